@@ -1,0 +1,17 @@
+//! FRMD core: the firmware side of a one-step ProDMP consistency policy.
+//!
+//! `#![no_std]` and no `alloc`: every buffer is a fixed-size array or a caller-owned slice whose
+//! size is known at compile time. No function on an input path panics; errors are small enums.
+#![no_std]
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::indexing_slicing,
+        clippy::unreachable,
+        clippy::todo,
+        clippy::unimplemented
+    )
+)]

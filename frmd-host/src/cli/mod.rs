@@ -1,0 +1,35 @@
+//! `frmd` subcommands. Each subcommand owns one file here with its clap `Args` and a `run`.
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+pub mod prodmp;
+
+/// FRMD: from demonstrations to a one-step diffusion policy in controller firmware.
+#[derive(Parser, Debug)]
+#[command(name = "frmd", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// ProDMP decoder tools (check against reference vectors).
+    #[command(subcommand)]
+    Prodmp(prodmp::ProdmpCommand),
+}
+
+/// Parses the command line, runs the subcommand, and maps errors to a non-zero exit code.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Prodmp(cmd) => prodmp::run(cmd),
+    };
+    match result {
+        Ok(code) => code,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::from(2)
+        }
+    }
+}

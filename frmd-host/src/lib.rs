@@ -1,0 +1,3 @@
+//! FRMD host side: float models and training (candle), built-in tasks, datasets, closed-loop
+//! evaluation, the bit-accuracy harness, benchmarks and the `frmd` CLI.
+pub mod cli;
