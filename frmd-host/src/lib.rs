@@ -1,3 +1,5 @@
 //! FRMD host side: float models and training (candle), built-in tasks, datasets, closed-loop
 //! evaluation, the bit-accuracy harness, benchmarks and the `frmd` CLI.
 pub mod cli;
+pub mod data;
+pub mod eval;
