@@ -15,3 +15,7 @@
         clippy::unimplemented
     )
 )]
+
+pub mod kernels;
+pub mod quant;
+pub mod rng;
