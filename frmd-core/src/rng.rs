@@ -159,7 +159,8 @@ mod tests {
         // The state layout of `new` is [lo(a), hi(a), lo(b), hi(b)] of two SplitMix64 draws.
         let mut seeder = SplitMix64::new(42);
         let (p, q) = (seeder.next_u64(), seeder.next_u64());
-        let mut manual = Rng::from_state([p as u32, (p >> 32) as u32, q as u32, (q >> 32) as u32]).unwrap();
+        let mut manual =
+            Rng::from_state([p as u32, (p >> 32) as u32, q as u32, (q >> 32) as u32]).unwrap();
         let mut seeded = Rng::new(42);
         for _ in 0..16 {
             assert_eq!(manual.next_u32(), seeded.next_u32());

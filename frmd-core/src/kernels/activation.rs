@@ -43,6 +43,48 @@ pub fn gelu_tanh(x: f32) -> f32 {
     0.5 * x * (1.0 + libm::tanhf(SQRT_2_OVER_PI * (x + 0.044_715 * x * x * x)))
 }
 
+/// A pointwise activation, named so that configs, the exporter and the f32 reference paths agree
+/// on which function a layer uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Activation {
+    /// `x` (no activation).
+    Identity,
+    /// `max(x, 0)`.
+    Relu,
+    /// [`silu`].
+    Silu,
+    /// [`mish`].
+    Mish,
+    /// [`gelu`] (erf form).
+    Gelu,
+    /// [`gelu_tanh`] (tanh approximation).
+    GeluTanh,
+}
+
+impl Activation {
+    /// Applies the activation to one value.
+    #[inline]
+    pub fn apply(self, x: f32) -> f32 {
+        match self {
+            Self::Identity => x,
+            Self::Relu => x.max(0.0),
+            Self::Silu => silu(x),
+            Self::Mish => mish(x),
+            Self::Gelu => gelu(x),
+            Self::GeluTanh => gelu_tanh(x),
+        }
+    }
+
+    /// Applies the activation to every element of `values`.
+    pub fn apply_in_place(self, values: &mut [f32]) {
+        if self != Self::Identity {
+            for v in values.iter_mut() {
+                *v = self.apply(*v);
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -63,11 +105,35 @@ mod tests {
         while x <= 30.0 {
             let xd = f64::from(x);
             let tol = |v: f64| 2e-6 * v.abs().max(1.0);
-            assert!((f64::from(silu(x)) - silu64(xd)).abs() <= tol(xd), "silu {x}");
-            assert!((f64::from(mish(x)) - mish64(xd)).abs() <= tol(xd), "mish {x}");
-            assert!((f64::from(softplus(x)) - softplus64(xd)).abs() <= tol(xd), "softplus {x}");
+            assert!(
+                (f64::from(silu(x)) - silu64(xd)).abs() <= tol(xd),
+                "silu {x}"
+            );
+            assert!(
+                (f64::from(mish(x)) - mish64(xd)).abs() <= tol(xd),
+                "mish {x}"
+            );
+            assert!(
+                (f64::from(softplus(x)) - softplus64(xd)).abs() <= tol(xd),
+                "softplus {x}"
+            );
             x += 0.0137;
         }
+    }
+
+    #[test]
+    fn enum_dispatches_to_the_functions() {
+        for x in [-3.0_f32, -0.5, 0.0, 0.7, 4.0] {
+            assert_eq!(Activation::Identity.apply(x), x);
+            assert_eq!(Activation::Relu.apply(x), x.max(0.0));
+            assert_eq!(Activation::Silu.apply(x), silu(x));
+            assert_eq!(Activation::Mish.apply(x), mish(x));
+            assert_eq!(Activation::Gelu.apply(x), gelu(x));
+            assert_eq!(Activation::GeluTanh.apply(x), gelu_tanh(x));
+        }
+        let mut v = [-1.0_f32, 2.0];
+        Activation::Relu.apply_in_place(&mut v);
+        assert_eq!(v, [0.0, 2.0]);
     }
 
     #[test]

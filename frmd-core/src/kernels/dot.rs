@@ -43,7 +43,10 @@ mod tests {
     use crate::rng::SplitMix64;
 
     fn naive(a: &[i8], b: &[i8]) -> i64 {
-        a.iter().zip(b).map(|(x, y)| i64::from(*x) * i64::from(*y)).sum()
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| i64::from(*x) * i64::from(*y))
+            .sum()
     }
 
     #[test]

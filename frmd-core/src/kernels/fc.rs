@@ -188,7 +188,9 @@ mod tests {
         let weights = (0..in_features * out_features)
             .map(|_| (rng.next_u64() as u8 as i8).max(-127))
             .collect();
-        let bias = (0..out_features).map(|_| (rng.next_u64() as i32) >> 16).collect();
+        let bias = (0..out_features)
+            .map(|_| (rng.next_u64() as i32) >> 16)
+            .collect();
         let mut multipliers = Vec::new();
         let mut shifts = Vec::new();
         for _ in 0..out_features {
@@ -204,15 +206,31 @@ mod tests {
         } else {
             (-128, 127)
         };
-        let input = (0..in_features).map(|_| rng.next_u64() as u8 as i8).collect();
-        Case { in_features, out_features, weights, bias, multipliers, shifts, zero_point, clamp, input }
+        let input = (0..in_features)
+            .map(|_| rng.next_u64() as u8 as i8)
+            .collect();
+        Case {
+            in_features,
+            out_features,
+            weights,
+            bias,
+            multipliers,
+            shifts,
+            zero_point,
+            clamp,
+            input,
+        }
     }
 
     fn naive_accumulators(case: &Case) -> Vec<i64> {
         (0..case.out_features)
             .map(|o| {
                 let row = &case.weights[o * case.in_features..(o + 1) * case.in_features];
-                let dot: i64 = row.iter().zip(&case.input).map(|(w, x)| i64::from(*w) * i64::from(*x)).sum();
+                let dot: i64 = row
+                    .iter()
+                    .zip(&case.input)
+                    .map(|(w, x)| i64::from(*w) * i64::from(*x))
+                    .sum();
                 i64::from(case.bias[o]) + dot
             })
             .collect()
@@ -225,7 +243,12 @@ mod tests {
         let mut total = 0_usize;
         for _ in 0..400 {
             let case = random_case(&mut rng);
-            let layer = FullyConnected::new(case.in_features, case.out_features, &case.weights, &case.bias);
+            let layer = FullyConnected::new(
+                case.in_features,
+                case.out_features,
+                &case.weights,
+                &case.bias,
+            );
             let requant = FcRequant {
                 multipliers: &case.multipliers,
                 shifts: &case.shifts,
@@ -255,7 +278,10 @@ mod tests {
                 }
             }
         }
-        assert!(unclamped * 4 > total, "{unclamped} of {total} outputs unclamped");
+        assert!(
+            unclamped * 4 > total,
+            "{unclamped} of {total} outputs unclamped"
+        );
     }
 
     #[test]
@@ -265,34 +291,92 @@ mod tests {
         let layer = FullyConnected::new(3, 2, &weights, &bias);
         let m = [1 << 30; 2];
         let s = [-3; 2];
-        let good = FcRequant { multipliers: &m, shifts: &s, output_zero_point: 0, activation_min: -128, activation_max: 127 };
+        let good = FcRequant {
+            multipliers: &m,
+            shifts: &s,
+            output_zero_point: 0,
+            activation_min: -128,
+            activation_max: 127,
+        };
         let mut out = [0_i8; 2];
         let mut acc = [0_i32; 2];
         assert!(layer.forward(&good, &[1, 2, 3], &mut out).is_ok());
-        assert_eq!(layer.forward(&good, &[1, 2], &mut out), Err(KernelError::InputLength));
-        assert_eq!(layer.forward(&good, &[1, 2, 3], &mut out[..1]), Err(KernelError::OutputLength));
-        assert_eq!(layer.forward_accumulators(&[1, 2, 3], &mut acc[..1]), Err(KernelError::OutputLength));
-        assert_eq!(layer.forward_accumulators(&[1, 2, 3, 4], &mut acc), Err(KernelError::InputLength));
+        assert_eq!(
+            layer.forward(&good, &[1, 2], &mut out),
+            Err(KernelError::InputLength)
+        );
+        assert_eq!(
+            layer.forward(&good, &[1, 2, 3], &mut out[..1]),
+            Err(KernelError::OutputLength)
+        );
+        assert_eq!(
+            layer.forward_accumulators(&[1, 2, 3], &mut acc[..1]),
+            Err(KernelError::OutputLength)
+        );
+        assert_eq!(
+            layer.forward_accumulators(&[1, 2, 3, 4], &mut acc),
+            Err(KernelError::InputLength)
+        );
         let bad_weights = FullyConnected::new(3, 2, &weights[..5], &bias);
-        assert_eq!(bad_weights.forward_accumulators(&[1, 2, 3], &mut acc), Err(KernelError::WeightsLength));
+        assert_eq!(
+            bad_weights.forward_accumulators(&[1, 2, 3], &mut acc),
+            Err(KernelError::WeightsLength)
+        );
         let zero_in = FullyConnected::new(0, 2, &[], &bias);
-        assert_eq!(zero_in.forward_accumulators(&[], &mut acc), Err(KernelError::WeightsLength));
+        assert_eq!(
+            zero_in.forward_accumulators(&[], &mut acc),
+            Err(KernelError::WeightsLength)
+        );
         let overflow = FullyConnected::new(usize::MAX, 2, &weights, &bias);
         assert_eq!(overflow.validate(), Err(KernelError::WeightsLength));
         let bad_bias = FullyConnected::new(3, 2, &weights, &bias[..1]);
-        assert_eq!(bad_bias.forward_accumulators(&[1, 2, 3], &mut acc), Err(KernelError::BiasLength));
-        let short = FcRequant { multipliers: &m[..1], ..good };
-        assert_eq!(layer.forward(&short, &[1, 2, 3], &mut out), Err(KernelError::RequantLength));
-        let zp = FcRequant { output_zero_point: 128, ..good };
-        assert_eq!(layer.forward(&zp, &[1, 2, 3], &mut out), Err(KernelError::ZeroPoint));
-        let range = FcRequant { activation_min: 5, activation_max: 4, ..good };
-        assert_eq!(layer.forward(&range, &[1, 2, 3], &mut out), Err(KernelError::ActivationRange));
+        assert_eq!(
+            bad_bias.forward_accumulators(&[1, 2, 3], &mut acc),
+            Err(KernelError::BiasLength)
+        );
+        let short = FcRequant {
+            multipliers: &m[..1],
+            ..good
+        };
+        assert_eq!(
+            layer.forward(&short, &[1, 2, 3], &mut out),
+            Err(KernelError::RequantLength)
+        );
+        let zp = FcRequant {
+            output_zero_point: 128,
+            ..good
+        };
+        assert_eq!(
+            layer.forward(&zp, &[1, 2, 3], &mut out),
+            Err(KernelError::ZeroPoint)
+        );
+        let range = FcRequant {
+            activation_min: 5,
+            activation_max: 4,
+            ..good
+        };
+        assert_eq!(
+            layer.forward(&range, &[1, 2, 3], &mut out),
+            Err(KernelError::ActivationRange)
+        );
         let shift = [-3, 31];
-        let bad_shift = FcRequant { shifts: &shift, ..good };
-        assert_eq!(layer.forward(&bad_shift, &[1, 2, 3], &mut out), Err(KernelError::Multiplier));
+        let bad_shift = FcRequant {
+            shifts: &shift,
+            ..good
+        };
+        assert_eq!(
+            layer.forward(&bad_shift, &[1, 2, 3], &mut out),
+            Err(KernelError::Multiplier)
+        );
         let neg = [1 << 30, -1];
-        let bad_mult = FcRequant { multipliers: &neg, ..good };
-        assert_eq!(layer.forward(&bad_mult, &[1, 2, 3], &mut out), Err(KernelError::Multiplier));
+        let bad_mult = FcRequant {
+            multipliers: &neg,
+            ..good
+        };
+        assert_eq!(
+            layer.forward(&bad_mult, &[1, 2, 3], &mut out),
+            Err(KernelError::Multiplier)
+        );
     }
 
     #[test]
@@ -300,7 +384,13 @@ mod tests {
         let mut out = [0.0_f32; 3];
         dequantize_accumulators(&[4, -8, 0], &[0.5, 0.25, 3.0], &mut out).unwrap();
         assert_eq!(out, [2.0, -2.0, 0.0]);
-        assert_eq!(dequantize_accumulators(&[1, 2], &[1.0], &mut out[..2]), Err(KernelError::ScaleLength));
-        assert_eq!(dequantize_accumulators(&[1, 2], &[1.0, 1.0], &mut out), Err(KernelError::OutputLength));
+        assert_eq!(
+            dequantize_accumulators(&[1, 2], &[1.0], &mut out[..2]),
+            Err(KernelError::ScaleLength)
+        );
+        assert_eq!(
+            dequantize_accumulators(&[1, 2], &[1.0, 1.0], &mut out),
+            Err(KernelError::OutputLength)
+        );
     }
 }

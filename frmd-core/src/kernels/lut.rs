@@ -117,11 +117,20 @@ mod tests {
     #[test]
     fn build_rejects_bad_inputs() {
         let ok = QuantParams::new(0.1, 0).unwrap();
-        let bad = QuantParams { scale: 0.0, zero_point: 0 };
+        let bad = QuantParams {
+            scale: 0.0,
+            zero_point: 0,
+        };
         assert_eq!(Lut8::build(silu, bad, ok), Err(QuantError::InvalidScale));
         assert_eq!(Lut8::build(silu, ok, bad), Err(QuantError::InvalidScale));
-        let zp = QuantParams { scale: 1.0, zero_point: 200 };
+        let zp = QuantParams {
+            scale: 1.0,
+            zero_point: 200,
+        };
         assert_eq!(Lut8::build(silu, zp, ok), Err(QuantError::InvalidZeroPoint));
-        assert_eq!(Lut8::build(|v| v.ln(), ok, ok), Err(QuantError::NonFiniteValue));
+        assert_eq!(
+            Lut8::build(|v| v.ln(), ok, ok),
+            Err(QuantError::NonFiniteValue)
+        );
     }
 }

@@ -18,7 +18,7 @@ pub mod lut;
 pub mod norm;
 pub mod softmax;
 
-pub use activation::{gelu, gelu_tanh, mish, silu, softplus};
+pub use activation::{gelu, gelu_tanh, mish, silu, softplus, Activation};
 pub use dot::dot_i8;
 pub use fc::{dequantize_accumulators, FcRequant, FullyConnected};
 pub use lut::Lut8;

@@ -74,17 +74,23 @@ fn statistics(
 mod tests {
     extern crate std;
     use super::*;
-    use std::{vec, vec::Vec};
     use crate::rng::Rng;
+    use std::{vec, vec::Vec};
 
     fn reference(x: &[f32], gamma: &[f32], beta: &[f32], eps: f64) -> Vec<f64> {
         let n = x.len() as f64;
         let mean = x.iter().map(|v| f64::from(*v)).sum::<f64>() / n;
-        let var = x.iter().map(|v| (f64::from(*v) - mean).powi(2)).sum::<f64>() / n;
+        let var = x
+            .iter()
+            .map(|v| (f64::from(*v) - mean).powi(2))
+            .sum::<f64>()
+            / n;
         x.iter()
             .zip(gamma)
             .zip(beta)
-            .map(|((v, g), b)| (f64::from(*v) - mean) / (var + eps).sqrt() * f64::from(*g) + f64::from(*b))
+            .map(|((v, g), b)| {
+                (f64::from(*v) - mean) / (var + eps).sqrt() * f64::from(*g) + f64::from(*b)
+            })
             .collect()
     }
 
@@ -103,7 +109,10 @@ mod tests {
                 layer_norm_in_place(&mut in_place, &gamma, &beta, 1e-5).unwrap();
                 assert_eq!(in_place, out);
                 for (got, want) in out.iter().zip(&want) {
-                    assert!((f64::from(*got) - want).abs() < 2e-4, "len {len}: {got} vs {want}");
+                    assert!(
+                        (f64::from(*got) - want).abs() < 2e-4,
+                        "len {len}: {got} vs {want}"
+                    );
                 }
             }
         }
@@ -129,11 +138,29 @@ mod tests {
     fn rejects_bad_arguments() {
         let mut out = [0.0_f32; 3];
         let three = [1.0_f32; 3];
-        assert_eq!(layer_norm(&[], &[], &[], 1e-5, &mut []), Err(KernelError::Empty));
-        assert_eq!(layer_norm(&three, &three[..2], &three, 1e-5, &mut out), Err(KernelError::AffineLength));
-        assert_eq!(layer_norm(&three, &three, &three[..1], 1e-5, &mut out), Err(KernelError::AffineLength));
-        assert_eq!(layer_norm(&three, &three, &three, 1e-5, &mut out[..2]), Err(KernelError::OutputLength));
-        assert_eq!(layer_norm(&three, &three, &three, 0.0, &mut out), Err(KernelError::Epsilon));
-        assert_eq!(layer_norm(&three, &three, &three, f32::NAN, &mut out), Err(KernelError::Epsilon));
+        assert_eq!(
+            layer_norm(&[], &[], &[], 1e-5, &mut []),
+            Err(KernelError::Empty)
+        );
+        assert_eq!(
+            layer_norm(&three, &three[..2], &three, 1e-5, &mut out),
+            Err(KernelError::AffineLength)
+        );
+        assert_eq!(
+            layer_norm(&three, &three, &three[..1], 1e-5, &mut out),
+            Err(KernelError::AffineLength)
+        );
+        assert_eq!(
+            layer_norm(&three, &three, &three, 1e-5, &mut out[..2]),
+            Err(KernelError::OutputLength)
+        );
+        assert_eq!(
+            layer_norm(&three, &three, &three, 0.0, &mut out),
+            Err(KernelError::Epsilon)
+        );
+        assert_eq!(
+            layer_norm(&three, &three, &three, f32::NAN, &mut out),
+            Err(KernelError::Epsilon)
+        );
     }
 }

@@ -37,8 +37,8 @@ pub fn softmax_in_place(values: &mut [f32]) -> Result<(), KernelError> {
 mod tests {
     extern crate std;
     use super::*;
-    use std::vec::Vec;
     use crate::rng::Rng;
+    use std::vec::Vec;
 
     #[test]
     fn sums_to_one_and_matches_f64() {
@@ -49,7 +49,10 @@ mod tests {
                 let original = x.clone();
                 softmax_in_place(&mut x).unwrap();
                 let sum: f32 = x.iter().sum();
-                assert!((sum - 1.0).abs() < 1e-5, "len {len} spread {spread}: sum {sum}");
+                assert!(
+                    (sum - 1.0).abs() < 1e-5,
+                    "len {len} spread {spread}: sum {sum}"
+                );
                 let max = original.iter().fold(f64::MIN, |m, v| m.max(f64::from(*v)));
                 let denom: f64 = original.iter().map(|v| (f64::from(*v) - max).exp()).sum();
                 for (p, v) in x.iter().zip(&original) {
@@ -70,8 +73,14 @@ mod tests {
     #[test]
     fn rejects_bad_rows() {
         assert_eq!(softmax_in_place(&mut []), Err(KernelError::Empty));
-        assert_eq!(softmax_in_place(&mut [1.0, f32::NAN]), Err(KernelError::NonFinite));
-        assert_eq!(softmax_in_place(&mut [1.0, f32::INFINITY]), Err(KernelError::NonFinite));
+        assert_eq!(
+            softmax_in_place(&mut [1.0, f32::NAN]),
+            Err(KernelError::NonFinite)
+        );
+        assert_eq!(
+            softmax_in_place(&mut [1.0, f32::INFINITY]),
+            Err(KernelError::NonFinite)
+        );
         assert_eq!(
             softmax_in_place(&mut [f32::NEG_INFINITY; 3]),
             Err(KernelError::NonFinite)

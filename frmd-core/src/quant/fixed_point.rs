@@ -90,7 +90,11 @@ pub fn rounding_divide_by_pot(x: i32, exponent: i32) -> i32 {
     }
     if exponent >= 32 {
         // |x| / 2^exponent <= 1/2, with equality only for x = i32::MIN and exponent 32.
-        return if exponent == 32 && x == i32::MIN { -1 } else { 0 };
+        return if exponent == 32 && x == i32::MIN {
+            -1
+        } else {
+            0
+        };
     }
     let mask = ((1_u32 << exponent) - 1) as i32;
     let remainder = x & mask;
@@ -112,7 +116,10 @@ pub fn multiply_by_quantized_multiplier(acc: i32, multiplier: i32, shift: i32) -
     let left = shift.clamp(0, 31) as u32;
     let right = if shift < 0 { shift.saturating_neg() } else { 0 };
     let shifted = saturate_to_i32(i64::from(acc) << left);
-    rounding_divide_by_pot(saturating_rounding_doubling_high_mul(shifted, multiplier), right)
+    rounding_divide_by_pot(
+        saturating_rounding_doubling_high_mul(shifted, multiplier),
+        right,
+    )
 }
 
 /// Requantizes one int32 accumulator to int8: multiply by the quantized multiplier, add the output

@@ -24,15 +24,30 @@ fn edge_accumulators() -> Vec<i32> {
 
 #[test]
 fn high_mul_matches_model_and_rounds_half_up() {
-    assert_eq!(saturating_rounding_doubling_high_mul(i32::MIN, i32::MIN), i32::MAX);
+    assert_eq!(
+        saturating_rounding_doubling_high_mul(i32::MIN, i32::MIN),
+        i32::MAX
+    );
     assert_eq!(reference::high_mul(i32::MIN, i32::MIN), i32::MAX);
     // Exact ties: (2k + 1) * 2^30 / 2^31 = k + 1/2 rounds up to k + 1; the negative tie
     // -(k + 1/2) rounds up to -k.
     for k in [0_i32, 1, 2, 7, 1000, 1 << 20] {
         let odd = 2 * k + 1;
-        assert_eq!(saturating_rounding_doubling_high_mul(odd, 1 << 30), k + 1, "k={k}");
-        assert_eq!(saturating_rounding_doubling_high_mul(-odd, 1 << 30), -k, "k={k}");
-        assert_eq!(saturating_rounding_doubling_high_mul(1 << 30, -odd), -k, "k={k}");
+        assert_eq!(
+            saturating_rounding_doubling_high_mul(odd, 1 << 30),
+            k + 1,
+            "k={k}"
+        );
+        assert_eq!(
+            saturating_rounding_doubling_high_mul(-odd, 1 << 30),
+            -k,
+            "k={k}"
+        );
+        assert_eq!(
+            saturating_rounding_doubling_high_mul(1 << 30, -odd),
+            -k,
+            "k={k}"
+        );
     }
     let edges = edge_accumulators();
     for &a in &edges {
@@ -58,7 +73,11 @@ fn divide_by_pot_matches_model_and_rounds_half_away() {
             }
             let x = x as i32;
             assert_eq!(rounding_divide_by_pot(x, e), (k + 1) as i32, "x={x} e={e}");
-            assert_eq!(rounding_divide_by_pot(-x, e), -(k + 1) as i32, "x=-{x} e={e}");
+            assert_eq!(
+                rounding_divide_by_pot(-x, e),
+                -(k + 1) as i32,
+                "x=-{x} e={e}"
+            );
         }
     }
     assert_eq!(rounding_divide_by_pot(i32::MIN, 31), -1);
@@ -69,19 +88,41 @@ fn divide_by_pot_matches_model_and_rounds_half_away() {
     assert_eq!(rounding_divide_by_pot(-5, -3), -5);
     for e in 0..=31_u32 {
         for &x in &edge_accumulators() {
-            assert_eq!(rounding_divide_by_pot(x, e as i32), reference::divide_pot(x, e), "x={x} e={e}");
+            assert_eq!(
+                rounding_divide_by_pot(x, e as i32),
+                reference::divide_pot(x, e),
+                "x={x} e={e}"
+            );
         }
         for x in -3000..=3000 {
-            assert_eq!(rounding_divide_by_pot(x, e as i32), reference::divide_pot(x, e), "x={x} e={e}");
+            assert_eq!(
+                rounding_divide_by_pot(x, e as i32),
+                reference::divide_pot(x, e),
+                "x={x} e={e}"
+            );
         }
     }
 }
 
 #[test]
 fn requantization_edges_match_model() {
-    let multipliers = [0, 1, Q31_MANTISSA_MIN, Q31_MANTISSA_MIN + 1, 1_518_500_250, Q31_MAX - 1, Q31_MAX];
+    let multipliers = [
+        0,
+        1,
+        Q31_MANTISSA_MIN,
+        Q31_MANTISSA_MIN + 1,
+        1_518_500_250,
+        Q31_MAX - 1,
+        Q31_MAX,
+    ];
     let zero_points = [-128, -127, -1, 0, 1, 126, 127];
-    let clamps = [(-128_i8, 127_i8), (0, 127), (-128, -128), (127, 127), (-5, 6)];
+    let clamps = [
+        (-128_i8, 127_i8),
+        (0, 127),
+        (-128, -128),
+        (127, 127),
+        (-5, 6),
+    ];
     let mut checked = 0_u64;
     for &acc in &edge_accumulators() {
         for &m in &multipliers {
@@ -96,7 +137,10 @@ fn requantization_edges_match_model() {
                     for &(lo, hi) in &clamps {
                         let got = requantize_to_i8(acc, m, shift, zp, lo, hi);
                         let want = reference::requantize(acc, m, shift, zp, lo, hi);
-                        assert_eq!(got, want, "acc={acc} m={m} shift={shift} zp={zp} clamp={lo}..={hi}");
+                        assert_eq!(
+                            got, want,
+                            "acc={acc} m={m} shift={shift} zp={zp} clamp={lo}..={hi}"
+                        );
                         checked += 1;
                     }
                 }
@@ -178,7 +222,10 @@ fn requantization_one_million_random_inputs_match_model() {
         };
         let got = requantize_to_i8(acc, multiplier, shift, zero_point, lo, hi);
         let want = reference::requantize(acc, multiplier, shift, zero_point, lo, hi);
-        assert_eq!(got, want, "acc={acc} m={multiplier} shift={shift} zp={zero_point} {lo}..={hi}");
+        assert_eq!(
+            got, want,
+            "acc={acc} m={multiplier} shift={shift} zp={zero_point} {lo}..={hi}"
+        );
         if got != lo && got != hi {
             in_range += 1;
         }
@@ -200,7 +247,10 @@ fn double_rounding_stays_within_one_of_exact() {
         let denominator = 1_i128 << (31 - shift);
         let got = i128::from(multiply_by_quantized_multiplier(acc, m, shift));
         // |got - exact / denominator| <= 1  <=>  |got * d - exact| <= d
-        assert!((got * denominator - exact).abs() <= denominator, "acc={acc} m={m} shift={shift}");
+        assert!(
+            (got * denominator - exact).abs() <= denominator,
+            "acc={acc} m={m} shift={shift}"
+        );
     }
 }
 
@@ -210,12 +260,24 @@ fn quantize_multiplier_reproduces_real_within_q31() {
     assert_eq!(quantize_multiplier(0.5), Ok((Q31_MANTISSA_MIN, 0)));
     assert_eq!(quantize_multiplier(0.1), Ok((1_717_986_918, -3)));
     // Rounds up to 2^31 and is renormalized: 1 - 2^-33 -> (2^30, 1).
-    assert_eq!(quantize_multiplier(1.0 - 2f64.powi(-33)), Ok((Q31_MANTISSA_MIN, 1)));
+    assert_eq!(
+        quantize_multiplier(1.0 - 2f64.powi(-33)),
+        Ok((Q31_MANTISSA_MIN, 1))
+    );
     // Largest and smallest representable.
-    assert_eq!(quantize_multiplier(2f64.powi(-32)), Ok((Q31_MANTISSA_MIN, SHIFT_MIN)));
-    assert_eq!(quantize_multiplier(2f64.powi(30) - 0.5), Ok((Q31_MAX, SHIFT_MAX)));
+    assert_eq!(
+        quantize_multiplier(2f64.powi(-32)),
+        Ok((Q31_MANTISSA_MIN, SHIFT_MIN))
+    );
+    assert_eq!(
+        quantize_multiplier(2f64.powi(30) - 0.5),
+        Ok((Q31_MAX, SHIFT_MAX))
+    );
     // Just below 2^30 the mantissa rounds up to 2^31 and renormalizes to shift 31: overflow.
-    assert_eq!(quantize_multiplier(2f64.powi(30) - 0.25), Err(QuantError::MultiplierOverflow));
+    assert_eq!(
+        quantize_multiplier(2f64.powi(30) - 0.25),
+        Err(QuantError::MultiplierOverflow)
+    );
 
     let mut rng = SplitMix64::new(3);
     for _ in 0..100_000 {
@@ -223,7 +285,10 @@ fn quantize_multiplier_reproduces_real_within_q31() {
         let u = (rng.next_u64() >> 11) as f64 / (1_u64 << 53) as f64;
         let real = 2f64.powf(-32.0 + 61.99 * u);
         let (m, s) = quantize_multiplier(real).unwrap();
-        assert!((Q31_MANTISSA_MIN..=Q31_MAX).contains(&m), "real={real} m={m}");
+        assert!(
+            (Q31_MANTISSA_MIN..=Q31_MAX).contains(&m),
+            "real={real} m={m}"
+        );
         assert!((SHIFT_MIN..=SHIFT_MAX).contains(&s), "real={real} s={s}");
         let represented = f64::from(m) * 2f64.powi(s - 31);
         assert!(
@@ -235,19 +300,58 @@ fn quantize_multiplier_reproduces_real_within_q31() {
 
 #[test]
 fn quantize_multiplier_rejects_unrepresentable() {
-    assert_eq!(quantize_multiplier(0.0), Err(QuantError::NonPositiveMultiplier));
-    assert_eq!(quantize_multiplier(-0.0), Err(QuantError::NonPositiveMultiplier));
-    assert_eq!(quantize_multiplier(-0.25), Err(QuantError::NonPositiveMultiplier));
-    assert_eq!(quantize_multiplier(f64::NAN), Err(QuantError::NonFiniteMultiplier));
-    assert_eq!(quantize_multiplier(f64::INFINITY), Err(QuantError::NonFiniteMultiplier));
-    assert_eq!(quantize_multiplier(f64::NEG_INFINITY), Err(QuantError::NonFiniteMultiplier));
-    assert_eq!(quantize_multiplier(2f64.powi(-33)), Err(QuantError::MultiplierUnderflow));
-    assert_eq!(quantize_multiplier(1e-20), Err(QuantError::MultiplierUnderflow));
-    assert_eq!(quantize_multiplier(f64::MIN_POSITIVE), Err(QuantError::MultiplierUnderflow));
-    assert_eq!(quantize_multiplier(5e-324), Err(QuantError::MultiplierUnderflow));
-    assert_eq!(quantize_multiplier(2f64.powi(30)), Err(QuantError::MultiplierOverflow));
-    assert_eq!(quantize_multiplier(1e30), Err(QuantError::MultiplierOverflow));
-    assert_eq!(quantize_multiplier(f64::MAX), Err(QuantError::MultiplierOverflow));
+    assert_eq!(
+        quantize_multiplier(0.0),
+        Err(QuantError::NonPositiveMultiplier)
+    );
+    assert_eq!(
+        quantize_multiplier(-0.0),
+        Err(QuantError::NonPositiveMultiplier)
+    );
+    assert_eq!(
+        quantize_multiplier(-0.25),
+        Err(QuantError::NonPositiveMultiplier)
+    );
+    assert_eq!(
+        quantize_multiplier(f64::NAN),
+        Err(QuantError::NonFiniteMultiplier)
+    );
+    assert_eq!(
+        quantize_multiplier(f64::INFINITY),
+        Err(QuantError::NonFiniteMultiplier)
+    );
+    assert_eq!(
+        quantize_multiplier(f64::NEG_INFINITY),
+        Err(QuantError::NonFiniteMultiplier)
+    );
+    assert_eq!(
+        quantize_multiplier(2f64.powi(-33)),
+        Err(QuantError::MultiplierUnderflow)
+    );
+    assert_eq!(
+        quantize_multiplier(1e-20),
+        Err(QuantError::MultiplierUnderflow)
+    );
+    assert_eq!(
+        quantize_multiplier(f64::MIN_POSITIVE),
+        Err(QuantError::MultiplierUnderflow)
+    );
+    assert_eq!(
+        quantize_multiplier(5e-324),
+        Err(QuantError::MultiplierUnderflow)
+    );
+    assert_eq!(
+        quantize_multiplier(2f64.powi(30)),
+        Err(QuantError::MultiplierOverflow)
+    );
+    assert_eq!(
+        quantize_multiplier(1e30),
+        Err(QuantError::MultiplierOverflow)
+    );
+    assert_eq!(
+        quantize_multiplier(f64::MAX),
+        Err(QuantError::MultiplierOverflow)
+    );
 }
 
 #[test]
@@ -262,14 +366,32 @@ fn activation_params_from_range() {
     assert_eq!((p.scale, p.zero_point), ((5.0_f64 / 255.0) as f32, -128));
     let p = QuantParams::from_range(-5.0, -2.0).unwrap();
     assert_eq!((p.scale, p.zero_point), ((5.0_f64 / 255.0) as f32, 127));
-    assert_eq!(QuantParams::from_range(0.0, 0.0), Ok(QuantParams { scale: 1.0, zero_point: 0 }));
-    assert_eq!(QuantParams::from_range(f32::NAN, 1.0), Err(QuantError::NonFiniteRange));
-    assert_eq!(QuantParams::from_range(0.0, f32::INFINITY), Err(QuantError::NonFiniteRange));
-    assert_eq!(QuantParams::from_range(1.0, -1.0), Err(QuantError::InvertedRange));
+    assert_eq!(
+        QuantParams::from_range(0.0, 0.0),
+        Ok(QuantParams {
+            scale: 1.0,
+            zero_point: 0
+        })
+    );
+    assert_eq!(
+        QuantParams::from_range(f32::NAN, 1.0),
+        Err(QuantError::NonFiniteRange)
+    );
+    assert_eq!(
+        QuantParams::from_range(0.0, f32::INFINITY),
+        Err(QuantError::NonFiniteRange)
+    );
+    assert_eq!(
+        QuantParams::from_range(1.0, -1.0),
+        Err(QuantError::InvertedRange)
+    );
     // Extreme but finite ranges still give valid parameters.
     assert!(QuantParams::from_range(-f32::MAX, f32::MAX).is_ok());
     assert_eq!(QuantParams::new(0.0, 0), Err(QuantError::InvalidScale));
-    assert_eq!(QuantParams::new(1.0, 128), Err(QuantError::InvalidZeroPoint));
+    assert_eq!(
+        QuantParams::new(1.0, 128),
+        Err(QuantError::InvalidZeroPoint)
+    );
 
     let mut rng = SplitMix64::new(17);
     for _ in 0..20_000 {
@@ -285,7 +407,10 @@ fn activation_params_from_range() {
         for t in 0..=16 {
             let x = min + (max - min) * t as f32 / 16.0;
             let back = p.dequantize(p.quantize(x));
-            assert!((back - x).abs() <= p.scale * 1.0001, "x={x} back={back} {p:?}");
+            assert!(
+                (back - x).abs() <= p.scale * 1.0001,
+                "x={x} back={back} {p:?}"
+            );
         }
     }
 }
@@ -357,7 +482,10 @@ fn per_channel_weights() {
     assert_eq!(quantize_weight(1.0, 2.0), 1); // 0.5 -> 1, half away from zero
     assert_eq!(quantize_weight(-1.0, 2.0), -1);
     assert_eq!(quantize_weight(-1000.0, 1.0), -127);
-    assert_eq!(symmetric_weight_scale(f32::NAN), Err(QuantError::NonFiniteValue));
+    assert_eq!(
+        symmetric_weight_scale(f32::NAN),
+        Err(QuantError::NonFiniteValue)
+    );
     assert_eq!(symmetric_weight_scale(1e-45), Err(QuantError::InvalidScale));
 }
 
@@ -366,8 +494,14 @@ fn bias_and_zero_point_folding() {
     assert_eq!(quantize_bias(1.0, 0.5, 0.25), Ok(8));
     assert_eq!(quantize_bias(0.625, 0.5, 0.5), Ok(3)); // 2.5 -> 3
     assert_eq!(quantize_bias(-0.625, 0.5, 0.5), Ok(-3));
-    assert_eq!(quantize_bias(1e10, 1e-3, 1e-3), Err(QuantError::BiasOverflow));
-    assert_eq!(quantize_bias(f32::NAN, 1.0, 1.0), Err(QuantError::NonFiniteValue));
+    assert_eq!(
+        quantize_bias(1e10, 1e-3, 1e-3),
+        Err(QuantError::BiasOverflow)
+    );
+    assert_eq!(
+        quantize_bias(f32::NAN, 1.0, 1.0),
+        Err(QuantError::NonFiniteValue)
+    );
     assert_eq!(quantize_bias(1.0, 0.0, 1.0), Err(QuantError::InvalidScale));
     assert_eq!(fold_input_zero_point(10, &[1, 2, 3], -5), Ok(40));
     assert_eq!(fold_input_zero_point(10, &[1, 2, 3], 5), Ok(-20));
@@ -380,12 +514,23 @@ fn bias_and_zero_point_folding() {
     let x = [-128_i8, 5, 17, 100];
     let zp = -9;
     let folded = fold_input_zero_point(1234, &w, zp).unwrap();
-    let direct: i32 = 1234 + w.iter().zip(&x).map(|(w, x)| i32::from(*w) * (i32::from(*x) - zp)).sum::<i32>();
-    let kernel: i32 = folded + w.iter().zip(&x).map(|(w, x)| i32::from(*w) * i32::from(*x)).sum::<i32>();
+    let direct: i32 = 1234
+        + w.iter()
+            .zip(&x)
+            .map(|(w, x)| i32::from(*w) * (i32::from(*x) - zp))
+            .sum::<i32>();
+    let kernel: i32 = folded
+        + w.iter()
+            .zip(&x)
+            .map(|(w, x)| i32::from(*w) * i32::from(*x))
+            .sum::<i32>();
     assert_eq!(direct, kernel);
     assert_eq!(
         requantization_multiplier(0.02, 0.003, 0.05),
         quantize_multiplier(f64::from(0.02_f32) * f64::from(0.003_f32) / f64::from(0.05_f32))
     );
-    assert_eq!(requantization_multiplier(0.02, -1.0, 0.05), Err(QuantError::InvalidScale));
+    assert_eq!(
+        requantization_multiplier(0.02, -1.0, 0.05),
+        Err(QuantError::InvalidScale)
+    );
 }
