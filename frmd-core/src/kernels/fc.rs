@@ -11,6 +11,29 @@ use super::KernelError;
 use crate::quant::{dequantize_accumulator, requantize_to_i8, SHIFT_MAX, SHIFT_MIN};
 
 /// Weights and bias of one fully connected layer, borrowed (typically `&'static` baked data).
+///
+/// ```
+/// use frmd_core::kernels::{FcRequant, FullyConnected};
+/// use frmd_core::quant::requantization_multiplier;
+///
+/// // 2 inputs -> 2 outputs; input scale 0.1, weight scales 0.01, output scale 0.05.
+/// static WEIGHTS: [i8; 4] = [10, -20, 127, 0];
+/// static BIAS: [i32; 2] = [0, 5];
+/// let (m, s) = requantization_multiplier(0.1, 0.01, 0.05).unwrap();
+/// let (multipliers, shifts) = ([m, m], [s, s]);
+/// let layer = FullyConnected::new(2, 2, &WEIGHTS, &BIAS);
+/// let requant = FcRequant {
+///     multipliers: &multipliers,
+///     shifts: &shifts,
+///     output_zero_point: 0,
+///     activation_min: -128,
+///     activation_max: 127,
+/// };
+/// let mut out = [0_i8; 2];
+/// layer.forward(&requant, &[50, 20], &mut out).unwrap();
+/// // acc = [500 - 400, 6350 + 5] = [100, 6355]; times 0.1 * 0.01 / 0.05 = 0.02 -> [2, 127.1]
+/// assert_eq!(out, [2, 127]);
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FullyConnected<'a> {
     /// Input width.

@@ -534,3 +534,43 @@ fn bias_and_zero_point_folding() {
         Err(QuantError::InvalidScale)
     );
 }
+
+mod properties {
+    use super::super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #[test]
+        fn requantization_is_monotone_in_the_accumulator(
+            a in any::<i32>(),
+            b in any::<i32>(),
+            multiplier in Q31_MANTISSA_MIN..=i32::MAX,
+            shift in SHIFT_MIN..=SHIFT_MAX,
+            zero_point in -128_i32..=127,
+        ) {
+            let (lo, hi) = (a.min(b), a.max(b));
+            let q_lo = requantize_to_i8(lo, multiplier, shift, zero_point, -128, 127);
+            let q_hi = requantize_to_i8(hi, multiplier, shift, zero_point, -128, 127);
+            prop_assert!(q_lo <= q_hi);
+        }
+
+        #[test]
+        fn high_mul_is_symmetric(a in any::<i32>(), b in any::<i32>()) {
+            prop_assert_eq!(
+                saturating_rounding_doubling_high_mul(a, b),
+                saturating_rounding_doubling_high_mul(b, a)
+            );
+        }
+
+        #[test]
+        fn divide_by_pot_is_odd(x in (i32::MIN + 1)..=i32::MAX, e in 0_i32..=31) {
+            prop_assert_eq!(rounding_divide_by_pot(-x, e), -rounding_divide_by_pot(x, e));
+        }
+
+        #[test]
+        fn quantize_dequantize_round_trip(code in any::<i8>(), scale in 1e-4_f32..10.0, zp in -128_i32..=127) {
+            let params = QuantParams::new(scale, zp).unwrap();
+            prop_assert_eq!(params.quantize(params.dequantize(code)), code);
+        }
+    }
+}
