@@ -15,3 +15,8 @@
         clippy::unimplemented
     )
 )]
+
+pub mod kernels;
+pub mod model;
+pub mod quant;
+pub mod rng;
