@@ -11,6 +11,7 @@
 mod digest;
 mod memory;
 mod report;
+mod shape;
 mod timer;
 mod workload;
 
@@ -22,7 +23,10 @@ use digest::Fnv1a64;
 use memory::{ImageSizes, StackProbe};
 use report::{exit_failure, exit_success, report};
 use timer::{calibrate, CycleCounter, TickCounter};
-use workload::{Workload, CASES, REPEATS};
+use workload::{Baked, Workload, CASES, REPEATS};
+
+/// The ProDMP decoder tables, baked on the host by build.rs.
+static BAKED: Baked = include!(concat!(env!("OUT_DIR"), "/baked_prodmp.rs"));
 
 const CALLS: usize = CASES * REPEATS;
 
@@ -44,19 +48,16 @@ fn median(samples: &mut [u32]) -> u32 {
 fn main() -> ! {
     let stack = StackProbe::paint();
     let Some(mut peripherals) = cortex_m::Peripherals::take() else {
-        exit_failure("core peripherals already taken");
+        exit_failure(&"core peripherals already taken");
     };
     let ticks = TickCounter::start(peripherals.SYST);
     let cycles = CycleCounter::start(&mut peripherals.DCB, &mut peripherals.DWT);
     let calibration = calibrate(&ticks);
     if calibration.ticks == 0 {
-        exit_failure("SysTick calibration failed: the long spin did not take more ticks than the short one (under QEMU, pass -icount shift=0)");
+        exit_failure(&"SysTick calibration failed: the long spin did not take more ticks than the short one (under QEMU, pass -icount shift=0)");
     }
 
-    let mut workload = match Workload::new() {
-        Ok(workload) => workload,
-        Err(what) => exit_failure(what),
-    };
+    let mut workload = Workload::new(&BAKED);
     let mut tick_samples = [0u32; CALLS];
     let mut cycle_samples = [0u32; CALLS];
     let mut total_ticks: u64 = 0;
@@ -70,8 +71,8 @@ fn main() -> ! {
             let result = workload.run();
             let cycle_end = cycles.now();
             let tick_end = ticks.now();
-            if let Err(what) = result {
-                exit_failure(what);
+            if let Err(error) = result {
+                exit_failure(&error);
             }
             let elapsed = TickCounter::elapsed(tick_start, tick_end);
             total_ticks += u64::from(elapsed);

@@ -1,60 +1,89 @@
-//! The measured workload.
+//! The measured workload: the baked ProDMP policy decoder on a fixed list of inputs.
 //!
-//! PLACEHOLDER until `frmd_core::prodmp::BakedProDmp` lands: a 12 x 21 f32 matrix-vector product
-//! (the shape of a 12-step, 20-basis ProDMP position table), so that the timing, digest and memory
-//! plumbing can be exercised end to end.
+//! Uses only `core` and frmd-core, so the host-side check (`frmd-core/tests/cortex_m_qemu.rs`) compiles
+//! this same file and must reproduce the firmware's digest bit for bit.
+//!
+//! Inputs: case `c` (0-based) draws from `frmd_core::rng::Rng::new(INPUT_SEED + c)`, in order,
+//! `uniform()` values mapped by `2u - 1` to the DoF-major parameters `[w_0 .. w_19, g]` (DoF 0
+//! first), then `y0` (`u - 0.5`, metres) and `v0` (`0.5 u - 0.25`, m/s) per DoF. Digest: FNV-1a 64
+//! over the little-endian bytes of `pos` then `vel` (`[time][dof]`, row-major) of every case in
+//! order, each case decoded once for the digest (repeats give identical outputs).
 
 use crate::digest::Fnv1a64;
+use crate::shape::{DOF, HORIZON, PARAMS};
+use frmd_core::prodmp::{BakedProDmp, ProDmpError};
+use frmd_core::rng::Rng;
 
-pub const NAME: &str = "placeholder-matvec-12x21";
-/// Number of distinct inputs; each is decoded [`REPEATS`] times.
-pub const CASES: usize = 8;
+pub const NAME: &str = "prodmp-decode dof=2 horizon=12 basis=20";
+/// Distinct inputs; each is decoded [`REPEATS`] times for timing.
+pub const CASES: usize = 16;
 pub const REPEATS: usize = 5;
+/// Seed of case 0; case `c` uses `INPUT_SEED + c`.
+pub const INPUT_SEED: u64 = 0x4652_4D44_0000_0000;
 
-const ROWS: usize = 12;
-const COLS: usize = 21;
+/// The baked decoder of [`crate::shape::config`].
+pub type Baked = BakedProDmp<HORIZON, PARAMS>;
 
-pub struct Workload {
-    table: [[f32; COLS]; ROWS],
-    input: [f32; COLS],
-    output: [f32; ROWS],
+/// One decoder input.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Inputs {
+    pub params: [[f32; PARAMS]; DOF],
+    pub y0: [f32; DOF],
+    pub v0: [f32; DOF],
 }
 
-/// A deterministic value in [-1, 1] for (`a`, `b`), exactly representable in f32.
-fn fixed_value(a: usize, b: usize) -> f32 {
-    let mixed = (a as u32).wrapping_mul(2_654_435_761) ^ (b as u32).wrapping_mul(40_503);
-    ((mixed % 2001) as f32 - 1000.0) / 1000.0
-}
-
-impl Workload {
-    pub fn new() -> Result<Self, &'static str> {
-        let mut table = [[0.0; COLS]; ROWS];
-        for (row_index, row) in table.iter_mut().enumerate() {
-            for (col_index, value) in row.iter_mut().enumerate() {
-                *value = fixed_value(row_index + 1000, col_index);
-            }
+impl Inputs {
+    /// Input number `case` of the fixed list (see the module docs).
+    pub fn fixed(case: usize) -> Self {
+        let mut rng = Rng::new(INPUT_SEED.wrapping_add(case as u64));
+        let mut inputs = Self { params: [[0.0; PARAMS]; DOF], y0: [0.0; DOF], v0: [0.0; DOF] };
+        for value in inputs.params.iter_mut().flatten() {
+            *value = 2.0 * rng.uniform() - 1.0;
         }
-        Ok(Self { table, input: [0.0; COLS], output: [0.0; ROWS] })
+        for (y0, v0) in inputs.y0.iter_mut().zip(inputs.v0.iter_mut()) {
+            *y0 = rng.uniform() - 0.5;
+            *v0 = 0.5 * rng.uniform() - 0.25;
+        }
+        inputs
+    }
+}
+
+/// Decoder, current input and outputs.
+pub struct Workload<'a> {
+    baked: &'a Baked,
+    inputs: Inputs,
+    pos: [[f32; DOF]; HORIZON],
+    vel: [[f32; DOF]; HORIZON],
+}
+
+impl<'a> Workload<'a> {
+    pub fn new(baked: &'a Baked) -> Self {
+        Self {
+            baked,
+            inputs: Inputs::fixed(0),
+            pos: [[0.0; DOF]; HORIZON],
+            vel: [[0.0; DOF]; HORIZON],
+        }
     }
 
     /// Loads input number `case` (not measured).
     pub fn prepare(&mut self, case: usize) {
-        for (index, value) in self.input.iter_mut().enumerate() {
-            *value = fixed_value(case, index);
-        }
+        self.inputs = Inputs::fixed(case);
     }
 
-    /// The measured call.
-    pub fn run(&mut self) -> Result<(), &'static str> {
-        let input = core::hint::black_box(&self.input);
-        for (out, row) in self.output.iter_mut().zip(self.table.iter()) {
-            *out = row.iter().zip(input.iter()).map(|(a, b)| a * b).sum();
-        }
-        Ok(())
+    /// The measured call: one chunk decode.
+    pub fn run(&mut self) -> Result<(), ProDmpError> {
+        let inputs = core::hint::black_box(&self.inputs);
+        self.baked.decode(&inputs.params, &inputs.y0, &inputs.v0, &mut self.pos, &mut self.vel)
     }
 
-    /// Feeds the outputs of the last [`Self::run`] to `digest`.
+    /// Feeds the outputs of the last [`Self::run`] to `digest`: `pos`, then `vel`.
     pub fn digest_outputs(&self, digest: &mut Fnv1a64) {
-        digest.f32s(&self.output);
+        for row in &self.pos {
+            digest.f32s(row);
+        }
+        for row in &self.vel {
+            digest.f32s(row);
+        }
     }
 }

@@ -1,0 +1,23 @@
+//! Shape of the policy the firmware runs, shared by `build.rs` (which bakes the ProDMP tables on
+//! the host), the firmware and the host-side digest check (`frmd-core/tests/cortex_m_qemu.rs`).
+//! Values follow the built-in tasks: 2 DoF (x, y targets in metres), 0.1 s control period,
+//! horizon 12, 20 basis functions (DESIGN.md s.2 policy convention).
+#![allow(dead_code)]
+
+use frmd_core::prodmp::ProDmpConfig;
+
+/// Degrees of freedom (action dimension).
+pub const DOF: usize = 2;
+/// Query times per decoded chunk.
+pub const HORIZON: usize = 12;
+/// ProDMP basis functions per DoF.
+pub const NUM_BASIS: usize = 20;
+/// Parameters per DoF: the basis weights, then the goal.
+pub const PARAMS: usize = NUM_BASIS + 1;
+/// Control period, seconds.
+pub const CONTROL_DT: f64 = 0.1;
+
+/// The ProDMP configuration of the policy (tau = HORIZON * CONTROL_DT = 1.2 s).
+pub fn config() -> ProDmpConfig {
+    ProDmpConfig::policy(DOF, NUM_BASIS, HORIZON, CONTROL_DT)
+}
