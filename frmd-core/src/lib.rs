@@ -15,3 +15,5 @@
         clippy::unimplemented
     )
 )]
+
+pub mod prodmp;
