@@ -1,6 +1,6 @@
 //! The f64 and baked f32 ProDMP decoders against mp_pytorch 0.1.4 reference vectors
 //! (`tests/data/prodmp_vectors.json`, a copy of `shared/testdata/prodmp_vectors.json`).
-use frmd_core::prodmp::{BakedProDmp, ProDmp, ProDmpConfig};
+use frmd_core::prodmp::{apply_row_f32, BakedProDmp, ProDmp, ProDmpConfig};
 use serde_json::Value;
 use std::path::PathBuf;
 
@@ -242,4 +242,68 @@ fn baked_f32_matches_reference_on_policy_form_cases() {
     let a = check_baked::<12, 13, 3>(&doc, "mpd_deflect_spheres_like");
     let b = check_baked::<12, 4, 7>(&doc, "mpd_ligating_loop_like");
     eprintln!("baked f32 worst scaled error: deflect {a:.3e}, ligating {b:.3e}");
+}
+
+/// Every case in f32: the f64 linear rows of the case's own times, rounded to f32 and applied with
+/// the baked decoder's f32 kernel (`apply_row_f32`), against the float64 reference.
+#[test]
+fn f32_linear_rows_match_reference_on_all_cases() {
+    let doc = load(&repo_copy());
+    let mut worst: f64 = 0.0;
+    for case in doc["cases"].as_array().unwrap() {
+        let name = case["name"].as_str().unwrap();
+        let cfg = config_of(case);
+        let decoder = ProDmp::new(&cfg).unwrap();
+        let width = cfg.num_basis + 1;
+        let inputs = &case["inputs"];
+        let params: Vec<f32> = vec_f(&inputs["params"]).iter().map(|x| *x as f32).collect();
+        let y0: Vec<f32> = vec_f(&inputs["init_pos"])
+            .iter()
+            .map(|x| *x as f32)
+            .collect();
+        let v0: Vec<f32> = vec_f(&inputs["init_vel"])
+            .iter()
+            .map(|x| *x as f32)
+            .collect();
+        let init_time = f(&inputs["init_time"]);
+        for query in case["queries"].as_array().unwrap() {
+            let ref_pos = mat_f(&query["pos"]);
+            let ref_vel = mat_f(&query["vel"]);
+            for (index, time) in vec_f(&query["times"]).iter().enumerate() {
+                let (mut pos_row, mut vel_row) = (vec![0.0; width], vec![0.0; width]);
+                let c = decoder
+                    .linear_row(init_time, *time, &mut pos_row, &mut vel_row)
+                    .unwrap();
+                let pos32: Vec<f32> = pos_row.iter().map(|x| *x as f32).collect();
+                let vel32: Vec<f32> = vel_row.iter().map(|x| *x as f32).collect();
+                for dof in 0..cfg.num_dof {
+                    let theta = &params[dof * width..(dof + 1) * width];
+                    let p = apply_row_f32(
+                        &pos32,
+                        c.pos_y0 as f32,
+                        c.pos_v0 as f32,
+                        theta,
+                        y0[dof],
+                        v0[dof],
+                    );
+                    let v = apply_row_f32(
+                        &vel32,
+                        c.vel_y0 as f32,
+                        c.vel_v0 as f32,
+                        theta,
+                        y0[dof],
+                        v0[dof],
+                    );
+                    let ep = scaled_err(p as f64, ref_pos[index][dof]);
+                    let ev = scaled_err(v as f64, ref_vel[index][dof]);
+                    assert!(
+                        ep < F32_TOL && ev < F32_TOL,
+                        "{name} t={time} dof {dof}: {ep:e} {ev:e}"
+                    );
+                    worst = worst.max(ep).max(ev);
+                }
+            }
+        }
+    }
+    eprintln!("f32 linear rows: worst scaled error {worst:.3e}");
 }
