@@ -258,10 +258,8 @@ impl ProDmp {
         let coeffs = self.linear_row(init_time, time, pos_row, vel_row)?;
         let dofs = params.chunks_exact(width).zip(y0.iter().zip(v0.iter()));
         for ((theta, (y0, v0)), (pos, vel)) in dofs.zip(pos.iter_mut().zip(vel.iter_mut())) {
-            let pos_dot: f64 = pos_row.iter().zip(theta).map(|(a, b)| a * b).sum();
-            let vel_dot: f64 = vel_row.iter().zip(theta).map(|(a, b)| a * b).sum();
-            *pos = coeffs.pos_y0 * y0 + coeffs.pos_v0 * v0 + pos_dot;
-            *vel = coeffs.vel_y0 * y0 + coeffs.vel_v0 * v0 + vel_dot;
+            *pos = apply_row(pos_row, coeffs.pos_y0, coeffs.pos_v0, theta, *y0, *v0);
+            *vel = apply_row(vel_row, coeffs.vel_y0, coeffs.vel_v0, theta, *y0, *v0);
         }
         if pos.iter().chain(vel.iter()).all(|v| v.is_finite()) {
             Ok(())
@@ -269,6 +267,23 @@ impl ProDmp {
             Err(ProDmpError::NonFiniteResult)
         }
     }
+}
+
+/// One output of the linear map in f64: `coeffs . theta + y0_coeff y0 + v0_coeff v0` (boundary
+/// terms first, then parameters in order).
+pub fn apply_row(
+    coeffs: &[f64],
+    y0_coeff: f64,
+    v0_coeff: f64,
+    theta: &[f64],
+    y0: f64,
+    v0: f64,
+) -> f64 {
+    let mut acc = y0_coeff * y0 + v0_coeff * v0;
+    for (coeff, value) in coeffs.iter().zip(theta) {
+        acc += coeff * value;
+    }
+    acc
 }
 
 /// Convenience form of [`ProDmp::linear_row`] that builds the decoder from `cfg` each call.

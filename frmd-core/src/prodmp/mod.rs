@@ -20,7 +20,7 @@ mod table;
 
 pub use baked::{apply_row_f32, BakedProDmp};
 pub use config::{ProDmpConfig, MAX_GRID_STEPS_PER_TAU, MAX_NUM_BASIS, PRE_COMPUTE_LENGTH_FACTOR};
-pub use decoder::{linear_row, BoundaryCoefficients, BoundaryTerms, ProDmp};
+pub use decoder::{apply_row, linear_row, BoundaryCoefficients, BoundaryTerms, ProDmp};
 
 /// Why a ProDMP could not be built or evaluated. Each variant names one problem.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
