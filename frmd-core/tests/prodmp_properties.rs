@@ -402,3 +402,31 @@ fn error_display_names_the_problem() {
     assert!(format!("{}", ProDmpError::NonPositiveTau).contains("tau"));
     assert!(format!("{}", ProDmpError::TimeBeyondPrecompute).contains("pre-computed"));
 }
+
+#[test]
+fn lookup_beyond_the_last_grid_point_extrapolates_like_the_reference() {
+    // tau / dt = 33.3: the grid has 6 * 33 + 1 = 199 points but s = 6 maps to index 200, so the
+    // reference clips the lower index to 197 and extrapolates with weight 3.
+    let mut cfg = ProDmpConfig::policy(1, 6, 10, 0.1);
+    cfg.dt = 0.03;
+    let d = ProDmp::new(&cfg).unwrap();
+    assert_eq!(d.num_grid_points(), 199);
+    let row = |time: f64| {
+        let (mut p, mut v) = (vec![0.0; 7], vec![0.0; 7]);
+        let c = d.linear_row(0.0, time, &mut p, &mut v).unwrap();
+        p.push(c.pos_y0);
+        p
+    };
+    // Times whose index is (to rounding) exactly 197, 198 and 200.
+    let (r197, r198, r200) = (row(197.0 * 0.03), row(198.0 * 0.03), row(6.0));
+    for k in 0..8 {
+        let extrapolated = r197[k] + 3.0 * (r198[k] - r197[k]);
+        let scale = r197[k].abs().max(r198[k].abs()).max(1e-300);
+        assert!(
+            (r200[k] - extrapolated).abs() <= 1e-6 * scale,
+            "{k}: {} vs {extrapolated}",
+            r200[k]
+        );
+    }
+    assert!((r200[0] - r198[0]).abs() > 0.0);
+}

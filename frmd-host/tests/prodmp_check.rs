@@ -34,7 +34,7 @@ fn all_reference_cases_pass() {
     let tol = Tolerances::default();
     for (index, case) in file.cases.iter().enumerate() {
         let report = check_case(case, index, &tol);
-        assert!(report.pass(&tol), "{report:?}");
+        assert!(report.pass(), "{report:?}");
         assert!(report.derived_err.is_some(), "derived values are checked");
     }
 }
@@ -49,10 +49,10 @@ fn corrupted_reference_fails() {
     let file = parse(&json).unwrap();
     let tol = Tolerances::default();
     let report = check_case(&file.cases[3], 3, &tol);
-    assert!(!report.pass(&tol));
+    assert!(!report.pass());
     assert!(report.queries[1].f64_err > 1e-7 && report.queries[1].f64_err < 1e-5);
     // The other cases are unaffected.
-    assert!(check_case(&file.cases[2], 2, &tol).pass(&tol));
+    assert!(check_case(&file.cases[2], 2, &tol).pass());
 }
 
 #[test]
@@ -70,7 +70,7 @@ fn per_basis_weights_scale_is_applied_per_column() {
     let file = parse(&json).unwrap();
     let tol = Tolerances::default();
     let report = check_case(&file.cases[0], 0, &tol);
-    assert!(report.pass(&tol), "{report:?}");
+    assert!(report.pass(), "{report:?}");
 }
 
 #[test]
@@ -157,14 +157,29 @@ fn invalid_config_or_time_is_a_failing_case_not_a_crash() {
     let tol = Tolerances::default();
     let r0 = check_case(&file.cases[0], 0, &tol);
     assert!(
-        !r0.pass(&tol) && r0.error.as_deref().unwrap_or("").contains("alpha"),
+        !r0.pass() && r0.error.as_deref().unwrap_or("").contains("alpha"),
         "{r0:?}"
     );
     let r1 = check_case(&file.cases[1], 1, &tol);
     assert!(
-        !r1.pass(&tol) && r1.error.as_deref().unwrap_or("").contains("pre-computed"),
+        !r1.pass() && r1.error.as_deref().unwrap_or("").contains("pre-computed"),
         "{r1:?}"
     );
+}
+
+#[test]
+fn float32_reference_uses_the_f32_tolerance() {
+    let mut json = vectors_json();
+    let value = json["cases"][4]["queries"][0]["pos"][6][1]
+        .as_f64()
+        .unwrap();
+    json["cases"][4]["queries"][0]["pos"][6][1] = (value + 1e-6).into();
+    let tol = Tolerances::default();
+    assert!(!check_case(&parse(&json).unwrap().cases[4], 4, &tol).pass());
+    json["cases"][4]["config"]["dtype"] = "float32".into();
+    let report = check_case(&parse(&json).unwrap().cases[4], 4, &tol);
+    assert!(report.pass() && report.f64_tol == tol.f32_err, "{report:?}");
+    assert!(report.config_summary.contains("ref float32"));
 }
 
 #[test]
