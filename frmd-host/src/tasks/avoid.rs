@@ -127,12 +127,18 @@ pub struct AvoidExpert {
     seed: u64,
     plan: Option<TimedPath>,
     step: usize,
+    forced_side: Option<f64>,
 }
 
 impl AvoidExpert {
     /// The side (+1: along the left normal of the start-goal line, -1: right) for a seed.
     pub fn side(seed: u64) -> f64 {
         TaskRng::new(seed, b"avoid/side").sign()
+    }
+
+    /// An expert that always passes on `side` (+1 or -1) instead of flipping a coin.
+    pub fn with_side(side: f64) -> Self {
+        Self { forced_side: Some(side.signum()), ..Self::default() }
     }
 }
 
@@ -169,7 +175,7 @@ impl Policy for AvoidExpert {
                 let (start, goal, obstacle) = (v2_at(obs, 0), v2_at(obs, 4), v2_at(obs, 6));
                 let radius = f64::from(obs[8]);
                 let normal = (goal - start).unit().perp();
-                let side = Self::side(self.seed);
+                let side = self.forced_side.unwrap_or_else(|| Self::side(self.seed));
                 // Signed offset of the obstacle from the chord midpoint, along the normal.
                 let offset = (obstacle - start.lerp(goal, 0.5)).dot(normal);
                 let amplitude = radius + EE_RADIUS + EXPERT_MARGIN + side * offset;

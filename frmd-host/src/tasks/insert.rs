@@ -12,7 +12,7 @@
 //! Observation (7): `[tip_x, tip_y, tip_vx, tip_vy, slot_x, wall_y, contact]` (m, m/s; contact is
 //! 1 when the peg touched the wall during the last control period, else 0).
 //! Success: the tip is within 2 cm of the slot bottom.
-//! Expert: one smooth path, a circular-arc approach that ends 25 cm above the slot centre heading
+//! Expert: one smooth path, a circular-arc approach that ends 15 cm above the slot centre heading
 //! straight down, then a straight descent aimed 1 cm below the slot bottom, with minimum-jerk
 //! timing at 0.5 m/s on average (so the descent is the slow end of the profile).
 use super::geom::{Cubic, SmoothPath, TimedPath, V2};
@@ -118,7 +118,7 @@ impl Task for Insert {
         let mut rng = TaskRng::new(seed, b"insert/layout");
         self.wall_y = rng.uniform(-1.2, -0.6);
         self.slot_x = rng.uniform(-1.5, 1.5);
-        let start = V2::new(rng.uniform(-1.8, 1.8), (self.wall_y + rng.uniform(1.2, 2.2)).min(1.9));
+        let start = V2::new(rng.uniform(-1.8, 1.8), (self.wall_y + rng.uniform(1.3, 2.3)).min(1.9));
         self.tip = PointMass::at_rest(start);
         self.contact = false;
     }
@@ -174,7 +174,7 @@ pub struct InsertExpert {
 }
 
 /// Height above the wall top where the approach arc ends and the straight descent begins, metres.
-const PRE_INSERT_HEIGHT: f64 = 0.25;
+const PRE_INSERT_HEIGHT: f64 = 0.15;
 
 fn plan(start: V2, slot_x: f64, wall_y: f64) -> TimedPath {
     let above = V2::new(slot_x, wall_y + PRE_INSERT_HEIGHT);

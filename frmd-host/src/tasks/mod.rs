@@ -26,6 +26,9 @@ pub mod push;
 pub mod reach;
 pub mod rng;
 
+#[cfg(test)]
+mod tests;
+
 /// Names accepted by [`make_task`], easiest first.
 pub const TASK_NAMES: &[&str] = &["reach", "avoid", "push", "insert"];
 

@@ -3,7 +3,7 @@
 //!
 //! Top-down view, no gravity. The end effector is a kinematic disc (radius 8 cm) that follows the
 //! point mass of [`super::point_mass`]; the puck is a dynamic disc (radius 15 cm, 1 kg) whose
-//! linear and angular damping stand in for floor friction. Rapier runs at 0.02 s, five steps per
+//! linear and angular damping stand in for floor friction. Rapier runs at 0.05 s, two steps per
 //! control period. The puck starts within 0.8 m of the centre, the target 1.0-1.4 m away, and the
 //! end effector 1.2-1.5 m behind the puck, at up to 20 degrees off the push line.
 //!
@@ -43,7 +43,7 @@ const PUCK_LINEAR_DAMPING: f64 = 5.0;
 const PUCK_ANGULAR_DAMPING: f64 = 5.0;
 const GOAL_TOLERANCE: f64 = 0.05;
 /// Physics steps per control period.
-const PHYSICS_STEPS: usize = 5;
+const PHYSICS_STEPS: usize = 2;
 
 pub struct Push {
     world: PhysicsWorld,
@@ -141,9 +141,10 @@ impl Task for Push {
 
     fn step(&mut self, action: &[f32]) -> anyhow::Result<()> {
         let target = parse_target(action)?;
-        let h = CONTROL_DT / PHYSICS_STEPS as f64;
         for _ in 0..PHYSICS_STEPS {
-            self.ee.substep(target, h);
+            // The end effector integrates in its usual 0.01 s substeps; rapier then moves the
+            // kinematic pusher to where it ended up.
+            self.ee.advance(target, CONTROL_DT / PHYSICS_STEPS as f64, |_| {});
             self.world.bodies[self.pusher].set_next_kinematic_translation(vector(self.ee.pos));
             self.world.step();
         }
