@@ -18,5 +18,6 @@
 
 pub mod kernels;
 pub mod model;
+pub mod prodmp;
 pub mod quant;
 pub mod rng;

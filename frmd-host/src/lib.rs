@@ -3,3 +3,5 @@
 pub mod cli;
 pub mod data;
 pub mod eval;
+pub mod prodmp_vectors;
+pub mod tasks;
