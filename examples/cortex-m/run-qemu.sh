@@ -23,10 +23,15 @@ esac
 shift
 timeout_s="${FRMD_QEMU_TIMEOUT:-120}"
 
-bash "$repo/scripts/setup-cortex-m.sh" >&2
+# Toolchain and QEMU: scripts/setup-cortex-m.sh records its choice in an env file; run it when
+# that file or QEMU is missing (FRMD_CORTEX_M_PATH=rustup|debian forces a path on first setup).
 env_file="${FRMD_CORTEX_M_ENV:-$repo/target/cortex-m.env}"
+if [ ! -f "$env_file" ] || ! command -v qemu-system-arm >/dev/null; then
+    bash "$repo/scripts/setup-cortex-m.sh" >&2
+fi
 # shellcheck disable=SC1090
 . "$env_file"
+echo "run-qemu: $FRMD_CM_PATH toolchain ($("$FRMD_CM_RUSTC" --version)), board $machine" >&2
 
 cd "$here"
 bash "$repo/scripts/cortex-m-cargo.sh" build --release "$@" >&2
