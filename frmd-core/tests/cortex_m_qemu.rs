@@ -77,7 +77,9 @@ fn qemu_digest_matches_host() {
         return;
     }
     let expected = format!("digest: {:016x}", host_digest());
-    let firmware_target = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cortex-m-firmware");
+    // The firmware's own target directory (as run-qemu.sh uses by default), so manual runs and
+    // this test share one build; it is never the directory of the `cargo test` running this.
+    let firmware_target = root.join("examples/cortex-m/target");
     for board in ["m4", "m7"] {
         let output = Command::new("bash")
             .arg(root.join("examples/cortex-m/run-qemu.sh"))
