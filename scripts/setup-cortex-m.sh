@@ -77,7 +77,8 @@ try_rustup() {
     command -v rustup >/dev/null || { log "rustup not found"; return 1; }
     if ! rustup target list --installed 2>/dev/null | grep -qx "$target"; then
         log "rustup target add $target"
-        rustup target add "$target" >&2 || { log "rustup target add failed"; return 1; }
+        # Bounded: where static.rust-lang.org is unreachable, rustup may retry for a long time.
+        timeout 180 rustup target add "$target" >&2 || { log "rustup target add failed"; return 1; }
     fi
     local rustc
     rustc="$(rustup which rustc)"
