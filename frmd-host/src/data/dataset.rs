@@ -57,11 +57,7 @@ fn metadata<'m>(meta: &'m Option<HashMap<String, String>>, key: &str) -> anyhow:
 impl Dataset {
     /// Number of steps T.
     pub fn len(&self) -> usize {
-        if self.action_dim == 0 {
-            0
-        } else {
-            self.action.len() / self.action_dim
-        }
+        self.action.len().checked_div(self.action_dim).unwrap_or(0)
     }
 
     pub fn is_empty(&self) -> bool {
@@ -90,13 +86,13 @@ impl Dataset {
         anyhow::ensure!(self.obs_dim > 0, "obs_dim is 0");
         anyhow::ensure!(self.action_dim > 0, "action_dim is 0");
         anyhow::ensure!(
-            self.obs.len() % self.obs_dim == 0,
+            self.obs.len().is_multiple_of(self.obs_dim),
             "obs has {} values, not a multiple of obs_dim {}",
             self.obs.len(),
             self.obs_dim
         );
         anyhow::ensure!(
-            self.action.len() % self.action_dim == 0,
+            self.action.len().is_multiple_of(self.action_dim),
             "action has {} values, not a multiple of action_dim {}",
             self.action.len(),
             self.action_dim

@@ -36,11 +36,7 @@ pub struct WindowSet {
 impl WindowSet {
     /// Number of windows.
     pub fn len(&self) -> usize {
-        if self.action_dim == 0 {
-            0
-        } else {
-            self.prev_action.len() / self.action_dim
-        }
+        self.prev_action.len().checked_div(self.action_dim).unwrap_or(0)
     }
 
     pub fn is_empty(&self) -> bool {

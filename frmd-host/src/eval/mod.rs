@@ -14,6 +14,9 @@ pub mod metrics;
 pub mod plot;
 pub mod policy;
 
+#[cfg(test)]
+mod tests;
+
 /// First seed of the evaluation stream; collection seeds are all below it.
 pub const EVAL_SEED_OFFSET: u64 = 1 << 63;
 

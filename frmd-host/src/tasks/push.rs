@@ -110,8 +110,7 @@ impl Task for Push {
                 break (puck, target, start);
             }
         };
-        let mut world = PhysicsWorld::default();
-        world.gravity = Vector::ZERO;
+        let mut world = PhysicsWorld { gravity: Vector::ZERO, ..PhysicsWorld::default() };
         world.integration_parameters.dt = (CONTROL_DT / PHYSICS_STEPS as f64) as f32;
         let area = std::f64::consts::PI * PUCK_RADIUS * PUCK_RADIUS;
         let (puck_body, _) = world.insert(
