@@ -1,5 +1,6 @@
 //! `frmd eval`: closed-loop evaluation of a policy on a task, with the metrics of DESIGN.md
 //! section 6.
+use crate::eval::policy::Policy;
 use crate::eval::{expert_policy, plot::plot_paths, run_episodes_with_progress, EvalConfig, EvalReport};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -60,11 +61,16 @@ pub fn print_report(report: &EvalReport) {
     );
 }
 
-pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
-    let mut policy = match args.policy.as_str() {
-        "expert" => expert_policy(&args.task)?,
+/// The policy named on the command line, for `task`. Methods add their arm here.
+pub fn make_policy(name: &str, task: &str) -> anyhow::Result<Box<dyn Policy>> {
+    match name {
+        "expert" => expert_policy(task),
         other => anyhow::bail!("unknown policy {other:?}; available: expert"),
-    };
+    }
+}
+
+pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
+    let mut policy = make_policy(&args.policy, &args.task)?;
     let cfg = EvalConfig {
         episodes: args.episodes,
         exec_steps: args.exec_steps,

@@ -145,3 +145,17 @@ fn push_moves_the_puck_only_through_contact() {
     let moved = (pushed[4] - puck[0]).hypot(pushed[5] - puck[1]);
     assert!(moved > 0.1, "puck moved {moved} m");
 }
+
+#[test]
+fn demonstrations_start_at_the_end_effector_position() {
+    // The first commanded action equals the initial end-effector position, so the window
+    // padding a_{-1} = a_0 agrees with the evaluator's prev_action at episode start.
+    for &name in TASK_NAMES {
+        let (data, _) = crate::data::collect::collect_demos(name, 3, 40, &mut |_| {}).unwrap();
+        for range in data.episode_ranges() {
+            let obs = &data.obs[range.start * data.obs_dim..][..2];
+            let action = &data.action[range.start * data.action_dim..][..2];
+            assert_eq!(obs, action, "{name}");
+        }
+    }
+}
