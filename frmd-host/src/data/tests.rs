@@ -6,7 +6,10 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 
 fn temp_path(name: &str) -> PathBuf {
-    std::env::temp_dir().join(format!("frmd-data-test-{}-{name}.safetensors", std::process::id()))
+    std::env::temp_dir().join(format!(
+        "frmd-data-test-{}-{name}.safetensors",
+        std::process::id()
+    ))
 }
 
 fn small() -> Dataset {
@@ -24,9 +27,14 @@ fn small() -> Dataset {
 
 /// Serializes tensors without any validation, to build corrupt files.
 fn raw(tensors: Vec<(&str, Dtype, Vec<usize>, Vec<u8>)>, meta: &[(&str, &str)]) -> Vec<u8> {
-    let views: Vec<(&str, TensorView<'_>)> =
-        tensors.iter().map(|(n, d, s, b)| (*n, TensorView::new(*d, s.clone(), b).unwrap())).collect();
-    let meta: HashMap<String, String> = meta.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+    let views: Vec<(&str, TensorView<'_>)> = tensors
+        .iter()
+        .map(|(n, d, s, b)| (*n, TensorView::new(*d, s.clone(), b).unwrap()))
+        .collect();
+    let meta: HashMap<String, String> = meta
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
     safetensors::serialize(views, Some(meta)).unwrap()
 }
 
@@ -41,7 +49,10 @@ fn i64s(v: &[i64]) -> Vec<u8> {
 const META: &[(&str, &str)] = &[("task", "handmade"), ("dt", "0.5"), ("source", "test")];
 
 fn error_of(bytes: &[u8]) -> String {
-    format!("{:#}", Dataset::from_bytes(bytes).expect_err("corrupt file accepted"))
+    format!(
+        "{:#}",
+        Dataset::from_bytes(bytes).expect_err("corrupt file accepted")
+    )
 }
 
 #[test]
@@ -56,7 +67,10 @@ fn collected_dataset_round_trips_through_a_file() {
     let loaded = Dataset::load(&path).unwrap();
     std::fs::remove_file(&path).ok();
     assert_eq!(loaded, data);
-    assert_eq!(Dataset::from_bytes(&small().to_bytes().unwrap()).unwrap(), small());
+    assert_eq!(
+        Dataset::from_bytes(&small().to_bytes().unwrap()).unwrap(),
+        small()
+    );
 }
 
 #[test]
@@ -69,7 +83,10 @@ fn reader_rejects_corrupt_files_with_the_reason() {
     assert!(message.contains("truncated"), "{message}");
     // Wrong dtype.
     let ends = i64s(&[3, 5]);
-    let obs64: Vec<u8> = [0.0f64, 1.0, 2.0, 3.0, 4.0].iter().flat_map(|x| x.to_le_bytes()).collect();
+    let obs64: Vec<u8> = [0.0f64, 1.0, 2.0, 3.0, 4.0]
+        .iter()
+        .flat_map(|x| x.to_le_bytes())
+        .collect();
     let actions = f32s(&[10.0, 20.0, 30.0, 40.0, 50.0]);
     let bytes = raw(
         vec![
@@ -80,7 +97,10 @@ fn reader_rejects_corrupt_files_with_the_reason() {
         META,
     );
     let message = error_of(&bytes);
-    assert!(message.contains("`obs` has dtype F64, expected F32"), "{message}");
+    assert!(
+        message.contains("`obs` has dtype F64, expected F32"),
+        "{message}"
+    );
     let ends32: Vec<u8> = [3i32, 5].iter().flat_map(|x| x.to_le_bytes()).collect();
     let obs = f32s(&[0.0, 1.0, 2.0, 3.0, 4.0]);
     let bytes = raw(
@@ -92,7 +112,10 @@ fn reader_rejects_corrupt_files_with_the_reason() {
         META,
     );
     let message = error_of(&bytes);
-    assert!(message.contains("`episode_ends` has dtype I32, expected I64"), "{message}");
+    assert!(
+        message.contains("`episode_ends` has dtype I32, expected I64"),
+        "{message}"
+    );
     // Decreasing episode ends.
     let bytes = raw(
         vec![
@@ -103,7 +126,10 @@ fn reader_rejects_corrupt_files_with_the_reason() {
         META,
     );
     let message = error_of(&bytes);
-    assert!(message.contains("not strictly increasing: entry 1 is 2 after 3"), "{message}");
+    assert!(
+        message.contains("not strictly increasing: entry 1 is 2 after 3"),
+        "{message}"
+    );
     // Episode ends not covering the data.
     let bytes = raw(
         vec![
@@ -114,18 +140,29 @@ fn reader_rejects_corrupt_files_with_the_reason() {
         META,
     );
     let message = error_of(&bytes);
-    assert!(message.contains("last episode end is 4 but the dataset has 5 steps"), "{message}");
+    assert!(
+        message.contains("last episode end is 4 but the dataset has 5 steps"),
+        "{message}"
+    );
     // NaN.
     let bytes = raw(
         vec![
-            ("obs", Dtype::F32, vec![5, 1], f32s(&[0.0, 1.0, 2.0, f32::NAN, 4.0])),
+            (
+                "obs",
+                Dtype::F32,
+                vec![5, 1],
+                f32s(&[0.0, 1.0, 2.0, f32::NAN, 4.0]),
+            ),
             ("action", Dtype::F32, vec![5, 1], actions.clone()),
             ("episode_ends", Dtype::I64, vec![2], ends.clone()),
         ],
         META,
     );
     let message = error_of(&bytes);
-    assert!(message.contains("`obs` has a non-finite value NaN at row 3, column 0"), "{message}");
+    assert!(
+        message.contains("`obs` has a non-finite value NaN at row 3, column 0"),
+        "{message}"
+    );
     // Row mismatch, missing tensor, missing or bad metadata.
     let bytes = raw(
         vec![
@@ -136,8 +173,17 @@ fn reader_rejects_corrupt_files_with_the_reason() {
         META,
     );
     let message = error_of(&bytes);
-    assert!(message.contains("obs has 4 rows but action has 5 rows"), "{message}");
-    let bytes = raw(vec![("obs", Dtype::F32, vec![5, 1], obs.clone()), ("episode_ends", Dtype::I64, vec![2], ends.clone())], META);
+    assert!(
+        message.contains("obs has 4 rows but action has 5 rows"),
+        "{message}"
+    );
+    let bytes = raw(
+        vec![
+            ("obs", Dtype::F32, vec![5, 1], obs.clone()),
+            ("episode_ends", Dtype::I64, vec![2], ends.clone()),
+        ],
+        META,
+    );
     let message = error_of(&bytes);
     assert!(message.contains("missing tensor `action`"), "{message}");
     let full = || {
@@ -149,13 +195,22 @@ fn reader_rejects_corrupt_files_with_the_reason() {
     };
     let message = error_of(&raw(full(), &[("task", "t"), ("source", "s")]));
     assert!(message.contains("missing metadata `dt`"), "{message}");
-    let message = error_of(&raw(full(), &[("task", "t"), ("dt", "fast"), ("source", "s")]));
+    let message = error_of(&raw(
+        full(),
+        &[("task", "t"), ("dt", "fast"), ("source", "s")],
+    ));
     assert!(message.contains("metadata `dt` is \"fast\""), "{message}");
-    let message = error_of(&raw(full(), &[("task", "t"), ("dt", "-0.1"), ("source", "s")]));
+    let message = error_of(&raw(
+        full(),
+        &[("task", "t"), ("dt", "-0.1"), ("source", "s")],
+    ));
     assert!(message.contains("dt is -0.1"), "{message}");
     // Loading a missing file names it.
     let message = format!("{:#}", Dataset::load(&temp_path("missing")).unwrap_err());
-    assert!(message.contains("cannot read dataset") && message.contains("missing"), "{message}");
+    assert!(
+        message.contains("cannot read dataset") && message.contains("missing"),
+        "{message}"
+    );
     // Saving refuses invalid data too.
     let mut bad = small();
     bad.action[1] = f32::INFINITY;
@@ -172,7 +227,10 @@ fn windows_follow_the_padding_and_rate_conventions() {
     assert_eq!(norm.action.max, vec![50.0]);
     assert_eq!(set.len(), 5);
     assert_eq!((set.history, set.horizon, set.dt), (2, 3, 0.5));
-    assert_eq!(set.obs, vec![-1.0, -1.0, -1.0, -0.5, -0.5, 0.0, 0.5, 0.5, 0.5, 1.0]);
+    assert_eq!(
+        set.obs,
+        vec![-1.0, -1.0, -1.0, -0.5, -0.5, 0.0, 0.5, 0.5, 0.5, 1.0]
+    );
     assert_eq!(set.prev_action, vec![-1.0, -1.0, -0.5, 0.5, 0.5]);
     // (a_{t-1} - a_{t-2}) / dt in normalized units: 0.5 / 0.5 s at t = 2 of the first episode.
     assert_eq!(set.prev_rate, vec![0.0, 0.0, 1.0, 0.0, 0.0]);

@@ -33,8 +33,17 @@ impl Policy for Hold {
 
 #[test]
 fn executes_the_configured_part_of_each_chunk() {
-    let mut hold = Hold { calls: 0, first_prev: None };
-    let cfg = EvalConfig { episodes: 2, exec_steps: 8, history: 3, warmup_calls: 3, ..EvalConfig::default() };
+    let mut hold = Hold {
+        calls: 0,
+        first_prev: None,
+    };
+    let cfg = EvalConfig {
+        episodes: 2,
+        exec_steps: 8,
+        history: 3,
+        warmup_calls: 3,
+        ..EvalConfig::default()
+    };
     let report = run_episodes("reach", &mut hold, &cfg).unwrap();
     // reach allows 100 steps: ceil(100 / 8) = 13 chunks per episode, plus 3 warm-up calls.
     assert_eq!(report.successes, 0);
@@ -59,10 +68,20 @@ impl Policy for Wrong {
 
 #[test]
 fn bad_policy_output_is_an_error_not_a_panic() {
-    let cfg = EvalConfig { episodes: 1, warmup_calls: 0, ..EvalConfig::default() };
+    let cfg = EvalConfig {
+        episodes: 1,
+        warmup_calls: 0,
+        ..EvalConfig::default()
+    };
     let message = format!("{:#}", run_episodes("push", &mut Wrong, &cfg).unwrap_err());
-    assert!(message.contains("3 values") && message.contains("expects 2"), "{message}");
-    let zero = EvalConfig { exec_steps: 0, ..cfg.clone() };
+    assert!(
+        message.contains("3 values") && message.contains("expects 2"),
+        "{message}"
+    );
+    let zero = EvalConfig {
+        exec_steps: 0,
+        ..cfg.clone()
+    };
     assert!(run_episodes("push", &mut Wrong, &zero).is_err());
     assert!(run_episodes("nope", &mut Wrong, &cfg).is_err());
 }
@@ -81,7 +100,12 @@ fn evaluation_seeds_are_disjoint_from_collection_seeds() {
 #[test]
 fn plots_expert_paths_as_png() {
     let mut expert = crate::eval::expert_policy("avoid").unwrap();
-    let cfg = EvalConfig { episodes: 4, keep_paths: 3, warmup_calls: 0, ..EvalConfig::default() };
+    let cfg = EvalConfig {
+        episodes: 4,
+        keep_paths: 3,
+        warmup_calls: 0,
+        ..EvalConfig::default()
+    };
     let report = run_episodes("avoid", expert.as_mut(), &cfg).unwrap();
     assert_eq!(report.kept_paths.len(), 3);
     for (kept, record) in report.kept_paths.iter().zip(&report.per_episode) {
