@@ -1,13 +1,17 @@
 //! 1. Puts `memory.x` on the linker search path and passes the cortex-m-rt (and, with the `defmt`
 //!    feature, defmt) linker scripts. Link arguments live here rather than in `.cargo/config.toml`
 //!    so that a caller's `RUSTFLAGS` (which replaces config rustflags) cannot drop them.
+//! 3. Generates the synthetic int8 MLP (src/synthetic_mlp.rs): weights as `synthetic_mlp.bin`,
+//!    everything else as `synthetic_mlp.rs`.
 //! 2. Bakes the ProDMP policy decoder on the host with frmd-core (f64 tables rounded to f32) and
 //!    writes it as a constant expression, `$OUT_DIR/baked_prodmp.rs`, with every f32 given by its
 //!    bit pattern: the firmware carries only the tables, not the f64 table builder.
-use std::{env, fmt::Write as _, fs, path::PathBuf};
+use std::{env, fmt::Write as _, fs, path::{Path, PathBuf}};
 
 #[path = "src/shape.rs"]
 mod shape;
+#[path = "src/synthetic_mlp.rs"]
+mod synthetic_mlp;
 
 use frmd_core::prodmp::BakedProDmp;
 
@@ -25,7 +29,7 @@ fn matrix(rows: &[[f32; shape::PARAMS]]) -> String {
     format!("[\n        {},\n    ]", items.join(",\n        "))
 }
 
-fn bake_prodmp(out: &PathBuf) {
+fn bake_prodmp(out: &Path) {
     let config = shape::config();
     let baked = BakedProDmp::<{ shape::HORIZON }, { shape::PARAMS }>::from_config(&config)
         .unwrap_or_else(|error| panic!("baking the ProDMP tables failed: {error}"));
@@ -49,9 +53,13 @@ fn main() {
     println!("cargo:rerun-if-changed=memory.x");
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-changed=src/shape.rs");
+    println!("cargo:rerun-if-changed=src/synthetic_mlp.rs");
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
     if env::var_os("CARGO_FEATURE_DEFMT").is_some() {
         println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
     }
     bake_prodmp(&out);
+    let model = synthetic_mlp::generate();
+    fs::write(out.join("synthetic_mlp.bin"), model.weight_bytes()).expect("write synthetic_mlp.bin");
+    fs::write(out.join("synthetic_mlp.rs"), model.rust_source()).expect("write synthetic_mlp.rs");
 }

@@ -1,5 +1,6 @@
 //! Shape of the policy the firmware runs, shared by `build.rs` (which bakes the ProDMP tables on
-//! the host), the firmware and the host-side digest check (`frmd-core/tests/cortex_m_qemu.rs`).
+//! the host), the firmware, `src/synthetic_mlp.rs` and the host-side digest check
+//! (`frmd-core/tests/cortex_m_qemu.rs`).
 //! Values follow the built-in tasks: 2 DoF (x, y targets in metres), 0.1 s control period,
 //! horizon 12, 20 basis functions (DESIGN.md s.2 policy convention).
 #![allow(dead_code)]
@@ -16,6 +17,14 @@ pub const NUM_BASIS: usize = 20;
 pub const PARAMS: usize = NUM_BASIS + 1;
 /// Control period, seconds.
 pub const CONTROL_DT: f64 = 0.1;
+
+/// Synthetic int8 MLP (src/synthetic_mlp.rs): input width (observation history, noisy trajectory
+/// and noise features of a small policy, rounded to 40), hidden widths, widest layer.
+pub const MLP_INPUT: usize = 40;
+pub const MLP_HIDDEN: [usize; 3] = [256, 256, 256];
+pub const MLP_WIDTH: usize = 256;
+/// MLP output: the ProDMP parameters of every DoF, DoF-major.
+pub const MLP_OUTPUT: usize = DOF * PARAMS;
 
 /// The ProDMP configuration of the policy (tau = HORIZON * CONTROL_DT = 1.2 s).
 pub fn config() -> ProDmpConfig {

@@ -11,13 +11,13 @@
 
 use crate::digest::Fnv1a64;
 use crate::shape::{DOF, HORIZON, PARAMS};
+use crate::workload_api::Workload;
 use frmd_core::prodmp::{BakedProDmp, ProDmpError};
 use frmd_core::rng::Rng;
 
 pub const NAME: &str = "prodmp-decode dof=2 horizon=12 basis=20";
-/// Distinct inputs; each is decoded [`REPEATS`] times for timing.
+/// Distinct inputs.
 pub const CASES: usize = 16;
-pub const REPEATS: usize = 5;
 /// Seed of case 0; case `c` uses `INPUT_SEED + c`.
 pub const INPUT_SEED: u64 = 0x4652_4D44_0000_0000;
 
@@ -49,14 +49,14 @@ impl Inputs {
 }
 
 /// Decoder, current input and outputs.
-pub struct Workload<'a> {
+pub struct ProDmpWorkload<'a> {
     baked: &'a Baked,
     inputs: Inputs,
     pos: [[f32; DOF]; HORIZON],
     vel: [[f32; DOF]; HORIZON],
 }
 
-impl<'a> Workload<'a> {
+impl<'a> ProDmpWorkload<'a> {
     pub fn new(baked: &'a Baked) -> Self {
         Self {
             baked,
@@ -65,25 +65,42 @@ impl<'a> Workload<'a> {
             vel: [[0.0; DOF]; HORIZON],
         }
     }
+}
 
-    /// Loads input number `case` (not measured).
-    pub fn prepare(&mut self, case: usize) {
+impl Workload for ProDmpWorkload<'_> {
+    type Error = ProDmpError;
+
+    fn name(&self) -> &'static str {
+        NAME
+    }
+
+    fn cases(&self) -> usize {
+        CASES
+    }
+
+    fn prepare(&mut self, case: usize) {
         self.inputs = Inputs::fixed(case);
     }
 
-    /// The measured call: one chunk decode.
-    pub fn run(&mut self) -> Result<(), ProDmpError> {
+    /// One chunk decode.
+    fn run(&mut self) -> Result<(), ProDmpError> {
         let inputs = core::hint::black_box(&self.inputs);
         self.baked.decode(&inputs.params, &inputs.y0, &inputs.v0, &mut self.pos, &mut self.vel)
     }
 
-    /// Feeds the outputs of the last [`Self::run`] to `digest`: `pos`, then `vel`.
-    pub fn digest_outputs(&self, digest: &mut Fnv1a64) {
-        for row in &self.pos {
-            digest.f32s(row);
-        }
-        for row in &self.vel {
-            digest.f32s(row);
-        }
+    /// `pos`, then `vel`.
+    fn digest_outputs(&self, digest: &mut Fnv1a64) {
+        digest_trajectory(&self.pos, &self.vel, digest);
+    }
+}
+
+/// Feeds `pos` then `vel` (`[time][dof]`, row-major) to `digest`.
+pub fn digest_trajectory(
+    pos: &[[f32; DOF]; HORIZON],
+    vel: &[[f32; DOF]; HORIZON],
+    digest: &mut Fnv1a64,
+) {
+    for row in pos.iter().chain(vel.iter()) {
+        digest.f32s(row);
     }
 }
