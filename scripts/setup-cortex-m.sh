@@ -100,6 +100,14 @@ try_debian() {
     local rustc=/usr/bin/rustc
     [ -x "$rustc" ] && [ -x /usr/bin/cargo ] && command -v ld.lld-16 >/dev/null \
         || { log "Debian toolchain incomplete after install"; return 1; }
+    # The workspace's rust-version (MSRV); Debian 12 without bookworm-security only has 1.85.
+    local msrv version
+    msrv="$(sed -n 's/^rust-version *= *"\([0-9.]*\)".*/\1/p' "$repo/Cargo.toml" | head -n1)"
+    version="$("$rustc" --version | awk '{print $2}')"
+    if [ -n "$msrv" ] && [ "$(printf '%s\n%s\n' "$msrv" "$version" | sort -V | head -n1)" != "$msrv" ]; then
+        log "Debian's rustc $version is older than the workspace's rust-version $msrv (enable bookworm-security for rustc-web 1.96)"
+        return 1
+    fi
     "$rustc" --print target-list | grep -qx "$target" \
         || { log "$rustc does not know target $target"; return 1; }
     sysroot="$("$rustc" --print sysroot)"
