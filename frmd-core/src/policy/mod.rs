@@ -28,6 +28,8 @@ mod runtime;
 mod sampler;
 
 #[cfg(test)]
+pub(crate) mod test_model;
+#[cfg(test)]
 mod tests;
 
 pub use history::ObsHistory;

@@ -238,18 +238,31 @@ pub struct F32Network<'a, const WIDTH: usize> {
 impl<'a, const WIDTH: usize> F32Network<'a, WIDTH> {
     /// Wraps `mlp`; `first_layer_biases` as in [`Int8Network::new`], in f32.
     pub fn new(mlp: &F32Mlp<'a>, first_layer_biases: &'a [f32]) -> Result<Self, PolicyError> {
-        mlp.validate::<WIDTH>().map_err(PolicyError::Model)?;
-        if mlp.hidden.len() > MAX_HIDDEN_LAYERS {
+        Self::from_parts(mlp.hidden, mlp.output, first_layer_biases)
+    }
+
+    /// As [`Self::new`] from the parts of an [`F32Mlp`]; the hidden layers are copied, so their
+    /// slice may be short-lived.
+    pub fn from_parts(
+        layers: &[F32Layer<'a>],
+        output: F32Layer<'a>,
+        first_layer_biases: &'a [f32],
+    ) -> Result<Self, PolicyError> {
+        if layers.len() > MAX_HIDDEN_LAYERS {
             return Err(PolicyError::TooManyLayers);
         }
         let mut hidden = [EMPTY_F32_LAYER; MAX_HIDDEN_LAYERS];
-        for (slot, layer) in hidden.iter_mut().zip(mlp.hidden) {
+        for (slot, layer) in hidden.iter_mut().zip(layers) {
             *slot = *layer;
         }
-        let first_width = mlp
-            .hidden
+        let mlp = F32Mlp {
+            hidden: layers,
+            output,
+        };
+        mlp.validate::<WIDTH>().map_err(PolicyError::Model)?;
+        let first_width = layers
             .first()
-            .map_or(mlp.output.out_features, |layer| layer.out_features);
+            .map_or(output.out_features, |layer| layer.out_features);
         let num_variants = if first_layer_biases.is_empty() {
             0
         } else {
@@ -257,8 +270,8 @@ impl<'a, const WIDTH: usize> F32Network<'a, WIDTH> {
         };
         Ok(Self {
             hidden,
-            num_hidden: mlp.hidden.len(),
-            output: mlp.output,
+            num_hidden: layers.len(),
+            output,
             first_layer_biases,
             num_variants,
             scratch: F32Scratch::new(),
