@@ -81,7 +81,7 @@ impl<'a> Data<'a> {
         id: SectionId,
     ) -> Result<&'a [T], BlobError> {
         let start = section.offset as usize;
-        if start % SECTION_ALIGN != 0 {
+        if !start.is_multiple_of(SECTION_ALIGN) {
             return Err(BlobError::SectionMisaligned(id));
         }
         let end = start
@@ -240,7 +240,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
         let input_width = d.layout.width(M, O, K, N).ok_or(BlobError::InputLayout)?;
 
         let lut_bytes = data.cast::<i8>(d.luts, SectionId::Luts)?;
-        if lut_bytes.len() % LUT_LEN != 0 || lut_bytes.len() / LUT_LEN > MAX_HIDDEN_LAYERS {
+        if !lut_bytes.len().is_multiple_of(LUT_LEN) || lut_bytes.len() / LUT_LEN > MAX_HIDDEN_LAYERS {
             return Err(BlobError::SectionLength(SectionId::Luts));
         }
         let mut luts = [Lut8::from_table([0; LUT_LEN]); MAX_HIDDEN_LAYERS];
@@ -333,10 +333,12 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
             .map_or(outputs, |layer| layer.out_features as usize);
         let first_layer_biases =
             data.cast::<i32>(d.first_layer_biases, SectionId::FirstLayerBiases)?;
-        if first_layer_biases.len() % first_width != 0 {
-            return Err(BlobError::SectionLength(SectionId::FirstLayerBiases));
-        }
-        let variants = (first_layer_biases.len() / first_width).max(1);
+        let variants = first_layer_biases
+            .len()
+            .checked_div(first_width)
+            .filter(|_| first_layer_biases.len().is_multiple_of(first_width))
+            .ok_or(BlobError::SectionLength(SectionId::FirstLayerBiases))?
+            .max(1);
         let active_steps = steps.get(..num_steps).unwrap_or(&[]);
         if active_steps
             .iter()
@@ -397,7 +399,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
         section: Section,
     ) -> Result<([StepConstants; MAX_STEPS], usize), BlobError> {
         let words = data.cast::<u32>(section, SectionId::Steps)?;
-        if words.len() % STEP_WORDS != 0 {
+        if !words.len().is_multiple_of(STEP_WORDS) {
             return Err(BlobError::SectionLength(SectionId::Steps));
         }
         let count = words.len() / STEP_WORDS;

@@ -60,7 +60,7 @@ fn bias_variant<T>(
 }
 
 fn variant_count<T>(variants: &[T], width: usize) -> Result<usize, PolicyError> {
-    if width == 0 || variants.len() % width != 0 {
+    if width == 0 || !variants.len().is_multiple_of(width) {
         return Err(PolicyError::FirstLayerBiasLength);
     }
     Ok(variants.len() / width)

@@ -1,6 +1,8 @@
 //! Policy tests: history, normalization, layout, error paths, sampler math, determinism and
 //! int8-vs-f32 agreement on a small random network.
 
+#![allow(clippy::needless_range_loop)] // index loops mirror the formulas
+
 extern crate std;
 
 use std::vec::Vec;
