@@ -92,6 +92,20 @@ impl InputLayout {
         Ok(layout)
     }
 
+    /// Unchecked `const` constructor for generated code: the first `count` of `segments` are used.
+    /// [`Self::validate`] (run by [`super::Policy::new`]) checks it.
+    pub const fn from_segments(
+        segments: [InputSegment; MAX_INPUT_SEGMENTS],
+        count: u8,
+        rate_scale: f32,
+    ) -> Self {
+        Self {
+            segments,
+            count,
+            rate_scale,
+        }
+    }
+
     /// The conventional order `[ObsHistory, PrevAction, PrevRate, NoisyTrajectory]`.
     pub const fn standard(rate_scale: f32) -> Self {
         Self {

@@ -20,6 +20,7 @@
 //! `P = num_basis + 1` ProDMP parameters per DoF, `I` capacity of the input buffer (at least the
 //! layout's width).
 
+mod baked;
 mod history;
 mod layout;
 mod network;
@@ -32,6 +33,7 @@ pub(crate) mod test_model;
 #[cfg(test)]
 mod tests;
 
+pub use baked::{baked_slice, AlignedBytes};
 pub use history::ObsHistory;
 pub use layout::{InputLayout, InputSegment, InputSources, MAX_INPUT_SEGMENTS};
 pub(crate) use network::EMPTY_INT8_LAYER;
@@ -43,6 +45,7 @@ pub use sampler::{
 };
 
 use crate::model::mlp::ModelError;
+
 use crate::prodmp::ProDmpError;
 
 /// Why the policy refused a call. Small and `Copy`; each variant names the problem.
@@ -90,6 +93,8 @@ pub enum PolicyError {
     NonFiniteNoise,
     /// The sampled chunk contains NaN or infinity.
     NonFiniteOutput,
+    /// A baked weight section lies outside the weight file or is misaligned for its type.
+    BakedData,
     /// The forward pass refused its arguments.
     Model(ModelError),
     /// The ProDMP decoder refused its arguments.
@@ -124,6 +129,7 @@ impl core::fmt::Display for PolicyError {
             Self::NoiseLength => f.write_str("supplied noise has the wrong length"),
             Self::NonFiniteNoise => f.write_str("supplied noise is not finite"),
             Self::NonFiniteOutput => f.write_str("sampled chunk is not finite"),
+            Self::BakedData => f.write_str("baked weight section out of range or misaligned"),
             Self::Model(e) => write!(f, "network: {e}"),
             Self::Decode(e) => write!(f, "ProDMP decode: {e}"),
         }
