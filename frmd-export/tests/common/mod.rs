@@ -1,5 +1,6 @@
 //! A deterministic random [`QuantizedPolicy`] with valid parameters (not a trained model: the
 //! export tests check that both output forms carry it exactly).
+#![allow(dead_code)] // each test crate uses a different subset
 
 use frmd_core::kernels::{silu, Lut8};
 use frmd_core::policy::{InputLayout, StepConstants};
@@ -14,6 +15,9 @@ pub const K: usize = 3;
 pub const N: usize = 8;
 pub const P: usize = 5;
 pub const DT: f32 = 0.05;
+/// Seed and step count of the committed golden module in `tests/baked/`.
+pub const GOLDEN_SEED: u64 = 11;
+pub const GOLDEN_STEPS: usize = 3;
 
 fn layer(rng: &mut Rng, inputs: usize, outputs: usize, lut: Option<usize>) -> QuantizedLayer {
     let mut multipliers = Vec::new();
