@@ -513,3 +513,67 @@ fn configuration_errors_are_named() {
         Some(PolicyError::NonFiniteNoise)
     );
 }
+
+mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn finite() -> impl Strategy<Value = f32> {
+        -1.0e6_f32..1.0e6
+    }
+
+    fn any_float() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            4 => finite(),
+            1 => Just(f32::NAN),
+            1 => Just(f32::INFINITY),
+            1 => Just(f32::NEG_INFINITY),
+            1 => Just(f32::MAX),
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+        /// Any observations, actions and noise give a chunk of finite values or a named error;
+        /// never a panic, and a rejected observation never enters the history.
+        #[test]
+        fn arbitrary_inputs_never_panic(
+            observations in proptest::collection::vec(proptest::array::uniform3(any_float()), 1..5),
+            action in proptest::array::uniform2(any_float()),
+            noise in proptest::collection::vec(any_float(), 0..(2 * N * K + 2)),
+            seed in any::<u64>(),
+        ) {
+            static MODEL: std::sync::OnceLock<TestModel> = std::sync::OnceLock::new();
+            let model = MODEL.get_or_init(|| TestModel::new(8, &[80.0, 0.7]));
+            let mut policy = model.int8_policy();
+            let reset = policy.reset(&action);
+            prop_assert_eq!(reset.is_ok(), action.iter().all(|v| v.is_finite()));
+            let mut accepted = 0;
+            for obs in &observations {
+                let result = policy.observe(obs);
+                prop_assert_eq!(result.is_ok(), obs.iter().all(|v| v.is_finite()));
+                accepted += usize::from(result.is_ok());
+            }
+            prop_assert_eq!(policy.history().is_filled(), accepted > 0);
+            for source in [Noise::Given(&noise), Noise::Rng(&mut crate::rng::Rng::new(seed))] {
+                match policy.act(source) {
+                    Ok(chunk) => {
+                        prop_assert!(chunk.positions.iter().chain(&chunk.velocities).flatten().all(|v| v.is_finite()));
+                    }
+                    Err(error) => {
+                        prop_assert!(matches!(
+                            error,
+                            PolicyError::NoPreviousAction
+                                | PolicyError::NoObservation
+                                | PolicyError::NoiseLength
+                                | PolicyError::NonFiniteNoise
+                                | PolicyError::NonFiniteOutput
+                                | PolicyError::Decode(_)
+                        ), "{:?}", error);
+                    }
+                }
+            }
+        }
+    }
+}
