@@ -223,10 +223,14 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
         let data = Data { bytes: data_bytes };
 
         let obs = data.finite(d.obs_norm, O.checked_mul(2), SectionId::ObsNorm)?;
-        let (obs_min, obs_max) = obs.split_at(O);
+        let (obs_min, obs_max) = obs
+            .split_at_checked(O)
+            .ok_or(BlobError::SectionLength(SectionId::ObsNorm))?;
         let obs_norm = RangeNormalizer::new(to_array(obs_min), to_array(obs_max));
         let action = data.finite(d.action_norm, K.checked_mul(2), SectionId::ActionNorm)?;
-        let (action_min, action_max) = action.split_at(K);
+        let (action_min, action_max) = action
+            .split_at_checked(K)
+            .ok_or(BlobError::SectionLength(SectionId::ActionNorm))?;
         let action_norm = RangeNormalizer::new(to_array(action_min), to_array(action_max));
         if obs_norm.validate().is_err() || action_norm.validate().is_err() {
             return Err(BlobError::Normalization);
@@ -240,7 +244,8 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
         let input_width = d.layout.width(M, O, K, N).ok_or(BlobError::InputLayout)?;
 
         let lut_bytes = data.cast::<i8>(d.luts, SectionId::Luts)?;
-        if !lut_bytes.len().is_multiple_of(LUT_LEN) || lut_bytes.len() / LUT_LEN > MAX_HIDDEN_LAYERS {
+        if !lut_bytes.len().is_multiple_of(LUT_LEN) || lut_bytes.len() / LUT_LEN > MAX_HIDDEN_LAYERS
+        {
             return Err(BlobError::SectionLength(SectionId::Luts));
         }
         let mut luts = [Lut8::from_table([0; LUT_LEN]); MAX_HIDDEN_LAYERS];
