@@ -63,50 +63,83 @@ fn step(sigma: f64, first: bool, index: u32) -> StepConstants {
     }
 }
 
+/// Sizes of a random policy.
+pub struct Dims {
+    pub m: usize,
+    pub o: usize,
+    pub k: usize,
+    pub n: usize,
+    pub p: usize,
+    /// Hidden widths; every hidden layer but the last gets the SiLU LUT.
+    pub hidden: Vec<usize>,
+}
+
 /// Two hidden layers (SiLU LUT on the first, none on the second), `steps` sampling steps.
 pub fn sample_policy(seed: u64, steps: usize) -> QuantizedPolicy {
+    let dims = Dims {
+        m: M,
+        o: O,
+        k: K,
+        n: N,
+        p: P,
+        hidden: vec![24, 20],
+    };
+    let mut policy = random_policy(seed, steps, &dims);
+    policy.obs_min = vec![-1.0, 0.0, 0.5, -3.0];
+    policy.obs_max = vec![1.0, 2.0, 0.5, 3.0];
+    policy.action_min = vec![-0.4, -0.4, 0.0];
+    policy.action_max = vec![0.4, 0.4, 0.3];
+    policy
+}
+
+/// A random policy of the given sizes (observations in [-1, 1], actions in [-0.5, 0.5]).
+pub fn random_policy(seed: u64, steps: usize, dims: &Dims) -> QuantizedPolicy {
+    let Dims { m, o, k, n, p, .. } = *dims;
     let mut rng = Rng::new(seed);
     let layout = InputLayout::standard(DT);
-    let input_width = layout.width(M, O, K, N).unwrap();
-    let hidden = vec![
-        layer(&mut rng, input_width, 24, Some(0)),
-        layer(&mut rng, 24, 20, None),
-    ];
-    let first_layer_biases = (0..steps * 24)
+    let input_width = layout.width(m, o, k, n).unwrap();
+    let mut hidden = Vec::new();
+    let mut width = input_width;
+    for (i, next) in dims.hidden.iter().enumerate() {
+        let lut = (i + 1 < dims.hidden.len()).then_some(0);
+        hidden.push(layer(&mut rng, width, *next, lut));
+        width = *next;
+    }
+    let first = dims.hidden[0];
+    let first_layer_biases = (0..steps * first)
         .map(|_| (rng.next_u32() % 4001) as i32 - 2000)
         .collect();
     let output = QuantizedOutput {
-        in_features: 20,
-        out_features: K * P,
-        weights: (0..20 * K * P)
+        in_features: width,
+        out_features: k * p,
+        weights: (0..width * k * p)
             .map(|_| ((rng.next_u32() % 255) as i32 - 127) as i8)
             .collect(),
-        bias: (0..K * P)
+        bias: (0..k * p)
             .map(|_| (rng.next_u32() % 501) as i32 - 250)
             .collect(),
-        scales: (0..K * P).map(|_| 1e-4 * (1.0 + rng.uniform())).collect(),
+        scales: (0..k * p).map(|_| 1e-4 * (1.0 + rng.uniform())).collect(),
     };
     let pre = QuantParams::new(0.05, 3).unwrap();
     let post = QuantParams::new(0.04, -100).unwrap();
     let lut = Lut8::build(silu, pre, post).unwrap();
     let sigmas = [80.0, 1.5, 0.4, 0.1];
-    let decoder =
-        BakedProDmp::<N, P>::from_config(&ProDmpConfig::policy(K, P - 1, N, f64::from(DT)))
-            .unwrap();
+    let cfg = ProDmpConfig::policy(k, p - 1, n, f64::from(DT));
+    let prodmp = tables(&cfg, n, p);
     QuantizedPolicy {
-        history: M,
-        obs_dim: O,
-        action_dim: K,
-        horizon: N,
-        params_per_dof: P,
+        history: m,
+        obs_dim: o,
+        action_dim: k,
+        horizon: n,
+        params_per_dof: p,
         control_dt: DT,
         layout,
         input: QuantParams::new(0.02, -5).unwrap(),
-        obs_min: vec![-1.0, 0.0, 0.5, -3.0],
-        obs_max: vec![1.0, 2.0, 0.5, 3.0],
-        action_min: vec![-0.4, -0.4, 0.0],
-        action_max: vec![0.4, 0.4, 0.3],
-        prodmp: ProDmpTablesOwned::from_baked(&decoder),
+        obs_min: vec![-1.0; o],
+        obs_max: vec![1.0; o],
+        action_min: vec![-0.5; k],
+        action_max: vec![0.5; k],
+        prodmp,
         steps: (0..steps)
             .map(|i| step(sigmas[i], i == 0, i as u32))
             .collect(),
@@ -114,5 +147,16 @@ pub fn sample_policy(seed: u64, steps: usize) -> QuantizedPolicy {
         luts: vec![lut.table],
         hidden,
         output,
+    }
+}
+
+/// Baked tables for the two shapes the tests use.
+fn tables(cfg: &ProDmpConfig, n: usize, p: usize) -> ProDmpTablesOwned {
+    match (n, p) {
+        (N, P) => ProDmpTablesOwned::from_baked(&BakedProDmp::<N, P>::from_config(cfg).unwrap()),
+        (12, 21) => {
+            ProDmpTablesOwned::from_baked(&BakedProDmp::<12, 21>::from_config(cfg).unwrap())
+        }
+        _ => panic!("no baked decoder for horizon {n}, {p} params"),
     }
 }
