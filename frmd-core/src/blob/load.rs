@@ -44,6 +44,20 @@ const EMPTY_LAYER: HiddenLayer<'static> = HiddenLayer {
 /// Weights, biases, multipliers, shifts and output scales stay in the blob (`'a`); the small
 /// tables are copied: normalization (`8 (O + K)` bytes), ProDMP tables (`4 N (2 P + 4)`), steps and
 /// up to [`MAX_HIDDEN_LAYERS`] LUTs of 256 bytes.
+///
+/// The policy built by [`Self::policy`] borrows the `LoadedPolicy`, so keep the `LoadedPolicy`
+/// where it outlives the control loop (a `static` cell, or a local of a never-returning `main`):
+///
+/// ```text
+/// let loaded = LoadedPolicy::<2, 10, 3, 12, 21>::load(BLOB)?;   // BLOB: 4-aligned &'static [u8]
+/// let mut policy = loaded.policy::<64, 256>()?;                  // input capacity, scratch width
+/// policy.reset(&current_position)?;
+/// loop {
+///     policy.observe(&read_sensors())?;
+///     if need_new_chunk { policy.act(Noise::Rng(&mut rng))?; }
+///     if let Some(action) = policy.next_action() { command(action); }
+/// }
+/// ```
 #[derive(Clone, Debug)]
 pub struct LoadedPolicy<
     'a,
