@@ -18,7 +18,7 @@ set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$repo"
 target=thumbv7em-none-eabihf
-allowed="libm micromath heapless bytemuck postcard defmt"
+allowed="libm micromath heapless bytemuck postcard serde defmt"  # serde: derive for the postcard blob descriptor (postcard itself depends on it)
 build_root="${CARGO_TARGET_DIR:-$repo/target}"
 proof_dir="$build_root/no-std-proof"
 
