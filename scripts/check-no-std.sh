@@ -19,9 +19,9 @@ repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$repo"
 target=thumbv7em-none-eabihf
 # DESIGN.md s.1: frmd-core's dependencies come only from these crates. `serde` (default features
-# off) is accepted as postcard's companion: postcard is a serde format, and deriving its
-# Serialize/Deserialize needs serde itself as a direct dependency.
-allowed="libm micromath heapless bytemuck postcard defmt serde"
+# off) is accepted as postcard's companion: the postcard blob descriptor derives Serialize and
+# Deserialize, which needs serde itself as a direct dependency (postcard depends on it anyway).
+allowed="libm micromath heapless bytemuck postcard serde defmt"
 build_root="${CARGO_TARGET_DIR:-$repo/target}"
 proof_dir="$build_root/no-std-proof"
 
