@@ -1,17 +1,22 @@
 //! 1. Puts `memory.x` on the linker search path and passes the cortex-m-rt (and, with the `defmt`
 //!    feature, defmt) linker scripts. Link arguments live here rather than in `.cargo/config.toml`
 //!    so that a caller's `RUSTFLAGS` (which replaces config rustflags) cannot drop them.
-//! 3. Generates the synthetic int8 MLP (src/synthetic_mlp.rs): weights as `synthetic_mlp.bin`,
-//!    everything else as `synthetic_mlp.rs`.
 //! 2. Bakes the ProDMP policy decoder on the host with frmd-core (f64 tables rounded to f32) and
 //!    writes it as a constant expression, `$OUT_DIR/baked_prodmp.rs`, with every f32 given by its
 //!    bit pattern: the firmware carries only the tables, not the f64 table builder.
+//! 3. Generates the synthetic int8 MLP (src/synthetic_mlp.rs): weights as `synthetic_mlp.bin`,
+//!    everything else as `synthetic_mlp.rs`.
+//! 4. Bakes the synthetic one-step policy (src/synthetic_policy.rs) with frmd-export into
+//!    `$OUT_DIR/policy/` (`policy.rs` + `weights.bin`), as a real firmware would bake an exported
+//!    student.
 use std::{env, fmt::Write as _, fs, path::{Path, PathBuf}};
 
 #[path = "src/shape.rs"]
 mod shape;
 #[path = "src/synthetic_mlp.rs"]
 mod synthetic_mlp;
+#[path = "src/synthetic_policy.rs"]
+mod synthetic_policy;
 
 use frmd_core::prodmp::BakedProDmp;
 
@@ -54,6 +59,7 @@ fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-changed=src/shape.rs");
     println!("cargo:rerun-if-changed=src/synthetic_mlp.rs");
+    println!("cargo:rerun-if-changed=src/synthetic_policy.rs");
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
     if env::var_os("CARGO_FEATURE_DEFMT").is_some() {
         println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
@@ -62,4 +68,6 @@ fn main() {
     let model = synthetic_mlp::generate();
     fs::write(out.join("synthetic_mlp.bin"), model.weight_bytes()).expect("write synthetic_mlp.bin");
     fs::write(out.join("synthetic_mlp.rs"), model.rust_source()).expect("write synthetic_mlp.rs");
+    frmd_export::bake::write_module(&synthetic_policy::generate(), &out.join("policy"))
+        .expect("bake the synthetic policy with frmd-export");
 }

@@ -50,7 +50,9 @@ pub fn run<W: Workload, const CALLS: usize>(workload: &mut W, stack: StackProbe)
     let mut digest = Fnv1a64::new();
     let mut samples = tick_samples.iter_mut().zip(cycle_samples.iter_mut());
     for case in 0..cases {
-        workload.prepare(case);
+        if let Err(error) = workload.prepare(case) {
+            exit_failure(&error);
+        }
         for _ in 0..repeats {
             let tick_start = ticks.now();
             let cycle_start = cycles.now();

@@ -4,6 +4,8 @@
 //! - `frmd-cortex-m` (src/main.rs): the baked ProDMP policy decoder on fixed inputs.
 //! - `frmd-cortex-m-mlp` (src/bin/frmd-cortex-m-mlp.rs): a synthetic int8 MLP (40-256-256-256-42,
 //!   SiLU LUTs) feeding the decoder, i.e. the one-step student's network + decode path.
+//! - `frmd-cortex-m-policy` (src/bin/frmd-cortex-m-policy.rs): a synthetic one-step policy baked
+//!   by frmd-export, measured as `Policy::act` (observations in, action chunk out).
 //!
 //! Each prints `digest: <16 hex>` (FNV-1a 64 over the little-endian bytes of every output, in
 //! order), `instructions: <n>` (median per call, from SysTick under QEMU `-icount shift=0`),
@@ -19,6 +21,7 @@ pub mod bench;
 pub mod digest;
 pub mod memory;
 pub mod mlp_workload;
+pub mod policy_workload;
 pub mod prodmp_workload;
 pub mod report;
 pub mod shape;

@@ -80,7 +80,7 @@ impl Workload for MlpWorkload<'_> {
         CASES
     }
 
-    fn prepare(&mut self, case: usize) {
+    fn prepare(&mut self, case: usize) -> Result<(), Self::Error> {
         let mut rng = Rng::new(OBS_SEED.wrapping_add(case as u64));
         for value in self.obs.iter_mut() {
             *value = 2.0 * rng.uniform() - 1.0;
@@ -89,6 +89,7 @@ impl Workload for MlpWorkload<'_> {
             *y0 = rng.uniform() - 0.5;
             *v0 = 0.5 * rng.uniform() - 0.25;
         }
+        Ok(())
     }
 
     /// Network forward pass, then decode.

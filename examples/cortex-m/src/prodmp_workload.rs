@@ -78,8 +78,9 @@ impl Workload for ProDmpWorkload<'_> {
         CASES
     }
 
-    fn prepare(&mut self, case: usize) {
+    fn prepare(&mut self, case: usize) -> Result<(), Self::Error> {
         self.inputs = Inputs::fixed(case);
+        Ok(())
     }
 
     /// One chunk decode.

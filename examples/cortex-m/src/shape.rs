@@ -26,6 +26,13 @@ pub const MLP_WIDTH: usize = 256;
 /// MLP output: the ProDMP parameters of every DoF, DoF-major.
 pub const MLP_OUTPUT: usize = DOF * PARAMS;
 
+/// Synthetic one-step policy (src/synthetic_policy.rs): observation history length, observation
+/// dimension, sampling steps, model input width (standard layout: `M*O + K + K + N*K`).
+pub const POLICY_HISTORY: usize = 2;
+pub const POLICY_OBS_DIM: usize = 8;
+pub const POLICY_STEPS: usize = 1;
+pub const POLICY_INPUT: usize = POLICY_HISTORY * POLICY_OBS_DIM + 2 * DOF + HORIZON * DOF;
+
 /// The ProDMP configuration of the policy (tau = HORIZON * CONTROL_DT = 1.2 s).
 pub fn config() -> ProDmpConfig {
     ProDmpConfig::policy(DOF, NUM_BASIS, HORIZON, CONTROL_DT)

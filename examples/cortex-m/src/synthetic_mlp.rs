@@ -23,9 +23,9 @@ pub use crate::shape::{
 pub const WEIGHT_SEED: u64 = 0x4652_4D44_4D4C_5031;
 
 /// Real range assumed for the inputs, pre-activations and SiLU outputs.
-const INPUT_RANGE: (f32, f32) = (-1.0, 1.0);
-const PRE_ACTIVATION_RANGE: (f32, f32) = (-4.0, 4.0);
-const ACTIVATION_RANGE: (f32, f32) = (-0.3, 4.0);
+pub const INPUT_RANGE: (f32, f32) = (-1.0, 1.0);
+pub const PRE_ACTIVATION_RANGE: (f32, f32) = (-4.0, 4.0);
+pub const ACTIVATION_RANGE: (f32, f32) = (-0.3, 4.0);
 
 /// One fully connected layer in int8 form.
 pub struct LayerData {
@@ -115,12 +115,17 @@ fn layer(
 
 /// Generates the model (deterministic: the same bytes on every host).
 pub fn generate() -> ModelData {
-    let mut rng = Rng::new(WEIGHT_SEED);
-    let input = params(INPUT_RANGE);
+    generate_with(INPUT, WEIGHT_SEED, INPUT_RANGE)
+}
+
+/// The same architecture with `input_width` inputs whose real range is `input_range`, from `seed`.
+pub fn generate_with(input_width: usize, seed: u64, input_range: (f32, f32)) -> ModelData {
+    let mut rng = Rng::new(seed);
+    let input = params(input_range);
     let pre = params(PRE_ACTIVATION_RANGE);
     let post = params(ACTIVATION_RANGE);
     let mut hidden = Vec::new();
-    let mut width = INPUT;
+    let mut width = input_width;
     let mut layer_input = input;
     for out in HIDDEN {
         hidden.push(layer(&mut rng, width, out, layer_input, Some((pre, post))));

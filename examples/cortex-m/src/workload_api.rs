@@ -12,7 +12,7 @@ pub trait Workload {
     /// Number of distinct inputs.
     fn cases(&self) -> usize;
     /// Loads input number `case` (not measured).
-    fn prepare(&mut self, case: usize);
+    fn prepare(&mut self, case: usize) -> Result<(), Self::Error>;
     /// The measured call.
     fn run(&mut self) -> Result<(), Self::Error>;
     /// Feeds the outputs of the last [`Workload::run`] to `digest`.
@@ -23,7 +23,7 @@ pub trait Workload {
 pub fn digest_all<W: Workload>(workload: &mut W) -> Result<u64, W::Error> {
     let mut digest = Fnv1a64::new();
     for case in 0..workload.cases() {
-        workload.prepare(case);
+        workload.prepare(case)?;
         workload.run()?;
         workload.digest_outputs(&mut digest);
     }
