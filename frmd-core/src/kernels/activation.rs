@@ -144,7 +144,10 @@ mod tests {
             let xd = f64::from(x);
             let want = xd / (1.0 + (-1.702 * xd).exp());
             let got = f64::from(gelu_sigmoid(x));
-            assert!((got - want).abs() <= 2e-6 * xd.abs().max(1.0), "{x}: {got} vs {want}");
+            assert!(
+                (got - want).abs() <= 2e-6 * xd.abs().max(1.0),
+                "{x}: {got} vs {want}"
+            );
             x += 0.0173;
         }
         assert_eq!(gelu_sigmoid(0.0), 0.0);

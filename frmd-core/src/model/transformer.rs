@@ -620,7 +620,10 @@ fn attend(
         return Err(KernelError::OutputLength);
     }
     for (score, key) in scores.iter_mut().zip(keys.chunks_exact(head_dim)) {
-        let dot = query.iter().zip(key).fold(0.0_f32, |acc, (q, k)| acc + q * k);
+        let dot = query
+            .iter()
+            .zip(key)
+            .fold(0.0_f32, |acc, (q, k)| acc + q * k);
         *score = dot * scale;
     }
     softmax_in_place(scores)?;

@@ -42,7 +42,7 @@ impl F32Block<'_> {
 /// A tensor shown to the [`F32Transformer::forward_observed`] callback. Probes marked "per token"
 /// are reported once per token row (`W` or `4W` values), the others once per forward pass; a
 /// calibration range is the union over all calls.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum TransformerProbe {
     /// The trajectory input (`n k`): `traj_in`'s input.
     Trajectory,
@@ -130,12 +130,13 @@ pub fn fold_noise_token(
             part: Part::Positions,
         });
     }
-    let position = positions
-        .chunks_exact(shape.width)
-        .nth(1)
-        .ok_or(TransformerError::Features {
-            part: Part::Positions,
-        })?;
+    let position =
+        positions
+            .chunks_exact(shape.width)
+            .nth(1)
+            .ok_or(TransformerError::Features {
+                part: Part::Positions,
+            })?;
     if token.len() != shape.width {
         return Err(TransformerError::Features {
             part: Part::NoiseToken,
@@ -162,12 +163,7 @@ impl F32Transformer<'_> {
         for (layer, block) in self.blocks.iter().enumerate() {
             block.check(shape, layer)?;
         }
-        check_f32_linear(
-            &self.head,
-            shape.token_values(),
-            shape.output,
-            Part::Head,
-        )
+        check_f32_linear(&self.head, shape.token_values(), shape.output, Part::Head)
     }
 
     /// Runs the backbone: `trajectory` is the `c_in`-scaled noisy trajectory (`[n, k]` row-major),

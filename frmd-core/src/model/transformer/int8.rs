@@ -3,8 +3,8 @@
 
 use super::{
     add_assign, attend, attention_scale, check_common, check_f32_linear, check_io, embed_tokens,
-    take, LayerNormWeights, Part, ScratchBuffer, TokenInput, TransformerError,
-    TransformerScratch, TransformerShape,
+    take, LayerNormWeights, Part, ScratchBuffer, TokenInput, TransformerError, TransformerScratch,
+    TransformerShape,
 };
 use crate::kernels::{dequantize_accumulators, FcRequant, FullyConnected, KernelError, Lut8};
 use crate::model::mlp::F32Layer;
@@ -65,7 +65,11 @@ impl<'a> Int8Linear<'a> {
             .zip(end.checked_mul(in_features))
             .and_then(|(from, to)| self.fc.weights.get(from..to))
             .ok_or(KernelError::WeightsLength)?;
-        let bias = self.fc.bias.get(start..end).ok_or(KernelError::BiasLength)?;
+        let bias = self
+            .fc
+            .bias
+            .get(start..end)
+            .ok_or(KernelError::BiasLength)?;
         let output_scales = self
             .output_scales
             .get(start..end)
@@ -176,9 +180,10 @@ impl Int8FeedForward<'_> {
         self.input
             .validate()
             .map_err(|_| TransformerError::InputParams { part: fc1 })?;
-        for (fc, part, in_features, out_features) in
-            [(&self.fc1, fc1, width, hidden), (&self.fc2, fc2, hidden, width)]
-        {
+        for (fc, part, in_features, out_features) in [
+            (&self.fc1, fc1, width, hidden),
+            (&self.fc2, fc2, hidden, width),
+        ] {
             fc.validate()
                 .map_err(|error| TransformerError::Weights { part, error })?;
             if fc.in_features != in_features || fc.out_features != out_features {

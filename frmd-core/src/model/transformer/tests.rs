@@ -1,1 +1,596 @@
+//! Transformer tests: the f32 path against a naive f64 reference, the int8 path against the f32
+//! path after calibration, named shape errors, scratch sizes and determinism.
 
+extern crate std;
+
+mod fixture;
+
+use super::*;
+use crate::kernels::{Activation, KernelError};
+use crate::quant::QuantParams;
+use crate::rng::Rng;
+use fixture::{big_scratch, random_inputs, FloatModel, QuantModel, Ranges};
+use std::{vec, vec::Vec};
+
+const SMALL: TransformerShape = TransformerShape {
+    horizon: 3,
+    action_dim: 2,
+    cond_dim: 6,
+    width: 16,
+    heads: 2,
+    layers: 2,
+    output: 8,
+};
+
+/// transformer-lite with a 7-DoF ProDMP head (10 basis functions + goal) and 2 x 20 observations.
+const LITE: TransformerShape = TransformerShape {
+    horizon: 12,
+    action_dim: 7,
+    cond_dim: 54,
+    width: 128,
+    heads: 2,
+    layers: 3,
+    output: 77,
+};
+
+fn shapes() -> [TransformerShape; 4] {
+    [
+        SMALL,
+        TransformerShape {
+            horizon: 1,
+            action_dim: 1,
+            cond_dim: 3,
+            width: 8,
+            heads: 1,
+            layers: 1,
+            output: 3,
+        },
+        TransformerShape {
+            horizon: 4,
+            action_dim: 3,
+            cond_dim: 10,
+            width: 24,
+            heads: 3,
+            layers: 3,
+            output: 12,
+        },
+        TransformerShape {
+            horizon: 5,
+            action_dim: 2,
+            cond_dim: 7,
+            width: 32,
+            heads: 4,
+            layers: 2,
+            output: 11,
+        },
+    ]
+}
+
+#[test]
+fn f32_path_matches_f64_reference() {
+    let mut worst = 0.0_f64;
+    for (index, shape) in shapes().into_iter().enumerate() {
+        let model = FloatModel::random(shape, 100 + index as u64);
+        let blocks = model.f32_blocks();
+        let net = model.f32_view(&blocks);
+        let mut scratch = big_scratch();
+        let mut rng = Rng::new(7 + index as u64);
+        for _ in 0..20 {
+            let (trajectory, condition) = random_inputs(&mut rng, &shape);
+            let mut out = vec![0.0_f32; shape.output];
+            net.forward(&trajectory, &condition, &mut out, &mut *scratch)
+                .unwrap();
+            let want = model.reference(&trajectory, &condition);
+            for (got, want) in out.iter().zip(&want) {
+                let error = (f64::from(*got) - want).abs() / want.abs().max(1.0);
+                worst = worst.max(error);
+                assert!(error < 1e-5, "{shape:?}: {got} vs {want}");
+            }
+        }
+    }
+    std::eprintln!("f32 transformer vs f64 reference: max error {worst:.2e} (relative above 1)");
+}
+
+/// Calibrates on `calibration` random inputs, then returns (max abs error, output range) of the
+/// int8 path against the f32 path over `evaluation` other inputs.
+fn int8_error(
+    shape: TransformerShape,
+    seed: u64,
+    float_inputs: bool,
+    runs: (usize, usize),
+) -> (f32, f32) {
+    let model = FloatModel::random(shape, seed);
+    let f32_blocks = model.f32_blocks();
+    let float_net = model.f32_view(&f32_blocks);
+    let mut rng = Rng::new(seed ^ 0xCA11);
+    let ranges = Ranges::calibrate(&float_net, &mut rng, runs.0);
+    let quant = QuantModel::new(&model, &ranges);
+    let int8_blocks = quant.blocks(&model);
+    let net = quant.view(&model, &int8_blocks, float_inputs);
+    let mut scratch = big_scratch();
+    let (mut max_error, mut lo, mut hi) = (0.0_f32, f32::MAX, f32::MIN);
+    for _ in 0..runs.1 {
+        let (trajectory, condition) = random_inputs(&mut rng, &shape);
+        let mut want = vec![0.0_f32; shape.output];
+        float_net
+            .forward(&trajectory, &condition, &mut want, &mut *scratch)
+            .unwrap();
+        let mut got = vec![0.0_f32; shape.output];
+        net.forward(&trajectory, &condition, &mut got, &mut *scratch)
+            .unwrap();
+        for (g, w) in got.iter().zip(&want) {
+            max_error = max_error.max((g - w).abs());
+            lo = lo.min(*w);
+            hi = hi.max(*w);
+        }
+    }
+    (max_error, hi - lo)
+}
+
+#[test]
+fn int8_path_close_to_f32_on_small_shapes() {
+    for (index, shape) in shapes().into_iter().enumerate() {
+        let (error, range) = int8_error(shape, 200 + index as u64, false, (200, 50));
+        std::eprintln!(
+            "int8 vs f32 {shape:?}: max abs error {error:.4} over output range {range:.3} ({:.2}%)",
+            100.0 * error / range
+        );
+        assert!(range > 1.0, "degenerate fixture: output range {range}");
+        assert!(error < 0.04 * range, "error {error} vs range {range}");
+    }
+}
+
+#[test]
+fn int8_transformer_lite_close_to_f32() {
+    let (error, range) = int8_error(LITE, 31, false, (48, 24));
+    std::eprintln!(
+        "int8 vs f32 transformer-lite: max abs error {error:.4} over output range {range:.3} ({:.2}%)",
+        100.0 * error / range
+    );
+    assert!(range > 1.0, "degenerate fixture: output range {range}");
+    assert!(error < 0.04 * range, "error {error} vs range {range}");
+}
+
+#[test]
+fn float_input_layers_are_supported_in_the_int8_path() {
+    let (int8_inputs, range) = int8_error(SMALL, 300, false, (200, 50));
+    let (float_inputs, same_range) = int8_error(SMALL, 300, true, (200, 50));
+    assert_eq!(range, same_range);
+    std::eprintln!(
+        "int8 vs f32, int8 input layers {int8_inputs:.4}, f32 input layers {float_inputs:.4}"
+    );
+    assert!(float_inputs < 0.04 * range);
+    assert_ne!(
+        float_inputs, int8_inputs,
+        "the input layer variant was not used"
+    );
+}
+
+#[test]
+fn deterministic_and_independent_of_scratch_contents() {
+    let model = FloatModel::random(SMALL, 5);
+    let f32_blocks = model.f32_blocks();
+    let float_net = model.f32_view(&f32_blocks);
+    let mut rng = Rng::new(6);
+    let ranges = Ranges::calibrate(&float_net, &mut rng, 50);
+    let quant = QuantModel::new(&model, &ranges);
+    let int8_blocks = quant.blocks(&model);
+    let net = quant.view(&model, &int8_blocks, false);
+    let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
+    let run = |dirty: bool| {
+        let mut scratch = big_scratch();
+        if dirty {
+            scratch.floats.fill(f32::NAN);
+            scratch.bytes.fill(-77);
+            scratch.accumulators.fill(i32::MIN);
+        }
+        let mut float_out = [0.0_f32; 8];
+        let mut int8_out = [0.0_f32; 8];
+        float_net
+            .forward(&trajectory, &condition, &mut float_out, &mut *scratch)
+            .unwrap();
+        net.forward(&trajectory, &condition, &mut int8_out, &mut *scratch)
+            .unwrap();
+        (float_out.map(f32::to_bits), int8_out.map(f32::to_bits))
+    };
+    let first = run(false);
+    assert_eq!(first, run(false));
+    assert_eq!(first, run(true));
+    // The output depends on the inputs (not a constant).
+    let mut moved = trajectory.clone();
+    moved[0] += 0.5;
+    let mut out = [0.0_f32; 8];
+    net.forward(&moved, &condition, &mut out, &mut *big_scratch())
+        .unwrap();
+    assert_ne!(out.map(f32::to_bits), first.1);
+}
+
+#[test]
+fn exact_scratch_sizes_suffice_and_one_less_fails() {
+    const F: ScratchLens = SMALL.f32_scratch();
+    const Q: ScratchLens = SMALL.int8_scratch();
+    let model = FloatModel::random(SMALL, 8);
+    let f32_blocks = model.f32_blocks();
+    let float_net = model.f32_view(&f32_blocks);
+    let mut rng = Rng::new(9);
+    let quant = QuantModel::new(&model, &Ranges::calibrate(&float_net, &mut rng, 20));
+    let int8_blocks = quant.blocks(&model);
+    let net = quant.view(&model, &int8_blocks, false);
+    let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
+    let mut out = [0.0_f32; 8];
+    let mut exact = TransformerScratch::<{ F.floats }, 0, 0>::new();
+    assert_eq!(
+        float_net.forward(&trajectory, &condition, &mut out, &mut exact),
+        Ok(())
+    );
+    let mut short = TransformerScratch::<{ F.floats - 1 }, 0, 0>::new();
+    assert_eq!(
+        float_net.forward(&trajectory, &condition, &mut out, &mut short),
+        Err(TransformerError::ScratchTooSmall {
+            buffer: ScratchBuffer::Floats,
+            needed: F.floats
+        })
+    );
+    let mut exact = TransformerScratch::<{ Q.floats }, { Q.bytes }, { Q.accumulators }>::new();
+    assert_eq!(
+        net.forward(&trajectory, &condition, &mut out, &mut exact),
+        Ok(())
+    );
+    let too_small = |buffer, needed| Err(TransformerError::ScratchTooSmall { buffer, needed });
+    let mut short = TransformerScratch::<{ Q.floats - 1 }, { Q.bytes }, { Q.accumulators }>::new();
+    assert_eq!(
+        net.forward(&trajectory, &condition, &mut out, &mut short),
+        too_small(ScratchBuffer::Floats, Q.floats)
+    );
+    let mut short = TransformerScratch::<{ Q.floats }, { Q.bytes - 1 }, { Q.accumulators }>::new();
+    assert_eq!(
+        net.forward(&trajectory, &condition, &mut out, &mut short),
+        too_small(ScratchBuffer::Bytes, Q.bytes)
+    );
+    let mut short = TransformerScratch::<{ Q.floats }, { Q.bytes }, { Q.accumulators - 1 }>::new();
+    assert_eq!(
+        net.forward(&trajectory, &condition, &mut out, &mut short),
+        too_small(ScratchBuffer::Accumulators, Q.accumulators)
+    );
+}
+
+#[test]
+fn transformer_lite_scratch_ram() {
+    let f = LITE.f32_scratch();
+    let q = LITE.int8_scratch();
+    // T = 14, W = 128, hd = 64: int8 floats = TW + 2T hd + 2 hd + T + W.
+    assert_eq!(q.floats, 1792 + 1792 + 128 + 14 + 128);
+    assert_eq!(q.bytes, 2 * 1792 + 512);
+    assert_eq!(q.accumulators, 128);
+    assert_eq!(q.ram_bytes(), 20_024);
+    assert_eq!(f.floats, 3 * 1792 + 1792 + 64 + 14 + 5 * 128);
+    assert_eq!(f.ram_bytes(), 31_544);
+    // A head wider than W needs more accumulators; a long condition more bytes.
+    let wide = TransformerShape {
+        output: 300,
+        cond_dim: 5000,
+        ..LITE
+    };
+    assert_eq!(wide.int8_scratch().accumulators, 300);
+    assert_eq!(wide.int8_scratch().bytes, 5000);
+}
+
+#[test]
+fn probes_report_every_quantization_point() {
+    let model = FloatModel::random(SMALL, 11);
+    let blocks = model.f32_blocks();
+    let net = model.f32_view(&blocks);
+    let mut rng = Rng::new(12);
+    let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
+    let mut seen: Vec<(TransformerProbe, usize)> = Vec::new();
+    let mut out = [0.0_f32; 8];
+    net.forward_observed(
+        &trajectory,
+        &condition,
+        &mut out,
+        &mut *big_scratch(),
+        |p, v| seen.push((p, v.len())),
+    )
+    .unwrap();
+    let count = |probe| seen.iter().filter(|(p, _)| *p == probe).count();
+    let len = |probe| seen.iter().find(|(p, _)| *p == probe).map(|(_, l)| *l);
+    let (t, w) = (SMALL.tokens(), SMALL.width);
+    assert_eq!(len(TransformerProbe::Trajectory), Some(6));
+    assert_eq!(len(TransformerProbe::Condition), Some(6));
+    assert_eq!(len(TransformerProbe::Tokens), Some(t * w));
+    for layer in 0..SMALL.layers {
+        assert_eq!(len(TransformerProbe::Norm1 { layer }), Some(t * w));
+        assert_eq!(len(TransformerProbe::Attention { layer }), Some(t * w));
+        assert_eq!(count(TransformerProbe::Norm2 { layer }), t);
+        assert_eq!(len(TransformerProbe::Norm2 { layer }), Some(w));
+        assert_eq!(count(TransformerProbe::Fc1 { layer }), t);
+        assert_eq!(len(TransformerProbe::Gelu { layer }), Some(4 * w));
+        assert_eq!(len(TransformerProbe::Block { layer }), Some(t * w));
+    }
+    assert_eq!(len(TransformerProbe::FinalNorm), Some(t * w));
+    assert_eq!(len(TransformerProbe::Output), Some(8));
+    // Trajectory, Condition, Tokens; per block Norm1, Attention, Block and 3 per token; then
+    // FinalNorm and Output.
+    assert_eq!(seen.len(), 3 + SMALL.layers * (3 + 3 * t) + 2);
+}
+
+#[test]
+fn attend_averages_values_for_equal_scores() {
+    let keys = [1.0_f32, 0.0, 1.0, 0.0, 1.0, 0.0];
+    let values = [1.0_f32, 2.0, 3.0, 4.0, 5.0, 9.0];
+    let mut scores = [0.0_f32; 3];
+    let mut out = [0.0_f32; 2];
+    attend(&[0.0, 1.0], &keys, &values, 0.5, &mut scores, &mut out).unwrap();
+    assert_eq!(scores, [1.0 / 3.0; 3]);
+    assert!((out[0] - 3.0).abs() < 1e-6 && (out[1] - 5.0).abs() < 1e-6);
+    // A dominant key selects its value.
+    let keys = [0.0_f32, 0.0, 50.0, 0.0, 0.0, 0.0];
+    attend(&[1.0, 0.0], &keys, &values, 1.0, &mut scores, &mut out).unwrap();
+    assert!((out[0] - 3.0).abs() < 1e-6 && (out[1] - 4.0).abs() < 1e-6);
+    assert_eq!(
+        attend(&[1.0, 0.0], &keys[..5], &values, 1.0, &mut scores, &mut out),
+        Err(KernelError::InputLength)
+    );
+}
+
+#[test]
+fn int8_linear_rows_match_the_full_layer() {
+    let model = FloatModel::random(SMALL, 13);
+    let blocks = model.f32_blocks();
+    let net = model.f32_view(&blocks);
+    let mut rng = Rng::new(14);
+    let quant = QuantModel::new(&model, &Ranges::calibrate(&net, &mut rng, 10));
+    let qkv = quant.blocks[0].qkv.view();
+    let input: Vec<i8> = (0..16).map(|i| (i * 13 - 100) as i8).collect();
+    let mut full = [0.0_f32; 48];
+    qkv.forward_quantized(&input, &mut [0; 48], &mut full)
+        .unwrap();
+    for start in [0_usize, 8, 16, 40] {
+        let mut part = [0.0_f32; 8];
+        qkv.rows(start, 8)
+            .unwrap()
+            .forward_quantized(&input, &mut [0; 8], &mut part)
+            .unwrap();
+        assert_eq!(part, full[start..start + 8]);
+    }
+    assert_eq!(qkv.rows(41, 8), Err(KernelError::WeightsLength));
+    assert_eq!(qkv.rows(usize::MAX, 2), Err(KernelError::WeightsLength));
+}
+
+#[test]
+fn named_errors_for_bad_shapes_weights_and_arguments() {
+    let model = FloatModel::random(SMALL, 21);
+    let blocks = model.f32_blocks();
+    let net = model.f32_view(&blocks);
+    let mut rng = Rng::new(22);
+    let quant = QuantModel::new(&model, &Ranges::calibrate(&net, &mut rng, 10));
+    let int8_blocks = quant.blocks(&model);
+    let int8 = quant.view(&model, &int8_blocks, false);
+    let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
+    let mut out = [0.0_f32; 8];
+    let mut scratch = big_scratch();
+    let mut run_f32 = |n: &F32Transformer<'_>, t: &[f32], c: &[f32], o: &mut [f32]| {
+        n.forward(t, c, o, &mut *scratch)
+    };
+    use TransformerError as E;
+    // Shapes.
+    let shape = |s: TransformerShape| F32Transformer { shape: s, ..net }.validate();
+    assert_eq!(
+        shape(TransformerShape { heads: 0, ..SMALL }),
+        Err(E::ZeroSize)
+    );
+    assert_eq!(
+        shape(TransformerShape { heads: 3, ..SMALL }),
+        Err(E::HeadsDoNotDivideWidth)
+    );
+    let huge = TransformerShape {
+        horizon: usize::MAX / 4,
+        ..SMALL
+    };
+    assert_eq!(shape(huge), Err(E::SizeOverflow));
+    assert_eq!(
+        shape(TransformerShape { layers: 3, ..SMALL }),
+        Err(E::LayerCount)
+    );
+    assert_eq!(
+        shape(TransformerShape { output: 9, ..SMALL }),
+        Err(E::Features { part: Part::Head })
+    );
+    assert_eq!(
+        shape(TransformerShape {
+            cond_dim: 5,
+            ..SMALL
+        }),
+        Err(E::Features { part: Part::CondIn })
+    );
+    // Weights.
+    let positions = F32Transformer {
+        positions: &model.positions[1..],
+        ..net
+    };
+    assert_eq!(
+        positions.validate(),
+        Err(E::Features {
+            part: Part::Positions
+        })
+    );
+    let noise = F32Transformer {
+        noise_token: &model.noise_token[1..],
+        ..net
+    };
+    assert_eq!(
+        noise.validate(),
+        Err(E::Features {
+            part: Part::NoiseToken
+        })
+    );
+    let mut broken = blocks.clone();
+    broken[1].qkv.out_features = 47;
+    broken[1].qkv.weights = &model.blocks[1].qkv.weights[..47 * 16];
+    broken[1].qkv.bias = &model.blocks[1].qkv.bias[..47];
+    let qkv = F32Transformer {
+        blocks: &broken,
+        ..net
+    };
+    assert_eq!(
+        qkv.validate(),
+        Err(E::Features {
+            part: Part::Qkv { layer: 1 }
+        })
+    );
+    let mut broken = blocks.clone();
+    broken[0].proj.weights = &model.blocks[0].proj.weights[1..];
+    let proj = F32Transformer {
+        blocks: &broken,
+        ..net
+    };
+    assert_eq!(
+        proj.validate(),
+        Err(E::Weights {
+            part: Part::Proj { layer: 0 },
+            error: KernelError::WeightsLength
+        })
+    );
+    let mut broken = blocks.clone();
+    broken[0].fc1.activation = Activation::Gelu;
+    let fc1 = F32Transformer {
+        blocks: &broken,
+        ..net
+    };
+    assert_eq!(
+        fc1.validate(),
+        Err(E::Activation {
+            part: Part::Fc1 { layer: 0 }
+        })
+    );
+    let mut broken = blocks.clone();
+    broken[1].norm2.beta = &model.blocks[1].norm2.beta[..15];
+    let norm = F32Transformer {
+        blocks: &broken,
+        ..net
+    };
+    assert_eq!(
+        norm.validate(),
+        Err(E::Features {
+            part: Part::Norm2 { layer: 1 }
+        })
+    );
+    // Arguments.
+    assert_eq!(
+        run_f32(&net, &trajectory[1..], &condition, &mut out),
+        Err(E::TrajectoryLength)
+    );
+    assert_eq!(
+        run_f32(&net, &trajectory, &condition[1..], &mut out),
+        Err(E::ConditionLength)
+    );
+    assert_eq!(
+        run_f32(&net, &trajectory, &condition, &mut out[1..]),
+        Err(E::OutputLength)
+    );
+    let mut nan = trajectory.clone();
+    nan[2] = f32::NAN;
+    assert_eq!(
+        run_f32(&net, &nan, &condition, &mut out),
+        Err(E::NonFiniteInput)
+    );
+    assert_eq!(run_f32(&net, &trajectory, &condition, &mut out), Ok(()));
+    // int8-specific parts.
+    let mut int8_scratch = big_scratch();
+    assert_eq!(
+        int8.forward(&nan, &condition, &mut out, &mut *int8_scratch),
+        Err(E::NonFiniteInput)
+    );
+    let bad_input = Int8Linear {
+        input: QuantParams {
+            scale: 0.0,
+            zero_point: 0,
+        },
+        ..int8.head
+    };
+    let head = Int8Transformer {
+        head: bad_input,
+        ..int8
+    };
+    assert_eq!(head.validate(), Err(E::InputParams { part: Part::Head }));
+    let mut broken = int8_blocks.clone();
+    broken[1].feed_forward.fc1_requant.shifts = &quant.blocks[1].shifts[1..];
+    let requant = Int8Transformer {
+        blocks: &broken,
+        ..int8
+    };
+    assert_eq!(
+        requant.validate(),
+        Err(E::Weights {
+            part: Part::Fc1 { layer: 1 },
+            error: KernelError::RequantLength
+        })
+    );
+    let mut broken = int8_blocks.clone();
+    broken[0].feed_forward.fc2_scales = &quant.blocks[0].fc2.output_scales[1..];
+    let scales = Int8Transformer {
+        blocks: &broken,
+        ..int8
+    };
+    assert_eq!(
+        scales.validate(),
+        Err(E::Weights {
+            part: Part::Fc2 { layer: 0 },
+            error: KernelError::ScaleLength
+        })
+    );
+    let mut broken = int8_blocks.clone();
+    broken[0].qkv.output_scales = &quant.blocks[0].qkv.output_scales[..47];
+    let qkv = Int8Transformer {
+        blocks: &broken,
+        ..int8
+    };
+    assert_eq!(
+        qkv.validate(),
+        Err(E::Weights {
+            part: Part::Qkv { layer: 0 },
+            error: KernelError::ScaleLength
+        })
+    );
+    let traj = Int8Transformer {
+        traj_in: int8.cond_in,
+        ..int8
+    };
+    assert_eq!(traj.validate(), Err(E::Features { part: Part::TrajIn }));
+    // Noise-token folding.
+    let mut token = [0.0_f32; 16];
+    let noise_in = model.noise_in.view();
+    assert_eq!(
+        fold_noise_token(
+            &SMALL,
+            &noise_in,
+            &model.embedding[1..],
+            &model.positions,
+            &mut token
+        ),
+        Err(E::EmbeddingLength)
+    );
+    assert_eq!(
+        fold_noise_token(
+            &SMALL,
+            &noise_in,
+            &model.embedding,
+            &model.positions,
+            &mut token[1..]
+        ),
+        Err(E::Features {
+            part: Part::NoiseToken
+        })
+    );
+    assert_eq!(
+        fold_noise_token(
+            &SMALL,
+            &noise_in,
+            &model.embedding,
+            &model.positions,
+            &mut token
+        ),
+        Ok(())
+    );
+    assert_eq!(token.as_slice(), model.noise_token.as_slice());
+}
