@@ -3,11 +3,11 @@
 
 extern crate std;
 
+mod errors;
 mod fixture;
 
 use super::*;
-use crate::kernels::{Activation, KernelError};
-use crate::quant::QuantParams;
+use crate::kernels::KernelError;
 use crate::rng::Rng;
 use fixture::{big_scratch, random_inputs, FloatModel, QuantModel, Ranges};
 use std::{vec, vec::Vec};
@@ -149,6 +149,29 @@ fn int8_transformer_lite_close_to_f32() {
     );
     assert!(range > 1.0, "degenerate fixture: output range {range}");
     assert!(error < 0.04 * range, "error {error} vs range {range}");
+}
+
+#[test]
+fn int8_path_is_bit_exact_with_naive_integer_model() {
+    for (index, shape) in shapes().into_iter().enumerate() {
+        let model = FloatModel::random(shape, 400 + index as u64);
+        let f32_blocks = model.f32_blocks();
+        let float_net = model.f32_view(&f32_blocks);
+        let mut rng = Rng::new(401 + index as u64);
+        let quant = QuantModel::new(&model, &Ranges::calibrate(&float_net, &mut rng, 30));
+        let int8_blocks = quant.blocks(&model);
+        let net = quant.view(&model, &int8_blocks, false);
+        let mut scratch = big_scratch();
+        for _ in 0..10 {
+            let (trajectory, condition) = random_inputs(&mut rng, &shape);
+            let mut got = vec![0.0_f32; shape.output];
+            net.forward(&trajectory, &condition, &mut got, &mut *scratch)
+                .unwrap();
+            let want = quant.naive_forward(&model, &trajectory, &condition);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
+            assert_eq!(bits(&got), bits(&want), "{shape:?}");
+        }
+    }
 }
 
 #[test]
@@ -355,242 +378,4 @@ fn int8_linear_rows_match_the_full_layer() {
     }
     assert_eq!(qkv.rows(41, 8), Err(KernelError::WeightsLength));
     assert_eq!(qkv.rows(usize::MAX, 2), Err(KernelError::WeightsLength));
-}
-
-#[test]
-fn named_errors_for_bad_shapes_weights_and_arguments() {
-    let model = FloatModel::random(SMALL, 21);
-    let blocks = model.f32_blocks();
-    let net = model.f32_view(&blocks);
-    let mut rng = Rng::new(22);
-    let quant = QuantModel::new(&model, &Ranges::calibrate(&net, &mut rng, 10));
-    let int8_blocks = quant.blocks(&model);
-    let int8 = quant.view(&model, &int8_blocks, false);
-    let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
-    let mut out = [0.0_f32; 8];
-    let mut scratch = big_scratch();
-    let mut run_f32 = |n: &F32Transformer<'_>, t: &[f32], c: &[f32], o: &mut [f32]| {
-        n.forward(t, c, o, &mut *scratch)
-    };
-    use TransformerError as E;
-    // Shapes.
-    let shape = |s: TransformerShape| F32Transformer { shape: s, ..net }.validate();
-    assert_eq!(
-        shape(TransformerShape { heads: 0, ..SMALL }),
-        Err(E::ZeroSize)
-    );
-    assert_eq!(
-        shape(TransformerShape { heads: 3, ..SMALL }),
-        Err(E::HeadsDoNotDivideWidth)
-    );
-    let huge = TransformerShape {
-        horizon: usize::MAX / 4,
-        ..SMALL
-    };
-    assert_eq!(shape(huge), Err(E::SizeOverflow));
-    assert_eq!(
-        shape(TransformerShape { layers: 3, ..SMALL }),
-        Err(E::LayerCount)
-    );
-    assert_eq!(
-        shape(TransformerShape { output: 9, ..SMALL }),
-        Err(E::Features { part: Part::Head })
-    );
-    assert_eq!(
-        shape(TransformerShape {
-            cond_dim: 5,
-            ..SMALL
-        }),
-        Err(E::Features { part: Part::CondIn })
-    );
-    // Weights.
-    let positions = F32Transformer {
-        positions: &model.positions[1..],
-        ..net
-    };
-    assert_eq!(
-        positions.validate(),
-        Err(E::Features {
-            part: Part::Positions
-        })
-    );
-    let noise = F32Transformer {
-        noise_token: &model.noise_token[1..],
-        ..net
-    };
-    assert_eq!(
-        noise.validate(),
-        Err(E::Features {
-            part: Part::NoiseToken
-        })
-    );
-    let mut broken = blocks.clone();
-    broken[1].qkv.out_features = 47;
-    broken[1].qkv.weights = &model.blocks[1].qkv.weights[..47 * 16];
-    broken[1].qkv.bias = &model.blocks[1].qkv.bias[..47];
-    let qkv = F32Transformer {
-        blocks: &broken,
-        ..net
-    };
-    assert_eq!(
-        qkv.validate(),
-        Err(E::Features {
-            part: Part::Qkv { layer: 1 }
-        })
-    );
-    let mut broken = blocks.clone();
-    broken[0].proj.weights = &model.blocks[0].proj.weights[1..];
-    let proj = F32Transformer {
-        blocks: &broken,
-        ..net
-    };
-    assert_eq!(
-        proj.validate(),
-        Err(E::Weights {
-            part: Part::Proj { layer: 0 },
-            error: KernelError::WeightsLength
-        })
-    );
-    let mut broken = blocks.clone();
-    broken[0].fc1.activation = Activation::Gelu;
-    let fc1 = F32Transformer {
-        blocks: &broken,
-        ..net
-    };
-    assert_eq!(
-        fc1.validate(),
-        Err(E::Activation {
-            part: Part::Fc1 { layer: 0 }
-        })
-    );
-    let mut broken = blocks.clone();
-    broken[1].norm2.beta = &model.blocks[1].norm2.beta[..15];
-    let norm = F32Transformer {
-        blocks: &broken,
-        ..net
-    };
-    assert_eq!(
-        norm.validate(),
-        Err(E::Features {
-            part: Part::Norm2 { layer: 1 }
-        })
-    );
-    // Arguments.
-    assert_eq!(
-        run_f32(&net, &trajectory[1..], &condition, &mut out),
-        Err(E::TrajectoryLength)
-    );
-    assert_eq!(
-        run_f32(&net, &trajectory, &condition[1..], &mut out),
-        Err(E::ConditionLength)
-    );
-    assert_eq!(
-        run_f32(&net, &trajectory, &condition, &mut out[1..]),
-        Err(E::OutputLength)
-    );
-    let mut nan = trajectory.clone();
-    nan[2] = f32::NAN;
-    assert_eq!(
-        run_f32(&net, &nan, &condition, &mut out),
-        Err(E::NonFiniteInput)
-    );
-    assert_eq!(run_f32(&net, &trajectory, &condition, &mut out), Ok(()));
-    // int8-specific parts.
-    let mut int8_scratch = big_scratch();
-    assert_eq!(
-        int8.forward(&nan, &condition, &mut out, &mut *int8_scratch),
-        Err(E::NonFiniteInput)
-    );
-    let bad_input = Int8Linear {
-        input: QuantParams {
-            scale: 0.0,
-            zero_point: 0,
-        },
-        ..int8.head
-    };
-    let head = Int8Transformer {
-        head: bad_input,
-        ..int8
-    };
-    assert_eq!(head.validate(), Err(E::InputParams { part: Part::Head }));
-    let mut broken = int8_blocks.clone();
-    broken[1].feed_forward.fc1_requant.shifts = &quant.blocks[1].shifts[1..];
-    let requant = Int8Transformer {
-        blocks: &broken,
-        ..int8
-    };
-    assert_eq!(
-        requant.validate(),
-        Err(E::Weights {
-            part: Part::Fc1 { layer: 1 },
-            error: KernelError::RequantLength
-        })
-    );
-    let mut broken = int8_blocks.clone();
-    broken[0].feed_forward.fc2_scales = &quant.blocks[0].fc2.output_scales[1..];
-    let scales = Int8Transformer {
-        blocks: &broken,
-        ..int8
-    };
-    assert_eq!(
-        scales.validate(),
-        Err(E::Weights {
-            part: Part::Fc2 { layer: 0 },
-            error: KernelError::ScaleLength
-        })
-    );
-    let mut broken = int8_blocks.clone();
-    broken[0].qkv.output_scales = &quant.blocks[0].qkv.output_scales[..47];
-    let qkv = Int8Transformer {
-        blocks: &broken,
-        ..int8
-    };
-    assert_eq!(
-        qkv.validate(),
-        Err(E::Weights {
-            part: Part::Qkv { layer: 0 },
-            error: KernelError::ScaleLength
-        })
-    );
-    let traj = Int8Transformer {
-        traj_in: int8.cond_in,
-        ..int8
-    };
-    assert_eq!(traj.validate(), Err(E::Features { part: Part::TrajIn }));
-    // Noise-token folding.
-    let mut token = [0.0_f32; 16];
-    let noise_in = model.noise_in.view();
-    assert_eq!(
-        fold_noise_token(
-            &SMALL,
-            &noise_in,
-            &model.embedding[1..],
-            &model.positions,
-            &mut token
-        ),
-        Err(E::EmbeddingLength)
-    );
-    assert_eq!(
-        fold_noise_token(
-            &SMALL,
-            &noise_in,
-            &model.embedding,
-            &model.positions,
-            &mut token[1..]
-        ),
-        Err(E::Features {
-            part: Part::NoiseToken
-        })
-    );
-    assert_eq!(
-        fold_noise_token(
-            &SMALL,
-            &noise_in,
-            &model.embedding,
-            &model.positions,
-            &mut token
-        ),
-        Ok(())
-    );
-    assert_eq!(token.as_slice(), model.noise_token.as_slice());
 }

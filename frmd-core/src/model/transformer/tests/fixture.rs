@@ -468,3 +468,115 @@ impl QuantModel {
         }
     }
 }
+
+fn naive_accumulator(q: &QLin, o: usize, codes: &[i8]) -> i32 {
+    let row = &q.weights[o * q.in_features..(o + 1) * q.in_features];
+    let wide: i64 = i64::from(q.bias[o])
+        + row
+            .iter()
+            .zip(codes)
+            .map(|(w, x)| i64::from(*w) * i64::from(*x))
+            .sum::<i64>();
+    i32::try_from(wide).expect("test accumulators fit i32")
+}
+
+/// Quantize, i64 dot products, dequantize (f32 in, f32 out).
+fn naive_linear(q: &QLin, input: &[f32]) -> Vec<f32> {
+    let codes: Vec<i8> = input.iter().map(|v| q.input.quantize(*v)).collect();
+    (0..q.out_features)
+        .map(|o| naive_accumulator(q, o, &codes) as f32 * q.output_scales[o])
+        .collect()
+}
+
+impl QuantModel {
+    /// Naive int8 forward pass: full `qkv` matrices, i64 accumulation, the wide-integer
+    /// requantization model, table lookups by index; f32 steps in the documented order.
+    pub fn naive_forward(
+        &self,
+        float: &FloatModel,
+        trajectory: &[f32],
+        condition: &[f32],
+    ) -> Vec<f32> {
+        let s = &float.shape;
+        let (w, t, hd) = (s.width, s.tokens(), s.head_dim());
+        let add = |x: &mut [f32], y: &[f32]| x.iter_mut().zip(y).for_each(|(a, b)| *a += *b);
+        let norm = |n: &Norm, x: &[f32]| {
+            let mut out = vec![0.0_f32; x.len()];
+            crate::kernels::layer_norm(x, &n.gamma, &n.beta, 1e-5, &mut out).unwrap();
+            out
+        };
+        let mut h: Vec<Vec<f32>> = vec![
+            naive_linear(&self.cond_in, condition),
+            float.noise_token.clone(),
+        ];
+        add(&mut h[0], &float.positions[..w]);
+        for i in 0..s.horizon {
+            let mut token = naive_linear(
+                &self.traj_in,
+                &trajectory[i * s.action_dim..(i + 1) * s.action_dim],
+            );
+            add(&mut token, &float.positions[(2 + i) * w..(3 + i) * w]);
+            h.push(token);
+        }
+        let scale = (1.0 / (hd as f64).sqrt()) as f32;
+        for (q, f) in self.blocks.iter().zip(&float.blocks) {
+            let qkv: Vec<Vec<f32>> = h
+                .iter()
+                .map(|x| naive_linear(&q.qkv, &norm(&f.norm1, x)))
+                .collect();
+            let mut attention = vec![vec![0_i8; w]; t];
+            for head in 0..s.heads {
+                let o = head * hd;
+                for i in 0..t {
+                    let mut scores: Vec<f32> = (0..t)
+                        .map(|j| {
+                            (0..hd).fold(0.0_f32, |acc, d| acc + qkv[i][o + d] * qkv[j][w + o + d])
+                                * scale
+                        })
+                        .collect();
+                    crate::kernels::softmax_in_place(&mut scores).unwrap();
+                    for d in 0..hd {
+                        let value =
+                            (0..t).fold(0.0_f32, |acc, j| acc + scores[j] * qkv[j][2 * w + o + d]);
+                        attention[i][o + d] = q.proj.input.quantize(value);
+                    }
+                }
+            }
+            for (x, codes) in h.iter_mut().zip(&attention) {
+                let row: Vec<f32> = (0..w)
+                    .map(|o| naive_accumulator(&q.proj, o, codes) as f32 * q.proj.output_scales[o])
+                    .collect();
+                add(x, &row);
+                let codes: Vec<i8> = norm(&f.norm2, x)
+                    .iter()
+                    .map(|v| q.fc1.input.quantize(*v))
+                    .collect();
+                let hidden: Vec<i8> = (0..4 * w)
+                    .map(|o| {
+                        let pre = crate::quant::reference::requantize(
+                            naive_accumulator(&q.fc1, o, &codes),
+                            q.multipliers[o],
+                            q.shifts[o],
+                            q.fc1_output.zero_point,
+                            -128,
+                            127,
+                        );
+                        q.gelu.table[(i32::from(pre) + 128) as usize]
+                    })
+                    .collect();
+                let row: Vec<f32> = (0..w)
+                    .map(|o| naive_accumulator(&q.fc2, o, &hidden) as f32 * q.fc2.output_scales[o])
+                    .collect();
+                add(x, &row);
+            }
+        }
+        let codes: Vec<i8> = h
+            .iter()
+            .flat_map(|x| norm(&float.final_norm, x))
+            .map(|v| self.head.input.quantize(v))
+            .collect();
+        (0..s.output)
+            .map(|o| naive_accumulator(&self.head, o, &codes) as f32 * self.head.output_scales[o])
+            .collect()
+    }
+}
