@@ -31,12 +31,20 @@
 //! 256-entry GELU [`crate::kernels::Lut8`] and fed to `fc2` as int8 ([`Int8FeedForward`]).
 //! LayerNorm and the attention (scores, softmax, weighted sum of values) run in f32.
 //!
-//! Quantization points (each with its own calibrated parameters, recorded by
-//! [`F32Transformer::forward_observed`]): `traj_in`/`cond_in` inputs ([`TransformerProbe::Trajectory`],
-//! [`TransformerProbe::Condition`]), `qkv` input ([`TransformerProbe::Norm1`]), `proj` input
-//! ([`TransformerProbe::Attention`]), `fc1` input ([`TransformerProbe::Norm2`]), `fc1` output /
-//! LUT input ([`TransformerProbe::Fc1`]), LUT output / `fc2` input ([`TransformerProbe::Gelu`]) and
-//! the `head` input ([`TransformerProbe::FinalNorm`]).
+//! Quantization points, each with its own calibrated parameters recorded by
+//! [`F32Transformer::forward_observed`] under the named [`TransformerProbe`]:
+//! - `traj_in` / `cond_in` inputs: `Trajectory` / `Condition`;
+//! - `qkv` input (LN1 output): `Norm1`; `proj` input (concatenated heads): `Attention`;
+//! - `fc1` input (LN2 output): `Norm2`; `fc1` output = LUT input: `Fc1`; LUT output = `fc2`
+//!   input: `Gelu`;
+//! - `head` input (final LayerNorm output): `FinalNorm`.
+//!
+//! # Flash and compute (transformer-lite, int8)
+//!
+//! Per block `12 W^2 = 196 608` int8 weights (`qkv`, `proj`, `fc1`, `fc2`), so 589 824 for three
+//! blocks, plus `T W output` for the head (137 984 for a 77-value ProDMP head), about 0.75 MB of
+//! int8 weights (int32 biases, f32 scales, norms and positions add about 50 KB). A forward pass
+//! is about `T (12 W^2 L) + T W output + 2 L T^2 W` = 8.5 M multiply-accumulates.
 //!
 //! # Scratch memory
 //!
@@ -259,7 +267,8 @@ impl LayerNormWeights<'_> {
 ///     horizon: 12, action_dim: 7, cond_dim: 54, width: 128, heads: 2, layers: 3, output: 77,
 /// };
 /// const LENS: ScratchLens = SHAPE.int8_scratch();
-/// let scratch = TransformerScratch::<{ LENS.floats }, { LENS.bytes }, { LENS.accumulators }>::new();
+/// type Scratch = TransformerScratch<{ LENS.floats }, { LENS.bytes }, { LENS.accumulators }>;
+/// let scratch = Scratch::new();
 /// assert_eq!(LENS.ram_bytes(), 20_024);
 /// # let _ = scratch;
 /// ```

@@ -1,5 +1,7 @@
 //! Errors of the transformer forward passes: which part of the model or which argument is wrong.
 
+#[cfg(doc)]
+use super::{fold_noise_token, TransformerShape};
 use crate::kernels::KernelError;
 
 /// A named tensor group of the backbone (used in errors). `layer` is the 0-based block index.

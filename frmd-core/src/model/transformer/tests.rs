@@ -144,7 +144,7 @@ fn int8_path_close_to_f32_on_small_shapes() {
 fn int8_transformer_lite_close_to_f32() {
     let (error, range) = int8_error(LITE, 31, false, (48, 24));
     std::eprintln!(
-        "int8 vs f32 transformer-lite: max abs error {error:.4} over output range {range:.3} ({:.2}%)",
+        "int8 vs f32 transformer-lite: max abs error {error:.4}, output range {range:.3} ({:.2}%)",
         100.0 * error / range
     );
     assert!(range > 1.0, "degenerate fixture: output range {range}");
