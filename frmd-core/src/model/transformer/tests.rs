@@ -91,14 +91,36 @@ fn f32_path_matches_f64_reference() {
     std::eprintln!("f32 transformer vs f64 reference: max error {worst:.2e} (relative above 1)");
 }
 
-/// Calibrates on `calibration` random inputs, then returns (max abs error, output range) of the
-/// int8 path against the f32 path over `evaluation` other inputs.
+/// int8 path against f32 path: max and RMS abs error, and the f32 output range (max - min).
+struct Comparison {
+    max_error: f32,
+    rms_error: f32,
+    range: f32,
+}
+
+impl core::fmt::Display for Comparison {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let pct = |e: f32| 100.0 * e / self.range;
+        write!(
+            f,
+            "max abs error {:.4} ({:.2}% of range {:.3}), rms {:.4} ({:.2}%)",
+            self.max_error,
+            pct(self.max_error),
+            self.range,
+            self.rms_error,
+            pct(self.rms_error)
+        )
+    }
+}
+
+/// Calibrates on `runs.0` random inputs, then compares the int8 path with the f32 path over
+/// `runs.1` other inputs.
 fn int8_error(
     shape: TransformerShape,
     seed: u64,
     float_inputs: bool,
     runs: (usize, usize),
-) -> (f32, f32) {
+) -> Comparison {
     let model = FloatModel::random(shape, seed);
     let f32_blocks = model.f32_blocks();
     let float_net = model.f32_view(&f32_blocks);
@@ -109,6 +131,7 @@ fn int8_error(
     let net = quant.view(&model, &int8_blocks, float_inputs);
     let mut scratch = big_scratch();
     let (mut max_error, mut lo, mut hi) = (0.0_f32, f32::MAX, f32::MIN);
+    let (mut sum_sq, mut count) = (0.0_f64, 0_usize);
     for _ in 0..runs.1 {
         let (trajectory, condition) = random_inputs(&mut rng, &shape);
         let mut want = vec![0.0_f32; shape.output];
@@ -120,35 +143,42 @@ fn int8_error(
             .unwrap();
         for (g, w) in got.iter().zip(&want) {
             max_error = max_error.max((g - w).abs());
+            sum_sq += f64::from(g - w).powi(2);
+            count += 1;
             lo = lo.min(*w);
             hi = hi.max(*w);
         }
     }
-    (max_error, hi - lo)
+    Comparison {
+        max_error,
+        rms_error: (sum_sq / count as f64).sqrt() as f32,
+        range: hi - lo,
+    }
+}
+
+/// Fails unless the int8 path is within 4% (max) and 1% (RMS) of the f32 output range.
+fn assert_close(what: &str, c: &Comparison) {
+    std::eprintln!("int8 vs f32 {what}: {c}");
+    assert!(
+        c.range > 1.0,
+        "degenerate fixture: output range {}",
+        c.range
+    );
+    assert!(c.max_error < 0.04 * c.range, "{what}: {c}");
+    assert!(c.rms_error < 0.01 * c.range, "{what}: {c}");
 }
 
 #[test]
 fn int8_path_close_to_f32_on_small_shapes() {
     for (index, shape) in shapes().into_iter().enumerate() {
-        let (error, range) = int8_error(shape, 200 + index as u64, false, (200, 50));
-        std::eprintln!(
-            "int8 vs f32 {shape:?}: max abs error {error:.4} over output range {range:.3} ({:.2}%)",
-            100.0 * error / range
-        );
-        assert!(range > 1.0, "degenerate fixture: output range {range}");
-        assert!(error < 0.04 * range, "error {error} vs range {range}");
+        let comparison = int8_error(shape, 200 + index as u64, false, (200, 50));
+        assert_close(&std::format!("{shape:?}"), &comparison);
     }
 }
 
 #[test]
 fn int8_transformer_lite_close_to_f32() {
-    let (error, range) = int8_error(LITE, 31, false, (48, 24));
-    std::eprintln!(
-        "int8 vs f32 transformer-lite: max abs error {error:.4}, output range {range:.3} ({:.2}%)",
-        100.0 * error / range
-    );
-    assert!(range > 1.0, "degenerate fixture: output range {range}");
-    assert!(error < 0.04 * range, "error {error} vs range {range}");
+    assert_close("transformer-lite", &int8_error(LITE, 31, false, (48, 24)));
 }
 
 #[test]
@@ -176,15 +206,13 @@ fn int8_path_is_bit_exact_with_naive_integer_model() {
 
 #[test]
 fn float_input_layers_are_supported_in_the_int8_path() {
-    let (int8_inputs, range) = int8_error(SMALL, 300, false, (200, 50));
-    let (float_inputs, same_range) = int8_error(SMALL, 300, true, (200, 50));
-    assert_eq!(range, same_range);
-    std::eprintln!(
-        "int8 vs f32, int8 input layers {int8_inputs:.4}, f32 input layers {float_inputs:.4}"
-    );
-    assert!(float_inputs < 0.04 * range);
+    let int8_inputs = int8_error(SMALL, 300, false, (200, 50));
+    let float_inputs = int8_error(SMALL, 300, true, (200, 50));
+    assert_eq!(int8_inputs.range, float_inputs.range);
+    assert_close("int8 input layers", &int8_inputs);
+    assert_close("f32 input layers", &float_inputs);
     assert_ne!(
-        float_inputs, int8_inputs,
+        float_inputs.max_error, int8_inputs.max_error,
         "the input layer variant was not used"
     );
 }
