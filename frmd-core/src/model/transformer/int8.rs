@@ -254,12 +254,15 @@ impl Int8Block<'_> {
 pub struct Int8Transformer<'a> {
     /// Sizes.
     pub shape: TransformerShape,
-    /// `k -> W`, applied to each trajectory step.
+    /// `k -> W`, applied to each trajectory step. Its input is the `c_in`-scaled trajectory; an
+    /// exporter may instead fold `c_in(sigma)` into the int8 variant's input scale
+    /// (`scale / c_in`) and have the caller pass the unscaled trajectory.
     pub traj_in: TokenLinear<'a>,
     /// `cond_dim -> W`.
     pub cond_in: TokenLinear<'a>,
     /// `[W]` constant noise token `noise_in(embedding(sigma)) + positions[1]`
-    /// ([`super::fold_noise_token`]).
+    /// ([`super::fold_noise_token`]). A few-step sampler keeps one token per noise level and
+    /// copies the model with the right one (`Int8Transformer { noise_token, ..model }`).
     pub noise_token: &'a [f32],
     /// `[T, W]` learned positions; row 1 is not read (folded into `noise_token`).
     pub positions: &'a [f32],
