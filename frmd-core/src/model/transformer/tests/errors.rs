@@ -246,3 +246,84 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
     );
     assert_eq!(token.as_slice(), model.noise_token.as_slice());
 }
+
+/// Corrupts one random size or slice of a valid model (or passes wrong argument lengths) many
+/// times; every forward pass must return (most with an error), none may panic.
+#[test]
+fn random_corruptions_return_errors_without_panicking() {
+    use crate::model::mlp::F32Layer;
+    let model = FloatModel::random(SMALL, 31);
+    let blocks = model.f32_blocks();
+    let net = model.f32_view(&blocks);
+    let mut rng = Rng::new(32);
+    let quant = QuantModel::new(&model, &Ranges::calibrate(&net, &mut rng, 10));
+    let int8_blocks = quant.blocks(&model);
+    let int8 = quant.view(&model, &int8_blocks, false);
+    let floats = std::vec![0.25_f32; 4096];
+    let codes = std::vec![1_i8; 4096];
+    let words = std::vec![0_i32; 4096];
+    let mut scratch = big_scratch();
+    let mut output = std::vec![0.0_f32; 64];
+    let (mut ok, mut failed) = (0_usize, 0_usize);
+    let mut pick = |n: usize| rng.next_u32() as usize % n;
+    for _ in 0..3000 {
+        let (mut f, mut q) = (net, int8);
+        let (mut f_blocks, mut q_blocks) = (blocks.clone(), int8_blocks.clone());
+        let size = pick(40);
+        let layer = pick(2);
+        match pick(14) {
+            0 => (f.shape.horizon, q.shape.horizon) = (size, size),
+            1 => (f.shape.width, q.shape.width) = (size, size),
+            2 => (f.shape.heads, q.shape.heads) = (size, size),
+            3 => (f.shape.output, q.shape.output) = (size, size),
+            4 => (f.shape.layers, q.shape.layers) = (size, size),
+            5 => (f.positions, q.positions) = (&floats[..size * 8], &floats[..size * 8]),
+            6 => (f.noise_token, q.noise_token) = (&floats[..size], &floats[..size]),
+            7 => {
+                f_blocks[layer].qkv.weights = &floats[..size * 16];
+                q_blocks[layer].qkv.fc.weights = &codes[..size * 16];
+            }
+            8 => {
+                f_blocks[layer].fc1.out_features = size;
+                q_blocks[layer].feed_forward.fc1.out_features = size;
+            }
+            9 => {
+                f_blocks[layer].norm2.gamma = &floats[..size];
+                q_blocks[layer].norm1.beta = &floats[..size];
+            }
+            10 => {
+                f.head.bias = &floats[..size];
+                q.head.output_scales = &floats[..size];
+            }
+            11 => q_blocks[layer].feed_forward.fc1_requant.shifts = &words[..size * 4],
+            12 => {
+                let layer = F32Layer {
+                    in_features: size % 4,
+                    out_features: 16,
+                    weights: &floats[..(size % 4) * 16],
+                    bias: &floats[..16],
+                    activation: Activation::Identity,
+                };
+                (f.traj_in, q.traj_in) = (layer, TokenLinear::Float(layer));
+            }
+            _ => {}
+        }
+        (f.blocks, q.blocks) = (&f_blocks, &q_blocks);
+        let right = pick(2) == 0;
+        let len = |correct: usize, random: usize| if right { correct } else { random };
+        let trajectory = &floats[..len(SMALL.trajectory_len(), pick(10))];
+        let condition = &floats[..len(SMALL.cond_dim, pick(10))];
+        let out = &mut output[..len(SMALL.output, pick(10))];
+        for result in [
+            f.forward(trajectory, condition, out, &mut *scratch),
+            q.forward(trajectory, condition, out, &mut *scratch),
+        ] {
+            match result {
+                Ok(()) => ok += 1,
+                Err(_) => failed += 1,
+            }
+        }
+    }
+    std::eprintln!("random corruptions: {ok} forward passes succeeded, {failed} refused");
+    assert!(ok > 300 && failed > 3000, "{ok} ok, {failed} failed");
+}
