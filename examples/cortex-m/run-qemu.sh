@@ -31,6 +31,10 @@ case "${1:-}" in
     policy) bin=frmd-cortex-m-policy; shift ;;
 esac
 timeout_s="${FRMD_QEMU_TIMEOUT:-120}"
+case " $* " in *defmt*)
+    echo "run-qemu: the defmt feature logs over RTT for a real probe; QEMU cannot show it (build it with scripts/cortex-m-cargo.sh instead)" >&2
+    exit 2 ;;
+esac
 
 # Toolchain and QEMU: scripts/setup-cortex-m.sh records its choice in an env file; run it when
 # that file or QEMU is missing (FRMD_CORTEX_M_PATH=rustup|debian forces a path on first setup).
