@@ -15,3 +15,4 @@
         clippy::unimplemented
     )
 )]
+pub mod sigma;

@@ -3,3 +3,7 @@
 pub mod cli;
 pub mod data;
 pub mod eval;
+pub mod diffusion;
+pub mod models;
+pub mod rng;
+pub mod train;
