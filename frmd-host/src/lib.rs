@@ -7,3 +7,4 @@ pub mod diffusion;
 pub mod models;
 pub mod rng;
 pub mod train;
+pub mod checkpoint;

@@ -6,6 +6,9 @@ pub mod distill;
 pub mod dp;
 pub mod optim;
 pub mod teacher;
+#[cfg(test)]
+mod tests;
+pub mod toy;
 
 use crate::models::OwnedNetwork;
 use serde::{Deserialize, Serialize};
