@@ -15,4 +15,9 @@
         clippy::unimplemented
     )
 )]
+
+pub mod kernels;
+pub mod model;
+pub mod quant;
+pub mod rng;
 pub mod sigma;

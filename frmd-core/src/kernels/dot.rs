@@ -1,0 +1,85 @@
+//! int8 x int8 -> int32 dot product.
+
+use super::KernelError;
+
+/// `sum_i a[i] * b[i]` with int32 accumulation, wrapping on overflow (two's complement).
+///
+/// Each product lies in `[-16256, 16384]`, so overflow needs more than 131072 terms; the layers of
+/// this crate are far smaller. Returns [`KernelError::OperandLength`] if the lengths differ.
+pub fn dot_i8(a: &[i8], b: &[i8]) -> Result<i32, KernelError> {
+    if a.len() != b.len() {
+        return Err(KernelError::OperandLength);
+    }
+    Ok(dot_i8_prefix(a, b))
+}
+
+/// Dot product over the common prefix of `a` and `b` (callers check the lengths).
+///
+/// Four independent accumulators over blocks of four lanes keep the multiply-accumulate pipeline
+/// busy (Cortex-M4 `MLA`/`SMLABB`, or vectorized on hosts); wrapping int32 addition is associative
+/// and commutative, so the result is identical to a sequential sum.
+#[inline]
+pub(crate) fn dot_i8_prefix(a: &[i8], b: &[i8]) -> i32 {
+    let len = a.len().min(b.len());
+    let (a, b) = (a.get(..len).unwrap_or(&[]), b.get(..len).unwrap_or(&[]));
+    let (a_blocks, a_tail) = a.as_chunks::<4>();
+    let (b_blocks, b_tail) = b.as_chunks::<4>();
+    let (mut s0, mut s1, mut s2, mut s3) = (0_i32, 0_i32, 0_i32, 0_i32);
+    for (&[a0, a1, a2, a3], &[b0, b1, b2, b3]) in a_blocks.iter().zip(b_blocks) {
+        s0 = s0.wrapping_add(i32::from(a0) * i32::from(b0));
+        s1 = s1.wrapping_add(i32::from(a1) * i32::from(b1));
+        s2 = s2.wrapping_add(i32::from(a2) * i32::from(b2));
+        s3 = s3.wrapping_add(i32::from(a3) * i32::from(b3));
+    }
+    for (x, y) in a_tail.iter().zip(b_tail) {
+        s0 = s0.wrapping_add(i32::from(*x) * i32::from(*y));
+    }
+    s0.wrapping_add(s1).wrapping_add(s2).wrapping_add(s3)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    fn naive(a: &[i8], b: &[i8]) -> i64 {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| i64::from(*x) * i64::from(*y))
+            .sum()
+    }
+
+    #[test]
+    fn matches_wide_sum_on_random_lengths() {
+        let mut rng = SplitMix64::new(7);
+        for len in 0..200_usize {
+            let a: [i8; 256] = core::array::from_fn(|_| rng.next_u64() as i8);
+            let b: [i8; 256] = core::array::from_fn(|_| rng.next_u64() as i8);
+            let got = dot_i8(&a[..len], &b[..len]).unwrap();
+            assert_eq!(i64::from(got), naive(&a[..len], &b[..len]), "len {len}");
+        }
+    }
+
+    #[test]
+    fn extreme_values() {
+        let a = [-128_i8; 37];
+        let b = [-128_i8; 37];
+        assert_eq!(dot_i8(&a, &b).unwrap(), 37 * 16384);
+        let c = [127_i8; 37];
+        assert_eq!(dot_i8(&a, &c).unwrap(), -37 * 16256);
+    }
+
+    #[test]
+    fn wraps_like_twos_complement() {
+        // 131073 products of 16384 exceed i32::MAX; the result wraps instead of panicking.
+        static A: [i8; 131_073] = [-128; 131_073];
+        let got = dot_i8(&A, &A).unwrap();
+        let wide = 131_073_i64 * 16384;
+        assert_eq!(got, wide as i32);
+    }
+
+    #[test]
+    fn length_mismatch_is_an_error() {
+        assert_eq!(dot_i8(&[1, 2], &[1]), Err(KernelError::OperandLength));
+    }
+}

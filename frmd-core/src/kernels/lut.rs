@@ -1,0 +1,136 @@
+//! 256-entry int8 lookup-table activations (Mish, SiLU, GELU, ...), built by the exporter from an
+//! f32 function and the input/output quantization parameters.
+
+use crate::quant::{dequantize, quantize, QuantError, QuantParams};
+
+/// An int8 -> int8 function as a table: `table[x + 128]` is the output for input code `x`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Lut8 {
+    /// Outputs for the input codes -128, -127, ..., 127, in that order.
+    pub table: [i8; 256],
+}
+
+impl Lut8 {
+    /// Wraps a baked table.
+    pub const fn from_table(table: [i8; 256]) -> Self {
+        Self { table }
+    }
+
+    /// `table[q + 128] = quantize(f(dequantize(q, input)), output)` for every int8 code `q`
+    /// (rounding: [`crate::quant::quantize`], half away from zero, saturating to int8).
+    ///
+    /// The result is within half an output step of `f` wherever `f` stays inside the output range.
+    /// Fails if either parameter set is invalid or `f` returns a non-finite value.
+    pub fn build<F: Fn(f32) -> f32>(
+        f: F,
+        input: QuantParams,
+        output: QuantParams,
+    ) -> Result<Self, QuantError> {
+        input.validate()?;
+        output.validate()?;
+        let mut table = [0_i8; 256];
+        for (code, slot) in (i8::MIN..=i8::MAX).zip(table.iter_mut()) {
+            let y = f(dequantize(code, input));
+            if !y.is_finite() {
+                return Err(QuantError::NonFiniteValue);
+            }
+            *slot = quantize(y, output);
+        }
+        Ok(Self { table })
+    }
+
+    /// The output code for input code `x`.
+    #[inline]
+    pub fn lookup(&self, x: i8) -> i8 {
+        // `x as u8 ^ 0x80` maps -128..=127 to 0..=255, always in bounds.
+        let index = usize::from((x as u8) ^ 0x80);
+        self.table.get(index).copied().unwrap_or(x)
+    }
+
+    /// Replaces every element of `data` by its table entry.
+    pub fn apply_in_place(&self, data: &mut [i8]) {
+        for value in data.iter_mut() {
+            *value = self.lookup(*value);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kernels::activation::{gelu, mish, silu};
+
+    #[test]
+    fn index_order() {
+        let mut table = [0_i8; 256];
+        for (i, t) in table.iter_mut().enumerate() {
+            *t = (i as i32 - 128) as i8;
+        }
+        let lut = Lut8::from_table(table);
+        for x in i8::MIN..=i8::MAX {
+            assert_eq!(lut.lookup(x), x);
+        }
+        let mut data = [-128_i8, -1, 0, 1, 127];
+        let negate = Lut8::build(
+            |v| -v,
+            QuantParams::new(1.0, 0).unwrap(),
+            QuantParams::new(1.0, 0).unwrap(),
+        )
+        .unwrap();
+        negate.apply_in_place(&mut data);
+        assert_eq!(data, [127, 1, 0, -1, -127]);
+    }
+
+    #[test]
+    fn activations_within_one_lsb() {
+        type Activation = fn(f32) -> f32;
+        let functions: [(&str, Activation); 3] = [("silu", silu), ("mish", mish), ("gelu", gelu)];
+        let input_ranges = [(-8.0_f32, 8.0_f32), (-3.0, 5.0), (-0.5, 12.0), (-20.0, 1.0)];
+        for (name, f) in functions {
+            for (lo, hi) in input_ranges {
+                let input = QuantParams::from_range(lo, hi).unwrap();
+                // Output range from the function's values on the input grid.
+                let (mut omin, mut omax) = (f32::MAX, f32::MIN);
+                for q in i8::MIN..=i8::MAX {
+                    let y = f(input.dequantize(q));
+                    omin = omin.min(y);
+                    omax = omax.max(y);
+                }
+                let output = QuantParams::from_range(omin, omax).unwrap();
+                let lut = Lut8::build(f, input, output).unwrap();
+                let lo_real = output.dequantize(i8::MIN);
+                let hi_real = output.dequantize(i8::MAX);
+                for q in i8::MIN..=i8::MAX {
+                    let exact = f(input.dequantize(q));
+                    let got = output.dequantize(lut.lookup(q));
+                    let target = exact.clamp(lo_real, hi_real);
+                    assert!(
+                        (got - target).abs() <= 0.5001 * output.scale,
+                        "{name} [{lo},{hi}] q={q}: {got} vs {exact} (scale {})",
+                        output.scale
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn build_rejects_bad_inputs() {
+        let ok = QuantParams::new(0.1, 0).unwrap();
+        let bad = QuantParams {
+            scale: 0.0,
+            zero_point: 0,
+        };
+        assert_eq!(Lut8::build(silu, bad, ok), Err(QuantError::InvalidScale));
+        assert_eq!(Lut8::build(silu, ok, bad), Err(QuantError::InvalidScale));
+        let zp = QuantParams {
+            scale: 1.0,
+            zero_point: 200,
+        };
+        assert_eq!(Lut8::build(silu, zp, ok), Err(QuantError::InvalidZeroPoint));
+        assert_eq!(
+            Lut8::build(|v| v.ln(), ok, ok),
+            Err(QuantError::NonFiniteValue)
+        );
+    }
+}

@@ -1,0 +1,81 @@
+//! Compute kernels of the firmware forward passes.
+//!
+//! - [`dot`]: int8 x int8 -> int32 dot product;
+//! - [`fc`]: int8 fully connected layer (requantized int8 output, or raw int32 accumulators);
+//! - [`lut`]: 256-entry int8 lookup-table activations and their builder;
+//! - [`activation`]: the f32 SiLU / Mish / GELU definitions used everywhere (LUT building, f32
+//!   reference paths, host models);
+//! - [`norm`]: f32 LayerNorm; [`softmax`]: numerically stable f32 softmax.
+//!
+//! Every kernel checks slice lengths and returns a [`KernelError`] instead of panicking. Integer
+//! kernels are bit-exact: int32 accumulation wraps (two's complement, like the Cortex-M
+//! `SMLAD`/`MLA` instructions), so the result does not depend on summation order.
+
+pub mod activation;
+pub mod dot;
+pub mod fc;
+pub mod lut;
+pub mod norm;
+pub mod softmax;
+
+pub use activation::{gelu, gelu_tanh, mish, silu, softplus, Activation};
+pub use dot::dot_i8;
+pub use fc::{dequantize_accumulators, FcRequant, FullyConnected};
+pub use lut::Lut8;
+pub use norm::{layer_norm, layer_norm_in_place};
+pub use softmax::softmax_in_place;
+
+/// Why a kernel refused its arguments. Small and `Copy`; each variant names the offending slice.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KernelError {
+    /// The two operands of a dot product differ in length.
+    OperandLength,
+    /// `weights.len() != out_features * in_features` (or a zero dimension).
+    WeightsLength,
+    /// `bias.len() != out_features`.
+    BiasLength,
+    /// Per-channel multipliers or shifts: `len() != out_features`.
+    RequantLength,
+    /// A per-channel scale slice has the wrong length.
+    ScaleLength,
+    /// The input slice has the wrong length.
+    InputLength,
+    /// The output slice has the wrong length.
+    OutputLength,
+    /// LayerNorm `gamma` or `beta` has the wrong length.
+    AffineLength,
+    /// An operation that needs at least one element got an empty slice.
+    Empty,
+    /// `activation_min > activation_max`.
+    ActivationRange,
+    /// The output zero point lies outside `[-128, 127]`.
+    ZeroPoint,
+    /// A per-channel shift lies outside `SHIFT_MIN..=SHIFT_MAX`, or a multiplier is negative.
+    Multiplier,
+    /// A float input is NaN or +infinity where a finite value is required.
+    NonFinite,
+    /// LayerNorm epsilon is not a finite positive number.
+    Epsilon,
+}
+
+impl core::fmt::Display for KernelError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let text = match self {
+            Self::OperandLength => "dot product operands differ in length",
+            Self::WeightsLength => "weights length is not out_features * in_features",
+            Self::BiasLength => "bias length is not out_features",
+            Self::RequantLength => "multiplier/shift length is not out_features",
+            Self::ScaleLength => "per-channel scale length is not out_features",
+            Self::InputLength => "input length does not match the layer",
+            Self::OutputLength => "output length does not match the layer",
+            Self::AffineLength => "layer norm gamma/beta length does not match the input",
+            Self::Empty => "empty input",
+            Self::ActivationRange => "activation_min > activation_max",
+            Self::ZeroPoint => "output zero point is outside [-128, 127]",
+            Self::Multiplier => "requantization multiplier negative or shift out of range",
+            Self::NonFinite => "non-finite float input",
+            Self::Epsilon => "layer norm epsilon is not finite and positive",
+        };
+        f.write_str(text)
+    }
+}

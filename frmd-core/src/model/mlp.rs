@@ -1,0 +1,407 @@
+//! MLP backbone: an int8 forward pass (fully connected layers with LUT activations, last layer
+//! dequantized to f32) and an f32 reference forward pass through the same structure.
+//!
+//! Int8 data flow for hidden layer `l` (all int8 tensors are asymmetric per tensor):
+//! `x_l (int8) --FC + requant--> pre_l (int8, params of the pre-activation) --LUT--> x_{l+1}`;
+//! a layer without LUT (ReLU via the clamp, or identity) outputs `x_{l+1}` directly. The f32 input
+//! is quantized with [`Int8Mlp::input`]; the last layer's int32 accumulators are dequantized per
+//! channel with `output_scales[o] = input_scale * weight_scale[o]`.
+//!
+//! Scratch memory is caller-owned and sized by a const generic `WIDTH` that must be at least the
+//! widest layer (input, hidden and output widths); nothing is allocated.
+
+use crate::kernels::{
+    dequantize_accumulators, Activation, FcRequant, FullyConnected, KernelError, Lut8,
+};
+use crate::quant::QuantParams;
+
+/// Why a forward pass refused its arguments.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModelError {
+    /// A kernel refused a layer's arguments (names the slice).
+    Kernel(KernelError),
+    /// Layer `index` (0-based, the output layer last) does not take the previous layer's width.
+    LayerWidth {
+        /// Index of the offending layer.
+        index: usize,
+    },
+    /// A layer is wider than the scratch buffers' `WIDTH`.
+    ScratchTooSmall,
+    /// The input slice length differs from the first layer's input width.
+    InputLength,
+    /// The output slice length differs from the last layer's output width.
+    OutputLength,
+    /// The input quantization parameters are invalid.
+    InputParams,
+}
+
+impl From<KernelError> for ModelError {
+    fn from(error: KernelError) -> Self {
+        Self::Kernel(error)
+    }
+}
+
+impl core::fmt::Display for ModelError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Kernel(e) => write!(f, "kernel error: {e}"),
+            Self::LayerWidth { index } => {
+                write!(
+                    f,
+                    "layer {index} input width differs from the previous output width"
+                )
+            }
+            Self::ScratchTooSmall => f.write_str("a layer is wider than the scratch buffers"),
+            Self::InputLength => f.write_str("input length differs from the first layer's width"),
+            Self::OutputLength => f.write_str("output length differs from the last layer's width"),
+            Self::InputParams => f.write_str("input quantization parameters are invalid"),
+        }
+    }
+}
+
+/// One int8 hidden layer: fully connected, requantized, then an optional LUT activation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Int8Layer<'a> {
+    /// Weights and bias (input zero point folded).
+    pub fc: FullyConnected<'a>,
+    /// Per-channel requantization to the pre-activation (or, without LUT, the output) params.
+    pub requant: FcRequant<'a>,
+    /// Activation table from pre-activation to output params; `None` for identity/clamp-only.
+    pub activation: Option<&'a Lut8>,
+}
+
+/// int8 MLP: hidden [`Int8Layer`]s, then a raw-accumulator output layer dequantized to f32.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Int8Mlp<'a> {
+    /// Quantization of the f32 input vector (first layer's input).
+    pub input: QuantParams,
+    /// Hidden layers in order (may be empty).
+    pub hidden: &'a [Int8Layer<'a>],
+    /// Output layer; its int32 accumulators are dequantized, not requantized.
+    pub output: FullyConnected<'a>,
+    /// `[output.out_features]` dequantization scales `input_scale * weight_scale[o]`.
+    pub output_scales: &'a [f32],
+}
+
+/// Scratch buffers for [`Int8Mlp::forward`]: two int8 ping-pong activations and the int32
+/// accumulators of the output layer, each `WIDTH` long.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Int8Scratch<const WIDTH: usize> {
+    ping: [i8; WIDTH],
+    pong: [i8; WIDTH],
+    accumulators: [i32; WIDTH],
+}
+
+impl<const WIDTH: usize> Int8Scratch<WIDTH> {
+    /// Zeroed scratch.
+    pub const fn new() -> Self {
+        Self {
+            ping: [0; WIDTH],
+            pong: [0; WIDTH],
+            accumulators: [0; WIDTH],
+        }
+    }
+
+    /// The output layer's int32 accumulators of the last forward pass (`out_features` long prefix).
+    pub fn accumulators(&self) -> &[i32; WIDTH] {
+        &self.accumulators
+    }
+}
+
+impl<const WIDTH: usize> Default for Int8Scratch<WIDTH> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Int8Mlp<'_> {
+    /// Input width (first layer's `in_features`).
+    pub fn input_width(&self) -> usize {
+        self.hidden
+            .first()
+            .map_or(self.output.in_features, |layer| layer.fc.in_features)
+    }
+
+    /// Output width (`output.out_features`).
+    pub fn output_width(&self) -> usize {
+        self.output.out_features
+    }
+
+    /// Checks that consecutive widths agree and that every width fits in `WIDTH`.
+    pub fn validate<const WIDTH: usize>(&self) -> Result<(), ModelError> {
+        self.input.validate().map_err(|_| ModelError::InputParams)?;
+        let mut width = self.input_width();
+        let layers = self
+            .hidden
+            .iter()
+            .map(|layer| &layer.fc)
+            .chain([&self.output]);
+        for (index, fc) in layers.enumerate() {
+            fc.validate()?;
+            if fc.in_features != width {
+                return Err(ModelError::LayerWidth { index });
+            }
+            if fc.in_features > WIDTH || fc.out_features > WIDTH {
+                return Err(ModelError::ScratchTooSmall);
+            }
+            width = fc.out_features;
+        }
+        if self.output_scales.len() != self.output.out_features {
+            return Err(ModelError::Kernel(KernelError::ScaleLength));
+        }
+        Ok(())
+    }
+
+    /// Runs the network on `input` (f32, `input_width()` long) and writes the dequantized last
+    /// layer into `output` (`output_width()` long).
+    pub fn forward<const WIDTH: usize>(
+        &self,
+        input: &[f32],
+        output: &mut [f32],
+        scratch: &mut Int8Scratch<WIDTH>,
+    ) -> Result<(), ModelError> {
+        self.validate::<WIDTH>()?;
+        let in_width = self.input_width();
+        if input.len() != in_width {
+            return Err(ModelError::InputLength);
+        }
+        if output.len() != self.output_width() {
+            return Err(ModelError::OutputLength);
+        }
+        let Int8Scratch {
+            ping,
+            pong,
+            accumulators,
+        } = scratch;
+        let (mut current, mut next) = (ping, pong);
+        let first = current
+            .get_mut(..in_width)
+            .ok_or(ModelError::ScratchTooSmall)?;
+        for (q, x) in first.iter_mut().zip(input) {
+            *q = self.input.quantize(*x);
+        }
+        let mut width = in_width;
+        for layer in self.hidden {
+            let out_width = layer.fc.out_features;
+            let layer_input = current.get(..width).ok_or(ModelError::ScratchTooSmall)?;
+            let layer_output = next
+                .get_mut(..out_width)
+                .ok_or(ModelError::ScratchTooSmall)?;
+            layer
+                .fc
+                .forward(&layer.requant, layer_input, layer_output)?;
+            if let Some(lut) = layer.activation {
+                lut.apply_in_place(layer_output);
+            }
+            core::mem::swap(&mut current, &mut next);
+            width = out_width;
+        }
+        let last_input = current.get(..width).ok_or(ModelError::ScratchTooSmall)?;
+        let acc = accumulators
+            .get_mut(..self.output.out_features)
+            .ok_or(ModelError::ScratchTooSmall)?;
+        self.output.forward_accumulators(last_input, acc)?;
+        dequantize_accumulators(acc, self.output_scales, output)?;
+        Ok(())
+    }
+}
+
+/// One f32 layer: `y = activation(W x + b)`, weights `[out_features, in_features]` row-major.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct F32Layer<'a> {
+    /// Input width.
+    pub in_features: usize,
+    /// Output width.
+    pub out_features: usize,
+    /// `[out_features, in_features]` row-major weights.
+    pub weights: &'a [f32],
+    /// `[out_features]` bias.
+    pub bias: &'a [f32],
+    /// Pointwise activation applied after the affine map.
+    pub activation: Activation,
+}
+
+impl F32Layer<'_> {
+    /// Checks the weight and bias lengths against the shape.
+    pub fn validate(&self) -> Result<(), KernelError> {
+        let expected = self.out_features.checked_mul(self.in_features);
+        if self.in_features == 0 || self.out_features == 0 || expected != Some(self.weights.len()) {
+            return Err(KernelError::WeightsLength);
+        }
+        if self.bias.len() != self.out_features {
+            return Err(KernelError::BiasLength);
+        }
+        Ok(())
+    }
+
+    /// `output = activation(W input + b)`; `pre_activation` (same length as `output`) receives
+    /// `W input + b` if given.
+    /// Dot products are summed sequentially in f32.
+    pub fn forward(
+        &self,
+        input: &[f32],
+        output: &mut [f32],
+        mut pre_activation: Option<&mut [f32]>,
+    ) -> Result<(), KernelError> {
+        self.validate()?;
+        if input.len() != self.in_features {
+            return Err(KernelError::InputLength);
+        }
+        if output.len() != self.out_features
+            || pre_activation
+                .as_deref()
+                .is_some_and(|p| p.len() != self.out_features)
+        {
+            return Err(KernelError::OutputLength);
+        }
+        let rows = self.weights.chunks_exact(self.in_features).zip(self.bias);
+        for (o, ((row, bias), out)) in rows.zip(output.iter_mut()).enumerate() {
+            let affine = row.iter().zip(input).fold(*bias, |acc, (w, x)| acc + w * x);
+            if let Some(slot) = pre_activation.as_deref_mut().and_then(|p| p.get_mut(o)) {
+                *slot = affine;
+            }
+            *out = self.activation.apply(affine);
+        }
+        Ok(())
+    }
+}
+
+/// Which tensor an [`F32Mlp::forward_observed`] callback sees (for calibration).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Probe {
+    /// The network input.
+    Input,
+    /// Hidden layer `l`'s affine output before its activation.
+    PreActivation(usize),
+    /// Hidden layer `l`'s output after its activation (the next layer's input).
+    Output(usize),
+    /// The output layer's values (before any activation it has).
+    Final,
+}
+
+/// f32 reference MLP with the same structure as [`Int8Mlp`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct F32Mlp<'a> {
+    /// Hidden layers in order (may be empty).
+    pub hidden: &'a [F32Layer<'a>],
+    /// Output layer (normally `Activation::Identity`).
+    pub output: F32Layer<'a>,
+}
+
+/// Scratch buffers for [`F32Mlp::forward`], each `WIDTH` long.
+#[derive(Clone, Debug, PartialEq)]
+pub struct F32Scratch<const WIDTH: usize> {
+    ping: [f32; WIDTH],
+    pong: [f32; WIDTH],
+    pre_activation: [f32; WIDTH],
+}
+
+impl<const WIDTH: usize> F32Scratch<WIDTH> {
+    /// Zeroed scratch.
+    pub const fn new() -> Self {
+        Self {
+            ping: [0.0; WIDTH],
+            pong: [0.0; WIDTH],
+            pre_activation: [0.0; WIDTH],
+        }
+    }
+}
+
+impl<const WIDTH: usize> Default for F32Scratch<WIDTH> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl F32Mlp<'_> {
+    /// Input width (first layer's `in_features`).
+    pub fn input_width(&self) -> usize {
+        self.hidden
+            .first()
+            .map_or(self.output.in_features, |layer| layer.in_features)
+    }
+
+    /// Output width.
+    pub fn output_width(&self) -> usize {
+        self.output.out_features
+    }
+
+    /// Checks consecutive widths and that every width fits in `WIDTH`.
+    pub fn validate<const WIDTH: usize>(&self) -> Result<(), ModelError> {
+        let mut width = self.input_width();
+        for (index, layer) in self.hidden.iter().chain([&self.output]).enumerate() {
+            layer.validate()?;
+            if layer.in_features != width {
+                return Err(ModelError::LayerWidth { index });
+            }
+            if layer.in_features > WIDTH || layer.out_features > WIDTH {
+                return Err(ModelError::ScratchTooSmall);
+            }
+            width = layer.out_features;
+        }
+        Ok(())
+    }
+
+    /// Runs the network.
+    pub fn forward<const WIDTH: usize>(
+        &self,
+        input: &[f32],
+        output: &mut [f32],
+        scratch: &mut F32Scratch<WIDTH>,
+    ) -> Result<(), ModelError> {
+        self.forward_observed(input, output, scratch, |_, _| {})
+    }
+
+    /// Runs the network and shows every intermediate tensor to `observe` (input, each hidden
+    /// layer's pre-activation and output, the final output), e.g. to record calibration ranges.
+    pub fn forward_observed<const WIDTH: usize, F: FnMut(Probe, &[f32])>(
+        &self,
+        input: &[f32],
+        output: &mut [f32],
+        scratch: &mut F32Scratch<WIDTH>,
+        mut observe: F,
+    ) -> Result<(), ModelError> {
+        self.validate::<WIDTH>()?;
+        let in_width = self.input_width();
+        if input.len() != in_width {
+            return Err(ModelError::InputLength);
+        }
+        if output.len() != self.output_width() {
+            return Err(ModelError::OutputLength);
+        }
+        observe(Probe::Input, input);
+        let F32Scratch {
+            ping,
+            pong,
+            pre_activation,
+        } = scratch;
+        let (mut current, mut next) = (ping, pong);
+        current
+            .get_mut(..in_width)
+            .ok_or(ModelError::ScratchTooSmall)?
+            .copy_from_slice(input);
+        let mut width = in_width;
+        for (index, layer) in self.hidden.iter().enumerate() {
+            let out_width = layer.out_features;
+            let layer_input = current.get(..width).ok_or(ModelError::ScratchTooSmall)?;
+            let layer_output = next
+                .get_mut(..out_width)
+                .ok_or(ModelError::ScratchTooSmall)?;
+            let pre = pre_activation
+                .get_mut(..out_width)
+                .ok_or(ModelError::ScratchTooSmall)?;
+            layer.forward(layer_input, layer_output, Some(&mut *pre))?;
+            observe(Probe::PreActivation(index), pre);
+            observe(Probe::Output(index), layer_output);
+            core::mem::swap(&mut current, &mut next);
+            width = out_width;
+        }
+        let last_input = current.get(..width).ok_or(ModelError::ScratchTooSmall)?;
+        let pre = pre_activation
+            .get_mut(..self.output.out_features)
+            .ok_or(ModelError::ScratchTooSmall)?;
+        self.output.forward(last_input, output, Some(&mut *pre))?;
+        observe(Probe::Final, pre);
+        Ok(())
+    }
+}

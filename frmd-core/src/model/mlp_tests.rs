@@ -1,0 +1,437 @@
+//! MLP tests: an f32 network is calibrated and quantized here exactly as the exporter will do it
+//! (with the `quant` helpers), then the int8 forward pass is checked bit for bit against a naive
+//! wide-integer re-implementation and approximately against the f32 reference.
+
+extern crate std;
+
+use super::mlp::*;
+use crate::kernels::{Activation, FcRequant, FullyConnected, KernelError, Lut8};
+use crate::quant::{
+    fold_input_zero_point, quantize_bias, quantize_weights_per_channel, reference,
+    requantization_multiplier, QuantParams,
+};
+use crate::rng::Rng;
+use std::{vec, vec::Vec};
+
+const WIDTH: usize = 48;
+
+struct FloatLayer {
+    in_features: usize,
+    out_features: usize,
+    weights: Vec<f32>,
+    bias: Vec<f32>,
+    activation: Activation,
+}
+
+impl FloatLayer {
+    fn random(
+        rng: &mut Rng,
+        in_features: usize,
+        out_features: usize,
+        activation: Activation,
+    ) -> Self {
+        let gain = 1.5 / (in_features as f32).sqrt();
+        Self {
+            in_features,
+            out_features,
+            weights: (0..in_features * out_features)
+                .map(|_| rng.gaussian() * gain)
+                .collect(),
+            bias: (0..out_features).map(|_| 0.1 * rng.gaussian()).collect(),
+            activation,
+        }
+    }
+
+    fn view(&self) -> F32Layer<'_> {
+        F32Layer {
+            in_features: self.in_features,
+            out_features: self.out_features,
+            weights: &self.weights,
+            bias: &self.bias,
+            activation: self.activation,
+        }
+    }
+}
+
+#[derive(Clone, Copy)]
+struct Range {
+    min: f32,
+    max: f32,
+}
+
+impl Range {
+    fn new() -> Self {
+        Self {
+            min: f32::MAX,
+            max: f32::MIN,
+        }
+    }
+    fn add(&mut self, values: &[f32]) {
+        for v in values {
+            self.min = self.min.min(*v);
+            self.max = self.max.max(*v);
+        }
+    }
+    fn params(&self) -> QuantParams {
+        QuantParams::from_range(self.min, self.max).unwrap()
+    }
+}
+
+struct QuantLayer {
+    fc_weights: Vec<i8>,
+    bias: Vec<i32>,
+    multipliers: Vec<i32>,
+    shifts: Vec<i32>,
+    weight_scales: Vec<f32>,
+    pre: QuantParams,
+    lut: Option<Lut8>,
+    in_features: usize,
+    out_features: usize,
+}
+
+/// Quantizes weights and bias of `layer` for int8 input `input`; requantizes to `pre` if given.
+fn quantize_layer(
+    layer: &FloatLayer,
+    input: QuantParams,
+    pre: Option<QuantParams>,
+    out: Option<QuantParams>,
+) -> QuantLayer {
+    let mut fc_weights = vec![0_i8; layer.weights.len()];
+    let mut weight_scales = vec![0.0_f32; layer.out_features];
+    quantize_weights_per_channel(
+        &layer.weights,
+        layer.in_features,
+        &mut fc_weights,
+        &mut weight_scales,
+    )
+    .unwrap();
+    let mut bias = Vec::new();
+    let mut multipliers = Vec::new();
+    let mut shifts = Vec::new();
+    for o in 0..layer.out_features {
+        let row = &fc_weights[o * layer.in_features..(o + 1) * layer.in_features];
+        let b = quantize_bias(layer.bias[o], input.scale, weight_scales[o]).unwrap();
+        bias.push(fold_input_zero_point(b, row, input.zero_point).unwrap());
+        if let Some(pre) = pre {
+            let (m, s) =
+                requantization_multiplier(input.scale, weight_scales[o], pre.scale).unwrap();
+            multipliers.push(m);
+            shifts.push(s);
+        }
+    }
+    let lut = match (pre, out) {
+        (Some(pre), Some(out)) => {
+            Some(Lut8::build(|x| layer.activation.apply(x), pre, out).unwrap())
+        }
+        _ => None,
+    };
+    QuantLayer {
+        fc_weights,
+        bias,
+        multipliers,
+        shifts,
+        weight_scales,
+        pre: pre.unwrap_or(input),
+        lut,
+        in_features: layer.in_features,
+        out_features: layer.out_features,
+    }
+}
+
+struct Fixture {
+    float_hidden: Vec<FloatLayer>,
+    float_output: FloatLayer,
+    input_params: QuantParams,
+    quant_hidden: Vec<QuantLayer>,
+    quant_output: QuantLayer,
+    output_scales: Vec<f32>,
+}
+
+fn random_input(rng: &mut Rng, width: usize) -> Vec<f32> {
+    (0..width)
+        .map(|_| (rng.gaussian() * 0.6).clamp(-1.0, 1.0))
+        .collect()
+}
+
+fn fixture(seed: u64) -> Fixture {
+    let mut rng = Rng::new(seed);
+    let float_hidden = vec![
+        FloatLayer::random(&mut rng, 20, 40, Activation::Mish),
+        FloatLayer::random(&mut rng, 40, 48, Activation::Silu),
+        FloatLayer::random(&mut rng, 48, 32, Activation::Gelu),
+    ];
+    let float_output = FloatLayer::random(&mut rng, 32, 12, Activation::Identity);
+    // Calibration: ranges of the input, every pre-activation and every hidden output.
+    let views: Vec<F32Layer<'_>> = float_hidden.iter().map(FloatLayer::view).collect();
+    let net = F32Mlp {
+        hidden: &views,
+        output: float_output.view(),
+    };
+    let mut input_range = Range::new();
+    let mut pre_ranges = vec![Range::new(); float_hidden.len()];
+    let mut out_ranges = vec![Range::new(); float_hidden.len()];
+    let mut scratch = F32Scratch::<WIDTH>::new();
+    let mut output = [0.0_f32; 12];
+    for _ in 0..500 {
+        let x = random_input(&mut rng, 20);
+        net.forward_observed(&x, &mut output, &mut scratch, |probe, values| match probe {
+            Probe::Input => input_range.add(values),
+            Probe::PreActivation(l) => pre_ranges[l].add(values),
+            Probe::Output(l) => out_ranges[l].add(values),
+            Probe::Final => {}
+        })
+        .unwrap();
+    }
+    let input_params = input_range.params();
+    let mut current = input_params;
+    let mut quant_hidden = Vec::new();
+    for (l, layer) in float_hidden.iter().enumerate() {
+        let out = out_ranges[l].params();
+        quant_hidden.push(quantize_layer(
+            layer,
+            current,
+            Some(pre_ranges[l].params()),
+            Some(out),
+        ));
+        current = out;
+    }
+    let quant_output = quantize_layer(&float_output, current, None, None);
+    let output_scales = quant_output
+        .weight_scales
+        .iter()
+        .map(|w| (f64::from(current.scale) * f64::from(*w)) as f32)
+        .collect();
+    Fixture {
+        float_hidden,
+        float_output,
+        input_params,
+        quant_hidden,
+        quant_output,
+        output_scales,
+    }
+}
+
+fn int8_layers(quant: &[QuantLayer]) -> Vec<Int8Layer<'_>> {
+    quant
+        .iter()
+        .map(|q| Int8Layer {
+            fc: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
+            requant: FcRequant {
+                multipliers: &q.multipliers,
+                shifts: &q.shifts,
+                output_zero_point: q.pre.zero_point,
+                activation_min: -128,
+                activation_max: 127,
+            },
+            activation: q.lut.as_ref(),
+        })
+        .collect()
+}
+
+/// Naive int8 forward: i64 dot products, the wide requantization model, table lookups by index.
+fn naive_int8_forward(fix: &Fixture, input: &[f32]) -> Vec<f32> {
+    let mut x: Vec<i8> = input
+        .iter()
+        .map(|v| fix.input_params.quantize(*v))
+        .collect();
+    for q in &fix.quant_hidden {
+        let mut y = Vec::new();
+        for o in 0..q.out_features {
+            let row = &q.fc_weights[o * q.in_features..(o + 1) * q.in_features];
+            let acc: i64 = i64::from(q.bias[o])
+                + row
+                    .iter()
+                    .zip(&x)
+                    .map(|(w, v)| i64::from(*w) * i64::from(*v))
+                    .sum::<i64>();
+            let pre = reference::requantize(
+                acc as i32,
+                q.multipliers[o],
+                q.shifts[o],
+                q.pre.zero_point,
+                -128,
+                127,
+            );
+            let lut = q.lut.as_ref().unwrap();
+            y.push(lut.table[(i32::from(pre) + 128) as usize]);
+        }
+        x = y;
+    }
+    let q = &fix.quant_output;
+    (0..q.out_features)
+        .map(|o| {
+            let row = &q.fc_weights[o * q.in_features..(o + 1) * q.in_features];
+            let acc: i64 = i64::from(q.bias[o])
+                + row
+                    .iter()
+                    .zip(&x)
+                    .map(|(w, v)| i64::from(*w) * i64::from(*v))
+                    .sum::<i64>();
+            acc as i32 as f32 * fix.output_scales[o]
+        })
+        .collect()
+}
+
+#[test]
+fn int8_forward_is_bit_exact_with_naive_model_and_close_to_f32() {
+    let fix = fixture(1234);
+    let hidden = int8_layers(&fix.quant_hidden);
+    let q = &fix.quant_output;
+    let net = Int8Mlp {
+        input: fix.input_params,
+        hidden: &hidden,
+        output: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
+        output_scales: &fix.output_scales,
+    };
+    let float_views: Vec<F32Layer<'_>> = fix.float_hidden.iter().map(FloatLayer::view).collect();
+    let float_net = F32Mlp {
+        hidden: &float_views,
+        output: fix.float_output.view(),
+    };
+    let mut scratch = Int8Scratch::<WIDTH>::new();
+    let mut float_scratch = F32Scratch::<WIDTH>::new();
+    let mut rng = Rng::new(99);
+    let (mut max_error, mut max_magnitude) = (0.0_f32, 0.0_f32);
+    for _ in 0..200 {
+        let x = random_input(&mut rng, 20);
+        let mut got = [0.0_f32; 12];
+        net.forward(&x, &mut got, &mut scratch).unwrap();
+        let want = naive_int8_forward(&fix, &x);
+        for (g, w) in got.iter().zip(&want) {
+            assert_eq!(g.to_bits(), w.to_bits());
+        }
+        let mut float_out = [0.0_f32; 12];
+        float_net
+            .forward(&x, &mut float_out, &mut float_scratch)
+            .unwrap();
+        for (g, f) in got.iter().zip(&float_out) {
+            max_error = max_error.max((g - f).abs());
+            max_magnitude = max_magnitude.max(f.abs());
+        }
+    }
+    std::eprintln!("int8 MLP vs f32: max abs error {max_error}, max |output| {max_magnitude}");
+    assert!(max_magnitude > 0.5, "degenerate fixture: outputs too small");
+    assert!(
+        max_error < 0.05 * max_magnitude,
+        "int8 error {max_error} vs output scale {max_magnitude}"
+    );
+}
+
+#[test]
+fn f32_forward_matches_direct_computation() {
+    let fix = fixture(5);
+    let views: Vec<F32Layer<'_>> = fix.float_hidden.iter().map(FloatLayer::view).collect();
+    let net = F32Mlp {
+        hidden: &views,
+        output: fix.float_output.view(),
+    };
+    let mut rng = Rng::new(8);
+    let x = random_input(&mut rng, 20);
+    let mut out = [0.0_f32; 12];
+    net.forward(&x, &mut out, &mut F32Scratch::<WIDTH>::new())
+        .unwrap();
+    let mut h: Vec<f64> = x.iter().map(|v| f64::from(*v)).collect();
+    for layer in fix.float_hidden.iter().chain([&fix.float_output]) {
+        h = (0..layer.out_features)
+            .map(|o| {
+                let row = &layer.weights[o * layer.in_features..(o + 1) * layer.in_features];
+                let affine: f64 = f64::from(layer.bias[o])
+                    + row
+                        .iter()
+                        .zip(&h)
+                        .map(|(w, v)| f64::from(*w) * v)
+                        .sum::<f64>();
+                f64::from(layer.activation.apply(affine as f32))
+            })
+            .collect();
+    }
+    for (got, want) in out.iter().zip(&h) {
+        assert!((f64::from(*got) - want).abs() < 1e-4, "{got} vs {want}");
+    }
+}
+
+#[test]
+fn shape_errors() {
+    let fix = fixture(77);
+    let hidden = int8_layers(&fix.quant_hidden);
+    let q = &fix.quant_output;
+    let net = Int8Mlp {
+        input: fix.input_params,
+        hidden: &hidden,
+        output: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
+        output_scales: &fix.output_scales,
+    };
+    let x = [0.0_f32; 20];
+    let mut out = [0.0_f32; 12];
+    assert_eq!(
+        net.forward(&x[..19], &mut out, &mut Int8Scratch::<WIDTH>::new()),
+        Err(ModelError::InputLength)
+    );
+    assert_eq!(
+        net.forward(&x, &mut out[..11], &mut Int8Scratch::<WIDTH>::new()),
+        Err(ModelError::OutputLength)
+    );
+    assert_eq!(
+        net.forward(&x, &mut out, &mut Int8Scratch::<40>::new()),
+        Err(ModelError::ScratchTooSmall)
+    );
+    let skipped = Int8Mlp {
+        hidden: &hidden[1..],
+        ..net
+    };
+    assert_eq!(
+        skipped.forward(&[0.0; 40], &mut out, &mut Int8Scratch::<WIDTH>::new()),
+        Ok(())
+    );
+    let broken = Int8Mlp {
+        hidden: &hidden[..2],
+        ..net
+    };
+    assert_eq!(
+        broken.validate::<WIDTH>(),
+        Err(ModelError::LayerWidth { index: 2 })
+    );
+    let scales = Int8Mlp {
+        output_scales: &fix.output_scales[..3],
+        ..net
+    };
+    assert_eq!(
+        scales.validate::<WIDTH>(),
+        Err(ModelError::Kernel(KernelError::ScaleLength))
+    );
+    let bad_input = Int8Mlp {
+        input: QuantParams {
+            scale: -1.0,
+            zero_point: 0,
+        },
+        ..net
+    };
+    assert_eq!(bad_input.validate::<WIDTH>(), Err(ModelError::InputParams));
+
+    let views: Vec<F32Layer<'_>> = fix.float_hidden.iter().map(FloatLayer::view).collect();
+    let float_net = F32Mlp {
+        hidden: &views,
+        output: fix.float_output.view(),
+    };
+    assert_eq!(
+        float_net.forward(&x, &mut out, &mut F32Scratch::<32>::new()),
+        Err(ModelError::ScratchTooSmall)
+    );
+    let broken = F32Mlp {
+        hidden: &views[1..],
+        ..float_net
+    };
+    assert_eq!(broken.validate::<WIDTH>(), Ok(()));
+    assert_eq!(
+        broken.forward(&x, &mut out, &mut F32Scratch::<WIDTH>::new()),
+        Err(ModelError::InputLength)
+    );
+    let broken = F32Mlp {
+        hidden: &views[..1],
+        ..float_net
+    };
+    assert_eq!(
+        broken.validate::<WIDTH>(),
+        Err(ModelError::LayerWidth { index: 1 })
+    );
+}

@@ -1,0 +1,6 @@
+//! Forward passes of the firmware networks over borrowed (typically `&'static` baked) weights.
+
+pub mod mlp;
+
+#[cfg(test)]
+mod mlp_tests;

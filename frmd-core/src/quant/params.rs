@@ -1,0 +1,228 @@
+//! Scales and zero points: activation parameters from calibration ranges, symmetric per-channel
+//! weights, int32 bias, requantization multipliers, and quantize/dequantize of single values.
+
+use super::{quantize_multiplier, QuantError};
+
+/// Smallest int8 weight value (symmetric quantization never uses -128).
+pub const WEIGHT_MIN: i8 = -127;
+/// Largest int8 weight value.
+pub const WEIGHT_MAX: i8 = 127;
+
+const ACTIVATION_QMIN: i32 = -128;
+const ACTIVATION_QMAX: i32 = 127;
+
+/// Affine int8 quantization of a tensor: `real = scale * (q - zero_point)`.
+///
+/// Invariants when built by [`QuantParams::from_range`] or [`QuantParams::new`]: `scale` is finite
+/// and positive, `zero_point` is in `[-128, 127]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct QuantParams {
+    /// Real units per quantization step.
+    pub scale: f32,
+    /// The int8 code that represents real 0.
+    pub zero_point: i32,
+}
+
+impl QuantParams {
+    /// Checked constructor.
+    pub fn new(scale: f32, zero_point: i32) -> Result<Self, QuantError> {
+        let params = Self { scale, zero_point };
+        params.validate()?;
+        Ok(params)
+    }
+
+    /// Checks the invariants (finite positive scale, zero point in `[-128, 127]`).
+    pub fn validate(&self) -> Result<(), QuantError> {
+        if !(self.scale.is_finite() && self.scale > 0.0) {
+            return Err(QuantError::InvalidScale);
+        }
+        if !(ACTIVATION_QMIN..=ACTIVATION_QMAX).contains(&self.zero_point) {
+            return Err(QuantError::InvalidZeroPoint);
+        }
+        Ok(())
+    }
+
+    /// Asymmetric int8 parameters covering the real range `[min, max]` (TFLite
+    /// `ChooseQuantizationParams`).
+    ///
+    /// The range is first widened to contain 0 (`min' = min(min, 0)`, `max' = max(max, 0)`).
+    /// `scale = (max' - min') / 255` (computed in f64, stored as f32). The zero point is taken from
+    /// whichever end gives the smaller error, `qmin - min'/scale` or `qmax - max'/scale` (f64 scale,
+    /// as TFLite), rounded half away from zero and clamped to `[-128, 127]`; so real 0 maps exactly
+    /// to `zero_point`. A range that is all zero gives `scale = 1, zero_point = 0`.
+    pub fn from_range(min: f32, max: f32) -> Result<Self, QuantError> {
+        if !(min.is_finite() && max.is_finite()) {
+            return Err(QuantError::NonFiniteRange);
+        }
+        if min > max {
+            return Err(QuantError::InvertedRange);
+        }
+        let real_min = f64::from(min.min(0.0));
+        let real_max = f64::from(max.max(0.0));
+        if real_max == real_min {
+            return Self::new(1.0, 0);
+        }
+        let qmin = f64::from(ACTIVATION_QMIN);
+        let qmax = f64::from(ACTIVATION_QMAX);
+        let scale_wide = (real_max - real_min) / (qmax - qmin);
+        let scale = scale_wide as f32;
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(QuantError::InvalidScale);
+        }
+        let zero_point_from_min = qmin - real_min / scale_wide;
+        let zero_point_from_max = qmax - real_max / scale_wide;
+        let error_from_min = qmin.abs() + (real_min / scale_wide).abs();
+        let error_from_max = qmax.abs() + (real_max / scale_wide).abs();
+        let zero_point_real = if error_from_min < error_from_max {
+            zero_point_from_min
+        } else {
+            zero_point_from_max
+        };
+        let zero_point = libm::round(zero_point_real).clamp(qmin, qmax) as i32;
+        Self::new(scale, zero_point)
+    }
+
+    /// Quantizes one value with these parameters; see [`quantize`].
+    #[inline]
+    pub fn quantize(&self, value: f32) -> i8 {
+        quantize(value, *self)
+    }
+
+    /// Dequantizes one value with these parameters; see [`dequantize`].
+    #[inline]
+    pub fn dequantize(&self, code: i8) -> f32 {
+        dequantize(code, *self)
+    }
+}
+
+/// `clamp(round_half_away_from_zero(value / scale) + zero_point, -128, 127)`, division in f32
+/// (TFLite reference `Quantize`). NaN maps to `zero_point`; infinities saturate.
+#[inline]
+pub fn quantize(value: f32, params: QuantParams) -> i8 {
+    let steps = libm::roundf(value / params.scale) as i32; // `as` saturates, NaN -> 0
+    let code = steps
+        .saturating_add(params.zero_point)
+        .clamp(ACTIVATION_QMIN, ACTIVATION_QMAX);
+    code as i8
+}
+
+/// `scale * (code - zero_point)` in f32 (the integer difference is exact).
+#[inline]
+pub fn dequantize(code: i8, params: QuantParams) -> f32 {
+    let steps = i32::from(code).saturating_sub(params.zero_point);
+    params.scale * steps as f32
+}
+
+/// Real value of an int32 accumulator whose scale is `input_scale * weight_scale` (the last layer's
+/// raw output): `acc as f32 * scale` (the i32 -> f32 conversion rounds to nearest even).
+#[inline]
+pub fn dequantize_accumulator(acc: i32, scale: f32) -> f32 {
+    acc as f32 * scale
+}
+
+/// Symmetric weight scale for a channel whose largest absolute weight is `max_abs`:
+/// `max_abs / 127` in f32, or 1 for an all-zero channel (any positive scale represents it exactly).
+pub fn symmetric_weight_scale(max_abs: f32) -> Result<f32, QuantError> {
+    if !max_abs.is_finite() {
+        return Err(QuantError::NonFiniteValue);
+    }
+    let max_abs = max_abs.abs();
+    if max_abs == 0.0 {
+        return Ok(1.0);
+    }
+    let scale = max_abs / f32::from(WEIGHT_MAX);
+    if scale > 0.0 {
+        Ok(scale)
+    } else {
+        // max_abs is so small that max_abs / 127 underflows to 0.
+        Err(QuantError::InvalidScale)
+    }
+}
+
+/// `clamp(round_half_away_from_zero(weight / scale), -127, 127)`, division in f32.
+#[inline]
+pub fn quantize_weight(weight: f32, scale: f32) -> i8 {
+    let steps = libm::roundf(weight / scale) as i32;
+    steps.clamp(i32::from(WEIGHT_MIN), i32::from(WEIGHT_MAX)) as i8
+}
+
+/// Symmetric per-output-channel quantization of a row-major `[out, in]` weight matrix, where
+/// `out = scales.len()` and `in = in_features`. Writes the int8 weights into `quantized` (same
+/// shape) and each row's scale ([`symmetric_weight_scale`]) into `scales`.
+pub fn quantize_weights_per_channel(
+    weights: &[f32],
+    in_features: usize,
+    quantized: &mut [i8],
+    scales: &mut [f32],
+) -> Result<(), QuantError> {
+    let expected = scales
+        .len()
+        .checked_mul(in_features)
+        .ok_or(QuantError::LengthMismatch)?;
+    if in_features == 0 || weights.len() != expected || quantized.len() != expected {
+        return Err(QuantError::LengthMismatch);
+    }
+    let rows = weights
+        .chunks_exact(in_features)
+        .zip(quantized.chunks_exact_mut(in_features))
+        .zip(scales.iter_mut());
+    for ((row, row_q), scale_out) in rows {
+        if row.iter().any(|w| !w.is_finite()) {
+            return Err(QuantError::NonFiniteValue);
+        }
+        let max_abs = row.iter().fold(0.0_f32, |acc, w| acc.max(w.abs()));
+        let scale = symmetric_weight_scale(max_abs)?;
+        for (w, q) in row.iter().zip(row_q.iter_mut()) {
+            *q = quantize_weight(*w, scale);
+        }
+        *scale_out = scale;
+    }
+    Ok(())
+}
+
+/// int32 bias with scale `input_scale * weight_scale`:
+/// `round_half_away_from_zero(bias / (input_scale * weight_scale))`, computed in f64.
+pub fn quantize_bias(bias: f32, input_scale: f32, weight_scale: f32) -> Result<i32, QuantError> {
+    if !bias.is_finite() {
+        return Err(QuantError::NonFiniteValue);
+    }
+    let bias_scale = f64::from(input_scale) * f64::from(weight_scale);
+    if !(bias_scale.is_finite() && bias_scale > 0.0) {
+        return Err(QuantError::InvalidScale);
+    }
+    let steps = libm::round(f64::from(bias) / bias_scale);
+    if !(f64::from(i32::MIN)..=f64::from(i32::MAX)).contains(&steps) {
+        return Err(QuantError::BiasOverflow);
+    }
+    Ok(steps as i32)
+}
+
+/// Folds the input zero point into a quantized bias: `bias_q - input_zero_point * sum(weight_row)`,
+/// so that `bias' + sum(w * x_q) = bias_q + sum(w * (x_q - input_zero_point))`.
+pub fn fold_input_zero_point(
+    bias_q: i32,
+    weight_row: &[i8],
+    input_zero_point: i32,
+) -> Result<i32, QuantError> {
+    let weight_sum: i64 = weight_row.iter().map(|w| i64::from(*w)).sum();
+    let folded = i64::from(input_zero_point)
+        .checked_mul(weight_sum)
+        .and_then(|offset| i64::from(bias_q).checked_sub(offset))
+        .ok_or(QuantError::BiasOverflow)?;
+    i32::try_from(folded).map_err(|_| QuantError::BiasOverflow)
+}
+
+/// Q31 multiplier and shift for one output channel: real multiplier
+/// `input_scale * weight_scale / output_scale` (f64), then [`quantize_multiplier`].
+pub fn requantization_multiplier(
+    input_scale: f32,
+    weight_scale: f32,
+    output_scale: f32,
+) -> Result<(i32, i32), QuantError> {
+    let scales = [input_scale, weight_scale, output_scale];
+    if scales.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+        return Err(QuantError::InvalidScale);
+    }
+    let real = f64::from(input_scale) * f64::from(weight_scale) / f64::from(output_scale);
+    quantize_multiplier(real)
+}
