@@ -80,7 +80,7 @@ fn clean_estimate(x: &Tensor, eps: &Tensor, abar: f64) -> anyhow::Result<Tensor>
 
 /// Samples the DP baseline from standard-normal `x` [B, n k]. DDPM uses all T steps (`steps`
 /// must be T); DDIM uses `steps` timesteps t = (steps-1) s, .., s, 0 with s = T / steps.
-pub fn sample_dp(net: &Network, sched: &DdpmSchedule, cond: &Condition, x: Tensor, sampler: DpSampler, steps: usize, rng: &mut HostRng) -> anyhow::Result<Tensor> {
+pub fn sample_dp(net: &Network, sched: &DdpmSchedule, cond: &Condition, x: Tensor, sampler: DpSampler, steps: usize, rng: &mut dyn super::samplers::NoiseSource) -> anyhow::Result<Tensor> {
     let total = sched.steps();
     let batch = x.dim(0)?;
     let mut x = x;

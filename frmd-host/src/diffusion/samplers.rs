@@ -39,9 +39,29 @@ impl Solver {
     }
 }
 
-/// Standard normal noise [B, n k] from the seeded generator.
-pub fn gaussian(rng: &mut HostRng, batch: usize, dim: usize, device: &candle_core::Device) -> anyhow::Result<Tensor> {
-    Ok(Tensor::from_vec(rng.normal_vec(batch * dim), (batch, dim), device)?)
+/// A source of standard-normal f32 samples (the host training generator, or frmd-core's
+/// firmware generator so float and firmware policies can share noise streams).
+pub trait NoiseSource {
+    fn fill_normal(&mut self, out: &mut [f32]);
+}
+
+impl NoiseSource for HostRng {
+    fn fill_normal(&mut self, out: &mut [f32]) {
+        out.iter_mut().for_each(|v| *v = self.normal() as f32);
+    }
+}
+
+impl NoiseSource for frmd_core::rng::Rng {
+    fn fill_normal(&mut self, out: &mut [f32]) {
+        self.fill_gaussian(out);
+    }
+}
+
+/// Standard normal noise [B, dim] from a seeded source.
+pub fn gaussian(rng: &mut dyn NoiseSource, batch: usize, dim: usize, device: &candle_core::Device) -> anyhow::Result<Tensor> {
+    let mut data = vec![0f32; batch * dim];
+    rng.fill_normal(&mut data);
+    Ok(Tensor::from_vec(data, (batch, dim), device)?)
 }
 
 /// `steps` Karras levels from sigma_max down to sigma_min, then 0.
@@ -117,7 +137,7 @@ pub fn consistency_levels(sig: &SigmaConfig, steps: usize) -> anyhow::Result<Vec
 
 /// Consistency sampling: x0 = f(sigma_max z); for each further level tau,
 /// x0 = f(x0 + sqrt(tau^2 - sigma_min^2) z', tau). `z` is the initial standard-normal noise.
-pub fn sample_consistency(net: &Network, sig: &SigmaConfig, cond: &Condition, z: &Tensor, steps: usize, rng: &mut HostRng) -> anyhow::Result<Tensor> {
+pub fn sample_consistency(net: &Network, sig: &SigmaConfig, cond: &Condition, z: &Tensor, steps: usize, rng: &mut dyn NoiseSource) -> anyhow::Result<Tensor> {
     let batch = z.dim(0)?;
     let levels = consistency_levels(sig, steps)?;
     let start = (z * sig.sigma_max)?;
