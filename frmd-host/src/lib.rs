@@ -1,10 +1,12 @@
 //! FRMD host side: float models and training (candle), built-in tasks, datasets, closed-loop
 //! evaluation, the bit-accuracy harness, benchmarks and the `frmd` CLI.
+pub mod checkpoint;
 pub mod cli;
 pub mod data;
-pub mod eval;
 pub mod diffusion;
+pub mod eval;
 pub mod models;
+pub mod policy;
 pub mod rng;
+pub mod tasks;
 pub mod train;
-pub mod checkpoint;

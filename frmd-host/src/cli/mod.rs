@@ -2,6 +2,8 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+pub mod collect;
+pub mod eval;
 pub mod prodmp;
 
 /// FRMD: from demonstrations to a one-step diffusion policy in controller firmware.
@@ -17,6 +19,10 @@ pub enum Command {
     /// ProDMP decoder tools (check against reference vectors).
     #[command(subcommand)]
     Prodmp(prodmp::ProdmpCommand),
+    /// Run a task's scripted expert and write a demonstration dataset (safetensors).
+    Collect(collect::CollectArgs),
+    /// Closed-loop evaluation of a policy on a task.
+    Eval(eval::EvalArgs),
 }
 
 /// Parses the command line, runs the subcommand, and maps errors to a non-zero exit code.
@@ -24,6 +30,8 @@ pub fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Prodmp(cmd) => prodmp::run(cmd),
+        Command::Collect(args) => collect::run(args),
+        Command::Eval(args) => eval::run(args),
     };
     match result {
         Ok(code) => code,

@@ -1,3 +1,8 @@
 //! Demonstration datasets: the safetensors format of DESIGN.md section 4, validation, training
 //! windows and [-1, 1] normalization.
+pub mod collect;
+pub mod dataset;
 pub mod windows;
+
+pub use dataset::Dataset;
+pub use windows::{Normalization, Normalizer, WindowSet};

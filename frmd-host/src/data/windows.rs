@@ -47,3 +47,126 @@ impl WindowSet {
         self.len() == 0
     }
 }
+
+/// Normalizers for observations and actions, fitted together on a training set.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Normalization {
+    pub obs: Normalizer,
+    pub action: Normalizer,
+}
+
+impl Normalizer {
+    /// Per-dimension min/max over the rows of `data` ([rows, dim], row-major). Non-finite values
+    /// are ignored; a dimension without finite values gets min = max = 0.
+    pub fn fit(data: &[f32], dim: usize) -> Self {
+        let mut min = vec![f32::INFINITY; dim];
+        let mut max = vec![f32::NEG_INFINITY; dim];
+        if dim > 0 {
+            for row in data.chunks_exact(dim) {
+                for ((lo, hi), &v) in min.iter_mut().zip(max.iter_mut()).zip(row) {
+                    if v.is_finite() {
+                        *lo = lo.min(v);
+                        *hi = hi.max(v);
+                    }
+                }
+            }
+        }
+        for (lo, hi) in min.iter_mut().zip(max.iter_mut()) {
+            if *lo > *hi {
+                (*lo, *hi) = (0.0, 0.0);
+            }
+        }
+        Self { min, max }
+    }
+
+    pub fn dim(&self) -> usize {
+        self.min.len()
+    }
+
+    /// Raw to [-1, 1] in place; `x` holds whole rows of `dim` values (a trailing partial row is
+    /// mapped with the leading dimensions). Constant dimensions map to 0.
+    pub fn normalize(&self, x: &mut [f32]) {
+        if self.min.is_empty() {
+            return;
+        }
+        for row in x.chunks_mut(self.min.len()) {
+            for ((v, &lo), &hi) in row.iter_mut().zip(&self.min).zip(&self.max) {
+                *v = if hi > lo { 2.0 * (*v - lo) / (hi - lo) - 1.0 } else { 0.0 };
+            }
+        }
+    }
+
+    /// [-1, 1] to raw in place (inverse of [`Normalizer::normalize`]; constant dimensions map to
+    /// their constant).
+    pub fn denormalize(&self, x: &mut [f32]) {
+        if self.min.is_empty() {
+            return;
+        }
+        for row in x.chunks_mut(self.min.len()) {
+            for ((v, &lo), &hi) in row.iter_mut().zip(&self.min).zip(&self.max) {
+                *v = if hi > lo { (*v + 1.0) * 0.5 * (hi - lo) + lo } else { lo };
+            }
+        }
+    }
+
+    /// Normalized units per raw unit for each dimension (0 for constant dimensions); rates and
+    /// other differences scale by this factor.
+    pub fn scale(&self) -> Vec<f32> {
+        self.min.iter().zip(&self.max).map(|(&lo, &hi)| if hi > lo { 2.0 / (hi - lo) } else { 0.0 }).collect()
+    }
+}
+
+impl super::Dataset {
+    /// Training windows of DESIGN.md section 4 and the normalization fitted on this dataset.
+    ///
+    /// One window per step t of every episode: observations t-m+1..=t, the previous action
+    /// a_{t-1} with rate (a_{t-1} - a_{t-2}) / dt, and actions a_t..a_{t+n-1}, all normalized.
+    /// Episodes are padded by repeating the first observation/action before their start and the
+    /// last action after their end, so a_{-1} = a_0 and the rate at the start is 0 (matching the
+    /// evaluator, whose experts start their commands at the initial end-effector position).
+    pub fn windows(&self, history: usize, horizon: usize) -> anyhow::Result<(WindowSet, Normalization)> {
+        anyhow::ensure!(history >= 1, "observation history must be at least 1, got {history}");
+        anyhow::ensure!(horizon >= 1, "horizon must be at least 1, got {horizon}");
+        self.validate()?;
+        let norm = Normalization {
+            obs: Normalizer::fit(&self.obs, self.obs_dim),
+            action: Normalizer::fit(&self.action, self.action_dim),
+        };
+        let mut obs = self.obs.clone();
+        norm.obs.normalize(&mut obs);
+        let mut action = self.action.clone();
+        norm.action.normalize(&mut action);
+        let (o, a) = (self.obs_dim, self.action_dim);
+        let steps = self.len();
+        let mut set = WindowSet {
+            obs_dim: o,
+            action_dim: a,
+            history,
+            horizon,
+            dt: self.dt,
+            obs: Vec::with_capacity(steps * history * o),
+            prev_action: Vec::with_capacity(steps * a),
+            prev_rate: Vec::with_capacity(steps * a),
+            actions: Vec::with_capacity(steps * horizon * a),
+        };
+        let obs_row = |r: usize| &obs[r * o..(r + 1) * o];
+        let action_row = |r: usize| &action[r * a..(r + 1) * a];
+        for range in self.episode_ranges() {
+            let (first, last) = (range.start, range.end - 1);
+            // Row of in-episode index t (may be negative or past the end), padded.
+            let row = |t: isize| (range.start as isize + t).clamp(first as isize, last as isize) as usize;
+            for t in 0..range.len() as isize {
+                for k in 0..history as isize {
+                    set.obs.extend_from_slice(obs_row(row(t + k + 1 - history as isize)));
+                }
+                let (prev, prev2) = (action_row(row(t - 1)), action_row(row(t - 2)));
+                set.prev_action.extend_from_slice(prev);
+                set.prev_rate.extend(prev.iter().zip(prev2).map(|(p, q)| (p - q) / self.dt));
+                for k in 0..horizon as isize {
+                    set.actions.extend_from_slice(action_row(row(t + k)));
+                }
+            }
+        }
+        Ok((set, norm))
+    }
+}

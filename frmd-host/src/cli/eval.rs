@@ -1,0 +1,92 @@
+//! `frmd eval`: closed-loop evaluation of a policy on a task, with the metrics of DESIGN.md
+//! section 6.
+use crate::eval::{expert_policy, plot::plot_paths, run_episodes_with_progress, EvalConfig, EvalReport};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Args, Debug)]
+pub struct EvalArgs {
+    /// Task name (reach, avoid, push, insert).
+    #[arg(long)]
+    pub task: String,
+    /// Policy to evaluate: `expert` (the task's scripted expert).
+    #[arg(long, default_value = "expert")]
+    pub policy: String,
+    /// Number of evaluation episodes.
+    #[arg(long, default_value_t = 50)]
+    pub episodes: usize,
+    /// Actions executed from each predicted chunk.
+    #[arg(long, default_value_t = 8)]
+    pub exec_steps: usize,
+    /// Observation history length handed to the policy.
+    #[arg(long, default_value_t = 2)]
+    pub history: usize,
+    /// Index of the first seed within the evaluation seed stream.
+    #[arg(long, default_value_t = 0)]
+    pub first_seed: u64,
+    /// Write the full report (with per-episode records) as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Draw the executed end-effector paths of the first episodes over the layout (PNG).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Number of episodes drawn by --plot.
+    #[arg(long, default_value_t = 10)]
+    pub plot_episodes: usize,
+}
+
+/// Prints the human-readable summary of a report.
+pub fn print_report(report: &EvalReport) {
+    println!("task {} / policy {} / {} episodes (exec {} of each chunk, history {})", report.task, report.policy, report.episodes, report.exec_steps, report.history);
+    println!(
+        "  success        {:.1} % ({} of {}), 95 % Wilson [{:.1}, {:.1}] %",
+        100.0 * report.success_rate,
+        report.successes,
+        report.episodes,
+        100.0 * report.success_ci95[0],
+        100.0 * report.success_ci95[1]
+    );
+    println!("  length         {:.1} steps (successful: {:.1})", report.mean_length, report.mean_length_success);
+    println!(
+        "  latency/chunk  median {:.1} us, p99 {:.1} us over {} calls (RAYON_NUM_THREADS={})",
+        report.latency_us_median, report.latency_us_p99, report.chunk_calls, report.threads
+    );
+    println!("  sim step       {:.2} us", report.sim_step_us);
+    println!(
+        "  non-smooth     {:.2} per episode (end effector), {:.2} (actions); RMS jerk {:.2} m/s^3",
+        report.non_smooth_ee_mean, report.non_smooth_action_mean, report.rms_jerk_mean
+    );
+}
+
+pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
+    let mut policy = match args.policy.as_str() {
+        "expert" => expert_policy(&args.task)?,
+        other => anyhow::bail!("unknown policy {other:?}; available: expert"),
+    };
+    let cfg = EvalConfig {
+        episodes: args.episodes,
+        exec_steps: args.exec_steps,
+        history: args.history,
+        first_seed: args.first_seed,
+        keep_paths: if args.plot.is_some() { args.plot_episodes } else { 0 },
+        ..EvalConfig::default()
+    };
+    let bar = ProgressBar::new(args.episodes as u64);
+    bar.set_style(ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} episodes ({elapsed})")?.progress_chars("=> "));
+    bar.set_message(format!("eval {} on {}", args.policy, args.task));
+    let report = run_episodes_with_progress(&args.task, policy.as_mut(), &cfg, &mut |done| bar.set_position(done as u64))?;
+    bar.finish_and_clear();
+    print_report(&report);
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))?;
+        println!("  report         {}", path.display());
+    }
+    if let Some(path) = &args.plot {
+        plot_paths(path, &report.kept_paths, 800)?;
+        println!("  plot           {}", path.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,78 @@
+//! Demonstration collection: runs a task's scripted expert and gathers successful episodes.
+use super::Dataset;
+use crate::eval::{rollout, EVAL_SEED_OFFSET};
+use crate::tasks::make_task;
+
+/// Counts from a collection run.
+#[derive(Clone, Debug, Default)]
+pub struct CollectStats {
+    /// Episodes attempted (seeds used), successful or not.
+    pub attempted: usize,
+    /// Expert episodes that failed and were left out of the dataset.
+    pub failed: usize,
+    /// Mean wall time of one simulation step, microseconds.
+    pub sim_step_us: f64,
+}
+
+/// Collects `episodes` successful expert demonstrations of `task` on seeds `seed`, `seed + 1`, ...
+/// (failed expert episodes are skipped, at most `episodes + 10 + episodes / 5` seeds are tried).
+/// Seeds must stay below the evaluation stream ([`EVAL_SEED_OFFSET`]).
+pub fn collect_demos(
+    task_name: &str,
+    episodes: usize,
+    seed: u64,
+    progress: &mut dyn FnMut(usize),
+) -> anyhow::Result<(Dataset, CollectStats)> {
+    anyhow::ensure!(episodes >= 1, "at least one episode must be collected");
+    let max_attempts = episodes + 10 + episodes / 5;
+    anyhow::ensure!(
+        seed.checked_add(max_attempts as u64).is_some_and(|end| end <= EVAL_SEED_OFFSET),
+        "collection seeds must stay below 2^63 (the evaluation seed stream); seed {seed} is too large"
+    );
+    let mut task = make_task(task_name)?;
+    let mut expert = task.expert();
+    let mut data = Dataset {
+        obs: Vec::new(),
+        action: Vec::new(),
+        episode_ends: Vec::new(),
+        obs_dim: task.obs_dim(),
+        action_dim: task.action_dim(),
+        task: task_name.to_string(),
+        dt: task.dt() as f32,
+        source: format!("frmd collect: scripted expert, seeds from {seed}"),
+    };
+    let mut stats = CollectStats::default();
+    let (mut step_time, mut steps) = (0.0, 0usize);
+    while data.episode_ends.len() < episodes {
+        anyhow::ensure!(
+            stats.attempted < max_attempts,
+            "the {task_name} expert failed {} of {} episodes; giving up",
+            stats.failed,
+            stats.attempted
+        );
+        let episode_seed = seed + stats.attempted as u64;
+        stats.attempted += 1;
+        let (mut obs, mut action) = (Vec::new(), Vec::new());
+        let run = rollout(task.as_mut(), expert.as_mut(), episode_seed, 1, 1, &mut |o, a| {
+            obs.extend_from_slice(o);
+            action.extend_from_slice(a);
+        })?;
+        step_time += run.step_time;
+        steps += run.steps;
+        if !run.success {
+            stats.failed += 1;
+            continue;
+        }
+        data.obs.extend_from_slice(&obs);
+        data.action.extend_from_slice(&action);
+        data.episode_ends.push((data.action.len() / data.action_dim) as i64);
+        progress(data.episode_ends.len());
+    }
+    stats.sim_step_us = if steps > 0 { step_time / steps as f64 * 1e6 } else { 0.0 };
+    data.source = format!(
+        "frmd collect: scripted expert, seeds {seed}..{} ({} failed episodes skipped)",
+        seed + stats.attempted as u64,
+        stats.failed
+    );
+    Ok((data, stats))
+}

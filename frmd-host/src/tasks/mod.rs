@@ -1,0 +1,125 @@
+//! Built-in planar manipulation tasks with scripted experts.
+//!
+//! Every task shares one end effector model ([`point_mass`]): a point mass that tracks a commanded
+//! 2-D position target (metres) with a stiff critically damped loop. Actions are therefore
+//! position targets `[x, y]`, and the ProDMP initial condition of a chunk is the last commanded
+//! action. All tasks use a control period of 0.1 s and live in the square [-2, 2]^2 m, a scale at
+//! which the experts' smooth paths have curvature below the 1 rad/m non-smoothness threshold of
+//! DESIGN.md section 6 almost everywhere, so that kinks stand out.
+//!
+//! | task   | difficulty  | what makes it hard                                               |
+//! |--------|-------------|------------------------------------------------------------------|
+//! | reach  | easy        | nothing: go to a goal                                            |
+//! | avoid  | medium      | bimodal demos (pass the obstacle left or right at random)        |
+//! | push   | medium/hard | contact: push a puck (rapier2d) onto a target                    |
+//! | insert | hard        | approach, then a peg into a slot with 1 cm clearance per side    |
+//!
+//! Seeds: a task's layout is a pure function of the episode seed (see [`rng::TaskRng`]). The
+//! evaluator uses seeds from a disjoint range (see `eval::EVAL_SEED_OFFSET`).
+use crate::eval::policy::Policy;
+
+pub mod avoid;
+pub mod geom;
+pub mod insert;
+pub mod point_mass;
+pub mod push;
+pub mod reach;
+pub mod rng;
+
+#[cfg(test)]
+mod tests;
+
+/// Names accepted by [`make_task`], easiest first.
+pub const TASK_NAMES: &[&str] = &["reach", "avoid", "push", "insert"];
+
+/// Control period of every built-in task, seconds.
+pub const CONTROL_DT: f64 = 0.1;
+
+/// What a piece of the layout is, for plots.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    Goal,
+    Obstacle,
+    Object,
+    Wall,
+}
+
+/// A shape in the plane, metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Shape {
+    Disc { center: [f64; 2], radius: f64 },
+    Rect { min: [f64; 2], max: [f64; 2] },
+}
+
+/// One element of a task layout (for plots).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LayoutItem {
+    pub role: Role,
+    pub shape: Shape,
+}
+
+/// A closed-loop task: reset with a seed, observe, step with a position-target action.
+pub trait Task {
+    /// Task name as in [`TASK_NAMES`].
+    fn name(&self) -> &'static str;
+    /// Names (with units) of the observation fields, in order; `obs_dim` is their count.
+    fn obs_fields(&self) -> &'static [&'static str];
+    fn obs_dim(&self) -> usize {
+        self.obs_fields().len()
+    }
+    /// Action dimension: 2 (x, y position target in metres) for every built-in task.
+    fn action_dim(&self) -> usize {
+        2
+    }
+    /// Control period, seconds.
+    fn dt(&self) -> f64 {
+        CONTROL_DT
+    }
+    /// Episode length limit in control steps.
+    fn max_steps(&self) -> usize;
+    /// Starts a new episode whose layout is determined by `seed`.
+    fn reset(&mut self, seed: u64);
+    /// The current observation (`obs_dim` values, fields as in [`Task::obs_fields`]).
+    fn observe(&self) -> Vec<f32>;
+    /// Applies one action for one control period. Errors (and leaves the state unchanged) if
+    /// the action has the wrong length or is not finite.
+    fn step(&mut self, action: &[f32]) -> anyhow::Result<()>;
+    /// The task's own success test on the current state.
+    fn success(&self) -> bool;
+    /// True when the episode has failed irrecoverably (e.g. a collision); ends the episode.
+    fn failed(&self) -> bool {
+        false
+    }
+    /// End-effector position, metres (for smoothness metrics and plots).
+    fn ee_position(&self) -> [f64; 2];
+    /// The scripted expert for this task, as a policy (deterministic given the episode seed).
+    fn expert(&self) -> Box<dyn Policy>;
+    /// The current layout (goals, obstacles, objects, walls), for plots.
+    fn layout(&self) -> Vec<LayoutItem>;
+}
+
+/// Creates a task by name.
+pub fn make_task(name: &str) -> anyhow::Result<Box<dyn Task>> {
+    Ok(match name {
+        "reach" => Box::new(reach::Reach::new()),
+        "avoid" => Box::new(avoid::Avoid::new()),
+        "push" => Box::new(push::Push::new()),
+        "insert" => Box::new(insert::Insert::new()),
+        other => anyhow::bail!("unknown task {other:?}; known tasks: {}", TASK_NAMES.join(", ")),
+    })
+}
+
+/// The last observation of a policy input, checked against the task's observation size.
+pub(crate) fn last_obs<'a>(input: &'a crate::eval::policy::PolicyInput<'_>, dim: usize, task: &str) -> anyhow::Result<&'a [f32]> {
+    let obs = input
+        .obs_history
+        .last()
+        .ok_or_else(|| anyhow::anyhow!("{task} expert: empty observation history"))?;
+    anyhow::ensure!(obs.len() == dim, "{task} expert: observation has {} values, expected {dim}", obs.len());
+    Ok(obs)
+}
+
+/// The 2-D vector stored at `obs[index..index + 2]` (callers check the length first).
+pub(crate) fn v2_at(obs: &[f32], index: usize) -> geom::V2 {
+    geom::V2::new(f64::from(obs[index]), f64::from(obs[index + 1]))
+}
