@@ -2,7 +2,7 @@
 //! (format version, role, model config, ProDMP and sigma configs, normalization, dataset digest,
 //! training summary and the expected list of tensors). Loading validates every tensor's name,
 //! dtype and shape against the config and names what is wrong.
-use crate::data::windows::Normalizer;
+use crate::data::Normalization;
 use crate::models::init::sorted_vars;
 use crate::models::{ModelConfig, OwnedNetwork, ProDmpConfig};
 use anyhow::{bail, Context};
@@ -85,13 +85,6 @@ impl From<&ProDmpConfig> for ProDmpJson {
     }
 }
 
-/// Observation and action normalization (raw units <-> [-1, 1]).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct NormalizationJson {
-    pub obs: Normalizer,
-    pub action: Normalizer,
-}
-
 /// Where the training data came from.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct DatasetInfo {
@@ -118,7 +111,8 @@ pub struct CheckpointMeta {
     pub model: ModelConfig,
     pub prodmp: Option<ProDmpJson>,
     pub sigma: SigmaJson,
-    pub normalization: Option<NormalizationJson>,
+    /// Observation and action normalization (raw units <-> [-1, 1]).
+    pub normalization: Option<Normalization>,
     pub dataset: DatasetInfo,
     /// Free-form training summary (steps, seed, losses, timings, evaluation results).
     pub training: serde_json::Value,

@@ -35,6 +35,15 @@ pub struct EvalArgs {
     /// Number of episodes drawn by --plot.
     #[arg(long, default_value_t = 10)]
     pub plot_episodes: usize,
+    /// Float checkpoint (teacher, student or DP) to evaluate; overrides --policy and --history.
+    #[arg(long)]
+    pub ckpt: Option<PathBuf>,
+    /// Sampling steps for --ckpt (defaults: teacher 10, student 1, DP 10 = DDIM; DP 100 = DDPM).
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Teacher ODE solver for --ckpt: euler | heun | dpm++2m.
+    #[arg(long)]
+    pub solver: Option<String>,
 }
 
 /// Prints the human-readable summary of a report.
@@ -61,21 +70,24 @@ pub fn print_report(report: &EvalReport) {
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
-    let mut policy = match args.policy.as_str() {
-        "expert" => expert_policy(&args.task)?,
-        other => anyhow::bail!("unknown policy {other:?}; available: expert"),
+    let (mut policy, history) = match &args.ckpt {
+        Some(dir) => crate::policy::float::boxed(dir, args.steps, args.solver.as_deref())?,
+        None => match args.policy.as_str() {
+            "expert" => (expert_policy(&args.task)?, args.history),
+            other => anyhow::bail!("unknown policy {other:?}; available: expert (or --ckpt DIR)"),
+        },
     };
     let cfg = EvalConfig {
         episodes: args.episodes,
         exec_steps: args.exec_steps,
-        history: args.history,
+        history,
         first_seed: args.first_seed,
         keep_paths: if args.plot.is_some() { args.plot_episodes } else { 0 },
         ..EvalConfig::default()
     };
     let bar = ProgressBar::new(args.episodes as u64);
     bar.set_style(ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} episodes ({elapsed})")?.progress_chars("=> "));
-    bar.set_message(format!("eval {} on {}", args.policy, args.task));
+    bar.set_message(format!("eval {} on {}", policy.name(), args.task));
     let report = run_episodes_with_progress(&args.task, policy.as_mut(), &cfg, &mut |done| bar.set_position(done as u64))?;
     bar.finish_and_clear();
     print_report(&report);

@@ -2,6 +2,7 @@
 //! and the DP baseline, sharing one loop shape (seeded batches, scheduled AdamW, a progress
 //! callback every `log_every` steps).
 pub mod batch;
+pub mod curve;
 pub mod distill;
 pub mod dp;
 pub mod optim;
