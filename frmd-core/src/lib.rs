@@ -18,6 +18,7 @@
 
 pub mod kernels;
 pub mod model;
+pub mod prodmp;
 pub mod quant;
 pub mod rng;
 pub mod sigma;

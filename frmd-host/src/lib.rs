@@ -7,6 +7,7 @@ pub mod diffusion;
 pub mod eval;
 pub mod models;
 pub mod policy;
+pub mod prodmp_vectors;
 pub mod rng;
 pub mod tasks;
 pub mod train;

@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# Builds the FRMD firmware (release, thumbv7em-none-eabihf) and runs it under QEMU with
+# instruction counting:
+#
+#   bash examples/cortex-m/run-qemu.sh m4|m7 [extra cargo build args]
+#
+#   m4: -machine mps2-an386 -cpu cortex-m4 (Cortex-M4F)   m7: -machine mps2-an500 -cpu cortex-m7
+#
+# Prints the firmware's `key: value` lines on stdout (build and setup chatter go to stderr) and
+# exits non-zero if the build fails, the firmware reports an error or panics, a required line
+# (digest, instructions, flash, ram) is missing, or QEMU runs longer than FRMD_QEMU_TIMEOUT
+# seconds (default 120).
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+repo="$(cd "$here/../.." && pwd)"
+board="${1:-}"
+case "$board" in
+    m4) machine=mps2-an386; cpu=cortex-m4 ;;
+    m7) machine=mps2-an500; cpu=cortex-m7 ;;
+    *) echo "usage: $0 m4|m7 [extra cargo build args]" >&2; exit 2 ;;
+esac
+shift
+timeout_s="${FRMD_QEMU_TIMEOUT:-120}"
+
+bash "$repo/scripts/setup-cortex-m.sh" >&2
+env_file="${FRMD_CORTEX_M_ENV:-$repo/target/cortex-m.env}"
+# shellcheck disable=SC1090
+. "$env_file"
+
+cd "$here"
+bash "$repo/scripts/cortex-m-cargo.sh" build --release "$@" >&2
+target_dir="${CARGO_TARGET_DIR:-$here/target}"
+elf="$target_dir/$FRMD_CM_TARGET/release/frmd-cortex-m"
+[ -f "$elf" ] || { echo "run-qemu: firmware ELF not found at $elf" >&2; exit 1; }
+
+output="$(mktemp)"
+trap 'rm -f "$output"' EXIT
+set +e
+timeout "$timeout_s" "$FRMD_CM_QEMU" -machine "$machine" -cpu "$cpu" -nographic \
+    -semihosting-config enable=on,target=native -icount shift=0 -kernel "$elf" >"$output" 2>&1 </dev/null
+status=$?
+set -e
+cat "$output"
+
+if [ "$status" -eq 124 ]; then
+    echo "run-qemu: QEMU ($machine) timed out after ${timeout_s} s" >&2
+    exit 1
+fi
+if [ "$status" -ne 0 ]; then
+    echo "run-qemu: firmware on $machine failed (QEMU exit status $status)" >&2
+    exit 1
+fi
+for key in digest instructions flash ram; do
+    if ! grep -q "^$key: " "$output"; then
+        echo "run-qemu: firmware output on $machine lacks the '$key:' line" >&2
+        exit 1
+    fi
+done

@@ -1,0 +1,132 @@
+#!/usr/bin/env bash
+# Proves that frmd-core uses neither `alloc` nor `std` on thumbv7em-none-eabihf:
+#
+#   1. frmd-core is compiled with `-Z build-std=core` (RUSTC_BOOTSTRAP=1): the only standard
+#      crates that exist are `core` and `compiler_builtins`, so any `extern crate alloc` / `std`
+#      anywhere in frmd-core or its dependencies fails to compile. A negative control (a tiny
+#      crate that does `extern crate alloc;`, then one with `extern crate std;`) must FAIL under
+#      the same command, which shows the method can catch a violation.
+#   2. `cargo tree -e normal --target thumbv7em-none-eabihf`: frmd-core's direct dependencies are
+#      only libm, micromath, heapless, bytemuck, postcard, defmt (default and all features).
+#   3. frmd-core builds normally for the target with --release.
+#
+# Uses the rustup toolchain with the rust-src component if `rustup component add rust-src` works,
+# otherwise Debian's rustc-web + rust-web-src (installed by scripts/setup-cortex-m.sh --path debian).
+# Exits non-zero with a message naming the problem on any failure.
+set -euo pipefail
+
+repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$repo"
+target=thumbv7em-none-eabihf
+allowed="libm micromath heapless bytemuck postcard defmt"
+build_root="${CARGO_TARGET_DIR:-$repo/target}"
+proof_dir="$build_root/no-std-proof"
+
+fail() { echo "check-no-std: FAIL: $*" >&2; exit 1; }
+say() { echo "check-no-std: $*"; }
+
+# --- Toolchain: the normal one from setup, and one with rust-src for the build-std proof.
+env_file="${FRMD_CORTEX_M_ENV:-$repo/target/cortex-m.env}"
+[ -f "$env_file" ] || bash scripts/setup-cortex-m.sh >&2
+proof_env="$env_file"
+# shellcheck disable=SC1090
+. "$env_file"
+if [ "$FRMD_CM_PATH" = rustup ]; then
+    if rustup component add rust-src >&2; then
+        say "build-std proof uses the rustup toolchain + rust-src ($("$FRMD_CM_RUSTC" --version))"
+    else
+        say "rustup component add rust-src failed; using Debian's rustc-web + rust-web-src instead"
+        proof_env="$build_root/cortex-m-debian.env"
+        FRMD_CORTEX_M_ENV="$proof_env" bash scripts/setup-cortex-m.sh --path debian >&2 \
+            || fail "no toolchain with rust-src: rustup component add rust-src failed and the Debian fallback could not be set up"
+    fi
+else
+    say "build-std proof uses Debian's toolchain + rust-web-src ($("$FRMD_CM_RUSTC" --version))"
+fi
+
+# The proof compiles against a sysroot that holds only the standard library *sources* (a link to
+# the toolchain's rust-src) and no prebuilt target libraries, so `core` and `compiler_builtins`
+# built by -Z build-std are the only standard crates rustc can find. (With the real rustup sysroot,
+# `extern crate alloc` would load the prebuilt alloc and fail only with a duplicate-lang-item error.)
+# shellcheck disable=SC1090
+real_sysroot="$(. "$proof_env"; "$FRMD_CM_RUSTC" --print sysroot)"
+[ -d "$real_sysroot/lib/rustlib/src/rust/library/core" ] \
+    || fail "no standard library sources under $real_sysroot/lib/rustlib/src (rust-src / rust-web-src)"
+proof_sysroot="$proof_dir/sources-only-sysroot"
+mkdir -p "$proof_sysroot/lib/rustlib"
+ln -sfn "$real_sysroot/lib/rustlib/src" "$proof_sysroot/lib/rustlib/src"
+
+proof_cargo() { # cargo args...: build with only `core` available
+    env -u CARGO_ENCODED_RUSTFLAGS RUSTFLAGS="--sysroot=$proof_sysroot" \
+        FRMD_CORTEX_M_ENV="$proof_env" FRMD_CM_FORCE_BUILD_STD=1 CARGO_TARGET_DIR="$proof_dir" \
+        bash "$repo/scripts/cortex-m-cargo.sh" "$@"
+}
+
+# --- 1a. Negative control: the same command must reject `extern crate alloc` and `std`.
+control="$build_root/no-std-control"
+mkdir -p "$control/src"
+cat >"$control/Cargo.toml" <<'EOF'
+[package]
+name = "no-std-control"
+version = "0.0.0"
+edition = "2021"
+publish = false
+
+[workspace]
+
+[features]
+use-alloc = []
+use-std = []
+EOF
+cat >"$control/src/lib.rs" <<'EOF'
+//! Negative control for scripts/check-no-std.sh: must not compile with only `core` available.
+#![no_std]
+#[cfg(feature = "use-alloc")]
+extern crate alloc;
+#[cfg(feature = "use-std")]
+extern crate std;
+pub fn answer() -> u32 { 42 }
+EOF
+for crate_name in alloc std; do
+    log="$control/build-$crate_name.log"
+    if (cd "$control" && proof_cargo build --release --features "use-$crate_name") >"$log" 2>&1; then
+        fail "negative control: a crate with 'extern crate $crate_name' compiled under -Z build-std=core, so the proof would prove nothing (log: $log)"
+    fi
+    grep -q "can't find crate for \`$crate_name\`" "$log" \
+        || fail "negative control for '$crate_name' failed for an unexpected reason (log: $log):
+$(tail -n 20 "$log")"
+    say "negative control: 'extern crate $crate_name' is rejected under -Z build-std=core"
+done
+
+# --- 1b. frmd-core with only `core`: default features and all features.
+for features in "" "--all-features"; do
+    log="$proof_dir/frmd-core-build-std${features:+-all-features}.log"
+    mkdir -p "$proof_dir"
+    if ! proof_cargo build --release -p frmd-core $features >"$log" 2>&1; then
+        tail -n 30 "$log" >&2
+        fail "frmd-core${features:+ ($features)} does not build for $target with only 'core' (-Z build-std=core): it or a dependency needs alloc/std (log: $log)"
+    fi
+    say "frmd-core${features:+ ($features)} builds for $target with only core + compiler_builtins"
+done
+
+# --- 2. Direct dependencies of frmd-core on the target are from the allowed list.
+for features in "" "--all-features"; do
+    deps="$("$FRMD_CM_CARGO" tree -p frmd-core -e normal --target "$target" $features \
+        --depth 1 --prefix none --format '{p}' 2>&1)" || fail "cargo tree failed: $deps"
+    bad=""
+    while read -r name _; do
+        [ -z "$name" ] || [ "$name" = frmd-core ] && continue
+        case " $allowed " in *" $name "*) ;; *) bad="$bad $name" ;; esac
+    done <<<"$deps"
+    [ -z "$bad" ] || fail "frmd-core${features:+ ($features)} depends on crates outside the allowed list ($allowed):$bad"
+    say "frmd-core${features:+ ($features)} direct dependencies: $(echo "$deps" | awk '$1 != "frmd-core" {printf "%s ", $1}')(allowed: $allowed)"
+done
+
+# --- 3. Normal release build for the target with the toolchain chosen by setup.
+log="$build_root/frmd-core-$target-release.log"
+if ! bash scripts/cortex-m-cargo.sh build --release -p frmd-core >"$log" 2>&1; then
+    tail -n 30 "$log" >&2
+    fail "frmd-core does not build for $target --release (log: $log)"
+fi
+say "frmd-core builds for $target --release ($FRMD_CM_PATH toolchain)"
+say "OK: frmd-core links neither alloc nor std"

@@ -1,0 +1,146 @@
+#!/usr/bin/env bash
+# Makes `thumbv7em-none-eabihf` builds and QEMU Cortex-M runs work (Debian 12, idempotent).
+#
+#   bash scripts/setup-cortex-m.sh [--path auto|rustup|debian]
+#
+# Toolchain paths, tried in this order with `auto` (the default; FRMD_CORTEX_M_PATH overrides):
+#   rustup  `rustup target add thumbv7em-none-eabihf`, linked by the toolchain's rust-lld
+#           (checked by linking a tiny no_std probe).
+#   debian  Debian's rustc-web/cargo-web (1.96), rust-web-src and lld-16: core is compiled from
+#           source (RUSTC_BOOTSTRAP=1, -Z build-std=core) and linked with ld.lld-16. Works with only
+#           the Debian archive and crates.io reachable.
+# Also installs qemu-system-arm. Writes the choice to an env file (default
+# <repo>/target/cortex-m.env, override with FRMD_CORTEX_M_ENV) that scripts/cortex-m-cargo.sh
+# reads; it prints the same variables so a caller can `eval` them.
+set -euo pipefail
+
+repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$repo"
+target=thumbv7em-none-eabihf
+env_file="${FRMD_CORTEX_M_ENV:-$repo/target/cortex-m.env}"
+choice="${FRMD_CORTEX_M_PATH:-auto}"
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --path) choice="${2:?--path needs auto, rustup or debian}"; shift 2 ;;
+        --path=*) choice="${1#--path=}"; shift ;;
+        -h|--help) sed -n '2,15p' "${BASH_SOURCE[0]}"; exit 0 ;;
+        *) echo "setup-cortex-m: unknown argument '$1' (expected --path auto|rustup|debian)" >&2; exit 2 ;;
+    esac
+done
+case "$choice" in auto|rustup|debian) ;; *)
+    echo "setup-cortex-m: unknown toolchain path '$choice' (expected auto, rustup or debian)" >&2; exit 2 ;;
+esac
+
+log() { echo "setup-cortex-m: $*" >&2; }
+
+# --- Debian packages: apt-get update at most once, and only when something is missing.
+apt_updated=0
+as_root() {
+    if [ "$(id -u)" -eq 0 ]; then "$@"
+    elif command -v sudo >/dev/null; then sudo "$@"
+    else log "need root (or sudo) to run: $*"; return 1; fi
+}
+apt_install() {
+    local missing=()
+    local pkg
+    for pkg in "$@"; do
+        dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed' || missing+=("$pkg")
+    done
+    [ ${#missing[@]} -eq 0 ] && return 0
+    if [ "$apt_updated" -eq 0 ]; then
+        log "apt-get update"
+        as_root env DEBIAN_FRONTEND=noninteractive apt-get update -q >&2
+        apt_updated=1
+    fi
+    log "apt-get install ${missing[*]}"
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}" >&2
+}
+
+# --- Probe: link a tiny no_std program for the target with a given rustc (target default linker).
+probe_dir="$(mktemp -d)"
+trap 'rm -rf "$probe_dir"' EXIT
+cat >"$probe_dir/probe.rs" <<'EOF'
+#![no_std]
+#![no_main]
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! { loop {} }
+#[no_mangle]
+pub extern "C" fn _start() -> ! { loop {} }
+EOF
+probe_link() { # rustc [extra args]
+    local rustc="$1"; shift
+    "$rustc" --edition 2021 --target "$target" -C panic=abort -O "$@" \
+        "$probe_dir/probe.rs" -o "$probe_dir/probe.elf" >"$probe_dir/probe.log" 2>&1
+}
+
+try_rustup() {
+    command -v rustup >/dev/null || { log "rustup not found"; return 1; }
+    if ! rustup target list --installed 2>/dev/null | grep -qx "$target"; then
+        log "rustup target add $target"
+        rustup target add "$target" >&2 || { log "rustup target add failed"; return 1; }
+    fi
+    local rustc
+    rustc="$(rustup which rustc)"
+    if ! probe_link "$rustc"; then
+        log "rustup toolchain cannot link for $target with rust-lld:"; cat "$probe_dir/probe.log" >&2
+        return 1
+    fi
+    path=rustup
+    cargo_bin="$(rustup which cargo)"
+    rustc_bin="$rustc"
+    rustdoc_bin="$(rustup which rustdoc)"
+    build_std=0
+    linker=""
+    sysroot="$("$rustc" --print sysroot)"
+}
+
+try_debian() {
+    apt_install rustc-web cargo-web rust-web-src lld-16
+    local rustc=/usr/bin/rustc
+    [ -x "$rustc" ] && [ -x /usr/bin/cargo ] && command -v ld.lld-16 >/dev/null \
+        || { log "Debian toolchain incomplete after install"; return 1; }
+    "$rustc" --print target-list | grep -qx "$target" \
+        || { log "$rustc does not know target $target"; return 1; }
+    sysroot="$("$rustc" --print sysroot)"
+    [ -f "$sysroot/lib/rustlib/src/rust/library/core/Cargo.toml" ] \
+        || { log "rust-web-src missing: no $sysroot/lib/rustlib/src/rust/library/core"; return 1; }
+    path=debian
+    cargo_bin=/usr/bin/cargo
+    rustc_bin="$rustc"
+    rustdoc_bin=/usr/bin/rustdoc
+    build_std=1
+    linker="$(command -v ld.lld-16)"
+}
+
+case "$choice" in
+    rustup) try_rustup || { log "rustup path requested but unavailable"; exit 1; } ;;
+    debian) try_debian || { log "debian path requested but unavailable"; exit 1; } ;;
+    auto) try_rustup || { log "falling back to Debian's toolchain with -Z build-std=core"; try_debian; } ;;
+esac
+
+apt_install qemu-system-arm
+qemu="$(command -v qemu-system-arm)"
+
+mkdir -p "$(dirname "$env_file")"
+cat >"$env_file" <<EOF
+# Written by scripts/setup-cortex-m.sh; read by scripts/cortex-m-cargo.sh.
+FRMD_CM_PATH=$path
+FRMD_CM_TARGET=$target
+FRMD_CM_CARGO=$cargo_bin
+FRMD_CM_RUSTC=$rustc_bin
+FRMD_CM_RUSTDOC=$rustdoc_bin
+FRMD_CM_BUILD_STD=$build_std
+FRMD_CM_LINKER=$linker
+FRMD_CM_SYSROOT=$sysroot
+FRMD_CM_QEMU=$qemu
+EOF
+
+echo "setup-cortex-m: toolchain path: $path ($("$rustc_bin" --version))"
+if [ "$build_std" = 1 ]; then
+    echo "setup-cortex-m: builds use RUSTC_BOOTSTRAP=1 -Z build-std=core -Z build-std-features=compiler-builtins-mem, linker $linker"
+else
+    echo "setup-cortex-m: builds use the prebuilt $target std and rust-lld"
+fi
+echo "setup-cortex-m: qemu: $("$qemu" --version | head -n1)"
+echo "setup-cortex-m: env file: $env_file (use: bash scripts/cortex-m-cargo.sh <cargo args>)"
+sed -n 's/^\(FRMD_CM_[A-Z_]*=\)\(.*\)$/export \1"\2"/p' "$env_file"
