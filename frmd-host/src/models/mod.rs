@@ -5,11 +5,10 @@ pub mod act;
 pub mod decoder;
 pub mod init;
 pub mod mlp;
-mod prodmp_stand_in;
 pub mod transformer;
 
 pub use act::Activation;
-pub use prodmp_stand_in::ProDmpConfig;
+pub use frmd_core::prodmp::ProDmpConfig;
 
 use anyhow::{bail, Context};
 use candle_core::{DType, Device, Tensor, D};
@@ -211,7 +210,7 @@ impl Network {
             )?),
         };
         let decoder = match cfg.prodmp() {
-            Some(pcfg) => Some(ProDmpDecoder::new(&pcfg, cfg.horizon, cfg.control_dt, vb.device())?),
+            Some(pcfg) => Some(ProDmpDecoder::new(&pcfg, cfg.horizon, vb.device())?),
             None => None,
         };
         Ok(Network { cfg: cfg.clone(), backbone, decoder })

@@ -59,9 +59,7 @@ fn one_step_student_matches_teacher_on_bimodal_toy() {
     let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
     let sig = SigmaConfig::default();
-    // Uniform weighting: on this two-point distribution the EDM weight (huge at small sigma,
-    // with no skip connection in the teacher) trains much more slowly (see the ignored experiment).
-    let (teacher, _) = train_teacher(&windows, &cfg, &sig, LossWeight::Uniform, &quick_loop(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
+    let (teacher, _) = train_teacher(&windows, &cfg, &sig, LossWeight::Edm, &quick_loop(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
     let batch = 400;
     let cond = toy_condition(batch);
     let mut rng = HostRng::new(11);
@@ -147,7 +145,7 @@ fn experiment_distill() {
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
     let sig = SigmaConfig::default();
     let goal_end = windows.actions[cfg.horizon - 1].abs() as f64;
-    let (teacher, _) = train_teacher(&windows, &cfg, &sig, LossWeight::Uniform, &quick_loop(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
+    let (teacher, _) = train_teacher(&windows, &cfg, &sig, LossWeight::Edm, &quick_loop(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
     let batch = 400;
     let cond = toy_condition(batch);
     for (levels, lr, steps, solver) in [(18, 1e-3, 2000, Solver::Heun), (18, 3e-4, 2000, Solver::Heun), (18, 1e-3, 5000, Solver::Heun), (40, 1e-3, 5000, Solver::Heun), (10, 1e-3, 2000, Solver::Heun), (18, 1e-3, 2000, Solver::Euler)] {

@@ -27,7 +27,7 @@ pub fn toy_config(head: HeadConfig) -> ModelConfig {
 /// ProDMP rows of a 4-basis policy config).
 pub fn bimodal_windows(cfg: &ModelConfig, count: usize, seed: u64) -> anyhow::Result<WindowSet> {
     let pcfg = crate::models::ProDmpConfig::policy(1, 4, cfg.horizon, cfg.control_dt);
-    let rows = DecoderRows::new(&pcfg, cfg.horizon, cfg.control_dt)?;
+    let rows = DecoderRows::new(&pcfg, cfg.horizon)?;
     let goal_column = rows.num_params - 1;
     let mut rng = HostRng::new(seed);
     let mut actions = Vec::with_capacity(count * cfg.horizon);
