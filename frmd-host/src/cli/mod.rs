@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 pub mod collect;
 pub mod eval;
+pub mod latency;
 pub mod prodmp;
 pub mod train;
 
@@ -27,6 +28,8 @@ pub enum Command {
     /// Train a teacher, distill a student, or train the DP baseline.
     #[command(subcommand)]
     Train(train::TrainCommand),
+    /// Latency per action chunk of float policies, side by side.
+    Latency(latency::LatencyArgs),
 }
 
 /// Parses the command line, runs the subcommand, and maps errors to a non-zero exit code.
@@ -37,6 +40,7 @@ pub fn main() -> ExitCode {
         Command::Collect(args) => collect::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Train(cmd) => train::run(cmd),
+        Command::Latency(args) => latency::run(args),
     };
     match result {
         Ok(code) => code,
