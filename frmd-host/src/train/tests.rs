@@ -166,3 +166,42 @@ fn experiment_distill() {
         }
     }
 }
+
+/// The DP baseline learns the toy bimodal set: DDPM (100 steps) and DDIM (10 steps) both produce
+/// both modes with roughly equal weight.
+#[test]
+fn dp_baseline_learns_bimodal_toy() {
+    use crate::diffusion::ddpm::{sample_dp, DdpmSchedule, DpSampler};
+    let cfg = toy_config(HeadConfig::Raw);
+    let windows = bimodal_windows(&cfg, 512, 2).unwrap();
+    let (net, report) = super::dp::train_dp(&windows, &cfg, &quick_loop(2000, 4), &mut |_: &Progress| Ok(())).unwrap();
+    assert!(report.final_loss().unwrap() < 0.5 * report.loss_curve[0].1, "{:?}", report.loss_curve);
+    let sched = DdpmSchedule::cosine(super::dp::DP_TRAIN_STEPS);
+    let batch = 300;
+    for (sampler, steps) in [(DpSampler::Ddpm, 100), (DpSampler::Ddim, 10)] {
+        let mut rng = HostRng::new(5);
+        let z = gaussian(&mut rng, batch, cfg.traj_dim(), &Device::Cpu).unwrap();
+        let out = sample_dp(&net.net, &sched, &toy_condition(batch), z, sampler, steps, &mut rng).unwrap();
+        let flat = out.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        let fraction = positive_fraction(&flat, cfg.horizon);
+        eprintln!("DP {sampler:?} x{steps}: +fraction {fraction:.3}");
+        assert!((fraction - 0.5).abs() <= 0.1, "{sampler:?}: {fraction}");
+    }
+}
+
+#[test]
+fn transformer_backbones_have_the_documented_sizes() {
+    use crate::models::BackboneConfig;
+    let lite = BackboneConfig::parse("transformer-lite").unwrap();
+    assert_eq!(lite, BackboneConfig::Transformer { layers: 3, heads: 2, width: 128 });
+    assert_eq!(BackboneConfig::parse("transformer").unwrap(), BackboneConfig::Transformer { layers: 6, heads: 4, width: 256 });
+    let mut cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
+    cfg.backbone = lite;
+    let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
+    let names: Vec<String> = crate::models::init::sorted_vars(&net.varmap).into_iter().map(|(n, _)| n).collect();
+    assert!(names.contains(&"transformer.blocks.2.qkv.weight".to_string()) && !names.iter().any(|n| n.contains("blocks.3")));
+    let x = Tensor::zeros((3, cfg.traj_dim()), candle_core::DType::F32, &Device::Cpu).unwrap();
+    let emb = Tensor::zeros((3, cfg.embed_dim), candle_core::DType::F32, &Device::Cpu).unwrap();
+    assert_eq!(net.net.predict(&x, &toy_condition(3), &emb).unwrap().dims(), &[3, cfg.traj_dim()]);
+    assert!(BackboneConfig::parse("mlp:0,3").is_err() && BackboneConfig::parse("cnn").is_err());
+}
