@@ -1,8 +1,16 @@
 //! EDM preconditioning of the teacher D and the consistency parametrization of the student f.
 //!
 //! Teacher: D(x, o, sigma) = G(E(c_in(sigma) x, o, c_noise(sigma))) — the decoded ProDMP
-//! trajectory is the denoised estimate. Student: f = c_skip(sigma) x + c_out(sigma) G(E(..)), so
-//! f(x, sigma_min) = x exactly.
+//! trajectory is the denoised estimate. Student: f = c_skip(sigma) x + c_out_blend(sigma) G(E(..))
+//! with c_out_blend = 1 - c_skip, so f(x, sigma_min) = x exactly.
+//!
+//! Deviation from DESIGN.md section 3 (which scales G by the consistency c_out =
+//! (sigma - sigma_min) sigma_data / sqrt(sigma^2 + sigma_data^2)): G contains the boundary terms
+//! xi1(t) y0 + xi2(t) v0, and ProDMP's H(t) vanishes with its slope at t = 0, so scaling G by
+//! c_out (~0.5 at sigma_max) halves the start of every chunk and no theta can undo it (measured on
+//! reach: first action off by ~0.2 m, 5 % success). With 1 - c_skip the output is a convex blend
+//! of the noisy input and a ProDMP trajectory, the boundary conditions hold, and the student
+//! starts equal to the teacher for large sigma.
 use super::sigma_err;
 use crate::models::{Condition, Network};
 use candle_core::{Device, Tensor};
@@ -38,11 +46,11 @@ pub fn teacher_denoise(net: &Network, sig: &SigmaConfig, x: &Tensor, cond: &Cond
     net.predict(&x.broadcast_mul(&c_in)?, cond, &emb)
 }
 
-/// The consistency function f(x, o, sigma) = c_skip x + c_out G(E(c_in x, o, c_noise)).
+/// The consistency function f(x, o, sigma) = c_skip x + (1 - c_skip) G(E(c_in x, o, c_noise)).
 pub fn consistency(net: &Network, sig: &SigmaConfig, x: &Tensor, cond: &Condition, sigmas: &[f64]) -> anyhow::Result<Tensor> {
     let device = x.device();
     let c_skip = sigmas.iter().map(|&s| sig.c_skip(s)).collect::<Result<Vec<_>, _>>().map_err(sigma_err("c_skip"))?;
-    let c_out = sigmas.iter().map(|&s| sig.c_out(s)).collect::<Result<Vec<_>, _>>().map_err(sigma_err("c_out"))?;
+    let c_out = sigmas.iter().map(|&s| sig.c_out_blend(s)).collect::<Result<Vec<_>, _>>().map_err(sigma_err("c_out"))?;
     let inner = teacher_denoise(net, sig, x, cond, sigmas)?;
     Ok((x.broadcast_mul(&column(&c_skip, device)?)? + inner.broadcast_mul(&column(&c_out, device)?)?)?)
 }
