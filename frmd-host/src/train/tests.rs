@@ -68,9 +68,9 @@ fn one_step_student_matches_teacher_on_bimodal_toy() {
     let teacher_flat = teacher_samples.flatten_all().unwrap().to_vec1::<f32>().unwrap();
     let teacher_fraction = positive_fraction(&teacher_flat, cfg.horizon);
 
-    let mut dcfg = quick_loop(3000, 6);
+    let mut dcfg = quick_loop(2000, 6);
     dcfg.optim.lr = 1e-3;
-    let distilled = distill(&teacher, &windows, &sig, &DistillConfig { eval_ema: 0.99, ..DistillConfig::default() }, &dcfg, &mut |_: &Progress| Ok(())).unwrap();
+    let distilled = distill(&teacher, &windows, &sig, &DistillConfig { levels: 10, eval_ema: 0.99, ..DistillConfig::default() }, &dcfg, &mut |_: &Progress| Ok(())).unwrap();
     let student_samples = sample_consistency(&distilled.eval_student.net, &sig, &cond, &z, 1, &mut rng).unwrap();
     let student_flat = student_samples.flatten_all().unwrap().to_vec1::<f32>().unwrap();
     let student_fraction = positive_fraction(&student_flat, cfg.horizon);
@@ -85,7 +85,7 @@ fn one_step_student_matches_teacher_on_bimodal_toy() {
     assert!((student_fraction - 0.5).abs() <= 0.10, "student mode weight {student_fraction}");
     assert!((student_fraction - teacher_fraction).abs() <= 0.10);
     // Samples concentrate at the modes (0.5 from the origin); one step is blurrier than the
-    // teacher's 10 Heun steps (measured: teacher ~0.03, student ~0.1-0.15 on this budget).
+    // teacher's 10 Heun steps (measured: teacher 0.025, student 0.12 on this budget).
     assert!(teacher_err < 0.06 && student_err < 0.2, "distance to modes: teacher {teacher_err}, student {student_err}");
 }
 
