@@ -169,7 +169,7 @@ pub const EMBEDDING_MAX_FREQUENCY: f64 = 32.0;
 /// `f_j = EMBEDDING_MAX_FREQUENCY^(j / (h - 1))` (f_0 = 1; h = 1 uses f_0 only).
 /// This is the network's noise input for every backbone, on the host and in firmware.
 pub fn noise_embedding(c_noise: f64, out: &mut [f64]) -> Result<(), SigmaError> {
-    if out.is_empty() || out.len() % 2 != 0 {
+    if out.is_empty() || !out.len().is_multiple_of(2) {
         return Err(SigmaError::InvalidEmbeddingLength);
     }
     if !c_noise.is_finite() {
@@ -232,10 +232,9 @@ mod tests {
 
     #[test]
     fn invalid_config_rejected() {
-        let mut cfg = SigmaConfig::default();
-        cfg.sigma_min = 100.0;
+        let cfg = SigmaConfig { sigma_min: 100.0, ..SigmaConfig::default() };
         assert_eq!(cfg.validate(), Err(SigmaError::InvalidConfig));
-        cfg = SigmaConfig { rho: f64::NAN, ..SigmaConfig::default() };
+        let cfg = SigmaConfig { rho: f64::NAN, ..SigmaConfig::default() };
         assert_eq!(cfg.c_in(1.0), Err(SigmaError::InvalidConfig));
     }
 
