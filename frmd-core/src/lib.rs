@@ -23,3 +23,4 @@ pub mod policy;
 pub mod prodmp;
 pub mod quant;
 pub mod rng;
+pub mod sigma;

@@ -1,6 +1,5 @@
 //! `frmd eval`: closed-loop evaluation of a policy on a task, with the metrics of DESIGN.md
 //! section 6.
-use crate::eval::policy::Policy;
 use crate::eval::{
     expert_policy, plot::plot_paths, run_episodes_with_progress, EvalConfig, EvalReport,
 };
@@ -38,6 +37,15 @@ pub struct EvalArgs {
     /// Number of episodes drawn by --plot.
     #[arg(long, default_value_t = 10)]
     pub plot_episodes: usize,
+    /// Float checkpoint (teacher, student or DP) to evaluate; overrides --policy and --history.
+    #[arg(long)]
+    pub ckpt: Option<PathBuf>,
+    /// Sampling steps for --ckpt (defaults: teacher 10, student 1, DP 10 = DDIM; DP 100 = DDPM).
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Teacher ODE solver for --ckpt: euler | heun | dpm++2m.
+    #[arg(long)]
+    pub solver: Option<String>,
 }
 
 /// Prints the human-readable summary of a report.
@@ -69,20 +77,18 @@ pub fn print_report(report: &EvalReport) {
     );
 }
 
-/// The policy named on the command line, for `task`. Methods add their arm here.
-pub fn make_policy(name: &str, task: &str) -> anyhow::Result<Box<dyn Policy>> {
-    match name {
-        "expert" => expert_policy(task),
-        other => anyhow::bail!("unknown policy {other:?}; available: expert"),
-    }
-}
-
 pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
-    let mut policy = make_policy(&args.policy, &args.task)?;
+    let (mut policy, history) = match &args.ckpt {
+        Some(dir) => crate::policy::float::boxed(dir, args.steps, args.solver.as_deref())?,
+        None => match args.policy.as_str() {
+            "expert" => (expert_policy(&args.task)?, args.history),
+            other => anyhow::bail!("unknown policy {other:?}; available: expert (or --ckpt DIR)"),
+        },
+    };
     let cfg = EvalConfig {
         episodes: args.episodes,
         exec_steps: args.exec_steps,
-        history: args.history,
+        history,
         first_seed: args.first_seed,
         keep_paths: if args.plot.is_some() {
             args.plot_episodes
@@ -96,7 +102,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} episodes ({elapsed})")?
             .progress_chars("=> "),
     );
-    bar.set_message(format!("eval {} on {}", args.policy, args.task));
+    bar.set_message(format!("eval {} on {}", policy.name(), args.task));
     let report = run_episodes_with_progress(&args.task, policy.as_mut(), &cfg, &mut |done| {
         bar.set_position(done as u64)
     })?;

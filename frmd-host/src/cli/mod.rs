@@ -4,7 +4,9 @@ use std::process::ExitCode;
 
 pub mod collect;
 pub mod eval;
+pub mod latency;
 pub mod prodmp;
+pub mod train;
 
 /// FRMD: from demonstrations to a one-step diffusion policy in controller firmware.
 #[derive(Parser, Debug)]
@@ -23,6 +25,11 @@ pub enum Command {
     Collect(collect::CollectArgs),
     /// Closed-loop evaluation of a policy on a task.
     Eval(eval::EvalArgs),
+    /// Train a teacher, distill a student, or train the DP baseline.
+    #[command(subcommand)]
+    Train(train::TrainCommand),
+    /// Latency per action chunk of float policies, side by side.
+    Latency(latency::LatencyArgs),
 }
 
 /// Parses the command line, runs the subcommand, and maps errors to a non-zero exit code.
@@ -32,6 +39,8 @@ pub fn main() -> ExitCode {
         Command::Prodmp(cmd) => prodmp::run(cmd),
         Command::Collect(args) => collect::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Train(cmd) => train::run(cmd),
+        Command::Latency(args) => latency::run(args),
     };
     match result {
         Ok(code) => code,

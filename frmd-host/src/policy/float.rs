@@ -1,0 +1,217 @@
+//! Float policies from checkpoints: the teacher (ODE solver, S steps), the consistency student
+//! (1..4 steps) and the DP baseline (DDPM 100 / DDIM S), all behind `eval::policy::Policy`.
+//! Sampling noise comes from `frmd_core::rng::Rng` seeded by the episode seed, the same
+//! generator the firmware uses.
+use crate::checkpoint::{self, CheckpointMeta, Role};
+use crate::data::Normalization;
+use crate::diffusion::ddpm::{sample_dp, DdpmSchedule, DpSampler};
+use crate::diffusion::samplers::{gaussian, sample_consistency, sample_teacher, Solver};
+use crate::eval::policy::{Policy, PolicyInput};
+use crate::models::{Condition, OwnedNetwork};
+use crate::train::dp::DP_TRAIN_STEPS;
+use anyhow::{bail, Context};
+use candle_core::Device;
+use frmd_core::rng::Rng;
+use frmd_core::sigma::SigmaConfig;
+use std::path::Path;
+
+/// How a float policy turns noise into a chunk.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Sampler {
+    Teacher { solver: Solver, steps: usize },
+    Student { steps: usize },
+    Dp { sampler: DpSampler, steps: usize },
+}
+
+impl Sampler {
+    /// Default sampler for a role: teacher Heun 10 steps (the solver can be overridden),
+    /// student 1 step, DP DDIM 10 steps; `steps` overrides the count (DP: 100 means DDPM).
+    pub fn for_role(role: Role, steps: Option<usize>, solver: Option<Solver>) -> anyhow::Result<Self> {
+        Ok(match role {
+            Role::Teacher => Sampler::Teacher { solver: solver.unwrap_or(Solver::Heun), steps: steps.unwrap_or(10) },
+            Role::Student => {
+                let steps = steps.unwrap_or(1);
+                if !(1..=4).contains(&steps) {
+                    bail!("the student samples with 1..4 steps, not {steps}");
+                }
+                Sampler::Student { steps }
+            }
+            Role::Dp => match steps.unwrap_or(10) {
+                DP_TRAIN_STEPS => Sampler::Dp { sampler: DpSampler::Ddpm, steps: DP_TRAIN_STEPS },
+                s => Sampler::Dp { sampler: DpSampler::Ddim, steps: s },
+            },
+        })
+    }
+
+    pub fn label(&self) -> String {
+        match self {
+            Sampler::Teacher { solver, steps } => format!("teacher-{}-{steps}", serde_json::to_value(solver).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default()),
+            Sampler::Student { steps } => format!("student-{steps}"),
+            Sampler::Dp { sampler: DpSampler::Ddpm, steps } => format!("dp-ddpm-{steps}"),
+            Sampler::Dp { sampler: DpSampler::Ddim, steps } => format!("dp-ddim-{steps}"),
+        }
+    }
+}
+
+/// A float model acting as a closed-loop policy.
+pub struct FloatPolicy {
+    net: OwnedNetwork,
+    norm: Normalization,
+    sigma: SigmaConfig,
+    sampler: Sampler,
+    schedule: DdpmSchedule,
+    rng: Rng,
+    device: Device,
+}
+
+impl FloatPolicy {
+    /// Wraps an in-memory network (e.g. during training) with its normalization.
+    pub fn new(net: OwnedNetwork, norm: Normalization, sigma: SigmaConfig, sampler: Sampler) -> anyhow::Result<Self> {
+        let cfg = net.net.config();
+        if norm.obs.min.len() != cfg.obs_dim || norm.action.min.len() != cfg.action_dim {
+            bail!("normalization sizes (obs {}, action {}) do not match the model (obs {}, action {})", norm.obs.min.len(), norm.action.min.len(), cfg.obs_dim, cfg.action_dim);
+        }
+        match (sampler, cfg.prodmp().is_some()) {
+            (Sampler::Dp { .. }, true) => bail!("DP sampling needs a raw-head model"),
+            (Sampler::Teacher { .. } | Sampler::Student { .. }, false) => bail!("teacher/student sampling needs a ProDMP-head model"),
+            _ => {}
+        }
+        Ok(FloatPolicy { net, norm, sigma, sampler, schedule: DdpmSchedule::cosine(DP_TRAIN_STEPS), rng: Rng::new(0), device: Device::Cpu })
+    }
+
+    /// Loads a checkpoint directory; `steps`/`solver` override the role's default sampler.
+    pub fn load(dir: &Path, steps: Option<usize>, solver: Option<Solver>) -> anyhow::Result<Self> {
+        let (meta, net): (CheckpointMeta, OwnedNetwork) = checkpoint::load(dir)?;
+        let norm = meta.normalization.clone().with_context(|| format!("{}: checkpoint has no normalization", dir.display()))?;
+        let sampler = Sampler::for_role(meta.role, steps, solver)?;
+        FloatPolicy::new(net, norm, meta.sigma.into(), sampler)
+    }
+
+    /// (obs_dim, action_dim, history) the policy expects.
+    pub fn input_sizes(&self) -> (usize, usize, usize) {
+        let cfg = self.net.net.config();
+        (cfg.obs_dim, cfg.action_dim, cfg.history)
+    }
+
+    pub fn sampler(&self) -> Sampler {
+        self.sampler
+    }
+
+    /// One chunk in normalized units from normalized inputs: `obs` [m O], `y0`, `v0` [k].
+    pub fn sample_normalized(&mut self, obs: &[f32], y0: &[f32], v0: &[f32]) -> anyhow::Result<Vec<f32>> {
+        let cfg = self.net.net.config().clone();
+        let cond = Condition::from_slices(&cfg, obs, y0, v0, &self.device)?;
+        let net = &self.net.net;
+        let z = gaussian(&mut self.rng, 1, cfg.traj_dim(), &self.device)?;
+        let out = match self.sampler {
+            Sampler::Teacher { solver, steps } => sample_teacher(net, &self.sigma, &cond, (z * self.sigma.sigma_max)?, steps, solver)?,
+            Sampler::Student { steps } => sample_consistency(net, &self.sigma, &cond, &z, steps, &mut self.rng)?,
+            Sampler::Dp { sampler, steps } => sample_dp(net, &self.schedule, &cond, z, sampler, steps, &mut self.rng)?,
+        };
+        Ok(out.flatten_all()?.to_vec1::<f32>()?)
+    }
+}
+
+impl Policy for FloatPolicy {
+    fn name(&self) -> String {
+        self.sampler.label()
+    }
+
+    fn reset(&mut self, seed: u64) {
+        self.rng = Rng::new(seed);
+    }
+
+    fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
+        let cfg = self.net.net.config().clone();
+        if input.obs_history.len() != cfg.history {
+            bail!("policy expects an observation history of {}, got {}", cfg.history, input.obs_history.len());
+        }
+        let mut obs = Vec::with_capacity(cfg.history * cfg.obs_dim);
+        for o in input.obs_history {
+            if o.len() != cfg.obs_dim {
+                bail!("observation has {} values, the model expects {}", o.len(), cfg.obs_dim);
+            }
+            let mut row = o.clone();
+            self.norm.obs.normalize(&mut row);
+            obs.extend(row);
+        }
+        if input.prev_action.len() != cfg.action_dim || input.prev_rate.len() != cfg.action_dim {
+            bail!("previous action/rate must have {} values", cfg.action_dim);
+        }
+        let mut y0 = input.prev_action.to_vec();
+        self.norm.action.normalize(&mut y0);
+        let v0: Vec<f32> = input.prev_rate.iter().zip(self.norm.action.scale()).map(|(r, s)| r * s).collect();
+        let mut chunk = self.sample_normalized(&obs, &y0, &v0)?;
+        self.norm.action.denormalize(&mut chunk);
+        Ok(chunk.chunks_exact(cfg.action_dim).map(|a| a.to_vec()).collect())
+    }
+}
+
+/// Loads a checkpoint as a boxed policy plus the observation history it needs.
+pub fn boxed(dir: &Path, steps: Option<usize>, solver: Option<&str>) -> anyhow::Result<(Box<dyn Policy>, usize)> {
+    let solver = solver.map(Solver::parse).transpose()?;
+    let policy = FloatPolicy::load(dir, steps, solver)?;
+    let history = policy.net.net.config().history;
+    Ok((Box::new(policy), history))
+}
+
+#[cfg(test)]
+mod diagnostics {
+    use super::*;
+
+    /// Manual diagnostic: FRMD_CKPT=dir FRMD_DATA=file cargo test -- --ignored chunk_error
+    #[test]
+    #[ignore]
+    fn chunk_error_on_training_windows() {
+        let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else { return };
+        let mut policy = FloatPolicy::load(Path::new(&ckpt), None, None).unwrap();
+        let cfg = policy.net.net.config().clone();
+        let ds = crate::data::Dataset::load(Path::new(&data)).unwrap();
+        let (w, norm) = ds.windows(cfg.history, cfg.horizon).unwrap();
+        assert_eq!(norm, policy.norm);
+        let (mut err, mut base, mut count) = (0.0f64, 0.0f64, 0usize);
+        let obs_w = cfg.history * cfg.obs_dim;
+        let (k, traj) = (cfg.action_dim, cfg.traj_dim());
+        for i in (0..w.len()).step_by(w.len() / 200 + 1) {
+            let out = policy.sample_normalized(&w.obs[i * obs_w..(i + 1) * obs_w], &w.prev_action[i * k..(i + 1) * k], &w.prev_rate[i * k..(i + 1) * k]).unwrap();
+            let truth = &w.actions[i * traj..(i + 1) * traj];
+            err += out.iter().zip(truth).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / traj as f64;
+            base += truth.chunks_exact(k).flat_map(|row| row.iter().zip(&w.prev_action[i * k..(i + 1) * k]).map(|(a, b)| (a - b).abs() as f64)).sum::<f64>() / traj as f64;
+            count += 1;
+        }
+        eprintln!("{}: mean abs error {:.4} (hold-last-action baseline {:.4}) over {count} windows", policy.name(), err / count as f64, base / count as f64);
+        // Same through act() with raw inputs (episode 0, every 5th step).
+        let end = ds.episode_ends[0] as usize;
+        let (o, a) = (ds.obs_dim, ds.action_dim);
+        let mut raw_err = 0.0;
+        let mut n = 0;
+        for t in (2..end.saturating_sub(cfg.horizon)).step_by(5) {
+            let hist: Vec<Vec<f32>> = (0..cfg.history).map(|j| ds.obs[(t + 1 + j - cfg.history) * o..(t + 2 + j - cfg.history) * o].to_vec()).collect();
+            let prev = ds.action[(t - 1) * a..t * a].to_vec();
+            let rate: Vec<f32> = (0..a).map(|d| (ds.action[(t - 1) * a + d] - ds.action[(t - 2) * a + d]) / ds.dt).collect();
+            let chunk = policy.act(&PolicyInput { obs_history: &hist, prev_action: &prev, prev_rate: &rate }).unwrap();
+            let e: f64 = chunk.iter().enumerate().map(|(s, act)| act.iter().enumerate().map(|(d, v)| (v - ds.action[(t + s) * a + d]).abs() as f64).sum::<f64>()).sum::<f64>() / (cfg.horizon * a) as f64;
+            if n < 3 { eprintln!("t {t}: chunk[0] {:?} truth {:?} prev {:?}", chunk[0], &ds.action[t * a..(t + 1) * a], prev); }
+            raw_err += e;
+            n += 1;
+        }
+        eprintln!("act(): mean abs error {:.4} raw units over {n} queries", raw_err / n as f64);
+        // Closed-loop trace of one episode.
+        let mut task = crate::tasks::make_task(&ds.task).unwrap();
+        task.reset(crate::eval::eval_seed(0, 0));
+        policy.reset(1);
+        let mut hist = vec![task.observe(); cfg.history];
+        let mut prev: Vec<f32> = task.ee_position().iter().map(|&v| v as f32).collect();
+        let mut rate = vec![0f32; a];
+        for q in 0..8 {
+            let chunk = policy.act(&PolicyInput { obs_history: &hist, prev_action: &prev, prev_rate: &rate }).unwrap();
+            eprintln!("query {q}: obs {:?}\n   prev {prev:?} rate {rate:?}\n   chunk first {:?} last {:?}", hist.last().unwrap(), chunk[0], chunk[chunk.len() - 1]);
+            for act in chunk.iter().take(8) {
+                task.step(act).unwrap();
+                for d in 0..a { rate[d] = (act[d] - prev[d]) / ds.dt; prev[d] = act[d]; }
+                hist.remove(0);
+                hist.push(task.observe());
+            }
+        }
+    }
+}

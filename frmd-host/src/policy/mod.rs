@@ -1,0 +1,2 @@
+//! Policies backed by models: the float (candle) teacher, student and DP baseline.
+pub mod float;
