@@ -6,7 +6,8 @@
 //! (Cortex-M4F) and mps2-an500 (Cortex-M7) and requires each printed digest to equal the host's:
 //! ProDMP decode (f32) and int8 MLP + decode are bit-identical on x86-64 and Cortex-M. It needs
 //! `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without it, or with
-//! FRMD_SKIP_QEMU=1, it prints why and passes without checking.
+//! FRMD_SKIP_QEMU=1, it prints why and passes without checking
+//! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
 
 #[allow(dead_code)]
 #[path = "../../examples/cortex-m/src/digest.rs"]
@@ -100,6 +101,12 @@ fn qemu_digests_match_host() {
         .unwrap_or_else(|| root.join("target/cortex-m.env"));
     let qemu_found = Command::new("qemu-system-arm").arg("--version").output().is_ok();
     if std::env::var_os("FRMD_SKIP_QEMU").is_some() || !env_file.exists() || !qemu_found {
+        assert!(
+            std::env::var_os("FRMD_REQUIRE_QEMU").is_none(),
+            "FRMD_REQUIRE_QEMU is set but the QEMU check cannot run (env file {} present: {}, qemu-system-arm found: {qemu_found})",
+            env_file.display(),
+            env_file.exists()
+        );
         eprintln!(
             "qemu_digests_match_host: SKIPPED (FRMD_SKIP_QEMU set, or no {} / qemu-system-arm: \
              run `bash scripts/setup-cortex-m.sh`)",

@@ -6,7 +6,8 @@
 //! and driven through the same workload file; `qemu_policy_digest_matches_host` requires the
 //! firmware's printed digest on mps2-an386 (Cortex-M4F) and mps2-an500 (Cortex-M7) to equal the
 //! host's. It needs `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without
-//! it, or with FRMD_SKIP_QEMU=1, it prints why and passes without checking.
+//! it, or with FRMD_SKIP_QEMU=1, it prints why and passes without checking
+//! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
 
 #[allow(dead_code)]
 #[path = "../../examples/cortex-m/src/digest.rs"]
@@ -66,6 +67,12 @@ fn qemu_policy_digest_matches_host() {
         .unwrap_or_else(|| root.join("target/cortex-m.env"));
     let qemu_found = Command::new("qemu-system-arm").arg("--version").output().is_ok();
     if std::env::var_os("FRMD_SKIP_QEMU").is_some() || !env_file.exists() || !qemu_found {
+        assert!(
+            std::env::var_os("FRMD_REQUIRE_QEMU").is_none(),
+            "FRMD_REQUIRE_QEMU is set but the QEMU check cannot run (env file {} present: {}, qemu-system-arm found: {qemu_found})",
+            env_file.display(),
+            env_file.exists()
+        );
         eprintln!(
             "qemu_policy_digest_matches_host: SKIPPED (FRMD_SKIP_QEMU set, or no {} / \
              qemu-system-arm: run `bash scripts/setup-cortex-m.sh`)",
