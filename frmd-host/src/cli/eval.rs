@@ -1,5 +1,6 @@
 //! `frmd eval`: closed-loop evaluation of a policy on a task, with the metrics of DESIGN.md
 //! section 6.
+use crate::eval::policy::Policy;
 use crate::eval::{
     expert_policy, plot::plot_paths, run_episodes_with_progress, EvalConfig, EvalReport,
 };
@@ -77,6 +78,24 @@ pub fn print_report(report: &EvalReport) {
     );
 }
 
+/// Closed-loop evaluation with a progress bar over episodes (cleared when done).
+pub fn evaluate_with_bar(
+    task: &str,
+    policy: &mut dyn Policy,
+    cfg: &EvalConfig,
+) -> anyhow::Result<EvalReport> {
+    let bar = ProgressBar::new(cfg.episodes as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} episodes ({elapsed})")?
+            .progress_chars("=> "),
+    );
+    bar.set_message(format!("eval {} on {task}", policy.name()));
+    let report =
+        run_episodes_with_progress(task, policy, cfg, &mut |done| bar.set_position(done as u64))?;
+    bar.finish_and_clear();
+    Ok(report)
+}
+
 pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
     let (mut policy, history) = match &args.ckpt {
         Some(dir) => crate::policy::float::boxed(dir, args.steps, args.solver.as_deref())?,
@@ -97,16 +116,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
         },
         ..EvalConfig::default()
     };
-    let bar = ProgressBar::new(args.episodes as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} episodes ({elapsed})")?
-            .progress_chars("=> "),
-    );
-    bar.set_message(format!("eval {} on {}", policy.name(), args.task));
-    let report = run_episodes_with_progress(&args.task, policy.as_mut(), &cfg, &mut |done| {
-        bar.set_position(done as u64)
-    })?;
-    bar.finish_and_clear();
+    let report = evaluate_with_bar(&args.task, policy.as_mut(), &cfg)?;
     print_report(&report);
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&report)?)

@@ -2,10 +2,11 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+pub mod bench;
 pub mod collect;
 pub mod eval;
-pub mod latency;
 pub mod prodmp;
+pub mod quickstart;
 pub mod train;
 
 /// FRMD: from demonstrations to a one-step diffusion policy in controller firmware.
@@ -28,8 +29,11 @@ pub enum Command {
     /// Train a teacher, distill a student, or train the DP baseline.
     #[command(subcommand)]
     Train(train::TrainCommand),
-    /// Latency per action chunk of float policies, side by side.
-    Latency(latency::LatencyArgs),
+    /// Latency per action chunk of every policy kind side by side, with ratios (one run).
+    #[command(visible_alias = "latency")]
+    Bench(bench::BenchArgs),
+    /// The whole pipeline on a built-in task in minutes: collect, train, export, evaluate.
+    Quickstart(quickstart::QuickstartArgs),
 }
 
 /// Parses the command line, runs the subcommand, and maps errors to a non-zero exit code.
@@ -40,7 +44,8 @@ pub fn main() -> ExitCode {
         Command::Collect(args) => collect::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Train(cmd) => train::run(cmd),
-        Command::Latency(args) => latency::run(args),
+        Command::Bench(args) => bench::run(args),
+        Command::Quickstart(args) => quickstart::run(args),
     };
     match result {
         Ok(code) => code,

@@ -93,6 +93,11 @@ impl FloatPolicy {
         (cfg.obs_dim, cfg.action_dim, cfg.history)
     }
 
+    /// The network's configuration (backbone, sizes).
+    pub fn config(&self) -> &crate::models::ModelConfig {
+        self.net.net.config()
+    }
+
     pub fn sampler(&self) -> Sampler {
         self.sampler
     }

@@ -1,0 +1,58 @@
+//! A CI-sized run of the whole quickstart pipeline (`--tiny`: numbers are meaningless, the
+//! plumbing is what is tested).
+use super::*;
+
+#[test]
+fn tiny_quickstart_runs_every_stage_and_writes_its_artifacts() {
+    let out = std::env::temp_dir().join(format!("frmd-quickstart-test-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let args = QuickstartArgs {
+        task: DEFAULT_TASK.into(),
+        out: out.clone(),
+        demos: 100,
+        teacher_steps: 1,
+        student_steps: 1,
+        dp_steps: 1,
+        backbone: "mlp:32,32:silu".into(),
+        batch: 128,
+        no_baseline: false,
+        episodes: 50,
+        seed: 3,
+        tiny: true,
+    };
+    let summary = run_pipeline(&args).unwrap();
+    let methods: Vec<&str> = summary.rows.iter().map(|r| r.method.as_str()).collect();
+    assert_eq!(methods, ["expert", "dp-ddpm-100", "dp-ddim-10", "teacher-heun-10", "student-1", "int8-student-1"]);
+    let expert = summary.rows[0].report.as_ref().unwrap();
+    assert_eq!(expert.episodes, 3, "--tiny evaluates 3 episodes");
+    assert_eq!(expert.successes, 3, "the scripted expert solves every evaluation episode");
+    for row in &summary.rows {
+        match &row.report {
+            Some(r) => {
+                assert!(r.latency_us_median.is_finite() && r.latency_us_median > 0.0, "{}: latency {}", row.method, r.latency_us_median);
+                assert!(r.latency_us_p99 >= r.latency_us_median, "{}", row.method);
+                assert!(r.chunk_calls >= 3, "{}: {} calls", row.method, r.chunk_calls);
+                assert!(r.non_smooth_ee_mean.is_finite() && r.rms_jerk_mean.is_finite(), "{}", row.method);
+            }
+            None => assert!(row.missing.as_deref().is_some_and(|m| m.contains("not available")), "{}", row.method),
+        }
+    }
+    for path in ["reach-demos.safetensors", "teacher/model.safetensors", "teacher/frmd.json", "student/frmd.json", "dp/frmd.json", "teacher/learning_curve.png", "plots/student-1.png", "eval/expert.json", "summary.json", "summary.txt"] {
+        assert!(out.join(path).is_file(), "missing artifact {path}");
+    }
+    for (what, path) in &summary.artifacts {
+        assert!(path.exists(), "{what}: {} listed but absent", path.display());
+    }
+    let text = std::fs::read_to_string(out.join("summary.txt")).unwrap();
+    assert!(text.contains("student-1") && text.contains("100.0 %"), "{text}");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn unknown_task_is_rejected_before_any_work() {
+    let out = std::env::temp_dir().join(format!("frmd-quickstart-bad-{}", std::process::id()));
+    let args = QuickstartArgs { task: "juggle".into(), out: out.clone(), demos: 1, teacher_steps: 1, student_steps: 1, dp_steps: 1, backbone: "mlp".into(), batch: 8, no_baseline: true, episodes: 1, seed: 0, tiny: false };
+    let err = run_pipeline(&args).unwrap_err();
+    assert!(format!("{err:#}").contains("juggle"), "{err:#}");
+    assert!(!out.exists(), "nothing is written for a bad task");
+}
