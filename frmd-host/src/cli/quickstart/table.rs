@@ -42,7 +42,7 @@ pub fn render(s: &QuickstartSummary) -> String {
     let _ = writeln!(t, "wall time {:.0} s ({})", s.total_seconds, stages.join("; "));
     let _ = writeln!(t, "artifacts:");
     for (what, path) in &s.artifacts {
-        let _ = writeln!(t, "  {:<34} {}", what, path.display());
+        let _ = writeln!(t, "  {:<36} {}", what, path.display());
     }
     t
 }
