@@ -37,6 +37,34 @@ pub(crate) fn dot_i8_prefix(a: &[i8], b: &[i8]) -> i32 {
     s0.wrapping_add(s1).wrapping_add(s2).wrapping_add(s3)
 }
 
+/// `[dot(row_r, input) for r in 0..4]` for four consecutive rows stored row-major in `rows`, each
+/// `input.len()` long (callers pass exactly `4 * input.len()` weights; missing rows give 0).
+///
+/// The fully connected layer calls this per group of four output channels: the DSP kernel
+/// (`cfg(frmd_arm_dsp)`, module `kernels::dsp`) loads each input word once for four rows; other
+/// targets run the portable dot product per row. Both return identical sums.
+#[cfg(not(frmd_arm_dsp))]
+#[inline]
+pub(crate) fn dot_i8_rows4(rows: &[i8], input: &[i8]) -> [i32; 4] {
+    dot_i8_rows4_portable(rows, input)
+}
+
+#[cfg(frmd_arm_dsp)]
+pub(crate) use super::dsp::dot_i8_rows4;
+
+/// Portable four-row product: [`dot_i8_prefix`] per row.
+#[inline]
+pub(crate) fn dot_i8_rows4_portable(rows: &[i8], input: &[i8]) -> [i32; 4] {
+    let mut acc = [0_i32; 4];
+    if input.is_empty() {
+        return acc;
+    }
+    for (sum, row) in acc.iter_mut().zip(rows.chunks_exact(input.len())) {
+        *sum = dot_i8_prefix(row, input);
+    }
+    acc
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,7 +6,7 @@
 //! [`crate::quant::requantize_to_i8`]; the activation clamp (`activation_min..=activation_max`)
 //! implements ReLU-like activations for free.
 
-use super::dot::dot_i8_prefix;
+use super::dot::{dot_i8_prefix, dot_i8_rows4};
 use super::KernelError;
 use crate::quant::{dequantize_accumulator, requantize_to_i8, SHIFT_MAX, SHIFT_MIN};
 
@@ -104,10 +104,12 @@ impl<'a> FullyConnected<'a> {
         if acc.len() != self.out_features {
             return Err(KernelError::OutputLength);
         }
-        let rows = self.weights.chunks_exact(self.in_features).zip(self.bias);
-        for ((row, bias), out) in rows.zip(acc.iter_mut()) {
-            *out = bias.wrapping_add(dot_i8_prefix(row, input));
-        }
+        let mut outputs = acc.iter_mut();
+        self.for_each_accumulator(input, |acc| {
+            if let Some(out) = outputs.next() {
+                *out = acc;
+            }
+        });
         Ok(())
     }
 
@@ -124,20 +126,47 @@ impl<'a> FullyConnected<'a> {
         if output.len() != self.out_features {
             return Err(KernelError::OutputLength);
         }
-        let rows = self.weights.chunks_exact(self.in_features).zip(self.bias);
         let channels = requant.multipliers.iter().zip(requant.shifts);
-        for (((row, bias), (multiplier, shift)), out) in rows.zip(channels).zip(output.iter_mut()) {
-            let acc = bias.wrapping_add(dot_i8_prefix(row, input));
-            *out = requantize_to_i8(
-                acc,
-                *multiplier,
-                *shift,
-                requant.output_zero_point,
-                requant.activation_min,
-                requant.activation_max,
-            );
-        }
+        let mut outputs = output.iter_mut().zip(channels);
+        self.for_each_accumulator(input, |acc| {
+            if let Some((out, (multiplier, shift))) = outputs.next() {
+                *out = requantize_to_i8(
+                    acc,
+                    *multiplier,
+                    *shift,
+                    requant.output_zero_point,
+                    requant.activation_min,
+                    requant.activation_max,
+                );
+            }
+        });
         Ok(())
+    }
+
+    /// Calls `emit(bias[o] + sum_i w[o][i] * input[i])` for `o = 0..out_features` in order
+    /// (callers have checked the shapes).
+    ///
+    /// Rows go in groups of four through [`dot_i8_rows4`] (which on DSP targets reads each input
+    /// word once per group), the remaining `out_features % 4` rows one by one.
+    #[inline]
+    fn for_each_accumulator(&self, input: &[i8], mut emit: impl FnMut(i32)) {
+        let width = self.in_features;
+        if width == 0 {
+            return;
+        }
+        let mut biases = self.bias.iter();
+        let mut next_bias = || biases.next().copied().unwrap_or(0);
+        let group_len = width.saturating_mul(4);
+        let groups = self.weights.chunks_exact(group_len);
+        let last_rows = groups.remainder();
+        for group in groups {
+            for dot in dot_i8_rows4(group, input) {
+                emit(next_bias().wrapping_add(dot));
+            }
+        }
+        for row in last_rows.chunks_exact(width) {
+            emit(next_bias().wrapping_add(dot_i8_prefix(row, input)));
+        }
     }
 }
 
