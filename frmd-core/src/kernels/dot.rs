@@ -37,33 +37,25 @@ pub(crate) fn dot_i8_prefix(a: &[i8], b: &[i8]) -> i32 {
     s0.wrapping_add(s1).wrapping_add(s2).wrapping_add(s3)
 }
 
-/// `[dot(row_r, input) for r in 0..4]` for four consecutive rows stored row-major in `rows`, each
-/// `input.len()` long (callers pass exactly `4 * input.len()` weights; missing rows give 0).
+/// Calls `emit(dot(row, input))` for every row of the row-major `weights` (`input.len()` columns
+/// per row) in order; a partial last row is ignored (callers check the shapes).
 ///
-/// The fully connected layer calls this per group of four output channels: the DSP kernel
-/// (`cfg(frmd_arm_dsp)`, module `kernels::dsp`) loads each input word once for four rows; other
-/// targets run the portable dot product per row. Both return identical sums.
+/// This is the fully connected layer's matrix-vector product. On Arm cores with the DSP extension
+/// (`cfg(frmd_arm_dsp)`, module `kernels::dsp`) it runs an `SMLAD` kernel over four rows at a
+/// time; elsewhere it is [`dot_i8_prefix`] per row. Both give identical sums.
 #[cfg(not(frmd_arm_dsp))]
 #[inline]
-pub(crate) fn dot_i8_rows4(rows: &[i8], input: &[i8]) -> [i32; 4] {
-    dot_i8_rows4_portable(rows, input)
+pub(crate) fn for_each_row_dot(weights: &[i8], input: &[i8], mut emit: impl FnMut(i32)) {
+    if input.is_empty() {
+        return;
+    }
+    for row in weights.chunks_exact(input.len()) {
+        emit(dot_i8_prefix(row, input));
+    }
 }
 
 #[cfg(frmd_arm_dsp)]
-pub(crate) use super::dsp::dot_i8_rows4;
-
-/// Portable four-row product: [`dot_i8_prefix`] per row.
-#[inline]
-pub(crate) fn dot_i8_rows4_portable(rows: &[i8], input: &[i8]) -> [i32; 4] {
-    let mut acc = [0_i32; 4];
-    if input.is_empty() {
-        return acc;
-    }
-    for (sum, row) in acc.iter_mut().zip(rows.chunks_exact(input.len())) {
-        *sum = dot_i8_prefix(row, input);
-    }
-    acc
-}
+pub(crate) use super::dsp::for_each_row_dot;
 
 #[cfg(test)]
 mod tests {

@@ -6,7 +6,7 @@
 //! [`crate::quant::requantize_to_i8`]; the activation clamp (`activation_min..=activation_max`)
 //! implements ReLU-like activations for free.
 
-use super::dot::{dot_i8_prefix, dot_i8_rows4};
+use super::dot::for_each_row_dot;
 use super::KernelError;
 use crate::quant::{dequantize_accumulator, requantize_to_i8, SHIFT_MAX, SHIFT_MIN};
 
@@ -144,29 +144,15 @@ impl<'a> FullyConnected<'a> {
     }
 
     /// Calls `emit(bias[o] + sum_i w[o][i] * input[i])` for `o = 0..out_features` in order
-    /// (callers have checked the shapes).
-    ///
-    /// Rows go in groups of four through [`dot_i8_rows4`] (which on DSP targets reads each input
-    /// word once per group), the remaining `out_features % 4` rows one by one.
+    /// (callers have checked the shapes). The products come from [`for_each_row_dot`], which on
+    /// Cortex-M4/M7 is the `SMLAD` kernel (four rows per pass over the input).
     #[inline]
     fn for_each_accumulator(&self, input: &[i8], mut emit: impl FnMut(i32)) {
-        let width = self.in_features;
-        if width == 0 {
-            return;
-        }
         let mut biases = self.bias.iter();
-        let mut next_bias = || biases.next().copied().unwrap_or(0);
-        let group_len = width.saturating_mul(4);
-        let groups = self.weights.chunks_exact(group_len);
-        let last_rows = groups.remainder();
-        for group in groups {
-            for dot in dot_i8_rows4(group, input) {
-                emit(next_bias().wrapping_add(dot));
-            }
-        }
-        for row in last_rows.chunks_exact(width) {
-            emit(next_bias().wrapping_add(dot_i8_prefix(row, input)));
-        }
+        for_each_row_dot(self.weights, input, |dot| {
+            let bias = biases.next().copied().unwrap_or(0);
+            emit(bias.wrapping_add(dot));
+        });
     }
 }
 
