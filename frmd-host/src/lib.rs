@@ -4,6 +4,7 @@ pub mod checkpoint;
 pub mod cli;
 pub mod data;
 pub mod diffusion;
+pub mod equiv;
 pub mod eval;
 pub mod models;
 pub mod policy;
