@@ -12,7 +12,7 @@ use crate::checkpoint::{Activation, BackboneConfig, Checkpoint, ModelConfig, Rol
 use anyhow::{bail, Context};
 use frmd_core::kernels::Activation as KernelActivation;
 use frmd_core::model::mlp::{F32Layer, F32Mlp, F32Scratch, Probe};
-use frmd_core::policy::{InputLayout, InputSegment, StepConstants, MAX_HIDDEN_LAYERS, MAX_STEPS};
+use frmd_core::policy::{F32Network, InputLayout, InputSegment, StepConstants, MAX_HIDDEN_LAYERS, MAX_STEPS};
 use frmd_core::prodmp::{apply_row_f32, ProDmp, ProDmpConfig};
 use frmd_core::sigma::{noise_embedding, SigmaConfig};
 
@@ -206,6 +206,19 @@ impl FoldedMlp {
             layout,
             prodmp: ProDmpTablesOwned::from_config(&prodmp_cfg, config.horizon)?,
         })
+    }
+
+    /// All first-layer bias variants back to back (the layout [`F32Network`] takes).
+    pub fn flat_first_layer_biases(&self) -> Vec<f32> {
+        self.first_layer_biases.concat()
+    }
+
+    /// frmd-core's [`F32Network`] over these weights, with `biases` from
+    /// [`Self::flat_first_layer_biases`] (the f32 twin of the int8 network, for the runtime's
+    /// own sampler and policy).
+    pub fn f32_network<'a, const WIDTH: usize>(&'a self, biases: &'a [f32]) -> anyhow::Result<F32Network<'a, WIDTH>> {
+        let views: Vec<F32Layer<'a>> = self.hidden.iter().map(|l| l.view(&l.bias)).collect();
+        F32Network::from_parts(&views, self.output.view(&self.output.bias), biases).map_err(|e| anyhow::anyhow!("f32 network: {e}"))
     }
 
     /// Input width of the folded network.

@@ -172,6 +172,11 @@ pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
         let f = run_episodes(&task, &mut float, &eval)?;
         int8.reset(0);
         let i = run_episodes(&task, &mut int8, &eval)?;
+        let mut twin = Int8Policy::f32_twin(&blob, folded.clone(), "core-f32")?;
+        let t = run_episodes(&task, &mut twin, &eval)?;
+        rows.push(row("a", "success-rate difference core f32 vs candle (points)", 100.0 * (f.success_rate - t.success_rate).abs(), Some(cfg.max_success_diff_points), format!(
+            "{task}, {} episodes: candle {:.1} %, core f32 (runtime policy, f32 network) {:.1} %", cfg.episodes, 100.0 * f.success_rate, 100.0 * t.success_rate
+        )));
         let diff = 100.0 * (f.success_rate - i.success_rate).abs();
         rows.push(row("b", "success-rate difference (points)", diff, Some(cfg.max_success_diff_points), format!(
             "{task}, {} episodes: float {:.1} %, int8 {:.1} %; latency median float {:.1} us, int8 {:.1} us",

@@ -9,7 +9,8 @@
 use crate::eval::policy::{Policy, PolicyInput};
 use anyhow::{bail, Context};
 use frmd_core::blob::LoadedPolicy;
-use frmd_core::policy::{Int8Network, Noise, Policy as CorePolicy};
+use frmd_core::policy::{F32Network, Network, Noise, Policy as CorePolicy};
+use frmd_export::fold::FoldedMlp;
 use frmd_core::rng::Rng;
 use frmd_export::fold::MAX_WIDTH;
 use std::path::Path;
@@ -22,15 +23,17 @@ pub trait ChunkRunner {
     fn run(&mut self, input: &PolicyInput<'_>, noise: Noise<'_>) -> anyhow::Result<Vec<Vec<f32>>>;
 }
 
-struct Runner<const M: usize, const O: usize, const K: usize, const N: usize, const P: usize> {
-    policy: CorePolicy<'static, Int8Network<'static, MAX_WIDTH>, M, O, K, N, P, MAX_WIDTH>,
+struct Runner<Net, const M: usize, const O: usize, const K: usize, const N: usize, const P: usize> {
+    policy: CorePolicy<'static, Net, M, O, K, N, P, MAX_WIDTH>,
 }
 
 fn array<const L: usize>(values: &[f32], what: &str) -> anyhow::Result<[f32; L]> {
     values.try_into().map_err(|_| anyhow::anyhow!("{what} has {} values, the policy expects {L}", values.len()))
 }
 
-impl<const M: usize, const O: usize, const K: usize, const N: usize, const P: usize> ChunkRunner for Runner<M, O, K, N, P> {
+impl<Net: Network, const M: usize, const O: usize, const K: usize, const N: usize, const P: usize> ChunkRunner
+    for Runner<Net, M, O, K, N, P>
+{
     fn shape(&self) -> [usize; 5] {
         [M, O, K, N, P]
     }
@@ -61,6 +64,7 @@ fn leak_aligned(bytes: &[u8]) -> &'static [u8] {
 
 fn try_shape<const M: usize, const O: usize, const K: usize, const N: usize, const P: usize>(
     bytes: &'static [u8],
+    f32_twin: Option<&'static FoldedMlp>,
 ) -> Option<anyhow::Result<Box<dyn ChunkRunner>>> {
     let loaded = match LoadedPolicy::<M, O, K, N, P>::load(bytes) {
         Ok(l) => l,
@@ -68,25 +72,36 @@ fn try_shape<const M: usize, const O: usize, const K: usize, const N: usize, con
         Err(e) => return Some(Err(anyhow::anyhow!("blob: {e}"))),
     };
     let loaded: &'static LoadedPolicy<'static, M, O, K, N, P> = Box::leak(Box::new(loaded));
-    Some(
-        loaded
+    Some(match f32_twin {
+        None => loaded
             .policy::<MAX_WIDTH, MAX_WIDTH>()
             .map(|policy| Box::new(Runner { policy }) as Box<dyn ChunkRunner>)
             .map_err(|e| anyhow::anyhow!("blob policy: {e}")),
-    )
+        Some(folded) => {
+            let biases: &'static [f32] = Box::leak(folded.flat_first_layer_biases().into_boxed_slice());
+            folded.f32_network::<MAX_WIDTH>(biases).and_then(|net: F32Network<'static, MAX_WIDTH>| {
+                CorePolicy::<'static, _, M, O, K, N, P, MAX_WIDTH>::new(loaded.config(), net)
+                    .map(|policy| Box::new(Runner { policy }) as Box<dyn ChunkRunner>)
+                    .map_err(|e| anyhow::anyhow!("f32 policy: {e}"))
+            })
+        }
+    })
 }
 
 /// Shapes (M, O, K, N, P) the host int8 runner is compiled for.
 pub const SHAPES: &[[usize; 5]] = &[[2, 6, 2, 12, 21], [2, 9, 2, 12, 21], [2, 10, 2, 12, 21], [2, 7, 2, 12, 21], [2, 6, 2, 8, 7]];
 
 /// Loads a blob into a runner of the matching compiled shape.
-pub fn load_runner(bytes: &[u8]) -> anyhow::Result<Box<dyn ChunkRunner>> {
+/// With `f32_twin`, the policy runs frmd-core's f32 network of the folded model instead of the
+/// blob's int8 network (same blob config: normalization, steps, decoder, layout).
+pub fn load_runner(bytes: &[u8], f32_twin: Option<FoldedMlp>) -> anyhow::Result<Box<dyn ChunkRunner>> {
     let bytes = leak_aligned(bytes);
-    let found = try_shape::<2, 6, 2, 12, 21>(bytes)
-        .or_else(|| try_shape::<2, 9, 2, 12, 21>(bytes))
-        .or_else(|| try_shape::<2, 10, 2, 12, 21>(bytes))
-        .or_else(|| try_shape::<2, 7, 2, 12, 21>(bytes))
-        .or_else(|| try_shape::<2, 6, 2, 8, 7>(bytes));
+    let twin: Option<&'static FoldedMlp> = f32_twin.map(|f| &*Box::leak(Box::new(f)));
+    let found = try_shape::<2, 6, 2, 12, 21>(bytes, twin)
+        .or_else(|| try_shape::<2, 9, 2, 12, 21>(bytes, twin))
+        .or_else(|| try_shape::<2, 10, 2, 12, 21>(bytes, twin))
+        .or_else(|| try_shape::<2, 7, 2, 12, 21>(bytes, twin))
+        .or_else(|| try_shape::<2, 6, 2, 8, 7>(bytes, twin));
     match found {
         Some(runner) => runner,
         None => bail!("the blob's sizes are not among the host's compiled int8 shapes (M, O, K, N, P) {SHAPES:?}"),
@@ -103,7 +118,13 @@ pub struct Int8Policy {
 
 impl Int8Policy {
     pub fn from_blob(bytes: &[u8], label: &str) -> anyhow::Result<Self> {
-        Ok(Int8Policy { runner: load_runner(bytes)?, rng: Rng::new(0), label: label.into() })
+        Ok(Int8Policy { runner: load_runner(bytes, None)?, rng: Rng::new(0), label: label.into() })
+    }
+
+    /// The same runtime policy with frmd-core's f32 network of `folded` in place of the int8 one
+    /// (isolates quantization from everything else in closed-loop comparisons).
+    pub fn f32_twin(bytes: &[u8], folded: FoldedMlp, label: &str) -> anyhow::Result<Self> {
+        Ok(Int8Policy { runner: load_runner(bytes, Some(folded))?, rng: Rng::new(0), label: label.into() })
     }
 
     /// Loads a blob file.
