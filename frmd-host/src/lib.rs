@@ -5,6 +5,7 @@ pub mod cli;
 pub mod data;
 pub mod diffusion;
 pub mod equiv;
+pub mod bench;
 pub mod eval;
 pub mod models;
 pub mod policy;
