@@ -245,15 +245,18 @@ impl FoldedMlp {
 
     /// Builds the model input of one step: `cond = [obs history, y0, v0]` (normalized, v0 per
     /// second) and the unscaled noisy trajectory `x` (`[n][k]`).
-    pub fn input(&self, step: &StepConstants, cond: &[f32], x: &[f32]) -> Vec<f32> {
+    pub fn input(&self, step: &StepConstants, cond: &[f32], x: &[f32]) -> anyhow::Result<Vec<f32>> {
         let c = &self.config;
         let obs_len = c.history * c.obs_dim;
         let k = c.action_dim;
+        if cond.len() != c.cond_dim() || x.len() != c.traj_dim() {
+            bail!("model input: condition has {} values (expected {}), trajectory {} (expected {})", cond.len(), c.cond_dim(), x.len(), c.traj_dim());
+        }
         let mut input = Vec::with_capacity(self.input_width());
         input.extend_from_slice(&cond[..obs_len + k]);
         input.extend(cond[obs_len + k..obs_len + 2 * k].iter().map(|v| v * self.layout.rate_scale));
         input.extend(x.iter().map(|v| step.c_in * v));
-        input
+        Ok(input)
     }
 
     /// The f32 consistency sampler over all steps with the given standard-normal `noise`
@@ -275,7 +278,7 @@ impl FoldedMlp {
             } else {
                 f.iter().zip(z).map(|(f, z)| f + step.renoise_std * z).collect()
             };
-            let input = self.input(step, cond, &x);
+            let input = self.input(step, cond, &x)?;
             let params = self.forward_observed(i, &input, |p, v| observe(i, p, v))?;
             let decoded = self.prodmp.decode_positions(&params, y0, v0);
             f = x.iter().zip(&decoded).map(|(x, d)| step.c_skip * x + step.c_out * d).collect();

@@ -127,8 +127,18 @@ pub fn int8_network<'a, const WIDTH: usize>(policy: &'a QuantizedPolicy, luts: &
 }
 
 /// The wide-integer model of the whole int8 network: i64 dot products, the i128 requantization
-/// model, LUTs indexed directly; returns the output layer's accumulators.
-pub fn wide_network(policy: &QuantizedPolicy, step: usize, input: &[f32]) -> Vec<i64> {
+/// model, LUTs indexed directly; returns the output layer's accumulators. Errors if `policy` is
+/// inconsistent (widths, bias variants, LUT indices) or `input` has the wrong length.
+pub fn wide_network(policy: &QuantizedPolicy, step: usize, input: &[f32]) -> anyhow::Result<Vec<i64>> {
+    policy.with_parts(|parts| frmd_core::blob::encoded_len(parts).map(|_| ())).map_err(|e| anyhow::anyhow!("inconsistent policy: {e}"))?;
+    let first_in = policy.hidden.first().map_or(policy.output.in_features, |l| l.in_features);
+    let first_out = policy.hidden.first().map_or(policy.output.out_features, |l| l.out_features);
+    if input.len() != first_in {
+        anyhow::bail!("input has {} values, the network takes {first_in}", input.len());
+    }
+    if !policy.first_layer_biases.is_empty() && (step + 1) * first_out > policy.first_layer_biases.len() {
+        anyhow::bail!("no first-layer bias variant {step}");
+    }
     let mut x: Vec<i64> = input.iter().map(|&v| i64::from(policy.input.quantize(v))).collect();
     for (l, layer) in policy.hidden.iter().enumerate() {
         let bias: &[i32] = if l == 0 && !policy.first_layer_biases.is_empty() {
@@ -155,12 +165,12 @@ pub fn wide_network(policy: &QuantizedPolicy, step: usize, input: &[f32]) -> Vec
     } else {
         &out.bias
     };
-    (0..out.out_features)
+    Ok((0..out.out_features)
         .map(|o| {
             let row = &out.weights[o * out.in_features..(o + 1) * out.in_features];
             i64::from(bias[o]) + row.iter().zip(&x).map(|(w, v)| i64::from(*w) * v).sum::<i64>()
         })
-        .collect()
+        .collect())
 }
 
 /// The policy's int8 network (frmd-core) vs [`wide_network`] on `inputs` (f32 model inputs) for
@@ -188,7 +198,7 @@ pub fn check_network<const WIDTH: usize>(policy: &QuantizedPolicy, inputs: &[Vec
         for step in 0..policy.steps.len() {
             net.forward(step, input, &mut out).map_err(|e| anyhow::anyhow!("int8 forward: {e}"))?;
             let got: Vec<i64> = net.accumulators().iter().map(|&a| i64::from(a)).collect();
-            let want = wide_network(policy, step, input);
+            let want = wide_network(policy, step, input)?;
             check.record(got == want, || format!("input {n} step {step}: first differing accumulator {:?}", got.iter().zip(&want).position(|(a, b)| a != b)));
         }
     }

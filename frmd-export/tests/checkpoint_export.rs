@@ -140,7 +140,7 @@ fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
             for (step, input) in inputs {
                 let mut out = vec![0f32; 8];
                 net.forward(step, &input, &mut out).unwrap();
-                let wide = frmd_export::reference::wide_network(policy, step, &input);
+                let wide = frmd_export::reference::wide_network(policy, step, &input).unwrap();
                 assert_eq!(net.accumulators().iter().map(|&a| i64::from(a)).collect::<Vec<_>>(), wide);
                 let float = exported.folded.forward_observed(step, &input, |_, _| {}).unwrap();
                 let scale = float.iter().fold(0f32, |m, v| m.max(v.abs()));

@@ -102,6 +102,7 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
         model.backbone, policy.history, policy.obs_dim, policy.action_dim, policy.horizon, policy.params_per_dof,
         policy.steps.len(), info.calibration, exported.ranges.rows
     );
+    println!("  input  int8 scale {:.5} (zero point {}) over the whole input vector", policy.input.scale, policy.input.zero_point);
     println!("  RAM    scratch {} B (width {}) + state {} B = {} B", m.scratch_bytes, m.scratch_width, m.state_bytes, m.scratch_bytes + m.state_bytes);
     println!("  flash  weights {} B + tables {} B = {} B (blob {} B)", m.weights_bytes, m.table_bytes, m.flash_bytes(), blob.len());
     Ok(ExitCode::SUCCESS)
