@@ -7,16 +7,25 @@ use frmd_host::eval::policy::{Policy, PolicyInput};
 
 fn chunk(c: &mut Criterion) {
     let dir = std::env::temp_dir().join(format!("frmd-bench-chunk-{}", std::process::id()));
-    let mut p = reach_student(&dir, "mlp", 1).expect("bench student");
     let (history, prev, rate) = reach_input();
     let input = PolicyInput { obs_history: &history, prev_action: &prev, prev_rate: &rate };
-    let mut group = c.benchmark_group("one-step chunk, MLP-256, reach shape");
-    let policies: [(&str, &mut dyn Policy); 3] = [("candle-f32", &mut p.float), ("core-f32", &mut p.core_f32), ("core-int8", &mut p.int8)];
-    for (name, policy) in policies {
-        policy.reset(7);
-        group.bench_function(name, |b| b.iter(|| policy.act(&input).expect("act")));
+    for backbone in ["mlp", "transformer-lite"] {
+        let mut p = reach_student(&dir, backbone, 1).expect("bench student");
+        let mut group = c.benchmark_group(format!("one-step chunk, {backbone}, reach shape"));
+        let mut policies: Vec<(&str, &mut dyn Policy)> = vec![("candle-f32", &mut p.float)];
+        match &mut p.core {
+            Ok(core) => {
+                policies.push(("core-f32", &mut core.core_f32));
+                policies.push(("core-int8", &mut core.int8));
+            }
+            Err(reason) => eprintln!("{backbone}: no frmd-core policy ({reason})"),
+        }
+        for (name, policy) in policies {
+            policy.reset(7);
+            group.bench_function(name, |b| b.iter(|| policy.act(&input).expect("act")));
+        }
+        group.finish();
     }
-    group.finish();
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -11,11 +11,13 @@ fn main() -> anyhow::Result<()> {
     let backbone = args.get(3).map(String::as_str).unwrap_or("mlp");
     let dir = std::env::temp_dir().join(format!("frmd-icount-{}", std::process::id()));
     let mut p = reach_student(&dir, backbone, 1)?;
-    let policy: &mut dyn Policy = match which {
-        "int8" => &mut p.int8,
-        "core-f32" => &mut p.core_f32,
-        "candle-f32" => &mut p.float,
-        other => anyhow::bail!("unknown policy {other}"),
+    let flash = p.core.as_ref().map(|c| c.flash_bytes).unwrap_or(0);
+    let policy: &mut dyn Policy = match (which, &mut p.core) {
+        ("candle-f32", _) => &mut p.float,
+        ("int8", Ok(core)) => &mut core.int8,
+        ("core-f32", Ok(core)) => &mut core.core_f32,
+        ("int8" | "core-f32", Err(reason)) => anyhow::bail!("no frmd-core policy for {backbone}: {reason}"),
+        (other, _) => anyhow::bail!("unknown policy {other}"),
     };
     let (history, prev, rate) = reach_input();
     let input = PolicyInput { obs_history: &history, prev_action: &prev, prev_rate: &rate };
@@ -24,7 +26,7 @@ fn main() -> anyhow::Result<()> {
     for _ in 0..chunks {
         checksum += policy.act(&input)?[0][0];
     }
-    println!("{which} {backbone}: {chunks} chunks, checksum {checksum}, flash {} B", p.flash_bytes);
+    println!("{which} {backbone}: {chunks} chunks, checksum {checksum}, int8 flash {flash} B");
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }

@@ -17,6 +17,12 @@ use std::path::Path;
 /// The three policies of one model.
 pub struct BenchPolicies {
     pub float: FloatPolicy,
+    /// frmd-core policies; `None` (with the exporter's reason) for backbones it cannot export.
+    pub core: Result<CorePolicies, String>,
+}
+
+/// frmd-core's int8 policy and its f32 twin.
+pub struct CorePolicies {
     pub core_f32: Int8Policy,
     pub int8: Int8Policy,
     /// Flash bytes (weights + tables) of the int8 policy.
@@ -49,14 +55,18 @@ pub fn reach_student(dir: &Path, backbone: &str, seed: u64) -> anyhow::Result<Be
     let cond_dim = model.cond_dim();
     let cond: Vec<f32> = (0..64 * cond_dim).map(|_| (0.5 * rng.gaussian()).clamp(-1.0, 1.0)).collect();
     frmd_export::calibration_file::write(&dir.join(CALIBRATION_FILE), &CalibrationSet { cond_dim, cond, seed })?;
-    let exported = export_checkpoint(dir, ExportOptions::default(), None)?;
-    let blob = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
-    Ok(BenchPolicies {
-        float: FloatPolicy::new(net, norm, sigma, Sampler::Student { steps: 1 })?,
-        core_f32: Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?,
-        int8: Int8Policy::from_blob(&blob, "int8")?,
-        flash_bytes: exported.policy.memory().flash_bytes(),
-    })
+    let core = match export_checkpoint(dir, ExportOptions::default(), None) {
+        Ok(exported) => {
+            let blob = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
+            Ok(CorePolicies {
+                core_f32: Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?,
+                int8: Int8Policy::from_blob(&blob, "int8")?,
+                flash_bytes: exported.policy.memory().flash_bytes(),
+            })
+        }
+        Err(e) => Err(format!("{e:#}")),
+    };
+    Ok(BenchPolicies { float: FloatPolicy::new(net, norm, sigma, Sampler::Student { steps: 1 })?, core })
 }
 
 /// A fixed raw input at the reach shape.
