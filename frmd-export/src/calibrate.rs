@@ -7,7 +7,7 @@
 //! DESIGN.md section 5 with frmd-core's `quant` helpers (per-channel symmetric weights, int32 bias
 //! with the input zero point folded, Q31 requantization to the pre-activation range, a 256-entry
 //! LUT to the output range, a dequantized output layer).
-use crate::fold::{FloatLayer, FoldedMlp};
+use crate::fold::{FloatLayer, FoldedMlp, InputGains};
 use crate::{QuantizedLayer, QuantizedOutput, QuantizedPolicy};
 use anyhow::{bail, Context};
 use frmd_core::blob::LUT_LEN;
@@ -133,6 +133,35 @@ pub fn calibrate(model: &FoldedMlp, set: &CalibrationSet, method: RangeMethod) -
         .map(|(l, (p, o))| Ok((p.params(method, &format!("layer {l} pre-activation"))?, o.params(method, &format!("layer {l} output"))?)))
         .collect::<anyhow::Result<Vec<_>>>()?;
     Ok(Ranges { input, hidden, rows: set.rows() })
+}
+
+/// Gains that bring the trajectory and rate input segments to the absolute range of the
+/// observation and previous-action segments (at least 1), from the f32 sampler's inputs over
+/// `set` (see [`crate::fold`]).
+pub fn input_gains(model: &FoldedMlp, set: &CalibrationSet) -> anyhow::Result<InputGains> {
+    let c = &model.config;
+    let (obs_len, k) = (c.history * c.obs_dim, c.action_dim);
+    let (mut fixed, mut rate, mut traj) = (1f32, 0f32, 0f32);
+    for row in 0..set.rows() {
+        let cond = set.cond.get(row * set.cond_dim..(row + 1) * set.cond_dim).context("calibration row")?;
+        let noise = set.noise(row, model.steps.len(), c.traj_dim());
+        model.sample(cond, &noise, |_, probe, values| {
+            if probe == Probe::Input {
+                for (i, v) in values.iter().enumerate() {
+                    let a = v.abs();
+                    if i < obs_len + k {
+                        fixed = fixed.max(a);
+                    } else if i < obs_len + 2 * k {
+                        rate = rate.max(a);
+                    } else {
+                        traj = traj.max(a);
+                    }
+                }
+            }
+        })?;
+    }
+    let gain = |range: f32| if range > 0.0 { fixed / range } else { 1.0 };
+    Ok(InputGains { traj_gain: gain(traj), rate_gain: gain(rate) })
 }
 
 struct QuantizedWeights {

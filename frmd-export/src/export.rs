@@ -1,5 +1,5 @@
 //! Checkpoint directory -> [`QuantizedPolicy`] in one call (usable from a firmware build.rs).
-use crate::calibrate::{calibrate, quantize, CalibrationSet, RangeMethod, Ranges};
+use crate::calibrate::{calibrate, input_gains, quantize, CalibrationSet, RangeMethod, Ranges};
 use crate::checkpoint::{Checkpoint, CALIBRATION_FILE};
 use crate::fold::FoldedMlp;
 use crate::QuantizedPolicy;
@@ -12,11 +12,13 @@ pub struct ExportOptions {
     /// Sampling steps baked into the step table (1..=4).
     pub steps: usize,
     pub ranges: RangeMethod,
+    /// Balance the input segments' ranges with [`crate::fold::FoldedMlp::with_input_gains`].
+    pub balance_inputs: bool,
 }
 
 impl Default for ExportOptions {
     fn default() -> Self {
-        ExportOptions { steps: 1, ranges: RangeMethod::MinMax }
+        ExportOptions { steps: 1, ranges: RangeMethod::MinMax, balance_inputs: true }
     }
 }
 
@@ -40,6 +42,7 @@ pub fn export_checkpoint(dir: &Path, options: ExportOptions, calibration: Option
         None => crate::calibration_file::read(&dir.join(CALIBRATION_FILE), checkpoint.meta.model.cond_dim())
             .context("no calibration data given and the checkpoint's calibration file is unusable (pass --data)")?,
     };
+    let folded = if options.balance_inputs { folded.with_input_gains(input_gains(&folded, &set)?)? } else { folded };
     let ranges = calibrate(&folded, &set, options.ranges)?;
     let policy = quantize(&folded, &ranges, &norm)?;
     Ok(Exported { checkpoint, folded, ranges, policy })

@@ -8,6 +8,14 @@
 //! step has `c_skip = 0`, `c_out = 1`. Sampling levels are `karras_sigma(i, steps + 1)` for
 //! `i < steps`, re-noised with `sqrt(sigma_i^2 - sigma_min^2)` (frmd-host
 //! `samplers::sample_consistency`).
+//!
+//! Input gains: the model input is quantized with one int8 scale for the whole vector, and the
+//! `c_in`-scaled noisy trajectory (about +-4.5 at sigma_max) would otherwise set that scale for
+//! the observations (+-1). [`FoldedMlp::with_input_gains`] multiplies the trajectory segment by
+//! `traj_gain` (folded into every step's baked `c_in`) and the rate segment by `rate_gain` (folded
+//! into the layout's `rate_scale`), and divides the matching first-layer weight columns by the
+//! same gains, so the f32 function is unchanged while every segment spans about the same range.
+//! The baked `c_in` is therefore `c_in(sigma) * traj_gain`.
 use crate::checkpoint::{Activation, BackboneConfig, Checkpoint, ModelConfig, Role};
 use anyhow::{bail, Context};
 use frmd_core::kernels::Activation as KernelActivation;
@@ -56,6 +64,21 @@ pub struct FoldedMlp {
     pub steps: Vec<StepConstants>,
     pub layout: InputLayout,
     pub prodmp: ProDmpTablesOwned,
+    /// Input gains applied so far (1 after [`FoldedMlp::new`]).
+    pub gains: InputGains,
+}
+
+/// Factors on the trajectory and rate input segments (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InputGains {
+    pub traj_gain: f32,
+    pub rate_gain: f32,
+}
+
+impl Default for InputGains {
+    fn default() -> Self {
+        InputGains { traj_gain: 1.0, rate_gain: 1.0 }
+    }
 }
 
 fn kernel_activation(a: Activation) -> KernelActivation {
@@ -205,7 +228,37 @@ impl FoldedMlp {
             steps,
             layout,
             prodmp: ProDmpTablesOwned::from_config(&prodmp_cfg, config.horizon)?,
+            gains: InputGains::default(),
         })
+    }
+
+    /// The same function with the trajectory and rate input segments scaled by `gains` (relative
+    /// to the current ones) and the first layer's matching columns divided by them.
+    pub fn with_input_gains(&self, gains: InputGains) -> anyhow::Result<Self> {
+        let (traj, rate) = (gains.traj_gain, gains.rate_gain);
+        if !(traj.is_finite() && traj > 0.0 && rate.is_finite() && rate > 0.0) {
+            bail!("input gains must be finite and positive, got {gains:?}");
+        }
+        let c = &self.config;
+        let (obs_len, k) = (c.history * c.obs_dim, c.action_dim);
+        let mut out = self.clone();
+        let first = out.hidden.first_mut().context("a student MLP has at least one hidden layer")?;
+        let width = first.in_features;
+        for row in first.weights.chunks_exact_mut(width) {
+            for (i, w) in row.iter_mut().enumerate() {
+                if i >= obs_len + 2 * k {
+                    *w /= traj;
+                } else if i >= obs_len + k {
+                    *w /= rate;
+                }
+            }
+        }
+        for step in &mut out.steps {
+            step.c_in *= traj;
+        }
+        out.layout.rate_scale *= rate;
+        out.gains = InputGains { traj_gain: self.gains.traj_gain * traj, rate_gain: self.gains.rate_gain * rate };
+        Ok(out)
     }
 
     /// All first-layer bias variants back to back (the layout [`F32Network`] takes).

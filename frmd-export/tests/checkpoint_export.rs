@@ -109,7 +109,7 @@ fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
     assert!(frmd_export::calibration_file::read(&dir.join(frmd_export::checkpoint::CALIBRATION_FILE), 5).is_err());
 
     for (steps, ranges) in [(1, RangeMethod::MinMax), (3, RangeMethod::MinMax)] {
-        let exported = export_checkpoint(&dir, ExportOptions { steps, ranges }, None).unwrap();
+        let exported = export_checkpoint(&dir, ExportOptions { steps, ranges, ..Default::default() }, None).unwrap();
         let policy = &exported.policy;
         assert_eq!(policy.steps.len(), steps);
         assert_eq!(policy.first_layer_biases.len(), steps * 16);
@@ -148,9 +148,11 @@ fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
             }
         }
         eprintln!("{steps} step(s), {ranges:?}: worst relative int8 error {worst}");
-        // Random, untrained weights, on the calibration inputs: int8 parameters within 8 % of the
-        // largest f32 parameter (measured 4.5 % for one step).
-        assert!(worst < 0.08, "relative int8 error {worst}");
+        // Random, untrained weights, on the calibration inputs: int8 parameters within 12 % of
+        // the largest f32 parameter (measured 6.7 % for one step, 8.0 % for three, with balanced
+        // inputs; 4.5 % without on this random net, while balancing halves the error of a
+        // trained reach student).
+        assert!(worst < 0.12, "relative int8 error {worst}");
         let check = frmd_export::reference::check_network::<64>(policy, &[]).unwrap();
         assert!(check.passed(), "{check:?}");
     }
@@ -160,11 +162,33 @@ fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
 fn percentile_ranges_are_no_wider_than_minmax() {
     let (dir, meta) = checkpoint("percentile", Role::Student, mlp());
     let set = calibration(meta.model.cond_dim(), 32);
-    let minmax = export_checkpoint(&dir, ExportOptions { steps: 2, ranges: RangeMethod::MinMax }, Some(set.clone())).unwrap();
-    let pct = export_checkpoint(&dir, ExportOptions { steps: 2, ranges: RangeMethod::Percentile(99.0) }, Some(set)).unwrap();
-    assert!(pct.ranges.input.scale < minmax.ranges.input.scale);
+    let minmax = export_checkpoint(&dir, ExportOptions { steps: 2, ranges: RangeMethod::MinMax, ..Default::default() }, Some(set.clone())).unwrap();
+    let pct = export_checkpoint(&dir, ExportOptions { steps: 2, ranges: RangeMethod::Percentile(99.0), ..Default::default() }, Some(set)).unwrap();
+    assert!(pct.ranges.input.scale <= minmax.ranges.input.scale);
     for ((p_pre, p_out), (m_pre, m_out)) in pct.ranges.hidden.iter().zip(&minmax.ranges.hidden) {
         assert!(p_pre.scale <= m_pre.scale && p_out.scale <= m_out.scale);
+    }
+}
+
+/// Balancing the input segments keeps the f32 function and narrows the input quantization step.
+#[test]
+fn input_gains_keep_the_function_and_narrow_the_input_scale() {
+    let (dir, meta) = checkpoint("gains", Role::Student, mlp());
+    let set = calibration(meta.model.cond_dim(), 32);
+    let plain = export_checkpoint(&dir, ExportOptions { steps: 2, balance_inputs: false, ..Default::default() }, Some(set.clone())).unwrap();
+    let balanced = export_checkpoint(&dir, ExportOptions { steps: 2, ..Default::default() }, Some(set.clone())).unwrap();
+    let gains = balanced.folded.gains;
+    assert!(gains.traj_gain < 0.5 && gains.traj_gain > 0.05, "{gains:?}");
+    assert!(balanced.ranges.input.scale < 0.5 * plain.ranges.input.scale);
+    assert_eq!(balanced.policy.steps[1].c_in, plain.policy.steps[1].c_in * gains.traj_gain);
+    for row in 0..set.rows() {
+        let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
+        let noise = set.noise(row, 2, 10);
+        let a = plain.folded.sample(cond, &noise, |_, _, _| {}).unwrap();
+        let b = balanced.folded.sample(cond, &noise, |_, _, _| {}).unwrap();
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() <= 1e-4 * (1.0 + x.abs()), "{x} vs {y}");
+        }
     }
 }
 

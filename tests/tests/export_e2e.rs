@@ -65,6 +65,8 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
         steps: 1,
         calibration: "minmax".into(),
         data: None,
+        no_balance_inputs: false,
+        save_calibration: false,
     })
     .unwrap();
     assert_eq!(std::fs::read(dir.join("student.blob")).unwrap(), std::fs::read(baked.join(BAKED_BLOB_FILE)).unwrap());

@@ -36,6 +36,12 @@ pub struct ExportArgs {
     /// Demonstrations to calibrate on when the checkpoint has no calibration.safetensors.
     #[arg(long)]
     pub data: Option<PathBuf>,
+    /// Keep the raw input segments (no range balancing of the trajectory and rate inputs).
+    #[arg(long)]
+    pub no_balance_inputs: bool,
+    /// With --data: also store the calibration rows as the checkpoint's calibration.safetensors.
+    #[arg(long)]
+    pub save_calibration: bool,
 }
 
 /// What `export.json` records (enough to reproduce the export).
@@ -45,6 +51,13 @@ pub struct ExportInfo {
     pub steps: usize,
     pub calibration: String,
     pub calibration_data: Option<String>,
+    /// Input range balancing (`frmd_export::fold::FoldedMlp::with_input_gains`).
+    #[serde(default = "default_true")]
+    pub balance_inputs: bool,
+}
+
+fn default_true() -> bool {
+    true
 }
 
 /// Calibration rows from a dataset file, checked against the checkpoint's normalization.
@@ -69,7 +82,7 @@ pub fn export(info: &ExportInfo) -> anyhow::Result<Exported> {
         }
         None => None,
     };
-    export_checkpoint(ckpt, ExportOptions { steps: info.steps, ranges }, set)
+    export_checkpoint(ckpt, ExportOptions { steps: info.steps, ranges, balance_inputs: info.balance_inputs }, set)
 }
 
 pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
@@ -81,7 +94,13 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
         steps: args.steps,
         calibration: args.calibration.clone(),
         calibration_data: args.data.as_ref().map(|p| p.display().to_string()),
+        balance_inputs: !args.no_balance_inputs,
     };
+    if args.save_calibration {
+        let data = args.data.as_ref().context("--save-calibration needs --data")?;
+        let set = calibration_from_data(data, &args.ckpt)?;
+        frmd_export::calibration_file::write(&args.ckpt.join(CALIBRATION_FILE), &set)?;
+    }
     let exported = export(&info)?;
     let policy = &exported.policy;
     let blob = frmd_export::blob::write(policy).map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
@@ -102,7 +121,11 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
         model.backbone, policy.history, policy.obs_dim, policy.action_dim, policy.horizon, policy.params_per_dof,
         policy.steps.len(), info.calibration, exported.ranges.rows
     );
-    println!("  input  int8 scale {:.5} (zero point {}) over the whole input vector", policy.input.scale, policy.input.zero_point);
+    let gains = exported.folded.gains;
+    println!(
+        "  input  int8 scale {:.5} (zero point {}) over the whole input vector; segment gains: trajectory {:.4}, rate {:.4}",
+        policy.input.scale, policy.input.zero_point, gains.traj_gain, gains.rate_gain
+    );
     println!("  RAM    scratch {} B (width {}) + state {} B = {} B", m.scratch_bytes, m.scratch_width, m.state_bytes, m.scratch_bytes + m.state_bytes);
     println!("  flash  weights {} B + tables {} B = {} B (blob {} B)", m.weights_bytes, m.table_bytes, m.flash_bytes(), blob.len());
     Ok(ExitCode::SUCCESS)
