@@ -1,7 +1,7 @@
 //! `frmd bench` (alias `frmd latency`): wall time per action chunk of every policy kind side by
 //! side, in one process, batch 1, after warm-up, median and p99 over >= 200 calls (DESIGN.md
-//! section 6), with the ratio of each row to the fastest reference row (the frmd-core int8
-//! one-step policy when it is available in this build, otherwise the candle one-step student).
+//! section 6), with the ratio of each row to the first row: the frmd-core int8 one-step policy
+//! (the candle one-step student if the student cannot be exported).
 //!
 //! By default it times the checkpoints `frmd quickstart` wrote (`runs/quickstart/{student,
 //! teacher,dp}`): student 1 step, teacher 10 Heun steps, DP 100 (DDPM) and 10 (DDIM) steps, all
@@ -9,6 +9,8 @@
 //! `--synthetic` times randomly initialized networks of a given backbone (latency does not
 //! depend on the weights), which needs no checkpoint at all.
 use crate::checkpoint::Role;
+use crate::cli::export::{export, ExportInfo};
+use crate::policy::int8::Int8Policy;
 use crate::data::{Normalization, Normalizer};
 use crate::diffusion::samplers::Solver;
 use crate::eval::metrics::quantile;
@@ -145,10 +147,31 @@ fn default_float_policies(args: &BenchArgs) -> anyhow::Result<Vec<FloatPolicy>> 
     Ok(out)
 }
 
-/// The frmd-core int8 (and f32) one-step policies for the comparison, when this build has them.
-/// Returns the rows' policies, or the reason they are missing.
-fn core_policies(_args: &BenchArgs) -> Result<Vec<(String, Box<dyn Policy>)>, String> {
-    Err("frmd-core int8/f32 policy adapter not available in this build".into())
+/// The frmd-core int8 and f32 one-step policies for the comparison: the student in `--dir`
+/// exported as `frmd export` does it (or, with `--synthetic`, a random student of `--backbone`
+/// exported the same way). Returns the policies, or why there are none.
+fn core_policies(args: &BenchArgs) -> Result<Vec<(String, Box<dyn Policy>)>, String> {
+    let build = || -> anyhow::Result<Result<(Int8Policy, Int8Policy), String>> {
+        if args.synthetic {
+            let dir = std::env::temp_dir().join(format!("frmd-bench-{}", std::process::id()));
+            let policies = crate::bench::reach_student(&dir, &args.backbone, 7);
+            let _ = std::fs::remove_dir_all(&dir);
+            return Ok(policies?.core.map(|c| (c.int8, c.core_f32)));
+        }
+        let ckpt = args.dir.join("student");
+        let info = ExportInfo { checkpoint: ckpt.display().to_string(), steps: 1, calibration: "minmax".into(), calibration_data: None, balance_inputs: true };
+        let exported = export(&info).with_context(|| format!("exporting {}", ckpt.display()))?;
+        let blob = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
+        Ok(Ok((Int8Policy::from_blob(&blob, "int8")?, Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?)))
+    };
+    match build() {
+        Ok(Ok((int8, f32_twin))) => Ok(vec![
+            ("frmd-core int8 1-step".to_string(), Box::new(int8) as Box<dyn Policy>),
+            ("frmd-core f32 1-step".to_string(), Box::new(f32_twin)),
+        ]),
+        Ok(Err(reason)) => Err(format!("frmd-core policies unavailable: {reason}")),
+        Err(e) => Err(format!("frmd-core policies unavailable: {e:#}")),
+    }
 }
 
 /// Runs the whole comparison and returns its rows (reference row first when present) plus a

@@ -4,7 +4,9 @@ use std::process::ExitCode;
 
 pub mod bench;
 pub mod collect;
+pub mod equiv;
 pub mod eval;
+pub mod export;
 pub mod prodmp;
 pub mod quickstart;
 pub mod train;
@@ -34,6 +36,10 @@ pub enum Command {
     Bench(bench::BenchArgs),
     /// The whole pipeline on a built-in task in minutes: collect, train, export, evaluate.
     Quickstart(quickstart::QuickstartArgs),
+    /// Quantize a student checkpoint: baked Rust module and/or blob, with RAM/flash figures.
+    Export(export::ExportArgs),
+    /// Bit-accuracy harness: core f32 / int8 vs the float student, kernels vs a wide-integer model.
+    Equiv(equiv::EquivArgs),
 }
 
 /// Parses the command line, runs the subcommand, and maps errors to a non-zero exit code.
@@ -46,6 +52,8 @@ pub fn main() -> ExitCode {
         Command::Train(cmd) => train::run(cmd),
         Command::Bench(args) => bench::run(args),
         Command::Quickstart(args) => quickstart::run(args),
+        Command::Export(args) => export::run(args),
+        Command::Equiv(args) => equiv::run(args),
     };
     match result {
         Ok(code) => code,

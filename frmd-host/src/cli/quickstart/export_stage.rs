@@ -1,9 +1,12 @@
-//! Stage 5 of quickstart: int8 export of the student and its `Policy` adapter.
-//!
-//! This is the one place the exporter is wired in. Until `frmd export` and the frmd-core int8
-//! policy adapter are part of the build, the stage reports that it is not available, and the
-//! table says so instead of showing numbers.
+//! Stage 5 of quickstart: int8 export of the student (`frmd export`), its frmd-core `Policy`
+//! adapter for closed-loop evaluation, and the int8-vs-float error of DESIGN.md section 6 (b)
+//! from the bit-accuracy harness (`frmd equiv`, open-loop part).
+use crate::cli::export::{self, BAKED_BLOB_FILE};
+use crate::equiv::{run as run_equiv, EquivConfig};
 use crate::eval::policy::Policy;
+use crate::policy::int8::Int8Policy;
+use anyhow::Context;
+use clap::Parser;
 use std::path::{Path, PathBuf};
 
 /// The exported int8 student, ready for closed-loop evaluation.
@@ -18,9 +21,41 @@ pub struct Int8Export {
     pub artifacts: Vec<(String, PathBuf)>,
 }
 
-/// Exports the student checkpoint in `student_dir` into `out` and wraps it as a policy, or
-/// returns why that is not possible in this build.
+/// Open-loop inputs of the int8-vs-float comparison.
+const EQUIV_INPUTS: usize = 200;
+
+fn export_inner(student_dir: &Path, out: &Path) -> anyhow::Result<Int8Export> {
+    let baked = out.join("int8");
+    std::fs::create_dir_all(&baked)?;
+    // `frmd export --ckpt STUDENT --out DIR` with that command's defaults (1 step, min-max
+    // calibration on the rows saved beside the student checkpoint).
+    let argv = ["frmd", "export", "--ckpt", &student_dir.display().to_string(), "--out", &baked.display().to_string()].map(String::from);
+    match crate::cli::Cli::try_parse_from(argv).context("building the export arguments")?.command {
+        crate::cli::Command::Export(args) => export::run(args)?,
+        other => anyhow::bail!("internal: expected an export command, got {other:?}"),
+    };
+    let blob = baked.join(BAKED_BLOB_FILE);
+    let policy = Int8Policy::from_blob(&std::fs::read(&blob)?, "int8-student-1")?;
+    let history = policy.history();
+    // Open-loop error only: the closed-loop rows of the table are the success comparison.
+    let cfg = EquivConfig { episodes: 0, inputs: EQUIV_INPUTS, random_requant: 10_000, ..EquivConfig::new(student_dir.to_path_buf(), baked.clone()) };
+    let report = run_equiv(&cfg)?;
+    let pick = |metric: &str| report.rows.iter().find(|r| r.check == "b" && r.metric.contains(metric)).map(|r| r.value);
+    let float_error = match (pick("max abs"), pick("mean abs")) {
+        (Some(max), Some(mean)) => format!("max {max:.4} / mean {mean:.4} m"),
+        _ => "equiv report has no (b) rows".into(),
+    };
+    std::fs::write(out.join("eval").join("equiv.json"), serde_json::to_string_pretty(&report)?)?;
+    Ok(Int8Export {
+        policy: Box::new(policy),
+        history,
+        float_error,
+        artifacts: vec![("int8 baked module + blob".into(), baked), ("int8 vs float report".into(), out.join("eval").join("equiv.json"))],
+    })
+}
+
+/// Exports the student checkpoint in `student_dir` into `out/int8` and wraps it as a policy,
+/// or returns why that failed.
 pub fn export_int8(student_dir: &Path, out: &Path) -> Result<Int8Export, String> {
-    let _ = (student_dir, out);
-    Err("not available in this build (int8 export and frmd-core policy adapter not merged yet)".into())
+    export_inner(student_dir, out).map_err(|e| format!("int8 export failed: {e:#}"))
 }

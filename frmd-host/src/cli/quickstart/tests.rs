@@ -27,17 +27,16 @@ fn tiny_quickstart_runs_every_stage_and_writes_its_artifacts() {
     assert_eq!(expert.episodes, 3, "--tiny evaluates 3 episodes");
     assert_eq!(expert.successes, 3, "the scripted expert solves every evaluation episode");
     for row in &summary.rows {
-        match &row.report {
-            Some(r) => {
-                assert!(r.latency_us_median.is_finite() && r.latency_us_median > 0.0, "{}: latency {}", row.method, r.latency_us_median);
-                assert!(r.latency_us_p99 >= r.latency_us_median, "{}", row.method);
-                assert!(r.chunk_calls >= 3, "{}: {} calls", row.method, r.chunk_calls);
-                assert!(r.non_smooth_ee_mean.is_finite() && r.rms_jerk_mean.is_finite(), "{}", row.method);
-            }
-            None => assert!(row.missing.as_deref().is_some_and(|m| m.contains("not available")), "{}", row.method),
-        }
+        let r = row.report.as_ref().unwrap_or_else(|| panic!("{} not evaluated: {:?}", row.method, row.missing));
+        assert!(r.latency_us_median.is_finite() && r.latency_us_median > 0.0, "{}: latency {}", row.method, r.latency_us_median);
+        assert!(r.latency_us_p99 >= r.latency_us_median, "{}", row.method);
+        assert!(r.chunk_calls >= 3, "{}: {} calls", row.method, r.chunk_calls);
+        assert!(r.non_smooth_ee_mean.is_finite() && r.rms_jerk_mean.is_finite(), "{}", row.method);
     }
-    for path in ["reach-demos.safetensors", "teacher/model.safetensors", "teacher/frmd.json", "student/frmd.json", "dp/frmd.json", "teacher/learning_curve.png", "plots/student-1.png", "eval/expert.json", "summary.json", "summary.txt"] {
+    let int8 = summary.rows.last().unwrap();
+    let error = int8.int8_error.as_deref().unwrap();
+    assert!(error.starts_with("max ") && !error.contains("NaN"), "int8 error {error}");
+    for path in ["reach-demos.safetensors", "teacher/model.safetensors", "teacher/frmd.json", "student/frmd.json", "dp/frmd.json", "teacher/learning_curve.png", "plots/student-1.png", "eval/expert.json", "eval/equiv.json", "int8/policy.blob", "plots/int8-student-1.png", "summary.json", "summary.txt"] {
         assert!(out.join(path).is_file(), "missing artifact {path}");
     }
     for (what, path) in &summary.artifacts {
