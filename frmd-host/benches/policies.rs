@@ -1,9 +1,10 @@
 //! Criterion benches of one action chunk (batch 1) for every policy kind `frmd bench` compares,
 //! on randomly initialized networks of the quickstart backbone (latency does not depend on the
 //! weights): candle student (1 step), teacher (10 Heun steps), DP (100 DDPM and 10 DDIM steps).
-//! The frmd-core int8 and f32 paths join once the int8 policy adapter is in this build.
+//! The frmd-core int8 and f32 one-step paths of the same backbone are in `benches/chunk.rs`;
+//! `frmd bench` prints all of them in one table with ratios.
 //!
-//! Run with `RAYON_NUM_THREADS=1 cargo bench -p frmd-host --bench policies`.
+//! Run with `RAYON_NUM_THREADS=1 cargo bench -p frmd-host --bench policies --bench chunk`.
 use criterion::{criterion_group, criterion_main, Criterion};
 use frmd_host::checkpoint::Role;
 use frmd_host::cli::bench::{synthetic_float_policy, FixedInput};
