@@ -215,3 +215,44 @@ mod diagnostics {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::Normalizer;
+    use crate::models::HeadConfig;
+    use crate::train::toy::toy_config;
+
+    fn toy_policy(head: HeadConfig, sampler: Sampler) -> anyhow::Result<FloatPolicy> {
+        let cfg = toy_config(head);
+        let net = OwnedNetwork::new_seeded(&cfg, 2, &Device::Cpu)?;
+        let norm = Normalization { obs: Normalizer { min: vec![-2.0], max: vec![2.0] }, action: Normalizer { min: vec![10.0], max: vec![20.0] } };
+        FloatPolicy::new(net, norm, SigmaConfig::default(), sampler)
+    }
+
+    #[test]
+    fn chunks_have_the_model_shape_and_are_reproducible_per_seed() {
+        for (head, sampler) in [
+            (HeadConfig::ProDmp { num_basis: 4 }, Sampler::Student { steps: 1 }),
+            (HeadConfig::ProDmp { num_basis: 4 }, Sampler::Student { steps: 3 }),
+            (HeadConfig::ProDmp { num_basis: 4 }, Sampler::Teacher { solver: Solver::DpmPp2m, steps: 4 }),
+            (HeadConfig::Raw, Sampler::Dp { sampler: DpSampler::Ddim, steps: 10 }),
+        ] {
+            let mut policy = toy_policy(head, sampler).unwrap();
+            let obs = vec![vec![0.5f32]];
+            let input = PolicyInput { obs_history: &obs, prev_action: &[15.0], prev_rate: &[1.0] };
+            policy.reset(7);
+            let a = policy.act(&input).unwrap();
+            policy.reset(7);
+            let b = policy.act(&input).unwrap();
+            assert_eq!(a.len(), 4);
+            assert!(a.iter().all(|row| row.len() == 1 && row[0].is_finite()));
+            assert_eq!(a, b, "{}", policy.name());
+            // Wrong history length is an error, not a panic.
+            let two = vec![vec![0.5f32], vec![0.5f32]];
+            assert!(policy.act(&PolicyInput { obs_history: &two, prev_action: &[15.0], prev_rate: &[1.0] }).is_err());
+        }
+        assert!(Sampler::for_role(Role::Student, Some(5), None).is_err());
+        assert!(toy_policy(HeadConfig::Raw, Sampler::Student { steps: 1 }).is_err());
+    }
+}
