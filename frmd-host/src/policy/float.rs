@@ -198,7 +198,7 @@ mod diagnostics {
         eprintln!("act(): mean abs error {:.4} raw units over {n} queries", raw_err / n as f64);
         // Closed-loop trace of one episode.
         let mut task = crate::tasks::make_task(&ds.task).unwrap();
-        task.reset(crate::eval::eval_seed(0, 0));
+        task.reset(std::env::var("FRMD_SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(crate::eval::eval_seed(0, 0)));
         policy.reset(1);
         let mut hist = vec![task.observe(); cfg.history];
         let mut prev: Vec<f32> = task.ee_position().iter().map(|&v| v as f32).collect();
@@ -254,5 +254,109 @@ mod tests {
         }
         assert!(Sampler::for_role(Role::Student, Some(5), None).is_err());
         assert!(toy_policy(HeadConfig::Raw, Sampler::Student { steps: 1 }).is_err());
+    }
+}
+
+#[cfg(test)]
+mod seen_layouts {
+    use super::*;
+
+    /// Manual diagnostic: closed loop on the demonstration (training) seeds vs evaluation seeds.
+    /// FRMD_CKPT=dir FRMD_TASK=avoid cargo test -- --ignored train_vs_eval_seeds --nocapture
+    #[test]
+    #[ignore]
+    fn train_vs_eval_seeds() {
+        let (Ok(ckpt), Ok(task_name)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_TASK")) else { return };
+        let mut policy = FloatPolicy::load(Path::new(&ckpt), None, None).unwrap();
+        let history = policy.input_sizes().2;
+        let mut task = crate::tasks::make_task(&task_name).unwrap();
+        for (label, base) in [("training seeds", 0u64), ("eval seeds", crate::eval::EVAL_SEED_OFFSET)] {
+            let mut ok = 0;
+            for i in 0..20 {
+                let run = crate::eval::rollout(task.as_mut(), &mut policy, base + i, 8, history, &mut |_, _| {}).unwrap();
+                ok += usize::from(run.success);
+            }
+            eprintln!("{}: {label}: {ok}/20", policy.name());
+        }
+    }
+}
+
+#[cfg(test)]
+mod first_window {
+    use super::*;
+
+    /// Manual diagnostic: samples at the first window of episode 0 for several seeds and solvers.
+    #[test]
+    #[ignore]
+    fn first_window_samples() {
+        let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else { return };
+        let ds = crate::data::Dataset::load(Path::new(&data)).unwrap();
+        for (steps, solver) in [(10, Solver::Heun), (10, Solver::DpmPp2m), (40, Solver::Heun), (1, Solver::Euler)] {
+            let mut policy = FloatPolicy::load(Path::new(&ckpt), Some(steps), Some(solver)).unwrap();
+            let cfg = policy.net.net.config().clone();
+            let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
+            let (obs_w, k, traj) = (cfg.history * cfg.obs_dim, cfg.action_dim, cfg.traj_dim());
+            let i = 0;
+            let truth = &w.actions[i * traj..(i + 1) * traj];
+            let mut lasts = Vec::new();
+            for seed in 0..5 {
+                policy.reset(seed);
+                let out = policy.sample_normalized(&w.obs[i * obs_w..(i + 1) * obs_w], &w.prev_action[i * k..(i + 1) * k], &w.prev_rate[i * k..(i + 1) * k]).unwrap();
+                lasts.push(format!("({:.3},{:.3})", out[traj - 2], out[traj - 1]));
+            }
+            eprintln!("{} truth last ({:.3},{:.3}) samples {}", policy.name(), truth[traj - 2], truth[traj - 1], lasts.join(" "));
+        }
+    }
+}
+
+#[cfg(test)]
+mod theta_scale {
+    use crate::models::decoder::DecoderRows;
+    use crate::models::ProDmpConfig;
+
+    /// Manual diagnostic: magnitude of the min-norm ProDMP parameters that reproduce data windows.
+    #[test]
+    #[ignore]
+    fn min_norm_theta() {
+        let Ok(data) = std::env::var("FRMD_DATA") else { return };
+        let ds = crate::data::Dataset::load(std::path::Path::new(&data)).unwrap();
+        let (n, k) = (12, ds.action_dim);
+        let (w, _) = ds.windows(2, n).unwrap();
+        let cfg = ProDmpConfig::policy(k, 20, n, f64::from(ds.dt));
+        let rows = DecoderRows::new(&cfg, n).unwrap();
+        let p = rows.num_params;
+        // Gram matrix G = H H^T (n x n) and its inverse by Gauss-Jordan.
+        let h = |t: usize, j: usize| rows.pos_params[t * p + j];
+        let mut g = vec![vec![0.0f64; 2 * n]; n];
+        for a in 0..n { for b in 0..n { g[a][b] = (0..p).map(|j| h(a, j) * h(b, j)).sum(); } g[a][n + a] = 1.0; }
+        for c in 0..n {
+            let piv = g[c][c];
+            for x in g[c].iter_mut() { *x /= piv; }
+            for r in 0..n { if r != c { let f = g[r][c]; for x in 0..2 * n { g[r][x] -= f * g[c][x]; } } }
+        }
+        let mut report = |label: &str, idx: Vec<usize>| {
+            let mut max_abs: f64 = 0.0;
+            let mut mean_abs = 0.0;
+            let mut count = 0.0;
+            for i in idx {
+                for d in 0..k {
+                    let y0 = w.prev_action[i * k + d] as f64;
+                    let v0 = w.prev_rate[i * k + d] as f64;
+                    let resid: Vec<f64> = (0..n).map(|t| w.actions[(i * n + t) * k + d] as f64 - rows.pos_y0[t] * y0 - rows.pos_v0[t] * v0).collect();
+                    let alpha: Vec<f64> = (0..n).map(|a| (0..n).map(|b| g[a][n + b] * resid[b]).sum()).collect();
+                    for j in 0..p {
+                        let th: f64 = (0..n).map(|t| h(t, j) * alpha[t]).sum();
+                        max_abs = max_abs.max(th.abs());
+                        mean_abs += th.abs();
+                        count += 1.0;
+                    }
+                }
+            }
+            eprintln!("{label}: min-norm |theta| mean {:.3} max {:.3}", mean_abs / count, max_abs);
+        };
+        let ends: Vec<usize> = ds.episode_ends.iter().map(|&e| e as usize).collect();
+        let starts: Vec<usize> = std::iter::once(0).chain(ends.iter().copied()).take(ends.len()).collect();
+        report("first windows", starts.clone());
+        report("mid windows", starts.iter().map(|s| s + 15).collect());
     }
 }
