@@ -94,8 +94,10 @@ pub struct TeacherArgs {
     #[arg(long, default_value = "uniform")]
     pub loss_weight: String,
     /// Fraction of noise levels drawn log-uniformly on [sigma_min, sigma_max] instead of from
-    /// the log-normal (covers the levels samplers and the student start from).
-    #[arg(long, default_value_t = 0.0)]
+    /// the log-normal (covers the levels samplers and the student start from). Measured on
+    /// avoid (MLP-SiLU, 20k steps): 0 % success with 0.0, 45 % with 0.2 (teacher D at sigma_max
+    /// was an extrapolation).
+    #[arg(long, default_value_t = 0.2)]
     pub sigma_uniform_fraction: f64,
     /// Solver for evaluation: euler | heun | dpm++2m.
     #[arg(long, default_value = "heun")]

@@ -164,7 +164,9 @@ mod diagnostics {
     #[ignore]
     fn chunk_error_on_training_windows() {
         let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else { return };
-        let mut policy = FloatPolicy::load(Path::new(&ckpt), None, None).unwrap();
+        let steps = std::env::var("FRMD_STEPS").ok().and_then(|s| s.parse().ok());
+        let solver = std::env::var("FRMD_SOLVER").ok().map(|s| Solver::parse(&s).unwrap());
+        let mut policy = FloatPolicy::load(Path::new(&ckpt), steps, solver).unwrap();
         let cfg = policy.net.net.config().clone();
         let ds = crate::data::Dataset::load(Path::new(&data)).unwrap();
         let (w, norm) = ds.windows(cfg.history, cfg.horizon).unwrap();
@@ -180,6 +182,17 @@ mod diagnostics {
             count += 1;
         }
         eprintln!("{}: mean abs error {:.4} (hold-last-action baseline {:.4}) over {count} windows", policy.name(), err / count as f64, base / count as f64);
+        // Error by offset from the episode start (offsets 0, 1, 3, 6, 10) over 20 episodes.
+        let starts: Vec<usize> = std::iter::once(0).chain(ds.episode_ends.iter().map(|&e| e as usize)).take(20).collect();
+        for offset in [0usize, 1, 3, 6, 10] {
+            let mut e = 0.0;
+            for &s0 in &starts {
+                let i = s0 + offset;
+                let out = policy.sample_normalized(&w.obs[i * obs_w..(i + 1) * obs_w], &w.prev_action[i * k..(i + 1) * k], &w.prev_rate[i * k..(i + 1) * k]).unwrap();
+                e += out.iter().zip(&w.actions[i * traj..(i + 1) * traj]).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / traj as f64;
+            }
+            eprintln!("  offset {offset}: mean abs error {:.4}", e / starts.len() as f64);
+        }
         // Same through act() with raw inputs (episode 0, every 5th step).
         let end = ds.episode_ends[0] as usize;
         let (o, a) = (ds.obs_dim, ds.action_dim);
@@ -305,6 +318,17 @@ mod first_window {
                 lasts.push(format!("({:.3},{:.3})", out[traj - 2], out[traj - 1]));
             }
             eprintln!("{} truth last ({:.3},{:.3}) samples {}", policy.name(), truth[traj - 2], truth[traj - 1], lasts.join(" "));
+            if steps == 1 {
+                let cond = Condition::from_slices(&cfg, &w.obs[..obs_w], &w.prev_action[..k], &w.prev_rate[..k], &Device::Cpu).unwrap();
+                let x0 = candle_core::Tensor::from_slice(truth, (1, traj), &Device::Cpu).unwrap();
+                let mut rng = crate::rng::HostRng::new(1);
+                for sigma in [0.02, 0.2, 1.0, 5.0, 80.0] {
+                    let noise = gaussian(&mut rng, 1, traj, &Device::Cpu).unwrap();
+                    let x = (&x0 + (noise * sigma).unwrap()).unwrap();
+                    let d = crate::diffusion::precond::teacher_denoise(&policy.net.net, &policy.sigma, &x, &cond, &[sigma]).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+                    eprintln!("   D(truth + {sigma} eps) last ({:.3},{:.3}) first ({:.3},{:.3}) truth first ({:.3},{:.3})", d[traj - 2], d[traj - 1], d[0], d[1], truth[0], truth[1]);
+                }
+            }
         }
     }
 }
