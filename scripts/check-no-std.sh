@@ -18,7 +18,10 @@ set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$repo"
 target=thumbv7em-none-eabihf
-allowed="libm micromath heapless bytemuck postcard defmt"
+# DESIGN.md s.1: frmd-core's dependencies come only from these crates. `serde` (default features
+# off) is accepted as postcard's companion: the postcard blob descriptor derives Serialize and
+# Deserialize, which needs serde itself as a direct dependency (postcard depends on it anyway).
+allowed="libm micromath heapless bytemuck postcard serde defmt"
 build_root="${CARGO_TARGET_DIR:-$repo/target}"
 proof_dir="$build_root/no-std-proof"
 
@@ -32,7 +35,7 @@ proof_env="$env_file"
 # shellcheck disable=SC1090
 . "$env_file"
 if [ "$FRMD_CM_PATH" = rustup ]; then
-    if rustup component add rust-src >&2; then
+    if timeout 180 rustup component add rust-src >&2; then
         say "build-std proof uses the rustup toolchain + rust-src ($("$FRMD_CM_RUSTC" --version))"
     else
         say "rustup component add rust-src failed; using Debian's rustc-web + rust-web-src instead"
@@ -120,6 +123,15 @@ for features in "" "--all-features"; do
     done <<<"$deps"
     [ -z "$bad" ] || fail "frmd-core${features:+ ($features)} depends on crates outside the allowed list ($allowed):$bad"
     say "frmd-core${features:+ ($features)} direct dependencies: $(echo "$deps" | awk '$1 != "frmd-core" {printf "%s ", $1}')(allowed: $allowed)"
+
+    # No crate compiled for the target (proc macros run on the host and are excluded) may have
+    # an `std` or `alloc` feature enabled.
+    enabled="$("$FRMD_CM_CARGO" tree -p frmd-core -e normal,no-proc-macro --target "$target" $features \
+        --prefix none --format '{p}|{f}' 2>&1)" || fail "cargo tree failed: $enabled"
+    offenders="$(echo "$enabled" | awk -F'|' '{ n = split($2, f, ","); for (i = 1; i <= n; i++)
+        if (f[i] == "std" || f[i] == "alloc") { split($1, p, " "); print p[1] " (feature " f[i] ")" } }' | sort -u)"
+    [ -z "$offenders" ] || fail "dependencies of frmd-core${features:+ ($features)} enable std/alloc features: $offenders"
+    say "frmd-core${features:+ ($features)}: no target crate enables an std or alloc feature ($(echo "$enabled" | sort -u | wc -l) crates checked)"
 done
 
 # --- 3. Normal release build for the target with the toolchain chosen by setup.

@@ -23,7 +23,7 @@ while [ $# -gt 0 ]; do
     case "$1" in
         --path) choice="${2:?--path needs auto, rustup or debian}"; shift 2 ;;
         --path=*) choice="${1#--path=}"; shift ;;
-        -h|--help) sed -n '2,15p' "${BASH_SOURCE[0]}"; exit 0 ;;
+        -h|--help) sed -n '2,13p' "${BASH_SOURCE[0]}"; exit 0 ;;
         *) echo "setup-cortex-m: unknown argument '$1' (expected --path auto|rustup|debian)" >&2; exit 2 ;;
     esac
 done
@@ -77,7 +77,8 @@ try_rustup() {
     command -v rustup >/dev/null || { log "rustup not found"; return 1; }
     if ! rustup target list --installed 2>/dev/null | grep -qx "$target"; then
         log "rustup target add $target"
-        rustup target add "$target" >&2 || { log "rustup target add failed"; return 1; }
+        # Bounded: where static.rust-lang.org is unreachable, rustup may retry for a long time.
+        timeout 180 rustup target add "$target" >&2 || { log "rustup target add failed"; return 1; }
     fi
     local rustc
     rustc="$(rustup which rustc)"
@@ -99,6 +100,14 @@ try_debian() {
     local rustc=/usr/bin/rustc
     [ -x "$rustc" ] && [ -x /usr/bin/cargo ] && command -v ld.lld-16 >/dev/null \
         || { log "Debian toolchain incomplete after install"; return 1; }
+    # The workspace's rust-version (MSRV); Debian 12 without bookworm-security only has 1.85.
+    local msrv version
+    msrv="$(sed -n 's/^rust-version *= *"\([0-9.]*\)".*/\1/p' "$repo/Cargo.toml" | head -n1)"
+    version="$("$rustc" --version | awk '{print $2}')"
+    if [ -n "$msrv" ] && [ "$(printf '%s\n%s\n' "$msrv" "$version" | sort -V | head -n1)" != "$msrv" ]; then
+        log "Debian's rustc $version is older than the workspace's rust-version $msrv (enable bookworm-security for rustc-web 1.96)"
+        return 1
+    fi
     "$rustc" --print target-list | grep -qx "$target" \
         || { log "$rustc does not know target $target"; return 1; }
     sysroot="$("$rustc" --print sysroot)"

@@ -2,9 +2,12 @@
 # Builds the FRMD firmware (release, thumbv7em-none-eabihf) and runs it under QEMU with
 # instruction counting:
 #
-#   bash examples/cortex-m/run-qemu.sh m4|m7 [extra cargo build args]
+#   bash examples/cortex-m/run-qemu.sh m4|m7 [prodmp|mlp|policy] [extra cargo build args]
 #
 #   m4: -machine mps2-an386 -cpu cortex-m4 (Cortex-M4F)   m7: -machine mps2-an500 -cpu cortex-m7
+#   prodmp (default): firmware frmd-cortex-m, the baked ProDMP decoder
+#   mlp: firmware frmd-cortex-m-mlp, synthetic int8 MLP 40-256-256-256-42 + decoder
+#   policy: firmware frmd-cortex-m-policy, a synthetic one-step policy baked by frmd-export
 #
 # Prints the firmware's `key: value` lines on stdout (build and setup chatter go to stderr) and
 # exits non-zero if the build fails, the firmware reports an error or panics, a required line
@@ -18,20 +21,35 @@ board="${1:-}"
 case "$board" in
     m4) machine=mps2-an386; cpu=cortex-m4 ;;
     m7) machine=mps2-an500; cpu=cortex-m7 ;;
-    *) echo "usage: $0 m4|m7 [extra cargo build args]" >&2; exit 2 ;;
+    *) echo "usage: $0 m4|m7 [prodmp|mlp|policy] [extra cargo build args]" >&2; exit 2 ;;
 esac
 shift
+bin=frmd-cortex-m
+case "${1:-}" in
+    prodmp) shift ;;
+    mlp) bin=frmd-cortex-m-mlp; shift ;;
+    policy) bin=frmd-cortex-m-policy; shift ;;
+esac
 timeout_s="${FRMD_QEMU_TIMEOUT:-120}"
+case " $* " in *defmt*)
+    echo "run-qemu: the defmt feature logs over RTT for a real probe; QEMU cannot show it (build it with scripts/cortex-m-cargo.sh instead)" >&2
+    exit 2 ;;
+esac
 
-bash "$repo/scripts/setup-cortex-m.sh" >&2
+# Toolchain and QEMU: scripts/setup-cortex-m.sh records its choice in an env file; run it when
+# that file or QEMU is missing (FRMD_CORTEX_M_PATH=rustup|debian forces a path on first setup).
 env_file="${FRMD_CORTEX_M_ENV:-$repo/target/cortex-m.env}"
+if [ ! -f "$env_file" ] || ! command -v qemu-system-arm >/dev/null; then
+    bash "$repo/scripts/setup-cortex-m.sh" >&2
+fi
 # shellcheck disable=SC1090
 . "$env_file"
+echo "run-qemu: $bin on $machine, $FRMD_CM_PATH toolchain ($("$FRMD_CM_RUSTC" --version))" >&2
 
 cd "$here"
-bash "$repo/scripts/cortex-m-cargo.sh" build --release "$@" >&2
+bash "$repo/scripts/cortex-m-cargo.sh" build --release --bin "$bin" "$@" >&2
 target_dir="${CARGO_TARGET_DIR:-$here/target}"
-elf="$target_dir/$FRMD_CM_TARGET/release/frmd-cortex-m"
+elf="$target_dir/$FRMD_CM_TARGET/release/$bin"
 [ -f "$elf" ] || { echo "run-qemu: firmware ELF not found at $elf" >&2; exit 1; }
 
 output="$(mktemp)"

@@ -16,8 +16,10 @@
     )
 )]
 
+pub mod blob;
 pub mod kernels;
 pub mod model;
+pub mod policy;
 pub mod prodmp;
 pub mod quant;
 pub mod rng;

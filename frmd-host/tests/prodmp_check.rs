@@ -206,3 +206,21 @@ fn cli_exit_codes() {
     assert!(text.contains("cannot read"), "{text}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn model_vectors_cover_the_remaining_options() {
+    // Pure-Python model of the reference (tests/data/gen_prodmp_model_vectors.py), not mp_pytorch:
+    // length factors 3/4, per-basis weights_scale, disable_weights/disable_goal, b = 1/2 with
+    // delays and init times, times up to the end of the pre-computed range.
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/prodmp_model_vectors.json");
+    let file = prodmp_vectors::load(&path).unwrap();
+    assert_eq!(file.cases.len(), 14);
+    let c = |i: usize| &file.cases[i].config;
+    assert!(c(5).disable_weights && c(8).disable_goal && c(1).pre_compute_length_factor == 3);
+    let tol = Tolerances::default();
+    for (index, case) in file.cases.iter().enumerate() {
+        let report = check_case(case, index, &tol);
+        assert!(report.pass(), "{report:?}");
+    }
+}

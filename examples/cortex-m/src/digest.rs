@@ -32,3 +32,9 @@ impl Fnv1a64 {
         self.state
     }
 }
+
+impl Default for Fnv1a64 {
+    fn default() -> Self {
+        Self::new()
+    }
+}

@@ -1,111 +1,14 @@
-//! FRMD on a Cortex-M4F / Cortex-M7 (QEMU mps2-an386 / mps2-an500, or a real board with `defmt`).
-//!
-//! Runs a fixed list of inputs through the frmd-core workload, several calls each, and prints:
-//! `digest: <16 hex>` (FNV-1a 64 over the little-endian bytes of every output, in order),
-//! `instructions: <n>` (median per call, from SysTick under QEMU `-icount shift=0`),
-//! `flash: <bytes>` and `ram: <bytes>` (static RAM + peak stack), plus supporting lines.
+//! Firmware: the baked ProDMP policy decoder on a fixed list of inputs (see the crate docs).
 #![no_std]
 #![no_main]
-#![deny(unsafe_op_in_unsafe_fn)]
-
-mod digest;
-mod memory;
-mod report;
-mod timer;
-mod workload;
-
-#[cfg(feature = "defmt")]
-use defmt_rtt as _;
 
 use cortex_m_rt::entry;
-use digest::Fnv1a64;
-use memory::{ImageSizes, StackProbe};
-use report::{exit_failure, exit_success, report};
-use timer::{calibrate, CycleCounter, TickCounter};
-use workload::{Workload, CASES, REPEATS};
-
-const CALLS: usize = CASES * REPEATS;
-
-/// Core name from the CPUID part number.
-fn core_name(cpuid: u32) -> &'static str {
-    match (cpuid >> 4) & 0xFFF {
-        0xC24 => "cortex-m4",
-        0xC27 => "cortex-m7",
-        _ => "unknown",
-    }
-}
-
-fn median(samples: &mut [u32]) -> u32 {
-    samples.sort_unstable();
-    samples.get(samples.len() / 2).copied().unwrap_or(0)
-}
+use frmd_cortex_m::prodmp_workload::{ProDmpWorkload, CASES};
+use frmd_cortex_m::{bench, BAKED_PRODMP};
 
 #[entry]
 fn main() -> ! {
-    let stack = StackProbe::paint();
-    let Some(mut peripherals) = cortex_m::Peripherals::take() else {
-        exit_failure("core peripherals already taken");
-    };
-    let ticks = TickCounter::start(peripherals.SYST);
-    let cycles = CycleCounter::start(&mut peripherals.DCB, &mut peripherals.DWT);
-    let calibration = calibrate(&ticks);
-    if calibration.ticks == 0 {
-        exit_failure("SysTick calibration failed: the long spin did not take more ticks than the short one (under QEMU, pass -icount shift=0)");
-    }
-
-    let mut workload = match Workload::new() {
-        Ok(workload) => workload,
-        Err(what) => exit_failure(what),
-    };
-    let mut tick_samples = [0u32; CALLS];
-    let mut cycle_samples = [0u32; CALLS];
-    let mut total_ticks: u64 = 0;
-    let mut digest = Fnv1a64::new();
-    let mut samples = tick_samples.iter_mut().zip(cycle_samples.iter_mut());
-    for case in 0..CASES {
-        workload.prepare(case);
-        for _ in 0..REPEATS {
-            let tick_start = ticks.now();
-            let cycle_start = cycles.now();
-            let result = workload.run();
-            let cycle_end = cycles.now();
-            let tick_end = ticks.now();
-            if let Err(what) = result {
-                exit_failure(what);
-            }
-            let elapsed = TickCounter::elapsed(tick_start, tick_end);
-            total_ticks += u64::from(elapsed);
-            if let Some((tick_sample, cycle_sample)) = samples.next() {
-                *tick_sample = elapsed;
-                *cycle_sample = cycle_end.wrapping_sub(cycle_start);
-            }
-        }
-        workload.digest_outputs(&mut digest);
-    }
-    let median_ticks = median(&mut tick_samples);
-    let median_cycles = median(&mut cycle_samples);
-    let peak_stack = stack.peak_bytes();
-    let sizes = ImageSizes::of_this_image();
-
-    report!("workload: {}", workload::NAME);
-    report!("core: {}", core_name(peripherals.CPUID.base.read()));
-    report!("calls: {}", CALLS);
-    report::hex64("digest", digest.finish());
-    report!("instructions: {}", calibration.instructions(u64::from(median_ticks)));
-    report::milli(
-        "instructions_mean",
-        calibration.instructions(total_ticks * 1000) / CALLS as u64,
-    );
-    report!("systick_ticks: {}", median_ticks);
-    report::milli("instructions_per_systick", calibration.milli_instructions_per_tick());
-    if median_cycles != 0 {
-        report!("cycles: {}", median_cycles);
-    }
-    report!("flash: {}", sizes.flash);
-    report!("ram: {}", sizes.ram_static + peak_stack);
-    report!("flash_text: {}", sizes.text);
-    report!("flash_rodata: {}", sizes.rodata);
-    report!("ram_static: {}", sizes.ram_static);
-    report!("stack_peak: {}", peak_stack);
-    exit_success()
+    let stack = bench::start();
+    let mut workload = ProDmpWorkload::new(&BAKED_PRODMP);
+    bench::run::<_, { CASES * 5 }>(&mut workload, stack)
 }

@@ -49,7 +49,7 @@ pub fn exit_success() -> ! {
 }
 
 /// Ends the run with a failure after printing `error: <what>`.
-pub fn exit_failure(what: &str) -> ! {
+pub fn exit_failure(what: &dyn core::fmt::Display) -> ! {
     #[cfg(not(feature = "defmt"))]
     {
         cortex_m_semihosting::hprintln!("error: {}", what);
@@ -57,7 +57,7 @@ pub fn exit_failure(what: &str) -> ! {
     }
     #[cfg(feature = "defmt")]
     {
-        defmt::error!("error: {=str}", what);
+        defmt::error!("error: {}", defmt::Display2Format(what));
         cortex_m::asm::udf();
     }
     #[allow(unreachable_code)]

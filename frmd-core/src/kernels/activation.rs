@@ -43,6 +43,22 @@ pub fn gelu_tanh(x: f32) -> f32 {
     0.5 * x * (1.0 + libm::tanhf(SQRT_2_OVER_PI * (x + 0.044_715 * x * x * x)))
 }
 
+/// GELU, sigmoid approximation `x sigmoid(1.702 x)` (Hendrycks & Gimpel 2016), the transformer
+/// backbone's activation (`frmd-host` `models::act::gelu_sigmoid`). Evaluated as
+/// `x / (1 + e^(-1.702 x))` for `x >= 0` and `x e^(1.702 x) / (1 + e^(1.702 x))` otherwise, so
+/// the exponential never overflows.
+#[inline]
+pub fn gelu_sigmoid(x: f32) -> f32 {
+    const SLOPE: f32 = 1.702;
+    let s = SLOPE * x;
+    if s >= 0.0 {
+        x / (1.0 + libm::expf(-s))
+    } else {
+        let e = libm::expf(s);
+        x * e / (1.0 + e)
+    }
+}
+
 /// A pointwise activation, named so that configs, the exporter and the f32 reference paths agree
 /// on which function a layer uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -119,6 +135,23 @@ mod tests {
             );
             x += 0.0137;
         }
+    }
+
+    #[test]
+    fn gelu_sigmoid_matches_f64_definition() {
+        let mut x = -60.0_f32;
+        while x <= 60.0 {
+            let xd = f64::from(x);
+            let want = xd / (1.0 + (-1.702 * xd).exp());
+            let got = f64::from(gelu_sigmoid(x));
+            assert!(
+                (got - want).abs() <= 2e-6 * xd.abs().max(1.0),
+                "{x}: {got} vs {want}"
+            );
+            x += 0.0173;
+        }
+        assert_eq!(gelu_sigmoid(0.0), 0.0);
+        assert!(gelu_sigmoid(-1e30).abs() < 1e-3 && gelu_sigmoid(1e30) == 1e30);
     }
 
     #[test]

@@ -3,8 +3,8 @@
 //! - [`dot`]: int8 x int8 -> int32 dot product;
 //! - [`fc`]: int8 fully connected layer (requantized int8 output, or raw int32 accumulators);
 //! - [`lut`]: 256-entry int8 lookup-table activations and their builder;
-//! - [`activation`]: the f32 SiLU / Mish / GELU definitions used everywhere (LUT building, f32
-//!   reference paths, host models);
+//! - [`activation`]: the f32 SiLU / Mish / GELU (erf, tanh and sigmoid forms) definitions used
+//!   everywhere (LUT building, f32 reference paths, host models);
 //! - [`norm`]: f32 LayerNorm; [`softmax`]: numerically stable f32 softmax.
 //!
 //! Every kernel checks slice lengths and returns a [`KernelError`] instead of panicking. Integer
@@ -18,7 +18,7 @@ pub mod lut;
 pub mod norm;
 pub mod softmax;
 
-pub use activation::{gelu, gelu_tanh, mish, silu, softplus, Activation};
+pub use activation::{gelu, gelu_sigmoid, gelu_tanh, mish, silu, softplus, Activation};
 pub use dot::dot_i8;
 pub use fc::{dequantize_accumulators, FcRequant, FullyConnected};
 pub use lut::Lut8;

@@ -28,7 +28,9 @@ pub struct BoundaryTerms {
 }
 
 /// A validated ProDMP with its basis and (when `auto_scale_basis`) its per-column scales.
-/// About 1.6 KiB; building it streams the whole grid once only when `auto_scale_basis` is set.
+/// About 1.7 KiB; building it streams the whole grid once only when `auto_scale_basis` is set.
+/// A row query streams the grid from 0 to the needed index (`O(index * num_basis)` time) and
+/// uses about 4.5 KiB of stack (fixed `MAX_NUM_BASIS` buffers).
 #[derive(Clone, Debug)]
 pub struct ProDmp {
     cfg: ProDmpConfig,

@@ -23,13 +23,22 @@ pub struct CollectArgs {
 
 pub fn run(args: CollectArgs) -> anyhow::Result<ExitCode> {
     let bar = ProgressBar::new(args.episodes as u64);
-    bar.set_style(ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} episodes ({elapsed})")?.progress_chars("=> "));
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} episodes ({elapsed})")?
+            .progress_chars("=> "),
+    );
     bar.set_message(format!("collect {}", args.task));
-    let (data, stats) = collect_demos(&args.task, args.episodes, args.seed, &mut |done| bar.set_position(done as u64))?;
+    let (data, stats) = collect_demos(&args.task, args.episodes, args.seed, &mut |done| {
+        bar.set_position(done as u64)
+    })?;
     bar.finish();
     data.save(&args.out)?;
     let size = std::fs::metadata(&args.out)?.len();
-    let lengths: Vec<f64> = data.episode_ranges().iter().map(|r| r.len() as f64).collect();
+    let lengths: Vec<f64> = data
+        .episode_ranges()
+        .iter()
+        .map(|r| r.len() as f64)
+        .collect();
     println!(
         "wrote {}: {} episodes, {} steps (mean length {:.1}), obs_dim {}, action_dim {}, {} bytes; \
          expert failures skipped: {} of {}; sim step {:.2} us",

@@ -1,6 +1,8 @@
 //! `frmd eval`: closed-loop evaluation of a policy on a task, with the metrics of DESIGN.md
 //! section 6.
-use crate::eval::{expert_policy, plot::plot_paths, run_episodes_with_progress, EvalConfig, EvalReport};
+use crate::eval::{
+    expert_policy, plot::plot_paths, run_episodes_with_progress, EvalConfig, EvalReport,
+};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
@@ -48,7 +50,10 @@ pub struct EvalArgs {
 
 /// Prints the human-readable summary of a report.
 pub fn print_report(report: &EvalReport) {
-    println!("task {} / policy {} / {} episodes (exec {} of each chunk, history {})", report.task, report.policy, report.episodes, report.exec_steps, report.history);
+    println!(
+        "task {} / policy {} / {} episodes (exec {} of each chunk, history {})",
+        report.task, report.policy, report.episodes, report.exec_steps, report.history
+    );
     println!(
         "  success        {:.1} % ({} of {}), 95 % Wilson [{:.1}, {:.1}] %",
         100.0 * report.success_rate,
@@ -57,7 +62,10 @@ pub fn print_report(report: &EvalReport) {
         100.0 * report.success_ci95[0],
         100.0 * report.success_ci95[1]
     );
-    println!("  length         {:.1} steps (successful: {:.1})", report.mean_length, report.mean_length_success);
+    println!(
+        "  length         {:.1} steps (successful: {:.1})",
+        report.mean_length, report.mean_length_success
+    );
     println!(
         "  latency/chunk  median {:.1} us, p99 {:.1} us over {} calls (RAYON_NUM_THREADS={})",
         report.latency_us_median, report.latency_us_p99, report.chunk_calls, report.threads
@@ -82,13 +90,22 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
         exec_steps: args.exec_steps,
         history,
         first_seed: args.first_seed,
-        keep_paths: if args.plot.is_some() { args.plot_episodes } else { 0 },
+        keep_paths: if args.plot.is_some() {
+            args.plot_episodes
+        } else {
+            0
+        },
         ..EvalConfig::default()
     };
     let bar = ProgressBar::new(args.episodes as u64);
-    bar.set_style(ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} episodes ({elapsed})")?.progress_chars("=> "));
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} episodes ({elapsed})")?
+            .progress_chars("=> "),
+    );
     bar.set_message(format!("eval {} on {}", policy.name(), args.task));
-    let report = run_episodes_with_progress(&args.task, policy.as_mut(), &cfg, &mut |done| bar.set_position(done as u64))?;
+    let report = run_episodes_with_progress(&args.task, policy.as_mut(), &cfg, &mut |done| {
+        bar.set_position(done as u64)
+    })?;
     bar.finish_and_clear();
     print_report(&report);
     if let Some(path) = &args.json {

@@ -53,10 +53,17 @@ pub fn collect_demos(
         let episode_seed = seed + stats.attempted as u64;
         stats.attempted += 1;
         let (mut obs, mut action) = (Vec::new(), Vec::new());
-        let run = rollout(task.as_mut(), expert.as_mut(), episode_seed, 1, 1, &mut |o, a| {
-            obs.extend_from_slice(o);
-            action.extend_from_slice(a);
-        })?;
+        let run = rollout(
+            task.as_mut(),
+            expert.as_mut(),
+            episode_seed,
+            1,
+            1,
+            &mut |o, a| {
+                obs.extend_from_slice(o);
+                action.extend_from_slice(a);
+            },
+        )?;
         step_time += run.step_time;
         steps += run.steps;
         if !run.success {
@@ -65,10 +72,15 @@ pub fn collect_demos(
         }
         data.obs.extend_from_slice(&obs);
         data.action.extend_from_slice(&action);
-        data.episode_ends.push((data.action.len() / data.action_dim) as i64);
+        data.episode_ends
+            .push((data.action.len() / data.action_dim) as i64);
         progress(data.episode_ends.len());
     }
-    stats.sim_step_us = if steps > 0 { step_time / steps as f64 * 1e6 } else { 0.0 };
+    stats.sim_step_us = if steps > 0 {
+        step_time / steps as f64 * 1e6
+    } else {
+        0.0
+    };
     data.source = format!(
         "frmd collect: scripted expert, seeds {seed}..{} ({} failed episodes skipped)",
         seed + stats.attempted as u64,

@@ -33,11 +33,23 @@ fn i64_bytes(values: &[i64]) -> Vec<u8> {
 }
 
 /// Reads a tensor by name, checking dtype and rank, and returns (shape, data).
-fn tensor<'a>(file: &SafeTensors<'a>, name: &str, dtype: Dtype, rank: usize) -> anyhow::Result<(Vec<usize>, &'a [u8])> {
+fn tensor<'a>(
+    file: &SafeTensors<'a>,
+    name: &str,
+    dtype: Dtype,
+    rank: usize,
+) -> anyhow::Result<(Vec<usize>, &'a [u8])> {
     let view: TensorView<'a> = file.tensor(name).map_err(|_| {
-        anyhow::anyhow!("missing tensor `{name}` (found: {})", file.names().join(", "))
+        anyhow::anyhow!(
+            "missing tensor `{name}` (found: {})",
+            file.names().join(", ")
+        )
     })?;
-    anyhow::ensure!(view.dtype() == dtype, "tensor `{name}` has dtype {:?}, expected {dtype:?}", view.dtype());
+    anyhow::ensure!(
+        view.dtype() == dtype,
+        "tensor `{name}` has dtype {:?}, expected {dtype:?}",
+        view.dtype()
+    );
     anyhow::ensure!(
         view.shape().len() == rank,
         "tensor `{name}` has shape {:?} (rank {}), expected rank {rank}",
@@ -57,11 +69,7 @@ fn metadata<'m>(meta: &'m Option<HashMap<String, String>>, key: &str) -> anyhow:
 impl Dataset {
     /// Number of steps T.
     pub fn len(&self) -> usize {
-        if self.action_dim == 0 {
-            0
-        } else {
-            self.action.len() / self.action_dim
-        }
+        self.action.len().checked_div(self.action_dim).unwrap_or(0)
     }
 
     pub fn is_empty(&self) -> bool {
@@ -90,13 +98,13 @@ impl Dataset {
         anyhow::ensure!(self.obs_dim > 0, "obs_dim is 0");
         anyhow::ensure!(self.action_dim > 0, "action_dim is 0");
         anyhow::ensure!(
-            self.obs.len() % self.obs_dim == 0,
+            self.obs.len().is_multiple_of(self.obs_dim),
             "obs has {} values, not a multiple of obs_dim {}",
             self.obs.len(),
             self.obs_dim
         );
         anyhow::ensure!(
-            self.action.len() % self.action_dim == 0,
+            self.action.len().is_multiple_of(self.action_dim),
             "action has {} values, not a multiple of action_dim {}",
             self.action.len(),
             self.action_dim
@@ -121,7 +129,10 @@ impl Dataset {
             previous as usize == steps,
             "last episode end is {previous} but the dataset has {steps} steps"
         );
-        for (name, values, dim) in [("obs", &self.obs, self.obs_dim), ("action", &self.action, self.action_dim)] {
+        for (name, values, dim) in [
+            ("obs", &self.obs, self.obs_dim),
+            ("action", &self.action, self.action_dim),
+        ] {
             if let Some(index) = values.iter().position(|v| !v.is_finite()) {
                 anyhow::bail!(
                     "tensor `{name}` has a non-finite value {} at row {}, column {}",
@@ -131,7 +142,11 @@ impl Dataset {
                 );
             }
         }
-        anyhow::ensure!(self.dt.is_finite() && self.dt > 0.0, "dt is {}, expected a positive number of seconds", self.dt);
+        anyhow::ensure!(
+            self.dt.is_finite() && self.dt > 0.0,
+            "dt is {}, expected a positive number of seconds",
+            self.dt
+        );
         anyhow::ensure!(!self.task.is_empty(), "task name is empty");
         Ok(())
     }
@@ -140,11 +155,24 @@ impl Dataset {
     pub fn to_bytes(&self) -> anyhow::Result<Vec<u8>> {
         self.validate()?;
         let steps = self.len();
-        let (obs, action, ends) = (f32_bytes(&self.obs), f32_bytes(&self.action), i64_bytes(&self.episode_ends));
+        let (obs, action, ends) = (
+            f32_bytes(&self.obs),
+            f32_bytes(&self.action),
+            i64_bytes(&self.episode_ends),
+        );
         let tensors = [
-            ("obs", TensorView::new(Dtype::F32, vec![steps, self.obs_dim], &obs)?),
-            ("action", TensorView::new(Dtype::F32, vec![steps, self.action_dim], &action)?),
-            ("episode_ends", TensorView::new(Dtype::I64, vec![self.episode_ends.len()], &ends)?),
+            (
+                "obs",
+                TensorView::new(Dtype::F32, vec![steps, self.obs_dim], &obs)?,
+            ),
+            (
+                "action",
+                TensorView::new(Dtype::F32, vec![steps, self.action_dim], &action)?,
+            ),
+            (
+                "episode_ends",
+                TensorView::new(Dtype::I64, vec![self.episode_ends.len()], &ends)?,
+            ),
         ];
         let meta = HashMap::from([
             ("task".to_string(), self.task.clone()),
@@ -156,10 +184,12 @@ impl Dataset {
 
     /// Parses and validates safetensors bytes.
     pub fn from_bytes(bytes: &[u8]) -> anyhow::Result<Dataset> {
-        let file = SafeTensors::deserialize(bytes)
-            .map_err(|e| anyhow::anyhow!("not a valid safetensors file (truncated or corrupt header/data): {e}"))?;
-        let (_, meta) = SafeTensors::read_metadata(bytes)
-            .map_err(|e| anyhow::anyhow!("not a valid safetensors file (truncated or corrupt header): {e}"))?;
+        let file = SafeTensors::deserialize(bytes).map_err(|e| {
+            anyhow::anyhow!("not a valid safetensors file (truncated or corrupt header/data): {e}")
+        })?;
+        let (_, meta) = SafeTensors::read_metadata(bytes).map_err(|e| {
+            anyhow::anyhow!("not a valid safetensors file (truncated or corrupt header): {e}")
+        })?;
         let meta = meta.metadata();
         let (obs_shape, obs) = tensor(&file, "obs", Dtype::F32, 2)?;
         let (action_shape, action) = tensor(&file, "action", Dtype::F32, 2)?;
@@ -171,11 +201,22 @@ impl Dataset {
             action_shape[0]
         );
         let dt_text = metadata(meta, "dt")?;
-        let dt: f32 = dt_text.parse().map_err(|_| anyhow::anyhow!("metadata `dt` is {dt_text:?}, not a number"))?;
+        let dt: f32 = dt_text
+            .parse()
+            .map_err(|_| anyhow::anyhow!("metadata `dt` is {dt_text:?}, not a number"))?;
         let dataset = Dataset {
-            obs: obs.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect(),
-            action: action.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect(),
-            episode_ends: ends.chunks_exact(8).map(|b| i64::from_le_bytes(b.try_into().unwrap_or([0; 8]))).collect(),
+            obs: obs
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect(),
+            action: action
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect(),
+            episode_ends: ends
+                .chunks_exact(8)
+                .map(|b| i64::from_le_bytes(b.try_into().unwrap_or([0; 8])))
+                .collect(),
             obs_dim: obs_shape[1],
             action_dim: action_shape[1],
             task: metadata(meta, "task")?.to_string(),
@@ -188,13 +229,16 @@ impl Dataset {
 
     /// Loads and validates a dataset file; errors name the file and what is wrong.
     pub fn load(path: &Path) -> anyhow::Result<Dataset> {
-        let bytes = std::fs::read(path).map_err(|e| anyhow::anyhow!("cannot read dataset {}: {e}", path.display()))?;
-        Self::from_bytes(&bytes).map_err(|e| anyhow::anyhow!("invalid dataset {}: {e}", path.display()))
+        let bytes = std::fs::read(path)
+            .map_err(|e| anyhow::anyhow!("cannot read dataset {}: {e}", path.display()))?;
+        Self::from_bytes(&bytes)
+            .map_err(|e| anyhow::anyhow!("invalid dataset {}: {e}", path.display()))
     }
 
     /// Validates and writes the dataset to `path`.
     pub fn save(&self, path: &Path) -> anyhow::Result<()> {
         let bytes = self.to_bytes()?;
-        std::fs::write(path, bytes).map_err(|e| anyhow::anyhow!("cannot write dataset {}: {e}", path.display()))
+        std::fs::write(path, bytes)
+            .map_err(|e| anyhow::anyhow!("cannot write dataset {}: {e}", path.display()))
     }
 }

@@ -4,5 +4,8 @@ pub mod collect;
 pub mod dataset;
 pub mod windows;
 
+#[cfg(test)]
+mod tests;
+
 pub use dataset::Dataset;
 pub use windows::{Normalization, Normalizer, WindowSet};

@@ -36,11 +36,10 @@ pub struct WindowSet {
 impl WindowSet {
     /// Number of windows.
     pub fn len(&self) -> usize {
-        if self.action_dim == 0 {
-            0
-        } else {
-            self.prev_action.len() / self.action_dim
-        }
+        self.prev_action
+            .len()
+            .checked_div(self.action_dim)
+            .unwrap_or(0)
     }
 
     pub fn is_empty(&self) -> bool {
@@ -91,7 +90,11 @@ impl Normalizer {
         }
         for row in x.chunks_mut(self.min.len()) {
             for ((v, &lo), &hi) in row.iter_mut().zip(&self.min).zip(&self.max) {
-                *v = if hi > lo { 2.0 * (*v - lo) / (hi - lo) - 1.0 } else { 0.0 };
+                *v = if hi > lo {
+                    2.0 * (*v - lo) / (hi - lo) - 1.0
+                } else {
+                    0.0
+                };
             }
         }
     }
@@ -104,7 +107,11 @@ impl Normalizer {
         }
         for row in x.chunks_mut(self.min.len()) {
             for ((v, &lo), &hi) in row.iter_mut().zip(&self.min).zip(&self.max) {
-                *v = if hi > lo { (*v + 1.0) * 0.5 * (hi - lo) + lo } else { lo };
+                *v = if hi > lo {
+                    (*v + 1.0) * 0.5 * (hi - lo) + lo
+                } else {
+                    lo
+                };
             }
         }
     }
@@ -112,7 +119,11 @@ impl Normalizer {
     /// Normalized units per raw unit for each dimension (0 for constant dimensions); rates and
     /// other differences scale by this factor.
     pub fn scale(&self) -> Vec<f32> {
-        self.min.iter().zip(&self.max).map(|(&lo, &hi)| if hi > lo { 2.0 / (hi - lo) } else { 0.0 }).collect()
+        self.min
+            .iter()
+            .zip(&self.max)
+            .map(|(&lo, &hi)| if hi > lo { 2.0 / (hi - lo) } else { 0.0 })
+            .collect()
     }
 }
 
@@ -124,8 +135,15 @@ impl super::Dataset {
     /// Episodes are padded by repeating the first observation/action before their start and the
     /// last action after their end, so a_{-1} = a_0 and the rate at the start is 0 (matching the
     /// evaluator, whose experts start their commands at the initial end-effector position).
-    pub fn windows(&self, history: usize, horizon: usize) -> anyhow::Result<(WindowSet, Normalization)> {
-        anyhow::ensure!(history >= 1, "observation history must be at least 1, got {history}");
+    pub fn windows(
+        &self,
+        history: usize,
+        horizon: usize,
+    ) -> anyhow::Result<(WindowSet, Normalization)> {
+        anyhow::ensure!(
+            history >= 1,
+            "observation history must be at least 1, got {history}"
+        );
         anyhow::ensure!(horizon >= 1, "horizon must be at least 1, got {horizon}");
         self.validate()?;
         let norm = Normalization {
@@ -154,14 +172,17 @@ impl super::Dataset {
         for range in self.episode_ranges() {
             let (first, last) = (range.start, range.end - 1);
             // Row of in-episode index t (may be negative or past the end), padded.
-            let row = |t: isize| (range.start as isize + t).clamp(first as isize, last as isize) as usize;
+            let row =
+                |t: isize| (range.start as isize + t).clamp(first as isize, last as isize) as usize;
             for t in 0..range.len() as isize {
                 for k in 0..history as isize {
-                    set.obs.extend_from_slice(obs_row(row(t + k + 1 - history as isize)));
+                    set.obs
+                        .extend_from_slice(obs_row(row(t + k + 1 - history as isize)));
                 }
                 let (prev, prev2) = (action_row(row(t - 1)), action_row(row(t - 2)));
                 set.prev_action.extend_from_slice(prev);
-                set.prev_rate.extend(prev.iter().zip(prev2).map(|(p, q)| (p - q) / self.dt));
+                set.prev_rate
+                    .extend(prev.iter().zip(prev2).map(|(p, q)| (p - q) / self.dt));
                 for k in 0..horizon as isize {
                     set.actions.extend_from_slice(action_row(row(t + k)));
                 }

@@ -21,7 +21,9 @@ pub fn curvatures(path: &[[f64; 2]]) -> Vec<f64> {
         .map(|w| {
             let a = [w[1][0] - w[0][0], w[1][1] - w[0][1]];
             let b = [w[2][0] - w[1][0], w[2][1] - w[1][1]];
-            let theta = (a[0] * b[1] - a[1] * b[0]).abs().atan2(a[0] * b[0] + a[1] * b[1]);
+            let theta = (a[0] * b[1] - a[1] * b[0])
+                .abs()
+                .atan2(a[0] * b[0] + a[1] * b[1]);
             theta / (0.5 * (a[0].hypot(a[1]) + b[0].hypot(b[1])))
         })
         .collect()
@@ -29,7 +31,10 @@ pub fn curvatures(path: &[[f64; 2]]) -> Vec<f64> {
 
 /// Number of non-smooth transitions (curvature above [`NON_SMOOTH_CURVATURE`]) along `path`.
 pub fn non_smooth_transitions(path: &[[f64; 2]]) -> usize {
-    curvatures(path).into_iter().filter(|&k| k > NON_SMOOTH_CURVATURE).count()
+    curvatures(path)
+        .into_iter()
+        .filter(|&k| k > NON_SMOOTH_CURVATURE)
+        .count()
 }
 
 /// Root-mean-square jerk of a path sampled every `dt` seconds (third finite difference),
@@ -110,13 +115,29 @@ mod tests {
     #[test]
     fn square_counts_its_corners() {
         // Start mid-edge and go once around: four corners, each a 90-degree turn.
-        let square = polyline(&[[0.5, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0], [0.5, 0.0]], 0.1);
+        let square = polyline(
+            &[
+                [0.5, 0.0],
+                [1.0, 0.0],
+                [1.0, 1.0],
+                [0.0, 1.0],
+                [0.0, 0.0],
+                [0.5, 0.0],
+            ],
+            0.1,
+        );
         assert_eq!(non_smooth_transitions(&square), 4);
         // Open square path starting at a corner: its three interior corners.
-        let open = polyline(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]], 0.1);
+        let open = polyline(
+            &[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]],
+            0.1,
+        );
         assert_eq!(non_smooth_transitions(&open), 3);
         let kappa = curvatures(&square).into_iter().fold(0.0, f64::max);
-        assert!((kappa - std::f64::consts::FRAC_PI_2 / 0.1).abs() < 1e-9, "max curvature {kappa}");
+        assert!(
+            (kappa - std::f64::consts::FRAC_PI_2 / 0.1).abs() < 1e-9,
+            "max curvature {kappa}"
+        );
     }
 
     #[test]
@@ -156,7 +177,10 @@ mod tests {
     fn wilson_matches_known_values() {
         // 45 of 50: [0.786, 0.957] (standard tables).
         let [lo, hi] = wilson_interval(45, 50);
-        assert!((lo - 0.7864).abs() < 1e-3 && (hi - 0.9565).abs() < 1e-3, "{lo} {hi}");
+        assert!(
+            (lo - 0.7864).abs() < 1e-3 && (hi - 0.9565).abs() < 1e-3,
+            "{lo} {hi}"
+        );
         let [lo, hi] = wilson_interval(50, 50);
         assert!(lo > 0.92 && hi == 1.0);
         assert_eq!(wilson_interval(0, 0), [0.0, 1.0]);

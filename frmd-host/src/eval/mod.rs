@@ -14,6 +14,9 @@ pub mod metrics;
 pub mod plot;
 pub mod policy;
 
+#[cfg(test)]
+mod tests;
+
 /// First seed of the evaluation stream; collection seeds are all below it.
 pub const EVAL_SEED_OFFSET: u64 = 1 << 63;
 
@@ -36,13 +39,22 @@ pub struct EvalConfig {
 
 impl Default for EvalConfig {
     fn default() -> Self {
-        Self { episodes: 50, exec_steps: 8, history: 2, first_seed: 0, warmup_calls: 5, keep_paths: 0 }
+        Self {
+            episodes: 50,
+            exec_steps: 8,
+            history: 2,
+            first_seed: 0,
+            warmup_calls: 5,
+            keep_paths: 0,
+        }
     }
 }
 
 /// The seed of evaluation episode `index` for a given `first_seed`.
 pub fn eval_seed(first_seed: u64, index: usize) -> u64 {
-    EVAL_SEED_OFFSET.wrapping_add(first_seed).wrapping_add(index as u64)
+    EVAL_SEED_OFFSET
+        .wrapping_add(first_seed)
+        .wrapping_add(index as u64)
 }
 
 /// What happened in one episode.
@@ -156,11 +168,19 @@ pub fn rollout(
     let max_steps = task.max_steps();
     'episode: while out.steps < max_steps {
         let hist: Vec<Vec<f32>> = obs_history.iter().cloned().collect();
-        let input = PolicyInput { obs_history: &hist, prev_action: &prev_action, prev_rate: &prev_rate };
+        let input = PolicyInput {
+            obs_history: &hist,
+            prev_action: &prev_action,
+            prev_rate: &prev_rate,
+        };
         let started = Instant::now();
         let chunk = policy.act(&input)?;
         out.latencies.push(started.elapsed().as_secs_f64());
-        anyhow::ensure!(!chunk.is_empty(), "policy {} returned an empty chunk", policy.name());
+        anyhow::ensure!(
+            !chunk.is_empty(),
+            "policy {} returned an empty chunk",
+            policy.name()
+        );
         for action in chunk.iter().take(exec_steps) {
             anyhow::ensure!(
                 action.len() == action_dim,
@@ -176,8 +196,15 @@ pub fn rollout(
             out.step_time += started.elapsed().as_secs_f64();
             out.steps += 1;
             out.ee_path.push(task.ee_position());
-            out.action_path.push([f64::from(action[0]), f64::from(action.get(1).copied().unwrap_or(0.0))]);
-            for ((rate, prev), &a) in prev_rate.iter_mut().zip(prev_action.iter_mut()).zip(action.iter()) {
+            out.action_path.push([
+                f64::from(action[0]),
+                f64::from(action.get(1).copied().unwrap_or(0.0)),
+            ]);
+            for ((rate, prev), &a) in prev_rate
+                .iter_mut()
+                .zip(prev_action.iter_mut())
+                .zip(action.iter())
+            {
                 *rate = ((f64::from(a) - f64::from(*prev)) / dt) as f32;
                 *prev = a;
             }
@@ -198,7 +225,11 @@ fn threads_note() -> String {
 }
 
 /// Runs `cfg.episodes` closed-loop episodes of `task` on the evaluation seed stream.
-pub fn run_episodes(task: &str, policy: &mut dyn Policy, cfg: &EvalConfig) -> anyhow::Result<EvalReport> {
+pub fn run_episodes(
+    task: &str,
+    policy: &mut dyn Policy,
+    cfg: &EvalConfig,
+) -> anyhow::Result<EvalReport> {
     run_episodes_with_progress(task, policy, cfg, &mut |_| {})
 }
 
@@ -209,7 +240,10 @@ pub fn run_episodes_with_progress(
     cfg: &EvalConfig,
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<EvalReport> {
-    anyhow::ensure!(cfg.episodes >= 1, "at least one evaluation episode is needed");
+    anyhow::ensure!(
+        cfg.episodes >= 1,
+        "at least one evaluation episode is needed"
+    );
     let mut task = make_task(task_name)?;
     let dt = task.dt();
     if cfg.warmup_calls > 0 {
@@ -221,7 +255,11 @@ pub fn run_episodes_with_progress(
         let prev: Vec<f32> = task.ee_position().iter().map(|&x| x as f32).collect();
         let rate = vec![0.0f32; prev.len()];
         for _ in 0..cfg.warmup_calls {
-            policy.act(&PolicyInput { obs_history: &hist, prev_action: &prev, prev_rate: &rate })?;
+            policy.act(&PolicyInput {
+                obs_history: &hist,
+                prev_action: &prev,
+                prev_rate: &rate,
+            })?;
         }
     }
     let mut records = Vec::with_capacity(cfg.episodes);
@@ -232,7 +270,14 @@ pub fn run_episodes_with_progress(
         let seed = eval_seed(cfg.first_seed, index);
         task.reset(seed);
         let layout_start = task.layout();
-        let run = rollout(task.as_mut(), policy, seed, cfg.exec_steps, cfg.history, &mut |_, _| {})?;
+        let run = rollout(
+            task.as_mut(),
+            policy,
+            seed,
+            cfg.exec_steps,
+            cfg.history,
+            &mut |_, _| {},
+        )?;
         latencies.extend_from_slice(&run.latencies);
         step_time += run.step_time;
         steps += run.steps;
@@ -246,13 +291,23 @@ pub fn run_episodes_with_progress(
             rms_jerk: metrics::rms_jerk(&run.ee_path, dt),
         });
         if kept_paths.len() < cfg.keep_paths {
-            kept_paths.push(KeptPath { seed, success: run.success, ee_path: run.ee_path, layout_start, layout_end: task.layout() });
+            kept_paths.push(KeptPath {
+                seed,
+                success: run.success,
+                ee_path: run.ee_path,
+                layout_start,
+                layout_end: task.layout(),
+            });
         }
         progress(index + 1);
     }
     let successes = records.iter().filter(|r| r.success).count();
     let lengths: Vec<f64> = records.iter().map(|r| r.length as f64).collect();
-    let success_lengths: Vec<f64> = records.iter().filter(|r| r.success).map(|r| r.length as f64).collect();
+    let success_lengths: Vec<f64> = records
+        .iter()
+        .filter(|r| r.success)
+        .map(|r| r.length as f64)
+        .collect();
     let micros: Vec<f64> = latencies.iter().map(|s| s * 1e6).collect();
     Ok(EvalReport {
         task: task_name.to_string(),
@@ -269,9 +324,23 @@ pub fn run_episodes_with_progress(
         chunk_calls: micros.len(),
         latency_us_median: metrics::quantile(&micros, 0.5),
         latency_us_p99: metrics::quantile(&micros, 0.99),
-        sim_step_us: if steps > 0 { step_time / steps as f64 * 1e6 } else { 0.0 },
-        non_smooth_ee_mean: metrics::mean(&records.iter().map(|r| r.non_smooth_ee as f64).collect::<Vec<_>>()),
-        non_smooth_action_mean: metrics::mean(&records.iter().map(|r| r.non_smooth_action as f64).collect::<Vec<_>>()),
+        sim_step_us: if steps > 0 {
+            step_time / steps as f64 * 1e6
+        } else {
+            0.0
+        },
+        non_smooth_ee_mean: metrics::mean(
+            &records
+                .iter()
+                .map(|r| r.non_smooth_ee as f64)
+                .collect::<Vec<_>>(),
+        ),
+        non_smooth_action_mean: metrics::mean(
+            &records
+                .iter()
+                .map(|r| r.non_smooth_action as f64)
+                .collect::<Vec<_>>(),
+        ),
         rms_jerk_mean: metrics::mean(&records.iter().map(|r| r.rms_jerk).collect::<Vec<_>>()),
         threads: threads_note(),
         per_episode: records,

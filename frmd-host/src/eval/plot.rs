@@ -11,7 +11,8 @@ use std::path::Path;
 /// Half width of the plotted square, metres.
 const VIEW: f64 = 2.2;
 
-type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+type Chart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 fn err(e: impl std::fmt::Debug) -> anyhow::Error {
     anyhow::anyhow!("plot: {e:?}")
@@ -28,7 +29,11 @@ fn draw_item(chart: &mut Chart<'_, '_>, item: &LayoutItem, filled: bool) -> anyh
         Role::Object => RGBColor(60, 90, 220),
         Role::Wall => RGBColor(110, 110, 110),
     };
-    let style = if filled { color.mix(0.25).filled() } else { color.stroke_width(2) };
+    let style = if filled {
+        color.mix(0.25).filled()
+    } else {
+        color.stroke_width(2)
+    };
     match item.shape {
         Shape::Disc { center, radius } => {
             let points: Vec<(f64, f64)> = (0..48)
@@ -38,15 +43,24 @@ fn draw_item(chart: &mut Chart<'_, '_>, item: &LayoutItem, filled: bool) -> anyh
                 })
                 .collect();
             if filled {
-                chart.draw_series(std::iter::once(Polygon::new(points, style))).map_err(err)?;
+                chart
+                    .draw_series(std::iter::once(Polygon::new(points, style)))
+                    .map_err(err)?;
             } else {
                 let mut closed = points.clone();
                 closed.extend(points.first().copied());
-                chart.draw_series(std::iter::once(PathElement::new(closed, style))).map_err(err)?;
+                chart
+                    .draw_series(std::iter::once(PathElement::new(closed, style)))
+                    .map_err(err)?;
             }
         }
         Shape::Rect { min, max } => {
-            chart.draw_series(std::iter::once(Rectangle::new([clamp(min), clamp(max)], style))).map_err(err)?;
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [clamp(min), clamp(max)],
+                    style,
+                )))
+                .map_err(err)?;
         }
     }
     Ok(())
@@ -56,12 +70,31 @@ fn draw_item(chart: &mut Chart<'_, '_>, item: &LayoutItem, filled: bool) -> anyh
 pub fn plot_paths(out: &Path, paths: &[KeptPath], size: u32) -> anyhow::Result<()> {
     let root = BitMapBackend::new(out, (size, size)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
-    let mut chart = ChartBuilder::on(&root).margin(8).build_cartesian_2d(-VIEW..VIEW, -VIEW..VIEW).map_err(err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .margin(8)
+        .build_cartesian_2d(-VIEW..VIEW, -VIEW..VIEW)
+        .map_err(err)?;
     // Frame and axes through the origin instead of a labelled mesh.
-    let frame = [(-VIEW, -VIEW), (VIEW, -VIEW), (VIEW, VIEW), (-VIEW, VIEW), (-VIEW, -VIEW)];
-    chart.draw_series(std::iter::once(PathElement::new(frame.to_vec(), BLACK.stroke_width(1)))).map_err(err)?;
+    let frame = [
+        (-VIEW, -VIEW),
+        (VIEW, -VIEW),
+        (VIEW, VIEW),
+        (-VIEW, VIEW),
+        (-VIEW, -VIEW),
+    ];
+    chart
+        .draw_series(std::iter::once(PathElement::new(
+            frame.to_vec(),
+            BLACK.stroke_width(1),
+        )))
+        .map_err(err)?;
     for axis in [[(-VIEW, 0.0), (VIEW, 0.0)], [(0.0, -VIEW), (0.0, VIEW)]] {
-        chart.draw_series(std::iter::once(PathElement::new(axis.to_vec(), BLACK.mix(0.15)))).map_err(err)?;
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                axis.to_vec(),
+                BLACK.mix(0.15),
+            )))
+            .map_err(err)?;
     }
     for kept in paths {
         for item in &kept.layout_start {
@@ -74,12 +107,21 @@ pub fn plot_paths(out: &Path, paths: &[KeptPath], size: u32) -> anyhow::Result<(
     for (index, kept) in paths.iter().enumerate() {
         let color = Palette99::pick(index).to_rgba();
         let points: Vec<(f64, f64)> = kept.ee_path.iter().map(|&p| clamp(p)).collect();
-        chart.draw_series(LineSeries::new(points.iter().copied(), color.stroke_width(2))).map_err(err)?;
+        chart
+            .draw_series(LineSeries::new(
+                points.iter().copied(),
+                color.stroke_width(2),
+            ))
+            .map_err(err)?;
         if let Some(&start) = points.first() {
-            chart.draw_series(std::iter::once(Circle::new(start, 4, color.filled()))).map_err(err)?;
+            chart
+                .draw_series(std::iter::once(Circle::new(start, 4, color.filled())))
+                .map_err(err)?;
         }
         if let (false, Some(&end)) = (kept.success, points.last()) {
-            chart.draw_series(std::iter::once(Cross::new(end, 6, BLACK.stroke_width(2)))).map_err(err)?;
+            chart
+                .draw_series(std::iter::once(Cross::new(end, 6, BLACK.stroke_width(2))))
+                .map_err(err)?;
         }
     }
     root.present().map_err(err)?;

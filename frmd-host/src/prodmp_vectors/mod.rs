@@ -8,6 +8,11 @@
 //! bandwidths, grid size, table maxima, scales) are checked when present.
 //!
 //! Every problem is a [`VectorsError`] naming the case and field; nothing here panics.
+//!
+//! Note: serde_json (without its `float_roundtrip` feature, which would rebuild candle's
+//! dependencies) may parse a 17-digit decimal 1 ulp off. That is far below every tolerance, but a
+//! time written exactly at the end of the pre-computed range (`delay + 6 tau`) can then land just
+//! beyond it and be reported as out of range.
 pub mod check;
 
 use frmd_core::prodmp::ProDmpError;

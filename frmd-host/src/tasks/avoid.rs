@@ -45,7 +45,13 @@ pub struct Avoid {
 
 impl Avoid {
     pub fn new() -> Self {
-        let mut task = Self { ee: PointMass::default(), goal: V2::ZERO, obstacle: V2::ZERO, radius: 0.0, collided: false };
+        let mut task = Self {
+            ee: PointMass::default(),
+            goal: V2::ZERO,
+            obstacle: V2::ZERO,
+            radius: 0.0,
+            collided: false,
+        };
         task.reset(0);
         task
     }
@@ -85,20 +91,27 @@ impl Task for Avoid {
 
     fn observe(&self) -> Vec<f32> {
         let (p, v, g, o) = (self.ee.pos, self.ee.vel, self.goal, self.obstacle);
-        [p.x, p.y, v.x, v.y, g.x, g.y, o.x, o.y, self.radius].iter().map(|&x| x as f32).collect()
+        [p.x, p.y, v.x, v.y, g.x, g.y, o.x, o.y, self.radius]
+            .iter()
+            .map(|&x| x as f32)
+            .collect()
     }
 
     fn step(&mut self, action: &[f32]) -> anyhow::Result<()> {
         let target = parse_target(action)?;
         let (center, reach) = (self.obstacle, self.radius + EE_RADIUS);
         let mut hit = false;
-        self.ee.advance(target, CONTROL_DT, |pm| hit |= (pm.pos - center).norm() < reach);
+        self.ee.advance(target, CONTROL_DT, |pm| {
+            hit |= (pm.pos - center).norm() < reach
+        });
         self.collided |= hit;
         Ok(())
     }
 
     fn success(&self) -> bool {
-        !self.collided && (self.ee.pos - self.goal).norm() < GOAL_TOLERANCE && self.ee.vel.norm() < SPEED_TOLERANCE
+        !self.collided
+            && (self.ee.pos - self.goal).norm() < GOAL_TOLERANCE
+            && self.ee.vel.norm() < SPEED_TOLERANCE
     }
 
     fn failed(&self) -> bool {
@@ -115,8 +128,20 @@ impl Task for Avoid {
 
     fn layout(&self) -> Vec<LayoutItem> {
         vec![
-            LayoutItem { role: Role::Obstacle, shape: Shape::Disc { center: self.obstacle.to_array(), radius: self.radius } },
-            LayoutItem { role: Role::Goal, shape: Shape::Disc { center: self.goal.to_array(), radius: GOAL_TOLERANCE } },
+            LayoutItem {
+                role: Role::Obstacle,
+                shape: Shape::Disc {
+                    center: self.obstacle.to_array(),
+                    radius: self.radius,
+                },
+            },
+            LayoutItem {
+                role: Role::Goal,
+                shape: Shape::Disc {
+                    center: self.goal.to_array(),
+                    radius: GOAL_TOLERANCE,
+                },
+            },
         ]
     }
 }
@@ -138,7 +163,10 @@ impl AvoidExpert {
 
     /// An expert that always passes on `side` (+1 or -1) instead of flipping a coin.
     pub fn with_side(side: f64) -> Self {
-        Self { forced_side: Some(side.signum()), ..Self::default() }
+        Self {
+            forced_side: Some(side.signum()),
+            ..Self::default()
+        }
     }
 }
 
@@ -151,8 +179,18 @@ fn detour(start: V2, goal: V2, normal: V2, amplitude: f64) -> SmoothPath {
     let lean = normal * (amplitude * std::f64::consts::PI / 6.0);
     let half = chord * (1.0 / 6.0);
     SmoothPath::new(vec![
-        Cubic { p0: start, p1: start + half + lean, p2: apex - half, p3: apex },
-        Cubic { p0: apex, p1: apex + half, p2: goal - half + lean, p3: goal },
+        Cubic {
+            p0: start,
+            p1: start + half + lean,
+            p2: apex - half,
+            p3: apex,
+        },
+        Cubic {
+            p0: apex,
+            p1: apex + half,
+            p2: goal - half + lean,
+            p3: goal,
+        },
     ])
 }
 

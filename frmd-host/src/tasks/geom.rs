@@ -97,12 +97,22 @@ pub struct Cubic {
 impl Cubic {
     /// The straight segment from `a` to `b`.
     pub fn line(a: V2, b: V2) -> Self {
-        Self { p0: a, p1: a.lerp(b, 1.0 / 3.0), p2: a.lerp(b, 2.0 / 3.0), p3: b }
+        Self {
+            p0: a,
+            p1: a.lerp(b, 1.0 / 3.0),
+            p2: a.lerp(b, 2.0 / 3.0),
+            p3: b,
+        }
     }
 
     /// The quadratic Bezier with control point `c`, raised to a cubic.
     pub fn quadratic(a: V2, c: V2, b: V2) -> Self {
-        Self { p0: a, p1: a.lerp(c, 2.0 / 3.0), p2: b.lerp(c, 2.0 / 3.0), p3: b }
+        Self {
+            p0: a,
+            p1: a.lerp(c, 2.0 / 3.0),
+            p2: b.lerp(c, 2.0 / 3.0),
+            p3: b,
+        }
     }
 
     /// The cubic approximation of the circular arc from `start` to `end` that arrives at `end`
@@ -117,12 +127,20 @@ impl Cubic {
         let start_heading = along * (2.0 * along.dot(end_heading)) - end_heading;
         let cos_half = ((1.0 + along.dot(end_heading).clamp(-1.0, 1.0)) / 2.0).sqrt();
         let handle = length / (3.0 * (cos_half * cos_half).max(0.25));
-        Self { p0: start, p1: start + start_heading * handle, p2: end - end_heading * handle, p3: end }
+        Self {
+            p0: start,
+            p1: start + start_heading * handle,
+            p2: end - end_heading * handle,
+            p3: end,
+        }
     }
 
     pub fn at(&self, u: f64) -> V2 {
         let v = 1.0 - u;
-        self.p0 * (v * v * v) + self.p1 * (3.0 * v * v * u) + self.p2 * (3.0 * v * u * u) + self.p3 * (u * u * u)
+        self.p0 * (v * v * v)
+            + self.p1 * (3.0 * v * v * u)
+            + self.p2 * (3.0 * v * u * u)
+            + self.p3 * (u * u * u)
     }
 }
 
@@ -158,7 +176,10 @@ impl SmoothPath {
             total += (seg.p3 - last).norm();
         }
         cumulative.push(total);
-        Self { segments, cumulative }
+        Self {
+            segments,
+            cumulative,
+        }
     }
 
     pub fn length(&self) -> f64 {
@@ -189,7 +210,8 @@ impl SmoothPath {
         let (c0, c1) = (self.cumulative[k - 1], self.cumulative[k]);
         let frac = if c1 > c0 { (s - c0) / (c1 - c0) } else { 0.0 };
         let global = (k - 1) as f64 + frac;
-        let seg_index = ((global / ARC_SAMPLES as f64).floor() as usize).min(self.segments.len() - 1);
+        let seg_index =
+            ((global / ARC_SAMPLES as f64).floor() as usize).min(self.segments.len() - 1);
         let u = (global - (seg_index * ARC_SAMPLES) as f64) / ARC_SAMPLES as f64;
         self.segments[seg_index].at(u.clamp(0.0, 1.0))
     }
@@ -211,7 +233,11 @@ impl TimedPath {
 
     /// Position at time `t` seconds after the start.
     pub fn at(&self, t: f64) -> V2 {
-        let u = if self.duration > 0.0 { t / self.duration } else { 1.0 };
+        let u = if self.duration > 0.0 {
+            t / self.duration
+        } else {
+            1.0
+        };
         self.path.at_length(self.path.length() * min_jerk(u))
     }
 }

@@ -21,8 +21,15 @@ use super::rng::TaskRng;
 use super::{last_obs, LayoutItem, Role, Shape, Task, CONTROL_DT};
 use crate::eval::policy::{Policy, PolicyInput};
 
-const OBS_FIELDS: &[&str] =
-    &["tip_x [m]", "tip_y [m]", "tip_vx [m/s]", "tip_vy [m/s]", "slot_x [m]", "wall_y [m]", "contact [0/1]"];
+const OBS_FIELDS: &[&str] = &[
+    "tip_x [m]",
+    "tip_y [m]",
+    "tip_vx [m/s]",
+    "tip_vy [m/s]",
+    "slot_x [m]",
+    "wall_y [m]",
+    "contact [0/1]",
+];
 /// Peg width, metres.
 pub const PEG_WIDTH: f64 = 0.10;
 /// Lateral clearance on each side of the peg in the slot, metres.
@@ -46,7 +53,12 @@ pub struct Insert {
 
 impl Insert {
     pub fn new() -> Self {
-        let mut task = Self { tip: PointMass::default(), slot_x: 0.0, wall_y: 0.0, contact: false };
+        let mut task = Self {
+            tip: PointMass::default(),
+            slot_x: 0.0,
+            wall_y: 0.0,
+            contact: false,
+        };
         task.reset(0);
         task
     }
@@ -118,7 +130,10 @@ impl Task for Insert {
         let mut rng = TaskRng::new(seed, b"insert/layout");
         self.wall_y = rng.uniform(-1.2, -0.6);
         self.slot_x = rng.uniform(-1.5, 1.5);
-        let start = V2::new(rng.uniform(-1.8, 1.8), (self.wall_y + rng.uniform(1.3, 2.3)).min(1.9));
+        let start = V2::new(
+            rng.uniform(-1.8, 1.8),
+            (self.wall_y + rng.uniform(1.3, 2.3)).min(1.9),
+        );
         self.tip = PointMass::at_rest(start);
         self.contact = false;
     }
@@ -126,7 +141,10 @@ impl Task for Insert {
     fn observe(&self) -> Vec<f32> {
         let (p, v) = (self.tip.pos, self.tip.vel);
         let contact = if self.contact { 1.0 } else { 0.0 };
-        [p.x, p.y, v.x, v.y, self.slot_x, self.wall_y, contact].iter().map(|&x| x as f32).collect()
+        [p.x, p.y, v.x, v.y, self.slot_x, self.wall_y, contact]
+            .iter()
+            .map(|&x| x as f32)
+            .collect()
     }
 
     fn step(&mut self, action: &[f32]) -> anyhow::Result<()> {
@@ -142,7 +160,8 @@ impl Task for Insert {
     }
 
     fn success(&self) -> bool {
-        self.tip.pos.y <= self.wall_y - SLOT_DEPTH + INSERT_TOLERANCE && (self.tip.pos.x - self.slot_x).abs() <= CLEARANCE
+        self.tip.pos.y <= self.wall_y - SLOT_DEPTH + INSERT_TOLERANCE
+            && (self.tip.pos.x - self.slot_x).abs() <= CLEARANCE
     }
 
     fn ee_position(&self) -> [f64; 2] {
@@ -154,14 +173,41 @@ impl Task for Insert {
     }
 
     fn layout(&self) -> Vec<LayoutItem> {
-        let (slot_low, slot_high) = (self.slot_x - PEG_WIDTH / 2.0 - CLEARANCE, self.slot_x + PEG_WIDTH / 2.0 + CLEARANCE);
+        let (slot_low, slot_high) = (
+            self.slot_x - PEG_WIDTH / 2.0 - CLEARANCE,
+            self.slot_x + PEG_WIDTH / 2.0 + CLEARANCE,
+        );
         let (top, floor) = (self.wall_y, self.wall_y - WALL_THICKNESS);
         let bottom = self.wall_y - SLOT_DEPTH;
         vec![
-            LayoutItem { role: Role::Wall, shape: Shape::Rect { min: [-2.5, floor], max: [slot_low, top] } },
-            LayoutItem { role: Role::Wall, shape: Shape::Rect { min: [slot_high, floor], max: [2.5, top] } },
-            LayoutItem { role: Role::Wall, shape: Shape::Rect { min: [slot_low, floor], max: [slot_high, bottom] } },
-            LayoutItem { role: Role::Goal, shape: Shape::Disc { center: [self.slot_x, bottom], radius: INSERT_TOLERANCE } },
+            LayoutItem {
+                role: Role::Wall,
+                shape: Shape::Rect {
+                    min: [-2.5, floor],
+                    max: [slot_low, top],
+                },
+            },
+            LayoutItem {
+                role: Role::Wall,
+                shape: Shape::Rect {
+                    min: [slot_high, floor],
+                    max: [2.5, top],
+                },
+            },
+            LayoutItem {
+                role: Role::Wall,
+                shape: Shape::Rect {
+                    min: [slot_low, floor],
+                    max: [slot_high, bottom],
+                },
+            },
+            LayoutItem {
+                role: Role::Goal,
+                shape: Shape::Disc {
+                    center: [self.slot_x, bottom],
+                    radius: INSERT_TOLERANCE,
+                },
+            },
         ]
     }
 }
@@ -180,7 +226,10 @@ fn plan(start: V2, slot_x: f64, wall_y: f64) -> TimedPath {
     let above = V2::new(slot_x, wall_y + PRE_INSERT_HEIGHT);
     let down = V2::new(0.0, -1.0);
     let press = V2::new(slot_x, wall_y - SLOT_DEPTH - 0.01);
-    let path = SmoothPath::new(vec![Cubic::arc_to(start, above, down), Cubic::line(above, press)]);
+    let path = SmoothPath::new(vec![
+        Cubic::arc_to(start, above, down),
+        Cubic::line(above, press),
+    ]);
     TimedPath::with_speed(path, 0.5, 2.0)
 }
 

@@ -105,17 +105,28 @@ pub fn make_task(name: &str) -> anyhow::Result<Box<dyn Task>> {
         "avoid" => Box::new(avoid::Avoid::new()),
         "push" => Box::new(push::Push::new()),
         "insert" => Box::new(insert::Insert::new()),
-        other => anyhow::bail!("unknown task {other:?}; known tasks: {}", TASK_NAMES.join(", ")),
+        other => anyhow::bail!(
+            "unknown task {other:?}; known tasks: {}",
+            TASK_NAMES.join(", ")
+        ),
     })
 }
 
 /// The last observation of a policy input, checked against the task's observation size.
-pub(crate) fn last_obs<'a>(input: &'a crate::eval::policy::PolicyInput<'_>, dim: usize, task: &str) -> anyhow::Result<&'a [f32]> {
+pub(crate) fn last_obs<'a>(
+    input: &'a crate::eval::policy::PolicyInput<'_>,
+    dim: usize,
+    task: &str,
+) -> anyhow::Result<&'a [f32]> {
     let obs = input
         .obs_history
         .last()
         .ok_or_else(|| anyhow::anyhow!("{task} expert: empty observation history"))?;
-    anyhow::ensure!(obs.len() == dim, "{task} expert: observation has {} values, expected {dim}", obs.len());
+    anyhow::ensure!(
+        obs.len() == dim,
+        "{task} expert: observation has {} values, expected {dim}",
+        obs.len()
+    );
     Ok(obs)
 }
 

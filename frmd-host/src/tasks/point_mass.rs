@@ -51,7 +51,10 @@ pub fn parse_target(action: &[f32]) -> anyhow::Result<V2> {
             f64::from(*y).clamp(-TARGET_LIMIT, TARGET_LIMIT),
         )),
         [_, _] => anyhow::bail!("action {action:?} is not finite"),
-        _ => anyhow::bail!("action has {} values, expected 2 (x, y target in metres)", action.len()),
+        _ => anyhow::bail!(
+            "action has {} values, expected 2 (x, y target in metres)",
+            action.len()
+        ),
     }
 }
 
@@ -76,6 +79,9 @@ mod tests {
     fn rejects_bad_actions() {
         assert!(parse_target(&[0.0]).is_err());
         assert!(parse_target(&[f32::NAN, 0.0]).is_err());
-        assert_eq!(parse_target(&[9.0, -9.0]).unwrap(), V2::new(TARGET_LIMIT, -TARGET_LIMIT));
+        assert_eq!(
+            parse_target(&[9.0, -9.0]).unwrap(),
+            V2::new(TARGET_LIMIT, -TARGET_LIMIT)
+        );
     }
 }

@@ -58,7 +58,13 @@ impl Push {
         let mut world = PhysicsWorld::default();
         let pusher = world.insert_body(RigidBodyBuilder::fixed());
         let puck = world.insert_body(RigidBodyBuilder::fixed());
-        let mut task = Self { world, pusher, puck, ee: PointMass::default(), target: V2::ZERO };
+        let mut task = Self {
+            world,
+            pusher,
+            puck,
+            ee: PointMass::default(),
+            target: V2::ZERO,
+        };
         task.reset(0);
         task
     }
@@ -66,7 +72,10 @@ impl Push {
     fn puck_state(&self) -> (V2, V2) {
         let body = &self.world.bodies[self.puck];
         let (p, v) = (body.translation(), body.linvel());
-        (V2::new(f64::from(p.x), f64::from(p.y)), V2::new(f64::from(v.x), f64::from(v.y)))
+        (
+            V2::new(f64::from(p.x), f64::from(p.y)),
+            V2::new(f64::from(v.x), f64::from(v.y)),
+        )
     }
 }
 
@@ -110,8 +119,10 @@ impl Task for Push {
                 break (puck, target, start);
             }
         };
-        let mut world = PhysicsWorld::default();
-        world.gravity = Vector::ZERO;
+        let mut world = PhysicsWorld {
+            gravity: Vector::ZERO,
+            ..PhysicsWorld::default()
+        };
         world.integration_parameters.dt = (CONTROL_DT / PHYSICS_STEPS as f64) as f32;
         let area = std::f64::consts::PI * PUCK_RADIUS * PUCK_RADIUS;
         let (puck_body, _) = world.insert(
@@ -120,11 +131,16 @@ impl Task for Push {
                 .linear_damping(PUCK_LINEAR_DAMPING as f32)
                 .angular_damping(PUCK_ANGULAR_DAMPING as f32)
                 .can_sleep(false),
-            ColliderBuilder::ball(PUCK_RADIUS as f32).density((PUCK_MASS / area) as f32).friction(0.3).restitution(0.0),
+            ColliderBuilder::ball(PUCK_RADIUS as f32)
+                .density((PUCK_MASS / area) as f32)
+                .friction(0.3)
+                .restitution(0.0),
         );
         let (pusher_body, _) = world.insert(
             RigidBodyBuilder::kinematic_position_based().translation(vector(start)),
-            ColliderBuilder::ball(PUSHER_RADIUS as f32).friction(0.3).restitution(0.0),
+            ColliderBuilder::ball(PUSHER_RADIUS as f32)
+                .friction(0.3)
+                .restitution(0.0),
         );
         self.world = world;
         self.puck = puck_body;
@@ -136,7 +152,10 @@ impl Task for Push {
     fn observe(&self) -> Vec<f32> {
         let (p, v, t) = (self.ee.pos, self.ee.vel, self.target);
         let (q, w) = self.puck_state();
-        [p.x, p.y, v.x, v.y, q.x, q.y, w.x, w.y, t.x, t.y].iter().map(|&x| x as f32).collect()
+        [p.x, p.y, v.x, v.y, q.x, q.y, w.x, w.y, t.x, t.y]
+            .iter()
+            .map(|&x| x as f32)
+            .collect()
     }
 
     fn step(&mut self, action: &[f32]) -> anyhow::Result<()> {
@@ -144,7 +163,8 @@ impl Task for Push {
         for _ in 0..PHYSICS_STEPS {
             // The end effector integrates in its usual 0.01 s substeps; rapier then moves the
             // kinematic pusher to where it ended up.
-            self.ee.advance(target, CONTROL_DT / PHYSICS_STEPS as f64, |_| {});
+            self.ee
+                .advance(target, CONTROL_DT / PHYSICS_STEPS as f64, |_| {});
             self.world.bodies[self.pusher].set_next_kinematic_translation(vector(self.ee.pos));
             self.world.step();
         }
@@ -165,8 +185,20 @@ impl Task for Push {
 
     fn layout(&self) -> Vec<LayoutItem> {
         vec![
-            LayoutItem { role: Role::Object, shape: Shape::Disc { center: self.puck_state().0.to_array(), radius: PUCK_RADIUS } },
-            LayoutItem { role: Role::Goal, shape: Shape::Disc { center: self.target.to_array(), radius: GOAL_TOLERANCE } },
+            LayoutItem {
+                role: Role::Object,
+                shape: Shape::Disc {
+                    center: self.puck_state().0.to_array(),
+                    radius: PUCK_RADIUS,
+                },
+            },
+            LayoutItem {
+                role: Role::Goal,
+                shape: Shape::Disc {
+                    center: self.target.to_array(),
+                    radius: GOAL_TOLERANCE,
+                },
+            },
         ]
     }
 }
@@ -196,8 +228,15 @@ fn plan(ee: V2, puck: V2, target: V2) -> PushPlan {
     let contact = PUCK_RADIUS + PUSHER_RADIUS;
     let behind = puck - dir * (contact + APPROACH_GAP);
     let finish = target - dir * contact;
-    let path = SmoothPath::new(vec![Cubic::arc_to(ee, behind, dir), Cubic::line(behind, finish)]);
-    PushPlan { path: TimedPath::with_speed(path, 0.4, 2.0), dir, target }
+    let path = SmoothPath::new(vec![
+        Cubic::arc_to(ee, behind, dir),
+        Cubic::line(behind, finish),
+    ]);
+    PushPlan {
+        path: TimedPath::with_speed(path, 0.4, 2.0),
+        dir,
+        target,
+    }
 }
 
 impl Policy for PushExpert {

@@ -11,7 +11,14 @@ use super::rng::TaskRng;
 use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
 use crate::eval::policy::{Policy, PolicyInput};
 
-const OBS_FIELDS: &[&str] = &["ee_x [m]", "ee_y [m]", "ee_vx [m/s]", "ee_vy [m/s]", "goal_x [m]", "goal_y [m]"];
+const OBS_FIELDS: &[&str] = &[
+    "ee_x [m]",
+    "ee_y [m]",
+    "ee_vx [m/s]",
+    "ee_vy [m/s]",
+    "goal_x [m]",
+    "goal_y [m]",
+];
 const GOAL_TOLERANCE: f64 = 0.03;
 const SPEED_TOLERANCE: f64 = 0.1;
 const HALF_EXTENT: f64 = 1.6;
@@ -24,7 +31,10 @@ pub struct Reach {
 
 impl Reach {
     pub fn new() -> Self {
-        let mut task = Self { ee: PointMass::default(), goal: V2::ZERO };
+        let mut task = Self {
+            ee: PointMass::default(),
+            goal: V2::ZERO,
+        };
         task.reset(0);
         task
     }
@@ -52,8 +62,14 @@ impl Task for Reach {
     fn reset(&mut self, seed: u64) {
         let mut rng = TaskRng::new(seed, b"reach/layout");
         loop {
-            let start = V2::new(rng.uniform(-HALF_EXTENT, HALF_EXTENT), rng.uniform(-HALF_EXTENT, HALF_EXTENT));
-            let goal = V2::new(rng.uniform(-HALF_EXTENT, HALF_EXTENT), rng.uniform(-HALF_EXTENT, HALF_EXTENT));
+            let start = V2::new(
+                rng.uniform(-HALF_EXTENT, HALF_EXTENT),
+                rng.uniform(-HALF_EXTENT, HALF_EXTENT),
+            );
+            let goal = V2::new(
+                rng.uniform(-HALF_EXTENT, HALF_EXTENT),
+                rng.uniform(-HALF_EXTENT, HALF_EXTENT),
+            );
             if (goal - start).norm() >= MIN_DISTANCE {
                 self.ee = PointMass::at_rest(start);
                 self.goal = goal;
@@ -64,7 +80,10 @@ impl Task for Reach {
 
     fn observe(&self) -> Vec<f32> {
         let (p, v, g) = (self.ee.pos, self.ee.vel, self.goal);
-        [p.x, p.y, v.x, v.y, g.x, g.y].iter().map(|&x| x as f32).collect()
+        [p.x, p.y, v.x, v.y, g.x, g.y]
+            .iter()
+            .map(|&x| x as f32)
+            .collect()
     }
 
     fn step(&mut self, action: &[f32]) -> anyhow::Result<()> {
@@ -86,7 +105,13 @@ impl Task for Reach {
     }
 
     fn layout(&self) -> Vec<LayoutItem> {
-        vec![LayoutItem { role: Role::Goal, shape: Shape::Disc { center: self.goal.to_array(), radius: GOAL_TOLERANCE } }]
+        vec![LayoutItem {
+            role: Role::Goal,
+            shape: Shape::Disc {
+                center: self.goal.to_array(),
+                radius: GOAL_TOLERANCE,
+            },
+        }]
     }
 }
 
@@ -118,7 +143,11 @@ impl Policy for ReachExpert {
                 let mut rng = TaskRng::new(self.seed, b"reach/expert");
                 let bend = rng.uniform(-0.08, 0.08) * (goal - start).norm();
                 let control = start.lerp(goal, 0.5) + (goal - start).unit().perp() * (2.0 * bend);
-                TimedPath::with_speed(SmoothPath::new(vec![Cubic::quadratic(start, control, goal)]), 0.5, 2.0)
+                TimedPath::with_speed(
+                    SmoothPath::new(vec![Cubic::quadratic(start, control, goal)]),
+                    0.5,
+                    2.0,
+                )
             }
         };
         let target = plan.at(self.step as f64 * CONTROL_DT);

@@ -1,0 +1,33 @@
+//! FRMD on a Cortex-M4F / Cortex-M7 (QEMU mps2-an386 / mps2-an500, or a real board with `defmt`):
+//! the measurement harness and workloads shared by the firmware binaries.
+//!
+//! - `frmd-cortex-m` (src/main.rs): the baked ProDMP policy decoder on fixed inputs.
+//! - `frmd-cortex-m-mlp` (src/bin/frmd-cortex-m-mlp.rs): a synthetic int8 MLP (40-256-256-256-42,
+//!   SiLU LUTs) feeding the decoder, i.e. the one-step student's network + decode path.
+//! - `frmd-cortex-m-policy` (src/bin/frmd-cortex-m-policy.rs): a synthetic one-step policy baked
+//!   by frmd-export, measured as `Policy::act` (observations in, action chunk out).
+//!
+//! Each prints `digest: <16 hex>` (FNV-1a 64 over the little-endian bytes of every output, in
+//! order), `instructions: <n>` (median per call, from SysTick under QEMU `-icount shift=0`),
+//! `flash: <bytes>` and `ram: <bytes>` (static RAM + peak stack), plus supporting lines.
+#![no_std]
+#![deny(unsafe_op_in_unsafe_fn)]
+
+#[cfg(feature = "defmt")]
+use defmt_rtt as _;
+
+pub mod baked_mlp;
+pub mod bench;
+pub mod digest;
+pub mod memory;
+pub mod mlp_workload;
+pub mod policy_workload;
+pub mod prodmp_workload;
+pub mod report;
+pub mod shape;
+pub mod timer;
+pub mod workload_api;
+
+/// The ProDMP decoder tables of [`shape::config`], baked on the host by build.rs.
+pub static BAKED_PRODMP: prodmp_workload::Baked =
+    include!(concat!(env!("OUT_DIR"), "/baked_prodmp.rs"));

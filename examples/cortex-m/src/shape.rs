@@ -1,0 +1,39 @@
+//! Shape of the policy the firmware runs, shared by `build.rs` (which bakes the ProDMP tables on
+//! the host), the firmware, `src/synthetic_mlp.rs` and the host-side digest check
+//! (`frmd-core/tests/cortex_m_qemu.rs`).
+//! Values follow the built-in tasks: 2 DoF (x, y targets in metres), 0.1 s control period,
+//! horizon 12, 20 basis functions (DESIGN.md s.2 policy convention).
+#![allow(dead_code)]
+
+use frmd_core::prodmp::ProDmpConfig;
+
+/// Degrees of freedom (action dimension).
+pub const DOF: usize = 2;
+/// Query times per decoded chunk.
+pub const HORIZON: usize = 12;
+/// ProDMP basis functions per DoF.
+pub const NUM_BASIS: usize = 20;
+/// Parameters per DoF: the basis weights, then the goal.
+pub const PARAMS: usize = NUM_BASIS + 1;
+/// Control period, seconds.
+pub const CONTROL_DT: f64 = 0.1;
+
+/// Synthetic int8 MLP (src/synthetic_mlp.rs): input width (observation history, noisy trajectory
+/// and noise features of a small policy, rounded to 40), hidden widths, widest layer.
+pub const MLP_INPUT: usize = 40;
+pub const MLP_HIDDEN: [usize; 3] = [256, 256, 256];
+pub const MLP_WIDTH: usize = 256;
+/// MLP output: the ProDMP parameters of every DoF, DoF-major.
+pub const MLP_OUTPUT: usize = DOF * PARAMS;
+
+/// Synthetic one-step policy (src/synthetic_policy.rs): observation history length, observation
+/// dimension, sampling steps, model input width (standard layout: `M*O + K + K + N*K`).
+pub const POLICY_HISTORY: usize = 2;
+pub const POLICY_OBS_DIM: usize = 8;
+pub const POLICY_STEPS: usize = 1;
+pub const POLICY_INPUT: usize = POLICY_HISTORY * POLICY_OBS_DIM + 2 * DOF + HORIZON * DOF;
+
+/// The ProDMP configuration of the policy (tau = HORIZON * CONTROL_DT = 1.2 s).
+pub fn config() -> ProDmpConfig {
+    ProDmpConfig::policy(DOF, NUM_BASIS, HORIZON, CONTROL_DT)
+}

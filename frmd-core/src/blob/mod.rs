@@ -1,0 +1,185 @@
+//! Self-describing policy blob (DESIGN.md s.5): update a policy without rebuilding firmware.
+//!
+//! [`encode`] writes a blob from borrowed [`BlobParts`] into a caller buffer (the exporter wraps
+//! it); [`LoadedPolicy::load`] validates a blob in place and plugs it into the
+//! [`crate::policy::Policy`] API. The layout is documented in [`format`]. Loading is zero-copy for
+//! the weights, biases, requantization parameters and output scales (cast with `bytemuck`, which
+//! also checks alignment); normalization, ProDMP tables, step constants and LUTs (a few KiB) are
+//! copied into the [`LoadedPolicy`] so they can be used as fixed-size arrays. Every check failure is
+//! a named [`BlobError`]; nothing panics on any input.
+
+pub mod crc32;
+pub mod format;
+mod load;
+mod writer;
+
+#[cfg(test)]
+mod tests;
+
+pub use format::{
+    Descriptor, HiddenLayerDesc, OutputLayerDesc, Section, SectionId, FORMAT_VERSION, HEADER_LEN,
+    LUT_LEN, MAGIC, SECTION_ALIGN, STEP_WORDS,
+};
+pub use load::LoadedPolicy;
+pub use writer::{
+    encode, encoded_len, BlobParts, HiddenLayerParts, OutputLayerParts, ProDmpTables,
+};
+
+use crate::policy::PolicyError;
+
+/// Which blob dimension disagrees with the loader's const generics.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Dimension {
+    /// History length `M`.
+    History,
+    /// Observation dimension `O`.
+    ObsDim,
+    /// Action dimension `K`.
+    ActionDim,
+    /// Horizon `N`.
+    Horizon,
+    /// ProDMP parameters per DoF `P`.
+    ParamsPerDof,
+}
+
+/// Why a blob was rejected (or could not be written). Small and `Copy`; each variant names the
+/// problem and, where it applies, the section or layer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BlobError {
+    /// The buffer is shorter than the header or than the total length the header states.
+    Truncated,
+    /// The first four bytes are not `b"FRMD"`.
+    BadMagic,
+    /// The format version is not [`FORMAT_VERSION`].
+    UnsupportedVersion {
+        /// Version found in the header.
+        found: u16,
+    },
+    /// The reserved header field is not zero.
+    ReservedField,
+    /// The stated total length is smaller than the header, or the descriptor does not fit in it.
+    InvalidLength,
+    /// The payload CRC-32 differs from the header's.
+    CrcMismatch {
+        /// CRC stored in the header.
+        stored: u32,
+        /// CRC computed over the payload.
+        computed: u32,
+    },
+    /// The descriptor is not a valid postcard encoding (or has trailing bytes).
+    Descriptor,
+    /// A blob dimension differs from the const generic it is loaded into.
+    DimensionMismatch(Dimension),
+    /// A section lies (partly) outside the blob.
+    SectionBounds(SectionId),
+    /// A section's address is not aligned for its element type (the blob must start 4-aligned),
+    /// or its offset is not a multiple of [`SECTION_ALIGN`].
+    SectionMisaligned(SectionId),
+    /// A section's length does not match the shapes in the descriptor.
+    SectionLength(SectionId),
+    /// A float section contains NaN or infinity.
+    NonFinite(SectionId),
+    /// A normalization range has `min > max`.
+    Normalization,
+    /// The input layout is invalid or its width differs from the first layer's input width.
+    InputLayout,
+    /// The input quantization scale or zero point is invalid.
+    InputQuantization,
+    /// The step table is invalid (count, values, or a bias variant index out of range).
+    Steps,
+    /// The control period is not finite and positive.
+    ControlPeriod,
+    /// Layer `index` (the output layer is `hidden.len()`) does not take the previous width, or a
+    /// width is 0.
+    LayerWidth {
+        /// Offending layer.
+        index: u8,
+    },
+    /// The output layer does not produce `K * P` values.
+    OutputWidth,
+    /// A multiplier is negative in hidden layer `layer`.
+    NegativeMultiplier {
+        /// Offending layer.
+        layer: u8,
+    },
+    /// A shift is outside `SHIFT_MIN..=SHIFT_MAX` in hidden layer `layer`.
+    ShiftOutOfRange {
+        /// Offending layer.
+        layer: u8,
+    },
+    /// Output zero point outside `[-128, 127]` or `activation_min > activation_max` in hidden
+    /// layer `layer`.
+    Requantization {
+        /// Offending layer.
+        layer: u8,
+    },
+    /// Hidden layer `layer` refers to a LUT the blob does not have.
+    LutIndex {
+        /// Offending layer.
+        layer: u8,
+    },
+    /// The loader runs on a big-endian target (the blob is little endian, read in place).
+    BigEndianTarget,
+    /// Writing: the output buffer is too small.
+    BufferTooSmall,
+    /// Writing: the descriptor could not be encoded.
+    Encode,
+    /// Writing: more hidden layers than [`crate::policy::MAX_HIDDEN_LAYERS`] or a size beyond u32.
+    TooLarge,
+    /// Building the network or policy from a loaded blob failed.
+    Policy(PolicyError),
+}
+
+impl core::fmt::Display for BlobError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Truncated => f.write_str("blob is truncated"),
+            Self::BadMagic => f.write_str("blob magic is not FRMD"),
+            Self::UnsupportedVersion { found } => {
+                write!(f, "blob format version {found} is not {FORMAT_VERSION}")
+            }
+            Self::ReservedField => f.write_str("reserved header field is not zero"),
+            Self::InvalidLength => f.write_str("blob total or descriptor length is inconsistent"),
+            Self::CrcMismatch { stored, computed } => {
+                write!(
+                    f,
+                    "payload CRC {computed:#010x} differs from header {stored:#010x}"
+                )
+            }
+            Self::Descriptor => f.write_str("descriptor is not valid postcard"),
+            Self::DimensionMismatch(d) => write!(f, "blob dimension {d:?} differs from the build"),
+            Self::SectionBounds(s) => write!(f, "section {s:?} lies outside the blob"),
+            Self::SectionMisaligned(s) => write!(f, "section {s:?} is misaligned"),
+            Self::SectionLength(s) => write!(f, "section {s:?} has the wrong length"),
+            Self::NonFinite(s) => write!(f, "section {s:?} contains NaN or infinity"),
+            Self::Normalization => f.write_str("normalization range has min > max"),
+            Self::InputLayout => f.write_str("input layout invalid or width mismatch"),
+            Self::InputQuantization => f.write_str("input quantization parameters invalid"),
+            Self::Steps => f.write_str("step table invalid"),
+            Self::ControlPeriod => f.write_str("control period is not finite and positive"),
+            Self::LayerWidth { index } => write!(f, "layer {index} width mismatch"),
+            Self::OutputWidth => f.write_str("output layer width is not K * P"),
+            Self::NegativeMultiplier { layer } => {
+                write!(f, "layer {layer} has a negative multiplier")
+            }
+            Self::ShiftOutOfRange { layer } => write!(f, "layer {layer} has a shift out of range"),
+            Self::Requantization { layer } => {
+                write!(f, "layer {layer} has an invalid zero point or clamp range")
+            }
+            Self::LutIndex { layer } => write!(f, "layer {layer} refers to a missing LUT"),
+            Self::BigEndianTarget => {
+                f.write_str("blobs are read in place on little-endian targets only")
+            }
+            Self::BufferTooSmall => f.write_str("output buffer too small for the blob"),
+            Self::Encode => f.write_str("descriptor encoding failed"),
+            Self::TooLarge => f.write_str("blob too large (layers or sizes)"),
+            Self::Policy(e) => write!(f, "policy: {e}"),
+        }
+    }
+}
+
+impl From<PolicyError> for BlobError {
+    fn from(error: PolicyError) -> Self {
+        Self::Policy(error)
+    }
+}

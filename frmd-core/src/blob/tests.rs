@@ -1,0 +1,435 @@
+//! Blob tests: CRC, round trip through the policy, and rejection of every kind of damage by a
+//! named error (never a panic).
+
+extern crate std;
+
+use std::{vec, vec::Vec};
+
+use proptest::prelude::*;
+
+use super::*;
+use crate::policy::test_model::*;
+use crate::policy::{Noise, PolicyError};
+use crate::rng::Rng;
+
+type Loaded<'a> = LoadedPolicy<'a, M, O, K, N, P>;
+
+/// A 16-byte aligned byte buffer.
+struct Aligned {
+    words: Vec<u128>,
+    len: usize,
+    shift: usize,
+}
+
+impl Aligned {
+    fn new(bytes: &[u8], shift: usize) -> Self {
+        let mut words = vec![0_u128; (bytes.len() + shift) / 16 + 1];
+        let raw: &mut [u8] = bytemuck::cast_slice_mut(&mut words);
+        raw[shift..shift + bytes.len()].copy_from_slice(bytes);
+        Self {
+            words,
+            len: bytes.len(),
+            shift,
+        }
+    }
+    fn bytes(&self) -> &[u8] {
+        let raw: &[u8] = bytemuck::cast_slice(&self.words);
+        &raw[self.shift..self.shift + self.len]
+    }
+}
+
+fn model_blob(model: &TestModel) -> Vec<u8> {
+    let luts = model.luts();
+    let hidden = model.hidden_parts();
+    let parts = model.blob_parts(&luts, &hidden);
+    let len = encoded_len(&parts).unwrap();
+    let mut out = vec![0xAA_u8; len + 7];
+    let written = encode(&parts, &mut out).unwrap();
+    assert_eq!(written, len);
+    assert!(
+        out[len..].iter().all(|b| *b == 0xAA),
+        "encode wrote past its length"
+    );
+    out.truncate(len);
+    out
+}
+
+fn load(bytes: &[u8]) -> Result<Loaded<'_>, BlobError> {
+    Loaded::load(bytes)
+}
+
+fn load_copy(bytes: &[u8]) -> Result<(), BlobError> {
+    let buffer = Aligned::new(bytes, 0);
+    load(buffer.bytes()).map(|_| ())
+}
+
+fn fix_crc(blob: &mut [u8]) {
+    let crc = crc32::crc32(&blob[HEADER_LEN..]);
+    blob[12..16].copy_from_slice(&crc.to_le_bytes());
+}
+
+fn descriptor_of(blob: &[u8]) -> Descriptor {
+    let len = u32::from_le_bytes(blob[16..20].try_into().unwrap()) as usize;
+    postcard::from_bytes(&blob[HEADER_LEN..HEADER_LEN + len]).unwrap()
+}
+
+/// Rewrites the descriptor (the data area moves if the descriptor length changes alignment).
+fn with_descriptor(blob: &[u8], edit: impl FnOnce(&mut Descriptor)) -> Vec<u8> {
+    let old_len = u32::from_le_bytes(blob[16..20].try_into().unwrap()) as usize;
+    let old_start = writer::data_start(old_len).unwrap();
+    let mut d = descriptor_of(blob);
+    edit(&mut d);
+    let mut scratch = [0_u8; 4096];
+    let encoded = postcard::to_slice(&d, &mut scratch).unwrap().to_vec();
+    let start = writer::data_start(encoded.len()).unwrap();
+    let mut out = vec![0_u8; start];
+    out[..HEADER_LEN].copy_from_slice(&blob[..HEADER_LEN]);
+    out[HEADER_LEN..HEADER_LEN + encoded.len()].copy_from_slice(&encoded);
+    out.extend_from_slice(&blob[old_start..]);
+    let total = out.len() as u32;
+    out[8..12].copy_from_slice(&total.to_le_bytes());
+    out[16..20].copy_from_slice(&(encoded.len() as u32).to_le_bytes());
+    fix_crc(&mut out);
+    out
+}
+
+/// Overwrites bytes of the data area at `section.offset + at` and fixes the CRC.
+fn poke(blob: &[u8], section: Section, at: usize, bytes: &[u8]) -> Vec<u8> {
+    let mut out = blob.to_vec();
+    let len = u32::from_le_bytes(blob[16..20].try_into().unwrap()) as usize;
+    let start = writer::data_start(len).unwrap() + section.offset as usize + at;
+    out[start..start + bytes.len()].copy_from_slice(bytes);
+    fix_crc(&mut out);
+    out
+}
+
+#[test]
+fn round_trip_gives_the_same_policy_bit_for_bit() {
+    for sigmas in [&[80.0][..], &[80.0, 2.0, 0.3][..]] {
+        let model = TestModel::new(21, sigmas);
+        let blob = model_blob(&model);
+        let buffer = Aligned::new(&blob, 0);
+        let loaded = load(buffer.bytes()).unwrap();
+        assert_eq!(loaded.steps(), &model.steps[..]);
+        assert_eq!(loaded.decoder(), &model.decoder);
+        assert_eq!(loaded.layout(), &model.layout);
+        assert_eq!(loaded.control_dt(), DT);
+        let mut from_blob = loaded.policy::<I, WIDTH>().unwrap();
+        let mut direct = model.int8_policy();
+        for policy_seed in 0..3 {
+            from_blob.reset(&[0.0, 0.2]).unwrap();
+            direct.reset(&[0.0, 0.2]).unwrap();
+            for obs in [[0.1, 1.0, 2.0], [0.3, 2.0, 2.0]] {
+                from_blob.observe(&obs).unwrap();
+                direct.observe(&obs).unwrap();
+            }
+            let a = *from_blob
+                .act(Noise::Rng(&mut Rng::new(policy_seed)))
+                .unwrap();
+            let b = *direct.act(Noise::Rng(&mut Rng::new(policy_seed))).unwrap();
+            assert_eq!(a, b);
+            assert_eq!(
+                from_blob.network().accumulators(),
+                direct.network().accumulators()
+            );
+        }
+        // Trailing bytes (flash padding) are ignored.
+        let mut padded = blob.clone();
+        padded.extend_from_slice(&[0xFF; 40]);
+        assert!(load_copy(&padded).is_ok());
+    }
+}
+
+#[test]
+fn truncation_at_every_length_is_rejected() {
+    let model = TestModel::new(22, &[80.0, 1.0]);
+    let blob = model_blob(&model);
+    let buffer = Aligned::new(&blob, 0);
+    let bytes = buffer.bytes();
+    for len in 0..bytes.len() {
+        assert_eq!(
+            load(&bytes[..len]).err(),
+            Some(BlobError::Truncated),
+            "length {len}"
+        );
+    }
+    assert!(load(bytes).is_ok());
+}
+
+#[test]
+fn header_damage_is_named() {
+    let model = TestModel::new(23, &[80.0]);
+    let blob = model_blob(&model);
+    let mut bad = blob.clone();
+    bad[0] = b'G';
+    assert_eq!(load_copy(&bad), Err(BlobError::BadMagic));
+    let mut bad = blob.clone();
+    bad[4..6].copy_from_slice(&2_u16.to_le_bytes());
+    assert_eq!(
+        load_copy(&bad),
+        Err(BlobError::UnsupportedVersion { found: 2 })
+    );
+    let mut bad = blob.clone();
+    bad[6] = 1;
+    assert_eq!(load_copy(&bad), Err(BlobError::ReservedField));
+    let mut bad = blob.clone();
+    bad[8..12].copy_from_slice(&3_u32.to_le_bytes());
+    assert_eq!(load_copy(&bad), Err(BlobError::InvalidLength));
+    let mut bad = blob.clone();
+    bad[16..20].copy_from_slice(&(blob.len() as u32).to_le_bytes());
+    assert_eq!(load_copy(&bad), Err(BlobError::InvalidLength));
+    // Any flipped payload bit is caught by the CRC.
+    for at in [HEADER_LEN, HEADER_LEN + 5, blob.len() / 2, blob.len() - 1] {
+        let mut bad = blob.clone();
+        bad[at] ^= 0x10;
+        assert!(
+            matches!(load_copy(&bad), Err(BlobError::CrcMismatch { .. })),
+            "byte {at}"
+        );
+    }
+    // A descriptor that is not postcard: all 0xFF bytes with a fixed CRC.
+    let mut bad = blob.clone();
+    let len = u32::from_le_bytes(blob[16..20].try_into().unwrap()) as usize;
+    bad[HEADER_LEN..HEADER_LEN + len].fill(0xFF);
+    fix_crc(&mut bad);
+    assert_eq!(load_copy(&bad), Err(BlobError::Descriptor));
+}
+
+#[test]
+fn dimension_mismatches_are_named() {
+    let model = TestModel::new(24, &[80.0]);
+    let blob = model_blob(&model);
+    let buffer = Aligned::new(&blob, 0);
+    let bytes = buffer.bytes();
+    assert_eq!(
+        LoadedPolicy::<M, 4, K, N, P>::load(bytes).err(),
+        Some(BlobError::DimensionMismatch(Dimension::ObsDim))
+    );
+    assert_eq!(
+        LoadedPolicy::<3, O, K, N, P>::load(bytes).err(),
+        Some(BlobError::DimensionMismatch(Dimension::History))
+    );
+    assert_eq!(
+        LoadedPolicy::<M, O, 3, N, P>::load(bytes).err(),
+        Some(BlobError::DimensionMismatch(Dimension::ActionDim))
+    );
+    assert_eq!(
+        LoadedPolicy::<M, O, K, 5, P>::load(bytes).err(),
+        Some(BlobError::DimensionMismatch(Dimension::Horizon))
+    );
+    assert_eq!(
+        LoadedPolicy::<M, O, K, N, 5>::load(bytes).err(),
+        Some(BlobError::DimensionMismatch(Dimension::ParamsPerDof))
+    );
+    // Scratch or input buffer too small for the blob's network: named by the policy.
+    let loaded = load(bytes).unwrap();
+    assert_eq!(
+        loaded.policy::<I, 16>().err(),
+        Some(PolicyError::Model(
+            crate::model::mlp::ModelError::ScratchTooSmall
+        ))
+    );
+    assert_eq!(
+        loaded.policy::<8, WIDTH>().err(),
+        Some(PolicyError::InputWidth)
+    );
+}
+
+#[test]
+fn shape_and_value_damage_is_named() {
+    let model = TestModel::new(25, &[80.0, 0.5]);
+    let blob = model_blob(&model);
+    let d = descriptor_of(&blob);
+    let check = |bytes: Vec<u8>, expected: BlobError| {
+        assert_eq!(load_copy(&bytes), Err(expected));
+    };
+    check(
+        with_descriptor(&blob, |d| d.hidden[1].in_features += 1),
+        BlobError::LayerWidth { index: 1 },
+    );
+    check(
+        with_descriptor(&blob, |d| d.hidden[0].in_features -= 1),
+        BlobError::InputLayout,
+    );
+    check(
+        with_descriptor(&blob, |d| d.output.out_features -= 1),
+        BlobError::OutputWidth,
+    );
+    check(
+        with_descriptor(&blob, |d| d.output.in_features = 7),
+        BlobError::LayerWidth { index: 2 },
+    );
+    check(
+        with_descriptor(&blob, |d| d.hidden[0].weights.offset = 1 << 30),
+        BlobError::SectionBounds(SectionId::HiddenWeights(0)),
+    );
+    check(
+        with_descriptor(&blob, |d| d.obs_norm.offset += 4),
+        BlobError::SectionMisaligned(SectionId::ObsNorm),
+    );
+    check(
+        with_descriptor(&blob, |d| d.hidden[1].bias.len -= 4),
+        BlobError::SectionLength(SectionId::HiddenBias(1)),
+    );
+    check(
+        with_descriptor(&blob, |d| d.output.scales.len -= 2),
+        BlobError::SectionLength(SectionId::OutputScales),
+    );
+    check(
+        with_descriptor(&blob, |d| d.first_layer_biases.len -= 4),
+        BlobError::SectionLength(SectionId::FirstLayerBiases),
+    );
+    check(
+        with_descriptor(&blob, |d| d.hidden[1].lut = Some(7)),
+        BlobError::LutIndex { layer: 1 },
+    );
+    check(
+        with_descriptor(&blob, |d| d.hidden[0].output_zero_point = 300),
+        BlobError::Requantization { layer: 0 },
+    );
+    check(
+        with_descriptor(&blob, |d| d.input_scale = -1.0),
+        BlobError::InputQuantization,
+    );
+    check(
+        with_descriptor(&blob, |d| d.control_dt = f32::NAN),
+        BlobError::ControlPeriod,
+    );
+    check(
+        with_descriptor(&blob, |d| {
+            d.layout = crate::policy::InputLayout::new(
+                &[crate::policy::InputSegment::NoisyTrajectory],
+                1.0,
+            )
+            .unwrap()
+        }),
+        BlobError::InputLayout,
+    );
+    check(
+        with_descriptor(&blob, |d| d.steps.len = 0),
+        BlobError::Steps,
+    );
+    check(
+        poke(&blob, d.obs_norm, 4, &f32::NAN.to_le_bytes()),
+        BlobError::NonFinite(SectionId::ObsNorm),
+    );
+    check(
+        poke(&blob, d.prodmp, 8, &f32::INFINITY.to_le_bytes()),
+        BlobError::NonFinite(SectionId::ProDmp),
+    );
+    check(
+        poke(&blob, d.action_norm, 0, &9.0_f32.to_le_bytes()),
+        BlobError::Normalization,
+    );
+    check(
+        poke(&blob, d.hidden[1].shifts, 8, &40_i32.to_le_bytes()),
+        BlobError::ShiftOutOfRange { layer: 1 },
+    );
+    check(
+        poke(&blob, d.hidden[0].multipliers, 0, &(-5_i32).to_le_bytes()),
+        BlobError::NegativeMultiplier { layer: 0 },
+    );
+    // Second step's bias variant index beyond the two variants.
+    check(
+        poke(&blob, d.steps, 4 * (STEP_WORDS + 5), &2_u32.to_le_bytes()),
+        BlobError::Steps,
+    );
+    // First step re-noising is invalid.
+    check(
+        poke(&blob, d.steps, 4, &0.5_f32.to_le_bytes()),
+        BlobError::Steps,
+    );
+}
+
+#[test]
+fn misaligned_buffer_is_rejected() {
+    let model = TestModel::new(26, &[80.0]);
+    let blob = model_blob(&model);
+    for shift in [1, 2, 3] {
+        let buffer = Aligned::new(&blob, shift);
+        assert_eq!(
+            load(buffer.bytes()).err(),
+            Some(BlobError::SectionMisaligned(SectionId::ObsNorm)),
+            "shift {shift}"
+        );
+    }
+    // 4-byte alignment is enough.
+    let buffer = Aligned::new(&blob, 4);
+    assert!(load(buffer.bytes()).is_ok());
+}
+
+#[test]
+fn writer_checks_part_lengths() {
+    let model = TestModel::new(27, &[80.0]);
+    let luts = model.luts();
+    let hidden = model.hidden_parts();
+    let mut parts = model.blob_parts(&luts, &hidden);
+    let mut out = vec![0_u8; 1 << 16];
+    parts.obs_min = &model.obs_norm.min[..2];
+    assert_eq!(
+        encode(&parts, &mut out),
+        Err(BlobError::SectionLength(SectionId::ObsNorm))
+    );
+    let mut parts = model.blob_parts(&luts, &hidden);
+    parts.output.scales = &model.output_scales[1..];
+    assert_eq!(
+        encode(&parts, &mut out),
+        Err(BlobError::SectionLength(SectionId::OutputScales))
+    );
+    let parts = model.blob_parts(&luts, &hidden);
+    let len = encoded_len(&parts).unwrap();
+    assert_eq!(
+        encode(&parts, &mut out[..len - 1]),
+        Err(BlobError::BufferTooSmall)
+    );
+}
+
+fn fixture_blob() -> &'static [u8] {
+    static BLOB: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+    BLOB.get_or_init(|| model_blob(&TestModel::new(28, &[80.0, 1.0])))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+    #[test]
+    fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
+        let _ = load_copy(&bytes);
+        // With a valid header and CRC the descriptor parser and section checks are reached.
+        let mut framed = bytes.clone();
+        if framed.len() >= HEADER_LEN {
+            framed[..4].copy_from_slice(&MAGIC);
+            framed[4..6].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
+            framed[6..8].fill(0);
+            let total = framed.len() as u32;
+            framed[8..12].copy_from_slice(&total.to_le_bytes());
+            let desc = u32::from_le_bytes(framed[16..20].try_into().unwrap()) % (total + 1);
+            framed[16..20].copy_from_slice(&desc.to_le_bytes());
+            fix_crc(&mut framed);
+            let _ = load_copy(&framed);
+        }
+    }
+
+    #[test]
+    fn mutated_blobs_never_panic(
+        edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
+    ) {
+        let blob = fixture_blob();
+        let mut bytes = blob.to_vec();
+        for (index, value) in &edits {
+            let at = HEADER_LEN + index.index(bytes.len() - HEADER_LEN);
+            bytes[at] = *value;
+        }
+        fix_crc(&mut bytes);
+        if let Ok(()) = load_copy(&bytes) {
+            // A blob that still loads must give a policy that runs or fails by name.
+            let buffer = Aligned::new(&bytes, 0);
+            let loaded = load(buffer.bytes()).unwrap();
+            if let Ok(mut policy) = loaded.policy::<I, WIDTH>() {
+                policy.reset(&[0.0, 0.2]).unwrap();
+                policy.observe(&[0.0, 1.0, 2.0]).unwrap();
+                let _ = policy.act(Noise::Rng(&mut Rng::new(1)));
+            }
+        }
+    }
+}

@@ -1,0 +1,329 @@
+//! Every named error of the transformer forward passes is reachable and reported as documented.
+
+extern crate std;
+
+use super::fixture::{big_scratch, random_inputs, FloatModel, QuantModel, Ranges};
+use super::SMALL;
+use crate::kernels::{Activation, KernelError};
+use crate::model::transformer::*;
+use crate::quant::QuantParams;
+use crate::rng::Rng;
+
+#[test]
+fn named_errors_for_bad_shapes_weights_and_arguments() {
+    let model = FloatModel::random(SMALL, 21);
+    let blocks = model.f32_blocks();
+    let net = model.f32_view(&blocks);
+    let mut rng = Rng::new(22);
+    let quant = QuantModel::new(&model, &Ranges::calibrate(&net, &mut rng, 10));
+    let int8_blocks = quant.blocks(&model);
+    let int8 = quant.view(&model, &int8_blocks, false);
+    let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
+    let mut out = [0.0_f32; 8];
+    let mut scratch = big_scratch();
+    let mut run_f32 = |n: &F32Transformer<'_>, t: &[f32], c: &[f32], o: &mut [f32]| {
+        n.forward(t, c, o, &mut *scratch)
+    };
+    use TransformerError as E;
+    // Shapes.
+    let shape = |s: TransformerShape| F32Transformer { shape: s, ..net }.validate();
+    assert_eq!(
+        shape(TransformerShape { heads: 0, ..SMALL }),
+        Err(E::ZeroSize)
+    );
+    assert_eq!(
+        shape(TransformerShape { heads: 3, ..SMALL }),
+        Err(E::HeadsDoNotDivideWidth)
+    );
+    let huge = TransformerShape {
+        horizon: usize::MAX / 4,
+        ..SMALL
+    };
+    assert_eq!(shape(huge), Err(E::SizeOverflow));
+    assert_eq!(
+        shape(TransformerShape { layers: 3, ..SMALL }),
+        Err(E::LayerCount)
+    );
+    assert_eq!(
+        shape(TransformerShape { output: 9, ..SMALL }),
+        Err(E::Features { part: Part::Head })
+    );
+    assert_eq!(
+        shape(TransformerShape {
+            cond_dim: 5,
+            ..SMALL
+        }),
+        Err(E::Features { part: Part::CondIn })
+    );
+    // Weights.
+    let positions = F32Transformer {
+        positions: &model.positions[1..],
+        ..net
+    };
+    assert_eq!(
+        positions.validate(),
+        Err(E::Features {
+            part: Part::Positions
+        })
+    );
+    let noise = F32Transformer {
+        noise_token: &model.noise_token[1..],
+        ..net
+    };
+    assert_eq!(
+        noise.validate(),
+        Err(E::Features {
+            part: Part::NoiseToken
+        })
+    );
+    let mut broken = blocks.clone();
+    broken[1].qkv.out_features = 47;
+    broken[1].qkv.weights = &model.blocks[1].qkv.weights[..47 * 16];
+    broken[1].qkv.bias = &model.blocks[1].qkv.bias[..47];
+    let qkv = F32Transformer {
+        blocks: &broken,
+        ..net
+    };
+    assert_eq!(
+        qkv.validate(),
+        Err(E::Features {
+            part: Part::Qkv { layer: 1 }
+        })
+    );
+    let mut broken = blocks.clone();
+    broken[0].proj.weights = &model.blocks[0].proj.weights[1..];
+    let proj = F32Transformer {
+        blocks: &broken,
+        ..net
+    };
+    assert_eq!(
+        proj.validate(),
+        Err(E::Weights {
+            part: Part::Proj { layer: 0 },
+            error: KernelError::WeightsLength
+        })
+    );
+    let mut broken = blocks.clone();
+    broken[0].fc1.activation = Activation::Gelu;
+    let fc1 = F32Transformer {
+        blocks: &broken,
+        ..net
+    };
+    assert_eq!(
+        fc1.validate(),
+        Err(E::Activation {
+            part: Part::Fc1 { layer: 0 }
+        })
+    );
+    let mut broken = blocks.clone();
+    broken[1].norm2.beta = &model.blocks[1].norm2.beta[..15];
+    let norm = F32Transformer {
+        blocks: &broken,
+        ..net
+    };
+    assert_eq!(
+        norm.validate(),
+        Err(E::Features {
+            part: Part::Norm2 { layer: 1 }
+        })
+    );
+    // Arguments.
+    assert_eq!(
+        run_f32(&net, &trajectory[1..], &condition, &mut out),
+        Err(E::TrajectoryLength)
+    );
+    assert_eq!(
+        run_f32(&net, &trajectory, &condition[1..], &mut out),
+        Err(E::ConditionLength)
+    );
+    assert_eq!(
+        run_f32(&net, &trajectory, &condition, &mut out[1..]),
+        Err(E::OutputLength)
+    );
+    let mut nan = trajectory.clone();
+    nan[2] = f32::NAN;
+    assert_eq!(
+        run_f32(&net, &nan, &condition, &mut out),
+        Err(E::NonFiniteInput)
+    );
+    assert_eq!(run_f32(&net, &trajectory, &condition, &mut out), Ok(()));
+    // int8-specific parts.
+    let mut int8_scratch = big_scratch();
+    assert_eq!(
+        int8.forward(&nan, &condition, &mut out, &mut *int8_scratch),
+        Err(E::NonFiniteInput)
+    );
+    let bad_input = Int8Linear {
+        input: QuantParams {
+            scale: 0.0,
+            zero_point: 0,
+        },
+        ..int8.head
+    };
+    let head = Int8Transformer {
+        head: bad_input,
+        ..int8
+    };
+    assert_eq!(head.validate(), Err(E::InputParams { part: Part::Head }));
+    let mut broken = int8_blocks.clone();
+    broken[1].feed_forward.fc1_requant.shifts = &quant.blocks[1].shifts[1..];
+    let requant = Int8Transformer {
+        blocks: &broken,
+        ..int8
+    };
+    assert_eq!(
+        requant.validate(),
+        Err(E::Weights {
+            part: Part::Fc1 { layer: 1 },
+            error: KernelError::RequantLength
+        })
+    );
+    let mut broken = int8_blocks.clone();
+    broken[0].feed_forward.fc2_scales = &quant.blocks[0].fc2.output_scales[1..];
+    let scales = Int8Transformer {
+        blocks: &broken,
+        ..int8
+    };
+    assert_eq!(
+        scales.validate(),
+        Err(E::Weights {
+            part: Part::Fc2 { layer: 0 },
+            error: KernelError::ScaleLength
+        })
+    );
+    let mut broken = int8_blocks.clone();
+    broken[0].qkv.output_scales = &quant.blocks[0].qkv.output_scales[..47];
+    let qkv = Int8Transformer {
+        blocks: &broken,
+        ..int8
+    };
+    assert_eq!(
+        qkv.validate(),
+        Err(E::Weights {
+            part: Part::Qkv { layer: 0 },
+            error: KernelError::ScaleLength
+        })
+    );
+    let traj = Int8Transformer {
+        traj_in: int8.cond_in,
+        ..int8
+    };
+    assert_eq!(traj.validate(), Err(E::Features { part: Part::TrajIn }));
+    // Noise-token folding.
+    let mut token = [0.0_f32; 16];
+    let noise_in = model.noise_in.view();
+    assert_eq!(
+        fold_noise_token(
+            &SMALL,
+            &noise_in,
+            &model.embedding[1..],
+            &model.positions,
+            &mut token
+        ),
+        Err(E::EmbeddingLength)
+    );
+    assert_eq!(
+        fold_noise_token(
+            &SMALL,
+            &noise_in,
+            &model.embedding,
+            &model.positions,
+            &mut token[1..]
+        ),
+        Err(E::Features {
+            part: Part::NoiseToken
+        })
+    );
+    assert_eq!(
+        fold_noise_token(
+            &SMALL,
+            &noise_in,
+            &model.embedding,
+            &model.positions,
+            &mut token
+        ),
+        Ok(())
+    );
+    assert_eq!(token.as_slice(), model.noise_token.as_slice());
+}
+
+/// Corrupts one random size or slice of a valid model (or passes wrong argument lengths) many
+/// times; every forward pass must return (most with an error), none may panic.
+#[test]
+fn random_corruptions_return_errors_without_panicking() {
+    use crate::model::mlp::F32Layer;
+    let model = FloatModel::random(SMALL, 31);
+    let blocks = model.f32_blocks();
+    let net = model.f32_view(&blocks);
+    let mut rng = Rng::new(32);
+    let quant = QuantModel::new(&model, &Ranges::calibrate(&net, &mut rng, 10));
+    let int8_blocks = quant.blocks(&model);
+    let int8 = quant.view(&model, &int8_blocks, false);
+    let floats = std::vec![0.25_f32; 4096];
+    let codes = std::vec![1_i8; 4096];
+    let words = std::vec![0_i32; 4096];
+    let mut scratch = big_scratch();
+    let mut output = std::vec![0.0_f32; 64];
+    let (mut ok, mut failed) = (0_usize, 0_usize);
+    let mut pick = |n: usize| rng.next_u32() as usize % n;
+    for _ in 0..3000 {
+        let (mut f, mut q) = (net, int8);
+        let (mut f_blocks, mut q_blocks) = (blocks.clone(), int8_blocks.clone());
+        let size = pick(40);
+        let layer = pick(2);
+        match pick(14) {
+            0 => (f.shape.horizon, q.shape.horizon) = (size, size),
+            1 => (f.shape.width, q.shape.width) = (size, size),
+            2 => (f.shape.heads, q.shape.heads) = (size, size),
+            3 => (f.shape.output, q.shape.output) = (size, size),
+            4 => (f.shape.layers, q.shape.layers) = (size, size),
+            5 => (f.positions, q.positions) = (&floats[..size * 8], &floats[..size * 8]),
+            6 => (f.noise_token, q.noise_token) = (&floats[..size], &floats[..size]),
+            7 => {
+                f_blocks[layer].qkv.weights = &floats[..size * 16];
+                q_blocks[layer].qkv.fc.weights = &codes[..size * 16];
+            }
+            8 => {
+                f_blocks[layer].fc1.out_features = size;
+                q_blocks[layer].feed_forward.fc1.out_features = size;
+            }
+            9 => {
+                f_blocks[layer].norm2.gamma = &floats[..size];
+                q_blocks[layer].norm1.beta = &floats[..size];
+            }
+            10 => {
+                f.head.bias = &floats[..size];
+                q.head.output_scales = &floats[..size];
+            }
+            11 => q_blocks[layer].feed_forward.fc1_requant.shifts = &words[..size * 4],
+            12 => {
+                let layer = F32Layer {
+                    in_features: size % 4,
+                    out_features: 16,
+                    weights: &floats[..(size % 4) * 16],
+                    bias: &floats[..16],
+                    activation: Activation::Identity,
+                };
+                (f.traj_in, q.traj_in) = (layer, TokenLinear::Float(layer));
+            }
+            _ => {}
+        }
+        (f.blocks, q.blocks) = (&f_blocks, &q_blocks);
+        let right = pick(2) == 0;
+        let len = |correct: usize, random: usize| if right { correct } else { random };
+        let trajectory = &floats[..len(SMALL.trajectory_len(), pick(10))];
+        let condition = &floats[..len(SMALL.cond_dim, pick(10))];
+        let out = &mut output[..len(SMALL.output, pick(10))];
+        for result in [
+            f.forward(trajectory, condition, out, &mut *scratch),
+            q.forward(trajectory, condition, out, &mut *scratch),
+        ] {
+            match result {
+                Ok(()) => ok += 1,
+                Err(_) => failed += 1,
+            }
+        }
+    }
+    std::eprintln!("random corruptions: {ok} forward passes succeeded, {failed} refused");
+    assert!(ok > 300 && failed > 3000, "{ok} ok, {failed} failed");
+}

@@ -1,0 +1,582 @@
+//! Test fixtures: random f32 weights, a naive f64 reference forward pass written from the candle
+//! module's definition, and calibration + quantization done the way the exporter will do it.
+
+extern crate std;
+
+use super::super::*;
+use crate::kernels::{gelu_sigmoid, Activation, FcRequant, FullyConnected, Lut8};
+use crate::model::mlp::F32Layer;
+use crate::quant::{
+    fold_input_zero_point, quantize_bias, quantize_weights_per_channel, requantization_multiplier,
+    QuantParams,
+};
+use crate::rng::Rng;
+use std::collections::HashMap;
+use std::{vec, vec::Vec};
+
+/// Scratch large enough for every shape in these tests (transformer-lite included).
+pub type BigScratch = TransformerScratch<8192, 4096, 256>;
+
+pub fn big_scratch() -> std::boxed::Box<BigScratch> {
+    std::boxed::Box::new(BigScratch::new())
+}
+
+pub struct Lin {
+    pub in_features: usize,
+    pub out_features: usize,
+    pub weights: Vec<f32>,
+    pub bias: Vec<f32>,
+}
+
+impl Lin {
+    pub fn random(rng: &mut Rng, in_features: usize, out_features: usize) -> Self {
+        let gain = 1.0 / (in_features as f32).sqrt();
+        Self {
+            in_features,
+            out_features,
+            weights: (0..in_features * out_features)
+                .map(|_| rng.gaussian() * gain)
+                .collect(),
+            bias: (0..out_features).map(|_| 0.1 * rng.gaussian()).collect(),
+        }
+    }
+
+    pub fn view(&self) -> F32Layer<'_> {
+        F32Layer {
+            in_features: self.in_features,
+            out_features: self.out_features,
+            weights: &self.weights,
+            bias: &self.bias,
+            activation: Activation::Identity,
+        }
+    }
+
+    fn apply64(&self, x: &[f64]) -> Vec<f64> {
+        assert_eq!(x.len(), self.in_features);
+        (0..self.out_features)
+            .map(|o| {
+                let row = &self.weights[o * self.in_features..(o + 1) * self.in_features];
+                f64::from(self.bias[o])
+                    + row
+                        .iter()
+                        .zip(x)
+                        .map(|(w, v)| f64::from(*w) * v)
+                        .sum::<f64>()
+            })
+            .collect()
+    }
+}
+
+pub struct Norm {
+    pub gamma: Vec<f32>,
+    pub beta: Vec<f32>,
+}
+
+impl Norm {
+    fn random(rng: &mut Rng, width: usize) -> Self {
+        Self {
+            gamma: (0..width).map(|_| 1.0 + 0.2 * rng.gaussian()).collect(),
+            beta: (0..width).map(|_| 0.1 * rng.gaussian()).collect(),
+        }
+    }
+
+    pub fn view(&self) -> LayerNormWeights<'_> {
+        LayerNormWeights {
+            gamma: &self.gamma,
+            beta: &self.beta,
+        }
+    }
+
+    fn apply64(&self, x: &[f64]) -> Vec<f64> {
+        let n = x.len() as f64;
+        let mean = x.iter().sum::<f64>() / n;
+        let var = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+        let inv = 1.0 / (var + 1e-5).sqrt();
+        x.iter()
+            .zip(&self.gamma)
+            .zip(&self.beta)
+            .map(|((v, g), b)| (v - mean) * inv * f64::from(*g) + f64::from(*b))
+            .collect()
+    }
+}
+
+pub struct BlockWeights {
+    pub norm1: Norm,
+    pub qkv: Lin,
+    pub proj: Lin,
+    pub norm2: Norm,
+    pub fc1: Lin,
+    pub fc2: Lin,
+}
+
+pub struct FloatModel {
+    pub shape: TransformerShape,
+    pub traj_in: Lin,
+    pub cond_in: Lin,
+    pub noise_in: Lin,
+    pub embedding: Vec<f32>,
+    pub positions: Vec<f32>,
+    pub blocks: Vec<BlockWeights>,
+    pub final_norm: Norm,
+    pub head: Lin,
+    pub noise_token: Vec<f32>,
+}
+
+fn gelu64(x: f64) -> f64 {
+    x / (1.0 + (-1.702 * x).exp())
+}
+
+impl FloatModel {
+    pub fn random(shape: TransformerShape, seed: u64) -> Self {
+        let mut rng = Rng::new(seed);
+        let w = shape.width;
+        let embed_dim = 6;
+        let blocks = (0..shape.layers)
+            .map(|_| BlockWeights {
+                norm1: Norm::random(&mut rng, w),
+                qkv: Lin::random(&mut rng, w, 3 * w),
+                proj: Lin::random(&mut rng, w, w),
+                norm2: Norm::random(&mut rng, w),
+                fc1: Lin::random(&mut rng, w, 4 * w),
+                fc2: Lin::random(&mut rng, 4 * w, w),
+            })
+            .collect();
+        let mut model = Self {
+            shape,
+            traj_in: Lin::random(&mut rng, shape.action_dim, w),
+            cond_in: Lin::random(&mut rng, shape.cond_dim, w),
+            noise_in: Lin::random(&mut rng, embed_dim, w),
+            embedding: (0..embed_dim).map(|_| rng.gaussian()).collect(),
+            positions: (0..shape.token_values())
+                .map(|_| 0.5 * rng.gaussian())
+                .collect(),
+            blocks,
+            final_norm: Norm::random(&mut rng, w),
+            head: Lin::random(&mut rng, shape.token_values(), shape.output),
+            noise_token: vec![0.0; w],
+        };
+        fold_noise_token(
+            &shape,
+            &model.noise_in.view(),
+            &model.embedding,
+            &model.positions,
+            &mut model.noise_token,
+        )
+        .unwrap();
+        model
+    }
+
+    pub fn f32_blocks(&self) -> Vec<F32Block<'_>> {
+        self.blocks
+            .iter()
+            .map(|b| F32Block {
+                norm1: b.norm1.view(),
+                qkv: b.qkv.view(),
+                proj: b.proj.view(),
+                norm2: b.norm2.view(),
+                fc1: b.fc1.view(),
+                fc2: b.fc2.view(),
+            })
+            .collect()
+    }
+
+    pub fn f32_view<'a>(&'a self, blocks: &'a [F32Block<'a>]) -> F32Transformer<'a> {
+        F32Transformer {
+            shape: self.shape,
+            traj_in: self.traj_in.view(),
+            cond_in: self.cond_in.view(),
+            noise_token: &self.noise_token,
+            positions: &self.positions,
+            blocks,
+            final_norm: self.final_norm.view(),
+            head: self.head.view(),
+        }
+    }
+
+    /// Naive f64 forward pass from the definition (full qkv matrix, all heads at once).
+    pub fn reference(&self, trajectory: &[f32], condition: &[f32]) -> Vec<f64> {
+        let s = &self.shape;
+        let (w, t, hd) = (s.width, s.tokens(), s.head_dim());
+        let to64 = |v: &[f32]| v.iter().map(|x| f64::from(*x)).collect::<Vec<f64>>();
+        let pos = |i: usize| to64(&self.positions[i * w..(i + 1) * w]);
+        let add = |a: Vec<f64>, b: Vec<f64>| a.iter().zip(&b).map(|(x, y)| x + y).collect();
+        let mut h: Vec<Vec<f64>> = vec![
+            add(self.cond_in.apply64(&to64(condition)), pos(0)),
+            add(self.noise_in.apply64(&to64(&self.embedding)), pos(1)),
+        ];
+        for i in 0..s.horizon {
+            let step = to64(&trajectory[i * s.action_dim..(i + 1) * s.action_dim]);
+            h.push(add(self.traj_in.apply64(&step), pos(2 + i)));
+        }
+        for b in &self.blocks {
+            let qkv: Vec<Vec<f64>> = h
+                .iter()
+                .map(|x| b.qkv.apply64(&b.norm1.apply64(x)))
+                .collect();
+            let mut attn = vec![vec![0.0_f64; w]; t];
+            for head in 0..s.heads {
+                let o = head * hd;
+                for i in 0..t {
+                    let scores: Vec<f64> = (0..t)
+                        .map(|j| {
+                            (0..hd)
+                                .map(|d| qkv[i][o + d] * qkv[j][w + o + d])
+                                .sum::<f64>()
+                                / (hd as f64).sqrt()
+                        })
+                        .collect();
+                    let m = scores.iter().cloned().fold(f64::MIN, f64::max);
+                    let e: Vec<f64> = scores.iter().map(|x| (x - m).exp()).collect();
+                    let z: f64 = e.iter().sum();
+                    for d in 0..hd {
+                        attn[i][o + d] = (0..t).map(|j| e[j] / z * qkv[j][2 * w + o + d]).sum();
+                    }
+                }
+            }
+            for i in 0..t {
+                h[i] = add(h[i].clone(), b.proj.apply64(&attn[i]));
+                let hidden: Vec<f64> = b
+                    .fc1
+                    .apply64(&b.norm2.apply64(&h[i]))
+                    .into_iter()
+                    .map(gelu64)
+                    .collect();
+                h[i] = add(h[i].clone(), b.fc2.apply64(&hidden));
+            }
+        }
+        let flat: Vec<f64> = h.iter().flat_map(|x| self.final_norm.apply64(x)).collect();
+        self.head.apply64(&flat)
+    }
+}
+
+/// Inputs as the one-step student sees them: trajectory ~ N(0, 1), condition in [-1, 1].
+pub fn random_inputs(rng: &mut Rng, shape: &TransformerShape) -> (Vec<f32>, Vec<f32>) {
+    let trajectory = (0..shape.trajectory_len())
+        .map(|_| rng.gaussian())
+        .collect();
+    let condition = (0..shape.cond_dim)
+        .map(|_| (0.5 * rng.gaussian()).clamp(-1.0, 1.0))
+        .collect();
+    (trajectory, condition)
+}
+
+/// Min/max per probe over calibration runs of the f32 model.
+pub struct Ranges(HashMap<TransformerProbe, (f32, f32)>);
+
+impl Ranges {
+    pub fn calibrate(model: &F32Transformer<'_>, rng: &mut Rng, runs: usize) -> Self {
+        let mut map: HashMap<TransformerProbe, (f32, f32)> = HashMap::new();
+        let mut scratch = big_scratch();
+        let mut output = vec![0.0_f32; model.shape.output];
+        for _ in 0..runs {
+            let (trajectory, condition) = random_inputs(rng, &model.shape);
+            model
+                .forward_observed(
+                    &trajectory,
+                    &condition,
+                    &mut output,
+                    &mut *scratch,
+                    |probe, values| {
+                        let entry = map.entry(probe).or_insert((f32::MAX, f32::MIN));
+                        for v in values {
+                            entry.0 = entry.0.min(*v);
+                            entry.1 = entry.1.max(*v);
+                        }
+                    },
+                )
+                .unwrap();
+        }
+        Self(map)
+    }
+
+    pub fn params(&self, probe: TransformerProbe) -> QuantParams {
+        let (lo, hi) = self.0[&probe];
+        QuantParams::from_range(lo, hi).unwrap()
+    }
+}
+
+/// A linear layer quantized for input parameters `input` (exporter recipe).
+pub struct QLin {
+    pub input: QuantParams,
+    pub in_features: usize,
+    pub out_features: usize,
+    pub weights: Vec<i8>,
+    pub weight_scales: Vec<f32>,
+    pub bias: Vec<i32>,
+    pub output_scales: Vec<f32>,
+}
+
+impl QLin {
+    pub fn new(lin: &Lin, input: QuantParams) -> Self {
+        let mut weights = vec![0_i8; lin.weights.len()];
+        let mut weight_scales = vec![0.0_f32; lin.out_features];
+        quantize_weights_per_channel(
+            &lin.weights,
+            lin.in_features,
+            &mut weights,
+            &mut weight_scales,
+        )
+        .unwrap();
+        let bias = (0..lin.out_features)
+            .map(|o| {
+                let row = &weights[o * lin.in_features..(o + 1) * lin.in_features];
+                let b = quantize_bias(lin.bias[o], input.scale, weight_scales[o]).unwrap();
+                fold_input_zero_point(b, row, input.zero_point).unwrap()
+            })
+            .collect();
+        let output_scales = weight_scales
+            .iter()
+            .map(|w| (f64::from(input.scale) * f64::from(*w)) as f32)
+            .collect();
+        Self {
+            input,
+            in_features: lin.in_features,
+            out_features: lin.out_features,
+            weights,
+            weight_scales,
+            bias,
+            output_scales,
+        }
+    }
+
+    pub fn view(&self) -> Int8Linear<'_> {
+        Int8Linear {
+            input: self.input,
+            fc: FullyConnected::new(
+                self.in_features,
+                self.out_features,
+                &self.weights,
+                &self.bias,
+            ),
+            output_scales: &self.output_scales,
+        }
+    }
+}
+
+pub struct QBlock {
+    pub qkv: QLin,
+    pub proj: QLin,
+    pub fc1: QLin,
+    pub fc1_output: QuantParams,
+    pub multipliers: Vec<i32>,
+    pub shifts: Vec<i32>,
+    pub gelu: Lut8,
+    pub fc2: QLin,
+}
+
+pub struct QuantModel {
+    pub traj_in: QLin,
+    pub cond_in: QLin,
+    pub blocks: Vec<QBlock>,
+    pub head: QLin,
+}
+
+impl QuantModel {
+    pub fn new(float: &FloatModel, ranges: &Ranges) -> Self {
+        let blocks = float
+            .blocks
+            .iter()
+            .enumerate()
+            .map(|(layer, b)| {
+                let fc1 = QLin::new(&b.fc1, ranges.params(TransformerProbe::Norm2 { layer }));
+                let fc1_output = ranges.params(TransformerProbe::Fc1 { layer });
+                let gelu_output = ranges.params(TransformerProbe::Gelu { layer });
+                let (multipliers, shifts) = fc1
+                    .weight_scales
+                    .iter()
+                    .map(|w| {
+                        requantization_multiplier(fc1.input.scale, *w, fc1_output.scale).unwrap()
+                    })
+                    .unzip();
+                QBlock {
+                    qkv: QLin::new(&b.qkv, ranges.params(TransformerProbe::Norm1 { layer })),
+                    proj: QLin::new(
+                        &b.proj,
+                        ranges.params(TransformerProbe::Attention { layer }),
+                    ),
+                    fc1,
+                    fc1_output,
+                    multipliers,
+                    shifts,
+                    gelu: Lut8::build(gelu_sigmoid, fc1_output, gelu_output).unwrap(),
+                    fc2: QLin::new(&b.fc2, gelu_output),
+                }
+            })
+            .collect();
+        Self {
+            traj_in: QLin::new(&float.traj_in, ranges.params(TransformerProbe::Trajectory)),
+            cond_in: QLin::new(&float.cond_in, ranges.params(TransformerProbe::Condition)),
+            blocks,
+            head: QLin::new(&float.head, ranges.params(TransformerProbe::FinalNorm)),
+        }
+    }
+
+    pub fn blocks<'a>(&'a self, float: &'a FloatModel) -> Vec<Int8Block<'a>> {
+        self.blocks
+            .iter()
+            .zip(&float.blocks)
+            .map(|(q, f)| Int8Block {
+                norm1: f.norm1.view(),
+                qkv: q.qkv.view(),
+                proj: q.proj.view(),
+                norm2: f.norm2.view(),
+                feed_forward: Int8FeedForward {
+                    input: q.fc1.input,
+                    fc1: q.fc1.view().fc,
+                    fc1_requant: FcRequant {
+                        multipliers: &q.multipliers,
+                        shifts: &q.shifts,
+                        output_zero_point: q.fc1_output.zero_point,
+                        activation_min: -128,
+                        activation_max: 127,
+                    },
+                    gelu: &q.gelu,
+                    fc2: q.fc2.view().fc,
+                    fc2_scales: &q.fc2.output_scales,
+                },
+            })
+            .collect()
+    }
+
+    /// The int8 model; `float_inputs` keeps `traj_in`/`cond_in` in f32.
+    pub fn view<'a>(
+        &'a self,
+        float: &'a FloatModel,
+        blocks: &'a [Int8Block<'a>],
+        float_inputs: bool,
+    ) -> Int8Transformer<'a> {
+        let (traj_in, cond_in) = if float_inputs {
+            (
+                TokenLinear::Float(float.traj_in.view()),
+                TokenLinear::Float(float.cond_in.view()),
+            )
+        } else {
+            (
+                TokenLinear::Int8(self.traj_in.view()),
+                TokenLinear::Int8(self.cond_in.view()),
+            )
+        };
+        Int8Transformer {
+            shape: float.shape,
+            traj_in,
+            cond_in,
+            noise_token: &float.noise_token,
+            positions: &float.positions,
+            blocks,
+            final_norm: float.final_norm.view(),
+            head: self.head.view(),
+        }
+    }
+}
+
+fn naive_accumulator(q: &QLin, o: usize, codes: &[i8]) -> i32 {
+    let row = &q.weights[o * q.in_features..(o + 1) * q.in_features];
+    let wide: i64 = i64::from(q.bias[o])
+        + row
+            .iter()
+            .zip(codes)
+            .map(|(w, x)| i64::from(*w) * i64::from(*x))
+            .sum::<i64>();
+    i32::try_from(wide).expect("test accumulators fit i32")
+}
+
+/// Quantize, i64 dot products, dequantize (f32 in, f32 out).
+fn naive_linear(q: &QLin, input: &[f32]) -> Vec<f32> {
+    let codes: Vec<i8> = input.iter().map(|v| q.input.quantize(*v)).collect();
+    (0..q.out_features)
+        .map(|o| naive_accumulator(q, o, &codes) as f32 * q.output_scales[o])
+        .collect()
+}
+
+impl QuantModel {
+    /// Naive int8 forward pass: full `qkv` matrices, i64 accumulation, the wide-integer
+    /// requantization model, table lookups by index; f32 steps in the documented order.
+    pub fn naive_forward(
+        &self,
+        float: &FloatModel,
+        trajectory: &[f32],
+        condition: &[f32],
+    ) -> Vec<f32> {
+        let s = &float.shape;
+        let (w, t, hd) = (s.width, s.tokens(), s.head_dim());
+        let add = |x: &mut [f32], y: &[f32]| x.iter_mut().zip(y).for_each(|(a, b)| *a += *b);
+        let norm = |n: &Norm, x: &[f32]| {
+            let mut out = vec![0.0_f32; x.len()];
+            crate::kernels::layer_norm(x, &n.gamma, &n.beta, 1e-5, &mut out).unwrap();
+            out
+        };
+        let mut h: Vec<Vec<f32>> = vec![
+            naive_linear(&self.cond_in, condition),
+            float.noise_token.clone(),
+        ];
+        add(&mut h[0], &float.positions[..w]);
+        for i in 0..s.horizon {
+            let mut token = naive_linear(
+                &self.traj_in,
+                &trajectory[i * s.action_dim..(i + 1) * s.action_dim],
+            );
+            add(&mut token, &float.positions[(2 + i) * w..(3 + i) * w]);
+            h.push(token);
+        }
+        let scale = (1.0 / (hd as f64).sqrt()) as f32;
+        for (q, f) in self.blocks.iter().zip(&float.blocks) {
+            let qkv: Vec<Vec<f32>> = h
+                .iter()
+                .map(|x| naive_linear(&q.qkv, &norm(&f.norm1, x)))
+                .collect();
+            let mut attention = vec![vec![0_i8; w]; t];
+            for head in 0..s.heads {
+                let o = head * hd;
+                for i in 0..t {
+                    let mut scores: Vec<f32> = (0..t)
+                        .map(|j| {
+                            (0..hd).fold(0.0_f32, |acc, d| acc + qkv[i][o + d] * qkv[j][w + o + d])
+                                * scale
+                        })
+                        .collect();
+                    crate::kernels::softmax_in_place(&mut scores).unwrap();
+                    for d in 0..hd {
+                        let value =
+                            (0..t).fold(0.0_f32, |acc, j| acc + scores[j] * qkv[j][2 * w + o + d]);
+                        attention[i][o + d] = q.proj.input.quantize(value);
+                    }
+                }
+            }
+            for (x, codes) in h.iter_mut().zip(&attention) {
+                let row: Vec<f32> = (0..w)
+                    .map(|o| naive_accumulator(&q.proj, o, codes) as f32 * q.proj.output_scales[o])
+                    .collect();
+                add(x, &row);
+                let codes: Vec<i8> = norm(&f.norm2, x)
+                    .iter()
+                    .map(|v| q.fc1.input.quantize(*v))
+                    .collect();
+                let hidden: Vec<i8> = (0..4 * w)
+                    .map(|o| {
+                        let pre = crate::quant::reference::requantize(
+                            naive_accumulator(&q.fc1, o, &codes),
+                            q.multipliers[o],
+                            q.shifts[o],
+                            q.fc1_output.zero_point,
+                            -128,
+                            127,
+                        );
+                        q.gelu.table[(i32::from(pre) + 128) as usize]
+                    })
+                    .collect();
+                let row: Vec<f32> = (0..w)
+                    .map(|o| naive_accumulator(&q.fc2, o, &hidden) as f32 * q.fc2.output_scales[o])
+                    .collect();
+                add(x, &row);
+            }
+        }
+        let codes: Vec<i8> = h
+            .iter()
+            .flat_map(|x| norm(&float.final_norm, x))
+            .map(|v| self.head.input.quantize(v))
+            .collect();
+        (0..s.output)
+            .map(|o| naive_accumulator(&self.head, o, &codes) as f32 * self.head.output_scales[o])
+            .collect()
+    }
+}

@@ -1,0 +1,144 @@
+//! The Cortex-M firmware (examples/cortex-m) computes the same bytes as the host.
+//!
+//! The firmware's workload files are plain `core` + frmd-core code (and the synthetic MLP
+//! generator is std code that its build.rs runs), so they compile here for the host as well.
+//! `qemu_digests_match_host` builds both firmware images, runs them on QEMU mps2-an386
+//! (Cortex-M4F) and mps2-an500 (Cortex-M7) and requires each printed digest to equal the host's:
+//! ProDMP decode (f32) and int8 MLP + decode are bit-identical on x86-64 and Cortex-M. It needs
+//! `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without it, or with
+//! FRMD_SKIP_QEMU=1, it prints why and passes without checking
+//! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
+
+#[allow(dead_code)]
+#[path = "../../examples/cortex-m/src/digest.rs"]
+mod digest;
+#[allow(dead_code)] // firmware-only names
+#[path = "../../examples/cortex-m/src/mlp_workload.rs"]
+mod mlp_workload;
+#[allow(dead_code)]
+#[path = "../../examples/cortex-m/src/prodmp_workload.rs"]
+mod prodmp_workload;
+#[path = "../../examples/cortex-m/src/shape.rs"]
+mod shape;
+#[path = "../../examples/cortex-m/src/synthetic_mlp.rs"]
+mod synthetic_mlp;
+#[allow(dead_code)] // `name` is printed by the firmware only
+#[path = "../../examples/cortex-m/src/workload_api.rs"]
+mod workload_api;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn baked() -> prodmp_workload::Baked {
+    prodmp_workload::Baked::from_config(&shape::config()).expect("bake the policy decoder")
+}
+
+fn prodmp_digest() -> u64 {
+    let baked = baked();
+    let mut workload = prodmp_workload::ProDmpWorkload::new(&baked);
+    workload_api::digest_all(&mut workload).expect("decode the fixed inputs")
+}
+
+fn mlp_digest() -> u64 {
+    let baked = baked();
+    let model = synthetic_mlp::generate();
+    let hidden = model.hidden_layers();
+    let mut workload = mlp_workload::MlpWorkload::new(model.mlp(&hidden), &baked);
+    workload_api::digest_all(&mut workload).expect("run the synthetic policy on the fixed inputs")
+}
+
+#[test]
+fn fnv1a64_matches_published_vectors() {
+    let hash = |bytes: &[u8]| {
+        let mut digest = digest::Fnv1a64::new();
+        digest.bytes(bytes);
+        digest.finish()
+    };
+    assert_eq!(hash(b""), 0xcbf2_9ce4_8422_2325);
+    assert_eq!(hash(b"a"), 0xaf63_dc4c_8601_ec8c);
+    assert_eq!(hash(b"foobar"), 0x8594_4171_f739_67e8);
+}
+
+#[test]
+fn firmware_inputs_are_distinct_and_in_range() {
+    let first = prodmp_workload::Inputs::fixed(0);
+    assert_ne!(first, prodmp_workload::Inputs::fixed(1));
+    assert_eq!(first, prodmp_workload::Inputs::fixed(0));
+    for case in 0..prodmp_workload::CASES {
+        let inputs = prodmp_workload::Inputs::fixed(case);
+        assert!(inputs.params.iter().flatten().all(|v| (-1.0..1.0).contains(v)));
+        assert!(inputs.y0.iter().all(|v| (-0.5..0.5).contains(v)));
+        assert!(inputs.v0.iter().all(|v| (-0.25..0.25).contains(v)));
+    }
+    assert_eq!(prodmp_digest(), prodmp_digest());
+}
+
+#[test]
+fn synthetic_mlp_is_deterministic_and_valid() {
+    let model = synthetic_mlp::generate();
+    let hidden = model.hidden_layers();
+    let mlp = model.mlp(&hidden);
+    mlp.validate::<{ shape::MLP_WIDTH }>().expect("valid synthetic network");
+    assert_eq!(mlp.input_width(), shape::MLP_INPUT);
+    assert_eq!(mlp.output_width(), shape::MLP_OUTPUT);
+    assert_eq!(model.weight_bytes(), synthetic_mlp::generate().weight_bytes());
+    // The network is not degenerate: its outputs vary with the observation.
+    let mut out_a = [0.0_f32; shape::MLP_OUTPUT];
+    let mut out_b = [0.0_f32; shape::MLP_OUTPUT];
+    let mut scratch = frmd_core::model::mlp::Int8Scratch::<{ shape::MLP_WIDTH }>::new();
+    mlp.forward(&[0.5; shape::MLP_INPUT], &mut out_a, &mut scratch).expect("forward");
+    mlp.forward(&[-0.5; shape::MLP_INPUT], &mut out_b, &mut scratch).expect("forward");
+    assert_ne!(out_a, out_b);
+    assert!(out_a.iter().chain(&out_b).all(|v| v.is_finite()));
+    assert_eq!(mlp_digest(), mlp_digest());
+}
+
+#[test]
+fn qemu_digests_match_host() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let env_file = std::env::var_os("FRMD_CORTEX_M_ENV")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target/cortex-m.env"));
+    let qemu_found = Command::new("qemu-system-arm").arg("--version").output().is_ok();
+    if std::env::var_os("FRMD_SKIP_QEMU").is_some() || !env_file.exists() || !qemu_found {
+        assert!(
+            std::env::var_os("FRMD_REQUIRE_QEMU").is_none(),
+            "FRMD_REQUIRE_QEMU is set but the QEMU check cannot run (env file {} present: {}, qemu-system-arm found: {qemu_found})",
+            env_file.display(),
+            env_file.exists()
+        );
+        eprintln!(
+            "qemu_digests_match_host: SKIPPED (FRMD_SKIP_QEMU set, or no {} / qemu-system-arm: \
+             run `bash scripts/setup-cortex-m.sh`)",
+            env_file.display()
+        );
+        return;
+    }
+    // The firmware's own target directory (as run-qemu.sh uses by default), so manual runs and
+    // this test share one build; it is never the directory of the `cargo test` running this.
+    let firmware_target = root.join("examples/cortex-m/target");
+    for (firmware, host_digest) in [("prodmp", prodmp_digest()), ("mlp", mlp_digest())] {
+        let expected = format!("digest: {host_digest:016x}");
+        for board in ["m4", "m7"] {
+            let output = Command::new("bash")
+                .arg(root.join("examples/cortex-m/run-qemu.sh"))
+                .args([board, firmware])
+                .env("CARGO_TARGET_DIR", &firmware_target)
+                .output()
+                .expect("run examples/cortex-m/run-qemu.sh");
+            let stdout = String::from_utf8_lossy(&output.stdout);
+            assert!(
+                output.status.success(),
+                "run-qemu.sh {board} {firmware} failed:\n{stdout}\n{}",
+                String::from_utf8_lossy(&output.stderr)
+            );
+            let digest_line = stdout.lines().find(|line| line.starts_with("digest: "));
+            assert_eq!(
+                digest_line,
+                Some(expected.as_str()),
+                "{firmware} firmware on {board} computed different bytes than the host:\n{stdout}"
+            );
+            eprintln!("{firmware} {board}: {}", stdout.lines().collect::<Vec<_>>().join(" | "));
+        }
+    }
+}

@@ -1,0 +1,57 @@
+//! Host timing of the int8 policy from a blob at firmware-like size (ignored: a measurement, not a
+//! check). `cargo test -p frmd-export --release --test timing -- --ignored --nocapture`.
+
+mod common;
+
+use std::time::Instant;
+
+use common::{random_policy, Dims};
+use frmd_core::blob::LoadedPolicy;
+use frmd_core::policy::Noise;
+use frmd_core::rng::Rng;
+
+const M: usize = 2;
+const O: usize = 10;
+const K: usize = 3;
+const N: usize = 12;
+const P: usize = 21;
+
+#[test]
+#[ignore]
+fn int8_policy_act_time_on_host() {
+    for steps in [1, 2, 4] {
+        let dims = Dims {
+            m: M,
+            o: O,
+            k: K,
+            n: N,
+            p: P,
+            hidden: vec![256, 256, 256],
+        };
+        let policy = random_policy(3, steps, &dims);
+        let blob = frmd_export::blob::write(&policy).unwrap();
+        let mut words = vec![0_u128; blob.len().div_ceil(16)];
+        bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
+        let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
+        let loaded = LoadedPolicy::<M, O, K, N, P>::load(bytes).unwrap();
+        let mut runtime = loaded.policy::<64, 256>().unwrap();
+        runtime.reset(&[0.0; K]).unwrap();
+        runtime.observe(&[0.1; O]).unwrap();
+        let mut rng = Rng::new(1);
+        let iterations = 300;
+        let start = Instant::now();
+        for _ in 0..iterations {
+            runtime.act(Noise::Rng(&mut rng)).unwrap();
+        }
+        let per_act = start.elapsed().as_secs_f64() / f64::from(iterations) * 1e6;
+        let memory = policy.memory();
+        println!(
+            "{steps} step(s), MLP {}-256-256-256-{}: {per_act:.1} us per chunk on this host; blob {} B, flash {} B, scratch {} B",
+            policy.input_width().unwrap(),
+            K * P,
+            blob.len(),
+            memory.flash_bytes(),
+            memory.scratch_bytes
+        );
+    }
+}

@@ -1,0 +1,277 @@
+//! Dataset format, reader validation and training-window tests.
+use super::collect::collect_demos;
+use super::{Dataset, Normalizer};
+use safetensors::tensor::{Dtype, TensorView};
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+fn temp_path(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!(
+        "frmd-data-test-{}-{name}.safetensors",
+        std::process::id()
+    ))
+}
+
+fn small() -> Dataset {
+    Dataset {
+        obs: vec![0.0, 1.0, 2.0, 3.0, 4.0],
+        action: vec![10.0, 20.0, 30.0, 40.0, 50.0],
+        episode_ends: vec![3, 5],
+        obs_dim: 1,
+        action_dim: 1,
+        task: "handmade".into(),
+        dt: 0.5,
+        source: "test".into(),
+    }
+}
+
+/// Serializes tensors without any validation, to build corrupt files.
+fn raw(tensors: Vec<(&str, Dtype, Vec<usize>, Vec<u8>)>, meta: &[(&str, &str)]) -> Vec<u8> {
+    let views: Vec<(&str, TensorView<'_>)> = tensors
+        .iter()
+        .map(|(n, d, s, b)| (*n, TensorView::new(*d, s.clone(), b).unwrap()))
+        .collect();
+    let meta: HashMap<String, String> = meta
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    safetensors::serialize(views, Some(meta)).unwrap()
+}
+
+fn f32s(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+fn i64s(v: &[i64]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+const META: &[(&str, &str)] = &[("task", "handmade"), ("dt", "0.5"), ("source", "test")];
+
+fn error_of(bytes: &[u8]) -> String {
+    format!(
+        "{:#}",
+        Dataset::from_bytes(bytes).expect_err("corrupt file accepted")
+    )
+}
+
+#[test]
+fn collected_dataset_round_trips_through_a_file() {
+    let (data, stats) = collect_demos("avoid", 3, 17, &mut |_| {}).unwrap();
+    assert_eq!(stats.failed, 0);
+    assert_eq!(data.num_episodes(), 3);
+    assert_eq!(data.obs_dim, 9);
+    assert_eq!(data.dt, 0.1);
+    let path = temp_path("roundtrip");
+    data.save(&path).unwrap();
+    let loaded = Dataset::load(&path).unwrap();
+    std::fs::remove_file(&path).ok();
+    assert_eq!(loaded, data);
+    assert_eq!(
+        Dataset::from_bytes(&small().to_bytes().unwrap()).unwrap(),
+        small()
+    );
+}
+
+#[test]
+fn reader_rejects_corrupt_files_with_the_reason() {
+    let good = small().to_bytes().unwrap();
+    // Truncated.
+    let message = error_of(&good[..good.len() - 7]);
+    assert!(message.contains("truncated"), "{message}");
+    let message = error_of(&good[..5]);
+    assert!(message.contains("truncated"), "{message}");
+    // Wrong dtype.
+    let ends = i64s(&[3, 5]);
+    let obs64: Vec<u8> = [0.0f64, 1.0, 2.0, 3.0, 4.0]
+        .iter()
+        .flat_map(|x| x.to_le_bytes())
+        .collect();
+    let actions = f32s(&[10.0, 20.0, 30.0, 40.0, 50.0]);
+    let bytes = raw(
+        vec![
+            ("obs", Dtype::F64, vec![5, 1], obs64),
+            ("action", Dtype::F32, vec![5, 1], actions.clone()),
+            ("episode_ends", Dtype::I64, vec![2], ends.clone()),
+        ],
+        META,
+    );
+    let message = error_of(&bytes);
+    assert!(
+        message.contains("`obs` has dtype F64, expected F32"),
+        "{message}"
+    );
+    let ends32: Vec<u8> = [3i32, 5].iter().flat_map(|x| x.to_le_bytes()).collect();
+    let obs = f32s(&[0.0, 1.0, 2.0, 3.0, 4.0]);
+    let bytes = raw(
+        vec![
+            ("obs", Dtype::F32, vec![5, 1], obs.clone()),
+            ("action", Dtype::F32, vec![5, 1], actions.clone()),
+            ("episode_ends", Dtype::I32, vec![2], ends32),
+        ],
+        META,
+    );
+    let message = error_of(&bytes);
+    assert!(
+        message.contains("`episode_ends` has dtype I32, expected I64"),
+        "{message}"
+    );
+    // Decreasing episode ends.
+    let bytes = raw(
+        vec![
+            ("obs", Dtype::F32, vec![5, 1], obs.clone()),
+            ("action", Dtype::F32, vec![5, 1], actions.clone()),
+            ("episode_ends", Dtype::I64, vec![3], i64s(&[3, 2, 5])),
+        ],
+        META,
+    );
+    let message = error_of(&bytes);
+    assert!(
+        message.contains("not strictly increasing: entry 1 is 2 after 3"),
+        "{message}"
+    );
+    // Episode ends not covering the data.
+    let bytes = raw(
+        vec![
+            ("obs", Dtype::F32, vec![5, 1], obs.clone()),
+            ("action", Dtype::F32, vec![5, 1], actions.clone()),
+            ("episode_ends", Dtype::I64, vec![2], i64s(&[3, 4])),
+        ],
+        META,
+    );
+    let message = error_of(&bytes);
+    assert!(
+        message.contains("last episode end is 4 but the dataset has 5 steps"),
+        "{message}"
+    );
+    // NaN.
+    let bytes = raw(
+        vec![
+            (
+                "obs",
+                Dtype::F32,
+                vec![5, 1],
+                f32s(&[0.0, 1.0, 2.0, f32::NAN, 4.0]),
+            ),
+            ("action", Dtype::F32, vec![5, 1], actions.clone()),
+            ("episode_ends", Dtype::I64, vec![2], ends.clone()),
+        ],
+        META,
+    );
+    let message = error_of(&bytes);
+    assert!(
+        message.contains("`obs` has a non-finite value NaN at row 3, column 0"),
+        "{message}"
+    );
+    // Row mismatch, missing tensor, missing or bad metadata.
+    let bytes = raw(
+        vec![
+            ("obs", Dtype::F32, vec![4, 1], f32s(&[0.0, 1.0, 2.0, 3.0])),
+            ("action", Dtype::F32, vec![5, 1], actions.clone()),
+            ("episode_ends", Dtype::I64, vec![2], ends.clone()),
+        ],
+        META,
+    );
+    let message = error_of(&bytes);
+    assert!(
+        message.contains("obs has 4 rows but action has 5 rows"),
+        "{message}"
+    );
+    let bytes = raw(
+        vec![
+            ("obs", Dtype::F32, vec![5, 1], obs.clone()),
+            ("episode_ends", Dtype::I64, vec![2], ends.clone()),
+        ],
+        META,
+    );
+    let message = error_of(&bytes);
+    assert!(message.contains("missing tensor `action`"), "{message}");
+    let full = || {
+        vec![
+            ("obs", Dtype::F32, vec![5, 1], obs.clone()),
+            ("action", Dtype::F32, vec![5, 1], actions.clone()),
+            ("episode_ends", Dtype::I64, vec![2], ends.clone()),
+        ]
+    };
+    let message = error_of(&raw(full(), &[("task", "t"), ("source", "s")]));
+    assert!(message.contains("missing metadata `dt`"), "{message}");
+    let message = error_of(&raw(
+        full(),
+        &[("task", "t"), ("dt", "fast"), ("source", "s")],
+    ));
+    assert!(message.contains("metadata `dt` is \"fast\""), "{message}");
+    let message = error_of(&raw(
+        full(),
+        &[("task", "t"), ("dt", "-0.1"), ("source", "s")],
+    ));
+    assert!(message.contains("dt is -0.1"), "{message}");
+    // Loading a missing file names it.
+    let message = format!("{:#}", Dataset::load(&temp_path("missing")).unwrap_err());
+    assert!(
+        message.contains("cannot read dataset") && message.contains("missing"),
+        "{message}"
+    );
+    // Saving refuses invalid data too.
+    let mut bad = small();
+    bad.action[1] = f32::INFINITY;
+    assert!(bad.to_bytes().is_err());
+}
+
+#[test]
+fn windows_follow_the_padding_and_rate_conventions() {
+    let (set, norm) = small().windows(2, 3).unwrap();
+    // obs in [0, 4] -> o/2 - 1; actions in [10, 50] -> (a - 30)/20.
+    assert_eq!(norm.obs.min, vec![0.0]);
+    assert_eq!(norm.obs.max, vec![4.0]);
+    assert_eq!(norm.action.min, vec![10.0]);
+    assert_eq!(norm.action.max, vec![50.0]);
+    assert_eq!(set.len(), 5);
+    assert_eq!((set.history, set.horizon, set.dt), (2, 3, 0.5));
+    assert_eq!(
+        set.obs,
+        vec![-1.0, -1.0, -1.0, -0.5, -0.5, 0.0, 0.5, 0.5, 0.5, 1.0]
+    );
+    assert_eq!(set.prev_action, vec![-1.0, -1.0, -0.5, 0.5, 0.5]);
+    // (a_{t-1} - a_{t-2}) / dt in normalized units: 0.5 / 0.5 s at t = 2 of the first episode.
+    assert_eq!(set.prev_rate, vec![0.0, 0.0, 1.0, 0.0, 0.0]);
+    assert_eq!(
+        set.actions,
+        vec![-1.0, -0.5, 0.0, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0]
+    );
+    assert!(small().windows(0, 3).is_err());
+    assert!(small().windows(2, 0).is_err());
+}
+
+#[test]
+fn windows_of_collected_demos_are_normalized() {
+    let (data, _) = collect_demos("push", 2, 0, &mut |_| {}).unwrap();
+    let (set, norm) = data.windows(2, 12).unwrap();
+    assert_eq!(set.len(), data.len());
+    assert_eq!(set.obs.len(), set.len() * 2 * data.obs_dim);
+    assert_eq!(set.actions.len(), set.len() * 12 * data.action_dim);
+    for v in set.obs.iter().chain(&set.actions).chain(&set.prev_action) {
+        assert!((-1.0..=1.0).contains(v), "{v} outside [-1, 1]");
+    }
+    // Denormalizing a window's first action gives back the raw action.
+    let mut first = set.actions[..2].to_vec();
+    norm.action.denormalize(&mut first);
+    assert!((first[0] - data.action[0]).abs() < 1e-5 && (first[1] - data.action[1]).abs() < 1e-5);
+}
+
+#[test]
+fn normalizer_round_trips_and_maps_constants_to_zero() {
+    let data = [1.0f32, 5.0, -2.0, 5.0, 3.0, 5.0];
+    let norm = Normalizer::fit(&data, 2);
+    assert_eq!(norm.min, vec![-2.0, 5.0]);
+    assert_eq!(norm.max, vec![3.0, 5.0]);
+    let mut x = data.to_vec();
+    norm.normalize(&mut x);
+    for (a, b) in x.iter().zip([0.2, 0.0, -1.0, 0.0, 1.0, 0.0]) {
+        assert!((a - b).abs() < 1e-6, "{x:?}");
+    }
+    norm.denormalize(&mut x);
+    for (a, b) in x.iter().zip(&data) {
+        assert!((a - b).abs() < 1e-6);
+    }
+    assert_eq!(norm.scale(), vec![0.4, 0.0]);
+}
