@@ -118,7 +118,7 @@ impl ModelConfig {
         if !(self.control_dt.is_finite() && self.control_dt > 0.0) {
             bail!("model config: control_dt must be finite and positive, got {}", self.control_dt);
         }
-        if self.embed_dim == 0 || self.embed_dim % 2 != 0 {
+        if self.embed_dim == 0 || !self.embed_dim.is_multiple_of(2) {
             bail!("model config: embed_dim must be even and positive, got {}", self.embed_dim);
         }
         match &self.backbone {
