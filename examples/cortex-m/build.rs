@@ -9,6 +9,8 @@
 //! 4. Bakes the synthetic one-step policy (src/synthetic_policy.rs) with frmd-export into
 //!    `$OUT_DIR/policy/` (`policy.rs` + `weights.bin`), as a real firmware would bake an exported
 //!    student.
+//! 5. Generates the synthetic transformer-lite (src/synthetic_transformer.rs): weights as
+//!    `synthetic_transformer.bin`, everything else as `synthetic_transformer.rs`.
 use std::{env, fmt::Write as _, fs, path::{Path, PathBuf}};
 
 #[path = "src/shape.rs"]
@@ -17,6 +19,8 @@ mod shape;
 mod synthetic_mlp;
 #[path = "src/synthetic_policy.rs"]
 mod synthetic_policy;
+#[path = "src/synthetic_transformer.rs"]
+mod synthetic_transformer;
 
 use frmd_core::prodmp::BakedProDmp;
 
@@ -60,6 +64,7 @@ fn main() {
     println!("cargo:rerun-if-changed=src/shape.rs");
     println!("cargo:rerun-if-changed=src/synthetic_mlp.rs");
     println!("cargo:rerun-if-changed=src/synthetic_policy.rs");
+    println!("cargo:rerun-if-changed=src/synthetic_transformer.rs");
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
     if env::var_os("CARGO_FEATURE_DEFMT").is_some() {
         println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
@@ -70,4 +75,9 @@ fn main() {
     fs::write(out.join("synthetic_mlp.rs"), model.rust_source()).expect("write synthetic_mlp.rs");
     frmd_export::bake::write_module(&synthetic_policy::generate(), &out.join("policy"))
         .expect("bake the synthetic policy with frmd-export");
+    let transformer = synthetic_transformer::generate();
+    fs::write(out.join("synthetic_transformer.bin"), transformer.weight_bytes())
+        .expect("write synthetic_transformer.bin");
+    fs::write(out.join("synthetic_transformer.rs"), transformer.rust_source())
+        .expect("write synthetic_transformer.rs");
 }

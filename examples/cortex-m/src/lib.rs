@@ -6,6 +6,8 @@
 //!   SiLU LUTs) feeding the decoder, i.e. the one-step student's network + decode path.
 //! - `frmd-cortex-m-policy` (src/bin/frmd-cortex-m-policy.rs): a synthetic one-step policy baked
 //!   by frmd-export, measured as `Policy::act` (observations in, action chunk out).
+//! - `frmd-cortex-m-transformer` (src/bin/frmd-cortex-m-transformer.rs): the same policy
+//!   configuration with a synthetic int8 transformer-lite backbone instead of the MLP.
 //!
 //! Each prints `digest: <16 hex>` (FNV-1a 64 over the little-endian bytes of every output, in
 //! order), `instructions: <n>` (median per call, from SysTick under QEMU `-icount shift=0`),
@@ -17,6 +19,7 @@
 use defmt_rtt as _;
 
 pub mod baked_mlp;
+pub mod baked_transformer;
 pub mod bench;
 pub mod digest;
 pub mod memory;
@@ -26,6 +29,7 @@ pub mod prodmp_workload;
 pub mod report;
 pub mod shape;
 pub mod timer;
+pub mod transformer_network;
 pub mod workload_api;
 
 /// The ProDMP decoder tables of [`shape::config`], baked on the host by build.rs.

@@ -1,0 +1,80 @@
+//! [`TransformerNetwork`]: frmd-core's [`Int8Transformer`] behind the policy's [`Network`] trait,
+//! so `Policy::act` drives transformer-lite exactly as it drives the MLP (noise, input assembly,
+//! consistency output stage, ProDMP decode, denormalization). `core` + frmd-core only: the
+//! firmware and the host test share it.
+//!
+//! The policy assembles one input vector with the standard [`InputLayout`]
+//! (`[obs history | previous action | rate * rate_scale | c_in x]`); the first three segments are
+//! the transformer's condition (`cond_dim` values) and the last one its trajectory (`n k`). The
+//! noise token is folded for the single sampling step, so only first-layer bias index 0 exists.
+
+use frmd_core::model::mlp::ModelError;
+use frmd_core::model::transformer::{Int8Transformer, TransformerError, TransformerScratch};
+use frmd_core::policy::{InputLayout, InputSegment, Network, PolicyError};
+
+/// The backbone, its scratch and the error of the last refused forward pass.
+pub struct TransformerNetwork<'a, const F: usize, const B: usize, const A: usize> {
+    model: Int8Transformer<'a>,
+    scratch: TransformerScratch<F, B, A>,
+    last_error: Option<TransformerError>,
+}
+
+impl<'a, const F: usize, const B: usize, const A: usize> TransformerNetwork<'a, F, B, A> {
+    /// Wraps `model` for inputs laid out by `layout`, which must be the standard order (condition
+    /// segments first, the noisy trajectory last); the model must validate.
+    pub fn new(model: Int8Transformer<'a>, layout: &InputLayout) -> Result<Self, TransformerError> {
+        model.validate()?;
+        let standard = [
+            InputSegment::ObsHistory,
+            InputSegment::PrevAction,
+            InputSegment::PrevRate,
+            InputSegment::NoisyTrajectory,
+        ];
+        if layout.segments() != standard {
+            return Err(TransformerError::ConditionLength);
+        }
+        Ok(Self { model, scratch: TransformerScratch::new(), last_error: None })
+    }
+
+    /// The backbone.
+    pub fn model(&self) -> &Int8Transformer<'a> {
+        &self.model
+    }
+
+    /// Why the last forward pass was refused (the policy only sees [`PolicyError::Model`]).
+    pub fn last_error(&self) -> Option<TransformerError> {
+        self.last_error
+    }
+}
+
+impl<const F: usize, const B: usize, const A: usize> Network for TransformerNetwork<'_, F, B, A> {
+    fn input_width(&self) -> usize {
+        let shape = &self.model.shape;
+        shape.cond_dim.saturating_add(shape.trajectory_len())
+    }
+
+    fn output_width(&self) -> usize {
+        self.model.shape.output
+    }
+
+    fn num_first_layer_biases(&self) -> usize {
+        0
+    }
+
+    fn forward(
+        &mut self,
+        first_layer_bias: usize,
+        input: &[f32],
+        output: &mut [f32],
+    ) -> Result<(), PolicyError> {
+        if first_layer_bias != 0 {
+            return Err(PolicyError::FirstLayerBiasIndex);
+        }
+        let (condition, trajectory) = input
+            .split_at_checked(self.model.shape.cond_dim)
+            .ok_or(PolicyError::Model(ModelError::InputLength))?;
+        let result = self.model.forward(trajectory, condition, output, &mut self.scratch);
+        self.last_error = result.err();
+        result.map_err(|_| PolicyError::Model(ModelError::InputLength))
+    }
+}
