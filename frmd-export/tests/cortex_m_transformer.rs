@@ -50,6 +50,12 @@ type Network<'a> = TransformerNetwork<
     { TRANSFORMER_SCRATCH.accumulators },
 >;
 
+type Scratch = frmd_core::model::transformer::TransformerScratch<
+    { TRANSFORMER_SCRATCH.floats },
+    { TRANSFORMER_SCRATCH.bytes },
+    { TRANSFORMER_SCRATCH.accumulators },
+>;
+
 /// The blob in 16-byte aligned storage, as the loader requires.
 fn aligned(blob: &[u8]) -> Vec<u128> {
     let mut words = vec![0_u128; blob.len().div_ceil(16)];
@@ -67,7 +73,8 @@ fn host_digest() -> Result<u64, PolicyError> {
     let config = loaded.config();
     let data = synthetic_transformer::generate();
     let blocks = data.blocks();
-    let network = Network::new(data.model(&blocks), &config.sampler.layout)
+    let mut scratch = Box::new(Scratch::new());
+    let network = Network::new(data.model(&blocks), &config.sampler.layout, &mut scratch)
         .expect("the synthetic transformer validates");
     let policy = Policy::<_, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>::new(
         config, network,
@@ -103,7 +110,8 @@ fn transformer_network_rejects_a_non_standard_layout() {
         0.1,
     )
     .expect("a valid layout");
-    assert!(Network::new(data.model(&blocks), &layout).is_err());
+    let mut scratch = Box::new(Scratch::new());
+    assert!(Network::new(data.model(&blocks), &layout, &mut scratch).is_err());
 }
 
 #[test]

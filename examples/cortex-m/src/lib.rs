@@ -28,6 +28,8 @@ pub mod policy_workload;
 pub mod prodmp_workload;
 pub mod report;
 pub mod shape;
+pub mod stage_report;
+pub mod stages;
 pub mod timer;
 pub mod transformer_network;
 pub mod workload_api;

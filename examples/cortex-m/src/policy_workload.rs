@@ -55,6 +55,11 @@ impl<
         Self::with_name(policy, NAME)
     }
 
+    /// The policy (for the per-stage breakdown, which reads its network's marks).
+    pub fn policy(&self) -> &Policy<'a, Net, M, O, K, N, P, I> {
+        &self.policy
+    }
+
     /// As [`Self::new`], printed as `name` (another network behind the same policy).
     pub fn with_name(policy: Policy<'a, Net, M, O, K, N, P, I>, name: &'static str) -> Self {
         Self {

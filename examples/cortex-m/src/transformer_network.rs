@@ -12,17 +12,31 @@ use frmd_core::model::mlp::ModelError;
 use frmd_core::model::transformer::{Int8Transformer, TransformerError, TransformerScratch};
 use frmd_core::policy::{InputLayout, InputSegment, Network, PolicyError};
 
-/// The backbone, its scratch and the error of the last refused forward pass.
+use crate::stages::{Clock, Marks};
+
+fn no_clock() -> u32 {
+    0
+}
+
+/// The backbone, its scratch (borrowed, so that moving the network or the policy around copies
+/// no 20 KB buffers) and the error of the last refused forward pass.
 pub struct TransformerNetwork<'a, const F: usize, const B: usize, const A: usize> {
     model: Int8Transformer<'a>,
-    scratch: TransformerScratch<F, B, A>,
+    scratch: &'a mut TransformerScratch<F, B, A>,
     last_error: Option<TransformerError>,
+    /// Entry and exit of the last forward pass.
+    marks: Marks<2>,
 }
 
 impl<'a, const F: usize, const B: usize, const A: usize> TransformerNetwork<'a, F, B, A> {
     /// Wraps `model` for inputs laid out by `layout`, which must be the standard order (condition
-    /// segments first, the noisy trajectory last); the model must validate.
-    pub fn new(model: Int8Transformer<'a>, layout: &InputLayout) -> Result<Self, TransformerError> {
+    /// segments first, the noisy trajectory last), with `scratch` as working memory; the model
+    /// must validate.
+    pub fn new(
+        model: Int8Transformer<'a>,
+        layout: &InputLayout,
+        scratch: &'a mut TransformerScratch<F, B, A>,
+    ) -> Result<Self, TransformerError> {
         model.validate()?;
         let standard = [
             InputSegment::ObsHistory,
@@ -33,12 +47,27 @@ impl<'a, const F: usize, const B: usize, const A: usize> TransformerNetwork<'a, 
         if layout.segments() != standard {
             return Err(TransformerError::ConditionLength);
         }
-        Ok(Self { model, scratch: TransformerScratch::new(), last_error: None })
+        Ok(Self {
+            model,
+            scratch,
+            last_error: None,
+            marks: Marks::new(no_clock),
+        })
     }
 
     /// The backbone.
     pub fn model(&self) -> &Int8Transformer<'a> {
         &self.model
+    }
+
+    /// Reads `clock` at the entry and the exit of every forward pass (see [`Self::marks`]).
+    pub fn set_clock(&mut self, clock: Clock) {
+        self.marks = Marks::new(clock);
+    }
+
+    /// Clock readings at the entry and the exit of the last forward pass.
+    pub fn marks(&self) -> &Marks<2> {
+        &self.marks
     }
 
     /// Why the last forward pass was refused (the policy only sees [`PolicyError::Model`]).
@@ -67,13 +96,16 @@ impl<const F: usize, const B: usize, const A: usize> Network for TransformerNetw
         input: &[f32],
         output: &mut [f32],
     ) -> Result<(), PolicyError> {
+        self.marks.clear();
+        self.marks.mark();
         if first_layer_bias != 0 {
             return Err(PolicyError::FirstLayerBiasIndex);
         }
         let (condition, trajectory) = input
             .split_at_checked(self.model.shape.cond_dim)
             .ok_or(PolicyError::Model(ModelError::InputLength))?;
-        let result = self.model.forward(trajectory, condition, output, &mut self.scratch);
+        let result = self.model.forward(trajectory, condition, output, self.scratch);
+        self.marks.mark();
         self.last_error = result.err();
         result.map_err(|_| PolicyError::Model(ModelError::InputLength))
     }
