@@ -20,6 +20,9 @@ mod policy_workload;
 #[allow(dead_code)]
 #[path = "../../examples/cortex-m/src/shape.rs"]
 mod shape;
+#[allow(dead_code)] // the staged MLP network is firmware-only here
+#[path = "../../examples/cortex-m/src/stages.rs"]
+mod stages;
 #[path = "../../examples/cortex-m/src/synthetic_mlp.rs"]
 mod synthetic_mlp;
 #[path = "../../examples/cortex-m/src/synthetic_policy.rs"]

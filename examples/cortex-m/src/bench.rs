@@ -100,6 +100,9 @@ pub fn run_then<W: Workload, const CALLS: usize>(
         calibration.instructions(total_ticks * 1000) / CALLS as u64,
     );
     report!("systick_ticks: {}", median_ticks);
+    if workload.macs() != 0 {
+        report!("macs: {}", workload.macs());
+    }
     report::milli("instructions_per_systick", calibration.milli_instructions_per_tick());
     if median_cycles != 0 {
         report!("cycles: {}", median_cycles);

@@ -7,7 +7,8 @@
 //! over every call so the mean resolves single instructions):
 //! - inside `Policy::act`: the network marks its entry and exit (and, for the MLP, the boundary of
 //!   every layer, see [`crate::stages::StagedMlpNetwork`]); `input` is `act`'s start to the
-//!   network's entry (checks, history copy, Gaussian noise, `sigma z`, input assembly with `c_in`);
+//!   network's entry; `noise` (`Rng::fill_gaussian` of the chunk) is timed on its own and `input`
+//!   is the rest (checks, history copy, `sigma z`, sampler validation, input assembly with `c_in`);
 //!   the rest of `act` after the network is decode + consistency output stage + denormalization;
 //! - `decode` and `denormalize` are then timed on their own (same inputs, same frmd-core calls:
 //!   `BakedProDmp::decode` on the last parameters, `RangeNormalizer::denormalize{,_rate}` on the
@@ -28,12 +29,12 @@ use frmd_core::policy::{Network, Policy, PolicyError};
 use frmd_core::rng::Rng;
 
 use crate::digest::Fnv1a64;
-use crate::policy_workload::{PolicyWorkload, CASES};
+use crate::policy_workload::{PolicyWorkload, CASES, NOISE_SEED};
 use crate::report::{exit_failure, report};
 use crate::stages::StagedMlpNetwork;
 use crate::timer::{Calibration, TickCounter};
 use crate::transformer_network::TransformerNetwork;
-use crate::workload_api::Workload;
+use crate::workload_api::{prodmp_decode_macs, Workload};
 
 /// Calls per case in the breakdown (and standalone repetitions per call).
 pub const REPEATS: usize = 5;
@@ -144,6 +145,22 @@ fn time_post_stages<
     Ok((decode_ticks, denormalize_ticks))
 }
 
+/// Times the Gaussian noise of one chunk (`Rng::fill_gaussian` of `N K` values, as the sampler
+/// draws it) standalone, `REPEATS` times with the case's seed; summed ticks.
+fn time_noise<const N: usize, const K: usize>(case: usize) -> u64 {
+    let mut ticks = 0;
+    for _ in 0..REPEATS {
+        let mut noise = [[0.0_f32; K]; N];
+        let mut rng = Rng::new(NOISE_SEED.wrapping_add(case as u64));
+        let start = systick();
+        rng.fill_gaussian(noise.as_flattened_mut());
+        let end = systick();
+        core::hint::black_box(&noise);
+        ticks += elapsed(start, end);
+    }
+    ticks
+}
+
 /// Ends the run with a failure if the breakdown's chunks differ from the main measurement's.
 fn check_digest(digest: Fnv1a64, expected: u64) {
     report::hex64("stage_digest", digest.finish());
@@ -175,6 +192,7 @@ pub fn mlp_policy<
     expected_digest: u64,
 ) -> Result<(), PolicyError> {
     let mut stages = Breakdown::new();
+    let noise = stages.stage("noise", 0);
     let input = stages.stage("input", 0);
     let quantize = stages.stage("quantize", 0);
     const LAYER_NAMES: [&str; 8] =
@@ -185,7 +203,7 @@ pub fn mlp_policy<
     }
     let output_layer = stages.stage("output_layer", output_macs);
     let dequantize = stages.stage("dequantize", 0);
-    let decode = stages.stage("decode", (2 * N * K * (P + 2)) as u64);
+    let decode = stages.stage("decode", prodmp_decode_macs(N, K, P));
     let output_stage = stages.stage("output_stage", (2 * N * K) as u64);
     let denormalize = stages.stage("denormalize", (2 * N * K) as u64);
     let mut digest = Fnv1a64::new();
@@ -208,6 +226,9 @@ pub fn mlp_policy<
             stages.add(output_stage, elapsed(*exit, end));
         }
         workload.digest_outputs(&mut digest);
+        let noise_ticks = time_noise::<N, K>(case);
+        stages.add(noise, noise_ticks);
+        stages.sub(input, noise_ticks);
         let (decode_ticks, denormalize_ticks) = time_post_stages(workload.policy())?;
         stages.add(decode, decode_ticks);
         stages.add(denormalize, denormalize_ticks);
@@ -324,6 +345,7 @@ pub fn transformer_policy<
     let shape = model.shape;
     let (t, w) = (shape.tokens() as u64, shape.width as u64);
     let mut stages = Breakdown::new();
+    let noise = stages.stage("noise", 0);
     let input = stages.stage("input", 0);
     let embedding =
         stages.stage("embedding", (shape.cond_dim as u64 + shape.trajectory_len() as u64) * w);
@@ -335,7 +357,7 @@ pub fn transformer_policy<
     }
     let head = stages.stage("head", t * w * shape.output as u64);
     let network_rest = stages.stage("network_rest", 0);
-    let decode = stages.stage("decode", (2 * N * K * (P + 2)) as u64);
+    let decode = stages.stage("decode", prodmp_decode_macs(N, K, P));
     let output_stage = stages.stage("output_stage", (2 * N * K) as u64);
     let denormalize = stages.stage("denormalize", (2 * N * K) as u64);
     let mut digest = Fnv1a64::new();
@@ -353,6 +375,9 @@ pub fn transformer_policy<
         network_ticks += elapsed(*entry, *exit) * REPEATS as u64;
         stages.add(output_stage, elapsed(*exit, end) * REPEATS as u64);
         workload.digest_outputs(&mut digest);
+        let noise_ticks = time_noise::<N, K>(case);
+        stages.add(noise, noise_ticks);
+        stages.sub(input, noise_ticks);
         let (decode_ticks, denormalize_ticks) = time_post_stages(workload.policy())?;
         stages.add(decode, decode_ticks);
         stages.add(denormalize, denormalize_ticks);
