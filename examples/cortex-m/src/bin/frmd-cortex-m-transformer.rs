@@ -1,24 +1,22 @@
 //! Firmware: the synthetic one-step policy configuration baked by frmd-export (normalization,
 //! step constants, decoder, input layout) with a synthetic int8 transformer-lite backbone
 //! (src/synthetic_transformer.rs) as its network; `Policy::act` on the fixed observation
-//! histories of src/policy_workload.rs.
+//! histories of src/policy_workload.rs. The per-stage breakdown is a separate image
+//! (src/bin/frmd-cortex-m-transformer-stages.rs), so that its code does not change this one's
+//! inlining or size.
 #![no_std]
 #![no_main]
 
 use cortex_m_rt::entry;
+use frmd_core::model::transformer::TransformerScratch;
 use frmd_core::policy::Policy;
 use frmd_cortex_m::policy_workload::{PolicyWorkload, CASES};
 use frmd_cortex_m::report::exit_failure;
 use frmd_cortex_m::shape::{
     DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
-    TRANSFORMER_SHAPE,
 };
-use frmd_core::model::mlp::ModelError;
-use frmd_core::model::transformer::{Int8Transformer, TransformerScratch};
-use frmd_core::policy::PolicyError;
-use frmd_cortex_m::timer::Calibration;
 use frmd_cortex_m::transformer_network::TransformerNetwork;
-use frmd_cortex_m::{baked_transformer, bench, stage_report};
+use frmd_cortex_m::{baked_transformer, bench};
 
 /// The module frmd-export generated for the MLP policy; only its `config()` is used here (the
 /// MLP weights are not referenced, so the linker drops them).
@@ -65,43 +63,5 @@ fn main() -> ! {
         Err(error) => exit_failure(&error),
     };
     let mut workload = PolicyWorkload::with_name(policy, NAME);
-    bench::run_then::<_, { CASES }>(&mut workload, stack, |workload, calibration, digest| {
-        let model = *workload.policy().network().model();
-        if let Err(error) = breakdown(model, calibration, digest) {
-            exit_failure(&error);
-        }
-    })
-}
-
-/// The per-stage breakdown: the same policy with the network's entry and exit marked. Not
-/// inlined, so its frame (a second policy and scratch) is not part of the main measurement's stack.
-#[inline(never)]
-fn breakdown(
-    model: Int8Transformer<'_>,
-    calibration: &Calibration,
-    digest: u64,
-) -> Result<(), PolicyError> {
-    let config = baked::config();
-    let mut policy_scratch = Scratch::new();
-    let mut network = Network::new(model, &config.sampler.layout, &mut policy_scratch)
-        .map_err(|_| PolicyError::Model(ModelError::InputLength))?;
-    network.set_clock(stage_report::systick);
-    let policy =
-        Policy::<_, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>::new(config, network)?;
-    let mut staged = PolicyWorkload::with_name(policy, NAME);
-    let mut scratch = Scratch::new();
-    stage_report::transformer_policy::<
-        _,
-        _,
-        _,
-        { TRANSFORMER_SHAPE.token_values() },
-        { TRANSFORMER_SHAPE.width },
-        { TRANSFORMER_SHAPE.output },
-        POLICY_HISTORY,
-        POLICY_OBS_DIM,
-        DOF,
-        HORIZON,
-        PARAMS,
-        POLICY_INPUT,
-    >(&mut staged, &mut scratch, calibration, digest)
+    bench::run::<_, { CASES }>(&mut workload, stack)
 }
