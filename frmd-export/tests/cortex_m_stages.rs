@@ -112,3 +112,67 @@ fn staged_mlp_network_refuses_small_scratch() {
     );
     assert!(result.is_err());
 }
+
+/// `key: value` of the first line starting with `key: `.
+fn line_value<'a>(output: &'a str, key: &str) -> Option<&'a str> {
+    let prefix = format!("{key}: ");
+    output.lines().find_map(|line| line.strip_prefix(prefix.as_str()))
+}
+
+/// Runs both breakdown images on the Cortex-M4F board: each must print stage lines whose sum is
+/// within 2 % of its measured `instructions:` and a `stage_digest` equal to its `digest` (the
+/// firmware also refuses to finish otherwise). Skips like the other QEMU tests.
+#[test]
+fn qemu_stage_breakdowns_add_up() {
+    use std::path::{Path, PathBuf};
+    use std::process::Command;
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let env_file = std::env::var_os("FRMD_CORTEX_M_ENV")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target/cortex-m.env"));
+    let qemu_found = Command::new("qemu-system-arm").arg("--version").output().is_ok();
+    if std::env::var_os("FRMD_SKIP_QEMU").is_some() || !env_file.exists() || !qemu_found {
+        assert!(
+            std::env::var_os("FRMD_REQUIRE_QEMU").is_none(),
+            "FRMD_REQUIRE_QEMU is set but the QEMU check cannot run (env file {} present: {}, qemu-system-arm found: {qemu_found})",
+            env_file.display(),
+            env_file.exists()
+        );
+        eprintln!("qemu_stage_breakdowns_add_up: SKIPPED (FRMD_SKIP_QEMU set, or no {} / qemu-system-arm)", env_file.display());
+        return;
+    }
+    for image in ["policy-stages", "transformer-stages"] {
+        let output = Command::new("bash")
+            .arg(root.join("examples/cortex-m/run-qemu.sh"))
+            .args(["m4", image])
+            .env("CARGO_TARGET_DIR", root.join("examples/cortex-m/target"))
+            .output()
+            .expect("run examples/cortex-m/run-qemu.sh");
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            output.status.success(),
+            "run-qemu.sh m4 {image} failed:\n{stdout}\n{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        assert_eq!(line_value(&stdout, "stage_digest"), line_value(&stdout, "digest"), "{stdout}");
+        let number = |key: &str| -> f64 {
+            line_value(&stdout, key)
+                .and_then(|v| v.parse().ok())
+                .unwrap_or_else(|| panic!("no numeric '{key}:' line in\n{stdout}"))
+        };
+        let stages: Vec<f64> = stdout
+            .lines()
+            .filter(|line| line.starts_with("stage ") && !line.starts_with("stage_"))
+            .map(|line| line.rsplit(": ").next().and_then(|v| v.parse().ok()).expect("stage value"))
+            .collect();
+        assert!(stages.len() >= 8, "{image}: too few stages\n{stdout}");
+        let sum: f64 = stages.iter().sum();
+        assert_eq!(sum, number("stage_sum"));
+        let total = number("instructions_mean");
+        assert!(
+            (sum - total).abs() <= 0.02 * total,
+            "{image}: stages sum to {sum}, the measured call takes {total}\n{stdout}"
+        );
+        eprintln!("{image} m4: stages sum {sum}, instructions_mean {total}");
+    }
+}
