@@ -13,12 +13,10 @@ mod digest;
 #[allow(dead_code)]
 #[path = "../../examples/cortex-m/src/policy_workload.rs"]
 mod policy_workload;
-#[allow(dead_code)]
 #[path = "../../examples/cortex-m/src/shape.rs"]
 mod shape;
 #[path = "../../examples/cortex-m/src/stages.rs"]
 mod stages;
-#[allow(dead_code)]
 #[path = "../../examples/cortex-m/src/synthetic_mlp.rs"]
 mod synthetic_mlp;
 #[path = "../../examples/cortex-m/src/synthetic_policy.rs"]

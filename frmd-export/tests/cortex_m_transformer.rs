@@ -17,7 +17,6 @@ mod digest;
 #[allow(dead_code)]
 #[path = "../../examples/cortex-m/src/policy_workload.rs"]
 mod policy_workload;
-#[allow(dead_code)]
 #[path = "../../examples/cortex-m/src/shape.rs"]
 mod shape;
 #[allow(dead_code)] // the staged MLP network is firmware-only here
