@@ -113,7 +113,10 @@ fn transformer_network_rejects_a_non_standard_layout() {
     )
     .expect("a valid layout");
     let mut scratch = Box::new(Scratch::new());
-    assert!(Network::new(data.model(&blocks), &layout, &mut scratch).is_err());
+    assert_eq!(
+        Network::new(data.model(&blocks), &layout, &mut scratch).err(),
+        Some(transformer_network::TransformerNetworkError::Layout)
+    );
 }
 
 #[test]

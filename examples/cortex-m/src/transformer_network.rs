@@ -18,6 +18,25 @@ fn no_clock() -> u32 {
     0
 }
 
+/// Why [`TransformerNetwork::new`] refused its arguments.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TransformerNetworkError {
+    /// The backbone does not validate.
+    Model(TransformerError),
+    /// The input layout is not the standard order (condition segments first, then the noisy
+    /// trajectory), so the input cannot be split into condition and trajectory.
+    Layout,
+}
+
+impl core::fmt::Display for TransformerNetworkError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Model(error) => write!(f, "transformer: {error}"),
+            Self::Layout => f.write_str("transformer network needs the standard input layout"),
+        }
+    }
+}
+
 /// The backbone, its scratch (borrowed, so that moving the network or the policy around copies
 /// no 20 KB buffers) and the error of the last refused forward pass.
 pub struct TransformerNetwork<'a, const F: usize, const B: usize, const A: usize> {
@@ -36,8 +55,8 @@ impl<'a, const F: usize, const B: usize, const A: usize> TransformerNetwork<'a, 
         model: Int8Transformer<'a>,
         layout: &InputLayout,
         scratch: &'a mut TransformerScratch<F, B, A>,
-    ) -> Result<Self, TransformerError> {
-        model.validate()?;
+    ) -> Result<Self, TransformerNetworkError> {
+        model.validate().map_err(TransformerNetworkError::Model)?;
         let standard = [
             InputSegment::ObsHistory,
             InputSegment::PrevAction,
@@ -45,7 +64,7 @@ impl<'a, const F: usize, const B: usize, const A: usize> TransformerNetwork<'a, 
             InputSegment::NoisyTrajectory,
         ];
         if layout.segments() != standard {
-            return Err(TransformerError::ConditionLength);
+            return Err(TransformerNetworkError::Layout);
         }
         Ok(Self {
             model,
@@ -70,7 +89,8 @@ impl<'a, const F: usize, const B: usize, const A: usize> TransformerNetwork<'a, 
         &self.marks
     }
 
-    /// Why the last forward pass was refused (the policy only sees [`PolicyError::Model`]).
+    /// Why the last forward pass was refused: the policy only sees
+    /// `PolicyError::Model(ModelError::InputLength)`, since `PolicyError` has no transformer variant.
     pub fn last_error(&self) -> Option<TransformerError> {
         self.last_error
     }

@@ -14,7 +14,6 @@ use frmd_cortex_m::shape::{
     DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
     TRANSFORMER_SHAPE,
 };
-use frmd_core::model::mlp::ModelError;
 use frmd_core::model::transformer::{Int8Transformer, TransformerScratch};
 use frmd_core::policy::PolicyError;
 use frmd_cortex_m::timer::Calibration;
@@ -84,8 +83,10 @@ fn breakdown(
 ) -> Result<(), PolicyError> {
     let config = baked::config();
     let mut policy_scratch = Scratch::new();
-    let mut network = Network::new(model, &config.sampler.layout, &mut policy_scratch)
-        .map_err(|_| PolicyError::Model(ModelError::InputLength))?;
+    let mut network = match Network::new(model, &config.sampler.layout, &mut policy_scratch) {
+        Ok(network) => network,
+        Err(error) => exit_failure(&error),
+    };
     network.set_clock(stage_report::systick);
     let policy =
         Policy::<_, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>::new(config, network)?;
