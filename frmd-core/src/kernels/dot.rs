@@ -37,6 +37,26 @@ pub(crate) fn dot_i8_prefix(a: &[i8], b: &[i8]) -> i32 {
     s0.wrapping_add(s1).wrapping_add(s2).wrapping_add(s3)
 }
 
+/// Calls `emit(dot(row, input))` for every row of the row-major `weights` (`input.len()` columns
+/// per row) in order; a partial last row is ignored (callers check the shapes).
+///
+/// This is the fully connected layer's matrix-vector product. On Arm cores with the DSP extension
+/// (`cfg(frmd_arm_dsp)`, module `kernels::dsp`) it runs an `SMLAD` kernel over four rows at a
+/// time; elsewhere it is [`dot_i8_prefix`] per row. Both give identical sums.
+#[cfg(not(frmd_arm_dsp))]
+#[inline]
+pub(crate) fn for_each_row_dot(weights: &[i8], input: &[i8], mut emit: impl FnMut(i32)) {
+    if input.is_empty() {
+        return;
+    }
+    for row in weights.chunks_exact(input.len()) {
+        emit(dot_i8_prefix(row, input));
+    }
+}
+
+#[cfg(frmd_arm_dsp)]
+pub(crate) use super::dsp::for_each_row_dot;
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,7 +6,7 @@
 //! [`crate::quant::requantize_to_i8`]; the activation clamp (`activation_min..=activation_max`)
 //! implements ReLU-like activations for free.
 
-use super::dot::dot_i8_prefix;
+use super::dot::for_each_row_dot;
 use super::KernelError;
 use crate::quant::{dequantize_accumulator, requantize_to_i8, SHIFT_MAX, SHIFT_MIN};
 
@@ -104,10 +104,12 @@ impl<'a> FullyConnected<'a> {
         if acc.len() != self.out_features {
             return Err(KernelError::OutputLength);
         }
-        let rows = self.weights.chunks_exact(self.in_features).zip(self.bias);
-        for ((row, bias), out) in rows.zip(acc.iter_mut()) {
-            *out = bias.wrapping_add(dot_i8_prefix(row, input));
-        }
+        let mut outputs = acc.iter_mut();
+        self.for_each_accumulator(input, |acc| {
+            if let Some(out) = outputs.next() {
+                *out = acc;
+            }
+        });
         Ok(())
     }
 
@@ -124,20 +126,33 @@ impl<'a> FullyConnected<'a> {
         if output.len() != self.out_features {
             return Err(KernelError::OutputLength);
         }
-        let rows = self.weights.chunks_exact(self.in_features).zip(self.bias);
         let channels = requant.multipliers.iter().zip(requant.shifts);
-        for (((row, bias), (multiplier, shift)), out) in rows.zip(channels).zip(output.iter_mut()) {
-            let acc = bias.wrapping_add(dot_i8_prefix(row, input));
-            *out = requantize_to_i8(
-                acc,
-                *multiplier,
-                *shift,
-                requant.output_zero_point,
-                requant.activation_min,
-                requant.activation_max,
-            );
-        }
+        let mut outputs = output.iter_mut().zip(channels);
+        self.for_each_accumulator(input, |acc| {
+            if let Some((out, (multiplier, shift))) = outputs.next() {
+                *out = requantize_to_i8(
+                    acc,
+                    *multiplier,
+                    *shift,
+                    requant.output_zero_point,
+                    requant.activation_min,
+                    requant.activation_max,
+                );
+            }
+        });
         Ok(())
+    }
+
+    /// Calls `emit(bias[o] + sum_i w[o][i] * input[i])` for `o = 0..out_features` in order
+    /// (callers have checked the shapes). The products come from [`for_each_row_dot`], which on
+    /// Cortex-M4/M7 is the `SMLAD` kernel (four rows per pass over the input).
+    #[inline]
+    fn for_each_accumulator(&self, input: &[i8], mut emit: impl FnMut(i32)) {
+        let mut biases = self.bias.iter();
+        for_each_row_dot(self.weights, input, |dot| {
+            let bias = biases.next().copied().unwrap_or(0);
+            emit(bias.wrapping_add(dot));
+        });
     }
 }
 

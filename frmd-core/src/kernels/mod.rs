@@ -1,6 +1,7 @@
 //! Compute kernels of the firmware forward passes.
 //!
-//! - [`dot`]: int8 x int8 -> int32 dot product;
+//! - [`dot`]: int8 x int8 -> int32 dot product (on Arm cores with the DSP extension, the
+//!   fully connected layer uses the `SMLAD` kernel of the private `dsp` module; see `build.rs`);
 //! - [`fc`]: int8 fully connected layer (requantized int8 output, or raw int32 accumulators);
 //! - [`lut`]: 256-entry int8 lookup-table activations and their builder;
 //! - [`activation`]: the f32 SiLU / Mish / GELU (erf, tanh and sigmoid forms) definitions used
@@ -13,6 +14,8 @@
 
 pub mod activation;
 pub mod dot;
+#[cfg(frmd_arm_dsp)]
+mod dsp;
 pub mod fc;
 pub mod lut;
 pub mod norm;
