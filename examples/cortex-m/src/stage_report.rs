@@ -30,7 +30,7 @@ use frmd_core::rng::Rng;
 
 use crate::digest::Fnv1a64;
 use crate::policy_workload::{PolicyWorkload, CASES, NOISE_SEED};
-use crate::report::{exit_failure, report};
+use crate::report::{self, exit_failure, report};
 use crate::stages::StagedMlpNetwork;
 use crate::timer::{Calibration, TickCounter};
 use crate::transformer_network::TransformerNetwork;
@@ -169,7 +169,6 @@ fn check_digest(digest: Fnv1a64, expected: u64) {
     }
 }
 
-use crate::report;
 
 #[inline(never)]
 /// Breakdown of the MLP policy: `workload` runs a [`StagedMlpNetwork`] whose clock is [`systick`];
