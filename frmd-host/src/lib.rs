@@ -4,6 +4,8 @@ pub mod checkpoint;
 pub mod cli;
 pub mod data;
 pub mod diffusion;
+pub mod equiv;
+pub mod bench;
 pub mod eval;
 pub mod models;
 pub mod policy;

@@ -15,26 +15,31 @@ pub fn dot_i8(a: &[i8], b: &[i8]) -> Result<i32, KernelError> {
 
 /// Dot product over the common prefix of `a` and `b` (callers check the lengths).
 ///
-/// Four independent accumulators over blocks of four lanes keep the multiply-accumulate pipeline
-/// busy (Cortex-M4 `MLA`/`SMLABB`, or vectorized on hosts); wrapping int32 addition is associative
-/// and commutative, so the result is identical to a sequential sum.
+/// Independent accumulators keep the multiply-accumulate pipeline busy: four on Arm (Cortex-M4
+/// `MLA`/`SMLABB` without register spills), sixteen elsewhere so hosts vectorize the loop (SSE2
+/// `pmaddwd`). Wrapping int32 addition is associative and commutative, so the result is identical
+/// to a sequential sum either way.
 #[inline]
 pub(crate) fn dot_i8_prefix(a: &[i8], b: &[i8]) -> i32 {
+    #[cfg(target_arch = "arm")]
+    const LANES: usize = 4;
+    #[cfg(not(target_arch = "arm"))]
+    const LANES: usize = 16;
     let len = a.len().min(b.len());
     let (a, b) = (a.get(..len).unwrap_or(&[]), b.get(..len).unwrap_or(&[]));
-    let (a_blocks, a_tail) = a.as_chunks::<4>();
-    let (b_blocks, b_tail) = b.as_chunks::<4>();
-    let (mut s0, mut s1, mut s2, mut s3) = (0_i32, 0_i32, 0_i32, 0_i32);
-    for (&[a0, a1, a2, a3], &[b0, b1, b2, b3]) in a_blocks.iter().zip(b_blocks) {
-        s0 = s0.wrapping_add(i32::from(a0) * i32::from(b0));
-        s1 = s1.wrapping_add(i32::from(a1) * i32::from(b1));
-        s2 = s2.wrapping_add(i32::from(a2) * i32::from(b2));
-        s3 = s3.wrapping_add(i32::from(a3) * i32::from(b3));
+    let (a_blocks, a_tail) = a.as_chunks::<LANES>();
+    let (b_blocks, b_tail) = b.as_chunks::<LANES>();
+    let mut sums = [0_i32; LANES];
+    for (x, y) in a_blocks.iter().zip(b_blocks) {
+        for ((sum, p), q) in sums.iter_mut().zip(x).zip(y) {
+            *sum = sum.wrapping_add(i32::from(*p) * i32::from(*q));
+        }
     }
+    let mut total = sums.iter().fold(0_i32, |acc, s| acc.wrapping_add(*s));
     for (x, y) in a_tail.iter().zip(b_tail) {
-        s0 = s0.wrapping_add(i32::from(*x) * i32::from(*y));
+        total = total.wrapping_add(i32::from(*x) * i32::from(*y));
     }
-    s0.wrapping_add(s1).wrapping_add(s2).wrapping_add(s3)
+    total
 }
 
 /// Calls `emit(dot(row, input))` for every row of the row-major `weights` (`input.len()` columns

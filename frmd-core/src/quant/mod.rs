@@ -28,8 +28,8 @@ pub use params::{
     symmetric_weight_scale, QuantParams, WEIGHT_MAX, WEIGHT_MIN,
 };
 
-#[cfg(test)]
-pub(crate) mod reference;
+#[cfg(any(test, feature = "reference"))]
+pub mod reference;
 #[cfg(test)]
 mod tests;
 

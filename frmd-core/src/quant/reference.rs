@@ -1,16 +1,16 @@
-//! Test-only wide-integer model of requantization, written directly from the formulas in
+//! Wide-integer model (tests and the `reference` feature) of requantization, written directly from the formulas in
 //! [`super::fixed_point`] with i128 arithmetic and floor divisions (no masks, no nudges), so it
 //! shares no code path with the implementation.
 
 /// `floor((a * b + 2^30) / 2^31)` saturated to i32: round half up of `a * b / 2^31`.
-pub(crate) fn high_mul(a: i32, b: i32) -> i32 {
+pub fn high_mul(a: i32, b: i32) -> i32 {
     let product = i128::from(a) * i128::from(b);
     let rounded = (product + (1_i128 << 30)).div_euclid(1_i128 << 31);
     saturate(rounded)
 }
 
 /// `sign(x) * floor((|x| + 2^(e-1)) / 2^e)`: round half away from zero of `x / 2^e`.
-pub(crate) fn divide_pot(x: i32, exponent: u32) -> i32 {
+pub fn divide_pot(x: i32, exponent: u32) -> i32 {
     if exponent == 0 {
         return x;
     }
@@ -23,7 +23,7 @@ pub(crate) fn divide_pot(x: i32, exponent: u32) -> i32 {
 }
 
 /// Left shift by `max(shift, 0)` saturated, high multiply, then divide by `2^max(-shift, 0)`.
-pub(crate) fn scale(acc: i32, multiplier: i32, shift: i32) -> i32 {
+pub fn scale(acc: i32, multiplier: i32, shift: i32) -> i32 {
     let left = shift.max(0) as u32;
     let right = (-i64::from(shift)).max(0) as u32;
     let shifted = saturate(i128::from(acc) << left.min(40));
@@ -31,7 +31,7 @@ pub(crate) fn scale(acc: i32, multiplier: i32, shift: i32) -> i32 {
 }
 
 /// `clamp(scale(acc) + zero_point, lo, hi)` with the sum taken exactly.
-pub(crate) fn requantize(
+pub fn requantize(
     acc: i32,
     multiplier: i32,
     shift: i32,

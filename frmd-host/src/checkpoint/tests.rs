@@ -1,4 +1,5 @@
 use super::*;
+use frmd_core::sigma::SigmaConfig;
 use crate::models::{HeadConfig, OwnedNetwork};
 use crate::train::toy::toy_config;
 
@@ -11,7 +12,7 @@ fn temp_dir(tag: &str) -> std::path::PathBuf {
 fn saved(tag: &str) -> (std::path::PathBuf, CheckpointMeta, OwnedNetwork) {
     let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
     let net = OwnedNetwork::new_seeded(&cfg, 21, &Device::Cpu).unwrap();
-    let meta = CheckpointMeta::describe(Role::Student, &net, SigmaConfig::default()).unwrap();
+    let meta = CheckpointMeta::describe(Role::Student, net.net.config(), SigmaConfig::default());
     let dir = temp_dir(tag);
     save(&dir, &meta, &net).unwrap();
     (dir, meta, net)
@@ -51,7 +52,7 @@ fn corrupted_or_mismatched_checkpoints_are_rejected_with_a_reason() {
     if let crate::models::BackboneConfig::Mlp { hidden, .. } = &mut meta2.model.backbone {
         hidden[0] = 32;
     }
-    meta2.tensors = expected_tensors(&meta2.model).unwrap();
+    meta2.tensors = expected_tensors(&meta2.model);
     std::fs::write(dir.join(CONFIG_FILE), serde_json::to_string(&meta2).unwrap()).unwrap();
     let err = load_err(&dir);
     assert!(err.contains("mlp.layers.0.bias") && err.contains("shape"), "{err}");
@@ -92,4 +93,23 @@ fn corrupted_or_mismatched_checkpoints_are_rejected_with_a_reason() {
     // Missing config file.
     std::fs::remove_file(dir.join(CONFIG_FILE)).unwrap();
     assert!(load_err(&dir).contains("frmd.json"));
+}
+
+/// The exporter's candle-free list of variables equals the candle models' `VarMap`.
+#[test]
+fn expected_tensors_match_the_candle_models() {
+    use crate::models::{BackboneConfig, ModelConfig};
+    for backbone in ["mlp:16,8:silu", "mlp:12", "transformer-lite"] {
+        let mut cfg: ModelConfig = toy_config(HeadConfig::ProDmp { num_basis: 3 });
+        cfg.backbone = BackboneConfig::parse(backbone).unwrap();
+        if backbone.starts_with("transformer") {
+            cfg.backbone = BackboneConfig::Transformer { layers: 2, heads: 2, width: 8 };
+        }
+        let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
+        let candle: Vec<TensorSpec> = sorted_vars(&net.varmap)
+            .into_iter()
+            .map(|(name, var)| TensorSpec { name, dtype: "F32".into(), shape: var.dims().to_vec() })
+            .collect();
+        assert_eq!(expected_tensors(&cfg), candle, "{backbone}");
+    }
 }

@@ -46,6 +46,12 @@ pub struct EvalArgs {
     /// Teacher ODE solver for --ckpt: euler | heun | dpm++2m.
     #[arg(long)]
     pub solver: Option<String>,
+    /// int8 student blob (written by `frmd export --blob`) run by frmd-core; overrides --policy.
+    #[arg(long)]
+    pub blob: Option<PathBuf>,
+    /// Baked module directory (`frmd export --out`): evaluates the blob written beside it.
+    #[arg(long)]
+    pub baked: Option<PathBuf>,
 }
 
 /// Prints the human-readable summary of a report.
@@ -78,9 +84,15 @@ pub fn print_report(report: &EvalReport) {
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
-    let (mut policy, history) = match &args.ckpt {
-        Some(dir) => crate::policy::float::boxed(dir, args.steps, args.solver.as_deref())?,
-        None => match args.policy.as_str() {
+    let blob = args.blob.clone().or_else(|| args.baked.as_ref().map(|d| d.join(crate::cli::export::BAKED_BLOB_FILE)));
+    let (mut policy, history): (Box<dyn crate::eval::policy::Policy>, usize) = match (&blob, &args.ckpt) {
+        (Some(path), _) => {
+            let p = crate::policy::int8::Int8Policy::load(path)?;
+            let history = p.history();
+            (Box::new(p), history)
+        }
+        (None, Some(dir)) => crate::policy::float::boxed(dir, args.steps, args.solver.as_deref())?,
+        (None, None) => match args.policy.as_str() {
             "expert" => (expert_policy(&args.task)?, args.history),
             other => anyhow::bail!("unknown policy {other:?}; available: expert (or --ckpt DIR)"),
         },

@@ -3,7 +3,9 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 pub mod collect;
+pub mod equiv;
 pub mod eval;
+pub mod export;
 pub mod latency;
 pub mod prodmp;
 pub mod train;
@@ -30,6 +32,10 @@ pub enum Command {
     Train(train::TrainCommand),
     /// Latency per action chunk of float policies, side by side.
     Latency(latency::LatencyArgs),
+    /// Quantize a student checkpoint: baked Rust module and/or blob, with RAM/flash figures.
+    Export(export::ExportArgs),
+    /// Bit-accuracy harness: core f32 / int8 vs the float student, kernels vs a wide-integer model.
+    Equiv(equiv::EquivArgs),
 }
 
 /// Parses the command line, runs the subcommand, and maps errors to a non-zero exit code.
@@ -41,6 +47,8 @@ pub fn main() -> ExitCode {
         Command::Eval(args) => eval::run(args),
         Command::Train(cmd) => train::run(cmd),
         Command::Latency(args) => latency::run(args),
+        Command::Export(args) => export::run(args),
+        Command::Equiv(args) => equiv::run(args),
     };
     match result {
         Ok(code) => code,

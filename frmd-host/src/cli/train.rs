@@ -217,7 +217,7 @@ fn finish(
     mut extra: serde_json::Value,
 ) -> anyhow::Result<ExitCode> {
     mon.bar.finish_and_clear();
-    let mut meta = CheckpointMeta::describe(role, net, SigmaConfig::default())?;
+    let mut meta = CheckpointMeta::describe(role, net.net.config(), SigmaConfig::default());
     meta.normalization = Some(prepared.norm.clone());
     meta.dataset = prepared.info.clone();
     let common = mon.common;
@@ -234,6 +234,11 @@ fn finish(
     }
     meta.training = extra;
     checkpoint::save(out, &meta, net)?;
+    if role == Role::Student {
+        // Calibration inputs for `frmd export` (a firmware build.rs then needs only this dir).
+        let set = calibration_rows(&prepared.windows, CALIBRATION_ROWS, common.seed);
+        frmd_export::calibration_file::write(&out.join(checkpoint::CALIBRATION_FILE), &set)?;
+    }
     plot_learning_curve(&out.join("learning_curve.png"), &report.loss_curve, &mon.success)?;
     println!(
         "{role:?}: {} steps in {:.1} s, final loss {:.5}{}; checkpoint in {}",
@@ -244,6 +249,24 @@ fn finish(
         out.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// Calibration rows written beside a student checkpoint.
+pub const CALIBRATION_ROWS: usize = 256;
+
+/// Up to `rows` evenly spaced window conditions `[obs history, y0, v0]` (normalized), with a
+/// noise seed derived from the training seed.
+pub fn calibration_rows(windows: &WindowSet, rows: usize, seed: u64) -> frmd_export::calibrate::CalibrationSet {
+    let (obs_w, k) = (windows.history * windows.obs_dim, windows.action_dim);
+    let len = windows.len();
+    let stride = (len / rows.max(1)).max(1);
+    let mut cond = Vec::new();
+    for i in (0..len).step_by(stride).take(rows) {
+        cond.extend_from_slice(&windows.obs[i * obs_w..(i + 1) * obs_w]);
+        cond.extend_from_slice(&windows.prev_action[i * k..(i + 1) * k]);
+        cond.extend_from_slice(&windows.prev_rate[i * k..(i + 1) * k]);
+    }
+    frmd_export::calibrate::CalibrationSet { cond_dim: obs_w + 2 * k, cond, seed: seed ^ 0xca11_b4a7e }
 }
 
 pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {

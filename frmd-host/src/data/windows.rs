@@ -1,12 +1,6 @@
 //! Training windows cut from demonstrations: the contract between datasets and training.
 
-/// Per-dimension affine map from raw units to [-1, 1], fitted on training min/max.
-/// Constant dimensions (max == min) map to 0.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Normalizer {
-    pub min: Vec<f32>,
-    pub max: Vec<f32>,
-}
+pub use frmd_export::checkpoint::{Normalization, Normalizer};
 
 /// A batch-ready set of training windows, all in normalized units, stored row-major.
 ///
@@ -44,86 +38,6 @@ impl WindowSet {
 
     pub fn is_empty(&self) -> bool {
         self.len() == 0
-    }
-}
-
-/// Normalizers for observations and actions, fitted together on a training set.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Normalization {
-    pub obs: Normalizer,
-    pub action: Normalizer,
-}
-
-impl Normalizer {
-    /// Per-dimension min/max over the rows of `data` ([rows, dim], row-major). Non-finite values
-    /// are ignored; a dimension without finite values gets min = max = 0.
-    pub fn fit(data: &[f32], dim: usize) -> Self {
-        let mut min = vec![f32::INFINITY; dim];
-        let mut max = vec![f32::NEG_INFINITY; dim];
-        if dim > 0 {
-            for row in data.chunks_exact(dim) {
-                for ((lo, hi), &v) in min.iter_mut().zip(max.iter_mut()).zip(row) {
-                    if v.is_finite() {
-                        *lo = lo.min(v);
-                        *hi = hi.max(v);
-                    }
-                }
-            }
-        }
-        for (lo, hi) in min.iter_mut().zip(max.iter_mut()) {
-            if *lo > *hi {
-                (*lo, *hi) = (0.0, 0.0);
-            }
-        }
-        Self { min, max }
-    }
-
-    pub fn dim(&self) -> usize {
-        self.min.len()
-    }
-
-    /// Raw to [-1, 1] in place; `x` holds whole rows of `dim` values (a trailing partial row is
-    /// mapped with the leading dimensions). Constant dimensions map to 0.
-    pub fn normalize(&self, x: &mut [f32]) {
-        if self.min.is_empty() {
-            return;
-        }
-        for row in x.chunks_mut(self.min.len()) {
-            for ((v, &lo), &hi) in row.iter_mut().zip(&self.min).zip(&self.max) {
-                *v = if hi > lo {
-                    2.0 * (*v - lo) / (hi - lo) - 1.0
-                } else {
-                    0.0
-                };
-            }
-        }
-    }
-
-    /// [-1, 1] to raw in place (inverse of [`Normalizer::normalize`]; constant dimensions map to
-    /// their constant).
-    pub fn denormalize(&self, x: &mut [f32]) {
-        if self.min.is_empty() {
-            return;
-        }
-        for row in x.chunks_mut(self.min.len()) {
-            for ((v, &lo), &hi) in row.iter_mut().zip(&self.min).zip(&self.max) {
-                *v = if hi > lo {
-                    (*v + 1.0) * 0.5 * (hi - lo) + lo
-                } else {
-                    lo
-                };
-            }
-        }
-    }
-
-    /// Normalized units per raw unit for each dimension (0 for constant dimensions); rates and
-    /// other differences scale by this factor.
-    pub fn scale(&self) -> Vec<f32> {
-        self.min
-            .iter()
-            .zip(&self.max)
-            .map(|(&lo, &hi)| if hi > lo { 2.0 / (hi - lo) } else { 0.0 })
-            .collect()
     }
 }
 

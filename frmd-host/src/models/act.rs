@@ -1,20 +1,17 @@
 //! Activations with well-behaved gradients (candle's `ops::mish` overflows to NaN gradients
 //! for inputs above ~88 and is slow).
 use candle_core::{Result, Tensor};
-use serde::{Deserialize, Serialize};
 
-/// Hidden-layer activation of the MLP backbone.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Activation {
-    /// x * sigmoid(x).
-    Silu,
-    /// x * tanh(softplus(x)).
-    Mish,
+pub use frmd_export::checkpoint::Activation;
+
+/// The candle forward of an [`Activation`] (the enum itself is part of the checkpoint schema in
+/// `frmd_export::checkpoint`).
+pub trait ActivationExt {
+    fn apply(self, xs: &Tensor) -> Result<Tensor>;
 }
 
-impl Activation {
-    pub fn apply(self, xs: &Tensor) -> Result<Tensor> {
+impl ActivationExt for Activation {
+    fn apply(self, xs: &Tensor) -> Result<Tensor> {
         match self {
             Activation::Silu => xs.silu(),
             Activation::Mish => mish(xs),

@@ -1,6 +1,6 @@
 //! MLP backbone: input = [condition, c_in-scaled noisy trajectory, noise embedding], hidden layers
 //! with Mish or SiLU, a linear output layer.
-use super::act::Activation;
+use super::act::{Activation, ActivationExt};
 use candle_core::{Result, Tensor, D};
 use candle_nn::{Linear, Module, VarBuilder};
 

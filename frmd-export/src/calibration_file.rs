@@ -1,0 +1,43 @@
+//! `calibration.safetensors` beside a student checkpoint: `cond` [R, m O + 2 K] f32 (normalized
+//! `[obs history, y0, v0]` rows from the training windows) and metadata `seed` (the noise seed of
+//! [`crate::calibrate::CalibrationSet`]), so that exporting needs only the checkpoint directory.
+use crate::calibrate::CalibrationSet;
+use anyhow::{bail, Context};
+use std::collections::HashMap;
+use std::path::Path;
+
+/// Writes `set` to `path`.
+pub fn write(path: &Path, set: &CalibrationSet) -> anyhow::Result<()> {
+    let rows = set.rows();
+    if rows * set.cond_dim != set.cond.len() || rows == 0 {
+        bail!("calibration set: {} values are not whole rows of {}", set.cond.len(), set.cond_dim);
+    }
+    let bytes: Vec<u8> = set.cond.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let view = safetensors::tensor::TensorView::new(safetensors::Dtype::F32, vec![rows, set.cond_dim], &bytes)
+        .map_err(|e| anyhow::anyhow!("calibration tensor: {e}"))?;
+    let meta = HashMap::from([("seed".to_string(), set.seed.to_string())]);
+    let data = safetensors::serialize([("cond", view)], Some(meta)).map_err(|e| anyhow::anyhow!("serializing calibration: {e}"))?;
+    std::fs::write(path, data).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Reads a calibration file, checking its row width against `cond_dim`.
+pub fn read(path: &Path, cond_dim: usize) -> anyhow::Result<CalibrationSet> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let seed = meta
+        .metadata()
+        .as_ref()
+        .and_then(|m| m.get("seed"))
+        .and_then(|s| s.parse().ok())
+        .with_context(|| format!("{}: missing or bad metadata `seed`", path.display()))?;
+    let file = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let view = file.tensor("cond").map_err(|e| anyhow::anyhow!("{}: tensor `cond`: {e}", path.display()))?;
+    if view.dtype() != safetensors::Dtype::F32 || view.shape().len() != 2 || view.shape()[1] != cond_dim {
+        bail!("{}: tensor `cond` is {:?} {:?}, expected F32 [rows, {cond_dim}]", path.display(), view.dtype(), view.shape());
+    }
+    let cond: Vec<f32> = view.data().chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+    if cond.iter().any(|v| !v.is_finite()) {
+        bail!("{}: non-finite calibration value", path.display());
+    }
+    Ok(CalibrationSet { cond_dim, cond, seed })
+}

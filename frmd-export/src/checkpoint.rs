@@ -1,0 +1,302 @@
+//! Checkpoints without candle: `frmd.json` (the one schema, also used by frmd-host's candle
+//! loader) and `model.safetensors` read as plain f32 tensors. Every tensor's name, dtype and
+//! shape is checked against the config and any mismatch is named.
+//!
+//! Variable names (candle `VarBuilder` prefixes; linear weights `[out, in]`):
+//! - MLP: `mlp.layers.{i}.weight` / `.bias`, `i` = 0 .. hidden count (the last is the output);
+//! - transformer: `transformer.{traj_in,cond_in,noise_in,head}.{weight,bias}`,
+//!   `transformer.pos_embedding` `[n + 2, W]`, `transformer.final_norm.{weight,bias}` and per
+//!   block `transformer.blocks.{i}.{norm1,qkv,proj,norm2,fc1,fc2}.{weight,bias}`.
+mod config;
+
+pub use config::{Activation, BackboneConfig, HeadConfig, ModelConfig, Normalization, Normalizer};
+
+use anyhow::{bail, Context};
+use frmd_core::sigma::SigmaConfig;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Version of the checkpoint layout.
+pub const FORMAT_VERSION: u32 = 1;
+/// Weights file inside a checkpoint directory.
+pub const WEIGHTS_FILE: &str = "model.safetensors";
+/// Config file inside a checkpoint directory.
+pub const CONFIG_FILE: &str = "frmd.json";
+/// Calibration inputs written beside a student checkpoint (see [`crate::calibration`]).
+pub const CALIBRATION_FILE: &str = "calibration.safetensors";
+
+/// Which method a checkpoint holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Role {
+    Teacher,
+    Student,
+    Dp,
+}
+
+/// `frmd_core::sigma::SigmaConfig` as JSON.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SigmaJson {
+    pub sigma_min: f64,
+    pub sigma_max: f64,
+    pub rho: f64,
+    pub sigma_data: f64,
+}
+
+impl From<SigmaConfig> for SigmaJson {
+    fn from(s: SigmaConfig) -> Self {
+        SigmaJson { sigma_min: s.sigma_min, sigma_max: s.sigma_max, rho: s.rho, sigma_data: s.sigma_data }
+    }
+}
+
+impl From<SigmaJson> for SigmaConfig {
+    fn from(s: SigmaJson) -> Self {
+        SigmaConfig { sigma_min: s.sigma_min, sigma_max: s.sigma_max, rho: s.rho, sigma_data: s.sigma_data }
+    }
+}
+
+/// `frmd_core::prodmp::ProDmpConfig` as JSON (must equal the policy convention for the model's
+/// sizes).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProDmpJson {
+    pub num_dof: usize,
+    pub num_basis: usize,
+    pub tau: f64,
+    pub delay: f64,
+    pub alpha: f64,
+    pub alpha_phase: f64,
+    pub bandwidth_factor: f64,
+    pub num_basis_outside: usize,
+    pub dt: f64,
+    pub weights_scale: f64,
+    pub goal_scale: f64,
+    pub relative_goal: bool,
+    pub auto_scale_basis: bool,
+}
+
+impl From<&frmd_core::prodmp::ProDmpConfig> for ProDmpJson {
+    fn from(c: &frmd_core::prodmp::ProDmpConfig) -> Self {
+        ProDmpJson {
+            num_dof: c.num_dof,
+            num_basis: c.num_basis,
+            tau: c.tau,
+            delay: c.delay,
+            alpha: c.alpha,
+            alpha_phase: c.alpha_phase,
+            bandwidth_factor: c.bandwidth_factor,
+            num_basis_outside: c.num_basis_outside,
+            dt: c.dt,
+            weights_scale: c.weights_scale,
+            goal_scale: c.goal_scale,
+            relative_goal: c.relative_goal,
+            auto_scale_basis: c.auto_scale_basis,
+        }
+    }
+}
+
+/// Where the training data came from.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DatasetInfo {
+    pub task: String,
+    pub path: String,
+    /// FNV-1a 64 of the data file's bytes, hex.
+    pub digest: String,
+    pub windows: usize,
+}
+
+/// One tensor the weights file must contain.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TensorSpec {
+    pub name: String,
+    pub dtype: String,
+    pub shape: Vec<usize>,
+}
+
+/// Contents of `frmd.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CheckpointMeta {
+    pub format_version: u32,
+    pub role: Role,
+    pub model: ModelConfig,
+    pub prodmp: Option<ProDmpJson>,
+    pub sigma: SigmaJson,
+    /// Observation and action normalization (raw units <-> [-1, 1]).
+    pub normalization: Option<Normalization>,
+    pub dataset: DatasetInfo,
+    /// Free-form training summary (steps, seed, losses, timings, evaluation results).
+    pub training: serde_json::Value,
+    pub tensors: Vec<TensorSpec>,
+}
+
+/// FNV-1a 64-bit digest as 16 hex digits.
+pub fn fnv1a_hex(bytes: &[u8]) -> String {
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        hash = (hash ^ u64::from(b)).wrapping_mul(0x100_0000_01b3);
+    }
+    format!("{hash:016x}")
+}
+
+/// Names and shapes of the variables a model config implies, sorted by name (the layout of
+/// frmd-host's candle models; a frmd-host test checks it against their `VarMap`).
+pub fn expected_tensors(model: &ModelConfig) -> Vec<TensorSpec> {
+    let mut specs = Vec::new();
+    let mut push = |name: String, shape: Vec<usize>| specs.push(TensorSpec { name, dtype: "F32".into(), shape });
+    let linear = |push: &mut dyn FnMut(String, Vec<usize>), prefix: &str, input: usize, output: usize| {
+        push(format!("{prefix}.weight"), vec![output, input]);
+        push(format!("{prefix}.bias"), vec![output]);
+    };
+    match &model.backbone {
+        BackboneConfig::Mlp { hidden, .. } => {
+            let mut width = model.cond_dim() + model.traj_dim() + model.embed_dim;
+            for (i, &next) in hidden.iter().chain([&model.output_dim()]).enumerate() {
+                linear(&mut push, &format!("mlp.layers.{i}"), width, next);
+                width = next;
+            }
+        }
+        BackboneConfig::Transformer { layers, width, .. } => {
+            let w = *width;
+            let tokens = model.horizon + 2;
+            linear(&mut push, "transformer.traj_in", model.action_dim, w);
+            linear(&mut push, "transformer.cond_in", model.cond_dim(), w);
+            linear(&mut push, "transformer.noise_in", model.embed_dim, w);
+            linear(&mut push, "transformer.head", tokens * w, model.output_dim());
+            push("transformer.pos_embedding".into(), vec![tokens, w]);
+            push("transformer.final_norm.weight".into(), vec![w]);
+            push("transformer.final_norm.bias".into(), vec![w]);
+            for i in 0..*layers {
+                let p = format!("transformer.blocks.{i}");
+                for norm in ["norm1", "norm2"] {
+                    push(format!("{p}.{norm}.weight"), vec![w]);
+                    push(format!("{p}.{norm}.bias"), vec![w]);
+                }
+                linear(&mut push, &format!("{p}.qkv"), w, 3 * w);
+                linear(&mut push, &format!("{p}.proj"), w, w);
+                linear(&mut push, &format!("{p}.fc1"), w, 4 * w);
+                linear(&mut push, &format!("{p}.fc2"), 4 * w, w);
+            }
+        }
+    }
+    specs.sort_by(|a, b| a.name.cmp(&b.name));
+    specs
+}
+
+impl CheckpointMeta {
+    /// A description of a `model` for `role`; fill in dataset, normalization and training after.
+    pub fn describe(role: Role, model: &ModelConfig, sigma: SigmaConfig) -> Self {
+        CheckpointMeta {
+            format_version: FORMAT_VERSION,
+            role,
+            prodmp: model.prodmp().as_ref().map(ProDmpJson::from),
+            tensors: expected_tensors(model),
+            model: model.clone(),
+            sigma: sigma.into(),
+            normalization: None,
+            dataset: DatasetInfo::default(),
+            training: serde_json::Value::Null,
+        }
+    }
+
+    /// Checks the config's internal consistency (version, sizes, ProDMP, sigma, tensor list).
+    pub fn validate(&self) -> anyhow::Result<()> {
+        if self.format_version != FORMAT_VERSION {
+            bail!("{CONFIG_FILE}: format_version {} is not supported (expected {FORMAT_VERSION})", self.format_version);
+        }
+        self.model.validate().with_context(|| format!("{CONFIG_FILE}: model"))?;
+        SigmaConfig::from(self.sigma).validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))?;
+        let expected_prodmp = self.model.prodmp().as_ref().map(ProDmpJson::from);
+        if self.prodmp != expected_prodmp {
+            bail!("{CONFIG_FILE}: prodmp config {:?} differs from the policy convention for this model ({:?})", self.prodmp, expected_prodmp);
+        }
+        match (self.role, self.prodmp.is_some()) {
+            (Role::Dp, true) => bail!("{CONFIG_FILE}: a DP checkpoint must have a raw head"),
+            (Role::Teacher | Role::Student, false) => bail!("{CONFIG_FILE}: teacher and student checkpoints need a ProDMP head"),
+            _ => {}
+        }
+        let expected = expected_tensors(&self.model);
+        if self.tensors != expected {
+            bail!("{CONFIG_FILE}: tensor list does not match the model config ({} listed, {} implied)", self.tensors.len(), expected.len());
+        }
+        Ok(())
+    }
+
+    /// Reads and validates `dir/frmd.json`.
+    pub fn read(dir: &Path) -> anyhow::Result<Self> {
+        let path = dir.join(CONFIG_FILE);
+        let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+        let meta: CheckpointMeta = serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        meta.validate()?;
+        Ok(meta)
+    }
+}
+
+/// One f32 tensor read from the weights file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct F32Tensor {
+    pub shape: Vec<usize>,
+    /// Row-major values.
+    pub values: Vec<f32>,
+}
+
+/// Reads `dir/model.safetensors`, checking that it holds exactly the tensors `meta` lists, each
+/// F32 with the listed shape and finite values.
+pub fn read_weights(dir: &Path, meta: &CheckpointMeta) -> anyhow::Result<BTreeMap<String, F32Tensor>> {
+    let path = dir.join(WEIGHTS_FILE);
+    let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+    let tensors = safetensors::SafeTensors::deserialize(&bytes)
+        .map_err(|e| anyhow::anyhow!("{WEIGHTS_FILE} is not a valid safetensors file: {e}"))?;
+    let mut present: Vec<String> = tensors.names().into_iter().map(|n| n.to_string()).collect();
+    present.sort();
+    let expected: Vec<&str> = meta.tensors.iter().map(|t| t.name.as_str()).collect();
+    let missing: Vec<&str> = expected.iter().copied().filter(|n| !present.iter().any(|p| p == n)).collect();
+    let unexpected: Vec<&String> = present.iter().filter(|p| !expected.contains(&p.as_str())).collect();
+    if !missing.is_empty() || !unexpected.is_empty() {
+        bail!("{WEIGHTS_FILE} does not match {CONFIG_FILE}: missing tensors {missing:?}, unexpected tensors {unexpected:?}");
+    }
+    let mut out = BTreeMap::new();
+    for spec in &meta.tensors {
+        let name = &spec.name;
+        let view = tensors.tensor(name).map_err(|e| anyhow::anyhow!("tensor `{name}`: {e}"))?;
+        if view.dtype() != safetensors::Dtype::F32 {
+            bail!("tensor `{name}`: dtype {:?} in {WEIGHTS_FILE}, F32 expected", view.dtype());
+        }
+        if view.shape() != spec.shape.as_slice() {
+            bail!("tensor `{name}`: shape {:?} in {WEIGHTS_FILE}, {:?} expected from {CONFIG_FILE}", view.shape(), spec.shape);
+        }
+        let values: Vec<f32> = view
+            .data()
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        if let Some(bad) = values.iter().position(|v| !v.is_finite()) {
+            bail!("tensor `{name}`: non-finite value {} at flat index {bad}", values[bad]);
+        }
+        out.insert(name.clone(), F32Tensor { shape: spec.shape.clone(), values });
+    }
+    Ok(out)
+}
+
+/// A validated checkpoint in memory: config plus every tensor.
+#[derive(Clone, Debug)]
+pub struct Checkpoint {
+    pub meta: CheckpointMeta,
+    pub tensors: BTreeMap<String, F32Tensor>,
+}
+
+impl Checkpoint {
+    /// Reads and validates `dir` (config and weights).
+    pub fn read(dir: &Path) -> anyhow::Result<Self> {
+        let meta = CheckpointMeta::read(dir)?;
+        let tensors = read_weights(dir, &meta)?;
+        Ok(Checkpoint { meta, tensors })
+    }
+
+    /// Values of tensor `name`.
+    pub fn tensor(&self, name: &str) -> anyhow::Result<&[f32]> {
+        self.tensors
+            .get(name)
+            .map(|t| t.values.as_slice())
+            .with_context(|| format!("tensor `{name}` is missing from the checkpoint"))
+    }
+}

@@ -1,0 +1,220 @@
+//! The pure-data model configuration stored in `frmd.json` (backbone, head, sizes) and the
+//! normalization, shared by the candle models (frmd-host) and the exporter.
+use anyhow::{bail, Context};
+use frmd_core::prodmp::ProDmpConfig;
+use serde::{Deserialize, Serialize};
+
+/// Hidden-layer activation of the MLP backbone.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Activation {
+    /// x * sigmoid(x).
+    Silu,
+    /// x * tanh(softplus(x)).
+    Mish,
+}
+
+/// Backbone architecture and sizes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum BackboneConfig {
+    Mlp { hidden: Vec<usize>, activation: Activation },
+    Transformer { layers: usize, heads: usize, width: usize },
+}
+
+impl BackboneConfig {
+    /// Parses `mlp` ([256, 256, 256], Mish), `mlp-paper` ([512, 512, 256, 256]),
+    /// `mlp:W1,W2,..[:silu|:mish]`, `transformer-lite` (3 layers, 2 heads, 128) and
+    /// `transformer` (6 layers, 4 heads, 256).
+    pub fn parse(text: &str) -> anyhow::Result<Self> {
+        let mlp = |hidden: Vec<usize>, activation| BackboneConfig::Mlp { hidden, activation };
+        Ok(match text {
+            "mlp" => mlp(vec![256, 256, 256], Activation::Mish),
+            "mlp-silu" => mlp(vec![256, 256, 256], Activation::Silu),
+            "mlp-paper" => mlp(vec![512, 512, 256, 256], Activation::Mish),
+            "transformer-lite" => BackboneConfig::Transformer { layers: 3, heads: 2, width: 128 },
+            "transformer" => BackboneConfig::Transformer { layers: 6, heads: 4, width: 256 },
+            other => {
+                let Some(rest) = other.strip_prefix("mlp:") else {
+                    bail!("unknown backbone `{other}` (mlp, mlp-silu, mlp-paper, mlp:W1,W2[:silu|:mish], transformer-lite, transformer)");
+                };
+                let (widths, activation) = match rest.split_once(':') {
+                    Some((w, "silu")) => (w, Activation::Silu),
+                    Some((w, "mish")) => (w, Activation::Mish),
+                    Some((_, act)) => bail!("unknown activation `{act}` (silu or mish)"),
+                    None => (rest, Activation::Mish),
+                };
+                let hidden = widths
+                    .split(',')
+                    .map(|w| w.trim().parse::<usize>().ok().filter(|&w| w > 0))
+                    .collect::<Option<Vec<_>>>()
+                    .with_context(|| format!("bad MLP widths `{widths}` (positive integers, comma separated)"))?;
+                mlp(hidden, activation)
+            }
+        })
+    }
+}
+
+/// What the network outputs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum HeadConfig {
+    /// k (b+1) ProDMP parameters, decoded to positions in the graph.
+    ProDmp { num_basis: usize },
+    /// A raw n k output (the DP baseline's noise prediction).
+    Raw,
+}
+
+/// Everything that fixes the network's variables and its input/output layout.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelConfig {
+    pub obs_dim: usize,
+    /// Observation history m.
+    pub history: usize,
+    pub action_dim: usize,
+    /// Prediction horizon n.
+    pub horizon: usize,
+    /// Control period, seconds (ProDMP tau = horizon * control_dt).
+    pub control_dt: f64,
+    /// Length of the noise embedding (`frmd_core::sigma::noise_embedding`).
+    pub embed_dim: usize,
+    pub backbone: BackboneConfig,
+    pub head: HeadConfig,
+}
+
+impl ModelConfig {
+    /// Width of the condition vector [obs history, y0, v0 * control_dt].
+    pub fn cond_dim(&self) -> usize {
+        self.history * self.obs_dim + 2 * self.action_dim
+    }
+
+    /// n k: length of a trajectory.
+    pub fn traj_dim(&self) -> usize {
+        self.horizon * self.action_dim
+    }
+
+    pub fn prodmp(&self) -> Option<ProDmpConfig> {
+        match self.head {
+            HeadConfig::ProDmp { num_basis } => {
+                Some(ProDmpConfig::policy(self.action_dim, num_basis, self.horizon, self.control_dt))
+            }
+            HeadConfig::Raw => None,
+        }
+    }
+
+    pub fn output_dim(&self) -> usize {
+        match self.head {
+            HeadConfig::ProDmp { num_basis } => self.action_dim * (num_basis + 1),
+            HeadConfig::Raw => self.traj_dim(),
+        }
+    }
+
+    pub fn validate(&self) -> anyhow::Result<()> {
+        if self.obs_dim == 0 || self.history == 0 || self.action_dim == 0 || self.horizon == 0 {
+            bail!("model config: obs_dim, history, action_dim and horizon must be positive");
+        }
+        if !(self.control_dt.is_finite() && self.control_dt > 0.0) {
+            bail!("model config: control_dt must be finite and positive, got {}", self.control_dt);
+        }
+        if self.embed_dim == 0 || !self.embed_dim.is_multiple_of(2) {
+            bail!("model config: embed_dim must be even and positive, got {}", self.embed_dim);
+        }
+        match &self.backbone {
+            BackboneConfig::Mlp { hidden, .. } if hidden.is_empty() || hidden.contains(&0) => {
+                bail!("model config: MLP needs at least one positive hidden width")
+            }
+            BackboneConfig::Transformer { layers, heads, width }
+                if *layers == 0 || *heads == 0 || *width == 0 || width % heads != 0 =>
+            {
+                bail!("model config: transformer needs layers, heads > 0 and width divisible by heads")
+            }
+            _ => {}
+        }
+        if let HeadConfig::ProDmp { num_basis } = self.head {
+            if num_basis == 0 {
+                bail!("model config: ProDMP needs at least one basis function");
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Per-dimension affine map from raw units to [-1, 1], fitted on training min/max.
+/// Constant dimensions (max == min) map to 0.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Normalizer {
+    pub min: Vec<f32>,
+    pub max: Vec<f32>,
+}
+
+/// Normalizers for observations and actions, fitted together on a training set.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Normalization {
+    pub obs: Normalizer,
+    pub action: Normalizer,
+}
+
+impl Normalizer {
+    /// Per-dimension min/max over the rows of `data` ([rows, dim], row-major). Non-finite values
+    /// are ignored; a dimension without finite values gets min = max = 0.
+    pub fn fit(data: &[f32], dim: usize) -> Self {
+        let mut min = vec![f32::INFINITY; dim];
+        let mut max = vec![f32::NEG_INFINITY; dim];
+        if dim > 0 {
+            for row in data.chunks_exact(dim) {
+                for ((lo, hi), &v) in min.iter_mut().zip(max.iter_mut()).zip(row) {
+                    if v.is_finite() {
+                        *lo = lo.min(v);
+                        *hi = hi.max(v);
+                    }
+                }
+            }
+        }
+        for (lo, hi) in min.iter_mut().zip(max.iter_mut()) {
+            if *lo > *hi {
+                (*lo, *hi) = (0.0, 0.0);
+            }
+        }
+        Self { min, max }
+    }
+
+    pub fn dim(&self) -> usize {
+        self.min.len()
+    }
+
+    /// Raw to [-1, 1] in place; `x` holds whole rows of `dim` values (a trailing partial row is
+    /// mapped with the leading dimensions). Constant dimensions map to 0.
+    pub fn normalize(&self, x: &mut [f32]) {
+        if self.min.is_empty() {
+            return;
+        }
+        for row in x.chunks_mut(self.min.len()) {
+            for ((v, &lo), &hi) in row.iter_mut().zip(&self.min).zip(&self.max) {
+                *v = if hi > lo { 2.0 * (*v - lo) / (hi - lo) - 1.0 } else { 0.0 };
+            }
+        }
+    }
+
+    /// [-1, 1] to raw in place (inverse of [`Normalizer::normalize`]; constant dimensions map to
+    /// their constant).
+    pub fn denormalize(&self, x: &mut [f32]) {
+        if self.min.is_empty() {
+            return;
+        }
+        for row in x.chunks_mut(self.min.len()) {
+            for ((v, &lo), &hi) in row.iter_mut().zip(&self.min).zip(&self.max) {
+                *v = if hi > lo { (*v + 1.0) * 0.5 * (hi - lo) + lo } else { lo };
+            }
+        }
+    }
+
+    /// Normalized units per raw unit for each dimension (0 for constant dimensions); rates and
+    /// other differences scale by this factor.
+    pub fn scale(&self) -> Vec<f32> {
+        self.min
+            .iter()
+            .zip(&self.max)
+            .map(|(&lo, &hi)| if hi > lo { 2.0 / (hi - lo) } else { 0.0 })
+            .collect()
+    }
+}

@@ -1,0 +1,63 @@
+//! `frmd equiv --ckpt DIR --baked DIR`: the bit-accuracy harness ([`crate::equiv`]); exits
+//! non-zero when a bound is exceeded.
+use crate::equiv::{print, run as run_equiv, EquivConfig};
+use clap::Args;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Args, Debug)]
+pub struct EquivArgs {
+    /// Student checkpoint directory.
+    #[arg(long)]
+    pub ckpt: PathBuf,
+    /// Baked module directory written by `frmd export --out`.
+    #[arg(long)]
+    pub baked: PathBuf,
+    /// Closed-loop episodes per method (0 skips the success-rate check).
+    #[arg(long, default_value_t = 100)]
+    pub episodes: usize,
+    /// Open-loop inputs for checks (a), (b), (d).
+    #[arg(long, default_value_t = 200)]
+    pub inputs: usize,
+    /// Random requantization cases for (d).
+    #[arg(long, default_value_t = 1_000_000)]
+    pub random_requant: u64,
+    /// Calibration data override (demonstrations file).
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Bound of (a), normalized units.
+    #[arg(long, default_value_t = 1e-3)]
+    pub max_f32_error: f64,
+    /// Bound of (b) max abs error, fraction of the mean action range.
+    #[arg(long, default_value_t = 0.10)]
+    pub max_int8_error_frac: f64,
+    /// Bound of (b) mean abs error, fraction of the mean action range.
+    #[arg(long, default_value_t = 0.02)]
+    pub mean_int8_error_frac: f64,
+    /// Bound of the success-rate difference, percentage points.
+    #[arg(long, default_value_t = 5.0)]
+    pub max_success_diff: f64,
+    /// Also write the report as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+pub fn run(args: EquivArgs) -> anyhow::Result<ExitCode> {
+    let cfg = EquivConfig {
+        episodes: args.episodes,
+        inputs: args.inputs,
+        random_requant: args.random_requant,
+        data: args.data,
+        max_f32_error: args.max_f32_error,
+        max_int8_error_frac: args.max_int8_error_frac,
+        mean_int8_error_frac: args.mean_int8_error_frac,
+        max_success_diff_points: args.max_success_diff,
+        ..EquivConfig::new(args.ckpt, args.baked)
+    };
+    let report = run_equiv(&cfg)?;
+    print(&report);
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)?;
+    }
+    Ok(if report.passed { ExitCode::SUCCESS } else { ExitCode::from(1) })
+}

@@ -1,0 +1,132 @@
+//! `frmd export`: student checkpoint -> calibrated int8 policy, written as a baked Rust module
+//! (`policy.rs` + `weights.bin`, plus `policy.blob` and `export.json` beside them) and/or a blob,
+//! with the RAM and flash figures of the policy.
+use crate::checkpoint::CALIBRATION_FILE;
+use crate::data::Dataset;
+use anyhow::{bail, Context};
+use clap::Args;
+use frmd_export::calibrate::{CalibrationSet, RangeMethod};
+use frmd_export::export::{export_checkpoint, ExportOptions, Exported};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+/// Blob written beside a baked module (what `--baked DIR` loads).
+pub const BAKED_BLOB_FILE: &str = "policy.blob";
+/// Export settings written beside a baked module.
+pub const EXPORT_INFO_FILE: &str = "export.json";
+
+#[derive(Args, Debug)]
+pub struct ExportArgs {
+    /// Student checkpoint directory.
+    #[arg(long)]
+    pub ckpt: PathBuf,
+    /// Directory for the baked module (policy.rs, weights.bin, policy.blob, export.json).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Also (or only) write the self-describing blob here.
+    #[arg(long)]
+    pub blob: Option<PathBuf>,
+    /// Sampling steps baked into the step table (1..4).
+    #[arg(long, default_value_t = 1)]
+    pub steps: usize,
+    /// Activation ranges: minmax | percentile:P (e.g. percentile:99.9).
+    #[arg(long, default_value = "minmax")]
+    pub calibration: String,
+    /// Demonstrations to calibrate on when the checkpoint has no calibration.safetensors.
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Keep the raw input segments (no range balancing of the trajectory and rate inputs).
+    #[arg(long)]
+    pub no_balance_inputs: bool,
+    /// With --data: also store the calibration rows as the checkpoint's calibration.safetensors.
+    #[arg(long)]
+    pub save_calibration: bool,
+}
+
+/// What `export.json` records (enough to reproduce the export).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ExportInfo {
+    pub checkpoint: String,
+    pub steps: usize,
+    pub calibration: String,
+    pub calibration_data: Option<String>,
+    /// Input range balancing (`frmd_export::fold::FoldedMlp::with_input_gains`).
+    #[serde(default = "default_true")]
+    pub balance_inputs: bool,
+}
+
+fn default_true() -> bool {
+    true
+}
+
+/// Calibration rows from a dataset file, checked against the checkpoint's normalization.
+pub fn calibration_from_data(path: &Path, ckpt: &Path) -> anyhow::Result<CalibrationSet> {
+    let meta = frmd_export::checkpoint::CheckpointMeta::read(ckpt)?;
+    let dataset = Dataset::load(path)?;
+    let (windows, norm) = dataset.windows(meta.model.history, meta.model.horizon)?;
+    if Some(&norm) != meta.normalization.as_ref() {
+        bail!("{}: its normalization differs from the checkpoint's (not the training data?)", path.display());
+    }
+    Ok(crate::cli::train::calibration_rows(&windows, crate::cli::train::CALIBRATION_ROWS, 0x5eed))
+}
+
+/// Runs the export of `info` (reads the calibration data it names).
+pub fn export(info: &ExportInfo) -> anyhow::Result<Exported> {
+    let ranges: RangeMethod = info.calibration.parse()?;
+    let ckpt = Path::new(&info.checkpoint);
+    let set = match &info.calibration_data {
+        Some(data) => Some(calibration_from_data(Path::new(data), ckpt)?),
+        None if !ckpt.join(CALIBRATION_FILE).exists() => {
+            bail!("{} has no {CALIBRATION_FILE}; pass --data with the training demonstrations", ckpt.display())
+        }
+        None => None,
+    };
+    export_checkpoint(ckpt, ExportOptions { steps: info.steps, ranges, balance_inputs: info.balance_inputs }, set)
+}
+
+pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
+    if args.out.is_none() && args.blob.is_none() {
+        bail!("nothing to write: pass --out DIR and/or --blob FILE");
+    }
+    let info = ExportInfo {
+        checkpoint: args.ckpt.display().to_string(),
+        steps: args.steps,
+        calibration: args.calibration.clone(),
+        calibration_data: args.data.as_ref().map(|p| p.display().to_string()),
+        balance_inputs: !args.no_balance_inputs,
+    };
+    if args.save_calibration {
+        let data = args.data.as_ref().context("--save-calibration needs --data")?;
+        let set = calibration_from_data(data, &args.ckpt)?;
+        frmd_export::calibration_file::write(&args.ckpt.join(CALIBRATION_FILE), &set)?;
+    }
+    let exported = export(&info)?;
+    let policy = &exported.policy;
+    let blob = frmd_export::blob::write(policy).map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
+    if let Some(dir) = &args.out {
+        frmd_export::bake::write_module(policy, dir).with_context(|| format!("writing {}", dir.display()))?;
+        std::fs::write(dir.join(BAKED_BLOB_FILE), &blob)?;
+        std::fs::write(dir.join(EXPORT_INFO_FILE), serde_json::to_string_pretty(&info)?)?;
+        println!("baked module: {}/{{policy.rs, weights.bin, {BAKED_BLOB_FILE}, {EXPORT_INFO_FILE}}}", dir.display());
+    }
+    if let Some(path) = &args.blob {
+        std::fs::write(path, &blob).with_context(|| format!("writing {}", path.display()))?;
+        println!("blob: {} ({} bytes)", path.display(), blob.len());
+    }
+    let m = policy.memory();
+    let model = &exported.checkpoint.meta.model;
+    println!(
+        "policy: {:?}, m {} O {} K {} n {} P {}, {} step(s), calibration {} on {} rows",
+        model.backbone, policy.history, policy.obs_dim, policy.action_dim, policy.horizon, policy.params_per_dof,
+        policy.steps.len(), info.calibration, exported.ranges.rows
+    );
+    let gains = exported.folded.gains;
+    println!(
+        "  input  int8 scale {:.5} (zero point {}) over the whole input vector; segment gains: trajectory {:.4}, rate {:.4}",
+        policy.input.scale, policy.input.zero_point, gains.traj_gain, gains.rate_gain
+    );
+    println!("  RAM    scratch {} B (width {}) + state {} B = {} B", m.scratch_bytes, m.scratch_width, m.state_bytes, m.scratch_bytes + m.state_bytes);
+    println!("  flash  weights {} B + tables {} B = {} B (blob {} B)", m.weights_bytes, m.table_bytes, m.flash_bytes(), blob.len());
+    Ok(ExitCode::SUCCESS)
+}

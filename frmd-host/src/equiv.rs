@@ -1,0 +1,208 @@
+//! The bit-accuracy harness of DESIGN.md section 6 (`frmd equiv`):
+//! - (a) frmd-core's f32 path (the exporter's folded network on frmd-core's f32 kernels) vs the
+//!   candle float student, same conditions and noise: max abs error, normalized units;
+//! - (b) frmd-core's int8 policy (loaded from the baked blob) vs the candle float student: max and
+//!   mean abs error of the chunk in action units over many inputs, and the success-rate
+//!   difference over closed-loop episodes on the checkpoint's task (same episode seeds, same
+//!   noise generator);
+//! - (c) x86-64 vs Cortex-M bytes: run by `examples/cortex-m/run-qemu.sh` (reported as such);
+//! - (d) frmd-core's int8 kernels vs the independent wide-integer model
+//!   (`frmd_export::reference`): requantization on edges, ties and random inputs, and the
+//!   exported network's accumulators on the (a) inputs plus saturating/zero-point edge inputs.
+//!
+//! Also checked: the baked blob is reproduced bit for bit by re-exporting the checkpoint.
+use crate::checkpoint::{self, CheckpointMeta};
+use crate::cli::export::{export, ExportInfo, BAKED_BLOB_FILE, EXPORT_INFO_FILE};
+use crate::diffusion::samplers::{gaussian, sample_consistency};
+use crate::eval::policy::{Policy, PolicyInput};
+use crate::eval::{run_episodes, EvalConfig};
+use crate::models::Condition;
+use crate::policy::float::FloatPolicy;
+use crate::policy::int8::Int8Policy;
+use anyhow::Context;
+use candle_core::Device;
+use frmd_core::model::mlp::Probe;
+use frmd_core::rng::Rng;
+use frmd_core::sigma::SigmaConfig;
+use frmd_export::fold::MAX_WIDTH;
+use serde::Serialize;
+use std::path::PathBuf;
+
+/// Harness settings and bounds.
+#[derive(Clone, Debug)]
+pub struct EquivConfig {
+    pub ckpt: PathBuf,
+    pub baked: PathBuf,
+    /// Closed-loop episodes per method (0 skips the success-rate check).
+    pub episodes: usize,
+    /// Open-loop conditions for (a), (b) and (d) (taken from the calibration rows, fresh noise).
+    pub inputs: usize,
+    /// Random requantization cases of (d).
+    pub random_requant: u64,
+    /// Calibration data override (else what `export.json` names, else the checkpoint's file).
+    pub data: Option<PathBuf>,
+    /// (a) bound, normalized units.
+    pub max_f32_error: f64,
+    /// (b) bounds as fractions of the mean action range (max and mean abs error).
+    pub max_int8_error_frac: f64,
+    pub mean_int8_error_frac: f64,
+    /// (b) success-rate difference bound, percentage points.
+    pub max_success_diff_points: f64,
+}
+
+impl EquivConfig {
+    pub fn new(ckpt: PathBuf, baked: PathBuf) -> Self {
+        EquivConfig {
+            ckpt,
+            baked,
+            episodes: 100,
+            inputs: 200,
+            random_requant: 1_000_000,
+            data: None,
+            max_f32_error: 1e-3,
+            max_int8_error_frac: 0.10,
+            mean_int8_error_frac: 0.02,
+            max_success_diff_points: 5.0,
+        }
+    }
+}
+
+/// One line of the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct EquivRow {
+    pub check: String,
+    pub metric: String,
+    pub value: f64,
+    /// `value <= bound` passes; `None`: informational.
+    pub bound: Option<f64>,
+    pub pass: Option<bool>,
+    pub note: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct EquivReport {
+    pub rows: Vec<EquivRow>,
+    /// Every bounded row passed.
+    pub passed: bool,
+}
+
+fn row(check: &str, metric: &str, value: f64, bound: Option<f64>, note: String) -> EquivRow {
+    EquivRow { check: check.into(), metric: metric.into(), value, bound, pass: bound.map(|b| value <= b), note }
+}
+
+/// Runs every check.
+pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
+    let info_path = cfg.baked.join(EXPORT_INFO_FILE);
+    let mut info: ExportInfo = serde_json::from_str(&std::fs::read_to_string(&info_path).with_context(|| format!("reading {}", info_path.display()))?)
+        .with_context(|| format!("parsing {}", info_path.display()))?;
+    info.checkpoint = cfg.ckpt.display().to_string();
+    if let Some(data) = &cfg.data {
+        info.calibration_data = Some(data.display().to_string());
+    }
+    let exported = export(&info)?;
+    let blob_path = cfg.baked.join(BAKED_BLOB_FILE);
+    let blob = std::fs::read(&blob_path).with_context(|| format!("reading {}", blob_path.display()))?;
+    let rebuilt = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding: {e}"))?;
+    let mut rows = vec![row("export", "baked blob differs from a re-export (0 = identical)", f64::from(u8::from(rebuilt != blob)), Some(0.0), blob_path.display().to_string())];
+
+    let (meta, net): (CheckpointMeta, _) = checkpoint::load(&cfg.ckpt)?;
+    let norm = meta.normalization.clone().context("checkpoint has no normalization")?;
+    let sigma: SigmaConfig = meta.sigma.into();
+    let model = meta.model.clone();
+    let folded = &exported.folded;
+    let steps = folded.steps.len();
+    let (k, traj, obs_w) = (model.action_dim, model.traj_dim(), model.history * model.obs_dim);
+    let mut int8 = Int8Policy::from_blob(&blob, "int8")?;
+    let set = match &info.calibration_data {
+        Some(d) => crate::cli::export::calibration_from_data(std::path::Path::new(d), &cfg.ckpt)?,
+        None => frmd_export::calibration_file::read(&cfg.ckpt.join(checkpoint::CALIBRATION_FILE), model.cond_dim())?,
+    };
+    let rate_scale = norm.action.scale();
+    let range: f64 = norm.action.min.iter().zip(&norm.action.max).map(|(lo, hi)| f64::from(hi - lo)).sum::<f64>() / k as f64;
+    let (mut max_a, mut max_b, mut sum_b, mut count_b) = (0f64, 0f64, 0f64, 0usize);
+    let mut network_inputs = Vec::new();
+    let rows_used = cfg.inputs.min(set.rows());
+    for r in 0..rows_used {
+        let cond = &set.cond[r * set.cond_dim..(r + 1) * set.cond_dim];
+        let seed = 0xe901_0000 + r as u64;
+        let mut noise = vec![0f32; steps * traj];
+        Rng::new(seed).fill_gaussian(&mut noise);
+        // Candle float student, noise from the same generator and seed.
+        let mut rng = Rng::new(seed);
+        let z = gaussian(&mut rng, 1, traj, &Device::Cpu)?;
+        let condition = Condition::from_slices(&model, &cond[..obs_w], &cond[obs_w..obs_w + k], &cond[obs_w + k..], &Device::Cpu)?;
+        let float: Vec<f32> = sample_consistency(&net.net, &sigma, &condition, &z, steps, &mut rng)?.flatten_all()?.to_vec1()?;
+        // frmd-core f32 path.
+        let core = folded.sample(cond, &noise, |step, probe, values| {
+            if step == 0 && probe == Probe::Input {
+                network_inputs.push(values.to_vec());
+            }
+        })?;
+        max_a = float.iter().zip(&core).map(|(a, b)| f64::from((a - b).abs())).fold(max_a, f64::max);
+        // frmd-core int8 policy on raw inputs.
+        let history: Vec<Vec<f32>> = cond[..obs_w]
+            .chunks_exact(model.obs_dim)
+            .map(|o| {
+                let mut raw = o.to_vec();
+                norm.obs.denormalize(&mut raw);
+                raw
+            })
+            .collect();
+        let mut prev = cond[obs_w..obs_w + k].to_vec();
+        norm.action.denormalize(&mut prev);
+        let rate: Vec<f32> = cond[obs_w + k..].iter().zip(&rate_scale).map(|(v, s)| if *s > 0.0 { v / s } else { 0.0 }).collect();
+        let chunk = int8.run_with_noise(&PolicyInput { obs_history: &history, prev_action: &prev, prev_rate: &rate }, &noise)?;
+        let mut float_raw = float.clone();
+        norm.action.denormalize(&mut float_raw);
+        for (a, b) in chunk.iter().flatten().zip(&float_raw) {
+            let e = f64::from((a - b).abs());
+            max_b = max_b.max(e);
+            sum_b += e;
+            count_b += 1;
+        }
+    }
+    let mean_b = sum_b / count_b.max(1) as f64;
+    rows.push(row("a", "core f32 vs candle float: max abs error (normalized)", max_a, Some(cfg.max_f32_error), format!("{rows_used} inputs, {steps} step(s)")));
+    rows.push(row("b", "core int8 vs candle float: max abs error (action units)", max_b, Some(cfg.max_int8_error_frac * range), format!("bound {:.0} % of mean action range {range:.4}", 100.0 * cfg.max_int8_error_frac)));
+    rows.push(row("b", "core int8 vs candle float: mean abs error (action units)", mean_b, Some(cfg.mean_int8_error_frac * range), format!("bound {:.0} % of mean action range", 100.0 * cfg.mean_int8_error_frac)));
+    if cfg.episodes > 0 {
+        let task = meta.dataset.task.clone();
+        let eval = EvalConfig { episodes: cfg.episodes, history: model.history, ..EvalConfig::default() };
+        let mut float = FloatPolicy::load(&cfg.ckpt, Some(steps), None)?;
+        let f = run_episodes(&task, &mut float, &eval)?;
+        int8.reset(0);
+        let i = run_episodes(&task, &mut int8, &eval)?;
+        let mut twin = Int8Policy::f32_twin(&blob, folded.clone(), "core-f32")?;
+        let t = run_episodes(&task, &mut twin, &eval)?;
+        rows.push(row("a", "success-rate difference core f32 vs candle (points)", 100.0 * (f.success_rate - t.success_rate).abs(), Some(cfg.max_success_diff_points), format!(
+            "{task}, {} episodes: candle {:.1} %, core f32 (runtime policy, f32 network) {:.1} %", cfg.episodes, 100.0 * f.success_rate, 100.0 * t.success_rate
+        )));
+        let diff = 100.0 * (f.success_rate - i.success_rate).abs();
+        rows.push(row("b", "success-rate difference (points)", diff, Some(cfg.max_success_diff_points), format!(
+            "{task}, {} episodes: float {:.1} %, int8 {:.1} %; latency median float {:.1} us, int8 {:.1} us",
+            cfg.episodes, 100.0 * f.success_rate, 100.0 * i.success_rate, f.latency_us_median, i.latency_us_median
+        )));
+    }
+    rows.push(EquivRow { check: "c".into(), metric: "x86-64 vs Cortex-M bytes".into(), value: f64::NAN, bound: None, pass: None, note: "not run here: see examples/cortex-m/run-qemu.sh (digest line)".into() });
+    let requant = frmd_export::reference::check_requantization(cfg.random_requant, 0x0dd5);
+    rows.push(row("d", "requantization mismatches vs i128 model", requant.mismatches as f64, Some(0.0), format!("{} cases{}", requant.cases, requant.first_mismatch.map(|m| format!("; first: {m}")).unwrap_or_default())));
+    let network = frmd_export::reference::check_network::<MAX_WIDTH>(&exported.policy, &network_inputs)?;
+    rows.push(row("d", "int8 network accumulator mismatches vs wide model", network.mismatches as f64, Some(0.0), format!("{} cases{}", network.cases, network.first_mismatch.map(|m| format!("; first: {m}")).unwrap_or_default())));
+    let passed = rows.iter().all(|r| r.pass != Some(false));
+    Ok(EquivReport { rows, passed })
+}
+
+/// The report as a table.
+pub fn print(report: &EquivReport) {
+    println!("{:<6} {:<58} {:>12} {:>12} {:<5}  note", "check", "metric", "value", "bound", "");
+    for r in &report.rows {
+        let status = match r.pass {
+            Some(true) => "PASS",
+            Some(false) => "FAIL",
+            None => "-",
+        };
+        let bound = r.bound.map(|b| format!("{b:.4e}")).unwrap_or_else(|| "-".into());
+        println!("{:<6} {:<58} {:>12.4e} {:>12} {:<5}  {}", r.check, r.metric, r.value, bound, status, r.note);
+    }
+    println!("{}", if report.passed { "ALL PASS" } else { "FAIL" });
+}
