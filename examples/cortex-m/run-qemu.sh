@@ -2,12 +2,15 @@
 # Builds the FRMD firmware (release, thumbv7em-none-eabihf) and runs it under QEMU with
 # instruction counting:
 #
-#   bash examples/cortex-m/run-qemu.sh m4|m7 [prodmp|mlp|policy] [extra cargo build args]
+#   bash examples/cortex-m/run-qemu.sh m4|m7 [prodmp|mlp|policy|transformer|policy-stages|transformer-stages] [extra cargo build args]
 #
 #   m4: -machine mps2-an386 -cpu cortex-m4 (Cortex-M4F)   m7: -machine mps2-an500 -cpu cortex-m7
 #   prodmp (default): firmware frmd-cortex-m, the baked ProDMP decoder
 #   mlp: firmware frmd-cortex-m-mlp, synthetic int8 MLP 40-256-256-256-42 + decoder
 #   policy: firmware frmd-cortex-m-policy, a synthetic one-step policy baked by frmd-export
+#   transformer: firmware frmd-cortex-m-transformer, the same policy with a transformer-lite network
+#   policy-stages, transformer-stages: the same measurement plus the per-stage breakdown
+#     (`stage <name>: <instructions>` lines)
 #
 # Prints the firmware's `key: value` lines on stdout (build and setup chatter go to stderr) and
 # exits non-zero if the build fails, the firmware reports an error or panics, a required line
@@ -21,7 +24,7 @@ board="${1:-}"
 case "$board" in
     m4) machine=mps2-an386; cpu=cortex-m4 ;;
     m7) machine=mps2-an500; cpu=cortex-m7 ;;
-    *) echo "usage: $0 m4|m7 [prodmp|mlp|policy] [extra cargo build args]" >&2; exit 2 ;;
+    *) echo "usage: $0 m4|m7 [prodmp|mlp|policy|transformer|policy-stages|transformer-stages] [extra cargo build args]" >&2; exit 2 ;;
 esac
 shift
 bin=frmd-cortex-m
@@ -29,6 +32,9 @@ case "${1:-}" in
     prodmp) shift ;;
     mlp) bin=frmd-cortex-m-mlp; shift ;;
     policy) bin=frmd-cortex-m-policy; shift ;;
+    transformer) bin=frmd-cortex-m-transformer; shift ;;
+    policy-stages) bin=frmd-cortex-m-policy-stages; shift ;;
+    transformer-stages) bin=frmd-cortex-m-transformer-stages; shift ;;
 esac
 timeout_s="${FRMD_QEMU_TIMEOUT:-120}"
 case " $* " in *defmt*)

@@ -4,7 +4,7 @@
 use crate::digest::Fnv1a64;
 use crate::memory::{ImageSizes, StackProbe};
 use crate::report::{self, exit_failure, exit_success, report};
-use crate::timer::{calibrate, CycleCounter, TickCounter};
+use crate::timer::{calibrate, Calibration, CycleCounter, TickCounter};
 use crate::workload_api::Workload;
 
 /// Core name from the CPUID part number.
@@ -29,6 +29,18 @@ pub fn start() -> StackProbe {
 /// Measures `workload` with `CALLS` timed calls (a multiple of its case count), prints the
 /// report and ends the run.
 pub fn run<W: Workload, const CALLS: usize>(workload: &mut W, stack: StackProbe) -> ! {
+    run_then::<W, CALLS>(workload, stack, |_, _, _| {})
+}
+
+/// As [`run`], then calls `after` with the workload, the SysTick calibration and the digest (for further
+/// measurements such as the per-stage breakdown, which print their own lines) once the main
+/// measurement and the peak stack are taken, and before the report lines are printed; `ram:`
+/// therefore covers the main measurement only.
+pub fn run_then<W: Workload, const CALLS: usize>(
+    workload: &mut W,
+    stack: StackProbe,
+    after: impl FnOnce(&mut W, &Calibration, u64),
+) -> ! {
     let Some(mut peripherals) = cortex_m::Peripherals::take() else {
         exit_failure(&"core peripherals already taken");
     };
@@ -75,17 +87,22 @@ pub fn run<W: Workload, const CALLS: usize>(workload: &mut W, stack: StackProbe)
     let median_cycles = median(&mut cycle_samples);
     let peak_stack = stack.peak_bytes();
     let sizes = ImageSizes::of_this_image();
+    let digest = digest.finish();
+    after(workload, &calibration, digest);
 
     report!("workload: {}", workload.name());
     report!("core: {}", core_name(peripherals.CPUID.base.read()));
     report!("calls: {}", CALLS);
-    report::hex64("digest", digest.finish());
+    report::hex64("digest", digest);
     report!("instructions: {}", calibration.instructions(u64::from(median_ticks)));
     report::milli(
         "instructions_mean",
         calibration.instructions(total_ticks * 1000) / CALLS as u64,
     );
     report!("systick_ticks: {}", median_ticks);
+    if workload.macs() != 0 {
+        report!("macs: {}", workload.macs());
+    }
     report::milli("instructions_per_systick", calibration.milli_instructions_per_tick());
     if median_cycles != 0 {
         report!("cycles: {}", median_cycles);

@@ -6,6 +6,11 @@
 //!   SiLU LUTs) feeding the decoder, i.e. the one-step student's network + decode path.
 //! - `frmd-cortex-m-policy` (src/bin/frmd-cortex-m-policy.rs): a synthetic one-step policy baked
 //!   by frmd-export, measured as `Policy::act` (observations in, action chunk out).
+//! - `frmd-cortex-m-transformer` (src/bin/frmd-cortex-m-transformer.rs): the same policy
+//!   configuration with a synthetic int8 transformer-lite backbone instead of the MLP.
+//! - `frmd-cortex-m-policy-stages`, `frmd-cortex-m-transformer-stages`: the two policy
+//!   measurements followed by a per-stage breakdown (`stage <name>: <instructions>` lines, see
+//!   src/stage_report.rs).
 //!
 //! Each prints `digest: <16 hex>` (FNV-1a 64 over the little-endian bytes of every output, in
 //! order), `instructions: <n>` (median per call, from SysTick under QEMU `-icount shift=0`),
@@ -17,6 +22,7 @@
 use defmt_rtt as _;
 
 pub mod baked_mlp;
+pub mod baked_transformer;
 pub mod bench;
 pub mod digest;
 pub mod memory;
@@ -25,7 +31,10 @@ pub mod policy_workload;
 pub mod prodmp_workload;
 pub mod report;
 pub mod shape;
+pub mod stage_report;
+pub mod stages;
 pub mod timer;
+pub mod transformer_network;
 pub mod workload_api;
 
 /// The ProDMP decoder tables of [`shape::config`], baked on the host by build.rs.

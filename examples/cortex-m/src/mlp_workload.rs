@@ -108,4 +108,11 @@ impl Workload for MlpWorkload<'_> {
         digest.f32s(self.params.as_flattened());
         digest_trajectory(&self.pos, &self.vel, digest);
     }
+
+    /// The network's layers (`in_features * out_features` each), then the decode.
+    fn macs(&self) -> u64 {
+        let layers = self.mlp.hidden.iter().map(|layer| &layer.fc).chain([&self.mlp.output]);
+        let network: usize = layers.map(|fc| fc.in_features * fc.out_features).sum();
+        network as u64 + crate::workload_api::prodmp_decode_macs(HORIZON, DOF, PARAMS)
+    }
 }

@@ -35,6 +35,7 @@ pub struct PolicyWorkload<
     const I: usize,
 > {
     policy: Policy<'a, Net, M, O, K, N, P, I>,
+    name: &'static str,
     noise_seed: u64,
     chunk: Trajectory<N, K>,
 }
@@ -51,8 +52,19 @@ impl<
     > PolicyWorkload<'a, Net, M, O, K, N, P, I>
 {
     pub fn new(policy: Policy<'a, Net, M, O, K, N, P, I>) -> Self {
+        Self::with_name(policy, NAME)
+    }
+
+    /// The policy (for the per-stage breakdown, which reads its network's marks).
+    pub fn policy(&self) -> &Policy<'a, Net, M, O, K, N, P, I> {
+        &self.policy
+    }
+
+    /// As [`Self::new`], printed as `name` (another network behind the same policy).
+    pub fn with_name(policy: Policy<'a, Net, M, O, K, N, P, I>, name: &'static str) -> Self {
         Self {
             policy,
+            name,
             noise_seed: NOISE_SEED,
             chunk: Trajectory { positions: [[0.0; K]; N], velocities: [[0.0; K]; N] },
         }
@@ -72,7 +84,7 @@ impl<
     type Error = PolicyError;
 
     fn name(&self) -> &'static str {
-        NAME
+        self.name
     }
 
     fn cases(&self) -> usize {

@@ -93,6 +93,10 @@ impl Workload for ProDmpWorkload<'_> {
     fn digest_outputs(&self, digest: &mut Fnv1a64) {
         digest_trajectory(&self.pos, &self.vel, digest);
     }
+
+    fn macs(&self) -> u64 {
+        crate::workload_api::prodmp_decode_macs(HORIZON, DOF, PARAMS)
+    }
 }
 
 /// Feeds `pos` then `vel` (`[time][dof]`, row-major) to `digest`.

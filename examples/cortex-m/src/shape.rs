@@ -37,3 +37,28 @@ pub const POLICY_INPUT: usize = POLICY_HISTORY * POLICY_OBS_DIM + 2 * DOF + HORI
 pub fn config() -> ProDmpConfig {
     ProDmpConfig::policy(DOF, NUM_BASIS, HORIZON, CONTROL_DT)
 }
+
+/// Synthetic transformer-lite policy network (src/synthetic_transformer.rs): 3 pre-LayerNorm
+/// blocks of width 128 with 2 heads over `HORIZON + 2 = 14` tokens; the condition is the standard
+/// layout's first three segments (observation history, previous action, its rate times the control
+/// period), the trajectory tokens the `c_in`-scaled noisy trajectory; the head outputs the ProDMP
+/// parameters.
+pub const TRANSFORMER_CONDITION: usize = POLICY_HISTORY * POLICY_OBS_DIM + 2 * DOF;
+pub const TRANSFORMER_SHAPE: frmd_core::model::transformer::TransformerShape =
+    frmd_core::model::transformer::TransformerShape {
+        horizon: HORIZON,
+        action_dim: DOF,
+        cond_dim: TRANSFORMER_CONDITION,
+        width: 128,
+        heads: 2,
+        layers: 3,
+        output: DOF * PARAMS,
+    };
+/// Scratch lengths of the int8 forward pass.
+pub const TRANSFORMER_SCRATCH: frmd_core::model::transformer::ScratchLens =
+    TRANSFORMER_SHAPE.int8_scratch();
+/// Linear layers in generation order: `traj_in`, `cond_in`, then `qkv, proj, fc1, fc2` per block,
+/// then `head`.
+pub const TRANSFORMER_LINEARS: usize = 2 + 4 * TRANSFORMER_SHAPE.layers + 1;
+/// LayerNorms: `norm1, norm2` per block, then the final one.
+pub const TRANSFORMER_NORMS: usize = 2 * TRANSFORMER_SHAPE.layers + 1;

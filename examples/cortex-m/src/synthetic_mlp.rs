@@ -55,18 +55,20 @@ fn uniform_weights(rng: &mut Rng, count: usize, limit: f32) -> Vec<f32> {
     (0..count).map(|_| (2.0 * rng.uniform() - 1.0) * limit).collect()
 }
 
-fn params(range: (f32, f32)) -> QuantParams {
+pub fn params(range: (f32, f32)) -> QuantParams {
     QuantParams::from_range(range.0, range.1).expect("valid synthetic range")
 }
 
 /// Quantizes one layer whose input has `input` params; `output` is `Some((pre, post))` for hidden
-/// layers (requantize to `pre`, SiLU LUT to `post`) and `None` for the output layer.
-fn layer(
+/// layers (requantize to `pre`, `activation` LUT to `post`) and `None` for a layer whose int32
+/// accumulators are dequantized to f32 (the MLP's output layer, the transformer's linear layers).
+pub fn layer(
     rng: &mut Rng,
     in_features: usize,
     out_features: usize,
     input: QuantParams,
     output: Option<(QuantParams, QuantParams)>,
+    activation: fn(f32) -> f32,
 ) -> LayerData {
     // Weights with variance 1/in_features keep pre-activations near unit scale.
     let limit = (3.0 / in_features as f32).sqrt();
@@ -104,7 +106,7 @@ fn layer(
                 data.shifts.push(shift);
             }
             data.output_zero_point = pre.zero_point;
-            data.lut = Some(Lut8::build(silu, pre, post).expect("SiLU LUT"));
+            data.lut = Some(Lut8::build(activation, pre, post).expect("activation LUT"));
         }
         None => {
             data.output_scales = weight_scales.iter().map(|s| input.scale * s).collect();
@@ -128,11 +130,11 @@ pub fn generate_with(input_width: usize, seed: u64, input_range: (f32, f32)) -> 
     let mut width = input_width;
     let mut layer_input = input;
     for out in HIDDEN {
-        hidden.push(layer(&mut rng, width, out, layer_input, Some((pre, post))));
+        hidden.push(layer(&mut rng, width, out, layer_input, Some((pre, post)), silu));
         width = out;
         layer_input = post;
     }
-    let output = layer(&mut rng, width, OUTPUT, layer_input, None);
+    let output = layer(&mut rng, width, OUTPUT, layer_input, None, silu);
     ModelData { input, hidden, output }
 }
 

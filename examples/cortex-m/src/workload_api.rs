@@ -17,6 +17,11 @@ pub trait Workload {
     fn run(&mut self) -> Result<(), Self::Error>;
     /// Feeds the outputs of the last [`Workload::run`] to `digest`.
     fn digest_outputs(&self, digest: &mut Fnv1a64);
+    /// Multiply-accumulates of one call (int8 and f32 together), 0 if not stated; printed as the
+    /// `macs:` line when nonzero. Workloads with a per-stage breakdown state theirs per stage.
+    fn macs(&self) -> u64 {
+        0
+    }
 }
 
 /// Digest of every case run once, in order (what the firmware prints as `digest:`).
@@ -28,4 +33,11 @@ pub fn digest_all<W: Workload>(workload: &mut W) -> Result<u64, W::Error> {
         workload.digest_outputs(&mut digest);
     }
     Ok(digest.finish())
+}
+
+/// Multiply-accumulates of one baked ProDMP decode (`BakedProDmp::decode`): per query time and
+/// DoF, `params + 2` for the position (basis weights and goal, then `y0`, `v0`) and as many for
+/// the velocity.
+pub const fn prodmp_decode_macs(horizon: usize, dof: usize, params: usize) -> u64 {
+    (2 * horizon * dof * (params + 2)) as u64
 }

@@ -36,11 +36,33 @@ impl LossWeight {
 pub const P_MEAN: f64 = -1.2;
 pub const P_STD: f64 = 1.2;
 
+/// Noise-level distribution of the teacher loss: log-normal (P_MEAN, P_STD), and with
+/// probability `uniform_fraction` log-uniform on [sigma_min, sigma_max] instead.
+///
+/// Why the mixture: the teacher predicts the clean trajectory directly (no EDM skip), so its
+/// output at levels the log-normal almost never draws (sigma_max = 80 is 4.6 standard deviations
+/// out) is an extrapolation — yet every sampler and the one-step student start there.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SigmaSampling {
+    pub uniform_fraction: f64,
+}
+
+impl SigmaSampling {
+    pub fn draw(&self, sig: &SigmaConfig, rng: &mut HostRng) -> f64 {
+        if self.uniform_fraction > 0.0 && rng.uniform() < self.uniform_fraction {
+            let (lo, hi) = (sig.sigma_min.ln(), sig.sigma_max.ln());
+            (lo + (hi - lo) * rng.uniform()).exp()
+        } else {
+            (P_MEAN + P_STD * rng.normal()).exp()
+        }
+    }
+}
+
 /// The weighted teacher loss on one batch (clean trajectories `x0` [B, n k]).
-pub fn teacher_loss(net: &Network, sig: &SigmaConfig, x0: &Tensor, cond: &Condition, weight: LossWeight, rng: &mut HostRng) -> anyhow::Result<Tensor> {
+pub fn teacher_loss(net: &Network, sig: &SigmaConfig, x0: &Tensor, cond: &Condition, weight: LossWeight, sampling: SigmaSampling, rng: &mut HostRng) -> anyhow::Result<Tensor> {
     let (batch, dim) = x0.dims2()?;
     let device = x0.device();
-    let sigmas: Vec<f64> = (0..batch).map(|_| (P_MEAN + P_STD * rng.normal()).exp()).collect();
+    let sigmas: Vec<f64> = (0..batch).map(|_| sampling.draw(sig, rng)).collect();
     let weights = sigmas
         .iter()
         .map(|&s| match weight {

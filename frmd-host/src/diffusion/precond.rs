@@ -52,7 +52,7 @@ pub fn teacher_denoise(net: &Network, sig: &SigmaConfig, x: &Tensor, cond: &Cond
 /// The consistency function: f(x, o, sigma_min) = x exactly, f(x, o, sigma) = G(E(c_in x, o,
 /// c_noise)) above sigma_min. Levels below sigma_min are an error.
 pub fn consistency(net: &Network, sig: &SigmaConfig, x: &Tensor, cond: &Condition, sigmas: &[f64]) -> anyhow::Result<Tensor> {
-    if let Some(bad) = sigmas.iter().find(|&&s| !(s >= sig.sigma_min)) {
+    if let Some(bad) = sigmas.iter().find(|&&s| s.is_nan() || s < sig.sigma_min) {
         anyhow::bail!("consistency function: noise level {bad} is below sigma_min {}", sig.sigma_min);
     }
     let at_boundary: Vec<f64> = sigmas.iter().map(|&s| if s <= sig.sigma_min { 1.0 } else { 0.0 }).collect();

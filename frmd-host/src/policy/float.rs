@@ -161,62 +161,46 @@ pub fn boxed(dir: &Path, steps: Option<usize>, solver: Option<&str>) -> anyhow::
 }
 
 #[cfg(test)]
-mod diagnostics {
+mod tests {
     use super::*;
+    use crate::data::Normalizer;
+    use crate::models::HeadConfig;
+    use crate::train::toy::toy_config;
 
-    /// Manual diagnostic: FRMD_CKPT=dir FRMD_DATA=file cargo test -- --ignored chunk_error
+    fn toy_policy(head: HeadConfig, sampler: Sampler) -> anyhow::Result<FloatPolicy> {
+        let cfg = toy_config(head);
+        let net = OwnedNetwork::new_seeded(&cfg, 2, &Device::Cpu)?;
+        let norm = Normalization { obs: Normalizer { min: vec![-2.0], max: vec![2.0] }, action: Normalizer { min: vec![10.0], max: vec![20.0] } };
+        FloatPolicy::new(net, norm, SigmaConfig::default(), sampler)
+    }
+
     #[test]
-    #[ignore]
-    fn chunk_error_on_training_windows() {
-        let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else { return };
-        let mut policy = FloatPolicy::load(Path::new(&ckpt), None, None).unwrap();
-        let cfg = policy.net.net.config().clone();
-        let ds = crate::data::Dataset::load(Path::new(&data)).unwrap();
-        let (w, norm) = ds.windows(cfg.history, cfg.horizon).unwrap();
-        assert_eq!(norm, policy.norm);
-        let (mut err, mut base, mut count) = (0.0f64, 0.0f64, 0usize);
-        let obs_w = cfg.history * cfg.obs_dim;
-        let (k, traj) = (cfg.action_dim, cfg.traj_dim());
-        for i in (0..w.len()).step_by(w.len() / 200 + 1) {
-            let out = policy.sample_normalized(&w.obs[i * obs_w..(i + 1) * obs_w], &w.prev_action[i * k..(i + 1) * k], &w.prev_rate[i * k..(i + 1) * k]).unwrap();
-            let truth = &w.actions[i * traj..(i + 1) * traj];
-            err += out.iter().zip(truth).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / traj as f64;
-            base += truth.chunks_exact(k).flat_map(|row| row.iter().zip(&w.prev_action[i * k..(i + 1) * k]).map(|(a, b)| (a - b).abs() as f64)).sum::<f64>() / traj as f64;
-            count += 1;
+    fn chunks_have_the_model_shape_and_are_reproducible_per_seed() {
+        for (head, sampler) in [
+            (HeadConfig::ProDmp { num_basis: 4 }, Sampler::Student { steps: 1 }),
+            (HeadConfig::ProDmp { num_basis: 4 }, Sampler::Student { steps: 3 }),
+            (HeadConfig::ProDmp { num_basis: 4 }, Sampler::Teacher { solver: Solver::DpmPp2m, steps: 4 }),
+            (HeadConfig::Raw, Sampler::Dp { sampler: DpSampler::Ddim, steps: 10 }),
+        ] {
+            let mut policy = toy_policy(head, sampler).unwrap();
+            let obs = vec![vec![0.5f32]];
+            let input = PolicyInput { obs_history: &obs, prev_action: &[15.0], prev_rate: &[1.0] };
+            policy.reset(7);
+            let a = policy.act(&input).unwrap();
+            policy.reset(7);
+            let b = policy.act(&input).unwrap();
+            assert_eq!(a.len(), 4);
+            assert!(a.iter().all(|row| row.len() == 1 && row[0].is_finite()));
+            assert_eq!(a, b, "{}", policy.name());
+            // Wrong history length is an error, not a panic.
+            let two = vec![vec![0.5f32], vec![0.5f32]];
+            assert!(policy.act(&PolicyInput { obs_history: &two, prev_action: &[15.0], prev_rate: &[1.0] }).is_err());
         }
-        eprintln!("{}: mean abs error {:.4} (hold-last-action baseline {:.4}) over {count} windows", policy.name(), err / count as f64, base / count as f64);
-        // Same through act() with raw inputs (episode 0, every 5th step).
-        let end = ds.episode_ends[0] as usize;
-        let (o, a) = (ds.obs_dim, ds.action_dim);
-        let mut raw_err = 0.0;
-        let mut n = 0;
-        for t in (2..end.saturating_sub(cfg.horizon)).step_by(5) {
-            let hist: Vec<Vec<f32>> = (0..cfg.history).map(|j| ds.obs[(t + 1 + j - cfg.history) * o..(t + 2 + j - cfg.history) * o].to_vec()).collect();
-            let prev = ds.action[(t - 1) * a..t * a].to_vec();
-            let rate: Vec<f32> = (0..a).map(|d| (ds.action[(t - 1) * a + d] - ds.action[(t - 2) * a + d]) / ds.dt).collect();
-            let chunk = policy.act(&PolicyInput { obs_history: &hist, prev_action: &prev, prev_rate: &rate }).unwrap();
-            let e: f64 = chunk.iter().enumerate().map(|(s, act)| act.iter().enumerate().map(|(d, v)| (v - ds.action[(t + s) * a + d]).abs() as f64).sum::<f64>()).sum::<f64>() / (cfg.horizon * a) as f64;
-            if n < 3 { eprintln!("t {t}: chunk[0] {:?} truth {:?} prev {:?}", chunk[0], &ds.action[t * a..(t + 1) * a], prev); }
-            raw_err += e;
-            n += 1;
-        }
-        eprintln!("act(): mean abs error {:.4} raw units over {n} queries", raw_err / n as f64);
-        // Closed-loop trace of one episode.
-        let mut task = crate::tasks::make_task(&ds.task).unwrap();
-        task.reset(crate::eval::eval_seed(0, 0));
-        policy.reset(1);
-        let mut hist = vec![task.observe(); cfg.history];
-        let mut prev: Vec<f32> = task.ee_position().iter().map(|&v| v as f32).collect();
-        let mut rate = vec![0f32; a];
-        for q in 0..8 {
-            let chunk = policy.act(&PolicyInput { obs_history: &hist, prev_action: &prev, prev_rate: &rate }).unwrap();
-            eprintln!("query {q}: obs {:?}\n   prev {prev:?} rate {rate:?}\n   chunk first {:?} last {:?}", hist.last().unwrap(), chunk[0], chunk[chunk.len() - 1]);
-            for act in chunk.iter().take(8) {
-                task.step(act).unwrap();
-                for d in 0..a { rate[d] = (act[d] - prev[d]) / ds.dt; prev[d] = act[d]; }
-                hist.remove(0);
-                hist.push(task.observe());
-            }
-        }
+        assert!(Sampler::for_role(Role::Student, Some(5), None).is_err());
+        assert!(toy_policy(HeadConfig::Raw, Sampler::Student { steps: 1 }).is_err());
     }
 }
+
+#[cfg(test)]
+#[path = "float_diagnostics.rs"]
+mod diagnostics;

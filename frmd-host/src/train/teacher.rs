@@ -3,7 +3,7 @@ use super::batch::{check_windows, sample};
 use super::optim::ScheduledAdamW;
 use super::{run_loop, LoopConfig, ProgressFn, TrainReport};
 use crate::data::windows::WindowSet;
-use crate::diffusion::loss::{teacher_loss, LossWeight};
+use crate::diffusion::loss::{teacher_loss, LossWeight, SigmaSampling};
 use crate::models::{ModelConfig, OwnedNetwork};
 use crate::rng::HostRng;
 use candle_core::Device;
@@ -15,6 +15,7 @@ pub fn train_teacher(
     model: &ModelConfig,
     sig: &SigmaConfig,
     weight: LossWeight,
+    sampling: SigmaSampling,
     cfg: &LoopConfig,
     progress: &mut ProgressFn<'_>,
 ) -> anyhow::Result<(OwnedNetwork, TrainReport)> {
@@ -30,7 +31,7 @@ pub fn train_teacher(
         cfg,
         |_| {
             let batch = sample(windows, model, cfg.batch_size, &mut rng, &device)?;
-            let loss = teacher_loss(&net.net, sig, &batch.x0, &batch.cond, weight, &mut rng)?;
+            let loss = teacher_loss(&net.net, sig, &batch.x0, &batch.cond, weight, sampling, &mut rng)?;
             let lr = opt.current_lr();
             opt.backward_step(&loss)?;
             Ok((loss.to_scalar::<f32>()? as f64, lr))

@@ -1,5 +1,7 @@
 //! Firmware: a synthetic one-step policy baked by frmd-export (build.rs), `Policy::act` on a fixed
-//! list of observation histories (see the crate docs and src/policy_workload.rs).
+//! list of observation histories (see the crate docs and src/policy_workload.rs). The per-stage
+//! breakdown is a separate image (src/bin/frmd-cortex-m-policy-stages.rs), so that its code does
+//! not change this one's inlining or size.
 #![no_std]
 #![no_main]
 

@@ -1,0 +1,70 @@
+//! Firmware: the per-stage breakdown of the policy image (src/bin/frmd-cortex-m-policy.rs). It
+//! first measures `Policy::act` exactly as that image does (same report lines), then runs the same
+//! baked MLP through a layer-marking network and prints `stage` lines (src/stage_report.rs). The
+//! breakdown lives in its own image because its second policy instance changes how the compiler
+//! inlines the shared code: the totals of the two images differ by about 1 %; the policy image's
+//! `instructions:` is the reference, the stage lines show where the time goes.
+#![no_std]
+#![no_main]
+
+use cortex_m_rt::entry;
+use frmd_core::policy::{Policy, PolicyError};
+use frmd_cortex_m::timer::Calibration;
+use frmd_cortex_m::policy_workload::{PolicyWorkload, CASES};
+use frmd_cortex_m::report::exit_failure;
+use frmd_cortex_m::stages::{mlp_marks, StagedMlpNetwork};
+use frmd_cortex_m::{bench, stage_report};
+
+/// The module frmd-export generated (policy.rs + weights.bin in OUT_DIR/policy), plus build.rs's
+/// `mlp_parts()` over the same statics.
+#[allow(dead_code)]
+mod baked {
+    include!(concat!(env!("OUT_DIR"), "/policy/policy.rs"));
+    include!(concat!(env!("OUT_DIR"), "/policy/policy_parts.rs"));
+}
+
+/// Hidden layers of the synthetic policy's MLP.
+const LAYERS: usize = frmd_cortex_m::shape::MLP_HIDDEN.len();
+
+#[entry]
+fn main() -> ! {
+    let stack = bench::start();
+    let policy = match baked::policy() {
+        Ok(policy) => policy,
+        Err(error) => exit_failure(&error),
+    };
+    let mut workload = PolicyWorkload::new(policy);
+    bench::run_then::<_, { CASES * 5 }>(&mut workload, stack, |_, calibration, digest| {
+        if let Err(error) = breakdown(calibration, digest) {
+            exit_failure(&error);
+        }
+    })
+}
+
+/// The per-stage breakdown: the same baked MLP through a layer-marking network. Not inlined, so
+/// its frame (a second policy) is not part of the main measurement's stack.
+#[inline(never)]
+fn breakdown(calibration: &Calibration, digest: u64) -> Result<(), PolicyError> {
+    let (hidden, output, variants) = baked::mlp_parts()?;
+    let layer_macs = hidden.map(|layer| (layer.fc.in_features * layer.fc.out_features) as u64);
+    let output_macs = (output.in_features * output.out_features) as u64;
+    let network = StagedMlpNetwork::<LAYERS, { mlp_marks(LAYERS) }, { baked::SCRATCH_WIDTH }>::new(
+        baked::INPUT,
+        hidden,
+        output,
+        &baked::OUTPUT_SCALES,
+        variants,
+        stage_report::systick,
+    )?;
+    let policy = Policy::<
+        _,
+        { baked::HISTORY },
+        { baked::OBS_DIM },
+        { baked::ACTION_DIM },
+        { baked::HORIZON },
+        { baked::PARAMS_PER_DOF },
+        { baked::INPUT_WIDTH },
+    >::new(baked::config(), network)?;
+    let mut staged = PolicyWorkload::new(policy);
+    stage_report::mlp_policy(&mut staged, &layer_macs, output_macs, calibration, digest)
+}

@@ -1,0 +1,422 @@
+//! The per-stage breakdown the policy and transformer firmware print after their main measurement
+//! (firmware only): `stage <name>: <instructions>` (mean per chunk) and `stage_macs <name>: <n>`
+//! (multiply-accumulates of that stage) lines, in pipeline order, then `stage_calls` and
+//! `stage_digest`.
+//!
+//! How each stage is measured (SysTick under `-icount shift=0`, 40 instructions a tick, averaged
+//! over every call so the mean resolves single instructions):
+//! - inside `Policy::act`: the network marks its entry and exit (and, for the MLP, the boundary of
+//!   every layer, see [`crate::stages::StagedMlpNetwork`]); `input` is `act`'s start to the
+//!   network's entry; `noise` (`Rng::fill_gaussian` of the chunk) is timed on its own and `input`
+//!   is the rest (checks, history copy, `sigma z`, sampler validation, input assembly with `c_in`);
+//!   the rest of `act` after the network is decode + consistency output stage + denormalization;
+//! - `decode` and `denormalize` are then timed on their own (same inputs, same frmd-core calls:
+//!   `BakedProDmp::decode` on the last parameters, `RangeNormalizer::denormalize{,_rate}` on the
+//!   last normalized chunk), and `output_stage` (`c_skip x + c_out decode`, the finiteness check,
+//!   returning the chunk) is the rest of `act` after the network minus those two;
+//! - transformer blocks: `Int8Transformer::forward` of the first 1, 2 and 3 blocks (same weights,
+//!   fixed input); block `l >= 2` is the difference of consecutive prefixes, `embedding` and
+//!   `head` are timed on their own from the same frmd-core calls the forward pass makes, and
+//!   block 1 is the 1-block forward pass minus those two.
+//!
+//! Each clock reading costs a few instructions, which land in the neighbouring stages.
+
+use cortex_m::peripheral::SYST;
+use frmd_core::model::transformer::{
+    Int8Transformer, TokenLinear, TransformerScratch, TransformerShape,
+};
+use frmd_core::policy::{Network, Policy, PolicyError};
+use frmd_core::rng::Rng;
+
+use crate::digest::Fnv1a64;
+use crate::policy_workload::{PolicyWorkload, CASES, NOISE_SEED};
+use crate::report::{self, exit_failure, report};
+use crate::stages::StagedMlpNetwork;
+use crate::timer::{Calibration, TickCounter};
+use crate::transformer_network::TransformerNetwork;
+use crate::workload_api::{prodmp_decode_macs, Workload};
+
+/// Calls per case in the breakdown (and standalone repetitions per call).
+pub const REPEATS: usize = 5;
+const MAX_STAGES: usize = 16;
+
+/// The SysTick counter (a [`crate::stages::Clock`]); SysTick must be running.
+pub fn systick() -> u32 {
+    SYST::get_current()
+}
+
+fn elapsed(start: u32, end: u32) -> u64 {
+    u64::from(TickCounter::elapsed(start, end))
+}
+
+/// Stage names, MAC counts and summed ticks.
+struct Breakdown {
+    names: [&'static str; MAX_STAGES],
+    macs: [u64; MAX_STAGES],
+    ticks: [u64; MAX_STAGES],
+    count: usize,
+}
+
+impl Breakdown {
+    const fn new() -> Self {
+        Self { names: [""; MAX_STAGES], macs: [0; MAX_STAGES], ticks: [0; MAX_STAGES], count: 0 }
+    }
+
+    /// Declares the next stage; returns its index.
+    fn stage(&mut self, name: &'static str, macs: u64) -> usize {
+        let index = self.count;
+        if let (Some(n), Some(m)) = (self.names.get_mut(index), self.macs.get_mut(index)) {
+            *n = name;
+            *m = macs;
+            self.count += 1;
+        }
+        index
+    }
+
+    fn add(&mut self, index: usize, ticks: u64) {
+        if let Some(total) = self.ticks.get_mut(index) {
+            *total += ticks;
+        }
+    }
+
+    fn sub(&mut self, index: usize, ticks: u64) {
+        if let Some(total) = self.ticks.get_mut(index) {
+            *total = total.saturating_sub(ticks);
+        }
+    }
+
+    fn print(&self, calibration: &Calibration, calls: u64) {
+        let stages = self.names.iter().zip(&self.macs).zip(&self.ticks).take(self.count);
+        let mut total = 0;
+        for ((name, macs), ticks) in stages {
+            let instructions = (calibration.instructions(*ticks) + calls / 2) / calls.max(1);
+            total += instructions;
+            report!("stage {}: {}", name, instructions);
+            report!("stage_macs {}: {}", name, macs);
+        }
+        report!("stage_sum: {}", total);
+        report!("stage_calls: {}", calls);
+    }
+}
+
+/// Times `decode` and `denormalize` standalone on the policy's last inputs, `REPEATS` times each;
+/// returns their summed ticks.
+fn time_post_stages<
+    Net: Network,
+    const M: usize,
+    const O: usize,
+    const K: usize,
+    const N: usize,
+    const P: usize,
+    const I: usize,
+>(
+    policy: &Policy<'_, Net, M, O, K, N, P, I>,
+) -> Result<(u64, u64), PolicyError> {
+    let (y0, v0) = policy.previous_action_normalized().ok_or(PolicyError::NoPreviousAction)?;
+    let config = policy.config();
+    let (mut decode_ticks, mut denormalize_ticks) = (0, 0);
+    for _ in 0..REPEATS {
+        let mut positions = [[0.0_f32; K]; N];
+        let mut velocities = [[0.0_f32; K]; N];
+        let start = systick();
+        let result = config.sampler.decoder.decode(
+            core::hint::black_box(policy.last_params()),
+            &y0,
+            &v0,
+            &mut positions,
+            &mut velocities,
+        );
+        let end = systick();
+        result.map_err(PolicyError::Decode)?;
+        core::hint::black_box((&positions, &velocities));
+        decode_ticks += elapsed(start, end);
+
+        let chunk = core::hint::black_box(policy.normalized_chunk());
+        let start = systick();
+        let rows = chunk.positions.iter().zip(&chunk.velocities).zip(positions.iter_mut().zip(velocities.iter_mut()));
+        for ((pos, vel), (pos_out, vel_out)) in rows {
+            config.action_norm.denormalize(pos, pos_out);
+            config.action_norm.denormalize_rate(vel, vel_out);
+        }
+        let end = systick();
+        core::hint::black_box((&positions, &velocities));
+        denormalize_ticks += elapsed(start, end);
+    }
+    Ok((decode_ticks, denormalize_ticks))
+}
+
+/// Times the Gaussian noise of one chunk (`Rng::fill_gaussian` of `N K` values, as the sampler
+/// draws it) standalone, `REPEATS` times with the case's seed; summed ticks.
+fn time_noise<const N: usize, const K: usize>(case: usize) -> u64 {
+    let mut ticks = 0;
+    for _ in 0..REPEATS {
+        let mut noise = [[0.0_f32; K]; N];
+        let mut rng = Rng::new(NOISE_SEED.wrapping_add(case as u64));
+        let start = systick();
+        rng.fill_gaussian(noise.as_flattened_mut());
+        let end = systick();
+        core::hint::black_box(&noise);
+        ticks += elapsed(start, end);
+    }
+    ticks
+}
+
+/// Ends the run with a failure if the breakdown's chunks differ from the main measurement's.
+fn check_digest(digest: Fnv1a64, expected: u64) {
+    report::hex64("stage_digest", digest.finish());
+    if digest.finish() != expected {
+        exit_failure(&"the per-stage breakdown computed different chunks than the measured policy");
+    }
+}
+
+
+#[inline(never)]
+/// Breakdown of the MLP policy: `workload` runs a [`StagedMlpNetwork`] whose clock is [`systick`];
+/// its chunks must reproduce `expected_digest` (the main measurement's).
+pub fn mlp_policy<
+    const L: usize,
+    const S: usize,
+    const W: usize,
+    const M: usize,
+    const O: usize,
+    const K: usize,
+    const N: usize,
+    const P: usize,
+    const I: usize,
+>(
+    workload: &mut PolicyWorkload<'_, StagedMlpNetwork<'_, L, S, W>, M, O, K, N, P, I>,
+    layer_macs: &[u64; L],
+    output_macs: u64,
+    calibration: &Calibration,
+    expected_digest: u64,
+) -> Result<(), PolicyError> {
+    let mut stages = Breakdown::new();
+    let noise = stages.stage("noise", 0);
+    let input = stages.stage("input", 0);
+    let quantize = stages.stage("quantize", 0);
+    const LAYER_NAMES: [&str; 8] =
+        ["layer1", "layer2", "layer3", "layer4", "layer5", "layer6", "layer7", "layer8"];
+    let first_layer = stages.count;
+    for (name, macs) in LAYER_NAMES.iter().zip(layer_macs) {
+        stages.stage(name, *macs);
+    }
+    let output_layer = stages.stage("output_layer", output_macs);
+    let dequantize = stages.stage("dequantize", 0);
+    let decode = stages.stage("decode", prodmp_decode_macs(N, K, P));
+    let output_stage = stages.stage("output_stage", (2 * N * K) as u64);
+    let denormalize = stages.stage("denormalize", (2 * N * K) as u64);
+    let mut digest = Fnv1a64::new();
+    for case in 0..CASES {
+        workload.prepare(case)?;
+        for _ in 0..REPEATS {
+            let start = systick();
+            workload.run()?;
+            let end = systick();
+            let marks = workload.policy().network().marks().ticks();
+            let (Some(entry), Some(exit)) = (marks.first(), marks.last()) else {
+                return Err(PolicyError::OutputWidth);
+            };
+            stages.add(input, elapsed(start, *entry));
+            for (index, pair) in marks.windows(2).enumerate() {
+                if let [from, to] = pair {
+                    stages.add(quantize + index, elapsed(*from, *to));
+                }
+            }
+            stages.add(output_stage, elapsed(*exit, end));
+        }
+        workload.digest_outputs(&mut digest);
+        let noise_ticks = time_noise::<N, K>(case);
+        stages.add(noise, noise_ticks);
+        stages.sub(input, noise_ticks);
+        let (decode_ticks, denormalize_ticks) = time_post_stages(workload.policy())?;
+        stages.add(decode, decode_ticks);
+        stages.add(denormalize, denormalize_ticks);
+        stages.sub(output_stage, decode_ticks + denormalize_ticks);
+    }
+    debug_assert!(first_layer == quantize + 1 && output_layer + 1 == dequantize);
+    check_digest(digest, expected_digest);
+    stages.print(calibration, (CASES * REPEATS) as u64);
+    Ok(())
+}
+
+/// Ticks of `Int8Transformer::forward` of `model` restricted to its first `layers` blocks, on the
+/// fixed input.
+fn time_prefix<const F: usize, const B: usize, const A: usize>(
+    model: &Int8Transformer<'_>,
+    layers: usize,
+    trajectory: &[f32],
+    condition: &[f32],
+    output: &mut [f32],
+    scratch: &mut TransformerScratch<F, B, A>,
+) -> Result<u64, PolicyError> {
+    let failed = |_| PolicyError::Model(frmd_core::model::mlp::ModelError::InputLength);
+    let blocks = model.blocks.get(..layers).ok_or(PolicyError::TooManyLayers)?;
+    let prefix = Int8Transformer { shape: TransformerShape { layers, ..model.shape }, blocks, ..*model };
+    let start = systick();
+    let result = prefix.forward(trajectory, condition, output, scratch);
+    let end = systick();
+    result.map_err(failed)?;
+    Ok(elapsed(start, end))
+}
+
+/// Token embedding (`cond_in`, the folded noise token, `traj_in` per step, plus positions) as
+/// `Int8Transformer::forward` does it, into `residual`; and the head (final LayerNorm, quantization,
+/// `head`) from `residual`. Returns the ticks of one run of each.
+fn time_embedding_and_head<const TW: usize, const WIDTH: usize, const OUT: usize>(
+    model: &Int8Transformer<'_>,
+    trajectory: &[f32],
+    condition: &[f32],
+) -> Result<(u64, u64), PolicyError> {
+    let failed = |_| PolicyError::Model(frmd_core::model::mlp::ModelError::InputLength);
+    let shape = &model.shape;
+    let mut residual = [0.0_f32; TW];
+    let mut codes = [0_i8; TW];
+    let mut accumulators = [0_i32; WIDTH];
+    let mut row = [0.0_f32; WIDTH];
+    let mut output = [0.0_f32; OUT];
+    let (embedding, head);
+    let project = |layer: &TokenLinear<'_>, input: &[f32], codes: &mut [i8], acc: &mut [i32], out: &mut [f32]| match layer {
+        TokenLinear::Int8(linear) => {
+            let codes = codes.get_mut(..input.len()).ok_or(PolicyError::InputWidth)?;
+            linear.forward(input, codes, acc, out).map_err(failed)
+        }
+        TokenLinear::Float(linear) => linear.forward(input, out, None).map_err(failed),
+    };
+    {
+        let start = systick();
+        let mut rows = residual.chunks_exact_mut(shape.width);
+        let mut positions = model.positions.chunks_exact(shape.width);
+        if let (Some(token), Some(position)) = (rows.next(), positions.next()) {
+            project(&model.cond_in, condition, &mut codes, &mut accumulators, token)?;
+            token.iter_mut().zip(position).for_each(|(t, p)| *t += p);
+        }
+        if let (Some(token), Some(_)) = (rows.next(), positions.next()) {
+            token.iter_mut().zip(model.noise_token).for_each(|(t, n)| *t = *n);
+        }
+        for ((token, position), step) in rows.zip(positions).zip(trajectory.chunks_exact(shape.action_dim)) {
+            project(&model.traj_in, step, &mut codes, &mut accumulators, token)?;
+            token.iter_mut().zip(position).for_each(|(t, p)| *t += p);
+        }
+        let end = systick();
+        embedding = elapsed(start, end);
+        core::hint::black_box(&residual);
+
+        let start = systick();
+        for (token, token_codes) in residual.chunks_exact(shape.width).zip(codes.chunks_exact_mut(shape.width)) {
+            model.final_norm.apply(token, &mut row).map_err(failed)?;
+            for (code, value) in token_codes.iter_mut().zip(&row) {
+                *code = model.head.input.quantize(*value);
+            }
+        }
+        let acc = accumulators.get_mut(..OUT).ok_or(PolicyError::OutputWidth)?;
+        model.head.forward_quantized(&codes, acc, &mut output).map_err(failed)?;
+        let end = systick();
+        head = elapsed(start, end);
+        core::hint::black_box(&output);
+    }
+    Ok((embedding, head))
+}
+
+#[inline(never)]
+/// Breakdown of the transformer policy: `workload`'s network clock must be [`systick`]; its
+/// chunks must reproduce `expected_digest`. `TW`, `WIDTH`, `OUT` are the model's `T W`, `W` and
+/// output width.
+pub fn transformer_policy<
+    const F: usize,
+    const B: usize,
+    const A: usize,
+    const TW: usize,
+    const WIDTH: usize,
+    const OUT: usize,
+    const M: usize,
+    const O: usize,
+    const K: usize,
+    const N: usize,
+    const P: usize,
+    const I: usize,
+>(
+    workload: &mut PolicyWorkload<'_, TransformerNetwork<'_, F, B, A>, M, O, K, N, P, I>,
+    scratch: &mut TransformerScratch<F, B, A>,
+    calibration: &Calibration,
+    expected_digest: u64,
+) -> Result<(), PolicyError> {
+    let model = *workload.policy().network().model();
+    let shape = model.shape;
+    let (t, w) = (shape.tokens() as u64, shape.width as u64);
+    let mut stages = Breakdown::new();
+    let noise = stages.stage("noise", 0);
+    let input = stages.stage("input", 0);
+    let embedding =
+        stages.stage("embedding", (shape.cond_dim as u64 + shape.trajectory_len() as u64) * w);
+    const BLOCK_NAMES: [&str; 8] =
+        ["block1", "block2", "block3", "block4", "block5", "block6", "block7", "block8"];
+    let first_block = stages.count;
+    for name in BLOCK_NAMES.iter().take(shape.layers) {
+        stages.stage(name, 12 * t * w * w + 2 * t * t * w);
+    }
+    let head = stages.stage("head", t * w * shape.output as u64);
+    let network_rest = stages.stage("network_rest", 0);
+    let decode = stages.stage("decode", prodmp_decode_macs(N, K, P));
+    let output_stage = stages.stage("output_stage", (2 * N * K) as u64);
+    let denormalize = stages.stage("denormalize", (2 * N * K) as u64);
+    let mut digest = Fnv1a64::new();
+    let mut network_ticks = 0;
+    for case in 0..CASES {
+        workload.prepare(case)?;
+        let start = systick();
+        workload.run()?;
+        let end = systick();
+        let marks = workload.policy().network().marks().ticks();
+        let (Some(entry), Some(exit)) = (marks.first(), marks.last()) else {
+            return Err(PolicyError::OutputWidth);
+        };
+        stages.add(input, elapsed(start, *entry) * REPEATS as u64);
+        network_ticks += elapsed(*entry, *exit) * REPEATS as u64;
+        stages.add(output_stage, elapsed(*exit, end) * REPEATS as u64);
+        workload.digest_outputs(&mut digest);
+        let noise_ticks = time_noise::<N, K>(case);
+        stages.add(noise, noise_ticks);
+        stages.sub(input, noise_ticks);
+        let (decode_ticks, denormalize_ticks) = time_post_stages(workload.policy())?;
+        stages.add(decode, decode_ticks);
+        stages.add(denormalize, denormalize_ticks);
+        stages.sub(output_stage, decode_ticks + denormalize_ticks);
+    }
+    check_digest(digest, expected_digest);
+    // The network's parts on a fixed input, REPEATS runs per case.
+    let mut rng = Rng::new(0x4652_4D44_5354_4731);
+    let mut condition = [0.0_f32; 64];
+    let mut trajectory = [0.0_f32; 64];
+    let condition = condition.get_mut(..shape.cond_dim).ok_or(PolicyError::InputWidth)?;
+    let trajectory = trajectory.get_mut(..shape.trajectory_len()).ok_or(PolicyError::InputWidth)?;
+    condition.iter_mut().for_each(|v| *v = 2.0 * rng.uniform() - 1.0);
+    rng.fill_gaussian(trajectory);
+    let mut output = [0.0_f32; OUT];
+    // Their cost hardly depends on the data, so each is timed once (about 70 M instructions for
+    // the three prefixes) and weighted like the CASES * REPEATS calls above.
+    let weight = (CASES * REPEATS) as u64;
+    let (embedding_ticks, head_ticks) =
+        time_embedding_and_head::<TW, WIDTH, OUT>(&model, trajectory, condition)?;
+    stages.add(embedding, embedding_ticks * weight);
+    stages.add(head, head_ticks * weight);
+    let mut previous = 0;
+    for layers in 1..=shape.layers {
+        let ticks = time_prefix(&model, layers, trajectory, condition, &mut output, scratch)?;
+        let block = first_block + layers - 1;
+        if layers == 1 {
+            stages.add(block, ticks * weight);
+            stages.sub(block, (embedding_ticks + head_ticks) * weight);
+        } else {
+            stages.add(block, ticks.saturating_sub(previous) * weight);
+        }
+        previous = ticks;
+    }
+    let prefix_ticks = previous * weight;
+    // What `act` spent in the network beyond the standalone full forward pass (the adapter, the
+    // input split, differences of input data).
+    stages.add(network_rest, network_ticks.saturating_sub(prefix_ticks));
+    let calls = (CASES * REPEATS) as u64;
+    report!("stage_network_in_act: {}", (calibration.instructions(network_ticks) + calls / 2) / calls);
+    stages.print(calibration, (CASES * REPEATS) as u64);
+    Ok(())
+}

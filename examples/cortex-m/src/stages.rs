@@ -1,0 +1,175 @@
+//! Per-stage instruction counts: timestamps taken inside a forward pass ([`Marks`]) and an int8
+//! MLP network that marks the boundary of every layer ([`StagedMlpNetwork`]). `core` + frmd-core
+//! only: the host test runs the same code with a clock that always reads 0 and checks that the
+//! staged network computes exactly what frmd-core's `Int8Network` computes.
+
+use frmd_core::kernels::{dequantize_accumulators, FullyConnected};
+use frmd_core::model::mlp::{Int8Layer, ModelError};
+use frmd_core::policy::{Network, PolicyError};
+use frmd_core::quant::QuantParams;
+
+/// Reads a free-running counter (SysTick on the firmware, counting down; a constant on the host).
+pub type Clock = fn() -> u32;
+
+/// Up to `S` counter readings of one pass, in order.
+#[derive(Clone, Copy, Debug)]
+pub struct Marks<const S: usize> {
+    clock: Clock,
+    ticks: [u32; S],
+    count: usize,
+}
+
+impl<const S: usize> Marks<S> {
+    pub const fn new(clock: Clock) -> Self {
+        Self { clock, ticks: [0; S], count: 0 }
+    }
+
+    /// Forgets the readings (call at the start of a pass).
+    #[inline(always)]
+    pub fn clear(&mut self) {
+        self.count = 0;
+    }
+
+    /// Records one reading; readings beyond `S` are dropped.
+    #[inline(always)]
+    pub fn mark(&mut self) {
+        if let Some(slot) = self.ticks.get_mut(self.count) {
+            *slot = (self.clock)();
+            self.count += 1;
+        }
+    }
+
+    /// The readings of the current pass.
+    pub fn ticks(&self) -> &[u32] {
+        self.ticks.get(..self.count).unwrap_or(&[])
+    }
+}
+
+/// Readings of [`StagedMlpNetwork`]: entry, after input quantization, after each of `L` hidden
+/// layers, after the output layer's accumulators, after dequantization.
+pub const fn mlp_marks(hidden_layers: usize) -> usize {
+    hidden_layers + 4
+}
+
+/// An int8 MLP as a policy [`Network`] that marks every stage boundary. It runs the same frmd-core
+/// kernels in the same order as `Int8Mlp::forward` (input quantization, per hidden layer
+/// `FullyConnected::forward` + LUT, output `forward_accumulators` + `dequantize_accumulators`),
+/// with the first-layer bias variant selected as `Int8Network` does; `L` hidden layers, `S`
+/// readings (`mlp_marks(L)`), activations up to `WIDTH` wide.
+pub struct StagedMlpNetwork<'a, const L: usize, const S: usize, const WIDTH: usize> {
+    input: QuantParams,
+    hidden: [Int8Layer<'a>; L],
+    output: FullyConnected<'a>,
+    output_scales: &'a [f32],
+    first_layer_biases: &'a [i32],
+    ping: [i8; WIDTH],
+    pong: [i8; WIDTH],
+    accumulators: [i32; WIDTH],
+    marks: Marks<S>,
+}
+
+impl<'a, const L: usize, const S: usize, const WIDTH: usize> StagedMlpNetwork<'a, L, S, WIDTH> {
+    /// The network; `first_layer_biases` as for `Int8Network::new` (back-to-back variants of the
+    /// first hidden layer's bias, or empty). Needs `L >= 1` and every width `<= WIDTH`.
+    pub fn new(
+        input: QuantParams,
+        hidden: [Int8Layer<'a>; L],
+        output: FullyConnected<'a>,
+        output_scales: &'a [f32],
+        first_layer_biases: &'a [i32],
+        clock: Clock,
+    ) -> Result<Self, PolicyError> {
+        let widths_fit = hidden
+            .iter()
+            .map(|layer| &layer.fc)
+            .chain([&output])
+            .all(|fc| fc.in_features <= WIDTH && fc.out_features <= WIDTH);
+        if L == 0 || S < mlp_marks(L) || !widths_fit {
+            return Err(PolicyError::Model(ModelError::ScratchTooSmall));
+        }
+        Ok(Self {
+            input,
+            hidden,
+            output,
+            output_scales,
+            first_layer_biases,
+            ping: [0; WIDTH],
+            pong: [0; WIDTH],
+            accumulators: [0; WIDTH],
+            marks: Marks::new(clock),
+        })
+    }
+
+    /// Readings of the last forward pass (see [`mlp_marks`]).
+    pub fn marks(&self) -> &Marks<S> {
+        &self.marks
+    }
+}
+
+impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNetwork<'_, L, S, WIDTH> {
+    fn input_width(&self) -> usize {
+        self.hidden.first().map_or(0, |layer| layer.fc.in_features)
+    }
+
+    fn output_width(&self) -> usize {
+        self.output.out_features
+    }
+
+    fn num_first_layer_biases(&self) -> usize {
+        let width = self.hidden.first().map_or(0, |layer| layer.fc.out_features);
+        self.first_layer_biases.len().checked_div(width).unwrap_or(0)
+    }
+
+    fn forward(
+        &mut self,
+        first_layer_bias: usize,
+        input: &[f32],
+        output: &mut [f32],
+    ) -> Result<(), PolicyError> {
+        self.marks.clear();
+        self.marks.mark();
+        let mut hidden = self.hidden;
+        if let Some(first) = hidden.first_mut() {
+            if !self.first_layer_biases.is_empty() {
+                let width = first.fc.out_features;
+                let start = first_layer_bias.checked_mul(width).ok_or(PolicyError::FirstLayerBiasIndex)?;
+                first.fc.bias = start
+                    .checked_add(width)
+                    .and_then(|end| self.first_layer_biases.get(start..end))
+                    .ok_or(PolicyError::FirstLayerBiasIndex)?;
+            } else if first_layer_bias != 0 {
+                return Err(PolicyError::FirstLayerBiasIndex);
+            }
+        }
+        let model = |error| PolicyError::Model(ModelError::Kernel(error));
+        let (mut current, mut next) = (&mut self.ping, &mut self.pong);
+        let first = current.get_mut(..input.len()).ok_or(PolicyError::InputWidth)?;
+        for (code, value) in first.iter_mut().zip(input) {
+            *code = self.input.quantize(*value);
+        }
+        self.marks.mark();
+        let mut width = input.len();
+        for layer in &hidden {
+            let out_width = layer.fc.out_features;
+            let layer_input = current.get(..width).ok_or(PolicyError::InputWidth)?;
+            let layer_output = next.get_mut(..out_width).ok_or(PolicyError::OutputWidth)?;
+            layer.fc.forward(&layer.requant, layer_input, layer_output).map_err(model)?;
+            if let Some(lut) = layer.activation {
+                lut.apply_in_place(layer_output);
+            }
+            core::mem::swap(&mut current, &mut next);
+            width = out_width;
+            self.marks.mark();
+        }
+        let last_input = current.get(..width).ok_or(PolicyError::InputWidth)?;
+        let accumulators = self
+            .accumulators
+            .get_mut(..self.output.out_features)
+            .ok_or(PolicyError::OutputWidth)?;
+        self.output.forward_accumulators(last_input, accumulators).map_err(model)?;
+        self.marks.mark();
+        dequantize_accumulators(accumulators, self.output_scales, output).map_err(model)?;
+        self.marks.mark();
+        Ok(())
+    }
+}

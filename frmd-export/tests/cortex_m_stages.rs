@@ -1,0 +1,176 @@
+//! The per-stage breakdown of the Cortex-M policy firmware measures the real computation.
+//!
+//! `examples/cortex-m` (binary `frmd-cortex-m-policy`) times each layer by running the baked MLP
+//! through `stages::StagedMlpNetwork`, which re-composes `Int8Mlp::forward` from frmd-core's
+//! kernels with a clock reading between layers. The firmware itself checks that the staged chunks
+//! hash to the measured policy's digest; this host test checks the same without QEMU: the staged
+//! network behind `Policy` gives bit-identical chunks to frmd-core's `Int8Network` (the blob form of
+//! the same synthetic policy), and records one clock reading per stage boundary.
+
+#[allow(dead_code)]
+#[path = "../../examples/cortex-m/src/digest.rs"]
+mod digest;
+#[allow(dead_code)]
+#[path = "../../examples/cortex-m/src/policy_workload.rs"]
+mod policy_workload;
+#[path = "../../examples/cortex-m/src/shape.rs"]
+mod shape;
+#[path = "../../examples/cortex-m/src/stages.rs"]
+mod stages;
+#[path = "../../examples/cortex-m/src/synthetic_mlp.rs"]
+mod synthetic_mlp;
+#[path = "../../examples/cortex-m/src/synthetic_policy.rs"]
+mod synthetic_policy;
+#[allow(dead_code)]
+#[path = "../../examples/cortex-m/src/workload_api.rs"]
+mod workload_api;
+
+use std::sync::atomic::{AtomicU32, Ordering};
+
+use frmd_core::blob::LoadedPolicy;
+use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
+use frmd_core::model::mlp::Int8Layer;
+use frmd_core::policy::Policy;
+use shape::{DOF, HORIZON, MLP_HIDDEN, MLP_WIDTH, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM};
+use stages::{mlp_marks, StagedMlpNetwork};
+
+const LAYERS: usize = MLP_HIDDEN.len();
+
+/// A clock that advances by one per reading.
+static TICKS: AtomicU32 = AtomicU32::new(0);
+fn counting_clock() -> u32 {
+    TICKS.fetch_add(1, Ordering::Relaxed)
+}
+
+fn aligned(blob: &[u8]) -> Vec<u128> {
+    let mut words = vec![0_u128; blob.len().div_ceil(16)];
+    bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..blob.len()].copy_from_slice(blob);
+    words
+}
+
+#[test]
+fn staged_mlp_network_matches_int8_network() {
+    let quantized = synthetic_policy::generate();
+    let blob = frmd_export::blob::write(&quantized).expect("write the blob");
+    let words = aligned(&blob);
+    let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
+    let loaded = LoadedPolicy::<POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS>::load(bytes)
+        .expect("load the blob");
+    let reference = loaded.policy::<POLICY_INPUT, MLP_WIDTH>().expect("policy from the blob");
+    let mut reference = policy_workload::PolicyWorkload::new(reference);
+    let expected = workload_api::digest_all(&mut reference).expect("reference chunks");
+
+    let luts: Vec<Lut8> = quantized.luts.iter().map(|table| Lut8::from_table(*table)).collect();
+    let hidden: [Int8Layer<'_>; LAYERS] = std::array::from_fn(|i| {
+        let layer = &quantized.hidden[i];
+        Int8Layer {
+            fc: FullyConnected::new(layer.in_features, layer.out_features, &layer.weights, &layer.bias),
+            requant: FcRequant {
+                multipliers: &layer.multipliers,
+                shifts: &layer.shifts,
+                output_zero_point: layer.output_zero_point,
+                activation_min: layer.activation_min,
+                activation_max: layer.activation_max,
+            },
+            activation: layer.lut.map(|index| &luts[index]),
+        }
+    });
+    let output = &quantized.output;
+    let network = StagedMlpNetwork::<LAYERS, { mlp_marks(LAYERS) }, MLP_WIDTH>::new(
+        quantized.input,
+        hidden,
+        FullyConnected::new(output.in_features, output.out_features, &output.weights, &output.bias),
+        &output.scales,
+        &quantized.first_layer_biases,
+        counting_clock,
+    )
+    .expect("staged network");
+    let policy = Policy::<_, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>::new(
+        loaded.config(),
+        network,
+    )
+    .expect("staged policy");
+    let mut staged = policy_workload::PolicyWorkload::new(policy);
+    assert_eq!(workload_api::digest_all(&mut staged).expect("staged chunks"), expected);
+    let marks = staged.policy().network().marks().ticks();
+    assert_eq!(marks.len(), mlp_marks(LAYERS));
+    assert!(marks.windows(2).all(|pair| pair[1] == pair[0] + 1), "{marks:?}");
+}
+
+#[test]
+fn staged_mlp_network_refuses_small_scratch() {
+    let quantized = synthetic_policy::generate();
+    let model = synthetic_mlp::generate_with(POLICY_INPUT, synthetic_policy::POLICY_WEIGHT_SEED, (-4.0, 4.0));
+    let hidden: [Int8Layer<'_>; LAYERS] = model.hidden_layers().try_into().expect("three layers");
+    let output = &quantized.output;
+    let fc = FullyConnected::new(output.in_features, output.out_features, &output.weights, &output.bias);
+    // WIDTH 128 is narrower than the 256-wide hidden layers.
+    let result = StagedMlpNetwork::<LAYERS, { mlp_marks(LAYERS) }, 128>::new(
+        quantized.input, hidden, fc, &output.scales, &[], counting_clock,
+    );
+    assert!(result.is_err());
+}
+
+/// `key: value` of the first line starting with `key: `.
+fn line_value<'a>(output: &'a str, key: &str) -> Option<&'a str> {
+    let prefix = format!("{key}: ");
+    output.lines().find_map(|line| line.strip_prefix(prefix.as_str()))
+}
+
+/// Runs both breakdown images on the Cortex-M4F board: each must print stage lines whose sum is
+/// within 2 % of its measured `instructions:` and a `stage_digest` equal to its `digest` (the
+/// firmware also refuses to finish otherwise). Skips like the other QEMU tests.
+#[test]
+fn qemu_stage_breakdowns_add_up() {
+    use std::path::{Path, PathBuf};
+    use std::process::Command;
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let env_file = std::env::var_os("FRMD_CORTEX_M_ENV")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target/cortex-m.env"));
+    let qemu_found = Command::new("qemu-system-arm").arg("--version").output().is_ok();
+    if std::env::var_os("FRMD_SKIP_QEMU").is_some() || !env_file.exists() || !qemu_found {
+        assert!(
+            std::env::var_os("FRMD_REQUIRE_QEMU").is_none(),
+            "FRMD_REQUIRE_QEMU is set but the QEMU check cannot run (env file {} present: {}, qemu-system-arm found: {qemu_found})",
+            env_file.display(),
+            env_file.exists()
+        );
+        eprintln!("qemu_stage_breakdowns_add_up: SKIPPED (FRMD_SKIP_QEMU set, or no {} / qemu-system-arm)", env_file.display());
+        return;
+    }
+    for image in ["policy-stages", "transformer-stages"] {
+        let output = Command::new("bash")
+            .arg(root.join("examples/cortex-m/run-qemu.sh"))
+            .args(["m4", image])
+            .env("CARGO_TARGET_DIR", root.join("examples/cortex-m/target"))
+            .output()
+            .expect("run examples/cortex-m/run-qemu.sh");
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            output.status.success(),
+            "run-qemu.sh m4 {image} failed:\n{stdout}\n{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        assert_eq!(line_value(&stdout, "stage_digest"), line_value(&stdout, "digest"), "{stdout}");
+        let number = |key: &str| -> f64 {
+            line_value(&stdout, key)
+                .and_then(|v| v.parse().ok())
+                .unwrap_or_else(|| panic!("no numeric '{key}:' line in\n{stdout}"))
+        };
+        let stages: Vec<f64> = stdout
+            .lines()
+            .filter(|line| line.starts_with("stage ") && !line.starts_with("stage_"))
+            .map(|line| line.rsplit(": ").next().and_then(|v| v.parse().ok()).expect("stage value"))
+            .collect();
+        assert!(stages.len() >= 8, "{image}: too few stages\n{stdout}");
+        let sum: f64 = stages.iter().sum();
+        assert_eq!(sum, number("stage_sum"));
+        let total = number("instructions_mean");
+        assert!(
+            (sum - total).abs() <= 0.02 * total,
+            "{image}: stages sum to {sum}, the measured call takes {total}\n{stdout}"
+        );
+        eprintln!("{image} m4: stages sum {sum}, instructions_mean {total}");
+    }
+}

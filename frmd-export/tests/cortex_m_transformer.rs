@@ -1,0 +1,166 @@
+//! transformer-lite runs bit-identically on Cortex-M and on the host.
+//!
+//! The firmware `examples/cortex-m` (binary `frmd-cortex-m-transformer`) bakes a synthetic int8
+//! transformer-lite (src/synthetic_transformer.rs) in its build.rs and runs it as the network of
+//! the synthetic one-step policy's configuration (baked by frmd-export), timing `Policy::act` on
+//! QEMU. Here the same backbone is regenerated in memory, the configuration comes from the blob
+//! form of the same policy (`frmd_core::blob::LoadedPolicy::config`), and the same workload file
+//! runs it; `qemu_transformer_digest_matches_host` requires the firmware's printed digest on
+//! mps2-an386 (Cortex-M4F) and mps2-an500 (Cortex-M7) to equal the host's. It needs
+//! `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without it, or with
+//! FRMD_SKIP_QEMU=1, it prints why and passes without checking (unless FRMD_REQUIRE_QEMU is set,
+//! as in CI: then it fails).
+
+#[allow(dead_code)]
+#[path = "../../examples/cortex-m/src/digest.rs"]
+mod digest;
+#[allow(dead_code)]
+#[path = "../../examples/cortex-m/src/policy_workload.rs"]
+mod policy_workload;
+#[path = "../../examples/cortex-m/src/shape.rs"]
+mod shape;
+#[allow(dead_code)] // the staged MLP network is firmware-only here
+#[path = "../../examples/cortex-m/src/stages.rs"]
+mod stages;
+#[path = "../../examples/cortex-m/src/synthetic_mlp.rs"]
+mod synthetic_mlp;
+#[path = "../../examples/cortex-m/src/synthetic_policy.rs"]
+mod synthetic_policy;
+#[path = "../../examples/cortex-m/src/synthetic_transformer.rs"]
+mod synthetic_transformer;
+#[allow(dead_code)]
+#[path = "../../examples/cortex-m/src/transformer_network.rs"]
+mod transformer_network;
+#[allow(dead_code)] // `name` is printed by the firmware only
+#[path = "../../examples/cortex-m/src/workload_api.rs"]
+mod workload_api;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use frmd_core::blob::LoadedPolicy;
+use frmd_core::policy::{Policy, PolicyError};
+use shape::{
+    DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
+};
+use transformer_network::TransformerNetwork;
+
+type Network<'a> = TransformerNetwork<
+    'a,
+    { TRANSFORMER_SCRATCH.floats },
+    { TRANSFORMER_SCRATCH.bytes },
+    { TRANSFORMER_SCRATCH.accumulators },
+>;
+
+type Scratch = frmd_core::model::transformer::TransformerScratch<
+    { TRANSFORMER_SCRATCH.floats },
+    { TRANSFORMER_SCRATCH.bytes },
+    { TRANSFORMER_SCRATCH.accumulators },
+>;
+
+/// The blob in 16-byte aligned storage, as the loader requires.
+fn aligned(blob: &[u8]) -> Vec<u128> {
+    let mut words = vec![0_u128; blob.len().div_ceil(16)];
+    bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..blob.len()].copy_from_slice(blob);
+    words
+}
+
+/// Digest of the fixed cases (and the first chunk's positions, to check they vary).
+fn host_digest() -> Result<u64, PolicyError> {
+    let blob = frmd_export::blob::write(&synthetic_policy::generate()).expect("write the blob");
+    let words = aligned(&blob);
+    let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
+    let loaded = LoadedPolicy::<POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS>::load(bytes)
+        .expect("load the blob");
+    let config = loaded.config();
+    let data = synthetic_transformer::generate();
+    let blocks = data.blocks();
+    let mut scratch = Box::new(Scratch::new());
+    let network = Network::new(data.model(&blocks), &config.sampler.layout, &mut scratch)
+        .expect("the synthetic transformer validates");
+    let policy = Policy::<_, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>::new(
+        config, network,
+    )?;
+    let mut workload = policy_workload::PolicyWorkload::with_name(policy, "transformer");
+    workload_api::digest_all(&mut workload)
+}
+
+#[test]
+fn synthetic_transformer_is_deterministic_and_acts() {
+    let first = synthetic_transformer::generate();
+    let second = synthetic_transformer::generate();
+    assert_eq!(first.weight_bytes(), second.weight_bytes());
+    assert_eq!(first.rust_source(), second.rust_source());
+    // 3 x 12 W^2 block weights + traj_in + cond_in + head (T W x 42).
+    let width = shape::TRANSFORMER_SHAPE.width;
+    let expected = 3 * 12 * width * width
+        + DOF * width
+        + shape::TRANSFORMER_CONDITION * width
+        + shape::TRANSFORMER_SHAPE.token_values() * DOF * PARAMS;
+    assert_eq!(first.weight_bytes().len(), expected);
+    let digest = host_digest().expect("the transformer policy acts on every case");
+    assert_eq!(digest, host_digest().expect("second run"));
+}
+
+#[test]
+fn transformer_network_rejects_a_non_standard_layout() {
+    use frmd_core::policy::{InputLayout, InputSegment};
+    let data = synthetic_transformer::generate();
+    let blocks = data.blocks();
+    let layout = InputLayout::new(
+        &[InputSegment::NoisyTrajectory, InputSegment::ObsHistory, InputSegment::PrevAction, InputSegment::PrevRate],
+        0.1,
+    )
+    .expect("a valid layout");
+    let mut scratch = Box::new(Scratch::new());
+    assert_eq!(
+        Network::new(data.model(&blocks), &layout, &mut scratch).err(),
+        Some(transformer_network::TransformerNetworkError::Layout)
+    );
+}
+
+#[test]
+fn qemu_transformer_digest_matches_host() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let env_file = std::env::var_os("FRMD_CORTEX_M_ENV")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target/cortex-m.env"));
+    let qemu_found = Command::new("qemu-system-arm").arg("--version").output().is_ok();
+    if std::env::var_os("FRMD_SKIP_QEMU").is_some() || !env_file.exists() || !qemu_found {
+        assert!(
+            std::env::var_os("FRMD_REQUIRE_QEMU").is_none(),
+            "FRMD_REQUIRE_QEMU is set but the QEMU check cannot run (env file {} present: {}, qemu-system-arm found: {qemu_found})",
+            env_file.display(),
+            env_file.exists()
+        );
+        eprintln!(
+            "qemu_transformer_digest_matches_host: SKIPPED (FRMD_SKIP_QEMU set, or no {} / \
+             qemu-system-arm: run `bash scripts/setup-cortex-m.sh`)",
+            env_file.display()
+        );
+        return;
+    }
+    let expected = format!("digest: {:016x}", host_digest().expect("host digest"));
+    for board in ["m4", "m7"] {
+        let output = Command::new("bash")
+            .arg(root.join("examples/cortex-m/run-qemu.sh"))
+            .args([board, "transformer"])
+            // The firmware's own target directory, shared with run-qemu.sh's default.
+            .env("CARGO_TARGET_DIR", root.join("examples/cortex-m/target"))
+            .output()
+            .expect("run examples/cortex-m/run-qemu.sh");
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            output.status.success(),
+            "run-qemu.sh {board} transformer failed:\n{stdout}\n{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let digest_line = stdout.lines().find(|line| line.starts_with("digest: "));
+        assert_eq!(
+            digest_line,
+            Some(expected.as_str()),
+            "transformer policy on {board} computed different bytes than on the host:\n{stdout}"
+        );
+        eprintln!("transformer {board}: {}", stdout.lines().collect::<Vec<_>>().join(" | "));
+    }
+}
