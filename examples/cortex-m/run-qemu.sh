@@ -7,9 +7,11 @@
 #   m4: -machine mps2-an386 -cpu cortex-m4 (Cortex-M4F)   m7: -machine mps2-an500 -cpu cortex-m7
 #   prodmp (default): firmware frmd-cortex-m, the baked ProDMP decoder
 #   mlp: firmware frmd-cortex-m-mlp, synthetic int8 MLP 40-256-256-256-42 + decoder
-#   policy: firmware frmd-cortex-m-policy, a synthetic one-step policy baked by frmd-export
-#   transformer: firmware frmd-cortex-m-transformer, the same policy with a transformer-lite network
-#   policy-stages, transformer-stages: the same measurement plus the per-stage breakdown
+#   policy: firmware frmd-cortex-m-policy, the trained student in policy/reach/ baked by frmd-export
+#   transformer: firmware frmd-cortex-m-transformer, a synthetic one-step policy with a
+#     transformer-lite network
+#   policy-stages, transformer-stages: the synthetic MLP policy and the transformer measurement,
+#     each plus the per-stage breakdown
 #     (`stage <name>: <instructions>` lines)
 #
 # Prints the firmware's `key: value` lines on stdout (build and setup chatter go to stderr) and

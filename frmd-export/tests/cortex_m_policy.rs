@@ -1,9 +1,10 @@
 //! An exported policy runs bit-identically on Cortex-M and on the host.
 //!
-//! The firmware `examples/cortex-m` (binary `frmd-cortex-m-policy`) bakes a synthetic one-step
-//! policy with `bake::write_module` in its build.rs and times `Policy::act` on QEMU. Here the same
-//! policy (same generator file) is written as a blob, loaded with `frmd_core::blob::LoadedPolicy`
-//! and driven through the same workload file; `qemu_policy_digest_matches_host` requires the
+//! The firmware `examples/cortex-m` (binary `frmd-cortex-m-policy`) exports the checked-in trained
+//! student `examples/cortex-m/policy/reach/` with `export::export_checkpoint` and bakes it with
+//! `bake::write_module` in its build.rs, then times `Policy::act` on QEMU. Here the same checkpoint
+//! goes through the same export call, is written as a blob, loaded with
+//! `frmd_core::blob::LoadedPolicy` and driven through the same workload file; `qemu_policy_digest_matches_host` requires the
 //! firmware's printed digest on mps2-an386 (Cortex-M4F) and mps2-an500 (Cortex-M7) to equal the
 //! host's. It needs `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without
 //! it, or with FRMD_SKIP_QEMU=1, it prints why and passes without checking
@@ -17,10 +18,6 @@ mod digest;
 mod policy_workload;
 #[path = "../../examples/cortex-m/src/shape.rs"]
 mod shape;
-#[path = "../../examples/cortex-m/src/synthetic_mlp.rs"]
-mod synthetic_mlp;
-#[path = "../../examples/cortex-m/src/synthetic_policy.rs"]
-mod synthetic_policy;
 #[allow(dead_code)] // `name` is printed by the firmware only
 #[path = "../../examples/cortex-m/src/workload_api.rs"]
 mod workload_api;
@@ -29,7 +26,15 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use frmd_core::blob::LoadedPolicy;
-use shape::{DOF, HORIZON, MLP_WIDTH, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM};
+use frmd_export::export::{export_checkpoint, ExportOptions};
+use frmd_export::QuantizedPolicy;
+use shape::{DOF, HORIZON, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM};
+
+/// The student the firmware's build.rs bakes, exported with the same call and options.
+fn student() -> QuantizedPolicy {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/cortex-m/policy/reach");
+    export_checkpoint(&dir, ExportOptions::default(), None).expect("export the checked-in student").policy
+}
 
 /// The blob in 16-byte aligned storage, as the loader requires.
 fn aligned(blob: &[u8]) -> Vec<u128> {
@@ -39,23 +44,24 @@ fn aligned(blob: &[u8]) -> Vec<u128> {
 }
 
 fn host_digest() -> u64 {
-    let blob = frmd_export::blob::write(&synthetic_policy::generate()).expect("write the blob");
+    let blob = frmd_export::blob::write(&student()).expect("write the blob");
     let words = aligned(&blob);
     let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
-    let loaded = LoadedPolicy::<POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS>::load(bytes)
+    let loaded = LoadedPolicy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS>::load(bytes)
         .expect("load the blob");
     let policy = loaded
-        .policy::<POLICY_INPUT, MLP_WIDTH>()
+        .policy::<STUDENT_INPUT, MLP_WIDTH>()
         .expect("policy from the blob");
     let mut workload = policy_workload::PolicyWorkload::new(policy);
     workload_api::digest_all(&mut workload).expect("run the fixed cases")
 }
 
 #[test]
-fn synthetic_policy_is_deterministic_and_acts() {
-    let policy = synthetic_policy::generate();
-    assert_eq!(policy, synthetic_policy::generate());
+fn student_export_is_deterministic_and_acts() {
+    let policy = student();
+    assert_eq!(policy, student());
     assert_eq!(policy.scratch_width(), MLP_WIDTH);
+    assert_eq!((policy.history, policy.obs_dim, policy.action_dim), (STUDENT_HISTORY, STUDENT_OBS_DIM, DOF));
     assert_eq!(host_digest(), host_digest());
 }
 

@@ -4,12 +4,13 @@
 //! - `frmd-cortex-m` (src/main.rs): the baked ProDMP policy decoder on fixed inputs.
 //! - `frmd-cortex-m-mlp` (src/bin/frmd-cortex-m-mlp.rs): a synthetic int8 MLP (40-256-256-256-42,
 //!   SiLU LUTs) feeding the decoder, i.e. the one-step student's network + decode path.
-//! - `frmd-cortex-m-policy` (src/bin/frmd-cortex-m-policy.rs): a synthetic one-step policy baked
-//!   by frmd-export, measured as `Policy::act` (observations in, action chunk out).
-//! - `frmd-cortex-m-transformer` (src/bin/frmd-cortex-m-transformer.rs): the same policy
-//!   configuration with a synthetic int8 transformer-lite backbone instead of the MLP.
-//! - `frmd-cortex-m-policy-stages`, `frmd-cortex-m-transformer-stages`: the two policy
-//!   measurements followed by a per-stage breakdown (`stage <name>: <instructions>` lines, see
+//! - `frmd-cortex-m-policy` (src/bin/frmd-cortex-m-policy.rs): the checked-in trained student
+//!   (`policy/reach/`) exported and baked by frmd-export, measured as `Policy::act` (observations
+//!   in, action chunk out).
+//! - `frmd-cortex-m-transformer` (src/bin/frmd-cortex-m-transformer.rs): a synthetic one-step
+//!   policy configuration with a synthetic int8 transformer-lite backbone instead of the MLP.
+//! - `frmd-cortex-m-policy-stages`, `frmd-cortex-m-transformer-stages`: the synthetic MLP policy
+//!   and the transformer measurements followed by a per-stage breakdown (`stage <name>: <instructions>` lines, see
 //!   src/stage_report.rs).
 //!
 //! Each prints `digest: <16 hex>` (FNV-1a 64 over the little-endian bytes of every output, in

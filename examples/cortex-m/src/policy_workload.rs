@@ -23,6 +23,16 @@ pub const CASES: usize = 8;
 pub const OBS_SEED: u64 = 0x4652_4D44_4F42_5301;
 pub const NOISE_SEED: u64 = 0x4652_4D44_4E4F_4953;
 
+/// Multiply-accumulates of one one-step `Policy::act` call whose network does `network_macs`:
+/// the network, the ProDMP decode, the output stage (`c_skip x + c_out decode`, 2 per value) and
+/// the denormalization (2 per value), counted as the per-stage breakdown (src/stage_report.rs)
+/// counts them.
+pub const fn policy_act_macs(network_macs: u64, horizon: usize, dof: usize, params: usize) -> u64 {
+    network_macs
+        + crate::workload_api::prodmp_decode_macs(horizon, dof, params)
+        + 2 * (2 * horizon * dof) as u64
+}
+
 /// A policy, the current case's noise seed and the last chunk.
 pub struct PolicyWorkload<
     'a,
@@ -36,6 +46,7 @@ pub struct PolicyWorkload<
 > {
     policy: Policy<'a, Net, M, O, K, N, P, I>,
     name: &'static str,
+    macs: u64,
     noise_seed: u64,
     chunk: Trajectory<N, K>,
 }
@@ -60,11 +71,19 @@ impl<
         &self.policy
     }
 
+    /// States the multiply-accumulates of one `act` call (printed as the `macs:` line), e.g. from
+    /// [`policy_act_macs`].
+    pub fn with_macs(mut self, macs: u64) -> Self {
+        self.macs = macs;
+        self
+    }
+
     /// As [`Self::new`], printed as `name` (another network behind the same policy).
     pub fn with_name(policy: Policy<'a, Net, M, O, K, N, P, I>, name: &'static str) -> Self {
         Self {
             policy,
             name,
+            macs: 0,
             noise_seed: NOISE_SEED,
             chunk: Trajectory { positions: [[0.0; K]; N], velocities: [[0.0; K]; N] },
         }
@@ -114,6 +133,10 @@ impl<
         let mut rng = Rng::new(self.noise_seed);
         self.chunk = *self.policy.act(Noise::Rng(&mut rng))?;
         Ok(())
+    }
+
+    fn macs(&self) -> u64 {
+        self.macs
     }
 
     fn digest_outputs(&self, digest: &mut Fnv1a64) {

@@ -33,6 +33,13 @@ pub const POLICY_OBS_DIM: usize = 8;
 pub const POLICY_STEPS: usize = 1;
 pub const POLICY_INPUT: usize = POLICY_HISTORY * POLICY_OBS_DIM + 2 * DOF + HORIZON * DOF;
 
+/// The trained student the `policy` image runs (checked in under `policy/reach/`, exported by
+/// build.rs): observation history length and observation dimension of the built-in `reach` task,
+/// model input width (standard layout, 40).
+pub const STUDENT_HISTORY: usize = 2;
+pub const STUDENT_OBS_DIM: usize = 6;
+pub const STUDENT_INPUT: usize = STUDENT_HISTORY * STUDENT_OBS_DIM + 2 * DOF + HORIZON * DOF;
+
 /// The ProDMP configuration of the policy (tau = HORIZON * CONTROL_DT = 1.2 s).
 pub fn config() -> ProDmpConfig {
     ProDmpConfig::policy(DOF, NUM_BASIS, HORIZON, CONTROL_DT)

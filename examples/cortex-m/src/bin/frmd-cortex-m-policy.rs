@@ -1,4 +1,5 @@
-//! Firmware: a synthetic one-step policy baked by frmd-export (build.rs), `Policy::act` on a fixed
+//! Firmware: the checked-in trained student (`policy/reach/`, one-step MLP-256 for the built-in
+//! `reach` task) exported and baked by frmd-export in build.rs, `Policy::act` on a fixed
 //! list of observation histories (see the crate docs and src/policy_workload.rs). The per-stage
 //! breakdown is a separate image (src/bin/frmd-cortex-m-policy-stages.rs), so that its code does
 //! not change this one's inlining or size.
@@ -6,15 +7,18 @@
 #![no_main]
 
 use cortex_m_rt::entry;
-use frmd_cortex_m::policy_workload::{PolicyWorkload, CASES};
+use frmd_cortex_m::policy_workload::{policy_act_macs, PolicyWorkload, CASES};
 use frmd_cortex_m::report::exit_failure;
 use frmd_cortex_m::bench;
 
-/// The module frmd-export generated (policy.rs + weights.bin in OUT_DIR/policy).
+/// The module frmd-export generated from the student (policy.rs + weights.bin in OUT_DIR/student).
 #[allow(dead_code)]
 mod baked {
-    include!(concat!(env!("OUT_DIR"), "/policy/policy.rs"));
+    include!(concat!(env!("OUT_DIR"), "/student/policy.rs"));
+    include!(concat!(env!("OUT_DIR"), "/student/network_macs.rs"));
 }
+
+const NAME: &str = "policy act: trained one-step int8 MLP student (reach, policy/reach) + decode";
 
 #[entry]
 fn main() -> ! {
@@ -23,6 +27,7 @@ fn main() -> ! {
         Ok(policy) => policy,
         Err(error) => exit_failure(&error),
     };
-    let mut workload = PolicyWorkload::new(policy);
+    let macs = policy_act_macs(baked::NETWORK_MACS, baked::HORIZON, baked::ACTION_DIM, baked::PARAMS_PER_DOF);
+    let mut workload = PolicyWorkload::with_name(policy, NAME).with_macs(macs);
     bench::run::<_, { CASES * 5 }>(&mut workload, stack)
 }
