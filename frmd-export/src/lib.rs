@@ -18,6 +18,7 @@ pub mod export;
 pub mod fold;
 pub mod quantized;
 pub mod reference;
+pub mod transformer;
 
 pub use quantized::{
     MemoryFigures, ProDmpTablesOwned, QuantizedLayer, QuantizedOutput, QuantizedPolicy,
