@@ -15,6 +15,7 @@
 //!
 //! [`Int8Transformer`]: frmd_core::model::transformer::Int8Transformer
 
+pub mod blob;
 mod quantize;
 #[cfg(test)]
 mod tests;

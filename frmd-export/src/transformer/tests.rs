@@ -174,3 +174,96 @@ fn refuses_non_transformer_and_non_student_checkpoints() {
     assert!(error.to_string().contains("1..=4"), "{error}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `bytes` copied into a 4-aligned buffer (plus `shift` leading bytes to misalign on purpose).
+fn aligned(bytes: &[u8], shift: usize) -> Vec<u32> {
+    let mut words = vec![0u32; (bytes.len() + shift).div_ceil(4)];
+    bytemuck::cast_slice_mut::<u32, u8>(&mut words)[shift..shift + bytes.len()].copy_from_slice(bytes);
+    words
+}
+
+type Lite<'a> = frmd_core::blob::LoadedTransformer<'a, 2, 5, 3, 8, 5>;
+
+fn exported_lite(name: &str, steps: usize) -> (QuantizedTransformer, Normalization, PathBuf) {
+    let config = lite_config();
+    let dir = write_checkpoint(name, &config, 21);
+    let ckpt = Checkpoint::read(&dir).unwrap();
+    let folded = FoldedTransformer::new(&ckpt, steps).unwrap();
+    let ranges = calibrate(&folded, &calibration_set(&config, 16, 7), RangeMethod::MinMax).unwrap();
+    (quantize(&folded, &ranges).unwrap(), ckpt.meta.normalization.clone().unwrap(), dir)
+}
+
+#[test]
+fn blob_round_trip_is_bit_exact_and_drives_the_core_policy() {
+    use frmd_core::policy::{Noise, Policy};
+    let (quantized, norm, dir) = exported_lite("blob", 2);
+    let bytes = blob::write(&quantized, &norm).unwrap();
+    let words = aligned(&bytes, 0);
+    let loaded = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()]).unwrap();
+    assert_eq!(loaded.steps(), &quantized.folded.steps[..]);
+    let blocks = loaded.blocks();
+    let mut scratch = Box::new(HostScratch::new());
+    let mut network = loaded.network(&blocks, &mut scratch).unwrap();
+    assert_eq!(network.num_first_layer_biases(), 2);
+    // Same int8 outputs as the exporter's in-memory model, per step, bit for bit.
+    let config = lite_config();
+    let mut rng = Rng::new(8);
+    let cond: Vec<f32> = (0..config.cond_dim()).map(|_| 0.3 * rng.gaussian()).collect();
+    let x: Vec<f32> = (0..config.traj_dim()).map(|_| rng.gaussian()).collect();
+    for (i, step) in quantized.folded.steps.iter().enumerate() {
+        let input = crate::fold::model_input(&config, &quantized.folded.layout, step, &cond, &x).unwrap();
+        let mut out = vec![0.0; config.output_dim()];
+        network.forward(i, &input, &mut out).unwrap();
+        assert_eq!(out, quantized.forward(i, &input).unwrap(), "step {i}");
+    }
+    // The loaded blob runs frmd-core's Policy end to end and yields finite chunks.
+    let mut policy = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), network).unwrap();
+    policy.reset(&[0.1, -0.2, 0.3]).unwrap();
+    policy.observe(&[0.5, -0.5, 0.25, 0.0, 0.9]).unwrap();
+    let mut noise_rng = Rng::new(3);
+    policy.act(Noise::Rng(&mut noise_rng)).unwrap();
+    let first = policy.next_action().unwrap();
+    assert!(first.iter().all(|v| v.is_finite()));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn blob_loader_rejects_damage_by_name() {
+    use frmd_core::blob::format::SectionId;
+    use frmd_core::blob::transformer::TensorField;
+    use frmd_core::blob::{BlobError, Dimension};
+    use frmd_core::model::transformer::{Part, TransformerError};
+    let (quantized, norm, dir) = exported_lite("damage", 1);
+    let bytes = blob::write(&quantized, &norm).unwrap();
+    let load = |b: &[u8], shift: usize| {
+        let words = aligned(b, shift);
+        Lite::load(&bytemuck::cast_slice(&words)[shift..shift + b.len()]).err()
+    };
+    assert_eq!(load(&bytes, 0).map(|e| e.to_string()), None);
+    assert_eq!(load(&bytes[..bytes.len() - 1], 0), Some(BlobError::Truncated));
+    assert_eq!(load(&bytes[..10], 0), Some(BlobError::Truncated));
+    let mut bad_magic = bytes.clone();
+    bad_magic[3] = b'D';
+    assert_eq!(load(&bad_magic, 0), Some(BlobError::BadMagic));
+    let mut flipped = bytes.clone();
+    *flipped.last_mut().unwrap() ^= 0x40;
+    assert!(matches!(load(&flipped, 0), Some(BlobError::CrcMismatch { .. })));
+    assert!(matches!(load(&bytes, 1), Some(BlobError::SectionMisaligned(_))));
+    let words = aligned(&bytes, 0);
+    let wrong_dims = frmd_core::blob::LoadedTransformer::<'_, 2, 5, 4, 8, 5>::load(&bytemuck::cast_slice(&words)[..bytes.len()]);
+    assert_eq!(wrong_dims.err(), Some(BlobError::DimensionMismatch(Dimension::ActionDim)));
+    // Mismatched shapes: a head with one weight row missing, NaN in a norm.
+    let mut short_head = quantized.clone();
+    let row = short_head.head.in_features;
+    short_head.head.weights.truncate(short_head.head.weights.len() - row);
+    let err = load(&blob::write(&short_head, &norm).unwrap(), 0);
+    assert!(matches!(err, Some(BlobError::Transformer(TransformerError::Weights { part: Part::Head, .. }))), "{err:?}");
+    let mut nan_norm = quantized.clone();
+    nan_norm.blocks[0].norm2.gamma[3] = f32::NAN;
+    let err = load(&blob::write(&nan_norm, &norm).unwrap(), 0);
+    assert_eq!(err, Some(BlobError::NonFinite(SectionId::Transformer { part: Part::Norm2 { layer: 0 }, field: TensorField::Gamma })));
+    // An MLP loader refuses a transformer blob by magic.
+    let mlp = frmd_core::blob::LoadedPolicy::<'_, 2, 5, 3, 8, 5>::load(&bytemuck::cast_slice(&words)[..bytes.len()]);
+    assert_eq!(mlp.err(), Some(BlobError::BadMagic));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
