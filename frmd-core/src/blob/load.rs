@@ -384,7 +384,10 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
         })
     }
 
-    pub(crate) fn read_decoder(data: &Data<'a>, section: Section) -> Result<BakedProDmp<N, P>, BlobError> {
+    pub(crate) fn read_decoder(
+        data: &Data<'a>,
+        section: Section,
+    ) -> Result<BakedProDmp<N, P>, BlobError> {
         let table_len = N.checked_mul(P);
         let count = table_len
             .and_then(|np| np.checked_mul(2))

@@ -143,7 +143,9 @@ impl core::fmt::Display for BlobError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Self::Truncated => f.write_str("blob is truncated"),
-            Self::BadMagic => f.write_str("blob magic is not the expected one (FRMD: MLP, FRMT: transformer)"),
+            Self::BadMagic => {
+                f.write_str("blob magic is not the expected one (FRMD: MLP, FRMT: transformer)")
+            }
             Self::UnsupportedVersion { found } => {
                 write!(f, "blob format version {found} is not {FORMAT_VERSION}")
             }

@@ -19,8 +19,8 @@ use super::writer::{data_start, seal};
 use super::{BlobError, Dimension, LoadedPolicy};
 use crate::kernels::{FcRequant, FullyConnected, Lut8};
 use crate::model::transformer::{
-    Int8Block, Int8FeedForward, Int8Linear, Int8Transformer, LayerNormWeights, Part,
-    TokenLinear, TransformerScratch, TransformerShape,
+    Int8Block, Int8FeedForward, Int8Linear, Int8Transformer, LayerNormWeights, Part, TokenLinear,
+    TransformerScratch, TransformerShape,
 };
 use crate::policy::{
     InputLayout, Int8TransformerNetwork, PolicyConfig, PolicyError, RangeNormalizer, Sampler,
@@ -291,7 +291,11 @@ fn field(part: Part, field: TensorField) -> SectionId {
 }
 
 /// f32 section of any length, all finite.
-fn finite_any<'a>(data: &Data<'a>, section: Section, id: SectionId) -> Result<&'a [f32], BlobError> {
+fn finite_any<'a>(
+    data: &Data<'a>,
+    section: Section,
+    id: SectionId,
+) -> Result<&'a [f32], BlobError> {
     let values = data.cast::<f32>(section, id)?;
     if values.iter().all(|v| v.is_finite()) {
         Ok(values)
@@ -300,7 +304,11 @@ fn finite_any<'a>(data: &Data<'a>, section: Section, id: SectionId) -> Result<&'
     }
 }
 
-fn read_norm<'a>(data: &Data<'a>, d: &NormDesc, part: Part) -> Result<LayerNormWeights<'a>, BlobError> {
+fn read_norm<'a>(
+    data: &Data<'a>,
+    d: &NormDesc,
+    part: Part,
+) -> Result<LayerNormWeights<'a>, BlobError> {
     Ok(LayerNormWeights {
         gamma: finite_any(data, d.gamma, field(part, TensorField::Gamma))?,
         beta: finite_any(data, d.beta, field(part, TensorField::Beta))?,
@@ -341,7 +349,10 @@ fn read_block<'a>(
     let fc1_part = Part::Fc1 { layer };
     let fc1 = read_linear(data, &d.fc1, width, fc1_part)?;
     if !fc1.output_scales.is_empty() {
-        return Err(BlobError::SectionLength(field(fc1_part, TensorField::Scales)));
+        return Err(BlobError::SectionLength(field(
+            fc1_part,
+            TensorField::Scales,
+        )));
     }
     let fc2 = read_linear(data, &d.fc2, hidden, Part::Fc2 { layer })?;
     let table = data.exact::<i8>(d.gelu, Some(LUT_LEN), field(fc1_part, TensorField::Lut))?;
@@ -357,7 +368,8 @@ fn read_block<'a>(
         fc1_input: fc1.input,
         fc1: fc1.fc,
         fc1_requant: FcRequant {
-            multipliers: data.cast::<i32>(d.fc1_multipliers, field(fc1_part, TensorField::Multipliers))?,
+            multipliers: data
+                .cast::<i32>(d.fc1_multipliers, field(fc1_part, TensorField::Multipliers))?,
             shifts: data.cast::<i32>(d.fc1_shifts, field(fc1_part, TensorField::Shifts))?,
             output_zero_point: d.fc1_output_zero_point,
             activation_min: i8::MIN,
@@ -435,7 +447,10 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
             .len()
             .checked_div(width)
             .filter(|n| *n > 0 && noise_tokens.len().is_multiple_of(width))
-            .ok_or(BlobError::SectionLength(field(Part::NoiseToken, TensorField::Values)))?;
+            .ok_or(BlobError::SectionLength(field(
+                Part::NoiseToken,
+                TensorField::Values,
+            )))?;
         let active = steps.get(..num_steps).unwrap_or(&[]);
         if active
             .iter()
