@@ -267,3 +267,53 @@ fn blob_loader_rejects_damage_by_name() {
     assert_eq!(mlp.err(), Some(BlobError::BadMagic));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// frmd-core's `Policy` over the blob-loaded int8 network and over the f32 network, same
+/// observations and noise: chunk positions in robot units agree within 2.5% of the f32 spread
+/// (max) and 0.75% (mean).
+#[test]
+fn core_policy_int8_blob_chunk_tracks_f32_policy_chunk() {
+    use frmd_core::policy::{Noise, Policy};
+    let (quantized, norm, dir) = exported_lite("policy", 1);
+    let bytes = blob::write(&quantized, &norm).unwrap();
+    let words = aligned(&bytes, 0);
+    let loaded = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()]).unwrap();
+    let blocks = loaded.blocks();
+    let mut int8_scratch = Box::new(HostScratch::new());
+    let mut int8 = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), loaded.network(&blocks, &mut int8_scratch).unwrap()).unwrap();
+    let folded = &quantized.folded;
+    let tokens = folded.flat_noise_tokens();
+    let f32_blocks = folded.f32_blocks();
+    let mut f32_scratch = Box::new(HostScratch::new());
+    let f32_net = F32TransformerNetwork::new(folded.view(&f32_blocks, 0).unwrap(), &folded.layout, &tokens, &mut f32_scratch).unwrap();
+    let mut float = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), f32_net).unwrap();
+    let mut rng = Rng::new(17);
+    let (mut max, mut sum, mut count, mut lo, mut hi) = (0f32, 0f64, 0usize, f32::MAX, f32::MIN);
+    for episode in 0..8 {
+        let start: [f32; 3] = std::array::from_fn(|_| 0.5 * rng.gaussian());
+        int8.reset(&start).unwrap();
+        float.reset(&start).unwrap();
+        for _ in 0..2 {
+            let obs: [f32; 5] = std::array::from_fn(|_| (0.5 * rng.gaussian()).clamp(-1.0, 1.0));
+            int8.observe(&obs).unwrap();
+            float.observe(&obs).unwrap();
+        }
+        let noise: Vec<f32> = (0..24).map(|_| rng.gaussian()).collect();
+        let got = int8.act(Noise::Given(&noise)).unwrap().positions;
+        let want = float.act(Noise::Given(&noise)).unwrap().positions;
+        for (g, w) in got.iter().flatten().zip(want.iter().flatten()) {
+            assert!(g.is_finite(), "episode {episode}");
+            max = max.max((g - w).abs());
+            sum += f64::from((g - w).abs());
+            count += 1;
+            lo = lo.min(*w);
+            hi = hi.max(*w);
+        }
+    }
+    let (mean, spread) = ((sum / count as f64) as f32, hi - lo);
+    println!("core Policy, blob int8 vs f32 transformer-lite chunk (robot units): max {max:.5}, mean {mean:.5}, f32 spread {spread:.3}");
+    assert!(spread > 0.1, "f32 chunks are degenerate (spread {spread})");
+    assert!(max <= 0.025 * spread, "max error {max} exceeds 2.5% of the f32 spread {spread}");
+    assert!(mean <= 0.0075 * spread, "mean error {mean} exceeds 0.75% of the f32 spread {spread}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
