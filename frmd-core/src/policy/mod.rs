@@ -28,6 +28,7 @@ mod normalize;
 mod runtime;
 mod sampler;
 mod transformer_network;
+pub(crate) use transformer_network::STANDARD_SEGMENTS;
 
 #[cfg(test)]
 pub(crate) mod test_model;

@@ -92,7 +92,7 @@ impl<'a> TransformerBackbone<'a> for F32Transformer<'a> {
 }
 
 /// The standard layout order the adapter requires (condition first, trajectory last).
-const STANDARD_SEGMENTS: [InputSegment; 4] = [
+pub(crate) const STANDARD_SEGMENTS: [InputSegment; 4] = [
     InputSegment::ObsHistory,
     InputSegment::PrevAction,
     InputSegment::PrevRate,
