@@ -69,12 +69,12 @@ impl CalibrationSet {
 
 /// Recorded values of one quantization point.
 #[derive(Default)]
-struct Recorder {
-    values: Vec<f32>,
+pub(crate) struct Recorder {
+    pub(crate) values: Vec<f32>,
 }
 
 impl Recorder {
-    fn params(&mut self, method: RangeMethod, what: &str) -> anyhow::Result<QuantParams> {
+    pub(crate) fn params(&mut self, method: RangeMethod, what: &str) -> anyhow::Result<QuantParams> {
         if self.values.is_empty() {
             bail!("calibration recorded no values for {what}");
         }
@@ -164,12 +164,12 @@ pub fn input_gains(model: &FoldedMlp, set: &CalibrationSet) -> anyhow::Result<In
     Ok(InputGains { traj_gain: gain(traj), rate_gain: gain(rate) })
 }
 
-struct QuantizedWeights {
-    weights: Vec<i8>,
-    scales: Vec<f32>,
+pub(crate) struct QuantizedWeights {
+    pub(crate) weights: Vec<i8>,
+    pub(crate) scales: Vec<f32>,
 }
 
-fn quantize_weights(layer: &FloatLayer) -> anyhow::Result<QuantizedWeights> {
+pub(crate) fn quantize_weights(layer: &FloatLayer) -> anyhow::Result<QuantizedWeights> {
     let mut weights = vec![0i8; layer.weights.len()];
     let mut scales = vec![0f32; layer.out_features];
     quantize_weights_per_channel(&layer.weights, layer.in_features, &mut weights, &mut scales)
@@ -177,7 +177,7 @@ fn quantize_weights(layer: &FloatLayer) -> anyhow::Result<QuantizedWeights> {
     Ok(QuantizedWeights { weights, scales })
 }
 
-fn int_bias(bias: &[f32], q: &QuantizedWeights, input: QuantParams, in_features: usize) -> anyhow::Result<Vec<i32>> {
+pub(crate) fn int_bias(bias: &[f32], q: &QuantizedWeights, input: QuantParams, in_features: usize) -> anyhow::Result<Vec<i32>> {
     bias.iter()
         .enumerate()
         .map(|(o, &b)| {

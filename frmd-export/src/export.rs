@@ -2,6 +2,7 @@
 use crate::calibrate::{calibrate, input_gains, quantize, CalibrationSet, RangeMethod, Ranges};
 use crate::checkpoint::{Checkpoint, CALIBRATION_FILE};
 use crate::fold::FoldedMlp;
+use crate::transformer::{FoldedTransformer, QuantizedTransformer, TransformerRanges};
 use crate::QuantizedPolicy;
 use anyhow::Context;
 use std::path::Path;
@@ -46,4 +47,29 @@ pub fn export_checkpoint(dir: &Path, options: ExportOptions, calibration: Option
     let ranges = calibrate(&folded, &set, options.ranges)?;
     let policy = quantize(&folded, &ranges, &norm)?;
     Ok(Exported { checkpoint, folded, ranges, policy })
+}
+
+/// Everything a transformer export produced.
+#[derive(Clone, Debug)]
+pub struct ExportedTransformer {
+    pub checkpoint: Checkpoint,
+    pub ranges: TransformerRanges,
+    /// The int8 model; its `folded` field is the f32 reference.
+    pub model: QuantizedTransformer,
+}
+
+/// [`export_checkpoint`] for a transformer student: reads `dir`, folds the per-step noise tokens,
+/// calibrates with the transformer probes on `calibration` (or `dir/calibration.safetensors`)
+/// and quantizes. `options.balance_inputs` does not apply (each input layer has its own scale).
+pub fn export_transformer_checkpoint(dir: &Path, options: ExportOptions, calibration: Option<CalibrationSet>) -> anyhow::Result<ExportedTransformer> {
+    let checkpoint = Checkpoint::read(dir).with_context(|| format!("checkpoint {}", dir.display()))?;
+    let folded = FoldedTransformer::new(&checkpoint, options.steps).with_context(|| format!("cannot export {}", dir.display()))?;
+    let set = match calibration {
+        Some(set) => set,
+        None => crate::calibration_file::read(&dir.join(CALIBRATION_FILE), checkpoint.meta.model.cond_dim())
+            .context("no calibration data given and the checkpoint's calibration file is unusable (pass --data)")?,
+    };
+    let ranges = crate::transformer::calibrate(&folded, &set, options.ranges)?;
+    let model = crate::transformer::quantize(&folded, &ranges)?;
+    Ok(ExportedTransformer { checkpoint, ranges, model })
 }

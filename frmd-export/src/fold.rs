@@ -170,7 +170,7 @@ impl FoldedMlp {
         let (hidden_sizes, activation) = match &config.backbone {
             BackboneConfig::Mlp { hidden, activation } => (hidden.clone(), *activation),
             BackboneConfig::Transformer { .. } => bail!(
-                "transformer backbones are not exportable yet: the blob/baked formats and the Network trait hold MLPs only (frmd-core's Int8Transformer exists but has no policy wiring)"
+                "transformer backbones fold with transformer::FoldedTransformer (export::export_transformer_checkpoint); the MLP blob/baked formats cannot hold them"
             ),
         };
         if hidden_sizes.len() > MAX_HIDDEN_LAYERS {
@@ -296,46 +296,69 @@ impl FoldedMlp {
         Ok(out)
     }
 
-    /// Builds the model input of one step: `cond = [obs history, y0, v0]` (normalized, v0 per
-    /// second) and the unscaled noisy trajectory `x` (`[n][k]`).
+    /// Builds the model input of one step (see [`model_input`]).
     pub fn input(&self, step: &StepConstants, cond: &[f32], x: &[f32]) -> anyhow::Result<Vec<f32>> {
-        let c = &self.config;
-        let obs_len = c.history * c.obs_dim;
-        let k = c.action_dim;
-        if cond.len() != c.cond_dim() || x.len() != c.traj_dim() {
-            bail!("model input: condition has {} values (expected {}), trajectory {} (expected {})", cond.len(), c.cond_dim(), x.len(), c.traj_dim());
-        }
-        let mut input = Vec::with_capacity(self.input_width());
-        input.extend_from_slice(&cond[..obs_len + k]);
-        input.extend(cond[obs_len + k..obs_len + 2 * k].iter().map(|v| v * self.layout.rate_scale));
-        input.extend(x.iter().map(|v| step.c_in * v));
-        Ok(input)
+        model_input(&self.config, &self.layout, step, cond, x)
     }
 
     /// The f32 consistency sampler over all steps with the given standard-normal `noise`
     /// (`steps * n * k` values): returns the chunk positions (normalized, `[n][k]`), calling
     /// `observe(step, probe, values)` for every probe of every step.
     pub fn sample(&self, cond: &[f32], noise: &[f32], mut observe: impl FnMut(usize, Probe, &[f32])) -> anyhow::Result<Vec<f32>> {
-        let c = &self.config;
-        let (k, traj) = (c.action_dim, c.traj_dim());
-        let obs_len = c.history * c.obs_dim;
-        if cond.len() != obs_len + 2 * k || noise.len() < self.steps.len() * traj {
-            bail!("condition has {} values (expected {}), noise {} (expected {})", cond.len(), obs_len + 2 * k, noise.len(), self.steps.len() * traj);
-        }
-        let (y0, v0) = (&cond[obs_len..obs_len + k], &cond[obs_len + k..]);
-        let mut f = vec![0.0f32; traj];
-        for (i, step) in self.steps.iter().enumerate() {
-            let z = &noise[i * traj..(i + 1) * traj];
-            let x: Vec<f32> = if i == 0 {
-                z.iter().map(|z| step.sigma * z).collect()
-            } else {
-                f.iter().zip(z).map(|(f, z)| f + step.renoise_std * z).collect()
-            };
-            let input = self.input(step, cond, &x)?;
-            let params = self.forward_observed(i, &input, |p, v| observe(i, p, v))?;
-            let decoded = self.prodmp.decode_positions(&params, y0, v0);
-            f = x.iter().zip(&decoded).map(|(x, d)| step.c_skip * x + step.c_out * d).collect();
-        }
-        Ok(f)
+        sample_chunk(&self.config, &self.layout, &self.steps, &self.prodmp, cond, noise, |i, input| {
+            self.forward_observed(i, input, |p, v| observe(i, p, v))
+        })
     }
+}
+
+/// Builds the model input of one step in the standard layout: `cond = [obs history, y0, v0]`
+/// (normalized, v0 per second) and the unscaled noisy trajectory `x` (`[n][k]`) become
+/// `[obs history, y0, v0 * rate_scale, c_in x]`.
+pub fn model_input(config: &ModelConfig, layout: &InputLayout, step: &StepConstants, cond: &[f32], x: &[f32]) -> anyhow::Result<Vec<f32>> {
+    let c = config;
+    let obs_len = c.history * c.obs_dim;
+    let k = c.action_dim;
+    if cond.len() != c.cond_dim() || x.len() != c.traj_dim() {
+        bail!("model input: condition has {} values (expected {}), trajectory {} (expected {})", cond.len(), c.cond_dim(), x.len(), c.traj_dim());
+    }
+    let mut input = Vec::with_capacity(c.cond_dim() + c.traj_dim());
+    input.extend_from_slice(&cond[..obs_len + k]);
+    input.extend(cond[obs_len + k..obs_len + 2 * k].iter().map(|v| v * layout.rate_scale));
+    input.extend(x.iter().map(|v| step.c_in * v));
+    Ok(input)
+}
+
+/// The host consistency sampler over all `steps` with standard-normal `noise` (`steps * n * k`
+/// values), for any network: `forward(step_index, model_input)` returns the `K * P` ProDMP
+/// parameters. Returns the chunk positions (normalized, `[n][k]`).
+pub fn sample_chunk(
+    config: &ModelConfig,
+    layout: &InputLayout,
+    steps: &[StepConstants],
+    prodmp: &ProDmpTablesOwned,
+    cond: &[f32],
+    noise: &[f32],
+    mut forward: impl FnMut(usize, &[f32]) -> anyhow::Result<Vec<f32>>,
+) -> anyhow::Result<Vec<f32>> {
+    let c = config;
+    let (k, traj) = (c.action_dim, c.traj_dim());
+    let obs_len = c.history * c.obs_dim;
+    if cond.len() != obs_len + 2 * k || noise.len() < steps.len() * traj {
+        bail!("condition has {} values (expected {}), noise {} (expected {})", cond.len(), obs_len + 2 * k, noise.len(), steps.len() * traj);
+    }
+    let (y0, v0) = (&cond[obs_len..obs_len + k], &cond[obs_len + k..]);
+    let mut f = vec![0.0f32; traj];
+    for (i, step) in steps.iter().enumerate() {
+        let z = &noise[i * traj..(i + 1) * traj];
+        let x: Vec<f32> = if i == 0 {
+            z.iter().map(|z| step.sigma * z).collect()
+        } else {
+            f.iter().zip(z).map(|(f, z)| f + step.renoise_std * z).collect()
+        };
+        let input = model_input(config, layout, step, cond, &x)?;
+        let params = forward(i, &input)?;
+        let decoded = prodmp.decode_positions(&params, y0, v0);
+        f = x.iter().zip(&decoded).map(|(x, d)| step.c_skip * x + step.c_out * d).collect();
+    }
+    Ok(f)
 }

@@ -7,7 +7,9 @@
 //! - [`QuantizedPolicy`]: the owned result of quantization;
 //! - [`blob::write`]: the self-describing blob (format in [`frmd_core::blob`]);
 //! - [`bake::write_module`]: a generated Rust module plus an aligned `weights.bin`;
-//! - [`reference`]: independent wide-integer checks of the int8 kernels.
+//! - [`reference`]: independent wide-integer checks of the int8 kernels;
+//! - [`transformer`]: the same pipeline for transformer-lite students (fold per-step noise
+//!   tokens, calibrate with frmd-core's transformer probes, quantize, write the `FRMT` blob).
 
 pub mod bake;
 pub mod blob;
@@ -18,6 +20,7 @@ pub mod export;
 pub mod fold;
 pub mod quantized;
 pub mod reference;
+pub mod transformer;
 
 pub use quantized::{
     MemoryFigures, ProDmpTablesOwned, QuantizedLayer, QuantizedOutput, QuantizedPolicy,

@@ -67,7 +67,11 @@ fn refuses_what_it_cannot_represent_by_name() {
 
     let (dir, _) = checkpoint("transformer", Role::Student, BackboneConfig::Transformer { layers: 1, heads: 2, width: 8 });
     let err = export_err(&dir);
-    assert!(err.contains("transformer backbones are not exportable"), "{err}");
+    assert!(err.contains("transformer backbones fold with transformer::FoldedTransformer"), "{err}");
+    let set = calibration(model(mlp()).cond_dim(), 8);
+    let exported = frmd_export::export::export_transformer_checkpoint(&dir, ExportOptions::default(), Some(set)).unwrap();
+    assert_eq!(exported.model.folded.shape.width, 8);
+    assert_eq!(exported.ranges.rows, 8);
 
     let (dir, _) = checkpoint("wide", Role::Student, BackboneConfig::Mlp { hidden: vec![2048], activation: Activation::Silu });
     let err = export_err(&dir);

@@ -156,6 +156,13 @@ pub enum SectionId {
     OutputBias,
     /// Output layer dequantization scales.
     OutputScales,
+    /// A section of a transformer blob: which part, which array.
+    Transformer {
+        /// The model part.
+        part: crate::model::transformer::Part,
+        /// The array of that part.
+        field: super::transformer::TensorField,
+    },
 }
 
 /// `value` rounded up to a multiple of `align` (a power of two); `None` on overflow.

@@ -84,12 +84,12 @@ pub struct LoadedPolicy<
 }
 
 /// The data area and a checked view of one section as `T` elements.
-struct Data<'a> {
-    bytes: &'a [u8],
+pub(crate) struct Data<'a> {
+    pub(crate) bytes: &'a [u8],
 }
 
 impl<'a> Data<'a> {
-    fn cast<T: bytemuck::Pod>(
+    pub(crate) fn cast<T: bytemuck::Pod>(
         &self,
         section: Section,
         id: SectionId,
@@ -115,7 +115,7 @@ impl<'a> Data<'a> {
     }
 
     /// Section of exactly `count` elements.
-    fn exact<T: bytemuck::Pod>(
+    pub(crate) fn exact<T: bytemuck::Pod>(
         &self,
         section: Section,
         count: Option<usize>,
@@ -130,7 +130,7 @@ impl<'a> Data<'a> {
     }
 
     /// f32 section of exactly `count` finite values.
-    fn finite(
+    pub(crate) fn finite(
         &self,
         section: Section,
         count: Option<usize>,
@@ -159,7 +159,7 @@ fn read_u32(bytes: &[u8], at: usize) -> Result<u32, BlobError> {
     Ok(u32::from_le_bytes(word))
 }
 
-fn check_dim(found: u32, expected: usize, which: Dimension) -> Result<(), BlobError> {
+pub(crate) fn check_dim(found: u32, expected: usize, which: Dimension) -> Result<(), BlobError> {
     if found as usize == expected {
         Ok(())
     } else {
@@ -168,7 +168,7 @@ fn check_dim(found: u32, expected: usize, which: Dimension) -> Result<(), BlobEr
 }
 
 /// Copies `values` into a fixed array (lengths checked by the caller).
-fn to_array<const D: usize>(values: &[f32]) -> [f32; D] {
+pub(crate) fn to_array<const D: usize>(values: &[f32]) -> [f32; D] {
     let mut array = [0.0; D];
     for (slot, value) in array.iter_mut().zip(values) {
         *slot = *value;
@@ -177,12 +177,12 @@ fn to_array<const D: usize>(values: &[f32]) -> [f32; D] {
 }
 
 /// Checks the header and CRC; returns the descriptor bytes and the data area.
-fn split(bytes: &[u8]) -> Result<(&[u8], &[u8]), BlobError> {
+pub(crate) fn split(bytes: &[u8], magic: [u8; 4]) -> Result<(&[u8], &[u8]), BlobError> {
     if cfg!(target_endian = "big") {
         return Err(BlobError::BigEndianTarget);
     }
     let header = bytes.get(..HEADER_LEN).ok_or(BlobError::Truncated)?;
-    if header.get(..4) != Some(&MAGIC[..]) {
+    if header.get(..4) != Some(&magic[..]) {
         return Err(BlobError::BadMagic);
     }
     let version = read_u16(header, 4)?;
@@ -220,7 +220,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
     /// Bytes after the stated total length are ignored (e.g. flash padding). The buffer must start
     /// at a 4-byte aligned address.
     pub fn load(bytes: &'a [u8]) -> Result<Self, BlobError> {
-        let (descriptor_bytes, data_bytes) = split(bytes)?;
+        let (descriptor_bytes, data_bytes) = split(bytes, MAGIC)?;
         let (d, rest) = postcard::take_from_bytes::<Descriptor>(descriptor_bytes)
             .map_err(|_| BlobError::Descriptor)?;
         if !rest.is_empty() {
@@ -384,7 +384,10 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
         })
     }
 
-    fn read_decoder(data: &Data<'a>, section: Section) -> Result<BakedProDmp<N, P>, BlobError> {
+    pub(crate) fn read_decoder(
+        data: &Data<'a>,
+        section: Section,
+    ) -> Result<BakedProDmp<N, P>, BlobError> {
         let table_len = N.checked_mul(P);
         let count = table_len
             .and_then(|np| np.checked_mul(2))
@@ -413,7 +416,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
         Ok(decoder)
     }
 
-    fn read_steps(
+    pub(crate) fn read_steps(
         data: &Data<'a>,
         section: Section,
     ) -> Result<([StepConstants; MAX_STEPS], usize), BlobError> {

@@ -11,6 +11,7 @@
 pub mod crc32;
 pub mod format;
 mod load;
+pub mod transformer;
 mod writer;
 
 #[cfg(test)]
@@ -21,10 +22,15 @@ pub use format::{
     LUT_LEN, MAGIC, SECTION_ALIGN, STEP_WORDS,
 };
 pub use load::LoadedPolicy;
+pub use transformer::{
+    encode_transformer, transformer_encoded_len, LoadedTransformer, TransformerDescriptor,
+    TRANSFORMER_MAGIC,
+};
 pub use writer::{
     encode, encoded_len, BlobParts, HiddenLayerParts, OutputLayerParts, ProDmpTables,
 };
 
+use crate::model::transformer::TransformerError;
 use crate::policy::PolicyError;
 
 /// Which blob dimension disagrees with the loader's const generics.
@@ -48,7 +54,7 @@ pub enum Dimension {
 pub enum BlobError {
     /// The buffer is shorter than the header or than the total length the header states.
     Truncated,
-    /// The first four bytes are not `b"FRMD"`.
+    /// The first four bytes are not `b"FRMD"` (MLP) or [`TRANSFORMER_MAGIC`] (transformer).
     BadMagic,
     /// The format version is not [`FORMAT_VERSION`].
     UnsupportedVersion {
@@ -128,13 +134,18 @@ pub enum BlobError {
     TooLarge,
     /// Building the network or policy from a loaded blob failed.
     Policy(PolicyError),
+    /// A transformer blob's backbone does not validate (shape, or a part's sizes or
+    /// quantization parameters, named by part).
+    Transformer(TransformerError),
 }
 
 impl core::fmt::Display for BlobError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Self::Truncated => f.write_str("blob is truncated"),
-            Self::BadMagic => f.write_str("blob magic is not FRMD"),
+            Self::BadMagic => {
+                f.write_str("blob magic is not the expected one (FRMD: MLP, FRMT: transformer)")
+            }
             Self::UnsupportedVersion { found } => {
                 write!(f, "blob format version {found} is not {FORMAT_VERSION}")
             }
@@ -174,6 +185,7 @@ impl core::fmt::Display for BlobError {
             Self::Encode => f.write_str("descriptor encoding failed"),
             Self::TooLarge => f.write_str("blob too large (layers or sizes)"),
             Self::Policy(e) => write!(f, "policy: {e}"),
+            Self::Transformer(e) => write!(f, "transformer: {e}"),
         }
     }
 }

@@ -342,15 +342,23 @@ pub fn encode(parts: &BlobParts<'_>, out: &mut [u8]) -> Result<usize, BlobError>
     put(data, d.output.weights, o.weights.iter().copied(), i8_bytes)?;
     put(data, d.output.bias, o.bias.iter().copied(), i32_bytes)?;
     put(data, d.output.scales, o.scales.iter().copied(), f32_bytes)?;
+    seal(blob, MAGIC, desc_len)?;
+    Ok(total)
+}
+
+/// Fills the header of `blob` (the whole blob, descriptor and data already in place): `magic`,
+/// [`FORMAT_VERSION`], reserved 0, total length `blob.len()`, the payload CRC-32 and the
+/// descriptor length.
+pub(crate) fn seal(blob: &mut [u8], magic: [u8; 4], desc_len: usize) -> Result<(), BlobError> {
     let crc = crc32(blob.get(HEADER_LEN..).ok_or(BlobError::BufferTooSmall)?);
+    let total_u32 = u32::try_from(blob.len()).map_err(|_| BlobError::TooLarge)?;
+    let desc_u32 = u32::try_from(desc_len).map_err(|_| BlobError::TooLarge)?;
     let header = blob
         .get_mut(..HEADER_LEN)
         .ok_or(BlobError::BufferTooSmall)?;
     let mut fields = [0_u8; HEADER_LEN];
-    let total_u32 = u32::try_from(total).map_err(|_| BlobError::TooLarge)?;
-    let desc_u32 = u32::try_from(desc_len).map_err(|_| BlobError::TooLarge)?;
     for (slot, byte) in fields.iter_mut().zip(
-        MAGIC
+        magic
             .iter()
             .chain(&FORMAT_VERSION.to_le_bytes())
             .chain(&0_u16.to_le_bytes())
@@ -361,5 +369,5 @@ pub fn encode(parts: &BlobParts<'_>, out: &mut [u8]) -> Result<usize, BlobError>
         *slot = *byte;
     }
     header.copy_from_slice(&fields);
-    Ok(total)
+    Ok(())
 }

@@ -27,6 +27,8 @@ mod network;
 mod normalize;
 mod runtime;
 mod sampler;
+mod transformer_network;
+pub(crate) use transformer_network::STANDARD_SEGMENTS;
 
 #[cfg(test)]
 pub(crate) mod test_model;
@@ -40,11 +42,15 @@ pub(crate) use network::EMPTY_INT8_LAYER;
 pub use network::{F32Network, Int8Network, Network, MAX_HIDDEN_LAYERS};
 pub use normalize::RangeNormalizer;
 pub use runtime::{Policy, PolicyConfig};
+pub use transformer_network::{
+    F32TransformerNetwork, Int8TransformerNetwork, TransformerBackbone, TransformerNetwork,
+};
 pub use sampler::{
     validate_steps, Conditioning, Noise, Sampler, SamplerWork, StepConstants, Trajectory, MAX_STEPS,
 };
 
 use crate::model::mlp::ModelError;
+use crate::model::transformer::TransformerError;
 
 use crate::prodmp::ProDmpError;
 
@@ -99,6 +105,11 @@ pub enum PolicyError {
     Model(ModelError),
     /// The ProDMP decoder refused its arguments.
     Decode(ProDmpError),
+    /// The transformer backbone refused its weights or arguments.
+    Transformer(TransformerError),
+    /// A transformer network needs the standard input layout (observation history, previous
+    /// action, previous rate, noisy trajectory) to split condition and trajectory.
+    TransformerLayout,
 }
 
 impl core::fmt::Display for PolicyError {
@@ -132,6 +143,10 @@ impl core::fmt::Display for PolicyError {
             Self::BakedData => f.write_str("baked weight section out of range or misaligned"),
             Self::Model(e) => write!(f, "network: {e}"),
             Self::Decode(e) => write!(f, "ProDMP decode: {e}"),
+            Self::Transformer(e) => write!(f, "transformer: {e}"),
+            Self::TransformerLayout => {
+                f.write_str("transformer network needs the standard input layout")
+            }
         }
     }
 }

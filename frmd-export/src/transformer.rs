@@ -1,0 +1,260 @@
+//! Folding a transformer-lite student checkpoint into frmd-core's transformer structure, in f32.
+//!
+//! The candle model (frmd-host `models/transformer.rs`, variables under `transformer.`) embeds
+//! the tokens `[cond_in(cond), noise_in(embedding(c_noise)), traj_in(c_in x_i) ...]`, adds
+//! `pos_embedding`, runs pre-LayerNorm blocks (`norm1`, `qkv`, `proj`, `norm2`, `fc1`, GELU,
+//! `fc2`), `final_norm` and a `head` over the flattened tokens. Per sampling step `i` the noise
+//! level is fixed, so `noise_in(embedding(c_noise(sigma_i))) + pos_embedding[1]` is one constant
+//! `W`-long token ([`frmd_core::model::transformer::fold_noise_token`]); the runtime selects it by
+//! the step's `first_layer_bias_index` ([`frmd_core::policy::TransformerNetwork`]), the way the
+//! MLP selects its per-step first-layer bias.
+//!
+//! The result ([`FoldedTransformer`]) runs on frmd-core's own f32 path
+//! ([`F32Transformer`]); [`quantize`] calibrates it with the transformer probes and quantizes it
+//! into an owned [`QuantizedTransformer`] that views as frmd-core's [`Int8Transformer`].
+//!
+//! [`Int8Transformer`]: frmd_core::model::transformer::Int8Transformer
+
+pub mod blob;
+mod quantize;
+#[cfg(test)]
+mod tests;
+
+pub use quantize::{calibrate, quantize, QuantizedLinear, QuantizedTransformer, TransformerRanges};
+
+use crate::checkpoint::{BackboneConfig, Checkpoint, ModelConfig, Role};
+use crate::fold::{mlp_layout, sample_chunk, step_constants, FloatLayer};
+use crate::ProDmpTablesOwned;
+use anyhow::{bail, Context};
+use frmd_core::kernels::Activation;
+use frmd_core::model::mlp::F32Layer;
+use frmd_core::model::transformer::{
+    fold_noise_token, F32Block, F32Transformer, LayerNormWeights, TransformerProbe,
+    TransformerScratch, TransformerShape,
+};
+use frmd_core::policy::{InputLayout, StepConstants};
+use frmd_core::sigma::{noise_embedding, SigmaConfig};
+
+/// Scratch for the exporter's f32 and int8 transformer passes (enough for `transformer`, 6 x 256
+/// with horizon 16): floats, bytes, accumulators.
+pub type HostScratch = TransformerScratch<HOST_FLOATS, HOST_BYTES, HOST_ACCUMULATORS>;
+const HOST_FLOATS: usize = 32_768;
+const HOST_BYTES: usize = 16_384;
+const HOST_ACCUMULATORS: usize = 1_024;
+
+/// LayerNorm affine parameters (`[W]` each).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FloatNorm {
+    pub gamma: Vec<f32>,
+    pub beta: Vec<f32>,
+}
+
+impl FloatNorm {
+    pub fn view(&self) -> LayerNormWeights<'_> {
+        LayerNormWeights { gamma: &self.gamma, beta: &self.beta }
+    }
+}
+
+/// One pre-LayerNorm block in f32.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FloatBlock {
+    pub norm1: FloatNorm,
+    pub qkv: FloatLayer,
+    pub proj: FloatLayer,
+    pub norm2: FloatNorm,
+    pub fc1: FloatLayer,
+    pub fc2: FloatLayer,
+}
+
+/// A transformer student folded for `steps.len()` sampling steps.
+#[derive(Clone, Debug)]
+pub struct FoldedTransformer {
+    pub config: ModelConfig,
+    pub sigma: SigmaConfig,
+    pub shape: TransformerShape,
+    pub traj_in: FloatLayer,
+    pub cond_in: FloatLayer,
+    /// Per step: `noise_in(embedding(c_noise(sigma_i))) + pos_embedding[1]`, `W` values.
+    pub noise_tokens: Vec<Vec<f32>>,
+    /// `[T, W]` learned positions (row 1 unused at run time).
+    pub positions: Vec<f32>,
+    pub blocks: Vec<FloatBlock>,
+    pub final_norm: FloatNorm,
+    pub head: FloatLayer,
+    pub steps: Vec<StepConstants>,
+    pub layout: InputLayout,
+    pub prodmp: ProDmpTablesOwned,
+}
+
+pub(crate) fn f32_view<'a>(layer: &'a FloatLayer) -> F32Layer<'a> {
+    F32Layer {
+        in_features: layer.in_features,
+        out_features: layer.out_features,
+        weights: &layer.weights,
+        bias: &layer.bias,
+        activation: layer.activation,
+    }
+}
+
+/// Reads linear layer `transformer.{name}` (`[out, in]` weight, `[out]` bias).
+fn linear(ckpt: &Checkpoint, name: &str, in_features: usize, out_features: usize) -> anyhow::Result<FloatLayer> {
+    let weights = ckpt.tensor(&format!("transformer.{name}.weight"))?.to_vec();
+    let bias = ckpt.tensor(&format!("transformer.{name}.bias"))?.to_vec();
+    if weights.len() != in_features * out_features || bias.len() != out_features {
+        bail!("transformer.{name}: {} weights and {} biases, expected [{out_features} x {in_features}]", weights.len(), bias.len());
+    }
+    Ok(FloatLayer { in_features, out_features, weights, bias, activation: Activation::Identity })
+}
+
+fn norm(ckpt: &Checkpoint, name: &str, width: usize) -> anyhow::Result<FloatNorm> {
+    let gamma = ckpt.tensor(&format!("transformer.{name}.weight"))?.to_vec();
+    let beta = ckpt.tensor(&format!("transformer.{name}.bias"))?.to_vec();
+    if gamma.len() != width || beta.len() != width {
+        bail!("transformer.{name}: LayerNorm of {} / {} values, expected {width}", gamma.len(), beta.len());
+    }
+    Ok(FloatNorm { gamma, beta })
+}
+
+impl FoldedTransformer {
+    /// Folds a transformer student checkpoint for `steps` sampling steps, refusing what the
+    /// runtime cannot represent (naming the reason).
+    pub fn new(ckpt: &Checkpoint, steps: usize) -> anyhow::Result<Self> {
+        let meta = &ckpt.meta;
+        let config = &meta.model;
+        if meta.role != Role::Student {
+            bail!("only student checkpoints can be exported; this one is a {:?} (its sampler needs many network evaluations)", meta.role);
+        }
+        let BackboneConfig::Transformer { layers, heads, width } = config.backbone else {
+            bail!("not a transformer checkpoint (backbone {:?}); use fold::FoldedMlp", config.backbone);
+        };
+        let prodmp_cfg = config.prodmp().context("a student needs a ProDMP head")?;
+        let shape = TransformerShape {
+            horizon: config.horizon,
+            action_dim: config.action_dim,
+            cond_dim: config.cond_dim(),
+            width,
+            heads,
+            layers,
+            output: config.output_dim(),
+        };
+        shape.validate().map_err(|e| anyhow::anyhow!("transformer shape {shape:?}: {e}"))?;
+        let lens = shape.f32_scratch();
+        let int8 = shape.int8_scratch();
+        if lens.floats.max(int8.floats) > HOST_FLOATS
+            || lens.bytes.max(int8.bytes) > HOST_BYTES
+            || lens.accumulators.max(int8.accumulators) > HOST_ACCUMULATORS
+        {
+            bail!("transformer shape {shape:?} needs more scratch than the exporter's host scratch holds");
+        }
+        let sigma: SigmaConfig = meta.sigma.into();
+        let steps = step_constants(&sigma, steps)?;
+        let (w, tokens) = (width, shape.tokens());
+        let positions = ckpt.tensor("transformer.pos_embedding")?.to_vec();
+        if positions.len() != tokens * w {
+            bail!("transformer.pos_embedding has {} values, expected [{tokens} x {w}]", positions.len());
+        }
+        let noise_in = linear(ckpt, "noise_in", config.embed_dim, w)?;
+        let mut embedding = vec![0.0f64; config.embed_dim];
+        let mut noise_tokens = Vec::with_capacity(steps.len());
+        for i in 0..steps.len() {
+            let level = sigma.karras_sigma(i, steps.len() + 1).map_err(|e| anyhow::anyhow!("sampling level: {e:?}"))?;
+            let c_noise = sigma.c_noise(level).map_err(|e| anyhow::anyhow!("c_noise: {e:?}"))?;
+            noise_embedding(c_noise, &mut embedding).map_err(|e| anyhow::anyhow!("noise embedding: {e:?}"))?;
+            let embedding32: Vec<f32> = embedding.iter().map(|&e| e as f32).collect();
+            let mut token = vec![0.0f32; w];
+            fold_noise_token(&shape, &f32_view(&noise_in), &embedding32, &positions, &mut token)
+                .map_err(|e| anyhow::anyhow!("folding the noise token of step {i}: {e}"))?;
+            noise_tokens.push(token);
+        }
+        let blocks = (0..layers)
+            .map(|i| {
+                let p = format!("blocks.{i}");
+                Ok(FloatBlock {
+                    norm1: norm(ckpt, &format!("{p}.norm1"), w)?,
+                    qkv: linear(ckpt, &format!("{p}.qkv"), w, 3 * w)?,
+                    proj: linear(ckpt, &format!("{p}.proj"), w, w)?,
+                    norm2: norm(ckpt, &format!("{p}.norm2"), w)?,
+                    fc1: linear(ckpt, &format!("{p}.fc1"), w, 4 * w)?,
+                    fc2: linear(ckpt, &format!("{p}.fc2"), 4 * w, w)?,
+                })
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        let folded = FoldedTransformer {
+            config: config.clone(),
+            sigma,
+            shape,
+            traj_in: linear(ckpt, "traj_in", config.action_dim, w)?,
+            cond_in: linear(ckpt, "cond_in", config.cond_dim(), w)?,
+            noise_tokens,
+            positions,
+            blocks,
+            final_norm: norm(ckpt, "final_norm", w)?,
+            head: linear(ckpt, "head", shape.token_values(), shape.output)?,
+            steps,
+            layout: mlp_layout(config)?,
+            prodmp: ProDmpTablesOwned::from_config(&prodmp_cfg, config.horizon)?,
+        };
+        folded.view(&folded.f32_blocks(), 0)?.validate().map_err(|e| anyhow::anyhow!("folded transformer: {e}"))?;
+        Ok(folded)
+    }
+
+    /// frmd-core block views (pass to [`Self::view`]).
+    pub fn f32_blocks(&self) -> Vec<F32Block<'_>> {
+        self.blocks
+            .iter()
+            .map(|b| F32Block {
+                norm1: b.norm1.view(),
+                qkv: f32_view(&b.qkv),
+                proj: f32_view(&b.proj),
+                norm2: b.norm2.view(),
+                fc1: f32_view(&b.fc1),
+                fc2: f32_view(&b.fc2),
+            })
+            .collect()
+    }
+
+    /// frmd-core's f32 transformer with step `step`'s noise token.
+    pub fn view<'a>(&'a self, blocks: &'a [F32Block<'a>], step: usize) -> anyhow::Result<F32Transformer<'a>> {
+        let noise_token = self.noise_tokens.get(step).with_context(|| format!("step index {step} out of range"))?;
+        Ok(F32Transformer {
+            shape: self.shape,
+            traj_in: f32_view(&self.traj_in),
+            cond_in: f32_view(&self.cond_in),
+            noise_token,
+            positions: &self.positions,
+            blocks,
+            final_norm: self.final_norm.view(),
+            head: f32_view(&self.head),
+        })
+    }
+
+    /// All noise tokens back to back (the layout [`frmd_core::policy::TransformerNetwork`]
+    /// takes).
+    pub fn flat_noise_tokens(&self) -> Vec<f32> {
+        self.noise_tokens.concat()
+    }
+
+    /// Runs step `step` on the standard-layout model `input` through frmd-core's f32 path,
+    /// reporting every probe to `observe`; returns the `K * P` ProDMP parameters.
+    pub fn forward_observed(&self, step: usize, input: &[f32], observe: impl FnMut(TransformerProbe, &[f32])) -> anyhow::Result<Vec<f32>> {
+        let blocks = self.f32_blocks();
+        let model = self.view(&blocks, step)?;
+        let (condition, trajectory) = input
+            .split_at_checked(self.shape.cond_dim)
+            .with_context(|| format!("model input of {} values is shorter than the condition", input.len()))?;
+        let mut scratch = Box::new(HostScratch::new());
+        let mut out = vec![0.0; self.shape.output];
+        model
+            .forward_observed(trajectory, condition, &mut out, &mut scratch, observe)
+            .map_err(|e| anyhow::anyhow!("f32 transformer forward: {e}"))?;
+        Ok(out)
+    }
+
+    /// The f32 consistency sampler (see [`crate::fold::sample_chunk`]), calling
+    /// `observe(step, probe, values)` for every probe of every step.
+    pub fn sample(&self, cond: &[f32], noise: &[f32], mut observe: impl FnMut(usize, TransformerProbe, &[f32])) -> anyhow::Result<Vec<f32>> {
+        sample_chunk(&self.config, &self.layout, &self.steps, &self.prodmp, cond, noise, |i, input| {
+            self.forward_observed(i, input, |p, v| observe(i, p, v))
+        })
+    }
+}

@@ -1,0 +1,319 @@
+//! End-to-end: a randomly initialized transformer-lite checkpoint written with the safetensors
+//! crate is read, folded, calibrated, quantized and sampled by the int8 and f32 paths.
+
+use super::*;
+use crate::calibrate::{CalibrationSet, RangeMethod};
+use crate::checkpoint::{
+    expected_tensors, CheckpointMeta, HeadConfig, Normalization, Normalizer, CONFIG_FILE,
+    WEIGHTS_FILE,
+};
+use frmd_core::policy::{F32TransformerNetwork, Int8TransformerNetwork, Network};
+use frmd_core::rng::Rng;
+use std::path::PathBuf;
+
+fn lite_config() -> ModelConfig {
+    ModelConfig {
+        obs_dim: 5,
+        history: 2,
+        action_dim: 3,
+        horizon: 8,
+        control_dt: 0.05,
+        embed_dim: 16,
+        backbone: BackboneConfig::parse("transformer-lite").unwrap(),
+        head: HeadConfig::ProDmp { num_basis: 4 },
+    }
+}
+
+/// Writes `frmd.json` + `model.safetensors` with random weights of the right names and shapes
+/// into a fresh temporary directory.
+fn write_checkpoint(name: &str, config: &ModelConfig, seed: u64) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("frmd-tfexport-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut meta = CheckpointMeta::describe(Role::Student, config, SigmaConfig::default());
+    meta.normalization = Some(Normalization {
+        obs: Normalizer { min: vec![-1.0; config.obs_dim], max: vec![1.0; config.obs_dim] },
+        action: Normalizer { min: vec![-1.0; config.action_dim], max: vec![1.0; config.action_dim] },
+    });
+    std::fs::write(dir.join(CONFIG_FILE), serde_json::to_string_pretty(&meta).unwrap()).unwrap();
+    let mut rng = Rng::new(seed);
+    let data: Vec<(String, Vec<usize>, Vec<u8>)> = expected_tensors(config)
+        .into_iter()
+        .map(|spec| {
+            let len: usize = spec.shape.iter().product();
+            let fan_in = spec.shape.get(1).copied().unwrap_or(1) as f32;
+            let values: Vec<f32> = (0..len)
+                .map(|_| {
+                    let g = rng.gaussian();
+                    if spec.name.ends_with("norm1.weight")
+                        || spec.name.ends_with("norm2.weight")
+                        || spec.name.ends_with("final_norm.weight")
+                    {
+                        1.0 + 0.1 * g
+                    } else if spec.shape.len() == 2 && !spec.name.ends_with("pos_embedding") {
+                        g / fan_in.sqrt()
+                    } else {
+                        0.1 * g
+                    }
+                })
+                .collect();
+            (spec.name, spec.shape, values.iter().flat_map(|v| v.to_le_bytes()).collect())
+        })
+        .collect();
+    let views: Vec<(String, safetensors::tensor::TensorView<'_>)> = data
+        .iter()
+        .map(|(name, shape, bytes)| {
+            (name.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), bytes).unwrap())
+        })
+        .collect();
+    std::fs::write(dir.join(WEIGHTS_FILE), safetensors::serialize(views, None).unwrap()).unwrap();
+    dir
+}
+
+fn calibration_set(config: &ModelConfig, rows: usize, seed: u64) -> CalibrationSet {
+    let mut rng = Rng::new(seed);
+    let cond = (0..rows * config.cond_dim()).map(|_| (0.5 * rng.gaussian()).clamp(-1.0, 1.0)).collect();
+    CalibrationSet { cond_dim: config.cond_dim(), cond, seed }
+}
+
+/// Max and mean absolute int8-vs-f32 chunk error (normalized action units) over the rows of
+/// `set`, and the spread of the f32 chunks.
+fn chunk_error(quantized: &QuantizedTransformer, set: &CalibrationSet) -> (f32, f32, f32) {
+    let f = &quantized.folded;
+    let (mut max, mut sum, mut count) = (0.0f32, 0.0f64, 0usize);
+    let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+    for row in 0..set.rows() {
+        let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
+        let noise = set.noise(row, f.steps.len(), f.config.traj_dim());
+        let want = f.sample(cond, &noise, |_, _, _| {}).unwrap();
+        let got = quantized.sample(cond, &noise).unwrap();
+        for (g, w) in got.iter().zip(&want) {
+            max = max.max((g - w).abs());
+            sum += f64::from((g - w).abs());
+            count += 1;
+            lo = lo.min(*w);
+            hi = hi.max(*w);
+        }
+    }
+    (max, (sum / count as f64) as f32, hi - lo)
+}
+
+#[test]
+fn transformer_lite_checkpoint_exports_and_int8_chunk_tracks_f32() {
+    let config = lite_config();
+    let dir = write_checkpoint("lite", &config, 11);
+    let ckpt = Checkpoint::read(&dir).unwrap();
+    for steps in [1, 2] {
+        let folded = FoldedTransformer::new(&ckpt, steps).unwrap();
+        assert_eq!(folded.noise_tokens.len(), steps);
+        assert_eq!(folded.shape.width, 128);
+        let calibration = calibration_set(&config, 32, 5);
+        let ranges = calibrate(&folded, &calibration, RangeMethod::MinMax).unwrap();
+        assert_eq!(ranges.rows, 32);
+        let quantized = quantize(&folded, &ranges).unwrap();
+        let held_out = calibration_set(&config, 16, 99);
+        let (max, mean, spread) = chunk_error(&quantized, &held_out);
+        println!("transformer-lite, {steps} step(s): int8 vs f32 chunk max {max:.5}, mean {mean:.5}, f32 spread {spread:.3} (normalized units)");
+        assert!(spread > 0.1, "f32 chunks are degenerate (spread {spread})");
+        assert!(max <= 0.025 * spread, "max error {max} exceeds 2.5% of the f32 spread {spread}");
+        assert!(mean <= 0.0075 * spread, "mean error {mean} exceeds 0.75% of the f32 spread {spread}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn adapters_run_the_exported_model_behind_the_network_trait() {
+    let config = lite_config();
+    let dir = write_checkpoint("adapter", &config, 12);
+    let ckpt = Checkpoint::read(&dir).unwrap();
+    let folded = FoldedTransformer::new(&ckpt, 2).unwrap();
+    let ranges = calibrate(&folded, &calibration_set(&config, 8, 3), RangeMethod::MinMax).unwrap();
+    let quantized = quantize(&folded, &ranges).unwrap();
+    let tokens = folded.flat_noise_tokens();
+    let f32_blocks = folded.f32_blocks();
+    let int8_blocks = quantized.int8_blocks();
+    let mut f32_scratch = Box::new(HostScratch::new());
+    let mut int8_scratch = Box::new(HostScratch::new());
+    let mut f32_net =
+        F32TransformerNetwork::new(folded.view(&f32_blocks, 0).unwrap(), &folded.layout, &tokens, &mut f32_scratch).unwrap();
+    let mut int8_net =
+        Int8TransformerNetwork::new(quantized.view(&int8_blocks, 0).unwrap(), &folded.layout, &tokens, &mut int8_scratch)
+            .unwrap();
+    assert_eq!(f32_net.num_first_layer_biases(), 2);
+    assert_eq!(int8_net.input_width(), config.cond_dim() + config.traj_dim());
+    let mut rng = Rng::new(4);
+    let cond: Vec<f32> = (0..config.cond_dim()).map(|_| 0.3 * rng.gaussian()).collect();
+    let x: Vec<f32> = (0..config.traj_dim()).map(|_| rng.gaussian()).collect();
+    for (i, step) in folded.steps.iter().enumerate() {
+        let input = crate::fold::model_input(&config, &folded.layout, step, &cond, &x).unwrap();
+        let mut out = vec![0.0; config.output_dim()];
+        f32_net.forward(i, &input, &mut out).unwrap();
+        assert_eq!(out, folded.forward_observed(i, &input, |_, _| {}).unwrap(), "f32 step {i}");
+        int8_net.forward(i, &input, &mut out).unwrap();
+        assert_eq!(out, quantized.forward(i, &input).unwrap(), "int8 step {i}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn refuses_non_transformer_and_non_student_checkpoints() {
+    let mut config = lite_config();
+    config.backbone = BackboneConfig::parse("mlp:16").unwrap();
+    let dir = write_checkpoint("mlp", &config, 1);
+    let error = FoldedTransformer::new(&Checkpoint::read(&dir).unwrap(), 1).unwrap_err();
+    assert!(error.to_string().contains("not a transformer checkpoint"), "{error}");
+    std::fs::remove_dir_all(&dir).unwrap();
+
+    let config = lite_config();
+    let dir = write_checkpoint("teacher", &config, 2);
+    let mut ckpt = Checkpoint::read(&dir).unwrap();
+    ckpt.meta.role = Role::Teacher;
+    let error = FoldedTransformer::new(&ckpt, 1).unwrap_err();
+    assert!(error.to_string().contains("only student checkpoints"), "{error}");
+    let ckpt = Checkpoint::read(&dir).unwrap();
+    let error = FoldedTransformer::new(&ckpt, 5).unwrap_err();
+    assert!(error.to_string().contains("1..=4"), "{error}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `bytes` copied into a 4-aligned buffer (plus `shift` leading bytes to misalign on purpose).
+fn aligned(bytes: &[u8], shift: usize) -> Vec<u32> {
+    let mut words = vec![0u32; (bytes.len() + shift).div_ceil(4)];
+    bytemuck::cast_slice_mut::<u32, u8>(&mut words)[shift..shift + bytes.len()].copy_from_slice(bytes);
+    words
+}
+
+type Lite<'a> = frmd_core::blob::LoadedTransformer<'a, 2, 5, 3, 8, 5>;
+
+fn exported_lite(name: &str, steps: usize) -> (QuantizedTransformer, Normalization, PathBuf) {
+    let config = lite_config();
+    let dir = write_checkpoint(name, &config, 21);
+    let ckpt = Checkpoint::read(&dir).unwrap();
+    let folded = FoldedTransformer::new(&ckpt, steps).unwrap();
+    let ranges = calibrate(&folded, &calibration_set(&config, 16, 7), RangeMethod::MinMax).unwrap();
+    (quantize(&folded, &ranges).unwrap(), ckpt.meta.normalization.clone().unwrap(), dir)
+}
+
+#[test]
+fn blob_round_trip_is_bit_exact_and_drives_the_core_policy() {
+    use frmd_core::policy::{Noise, Policy};
+    let (quantized, norm, dir) = exported_lite("blob", 2);
+    let bytes = blob::write(&quantized, &norm).unwrap();
+    let words = aligned(&bytes, 0);
+    let loaded = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()]).unwrap();
+    assert_eq!(loaded.steps(), &quantized.folded.steps[..]);
+    let blocks = loaded.blocks();
+    let mut scratch = Box::new(HostScratch::new());
+    let mut network = loaded.network(&blocks, &mut scratch).unwrap();
+    assert_eq!(network.num_first_layer_biases(), 2);
+    // Same int8 outputs as the exporter's in-memory model, per step, bit for bit.
+    let config = lite_config();
+    let mut rng = Rng::new(8);
+    let cond: Vec<f32> = (0..config.cond_dim()).map(|_| 0.3 * rng.gaussian()).collect();
+    let x: Vec<f32> = (0..config.traj_dim()).map(|_| rng.gaussian()).collect();
+    for (i, step) in quantized.folded.steps.iter().enumerate() {
+        let input = crate::fold::model_input(&config, &quantized.folded.layout, step, &cond, &x).unwrap();
+        let mut out = vec![0.0; config.output_dim()];
+        network.forward(i, &input, &mut out).unwrap();
+        assert_eq!(out, quantized.forward(i, &input).unwrap(), "step {i}");
+    }
+    // The loaded blob runs frmd-core's Policy end to end and yields finite chunks.
+    let mut policy = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), network).unwrap();
+    policy.reset(&[0.1, -0.2, 0.3]).unwrap();
+    policy.observe(&[0.5, -0.5, 0.25, 0.0, 0.9]).unwrap();
+    let mut noise_rng = Rng::new(3);
+    policy.act(Noise::Rng(&mut noise_rng)).unwrap();
+    let first = policy.next_action().unwrap();
+    assert!(first.iter().all(|v| v.is_finite()));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn blob_loader_rejects_damage_by_name() {
+    use frmd_core::blob::format::SectionId;
+    use frmd_core::blob::transformer::TensorField;
+    use frmd_core::blob::{BlobError, Dimension};
+    use frmd_core::model::transformer::{Part, TransformerError};
+    let (quantized, norm, dir) = exported_lite("damage", 1);
+    let bytes = blob::write(&quantized, &norm).unwrap();
+    let load = |b: &[u8], shift: usize| {
+        let words = aligned(b, shift);
+        Lite::load(&bytemuck::cast_slice(&words)[shift..shift + b.len()]).err()
+    };
+    assert_eq!(load(&bytes, 0).map(|e| e.to_string()), None);
+    assert_eq!(load(&bytes[..bytes.len() - 1], 0), Some(BlobError::Truncated));
+    assert_eq!(load(&bytes[..10], 0), Some(BlobError::Truncated));
+    let mut bad_magic = bytes.clone();
+    bad_magic[3] = b'D';
+    assert_eq!(load(&bad_magic, 0), Some(BlobError::BadMagic));
+    let mut flipped = bytes.clone();
+    *flipped.last_mut().unwrap() ^= 0x40;
+    assert!(matches!(load(&flipped, 0), Some(BlobError::CrcMismatch { .. })));
+    assert!(matches!(load(&bytes, 1), Some(BlobError::SectionMisaligned(_))));
+    let words = aligned(&bytes, 0);
+    let wrong_dims = frmd_core::blob::LoadedTransformer::<'_, 2, 5, 4, 8, 5>::load(&bytemuck::cast_slice(&words)[..bytes.len()]);
+    assert_eq!(wrong_dims.err(), Some(BlobError::DimensionMismatch(Dimension::ActionDim)));
+    // Mismatched shapes: a head with one weight row missing, NaN in a norm.
+    let mut short_head = quantized.clone();
+    let row = short_head.head.in_features;
+    short_head.head.weights.truncate(short_head.head.weights.len() - row);
+    let err = load(&blob::write(&short_head, &norm).unwrap(), 0);
+    assert!(matches!(err, Some(BlobError::Transformer(TransformerError::Weights { part: Part::Head, .. }))), "{err:?}");
+    let mut nan_norm = quantized.clone();
+    nan_norm.blocks[0].norm2.gamma[3] = f32::NAN;
+    let err = load(&blob::write(&nan_norm, &norm).unwrap(), 0);
+    assert_eq!(err, Some(BlobError::NonFinite(SectionId::Transformer { part: Part::Norm2 { layer: 0 }, field: TensorField::Gamma })));
+    // An MLP loader refuses a transformer blob by magic.
+    let mlp = frmd_core::blob::LoadedPolicy::<'_, 2, 5, 3, 8, 5>::load(&bytemuck::cast_slice(&words)[..bytes.len()]);
+    assert_eq!(mlp.err(), Some(BlobError::BadMagic));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// frmd-core's `Policy` over the blob-loaded int8 network and over the f32 network, same
+/// observations and noise: chunk positions in robot units agree within 2.5% of the f32 spread
+/// (max) and 0.75% (mean).
+#[test]
+fn core_policy_int8_blob_chunk_tracks_f32_policy_chunk() {
+    use frmd_core::policy::{Noise, Policy};
+    let (quantized, norm, dir) = exported_lite("policy", 1);
+    let bytes = blob::write(&quantized, &norm).unwrap();
+    let words = aligned(&bytes, 0);
+    let loaded = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()]).unwrap();
+    let blocks = loaded.blocks();
+    let mut int8_scratch = Box::new(HostScratch::new());
+    let mut int8 = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), loaded.network(&blocks, &mut int8_scratch).unwrap()).unwrap();
+    let folded = &quantized.folded;
+    let tokens = folded.flat_noise_tokens();
+    let f32_blocks = folded.f32_blocks();
+    let mut f32_scratch = Box::new(HostScratch::new());
+    let f32_net = F32TransformerNetwork::new(folded.view(&f32_blocks, 0).unwrap(), &folded.layout, &tokens, &mut f32_scratch).unwrap();
+    let mut float = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), f32_net).unwrap();
+    let mut rng = Rng::new(17);
+    let (mut max, mut sum, mut count, mut lo, mut hi) = (0f32, 0f64, 0usize, f32::MAX, f32::MIN);
+    for episode in 0..8 {
+        let start: [f32; 3] = std::array::from_fn(|_| 0.5 * rng.gaussian());
+        int8.reset(&start).unwrap();
+        float.reset(&start).unwrap();
+        for _ in 0..2 {
+            let obs: [f32; 5] = std::array::from_fn(|_| (0.5 * rng.gaussian()).clamp(-1.0, 1.0));
+            int8.observe(&obs).unwrap();
+            float.observe(&obs).unwrap();
+        }
+        let noise: Vec<f32> = (0..24).map(|_| rng.gaussian()).collect();
+        let got = int8.act(Noise::Given(&noise)).unwrap().positions;
+        let want = float.act(Noise::Given(&noise)).unwrap().positions;
+        for (g, w) in got.iter().flatten().zip(want.iter().flatten()) {
+            assert!(g.is_finite(), "episode {episode}");
+            max = max.max((g - w).abs());
+            sum += f64::from((g - w).abs());
+            count += 1;
+            lo = lo.min(*w);
+            hi = hi.max(*w);
+        }
+    }
+    let (mean, spread) = ((sum / count as f64) as f32, hi - lo);
+    println!("core Policy, blob int8 vs f32 transformer-lite chunk (robot units): max {max:.5}, mean {mean:.5}, f32 spread {spread:.3}");
+    assert!(spread > 0.1, "f32 chunks are degenerate (spread {spread})");
+    assert!(max <= 0.025 * spread, "max error {max} exceeds 2.5% of the f32 spread {spread}");
+    assert!(mean <= 0.0075 * spread, "mean error {mean} exceeds 0.75% of the f32 spread {spread}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
