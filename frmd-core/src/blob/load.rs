@@ -230,6 +230,26 @@ pub(crate) struct SharedFields {
     pub(crate) steps: Section,
 }
 
+/// [`SharedFields`] copied out of a descriptor value (MLP or transformer; both name the fields
+/// alike).
+macro_rules! shared_fields {
+    ($descriptor:expr) => {
+        SharedFields {
+            history: $descriptor.history,
+            obs_dim: $descriptor.obs_dim,
+            action_dim: $descriptor.action_dim,
+            horizon: $descriptor.horizon,
+            params_per_dof: $descriptor.params_per_dof,
+            control_dt: $descriptor.control_dt,
+            obs_norm: $descriptor.obs_norm,
+            action_norm: $descriptor.action_norm,
+            prodmp: $descriptor.prodmp,
+            steps: $descriptor.steps,
+        }
+    };
+}
+pub(crate) use shared_fields;
+
 /// The validated, copied tables every policy blob kind carries.
 pub(crate) struct SharedTables<const O: usize, const K: usize, const N: usize, const P: usize> {
     pub(crate) obs_norm: RangeNormalizer<O>,
@@ -268,21 +288,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
             decoder,
             steps,
             num_steps,
-        } = Self::read_shared(
-            &data,
-            SharedFields {
-                history: d.history,
-                obs_dim: d.obs_dim,
-                action_dim: d.action_dim,
-                horizon: d.horizon,
-                params_per_dof: d.params_per_dof,
-                control_dt: d.control_dt,
-                obs_norm: d.obs_norm,
-                action_norm: d.action_norm,
-                prodmp: d.prodmp,
-                steps: d.steps,
-            },
-        )?;
+        } = Self::read_shared(&data, shared_fields!(d))?;
         let input = QuantParams::new(d.input_scale, d.input_zero_point)
             .map_err(|_| BlobError::InputQuantization)?;
         d.layout.validate().map_err(|_| BlobError::InputLayout)?;

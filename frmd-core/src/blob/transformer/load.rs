@@ -2,7 +2,7 @@
 //! blob.
 
 use super::super::format::{Section, SectionId, LUT_LEN};
-use super::super::load::{parse_descriptor, Data, SharedFields, SharedTables};
+use super::super::load::{parse_descriptor, shared_fields, Data, SharedFields, SharedTables};
 use super::super::{BlobError, LoadedPolicy};
 use super::{
     BlockDesc, LinearDesc, NormDesc, TensorField, TransformerDescriptor, MAX_BLOCKS,
@@ -226,21 +226,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
             decoder,
             steps,
             num_steps,
-        } = LoadedPolicy::<M, O, K, N, P>::read_shared(
-            &data,
-            SharedFields {
-                history: d.history,
-                obs_dim: d.obs_dim,
-                action_dim: d.action_dim,
-                horizon: d.horizon,
-                params_per_dof: d.params_per_dof,
-                control_dt: d.control_dt,
-                obs_norm: d.obs_norm,
-                action_norm: d.action_norm,
-                prodmp: d.prodmp,
-                steps: d.steps,
-            },
-        )?;
+        } = LoadedPolicy::<M, O, K, N, P>::read_shared(&data, shared_fields!(d))?;
         d.layout.validate().map_err(|_| BlobError::InputLayout)?;
         if d.layout.segments() != crate::policy::STANDARD_SEGMENTS {
             return Err(BlobError::InputLayout);
