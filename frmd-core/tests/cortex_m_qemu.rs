@@ -25,9 +25,8 @@ mod synthetic_mlp;
 #[allow(dead_code)] // `name` is printed by the firmware only
 #[path = "../../examples/cortex-m/src/workload_api.rs"]
 mod workload_api;
-
-use std::path::{Path, PathBuf};
-use std::process::Command;
+#[path = "../../examples/cortex-m/host-test-support.rs"]
+mod qemu;
 
 fn baked() -> prodmp_workload::Baked {
     prodmp_workload::Baked::from_config(&shape::config()).expect("bake the policy decoder")
@@ -95,50 +94,21 @@ fn synthetic_mlp_is_deterministic_and_valid() {
 
 #[test]
 fn qemu_digests_match_host() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let env_file = std::env::var_os("FRMD_CORTEX_M_ENV")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root.join("target/cortex-m.env"));
-    let qemu_found = Command::new("qemu-system-arm").arg("--version").output().is_ok();
-    if std::env::var_os("FRMD_SKIP_QEMU").is_some() || !env_file.exists() || !qemu_found {
-        assert!(
-            std::env::var_os("FRMD_REQUIRE_QEMU").is_none(),
-            "FRMD_REQUIRE_QEMU is set but the QEMU check cannot run (env file {} present: {}, qemu-system-arm found: {qemu_found})",
-            env_file.display(),
-            env_file.exists()
-        );
-        eprintln!(
-            "qemu_digests_match_host: SKIPPED (FRMD_SKIP_QEMU set, or no {} / qemu-system-arm: \
-             run `bash scripts/setup-cortex-m.sh`)",
-            env_file.display()
-        );
+    let root = qemu::repo_root(env!("CARGO_MANIFEST_DIR"));
+    if !qemu::available("qemu_digests_match_host", &root) {
         return;
     }
-    // The firmware's own target directory (as run-qemu.sh uses by default), so manual runs and
-    // this test share one build; it is never the directory of the `cargo test` running this.
-    let firmware_target = root.join("examples/cortex-m/target");
     for (firmware, host_digest) in [("prodmp", prodmp_digest()), ("mlp", mlp_digest())] {
         let expected = format!("digest: {host_digest:016x}");
         for board in ["m4", "m7"] {
-            let output = Command::new("bash")
-                .arg(root.join("examples/cortex-m/run-qemu.sh"))
-                .args([board, firmware])
-                .env("CARGO_TARGET_DIR", &firmware_target)
-                .output()
-                .expect("run examples/cortex-m/run-qemu.sh");
-            let stdout = String::from_utf8_lossy(&output.stdout);
-            assert!(
-                output.status.success(),
-                "run-qemu.sh {board} {firmware} failed:\n{stdout}\n{}",
-                String::from_utf8_lossy(&output.stderr)
-            );
-            let digest_line = stdout.lines().find(|line| line.starts_with("digest: "));
+            let stdout = qemu::run(&root, board, firmware);
+            let digest_line = qemu::digest_line(&stdout);
             assert_eq!(
                 digest_line,
                 Some(expected.as_str()),
                 "{firmware} firmware on {board} computed different bytes than the host:\n{stdout}"
             );
-            eprintln!("{firmware} {board}: {}", stdout.lines().collect::<Vec<_>>().join(" | "));
+            eprintln!("{firmware} {board}: {}", qemu::one_line(&stdout));
         }
     }
 }

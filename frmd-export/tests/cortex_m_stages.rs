@@ -24,6 +24,9 @@ mod synthetic_policy;
 #[allow(dead_code)]
 #[path = "../../examples/cortex-m/src/workload_api.rs"]
 mod workload_api;
+#[allow(dead_code)] // the digest helpers serve the other QEMU tests
+#[path = "../../examples/cortex-m/host-test-support.rs"]
+mod qemu;
 
 use std::sync::atomic::{AtomicU32, Ordering};
 
@@ -122,36 +125,12 @@ fn line_value<'a>(output: &'a str, key: &str) -> Option<&'a str> {
 /// firmware also refuses to finish otherwise). Skips like the other QEMU tests.
 #[test]
 fn qemu_stage_breakdowns_add_up() {
-    use std::path::{Path, PathBuf};
-    use std::process::Command;
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let env_file = std::env::var_os("FRMD_CORTEX_M_ENV")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root.join("target/cortex-m.env"));
-    let qemu_found = Command::new("qemu-system-arm").arg("--version").output().is_ok();
-    if std::env::var_os("FRMD_SKIP_QEMU").is_some() || !env_file.exists() || !qemu_found {
-        assert!(
-            std::env::var_os("FRMD_REQUIRE_QEMU").is_none(),
-            "FRMD_REQUIRE_QEMU is set but the QEMU check cannot run (env file {} present: {}, qemu-system-arm found: {qemu_found})",
-            env_file.display(),
-            env_file.exists()
-        );
-        eprintln!("qemu_stage_breakdowns_add_up: SKIPPED (FRMD_SKIP_QEMU set, or no {} / qemu-system-arm)", env_file.display());
+    let root = qemu::repo_root(env!("CARGO_MANIFEST_DIR"));
+    if !qemu::available("qemu_stage_breakdowns_add_up", &root) {
         return;
     }
     for image in ["policy-stages", "transformer-stages"] {
-        let output = Command::new("bash")
-            .arg(root.join("examples/cortex-m/run-qemu.sh"))
-            .args(["m4", image])
-            .env("CARGO_TARGET_DIR", root.join("examples/cortex-m/target"))
-            .output()
-            .expect("run examples/cortex-m/run-qemu.sh");
-        let stdout = String::from_utf8_lossy(&output.stdout);
-        assert!(
-            output.status.success(),
-            "run-qemu.sh m4 {image} failed:\n{stdout}\n{}",
-            String::from_utf8_lossy(&output.stderr)
-        );
+        let stdout = qemu::run(&root, "m4", image);
         assert_eq!(line_value(&stdout, "stage_digest"), line_value(&stdout, "digest"), "{stdout}");
         let number = |key: &str| -> f64 {
             line_value(&stdout, key)

@@ -34,9 +34,8 @@ mod transformer_network;
 #[allow(dead_code)] // `name` is printed by the firmware only
 #[path = "../../examples/cortex-m/src/workload_api.rs"]
 mod workload_api;
-
-use std::path::{Path, PathBuf};
-use std::process::Command;
+#[path = "../../examples/cortex-m/host-test-support.rs"]
+mod qemu;
 
 use frmd_core::blob::LoadedPolicy;
 use frmd_core::policy::{Policy, PolicyError};
@@ -121,46 +120,19 @@ fn transformer_network_rejects_a_non_standard_layout() {
 
 #[test]
 fn qemu_transformer_digest_matches_host() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let env_file = std::env::var_os("FRMD_CORTEX_M_ENV")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root.join("target/cortex-m.env"));
-    let qemu_found = Command::new("qemu-system-arm").arg("--version").output().is_ok();
-    if std::env::var_os("FRMD_SKIP_QEMU").is_some() || !env_file.exists() || !qemu_found {
-        assert!(
-            std::env::var_os("FRMD_REQUIRE_QEMU").is_none(),
-            "FRMD_REQUIRE_QEMU is set but the QEMU check cannot run (env file {} present: {}, qemu-system-arm found: {qemu_found})",
-            env_file.display(),
-            env_file.exists()
-        );
-        eprintln!(
-            "qemu_transformer_digest_matches_host: SKIPPED (FRMD_SKIP_QEMU set, or no {} / \
-             qemu-system-arm: run `bash scripts/setup-cortex-m.sh`)",
-            env_file.display()
-        );
+    let root = qemu::repo_root(env!("CARGO_MANIFEST_DIR"));
+    if !qemu::available("qemu_transformer_digest_matches_host", &root) {
         return;
     }
     let expected = format!("digest: {:016x}", host_digest().expect("host digest"));
     for board in ["m4", "m7"] {
-        let output = Command::new("bash")
-            .arg(root.join("examples/cortex-m/run-qemu.sh"))
-            .args([board, "transformer"])
-            // The firmware's own target directory, shared with run-qemu.sh's default.
-            .env("CARGO_TARGET_DIR", root.join("examples/cortex-m/target"))
-            .output()
-            .expect("run examples/cortex-m/run-qemu.sh");
-        let stdout = String::from_utf8_lossy(&output.stdout);
-        assert!(
-            output.status.success(),
-            "run-qemu.sh {board} transformer failed:\n{stdout}\n{}",
-            String::from_utf8_lossy(&output.stderr)
-        );
-        let digest_line = stdout.lines().find(|line| line.starts_with("digest: "));
+        let stdout = qemu::run(&root, board, "transformer");
+        let digest_line = qemu::digest_line(&stdout);
         assert_eq!(
             digest_line,
             Some(expected.as_str()),
             "transformer policy on {board} computed different bytes than on the host:\n{stdout}"
         );
-        eprintln!("transformer {board}: {}", stdout.lines().collect::<Vec<_>>().join(" | "));
+        eprintln!("transformer {board}: {}", qemu::one_line(&stdout));
     }
 }

@@ -213,6 +213,67 @@ pub(crate) fn split(bytes: &[u8], magic: [u8; 4]) -> Result<(&[u8], &[u8]), Blob
     Ok((descriptor, data))
 }
 
+/// Descriptor fields shared by every policy blob kind (MLP and transformer), copied out of the
+/// kind's own descriptor so one routine validates them.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SharedFields {
+    pub(crate) history: u32,
+    pub(crate) obs_dim: u32,
+    pub(crate) action_dim: u32,
+    pub(crate) horizon: u32,
+    pub(crate) params_per_dof: u32,
+    /// Control period in seconds (must be finite and positive).
+    pub(crate) control_dt: f32,
+    pub(crate) obs_norm: Section,
+    pub(crate) action_norm: Section,
+    pub(crate) prodmp: Section,
+    pub(crate) steps: Section,
+}
+
+/// [`SharedFields`] copied out of a descriptor value (MLP or transformer; both name the fields
+/// alike).
+macro_rules! shared_fields {
+    ($descriptor:expr) => {
+        SharedFields {
+            history: $descriptor.history,
+            obs_dim: $descriptor.obs_dim,
+            action_dim: $descriptor.action_dim,
+            horizon: $descriptor.horizon,
+            params_per_dof: $descriptor.params_per_dof,
+            control_dt: $descriptor.control_dt,
+            obs_norm: $descriptor.obs_norm,
+            action_norm: $descriptor.action_norm,
+            prodmp: $descriptor.prodmp,
+            steps: $descriptor.steps,
+        }
+    };
+}
+pub(crate) use shared_fields;
+
+/// The validated, copied tables every policy blob kind carries.
+pub(crate) struct SharedTables<const O: usize, const K: usize, const N: usize, const P: usize> {
+    pub(crate) obs_norm: RangeNormalizer<O>,
+    pub(crate) action_norm: RangeNormalizer<K>,
+    pub(crate) decoder: BakedProDmp<N, P>,
+    pub(crate) steps: [StepConstants; MAX_STEPS],
+    pub(crate) num_steps: usize,
+}
+
+/// Checks the header and CRC (see [`split`]) and decodes the descriptor, which must fill the
+/// descriptor bytes exactly; returns it with the data region.
+pub(crate) fn parse_descriptor<'a, D: serde::Deserialize<'a>>(
+    bytes: &'a [u8],
+    magic: [u8; 4],
+) -> Result<(D, Data<'a>), BlobError> {
+    let (descriptor_bytes, data_bytes) = split(bytes, magic)?;
+    let (descriptor, rest) =
+        postcard::take_from_bytes::<D>(descriptor_bytes).map_err(|_| BlobError::Descriptor)?;
+    if !rest.is_empty() {
+        return Err(BlobError::Descriptor);
+    }
+    Ok((descriptor, Data { bytes: data_bytes }))
+}
+
 impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P: usize>
     LoadedPolicy<'a, M, O, K, N, P>
 {
@@ -220,38 +281,14 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
     /// Bytes after the stated total length are ignored (e.g. flash padding). The buffer must start
     /// at a 4-byte aligned address.
     pub fn load(bytes: &'a [u8]) -> Result<Self, BlobError> {
-        let (descriptor_bytes, data_bytes) = split(bytes, MAGIC)?;
-        let (d, rest) = postcard::take_from_bytes::<Descriptor>(descriptor_bytes)
-            .map_err(|_| BlobError::Descriptor)?;
-        if !rest.is_empty() {
-            return Err(BlobError::Descriptor);
-        }
-        check_dim(d.history, M, Dimension::History)?;
-        check_dim(d.obs_dim, O, Dimension::ObsDim)?;
-        check_dim(d.action_dim, K, Dimension::ActionDim)?;
-        check_dim(d.horizon, N, Dimension::Horizon)?;
-        check_dim(d.params_per_dof, P, Dimension::ParamsPerDof)?;
-        if !(d.control_dt.is_finite() && d.control_dt > 0.0) {
-            return Err(BlobError::ControlPeriod);
-        }
-        let data = Data { bytes: data_bytes };
-
-        let obs = data.finite(d.obs_norm, O.checked_mul(2), SectionId::ObsNorm)?;
-        let (obs_min, obs_max) = obs
-            .split_at_checked(O)
-            .ok_or(BlobError::SectionLength(SectionId::ObsNorm))?;
-        let obs_norm = RangeNormalizer::new(to_array(obs_min), to_array(obs_max));
-        let action = data.finite(d.action_norm, K.checked_mul(2), SectionId::ActionNorm)?;
-        let (action_min, action_max) = action
-            .split_at_checked(K)
-            .ok_or(BlobError::SectionLength(SectionId::ActionNorm))?;
-        let action_norm = RangeNormalizer::new(to_array(action_min), to_array(action_max));
-        if obs_norm.validate().is_err() || action_norm.validate().is_err() {
-            return Err(BlobError::Normalization);
-        }
-
-        let decoder = Self::read_decoder(&data, d.prodmp)?;
-        let (steps, num_steps) = Self::read_steps(&data, d.steps)?;
+        let (d, data) = parse_descriptor::<Descriptor>(bytes, MAGIC)?;
+        let SharedTables {
+            obs_norm,
+            action_norm,
+            decoder,
+            steps,
+            num_steps,
+        } = Self::read_shared(&data, shared_fields!(d))?;
         let input = QuantParams::new(d.input_scale, d.input_zero_point)
             .map_err(|_| BlobError::InputQuantization)?;
         d.layout.validate().map_err(|_| BlobError::InputLayout)?;
@@ -381,6 +418,45 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
             output: FullyConnected::new(inputs, outputs, weights, bias),
             output_scales,
             first_layer_biases,
+        })
+    }
+
+    /// Validates the dimensions, control period, normalization ranges, ProDMP tables and steps
+    /// named by `fields` (in that order, so the first failing check names the error) and copies
+    /// the tables.
+    pub(crate) fn read_shared(
+        data: &Data<'a>,
+        fields: SharedFields,
+    ) -> Result<SharedTables<O, K, N, P>, BlobError> {
+        check_dim(fields.history, M, Dimension::History)?;
+        check_dim(fields.obs_dim, O, Dimension::ObsDim)?;
+        check_dim(fields.action_dim, K, Dimension::ActionDim)?;
+        check_dim(fields.horizon, N, Dimension::Horizon)?;
+        check_dim(fields.params_per_dof, P, Dimension::ParamsPerDof)?;
+        if !(fields.control_dt.is_finite() && fields.control_dt > 0.0) {
+            return Err(BlobError::ControlPeriod);
+        }
+        let obs = data.finite(fields.obs_norm, O.checked_mul(2), SectionId::ObsNorm)?;
+        let (obs_min, obs_max) = obs
+            .split_at_checked(O)
+            .ok_or(BlobError::SectionLength(SectionId::ObsNorm))?;
+        let obs_norm = RangeNormalizer::new(to_array(obs_min), to_array(obs_max));
+        let action = data.finite(fields.action_norm, K.checked_mul(2), SectionId::ActionNorm)?;
+        let (action_min, action_max) = action
+            .split_at_checked(K)
+            .ok_or(BlobError::SectionLength(SectionId::ActionNorm))?;
+        let action_norm = RangeNormalizer::new(to_array(action_min), to_array(action_max));
+        if obs_norm.validate().is_err() || action_norm.validate().is_err() {
+            return Err(BlobError::Normalization);
+        }
+        let decoder = Self::read_decoder(data, fields.prodmp)?;
+        let (steps, num_steps) = Self::read_steps(data, fields.steps)?;
+        Ok(SharedTables {
+            obs_norm,
+            action_norm,
+            decoder,
+            steps,
+            num_steps,
         })
     }
 

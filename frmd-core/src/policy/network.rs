@@ -33,16 +33,17 @@ pub trait Network {
     ) -> Result<(), PolicyError>;
 }
 
-/// The `index`-th `width`-long chunk of `variants`; with no variants only index 0 is valid and
-/// selects `None` (the layer's own bias).
-fn bias_variant<T>(
-    variants: &[T],
+/// Points `bias` (the first layer's, `width` outputs) at the `index`-th `width`-long chunk of
+/// `variants`; with no variants only index 0 is valid and keeps the layer's own bias.
+fn use_bias_variant<'a, T>(
+    variants: &'a [T],
+    bias: &mut &'a [T],
     width: usize,
     index: usize,
-) -> Result<Option<&[T]>, PolicyError> {
+) -> Result<(), PolicyError> {
     if variants.is_empty() {
         return if index == 0 {
-            Ok(None)
+            Ok(())
         } else {
             Err(PolicyError::FirstLayerBiasIndex)
         };
@@ -53,10 +54,10 @@ fn bias_variant<T>(
     let end = start
         .checked_add(width)
         .ok_or(PolicyError::FirstLayerBiasIndex)?;
-    variants
+    *bias = variants
         .get(start..end)
-        .map(Some)
-        .ok_or(PolicyError::FirstLayerBiasIndex)
+        .ok_or(PolicyError::FirstLayerBiasIndex)?;
+    Ok(())
 }
 
 fn variant_count<T>(variants: &[T], width: usize) -> Result<usize, PolicyError> {
@@ -186,23 +187,18 @@ impl<const WIDTH: usize> Network for Int8Network<'_, WIDTH> {
             .ok_or(PolicyError::TooManyLayers)?;
         let mut last = self.output;
         match layers.first_mut() {
-            Some(first) => {
-                let bias = bias_variant(
-                    self.first_layer_biases,
-                    first.fc.out_features,
-                    first_layer_bias,
-                )?;
-                if let Some(bias) = bias {
-                    first.fc.bias = bias;
-                }
-            }
-            None => {
-                let bias =
-                    bias_variant(self.first_layer_biases, last.out_features, first_layer_bias)?;
-                if let Some(bias) = bias {
-                    last.bias = bias;
-                }
-            }
+            Some(first) => use_bias_variant(
+                self.first_layer_biases,
+                &mut first.fc.bias,
+                first.fc.out_features,
+                first_layer_bias,
+            )?,
+            None => use_bias_variant(
+                self.first_layer_biases,
+                &mut last.bias,
+                last.out_features,
+                first_layer_bias,
+            )?,
         }
         let mlp = Int8Mlp {
             input: self.input,
@@ -307,23 +303,18 @@ impl<const WIDTH: usize> Network for F32Network<'_, WIDTH> {
             .ok_or(PolicyError::TooManyLayers)?;
         let mut last = self.output;
         match layers.first_mut() {
-            Some(first) => {
-                let bias = bias_variant(
-                    self.first_layer_biases,
-                    first.out_features,
-                    first_layer_bias,
-                )?;
-                if let Some(bias) = bias {
-                    first.bias = bias;
-                }
-            }
-            None => {
-                let bias =
-                    bias_variant(self.first_layer_biases, last.out_features, first_layer_bias)?;
-                if let Some(bias) = bias {
-                    last.bias = bias;
-                }
-            }
+            Some(first) => use_bias_variant(
+                self.first_layer_biases,
+                &mut first.bias,
+                first.out_features,
+                first_layer_bias,
+            )?,
+            None => use_bias_variant(
+                self.first_layer_biases,
+                &mut last.bias,
+                last.out_features,
+                first_layer_bias,
+            )?,
         }
         let mlp = F32Mlp {
             hidden: layers,

@@ -37,59 +37,41 @@ pub trait TransformerBackbone<'a>: Copy {
     ) -> Result<(), TransformerError>;
 }
 
-impl<'a> TransformerBackbone<'a> for Int8Transformer<'a> {
-    fn shape(&self) -> &TransformerShape {
-        &self.shape
-    }
+/// Implements [`TransformerBackbone`] for a model type whose inherent `shape` field, `validate`,
+/// `noise_token` field and `forward` have the trait's meaning (both backbones share that API).
+macro_rules! impl_transformer_backbone {
+    ($model:ident) => {
+        impl<'a> TransformerBackbone<'a> for $model<'a> {
+            fn shape(&self) -> &TransformerShape {
+                &self.shape
+            }
 
-    fn validate(&self) -> Result<(), TransformerError> {
-        Int8Transformer::validate(self)
-    }
+            fn validate(&self) -> Result<(), TransformerError> {
+                $model::validate(self)
+            }
 
-    fn with_noise_token(&self, noise_token: &'a [f32]) -> Self {
-        Self {
-            noise_token,
-            ..*self
+            fn with_noise_token(&self, noise_token: &'a [f32]) -> Self {
+                Self {
+                    noise_token,
+                    ..*self
+                }
+            }
+
+            fn run<const F: usize, const B: usize, const A: usize>(
+                &self,
+                trajectory: &[f32],
+                condition: &[f32],
+                output: &mut [f32],
+                scratch: &mut TransformerScratch<F, B, A>,
+            ) -> Result<(), TransformerError> {
+                self.forward(trajectory, condition, output, scratch)
+            }
         }
-    }
-
-    fn run<const F: usize, const B: usize, const A: usize>(
-        &self,
-        trajectory: &[f32],
-        condition: &[f32],
-        output: &mut [f32],
-        scratch: &mut TransformerScratch<F, B, A>,
-    ) -> Result<(), TransformerError> {
-        self.forward(trajectory, condition, output, scratch)
-    }
+    };
 }
 
-impl<'a> TransformerBackbone<'a> for F32Transformer<'a> {
-    fn shape(&self) -> &TransformerShape {
-        &self.shape
-    }
-
-    fn validate(&self) -> Result<(), TransformerError> {
-        F32Transformer::validate(self)
-    }
-
-    fn with_noise_token(&self, noise_token: &'a [f32]) -> Self {
-        Self {
-            noise_token,
-            ..*self
-        }
-    }
-
-    fn run<const F: usize, const B: usize, const A: usize>(
-        &self,
-        trajectory: &[f32],
-        condition: &[f32],
-        output: &mut [f32],
-        scratch: &mut TransformerScratch<F, B, A>,
-    ) -> Result<(), TransformerError> {
-        self.forward(trajectory, condition, output, scratch)
-    }
-}
+impl_transformer_backbone!(Int8Transformer);
+impl_transformer_backbone!(F32Transformer);
 
 /// The standard layout order the adapter requires (condition first, trajectory last).
 pub(crate) const STANDARD_SEGMENTS: [InputSegment; 4] = [

@@ -2,8 +2,8 @@
 //! blob.
 
 use super::super::format::{Section, SectionId, LUT_LEN};
-use super::super::load::{check_dim, split, to_array, Data};
-use super::super::{BlobError, Dimension, LoadedPolicy};
+use super::super::load::{parse_descriptor, shared_fields, Data, SharedFields, SharedTables};
+use super::super::{BlobError, LoadedPolicy};
 use super::{
     BlockDesc, LinearDesc, NormDesc, TensorField, TransformerDescriptor, MAX_BLOCKS,
     TRANSFORMER_MAGIC,
@@ -219,36 +219,14 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
     /// [`Int8Transformer::validate`], reported as [`BlobError::Transformer`]) and borrows it.
     /// The buffer must start at a 4-byte aligned address.
     pub fn load(bytes: &'a [u8]) -> Result<Self, BlobError> {
-        let (descriptor_bytes, data_bytes) = split(bytes, TRANSFORMER_MAGIC)?;
-        let (d, rest) = postcard::take_from_bytes::<TransformerDescriptor>(descriptor_bytes)
-            .map_err(|_| BlobError::Descriptor)?;
-        if !rest.is_empty() {
-            return Err(BlobError::Descriptor);
-        }
-        check_dim(d.history, M, Dimension::History)?;
-        check_dim(d.obs_dim, O, Dimension::ObsDim)?;
-        check_dim(d.action_dim, K, Dimension::ActionDim)?;
-        check_dim(d.horizon, N, Dimension::Horizon)?;
-        check_dim(d.params_per_dof, P, Dimension::ParamsPerDof)?;
-        if !(d.control_dt.is_finite() && d.control_dt > 0.0) {
-            return Err(BlobError::ControlPeriod);
-        }
-        let data = Data { bytes: data_bytes };
-        let obs = data.finite(d.obs_norm, O.checked_mul(2), SectionId::ObsNorm)?;
-        let (obs_min, obs_max) = obs
-            .split_at_checked(O)
-            .ok_or(BlobError::SectionLength(SectionId::ObsNorm))?;
-        let obs_norm = RangeNormalizer::new(to_array(obs_min), to_array(obs_max));
-        let action = data.finite(d.action_norm, K.checked_mul(2), SectionId::ActionNorm)?;
-        let (action_min, action_max) = action
-            .split_at_checked(K)
-            .ok_or(BlobError::SectionLength(SectionId::ActionNorm))?;
-        let action_norm = RangeNormalizer::new(to_array(action_min), to_array(action_max));
-        if obs_norm.validate().is_err() || action_norm.validate().is_err() {
-            return Err(BlobError::Normalization);
-        }
-        let decoder = LoadedPolicy::<M, O, K, N, P>::read_decoder(&data, d.prodmp)?;
-        let (steps, num_steps) = LoadedPolicy::<M, O, K, N, P>::read_steps(&data, d.steps)?;
+        let (d, data) = parse_descriptor::<TransformerDescriptor>(bytes, TRANSFORMER_MAGIC)?;
+        let SharedTables {
+            obs_norm,
+            action_norm,
+            decoder,
+            steps,
+            num_steps,
+        } = LoadedPolicy::<M, O, K, N, P>::read_shared(&data, shared_fields!(d))?;
         d.layout.validate().map_err(|_| BlobError::InputLayout)?;
         if d.layout.segments() != crate::policy::STANDARD_SEGMENTS {
             return Err(BlobError::InputLayout);

@@ -1,0 +1,74 @@
+//! Host-test support for the QEMU firmware checks, included by each such test with
+//! `#[path = "../../examples/cortex-m/host-test-support.rs"] mod qemu;`.
+//!
+//! A QEMU check runs only when `bash scripts/setup-cortex-m.sh` has written its env file
+//! (`FRMD_CORTEX_M_ENV`, default `<repo>/target/cortex-m.env`), `qemu-system-arm` runs and
+//! `FRMD_SKIP_QEMU` is unset. Otherwise the test prints why and passes without checking, unless
+//! `FRMD_REQUIRE_QEMU` is set (as in CI): then it fails.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The repository root, from the including crate's `CARGO_MANIFEST_DIR` (each crate sits one
+/// level below the root).
+pub fn repo_root(manifest_dir: &str) -> PathBuf {
+    Path::new(manifest_dir).join("..")
+}
+
+/// Whether the QEMU check named `test` can run. Returns `false` after printing why it is skipped;
+/// panics instead when `FRMD_REQUIRE_QEMU` is set.
+pub fn available(test: &str, root: &Path) -> bool {
+    let env_file = std::env::var_os("FRMD_CORTEX_M_ENV")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target/cortex-m.env"));
+    let qemu_found = Command::new("qemu-system-arm")
+        .arg("--version")
+        .output()
+        .is_ok();
+    if std::env::var_os("FRMD_SKIP_QEMU").is_some() || !env_file.exists() || !qemu_found {
+        assert!(
+            std::env::var_os("FRMD_REQUIRE_QEMU").is_none(),
+            "FRMD_REQUIRE_QEMU is set but the QEMU check cannot run (env file {} present: {}, qemu-system-arm found: {qemu_found})",
+            env_file.display(),
+            env_file.exists()
+        );
+        eprintln!(
+            "{test}: SKIPPED (FRMD_SKIP_QEMU set, or no {} / qemu-system-arm: run \
+             `bash scripts/setup-cortex-m.sh`)",
+            env_file.display()
+        );
+        return false;
+    }
+    true
+}
+
+/// Runs `examples/cortex-m/run-qemu.sh <board> <image>` and returns its standard output; panics
+/// (with both outputs) if the script fails.
+///
+/// The firmware builds in its own target directory (run-qemu.sh's default), so manual runs and
+/// tests share one build; it is never the directory of the `cargo test` running the caller.
+pub fn run(root: &Path, board: &str, image: &str) -> String {
+    let output = Command::new("bash")
+        .arg(root.join("examples/cortex-m/run-qemu.sh"))
+        .args([board, image])
+        .env("CARGO_TARGET_DIR", root.join("examples/cortex-m/target"))
+        .output()
+        .expect("run examples/cortex-m/run-qemu.sh");
+    let stdout = String::from_utf8_lossy(&output.stdout).into_owned();
+    assert!(
+        output.status.success(),
+        "run-qemu.sh {board} {image} failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    stdout
+}
+
+/// The first `digest: <16 hex digits>` line the firmware printed, whole.
+pub fn digest_line(stdout: &str) -> Option<&str> {
+    stdout.lines().find(|line| line.starts_with("digest: "))
+}
+
+/// All output lines joined by ` | `, for one-line logging.
+pub fn one_line(stdout: &str) -> String {
+    stdout.lines().collect::<Vec<_>>().join(" | ")
+}
