@@ -15,7 +15,9 @@
 //!
 //! [`Int8Transformer`]: frmd_core::model::transformer::Int8Transformer
 
+pub mod bake;
 pub mod blob;
+mod memory;
 mod quantize;
 #[cfg(test)]
 mod tests;
