@@ -34,11 +34,13 @@ impl QuantizedTransformer {
         let input = f.layout.width(m, o, k, n).unwrap_or(0);
         let floats = 2 * m * o + 2 * n * k + 6 * n * k + input + k * p + 2 * k;
         let scratch = f.shape.int8_scratch();
+        // fc1 is requantized to int8 (multipliers and shifts below), so its output scales are not
+        // stored; every other linear layer dequantizes with its output scales.
         let mut linears: Vec<&QuantizedLinear> = vec![&self.traj_in, &self.cond_in, &self.head];
         for b in &self.blocks {
-            linears.extend([&b.qkv, &b.proj, &b.fc1, &b.fc2]);
+            linears.extend([&b.qkv, &b.proj, &b.fc2]);
         }
-        let weights_bytes = linears.iter().map(|l| linear_weight_bytes(l)).sum();
+        let weights_bytes = linears.iter().copied().chain(self.blocks.iter().map(|b| &b.fc1)).map(linear_weight_bytes).sum();
         let block_tables: usize = self
             .blocks
             .iter()

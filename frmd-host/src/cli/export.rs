@@ -79,6 +79,10 @@ pub fn calibration_from_data(path: &Path, ckpt: &Path) -> anyhow::Result<Calibra
 /// failing with advice when neither exists.
 fn calibration_set(info: &ExportInfo) -> anyhow::Result<Option<CalibrationSet>> {
     let ckpt = Path::new(&info.checkpoint);
+    let meta = frmd_export::checkpoint::CheckpointMeta::read(ckpt)?;
+    if meta.role != frmd_export::checkpoint::Role::Student {
+        bail!("{}: only student checkpoints can be exported; this one is a {:?} (its sampler needs many network evaluations)", ckpt.display(), meta.role);
+    }
     match &info.calibration_data {
         Some(data) => Ok(Some(calibration_from_data(Path::new(data), ckpt)?)),
         None if !ckpt.join(CALIBRATION_FILE).exists() => {
