@@ -19,6 +19,7 @@ pub mod bake;
 pub mod blob;
 mod memory;
 mod quantize;
+pub mod reference;
 #[cfg(test)]
 mod tests;
 

@@ -249,10 +249,9 @@ pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
 }
 
 /// The checks for a transformer-lite student (`FRMT` blob): the same (a), (b), (c) rows; (d) is
-/// the requantization check of the kernel every int8 linear layer uses. The network-level wide
-/// model of (d) exists for the MLP only; the int8 transformer is checked bit for bit against a
-/// naive int8 model by frmd-core's own tests (`model/transformer/tests`), which is reported as
-/// an informational row.
+/// the requantization check plus every exported int8 linear layer against the wide-integer model
+/// ([`frmd_export::transformer::reference::check_layers`]; the f32 LayerNorm/attention/residual
+/// parts are covered by (a) and (b)).
 fn run_transformer(cfg: &EquivConfig, s: &Setup) -> anyhow::Result<EquivReport> {
     let exported = crate::cli::export::export_transformer(&s.info)?;
     let rebuilt = crate::cli::export::transformer_blob(&exported)?;
@@ -267,14 +266,12 @@ fn run_transformer(cfg: &EquivConfig, s: &Setup) -> anyhow::Result<EquivReport> 
     }
     rows.push(qemu_row());
     rows.push(requant_row(cfg));
-    rows.push(EquivRow {
-        check: "d".into(),
-        metric: "int8 transformer vs wide model".into(),
-        value: f64::NAN,
-        bound: None,
-        pass: None,
-        note: "not run here: frmd-core test model::transformer::tests (bit-exact vs a naive int8 model)".into(),
-    });
+    let layers = frmd_export::transformer::reference::check_layers(&exported.model, 16, 0x7f3e)?;
+    rows.push(row("d", "int8 transformer layer mismatches vs wide model", layers.mismatches as f64, Some(0.0), format!(
+        "{} cases (every int8 linear layer, fc1 requantization + GELU table){}",
+        layers.cases,
+        layers.first_mismatch.map(|m| format!("; first: {m}")).unwrap_or_default()
+    )));
     Ok(report(rows))
 }
 

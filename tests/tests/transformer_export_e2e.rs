@@ -115,6 +115,7 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
     assert_eq!(value("baked blob differs").value, 0.0);
     assert!(value("core f32 vs candle float: max").value < 1e-4, "f32 path vs candle");
     assert_eq!(value("requantization mismatches").value, 0.0);
+    assert_eq!(value("int8 transformer layer mismatches").value, 0.0);
     // int8 vs float: stated bounds, 10 % (max) and 2 % (mean) of the mean action range.
     for r in report.rows.iter().filter(|r| r.check == "b" && r.metric.contains("abs error")) {
         assert_eq!(r.pass, Some(true), "{r:?}");
