@@ -132,10 +132,10 @@ impl Int8Policy {
         Int8Policy { runner, rng: Rng::new(0), label: label.into() }
     }
 
-    /// Loads a blob file.
+    /// Loads a blob file (MLP `FRMD` or transformer `FRMT`, by its magic).
     pub fn load(path: &Path) -> anyhow::Result<Self> {
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-        Self::from_blob(&bytes, "int8").with_context(|| format!("loading {}", path.display()))
+        super::transformer::int8_policy(&bytes, "int8").with_context(|| format!("loading {}", path.display()))
     }
 
     /// Observation history the policy needs.
