@@ -42,22 +42,12 @@ pub(crate) fn dot_i8_prefix(a: &[i8], b: &[i8]) -> i32 {
     total
 }
 
-/// Calls `emit(dot(row, input))` for every row of the row-major `weights` (`input.len()` columns
-/// per row) in order; a partial last row is ignored (callers check the shapes).
-///
-/// This is the fully connected layer's matrix-vector product. On Arm cores with the DSP extension
-/// (`cfg(frmd_arm_dsp)`, module `kernels::dsp`) it runs an `SMLAD` kernel over four rows at a
-/// time; elsewhere it is [`dot_i8_prefix`] per row. Both give identical sums.
+/// The fully connected layer's matrix-vector product: `emit(dot(row, input))` for every row of
+/// the row-major `weights` in order. On Arm cores with the DSP extension (`cfg(frmd_arm_dsp)`) it
+/// is the `SMLAD` kernel of `kernels::dsp`; elsewhere the row-blocked kernel of `kernels::matvec`
+/// (with an AVX2 build on x86-64). All give the sums of [`dot_i8_prefix`].
 #[cfg(not(frmd_arm_dsp))]
-#[inline]
-pub(crate) fn for_each_row_dot(weights: &[i8], input: &[i8], mut emit: impl FnMut(i32)) {
-    if input.is_empty() {
-        return;
-    }
-    for row in weights.chunks_exact(input.len()) {
-        emit(dot_i8_prefix(row, input));
-    }
-}
+pub(crate) use super::matvec::for_each_row_dot;
 
 #[cfg(frmd_arm_dsp)]
 pub(crate) use super::dsp::for_each_row_dot;

@@ -18,8 +18,12 @@ pub mod dot;
 mod dsp;
 pub mod fc;
 pub mod lut;
+#[cfg(not(frmd_arm_dsp))]
+mod matvec;
 pub mod norm;
 pub mod softmax;
+#[cfg(target_arch = "x86_64")]
+pub mod x86;
 
 pub use activation::{gelu, gelu_sigmoid, gelu_tanh, mish, silu, softplus, Activation};
 pub use dot::dot_i8;
