@@ -126,6 +126,11 @@ impl<'a> FullyConnected<'a> {
         if output.len() != self.out_features {
             return Err(KernelError::OutputLength);
         }
+        #[cfg(target_arch = "x86_64")]
+        if super::x86::avx2_active() {
+            self.forward_requant_blocks(requant, input, output);
+            return Ok(());
+        }
         let channels = requant.multipliers.iter().zip(requant.shifts);
         let mut outputs = output.iter_mut().zip(channels);
         self.for_each_accumulator(input, |acc| {
@@ -141,6 +146,41 @@ impl<'a> FullyConnected<'a> {
             }
         });
         Ok(())
+    }
+
+    /// [`Self::forward`] on x86-64 with AVX2 (callers checked the shapes and `requant`): the
+    /// accumulators are requantized eight at a time by `x86::requantize_block_avx2`, the last
+    /// `out_features % 8` with [`requantize_to_i8`]. Same outputs as the one-at-a-time loop.
+    #[cfg(target_arch = "x86_64")]
+    fn forward_requant_blocks(&self, requant: &FcRequant<'_>, input: &[i8], output: &mut [i8]) {
+        use super::x86::{requantize_block_avx2, REQUANT_CHANNELS};
+        let zero_point = requant.output_zero_point;
+        let bounds = (requant.activation_min, requant.activation_max);
+        let (out_blocks, out_tail) = output.as_chunks_mut::<REQUANT_CHANNELS>();
+        let (multiplier_blocks, multiplier_tail) = requant.multipliers.as_chunks();
+        let (shift_blocks, shift_tail) = requant.shifts.as_chunks();
+        let mut blocks = out_blocks
+            .iter_mut()
+            .zip(multiplier_blocks)
+            .zip(shift_blocks);
+        let mut pending = [0_i32; REQUANT_CHANNELS];
+        let mut filled = 0_usize;
+        self.for_each_accumulator(input, |acc| {
+            if let Some(slot) = pending.get_mut(filled) {
+                *slot = acc;
+                filled += 1;
+            }
+            if filled == REQUANT_CHANNELS {
+                filled = 0;
+                if let Some(((out, multipliers), shifts)) = blocks.next() {
+                    requantize_block_avx2(&pending, multipliers, shifts, zero_point, bounds, out);
+                }
+            }
+        });
+        let tail = out_tail.iter_mut().zip(multiplier_tail).zip(shift_tail);
+        for (acc, ((out, multiplier), shift)) in pending.iter().take(filled).zip(tail) {
+            *out = requantize_to_i8(*acc, *multiplier, *shift, zero_point, bounds.0, bounds.1);
+        }
     }
 
     /// Calls `emit(bias[o] + sum_i w[o][i] * input[i])` for `o = 0..out_features` in order

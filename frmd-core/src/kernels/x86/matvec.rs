@@ -1,101 +1,24 @@
-//! AVX2 int8 matrix-vector kernel for x86-64, chosen at run time; the portable kernel of
-//! `kernels::matvec` (SSE2 `pmaddwd` through LLVM) is the fallback.
+//! AVX2 four-row int8 matrix-vector kernel (see the module docs of `kernels::x86`).
 //!
-//! Four weight rows per pass (the block splitting of `matvec::for_each_row_block`); per 16 input
-//! columns the input is loaded and sign-extended to 16 halfwords once (`vpmovsxbw`), and for each
-//! row one `vpmovsxbw` of 16 weights, one `vpmaddwd` (16 products summed in pairs into 8 int32
-//! lanes) and one `vpaddd`: 13 instructions per 64 multiply-accumulates. The last `columns % 16`
-//! columns use [`dot_i8_prefix`].
+//! Per 16 input columns the input is loaded and sign-extended to 16 halfwords once
+//! (`vpmovsxbw`), and for each of the four rows: one `vpmovsxbw` of 16 weights, one `vpmaddwd`
+//! (16 products summed in pairs into 8 int32 lanes) and one `vpaddd`: 13 instructions per 64
+//! multiply-accumulates. The last `columns % 16` columns use [`dot_i8_prefix`].
 //!
-//! Bit-exactness: an int8 x int8 product lies in `[-16256, 16384]`, so a `vpmaddwd` pair sum
-//! (at most 32768 in magnitude) is exact in int32; `vpaddd` and `vphaddd` add modulo 2^32. Every
-//! row sum is therefore the wrapping int32 sum of the same products as the portable kernel, and
-//! wrapping addition does not depend on order. The tests compare both on random shapes.
-//!
-//! Detection is `no_std`: `CPUID` leaf 1 (AVX and OSXSAVE bits), `XGETBV` (the OS saves the
-//! SSE and AVX register state: XCR0 bits 1 and 2) and `CPUID` leaf 7 (AVX2 bit), cached in an
-//! atomic. [`set_avx2_enabled`] turns the AVX2 path off (or back on, if the CPU has it) for
-//! A/B measurements.
-//!
-//! Safety audit (the only `unsafe` besides `kernels::dsp`), three kinds of `unsafe` expression:
-//! - `_xgetbv(0)`: requires the `XGETBV` instruction, which exists when `CPUID.1:ECX.OSXSAVE`
-//!   (bit 27) is set; it is called only after checking that bit.
-//! - calls of the `#[target_feature(enable = "avx2")]` function [`dot_four_rows_avx2`]: sound when
-//!   the CPU supports AVX2 and the OS enabled the AVX state, which is what [`avx2_active`]
-//!   checked (the cached state only becomes "active" through [`detect_avx2`]).
-//! - `_mm_loadu_si128` in [`widen`]: an unaligned 16-byte read through a pointer made from a
-//!   `&[i8; 16]`, so all 16 bytes are in bounds and initialized.
-//!
-//! No other memory is touched: weights and input are walked with `as_chunks::<16>` iterators.
+//! Bit-exactness: an int8 x int8 product lies in `[-16256, 16384]`, so a `vpmaddwd` pair sum (at
+//! most 32768 in magnitude) is exact in int32; `vpaddd` and `vphaddd` add modulo 2^32. Every row
+//! sum is the wrapping int32 sum of the same products as the portable kernel, and wrapping
+//! addition does not depend on order.
 #![allow(unsafe_code)]
 
-use super::dot::dot_i8_prefix;
-use super::matvec::{for_each_row_block, for_each_row_dot_portable, ROWS};
+use super::avx2_active;
+use crate::kernels::dot::dot_i8_prefix;
+use crate::kernels::matvec::{for_each_row_block, for_each_row_dot_portable, ROWS};
 use core::arch::x86_64::{
-    __cpuid, __cpuid_count, __m128i, __m256i, _mm256_add_epi32, _mm256_castsi256_si128,
-    _mm256_cvtepi8_epi16, _mm256_extracti128_si256, _mm256_hadd_epi32, _mm256_madd_epi16,
-    _mm256_setzero_si256, _mm_add_epi32, _mm_cvtsi128_si32, _mm_extract_epi32, _mm_loadu_si128,
-    _xgetbv,
+    __m128i, __m256i, _mm256_add_epi32, _mm256_castsi256_si128, _mm256_cvtepi8_epi16,
+    _mm256_extracti128_si256, _mm256_hadd_epi32, _mm256_madd_epi16, _mm256_setzero_si256,
+    _mm_add_epi32, _mm_cvtsi128_si32, _mm_extract_epi32, _mm_loadu_si128,
 };
-use core::sync::atomic::{AtomicU8, Ordering};
-
-/// Detection state: not yet probed.
-const UNKNOWN: u8 = 0;
-/// The CPU and OS support AVX2 and the path is enabled.
-const ACTIVE: u8 = 1;
-/// AVX2 is unsupported, or disabled by [`set_avx2_enabled`].
-const INACTIVE: u8 = 2;
-
-static AVX2_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
-
-/// Whether the CPU and the OS support AVX2 (probed once with `CPUID`/`XGETBV`).
-pub fn avx2_supported() -> bool {
-    detect_avx2()
-}
-
-/// Whether the int8 kernels currently use the AVX2 build.
-#[inline]
-pub fn avx2_active() -> bool {
-    match AVX2_STATE.load(Ordering::Relaxed) {
-        ACTIVE => true,
-        INACTIVE => false,
-        _ => {
-            let supported = detect_avx2();
-            AVX2_STATE.store(if supported { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
-            supported
-        }
-    }
-}
-
-/// Enables (if the CPU supports it) or disables the AVX2 build of the int8 kernels, process-wide.
-/// Returns whether AVX2 is active afterwards. Both builds give identical results; this only
-/// exists to measure one against the other.
-pub fn set_avx2_enabled(enabled: bool) -> bool {
-    let active = enabled && detect_avx2();
-    AVX2_STATE.store(if active { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
-    active
-}
-
-/// `CPUID`/`XGETBV` probe for AVX2 with OS support of the YMM state.
-fn detect_avx2() -> bool {
-    const OSXSAVE: u32 = 1 << 27;
-    const AVX: u32 = 1 << 28;
-    const XCR0_SSE_AVX: u64 = 0b110;
-    const AVX2: u32 = 1 << 5;
-    if __cpuid(0).eax < 7 {
-        return false;
-    }
-    let features = __cpuid(1).ecx;
-    if features & OSXSAVE == 0 || features & AVX == 0 {
-        return false;
-    }
-    // SAFETY: CPUID.1:ECX.OSXSAVE is set (checked above), so XGETBV is available and XCR0 readable.
-    let xcr0 = unsafe { _xgetbv(0) };
-    if xcr0 & XCR0_SSE_AVX != XCR0_SSE_AVX {
-        return false;
-    }
-    __cpuid_count(7, 0).ebx & AVX2 != 0
-}
 
 /// The matrix-vector product `emit(dot(row, input))` per row, in row order, with the AVX2
 /// four-row kernel (callers checked [`avx2_active`]; without AVX2 this runs the portable kernel).
@@ -170,6 +93,7 @@ mod tests {
     extern crate std;
     use super::*;
     use crate::kernels::matvec::tests::{random_cases, wide_row_sums};
+    use crate::kernels::x86::avx2_supported;
     use std::vec::Vec;
 
     #[test]

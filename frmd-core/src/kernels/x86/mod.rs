@@ -1,0 +1,93 @@
+//! AVX2 builds of the int8 kernels for x86-64, chosen at run time; the portable kernels
+//! (`kernels::matvec`, SSE2 through LLVM, and `quant::requantize_to_i8`) are the fallback and the
+//! definition: the tests compare both on random and extreme inputs.
+//!
+//! - [`matvec`]: four-row matrix-vector product with `vpmaddwd`;
+//! - [`requant`]: requantization of eight accumulators at once.
+//!
+//! Detection is `no_std`: `CPUID` leaf 1 (AVX and OSXSAVE bits), `XGETBV` (the OS saves the SSE
+//! and AVX register state: XCR0 bits 1 and 2) and `CPUID` leaf 7 (AVX2 bit), cached in an
+//! atomic. [`set_avx2_enabled`] turns the AVX2 path off (or back on, if the CPU has it) for A/B
+//! measurements.
+//!
+//! Safety audit: `unsafe` is allowed in this module and its two submodules only (and in
+//! `kernels::dsp`). There are three kinds of `unsafe` expression:
+//! - `_xgetbv(0)` here: requires the `XGETBV` instruction, which exists when `CPUID.1:ECX.OSXSAVE`
+//!   (bit 27) is set; it is called only after checking that bit.
+//! - calls of `#[target_feature(enable = "avx2")]` functions from the dispatchers
+//!   `for_each_row_dot_avx2` and `requantize_block_avx2`: sound when the CPU supports AVX2 and the
+//!   OS enabled the AVX state, which both check through [`avx2_active`] right before the call
+//!   (the cached state only becomes "active" through [`detect_avx2`]).
+//! - unaligned loads and stores (`_mm_loadu_si128`, `_mm256_loadu_si256`, `_mm256_storeu_si256`)
+//!   through pointers made from references to fixed-size arrays of exactly the accessed size
+//!   (`&[i8; 16]`, `&[i32; 8]`, `&mut [i32; 8]`): in bounds, initialized, no alignment needed.
+//!
+//! No other memory is touched: slices are walked with `as_chunks` iterators.
+#![allow(unsafe_code)]
+
+mod matvec;
+mod requant;
+
+pub(crate) use matvec::for_each_row_dot_avx2;
+pub(crate) use requant::{requantize_block_avx2, CHANNELS as REQUANT_CHANNELS};
+
+use core::arch::x86_64::{__cpuid, __cpuid_count, _xgetbv};
+use core::sync::atomic::{AtomicU8, Ordering};
+
+/// Detection state: not yet probed.
+const UNKNOWN: u8 = 0;
+/// The CPU and OS support AVX2 and the path is enabled.
+const ACTIVE: u8 = 1;
+/// AVX2 is unsupported, or disabled by [`set_avx2_enabled`].
+const INACTIVE: u8 = 2;
+
+static AVX2_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
+
+/// Whether the CPU and the OS support AVX2 (probed once with `CPUID`/`XGETBV`).
+pub fn avx2_supported() -> bool {
+    detect_avx2()
+}
+
+/// Whether the int8 kernels currently use the AVX2 build.
+#[inline]
+pub fn avx2_active() -> bool {
+    match AVX2_STATE.load(Ordering::Relaxed) {
+        ACTIVE => true,
+        INACTIVE => false,
+        _ => {
+            let supported = detect_avx2();
+            AVX2_STATE.store(if supported { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
+            supported
+        }
+    }
+}
+
+/// Enables (if the CPU supports it) or disables the AVX2 build of the int8 kernels, process-wide.
+/// Returns whether AVX2 is active afterwards. Both builds give identical results; this only
+/// exists to measure one against the other.
+pub fn set_avx2_enabled(enabled: bool) -> bool {
+    let active = enabled && detect_avx2();
+    AVX2_STATE.store(if active { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
+    active
+}
+
+/// `CPUID`/`XGETBV` probe for AVX2 with OS support of the YMM state.
+fn detect_avx2() -> bool {
+    const OSXSAVE: u32 = 1 << 27;
+    const AVX: u32 = 1 << 28;
+    const XCR0_SSE_AVX: u64 = 0b110;
+    const AVX2: u32 = 1 << 5;
+    if __cpuid(0).eax < 7 {
+        return false;
+    }
+    let features = __cpuid(1).ecx;
+    if features & OSXSAVE == 0 || features & AVX == 0 {
+        return false;
+    }
+    // SAFETY: CPUID.1:ECX.OSXSAVE is set (checked above), so XGETBV is available and XCR0 readable.
+    let xcr0 = unsafe { _xgetbv(0) };
+    if xcr0 & XCR0_SSE_AVX != XCR0_SSE_AVX {
+        return false;
+    }
+    __cpuid_count(7, 0).ebx & AVX2 != 0
+}
