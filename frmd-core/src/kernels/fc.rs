@@ -6,6 +6,8 @@
 //! [`crate::quant::requantize_to_i8`]; the activation clamp (`activation_min..=activation_max`)
 //! implements ReLU-like activations for free.
 
+#[cfg(target_arch = "x86_64")]
+use super::dot::dot_i8_prefix;
 use super::dot::for_each_row_dot;
 use super::KernelError;
 use crate::quant::{dequantize_accumulator, requantize_to_i8, SHIFT_MAX, SHIFT_MIN};
@@ -104,6 +106,11 @@ impl<'a> FullyConnected<'a> {
         if acc.len() != self.out_features {
             return Err(KernelError::OutputLength);
         }
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx2) = super::x86::Avx2::get() {
+            self.accumulators_avx2(avx2, input, acc);
+            return Ok(());
+        }
         let mut outputs = acc.iter_mut();
         self.for_each_accumulator(input, |acc| {
             if let Some(out) = outputs.next() {
@@ -127,8 +134,8 @@ impl<'a> FullyConnected<'a> {
             return Err(KernelError::OutputLength);
         }
         #[cfg(target_arch = "x86_64")]
-        if super::x86::avx2_active() {
-            self.forward_requant_blocks(requant, input, output);
+        if let Some(avx2) = super::x86::Avx2::get() {
+            self.forward_avx2(avx2, requant, input, output);
             return Ok(());
         }
         let channels = requant.multipliers.iter().zip(requant.shifts);
@@ -148,38 +155,73 @@ impl<'a> FullyConnected<'a> {
         Ok(())
     }
 
-    /// [`Self::forward`] on x86-64 with AVX2 (callers checked the shapes and `requant`): the
-    /// accumulators are requantized eight at a time by `x86::requantize_block_avx2`, the last
-    /// `out_features % 8` with [`requantize_to_i8`]. Same outputs as the one-at-a-time loop.
+    /// [`Self::forward`] with the AVX2 kernels (x86-64; callers checked the shapes and
+    /// `requant`): eight output channels per kernel call, requantized in registers; the last
+    /// `out_features % 8` channels one at a time. Same outputs as the portable loop.
     #[cfg(target_arch = "x86_64")]
-    fn forward_requant_blocks(&self, requant: &FcRequant<'_>, input: &[i8], output: &mut [i8]) {
-        use super::x86::{requantize_block_avx2, REQUANT_CHANNELS};
+    fn forward_avx2(
+        &self,
+        avx2: super::x86::Avx2,
+        requant: &FcRequant<'_>,
+        input: &[i8],
+        output: &mut [i8],
+    ) {
+        use super::x86::{RequantBlock, BLOCK_ROWS};
+        let Some(block_len) = self.in_features.checked_mul(BLOCK_ROWS) else {
+            return;
+        };
         let zero_point = requant.output_zero_point;
         let bounds = (requant.activation_min, requant.activation_max);
-        let (out_blocks, out_tail) = output.as_chunks_mut::<REQUANT_CHANNELS>();
+        let mut row_blocks = self.weights.chunks_exact(block_len);
+        let (out_blocks, out_tail) = output.as_chunks_mut::<BLOCK_ROWS>();
+        let (bias_blocks, bias_tail) = self.bias.as_chunks::<BLOCK_ROWS>();
         let (multiplier_blocks, multiplier_tail) = requant.multipliers.as_chunks();
         let (shift_blocks, shift_tail) = requant.shifts.as_chunks();
-        let mut blocks = out_blocks
+        let blocks = out_blocks
             .iter_mut()
-            .zip(multiplier_blocks)
-            .zip(shift_blocks);
-        let mut pending = [0_i32; REQUANT_CHANNELS];
-        let mut filled = 0_usize;
-        self.for_each_accumulator(input, |acc| {
-            if let Some(slot) = pending.get_mut(filled) {
-                *slot = acc;
-                filled += 1;
-            }
-            if filled == REQUANT_CHANNELS {
-                filled = 0;
-                if let Some(((out, multipliers), shifts)) = blocks.next() {
-                    requantize_block_avx2(&pending, multipliers, shifts, zero_point, bounds, out);
-                }
-            }
-        });
-        let tail = out_tail.iter_mut().zip(multiplier_tail).zip(shift_tail);
-        for (acc, ((out, multiplier), shift)) in pending.iter().take(filled).zip(tail) {
-            *out = requantize_to_i8(*acc, *multiplier, *shift, zero_point, bounds.0, bounds.1);
+            .zip(row_blocks.by_ref())
+            .zip(bias_blocks)
+            .zip(multiplier_blocks.iter().zip(shift_blocks));
+        for (((out, rows), bias), (multipliers, shifts)) in blocks {
+            let block = RequantBlock {
+                multipliers,
+                shifts,
+                zero_point,
+                bounds,
+            };
+            *out = avx2.requantize_rows(rows, input, bias, block);
+        }
+        let tail = out_tail
+            .iter_mut()
+            .zip(row_blocks.remainder().chunks_exact(self.in_features))
+            .zip(bias_tail)
+            .zip(multiplier_tail.iter().zip(shift_tail));
+        for (((out, row), bias), (multiplier, shift)) in tail {
+            let acc = bias.wrapping_add(dot_i8_prefix(row, input));
+            *out = requantize_to_i8(acc, *multiplier, *shift, zero_point, bounds.0, bounds.1);
+        }
+    }
+
+    /// [`Self::forward_accumulators`] with the AVX2 kernels (x86-64; shapes checked).
+    #[cfg(target_arch = "x86_64")]
+    fn accumulators_avx2(&self, avx2: super::x86::Avx2, input: &[i8], acc: &mut [i32]) {
+        use super::x86::BLOCK_ROWS;
+        let Some(block_len) = self.in_features.checked_mul(BLOCK_ROWS) else {
+            return;
+        };
+        let mut row_blocks = self.weights.chunks_exact(block_len);
+        let (acc_blocks, acc_tail) = acc.as_chunks_mut::<BLOCK_ROWS>();
+        let (bias_blocks, bias_tail) = self.bias.as_chunks::<BLOCK_ROWS>();
+        let blocks = acc_blocks
+            .iter_mut()
+            .zip(row_blocks.by_ref())
+            .zip(bias_blocks);
+        for ((out, rows), bias) in blocks {
+            *out = avx2.accumulate_rows(rows, input, bias);
+        }
+        let rows = row_blocks.remainder().chunks_exact(self.in_features);
+        for ((out, row), bias) in acc_tail.iter_mut().zip(rows).zip(bias_tail) {
+            *out = bias.wrapping_add(dot_i8_prefix(row, input));
         }
     }
 

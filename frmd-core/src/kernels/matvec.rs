@@ -4,8 +4,8 @@
 //! Off Arm, rows go in groups of [`ROWS`]: each block of [`LANES`] input columns is loaded (and
 //! sign-extended) once and multiplied into four weight rows with sixteen int32 partial sums per
 //! row, which LLVM compiles to SSE2 `pmaddwd` (36 instructions per 64 multiply-accumulates, against
-//! 16 per 16 one row at a time). On x86-64 CPUs with AVX2 the hand-vectorized kernel of
-//! `kernels::x86` is used instead (LLVM does not find `vpmaddwd` for this loop with AVX2 enabled).
+//! 16 per 16 one row at a time). On x86-64 CPUs with AVX2, `FullyConnected` uses the eight-row
+//! kernels of `kernels::x86` instead (LLVM does not find `vpmaddwd` for this loop with AVX2).
 //! On Arm without DSP the loop stays one row at a time ([`dot_i8_prefix`]), which is what
 //! Cortex-M0/M3 register files favour.
 //!
@@ -17,24 +17,12 @@ use super::dot::dot_i8_prefix;
 
 /// Weight rows per pass over the input on hosts.
 #[cfg(not(target_arch = "arm"))]
-pub(crate) const ROWS: usize = 4;
+const ROWS: usize = 4;
 
 /// Calls `emit(dot(row, input))` for every row of the row-major `weights` (`input.len()` columns
-/// per row) in order; a partial last row is ignored (callers check the shapes). Picks the AVX2
-/// build of the kernel when the CPU has it (x86-64 only), the portable one otherwise.
+/// per row) in order; a partial last row is ignored (callers check the shapes).
 #[inline]
 pub(crate) fn for_each_row_dot(weights: &[i8], input: &[i8], mut emit: impl FnMut(i32)) {
-    #[cfg(target_arch = "x86_64")]
-    if super::x86::avx2_active() {
-        super::x86::for_each_row_dot_avx2(weights, input, &mut emit);
-        return;
-    }
-    for_each_row_dot_portable(weights, input, &mut emit);
-}
-
-/// The portable kernel (SSE2 on x86-64), whatever the CPU supports; see [`for_each_row_dot`].
-#[inline]
-pub(crate) fn for_each_row_dot_portable(weights: &[i8], input: &[i8], emit: &mut impl FnMut(i32)) {
     #[cfg(target_arch = "arm")]
     {
         if input.is_empty() {
@@ -45,24 +33,19 @@ pub(crate) fn for_each_row_dot_portable(weights: &[i8], input: &[i8], emit: &mut
         }
     }
     #[cfg(not(target_arch = "arm"))]
-    for_each_row_block(weights, input, emit, dot_four_rows);
+    for_each_row_block(weights, input, &mut emit);
 }
 
 /// Input columns per inner-loop step of the portable kernel (int32 partial sums per row).
 #[cfg(not(target_arch = "arm"))]
 const LANES: usize = 16;
 
-/// Splits `weights` into blocks of [`ROWS`] rows of `input.len()` columns, emits the sums that
-/// `four_rows(rows, input)` returns for each block, then `dot_i8_prefix` for the last
-/// `rows % ROWS` rows, all in row order. Shared by the portable and the AVX2 kernels.
+/// Splits `weights` into blocks of [`ROWS`] rows of `input.len()` columns, emits the sums of
+/// [`dot_four_rows`] for each block, then [`dot_i8_prefix`] for the last `rows % ROWS` rows, all
+/// in row order.
 #[cfg(not(target_arch = "arm"))]
 #[inline(always)]
-pub(crate) fn for_each_row_block(
-    weights: &[i8],
-    input: &[i8],
-    emit: &mut impl FnMut(i32),
-    mut four_rows: impl FnMut([&[i8]; ROWS], &[i8]) -> [i32; ROWS],
-) {
+fn for_each_row_block(weights: &[i8], input: &[i8], emit: &mut impl FnMut(i32)) {
     let columns = input.len();
     let Some(block_len) = columns.checked_mul(ROWS).filter(|len| *len > 0) else {
         return;
@@ -78,7 +61,7 @@ pub(crate) fn for_each_row_block(
         ) else {
             return;
         };
-        for sum in four_rows([row_0, row_1, row_2, row_3], input) {
+        for sum in dot_four_rows([row_0, row_1, row_2, row_3], input) {
             emit(sum);
         }
     }
@@ -171,7 +154,7 @@ pub(crate) mod tests {
     fn portable_kernel_matches_wide_sums() {
         random_cases(0x3A7, |weights, input| {
             let mut got = Vec::new();
-            for_each_row_dot_portable(weights, input, &mut |sum| got.push(i64::from(sum)));
+            for_each_row_dot(weights, input, |sum| got.push(i64::from(sum)));
             assert_eq!(
                 got,
                 wide_row_sums(weights, input),

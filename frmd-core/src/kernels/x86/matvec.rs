@@ -1,81 +1,141 @@
-//! AVX2 four-row int8 matrix-vector kernel (see the module docs of `kernels::x86`).
+//! AVX2 int8 fully connected rows, eight output channels per call (see `kernels::x86`).
 //!
 //! Per 16 input columns the input is loaded and sign-extended to 16 halfwords once
-//! (`vpmovsxbw`), and for each of the four rows: one `vpmovsxbw` of 16 weights, one `vpmaddwd`
-//! (16 products summed in pairs into 8 int32 lanes) and one `vpaddd`: 13 instructions per 64
-//! multiply-accumulates. The last `columns % 16` columns use [`dot_i8_prefix`].
+//! (`vpmovsxbw`), and for each of the eight rows: one `vpmovsxbw` of 16 weights, one `vpmaddwd`
+//! (16 products summed in pairs into 8 int32 lanes) and one `vpaddd`: 25 instructions per 128
+//! multiply-accumulates. Three `vphaddd` levels and one 128-bit lane swap reduce the eight
+//! accumulators to one vector of eight row sums, to which the bias is added; the requantizing
+//! variant then runs `x86::requant` on that vector and packs eight int8 outputs, so accumulators
+//! never leave the registers. The last `columns % 16` columns use [`dot_i8_prefix`].
 //!
 //! Bit-exactness: an int8 x int8 product lies in `[-16256, 16384]`, so a `vpmaddwd` pair sum (at
 //! most 32768 in magnitude) is exact in int32; `vpaddd` and `vphaddd` add modulo 2^32. Every row
-//! sum is the wrapping int32 sum of the same products as the portable kernel, and wrapping
-//! addition does not depend on order.
+//! sum is the wrapping int32 sum of the same products as the portable kernel (wrapping addition
+//! does not depend on order), plus the bias with wrapping addition as in `FullyConnected`.
 #![allow(unsafe_code)]
 
-use super::avx2_active;
+use super::requant::{pack_i8, requantize_lanes, RequantBlock};
+use super::Avx2;
 use crate::kernels::dot::dot_i8_prefix;
-use crate::kernels::matvec::{for_each_row_block, for_each_row_dot_portable, ROWS};
 use core::arch::x86_64::{
-    __m128i, __m256i, _mm256_add_epi32, _mm256_castsi256_si128, _mm256_cvtepi8_epi16,
-    _mm256_extracti128_si256, _mm256_hadd_epi32, _mm256_madd_epi16, _mm256_setzero_si256,
-    _mm_add_epi32, _mm_cvtsi128_si32, _mm_extract_epi32, _mm_loadu_si128,
+    __m128i, __m256i, _mm256_add_epi32, _mm256_cvtepi8_epi16, _mm256_hadd_epi32,
+    _mm256_loadu_si256, _mm256_madd_epi16, _mm256_permute2x128_si256, _mm256_setzero_si256,
+    _mm256_storeu_si256, _mm_loadu_si128,
 };
 
-/// The matrix-vector product `emit(dot(row, input))` per row, in row order, with the AVX2
-/// four-row kernel (callers checked [`avx2_active`]; without AVX2 this runs the portable kernel).
-#[inline]
-pub(crate) fn for_each_row_dot_avx2(weights: &[i8], input: &[i8], emit: &mut impl FnMut(i32)) {
-    if !avx2_active() {
-        for_each_row_dot_portable(weights, input, emit);
-        return;
-    }
-    for_each_row_block(weights, input, emit, |rows, input| {
-        // SAFETY: `avx2_active()` returned true, so the CPU supports AVX2 and the OS saves the
-        // YMM registers (see `detect_avx2`).
-        unsafe { dot_four_rows_avx2(rows, input) }
-    });
-}
+/// Output channels (weight rows) per call.
+pub(crate) const BLOCK_ROWS: usize = 8;
 
 /// Columns per `vpmaddwd` step.
 const COLUMNS: usize = 16;
 
-/// `[dot(rows[r], input) for r in 0..4]` (rows as long as `input`), wrapping int32 sums.
+impl Avx2 {
+    /// `bias[r] + dot(row r, input)` (wrapping) for the eight rows stored back to back in `rows`
+    /// (`8 * input.len()` weights). An empty `input` gives `bias`.
+    #[inline]
+    pub(crate) fn accumulate_rows(
+        self,
+        rows: &[i8],
+        input: &[i8],
+        bias: &[i32; BLOCK_ROWS],
+    ) -> [i32; BLOCK_ROWS] {
+        // SAFETY: an `Avx2` token exists only after `avx2_active()` returned true.
+        unsafe { accumulate_rows(rows, input, bias) }
+    }
+
+    /// `requantize_to_i8(bias[r] + dot(row r, input), ...)` for the eight rows of `rows`;
+    /// `requant` must satisfy `FcRequant::validate` (shift range, zero point, clamp order).
+    #[inline]
+    pub(crate) fn requantize_rows(
+        self,
+        rows: &[i8],
+        input: &[i8],
+        bias: &[i32; BLOCK_ROWS],
+        requant: RequantBlock<'_>,
+    ) -> [i8; BLOCK_ROWS] {
+        // SAFETY: an `Avx2` token exists only after `avx2_active()` returned true.
+        unsafe { requantize_rows(rows, input, bias, requant) }
+    }
+}
+
 #[target_feature(enable = "avx2")]
-fn dot_four_rows_avx2(rows: [&[i8]; ROWS], input: &[i8]) -> [i32; ROWS] {
+fn accumulate_rows(rows: &[i8], input: &[i8], bias: &[i32; BLOCK_ROWS]) -> [i32; BLOCK_ROWS] {
+    let sums = _mm256_add_epi32(row_sums(rows, input), load_i32(bias));
+    let mut out = [0_i32; BLOCK_ROWS];
+    // SAFETY: the pointer comes from a `&mut [i32; 8]`: 32 writable bytes; no alignment needed.
+    unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast::<__m256i>(), sums) };
+    out
+}
+
+#[target_feature(enable = "avx2")]
+fn requantize_rows(
+    rows: &[i8],
+    input: &[i8],
+    bias: &[i32; BLOCK_ROWS],
+    requant: RequantBlock<'_>,
+) -> [i8; BLOCK_ROWS] {
+    let acc = _mm256_add_epi32(row_sums(rows, input), load_i32(bias));
+    pack_i8(requantize_lanes(acc, requant))
+}
+
+/// `[dot(row r, input) for r in 0..8]` as one vector (wrapping int32 sums).
+#[inline]
+#[target_feature(enable = "avx2")]
+fn row_sums(rows: &[i8], input: &[i8]) -> __m256i {
+    if input.is_empty() {
+        return _mm256_setzero_si256();
+    }
+    // Plain `next()` calls rather than `array::from_fn`: closures do not inherit the target
+    // features, and LLVM left them as out-of-line calls.
+    let mut split = rows.chunks_exact(input.len());
+    let r0 = split.next().unwrap_or(&[]);
+    let r1 = split.next().unwrap_or(&[]);
+    let r2 = split.next().unwrap_or(&[]);
+    let r3 = split.next().unwrap_or(&[]);
+    let r4 = split.next().unwrap_or(&[]);
+    let r5 = split.next().unwrap_or(&[]);
+    let r6 = split.next().unwrap_or(&[]);
+    let r7 = split.next().unwrap_or(&[]);
     let (x_blocks, x_tail) = input.as_chunks::<COLUMNS>();
-    let [(w0, t0), (w1, t1), (w2, t2), (w3, t3)] = rows.map(|row| row.as_chunks::<COLUMNS>());
-    let mut acc = [_mm256_setzero_si256(); ROWS];
-    let blocks = x_blocks.iter().zip(w0).zip(w1).zip(w2).zip(w3);
-    for ((((x, w0), w1), w2), w3) in blocks {
+    let mut acc = [_mm256_setzero_si256(); BLOCK_ROWS];
+    let blocks = x_blocks
+        .iter()
+        .zip(r0.as_chunks::<COLUMNS>().0)
+        .zip(r1.as_chunks::<COLUMNS>().0)
+        .zip(r2.as_chunks::<COLUMNS>().0)
+        .zip(r3.as_chunks::<COLUMNS>().0)
+        .zip(r4.as_chunks::<COLUMNS>().0)
+        .zip(r5.as_chunks::<COLUMNS>().0)
+        .zip(r6.as_chunks::<COLUMNS>().0)
+        .zip(r7.as_chunks::<COLUMNS>().0);
+    for ((((((((x, w0), w1), w2), w3), w4), w5), w6), w7) in blocks {
         let x = widen(x);
-        let [a0, a1, a2, a3] = &mut acc;
+        let [a0, a1, a2, a3, a4, a5, a6, a7] = &mut acc;
         *a0 = _mm256_add_epi32(*a0, _mm256_madd_epi16(widen(w0), x));
         *a1 = _mm256_add_epi32(*a1, _mm256_madd_epi16(widen(w1), x));
         *a2 = _mm256_add_epi32(*a2, _mm256_madd_epi16(widen(w2), x));
         *a3 = _mm256_add_epi32(*a3, _mm256_madd_epi16(widen(w3), x));
+        *a4 = _mm256_add_epi32(*a4, _mm256_madd_epi16(widen(w4), x));
+        *a5 = _mm256_add_epi32(*a5, _mm256_madd_epi16(widen(w5), x));
+        *a6 = _mm256_add_epi32(*a6, _mm256_madd_epi16(widen(w6), x));
+        *a7 = _mm256_add_epi32(*a7, _mm256_madd_epi16(widen(w7), x));
     }
-    let [a0, a1, a2, a3] = acc;
-    // Lanes of `quad`: per 128-bit half, [sum of a0's four lanes, a1's, a2's, a3's].
-    let quad = _mm256_hadd_epi32(_mm256_hadd_epi32(a0, a1), _mm256_hadd_epi32(a2, a3));
-    let sums = _mm_add_epi32(
-        _mm256_castsi256_si128(quad),
-        _mm256_extracti128_si256::<1>(quad),
-    );
-    let body = [
-        _mm_cvtsi128_si32(sums),
-        _mm_extract_epi32::<1>(sums),
-        _mm_extract_epi32::<2>(sums),
-        _mm_extract_epi32::<3>(sums),
-    ];
-    let mut out = [0_i32; ROWS];
-    for ((total, body), tail) in out.iter_mut().zip(body).zip([t0, t1, t2, t3]) {
-        let tail_sum = if x_tail.is_empty() {
-            0
-        } else {
-            dot_i8_prefix(tail, x_tail)
-        };
-        *total = body.wrapping_add(tail_sum);
+    let [a0, a1, a2, a3, a4, a5, a6, a7] = acc;
+    // Per 128-bit half: [row 0 .. row 3 partial sums] and [row 4 .. row 7 partial sums].
+    let first = _mm256_hadd_epi32(_mm256_hadd_epi32(a0, a1), _mm256_hadd_epi32(a2, a3));
+    let second = _mm256_hadd_epi32(_mm256_hadd_epi32(a4, a5), _mm256_hadd_epi32(a6, a7));
+    let low_halves = _mm256_permute2x128_si256::<0x20>(first, second);
+    let high_halves = _mm256_permute2x128_si256::<0x31>(first, second);
+    let sums = _mm256_add_epi32(low_halves, high_halves);
+    if x_tail.is_empty() {
+        return sums;
     }
-    out
+    let column_start = input.len() - x_tail.len();
+    let mut tails = [0_i32; BLOCK_ROWS];
+    for (tail, row) in tails.iter_mut().zip([r0, r1, r2, r3, r4, r5, r6, r7]) {
+        *tail = dot_i8_prefix(row.get(column_start..).unwrap_or(&[]), x_tail);
+    }
+    _mm256_add_epi32(sums, load_i32(&tails))
 }
 
 /// Loads 16 int8 values and sign-extends them to 16 int16 lanes.
@@ -88,55 +148,119 @@ fn widen(block: &[i8; COLUMNS]) -> __m256i {
     _mm256_cvtepi8_epi16(bytes)
 }
 
+/// Loads eight int32 lanes.
+#[inline]
+#[target_feature(enable = "avx2")]
+pub(super) fn load_i32(values: &[i32; BLOCK_ROWS]) -> __m256i {
+    // SAFETY: the pointer comes from a `&[i32; 8]`: 32 initialized, readable bytes; `loadu` has no
+    // alignment requirement.
+    unsafe { _mm256_loadu_si256(values.as_ptr().cast::<__m256i>()) }
+}
+
 #[cfg(test)]
 mod tests {
     extern crate std;
     use super::*;
     use crate::kernels::matvec::tests::{random_cases, wide_row_sums};
-    use crate::kernels::x86::avx2_supported;
+    use crate::quant::requantize_to_i8;
+    use crate::rng::SplitMix64;
     use std::vec::Vec;
 
+    /// Row sums of `weights` through the eight-row kernel (zero bias), the last `rows % 8` rows
+    /// padded with zero rows.
+    fn kernel_row_sums(avx2: Avx2, weights: &[i8], input: &[i8]) -> Vec<i32> {
+        let rows = weights.len() / input.len();
+        let mut padded = weights.to_vec();
+        padded.resize(rows.div_ceil(BLOCK_ROWS) * BLOCK_ROWS * input.len(), 0);
+        let mut sums = Vec::new();
+        for block in padded.chunks_exact(BLOCK_ROWS * input.len()) {
+            sums.extend(avx2.accumulate_rows(block, input, &[0; BLOCK_ROWS]));
+        }
+        sums.truncate(rows);
+        sums
+    }
+
     #[test]
-    fn avx2_kernel_matches_portable_and_wide_sums() {
-        if !avx2_supported() {
+    fn eight_row_sums_match_wide_sums() {
+        let Some(avx2) = Avx2::get() else {
             std::eprintln!("no AVX2 on this CPU: only the portable kernel is exercised");
             return;
-        }
+        };
         random_cases(0xA7, |weights, input| {
-            let (mut avx2, mut portable) = (Vec::new(), Vec::new());
-            for_each_row_dot_avx2(weights, input, &mut |sum| avx2.push(sum));
-            for_each_row_dot_portable(weights, input, &mut |sum| portable.push(sum));
-            assert_eq!(avx2, portable, "columns {}", input.len());
-            let wide: Vec<i64> = avx2.iter().map(|s| i64::from(*s)).collect();
-            assert_eq!(wide, wide_row_sums(weights, input));
+            let got: Vec<i64> = kernel_row_sums(avx2, weights, input)
+                .into_iter()
+                .map(i64::from)
+                .collect();
+            assert_eq!(
+                got,
+                wide_row_sums(weights, input),
+                "columns {}",
+                input.len()
+            );
         });
     }
 
     #[test]
-    fn avx2_kernel_wraps_like_the_portable_one() {
-        if !avx2_supported() {
+    fn sums_wrap_like_the_portable_kernel() {
+        let Some(avx2) = Avx2::get() else {
             return;
-        }
-        // 65 537 * 2 products of 16384 exceed i32::MAX: both kernels wrap identically.
+        };
+        // 131 074 products of 16384 exceed i32::MAX: the sums wrap like `dot_i8`.
         static COLUMN: [i8; 131_074] = [-128; 131_074];
-        let weights: Vec<i8> = COLUMN
-            .iter()
-            .chain(&COLUMN)
-            .chain(&COLUMN)
-            .chain(&COLUMN)
-            .copied()
-            .collect();
-        let (mut avx2, mut portable) = (Vec::new(), Vec::new());
-        for_each_row_dot_avx2(&weights, &COLUMN, &mut |sum| avx2.push(sum));
-        for_each_row_dot_portable(&weights, &COLUMN, &mut |sum| portable.push(sum));
+        let weights: Vec<i8> = (0..BLOCK_ROWS).flat_map(|_| COLUMN).collect();
         let wide = (131_074_i64 * 16384) as i32;
-        assert_eq!(avx2, [wide; 4]);
-        assert_eq!(portable, avx2);
+        let got = avx2.accumulate_rows(&weights, &COLUMN, &[1; BLOCK_ROWS]);
+        assert_eq!(got, [wide.wrapping_add(1); BLOCK_ROWS]);
+        assert_eq!(crate::kernels::dot_i8(&COLUMN, &COLUMN), Ok(wide));
     }
 
     #[test]
-    fn switching_reports_the_state() {
-        // Only reads the state: other tests of this process may run the kernels concurrently.
-        assert_eq!(avx2_active(), avx2_supported());
+    fn requantized_rows_match_scalar_requantization() {
+        let Some(avx2) = Avx2::get() else {
+            return;
+        };
+        let mut rng = SplitMix64::new(0xB10C);
+        for case in 0..2_000 {
+            let columns = 1 + (rng.next_u64() % 70) as usize;
+            let weights: Vec<i8> = (0..BLOCK_ROWS * columns)
+                .map(|_| rng.next_u64() as i8)
+                .collect();
+            let input: Vec<i8> = (0..columns).map(|_| rng.next_u64() as i8).collect();
+            let bias: [i32; BLOCK_ROWS] = core::array::from_fn(|_| (rng.next_u64() as i32) >> 12);
+            let scales: [(i32, i32); BLOCK_ROWS] = core::array::from_fn(|_| {
+                let u = (rng.next_u64() >> 11) as f64 / (1_u64 << 53) as f64;
+                crate::quant::quantize_multiplier(1e-4 * 1e3_f64.powf(u)).unwrap_or((1 << 30, 0))
+            });
+            let multipliers = scales.map(|(m, _)| m);
+            let shifts = scales.map(|(_, s)| s);
+            let zero_point = (rng.next_u64() % 256) as i32 - 128;
+            let bounds = if case % 2 == 0 {
+                (zero_point as i8, 127)
+            } else {
+                (-128, 127)
+            };
+            let requant = RequantBlock {
+                multipliers: &multipliers,
+                shifts: &shifts,
+                zero_point,
+                bounds,
+            };
+            let got = avx2.requantize_rows(&weights, &input, &bias, requant);
+            let acc = avx2.accumulate_rows(&weights, &input, &bias);
+            let want: [i8; BLOCK_ROWS] = core::array::from_fn(|r| {
+                let dot = crate::kernels::dot_i8(&weights[r * columns..(r + 1) * columns], &input)
+                    .unwrap();
+                assert_eq!(acc[r], bias[r].wrapping_add(dot));
+                requantize_to_i8(
+                    acc[r],
+                    multipliers[r],
+                    shifts[r],
+                    zero_point,
+                    bounds.0,
+                    bounds.1,
+                )
+            });
+            assert_eq!(got, want, "case {case}");
+        }
     }
 }

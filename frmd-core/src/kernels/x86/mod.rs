@@ -2,7 +2,8 @@
 //! (`kernels::matvec`, SSE2 through LLVM, and `quant::requantize_to_i8`) are the fallback and the
 //! definition: the tests compare both on random and extreme inputs.
 //!
-//! - [`matvec`]: four-row matrix-vector product with `vpmaddwd`;
+//! - [`matvec`]: eight rows of a fully connected layer at once (`vpmaddwd`), with the bias added
+//!   and, for hidden layers, requantized in registers;
 //! - [`requant`]: requantization of eight accumulators at once.
 //!
 //! Detection is `no_std`: `CPUID` leaf 1 (AVX and OSXSAVE bits), `XGETBV` (the OS saves the SSE
@@ -14,10 +15,11 @@
 //! `kernels::dsp`). There are three kinds of `unsafe` expression:
 //! - `_xgetbv(0)` here: requires the `XGETBV` instruction, which exists when `CPUID.1:ECX.OSXSAVE`
 //!   (bit 27) is set; it is called only after checking that bit.
-//! - calls of `#[target_feature(enable = "avx2")]` functions from the dispatchers
-//!   `for_each_row_dot_avx2` and `requantize_block_avx2`: sound when the CPU supports AVX2 and the
-//!   OS enabled the AVX state, which both check through [`avx2_active`] right before the call
-//!   (the cached state only becomes "active" through [`detect_avx2`]).
+//! - calls of `#[target_feature(enable = "avx2")]` functions from the methods of the [`Avx2`]
+//!   token: sound when the CPU supports AVX2 and the OS enabled the AVX state. A token is made
+//!   only by [`Avx2::get`] after [`avx2_active`] returned true, and that state only becomes
+//!   "active" through [`detect_avx2`]. (Disabling AVX2 later with [`set_avx2_enabled`] leaves
+//!   existing tokens valid: the CPU still has AVX2.)
 //! - unaligned loads and stores (`_mm_loadu_si128`, `_mm256_loadu_si256`, `_mm256_storeu_si256`)
 //!   through pointers made from references to fixed-size arrays of exactly the accessed size
 //!   (`&[i8; 16]`, `&[i32; 8]`, `&mut [i32; 8]`): in bounds, initialized, no alignment needed.
@@ -28,8 +30,8 @@
 mod matvec;
 mod requant;
 
-pub(crate) use matvec::for_each_row_dot_avx2;
-pub(crate) use requant::{requantize_block_avx2, CHANNELS as REQUANT_CHANNELS};
+pub(crate) use matvec::BLOCK_ROWS;
+pub(crate) use requant::RequantBlock;
 
 use core::arch::x86_64::{__cpuid, __cpuid_count, _xgetbv};
 use core::sync::atomic::{AtomicU8, Ordering};
@@ -42,6 +44,21 @@ const ACTIVE: u8 = 1;
 const INACTIVE: u8 = 2;
 
 static AVX2_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
+
+/// Proof that the AVX2 kernels may run: [`Avx2::get`] hands one out only while [`avx2_active`]
+/// is true. The kernels are methods of this token (`matvec`, `requant`).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Avx2 {
+    _checked: (),
+}
+
+impl Avx2 {
+    /// The token, if the CPU and OS support AVX2 and the path is enabled.
+    #[inline]
+    pub(crate) fn get() -> Option<Self> {
+        avx2_active().then_some(Self { _checked: () })
+    }
+}
 
 /// Whether the CPU and the OS support AVX2 (probed once with `CPUID`/`XGETBV`).
 pub fn avx2_supported() -> bool {

@@ -1,6 +1,7 @@
 //! AVX2 requantization of eight int32 accumulators to int8: the same integer steps as
 //! [`crate::quant::requantize_to_i8`] (see `quant::fixed_point` for the definitions), one lane
-//! per output channel, about 40 instructions per eight outputs instead of about 70 per output.
+//! per output channel: about 40 instructions per eight outputs instead of about 70 per output.
+//! `x86::matvec` applies it to the accumulators of eight rows while they are still in registers.
 //!
 //! Per lane, with `left = max(shift, 0)` and `right = max(-shift, 0)`:
 //! 1. `x = sat32(acc << left)`: `vpsllvd`, with the lanes where `acc` exceeds `i32::MAX >> left`
@@ -20,57 +21,61 @@
 //! `SHIFT_MIN..=SHIFT_MAX` (so `left <= 30`, `right <= 31`), zero point in `[-128, 127]`.
 #![allow(unsafe_code)]
 
-use super::avx2_active;
-use crate::quant::requantize_to_i8;
+use super::matvec::{load_i32, BLOCK_ROWS};
+#[cfg(test)]
+use super::Avx2;
 use core::arch::x86_64::{
     __m256i, _mm256_add_epi32, _mm256_add_epi64, _mm256_and_si256, _mm256_blend_epi32,
-    _mm256_blendv_epi8, _mm256_cmpeq_epi32, _mm256_cmpgt_epi32, _mm256_loadu_si256,
-    _mm256_max_epi32, _mm256_min_epi32, _mm256_mul_epi32, _mm256_set1_epi32, _mm256_set1_epi64x,
+    _mm256_blendv_epi8, _mm256_castsi256_si128, _mm256_cmpeq_epi32, _mm256_cmpgt_epi32,
+    _mm256_extracti128_si256, _mm256_max_epi32, _mm256_min_epi32, _mm256_mul_epi32,
+    _mm256_packs_epi16, _mm256_packs_epi32, _mm256_set1_epi32, _mm256_set1_epi64x,
     _mm256_setzero_si256, _mm256_slli_epi64, _mm256_sllv_epi32, _mm256_srai_epi32,
-    _mm256_srav_epi32, _mm256_srli_epi64, _mm256_storeu_si256, _mm256_sub_epi32,
+    _mm256_srav_epi32, _mm256_srli_epi64, _mm256_sub_epi32, _mm_cvtsi128_si32,
 };
 
-/// Output channels per call.
-pub(crate) const CHANNELS: usize = 8;
+/// Requantization parameters of eight output channels (as in `kernels::FcRequant`, which
+/// validates them: shifts in `SHIFT_MIN..=SHIFT_MAX`, zero point in `[-128, 127]`).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RequantBlock<'a> {
+    /// Q31 multiplier mantissas.
+    pub multipliers: &'a [i32; BLOCK_ROWS],
+    /// Shifts, positive to the left.
+    pub shifts: &'a [i32; BLOCK_ROWS],
+    /// Output zero point.
+    pub zero_point: i32,
+    /// Activation clamp `(min, max)`.
+    pub bounds: (i8, i8),
+}
 
-/// `out[i] = requantize_to_i8(acc[i], multipliers[i], shifts[i], zero_point, min, max)` for the
-/// eight lanes, with AVX2 when it is active (the scalar function otherwise). Arguments must satisfy
-/// `FcRequant::validate` (shifts in range, zero point in `[-128, 127]`, `min <= max`).
-#[inline]
-pub(crate) fn requantize_block_avx2(
-    acc: &[i32; CHANNELS],
-    multipliers: &[i32; CHANNELS],
-    shifts: &[i32; CHANNELS],
-    zero_point: i32,
-    (min, max): (i8, i8),
-    out: &mut [i8; CHANNELS],
-) {
-    if !avx2_active() {
-        let lanes = acc.iter().zip(multipliers).zip(shifts).zip(out.iter_mut());
-        for (((acc, multiplier), shift), out) in lanes {
-            *out = requantize_to_i8(*acc, *multiplier, *shift, zero_point, min, max);
-        }
-        return;
-    }
-    // SAFETY: `avx2_active()` returned true: the CPU supports AVX2 and the OS saves the YMM state.
-    let lanes = unsafe { requantize_lanes(acc, multipliers, shifts, zero_point, (min, max)) };
-    for (out, lane) in out.iter_mut().zip(lanes) {
-        // Every lane was clamped to `[min, max]`, an int8 range: the conversion is exact.
-        *out = lane as i8;
+#[cfg(test)]
+impl Avx2 {
+    /// (Tests) `requantize_to_i8(acc[i], multipliers[i], shifts[i], zero_point, min, max)` for eight
+    /// lanes at once.
+    #[inline]
+    pub(crate) fn requantize_accumulators(
+        self,
+        acc: &[i32; BLOCK_ROWS],
+        requant: RequantBlock<'_>,
+    ) -> [i8; BLOCK_ROWS] {
+        // SAFETY: an `Avx2` token exists only after `avx2_active()` returned true.
+        unsafe { requantize_loaded(acc, requant) }
     }
 }
 
+#[cfg(test)]
 #[target_feature(enable = "avx2")]
-fn requantize_lanes(
-    acc: &[i32; CHANNELS],
-    multipliers: &[i32; CHANNELS],
-    shifts: &[i32; CHANNELS],
-    zero_point: i32,
-    (min, max): (i8, i8),
-) -> [i32; CHANNELS] {
-    let acc = load(acc);
-    let multiplier = load(multipliers);
-    let shift = load(shifts);
+fn requantize_loaded(acc: &[i32; BLOCK_ROWS], requant: RequantBlock<'_>) -> [i8; BLOCK_ROWS] {
+    pack_i8(requantize_lanes(load_i32(acc), requant))
+}
+
+/// The eight requantized lanes (each in `[min, max]`) of the accumulators `acc`.
+#[inline]
+#[target_feature(enable = "avx2")]
+pub(super) fn requantize_lanes(acc: __m256i, requant: RequantBlock<'_>) -> __m256i {
+    let multiplier = load_i32(requant.multipliers);
+    let shift = load_i32(requant.shifts);
+    let (min, max) = requant.bounds;
+    let zero_point = requant.zero_point;
     let zero = _mm256_setzero_si256();
     let left = _mm256_max_epi32(shift, zero);
     let right = _mm256_max_epi32(_mm256_sub_epi32(zero, shift), zero);
@@ -121,30 +126,31 @@ fn requantize_lanes(
         _mm256_set1_epi32(256),
     );
     let with_offset = _mm256_add_epi32(bounded, _mm256_set1_epi32(zero_point));
-    let clamped = _mm256_min_epi32(
+    _mm256_min_epi32(
         _mm256_max_epi32(with_offset, _mm256_set1_epi32(i32::from(min))),
         _mm256_set1_epi32(i32::from(max)),
-    );
-    let mut lanes = [0_i32; CHANNELS];
-    // SAFETY: the pointer comes from a `&mut [i32; 8]`: 32 writable bytes; `storeu` has no
-    // alignment requirement.
-    unsafe { _mm256_storeu_si256(lanes.as_mut_ptr().cast::<__m256i>(), clamped) };
-    lanes
+    )
 }
 
-/// Loads eight int32 lanes.
+/// Packs eight lanes holding int8 values into bytes (lane order kept).
 #[inline]
 #[target_feature(enable = "avx2")]
-fn load(values: &[i32; CHANNELS]) -> __m256i {
-    // SAFETY: the pointer comes from a `&[i32; 8]`: 32 initialized, readable bytes; `loadu` has no
-    // alignment requirement.
-    unsafe { _mm256_loadu_si256(values.as_ptr().cast::<__m256i>()) }
+pub(super) fn pack_i8(lanes: __m256i) -> [i8; BLOCK_ROWS] {
+    // The lanes are int8 values already, so the saturating packs are exact; after both packs each
+    // 128-bit half starts with its four lanes as bytes.
+    let words = _mm256_packs_epi32(lanes, lanes);
+    let bytes = _mm256_packs_epi16(words, words);
+    let low = _mm_cvtsi128_si32(_mm256_castsi256_si128(bytes)).to_le_bytes();
+    let high = _mm_cvtsi128_si32(_mm256_extracti128_si256::<1>(bytes)).to_le_bytes();
+    let [b0, b1, b2, b3] = low.map(|b| b as i8);
+    let [b4, b5, b6, b7] = high.map(|b| b as i8);
+    [b0, b1, b2, b3, b4, b5, b6, b7]
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kernels::x86::avx2_supported;
+    use crate::quant::requantize_to_i8;
     use crate::quant::{SHIFT_MAX, SHIFT_MIN};
     use crate::rng::SplitMix64;
 
@@ -169,9 +175,9 @@ mod tests {
 
     #[test]
     fn avx2_requantization_matches_scalar() {
-        if !avx2_supported() {
+        let Some(avx2) = Avx2::get() else {
             return;
-        }
+        };
         let mut rng = SplitMix64::new(0x5EED);
         let span = (SHIFT_MAX - SHIFT_MIN + 1) as u64;
         let mut unclamped = 0_usize;
@@ -200,8 +206,13 @@ mod tests {
                 let (a, b) = (rng.next_u64() as i8, rng.next_u64() as i8);
                 (a.min(b), a.max(b))
             };
-            let mut got = [0_i8; 8];
-            requantize_block_avx2(&acc, &multipliers, &shifts, zero_point, bounds, &mut got);
+            let requant = RequantBlock {
+                multipliers: &multipliers,
+                shifts: &shifts,
+                zero_point,
+                bounds,
+            };
+            let got = avx2.requantize_accumulators(&acc, requant);
             let want = scalar(&acc, &multipliers, &shifts, zero_point, bounds);
             assert_eq!(
                 got, want,
@@ -218,9 +229,9 @@ mod tests {
 
     #[test]
     fn avx2_requantization_of_typical_layers_matches_scalar() {
-        if !avx2_supported() {
+        let Some(avx2) = Avx2::get() else {
             return;
-        }
+        };
         // Multipliers from real-valued scales as the exporter makes them; accumulators of
         // 256-wide int8 layers; ties forced by small accumulators and large right shifts.
         let mut rng = SplitMix64::new(0xF00D);
@@ -234,15 +245,13 @@ mod tests {
             let multipliers = scale.map(|(m, _)| m);
             let shifts = scale.map(|(_, s)| s);
             let zero_point = (rng.next_u64() % 256) as i32 - 128;
-            let mut got = [0_i8; 8];
-            requantize_block_avx2(
-                &acc,
-                &multipliers,
-                &shifts,
+            let requant = RequantBlock {
+                multipliers: &multipliers,
+                shifts: &shifts,
                 zero_point,
-                (-128, 127),
-                &mut got,
-            );
+                bounds: (-128, 127),
+            };
+            let got = avx2.requantize_accumulators(&acc, requant);
             assert_eq!(
                 got,
                 scalar(&acc, &multipliers, &shifts, zero_point, (-128, 127))
