@@ -1,6 +1,6 @@
 //! One-step chunk latency, all in one run: frmd-core int8 policy vs the candle float student
 //! (same MLP-256 model, random weights), plus frmd-core's f32 twin. Batch 1, RAYON_NUM_THREADS
-//! should be 1.
+//! should be 1. On x86-64 with AVX2 also the int8 policy with the portable kernels.
 use criterion::{criterion_group, criterion_main, Criterion};
 use frmd_host::bench::{reach_input, reach_student};
 use frmd_host::eval::policy::{Policy, PolicyInput};
@@ -23,6 +23,14 @@ fn chunk(c: &mut Criterion) {
         for (name, policy) in policies {
             policy.reset(7);
             group.bench_function(name, |b| b.iter(|| policy.act(&input).expect("act")));
+        }
+        // The int8 policy with frmd-core's portable kernels (what CPUs without AVX2 run).
+        #[cfg(target_arch = "x86_64")]
+        if let (Ok(core), true) = (&mut p.core, frmd_core::kernels::x86::avx2_active()) {
+            frmd_core::kernels::x86::set_avx2_enabled(false);
+            core.int8.reset(7);
+            group.bench_function("core-int8-portable", |b| b.iter(|| core.int8.act(&input).expect("act")));
+            frmd_core::kernels::x86::set_avx2_enabled(true);
         }
         group.finish();
     }

@@ -251,11 +251,12 @@ impl FcRequant<'_> {
         if self.activation_min > self.activation_max {
             return Err(KernelError::ActivationRange);
         }
-        let bad_multiplier = self.multipliers.iter().any(|m| *m < 0);
+        // Folds without early exit: LLVM vectorizes them (this runs on every forward call).
+        let bad_multiplier = self.multipliers.iter().fold(false, |bad, m| bad | (*m < 0));
         let bad_shift = self
             .shifts
             .iter()
-            .any(|s| !(SHIFT_MIN..=SHIFT_MAX).contains(s));
+            .fold(false, |bad, s| bad | !(SHIFT_MIN..=SHIFT_MAX).contains(s));
         if bad_multiplier || bad_shift {
             return Err(KernelError::Multiplier);
         }

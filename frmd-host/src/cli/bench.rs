@@ -1,7 +1,8 @@
 //! `frmd bench` (alias `frmd latency`): wall time per action chunk of every policy kind side by
 //! side, in one process, batch 1, after warm-up, median and p99 over >= 200 calls (DESIGN.md
 //! section 6), with the ratio of each row to the first row: the frmd-core int8 one-step policy
-//! (the candle one-step student if the student cannot be exported).
+//! (the candle one-step student if the student cannot be exported). On x86-64 CPUs with AVX2 the
+//! int8 policy is timed a second time with frmd-core's portable kernels (`... portable` row).
 //!
 //! By default it times the checkpoints `frmd quickstart` wrote (`runs/quickstart/{student,
 //! teacher,dp}`): student 1 step, teacher 10 Heun steps, DP 100 (DDPM) and 10 (DDIM) steps, all
@@ -196,8 +197,12 @@ pub fn bench_rows(args: &BenchArgs) -> anyhow::Result<(Vec<BenchRow>, Option<Str
     let (obs_dim, action_dim, history) = first.input_sizes();
     let fixed = FixedInput::new(obs_dim, action_dim, history);
     for (label, mut policy) in core {
+        let backbone = backbone_label(&first.config().backbone);
         let (median_us, p99_us) = time_policy(policy.as_mut(), &fixed.input(), args.warmup, args.calls)?;
-        rows.push(BenchRow { label, backbone: backbone_label(&first.config().backbone), median_us, p99_us, calls: args.calls });
+        rows.push(BenchRow { label: label.clone(), backbone: backbone.clone(), median_us, p99_us, calls: args.calls });
+        if let Some((median_us, p99_us)) = time_portable_kernels(policy.as_mut(), &fixed.input(), args)? {
+            rows.push(BenchRow { label: format!("{label} portable"), backbone, median_us, p99_us, calls: args.calls });
+        }
     }
     for mut policy in floats {
         let (o, a, h) = policy.input_sizes();
@@ -206,6 +211,25 @@ pub fn bench_rows(args: &BenchArgs) -> anyhow::Result<(Vec<BenchRow>, Option<Str
         rows.push(BenchRow { label: format!("candle {}", policy.name()), backbone: backbone_label(&policy.config().backbone), median_us, p99_us, calls: args.calls });
     }
     Ok((rows, note))
+}
+
+/// On x86-64 CPUs where frmd-core's int8 kernels use AVX2: the same policy timed again with the
+/// portable (SSE2) kernels, which give identical outputs (what a CPU without AVX2 runs).
+#[cfg(target_arch = "x86_64")]
+fn time_portable_kernels(policy: &mut dyn Policy, input: &PolicyInput<'_>, args: &BenchArgs) -> anyhow::Result<Option<(f64, f64)>> {
+    use frmd_core::kernels::x86;
+    if !policy.name().contains("int8") || !x86::avx2_active() {
+        return Ok(None);
+    }
+    x86::set_avx2_enabled(false);
+    let timed = time_policy(policy, input, args.warmup, args.calls);
+    x86::set_avx2_enabled(true);
+    timed.map(Some)
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+fn time_portable_kernels(_: &mut dyn Policy, _: &PolicyInput<'_>, _: &BenchArgs) -> anyhow::Result<Option<(f64, f64)>> {
+    Ok(None)
 }
 
 /// Prints the rows with ratios to the first row.

@@ -3,10 +3,11 @@
 //! Per 16 input columns the input is loaded and sign-extended to 16 halfwords once
 //! (`vpmovsxbw`), and for each of the eight rows: one `vpmovsxbw` of 16 weights, one `vpmaddwd`
 //! (16 products summed in pairs into 8 int32 lanes) and one `vpaddd`: 25 instructions per 128
-//! multiply-accumulates. Three `vphaddd` levels and one 128-bit lane swap reduce the eight
+//! multiply-accumulates (then one 8-column step with 128-bit registers if at least 8 columns are
+//! left). Three `vphaddd` levels and one 128-bit lane swap reduce the eight
 //! accumulators to one vector of eight row sums, to which the bias is added; the requantizing
 //! variant then runs `x86::requant` on that vector and packs eight int8 outputs, so accumulators
-//! never leave the registers. The last `columns % 16` columns use [`dot_i8_prefix`].
+//! never leave the registers. The last `columns % 8` columns use [`dot_i8_prefix`].
 //!
 //! Bit-exactness: an int8 x int8 product lies in `[-16256, 16384]`, so a `vpmaddwd` pair sum (at
 //! most 32768 in magnitude) is exact in int32; `vpaddd` and `vphaddd` add modulo 2^32. Every row
@@ -20,7 +21,8 @@ use crate::kernels::dot::dot_i8_prefix;
 use core::arch::x86_64::{
     __m128i, __m256i, _mm256_add_epi32, _mm256_cvtepi8_epi16, _mm256_hadd_epi32,
     _mm256_loadu_si256, _mm256_madd_epi16, _mm256_permute2x128_si256, _mm256_setzero_si256,
-    _mm256_storeu_si256, _mm_loadu_si128,
+    _mm256_storeu_si256, _mm256_zextsi128_si256, _mm_cvtepi8_epi16, _mm_loadl_epi64,
+    _mm_loadu_si128, _mm_madd_epi16,
 };
 
 /// Output channels (weight rows) per call.
@@ -28,6 +30,9 @@ pub(crate) const BLOCK_ROWS: usize = 8;
 
 /// Columns per `vpmaddwd` step.
 const COLUMNS: usize = 16;
+
+/// Columns of the 128-bit step after the 16-column blocks.
+const HALF: usize = 8;
 
 impl Avx2 {
     /// `bias[r] + dot(row r, input)` (wrapping) for the eight rows stored back to back in `rows`
@@ -120,6 +125,22 @@ fn row_sums(rows: &[i8], input: &[i8]) -> __m256i {
         *a6 = _mm256_add_epi32(*a6, _mm256_madd_epi16(widen(w6), x));
         *a7 = _mm256_add_epi32(*a7, _mm256_madd_epi16(widen(w7), x));
     }
+    let rows = [r0, r1, r2, r3, r4, r5, r6, r7];
+    // Eight more columns with 128-bit registers when at least eight are left.
+    let mut column = input.len() - x_tail.len();
+    if let Some((x_half, _)) = x_tail.split_first_chunk::<HALF>() {
+        let x = widen_half(x_half);
+        for (a, row) in acc.iter_mut().zip(rows) {
+            let weights = row
+                .get(column..)
+                .and_then(|w| w.split_first_chunk::<HALF>());
+            if let Some((w, _)) = weights {
+                let products = _mm_madd_epi16(widen_half(w), x);
+                *a = _mm256_add_epi32(*a, _mm256_zextsi128_si256(products));
+            }
+        }
+        column += HALF;
+    }
     let [a0, a1, a2, a3, a4, a5, a6, a7] = acc;
     // Per 128-bit half: [row 0 .. row 3 partial sums] and [row 4 .. row 7 partial sums].
     let first = _mm256_hadd_epi32(_mm256_hadd_epi32(a0, a1), _mm256_hadd_epi32(a2, a3));
@@ -127,15 +148,24 @@ fn row_sums(rows: &[i8], input: &[i8]) -> __m256i {
     let low_halves = _mm256_permute2x128_si256::<0x20>(first, second);
     let high_halves = _mm256_permute2x128_si256::<0x31>(first, second);
     let sums = _mm256_add_epi32(low_halves, high_halves);
-    if x_tail.is_empty() {
+    let Some(x_rest) = input.get(column..).filter(|rest| !rest.is_empty()) else {
         return sums;
-    }
-    let column_start = input.len() - x_tail.len();
+    };
     let mut tails = [0_i32; BLOCK_ROWS];
-    for (tail, row) in tails.iter_mut().zip([r0, r1, r2, r3, r4, r5, r6, r7]) {
-        *tail = dot_i8_prefix(row.get(column_start..).unwrap_or(&[]), x_tail);
+    for (tail, row) in tails.iter_mut().zip(rows) {
+        *tail = dot_i8_prefix(row.get(column..).unwrap_or(&[]), x_rest);
     }
     _mm256_add_epi32(sums, load_i32(&tails))
+}
+
+/// Loads 8 int8 values and sign-extends them to 8 int16 lanes.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn widen_half(block: &[i8; HALF]) -> __m128i {
+    // SAFETY: the pointer comes from a `&[i8; 8]`: `loadl` reads exactly 8 initialized bytes and
+    // has no alignment requirement.
+    let bytes = unsafe { _mm_loadl_epi64(block.as_ptr().cast::<__m128i>()) };
+    _mm_cvtepi8_epi16(bytes)
 }
 
 /// Loads 16 int8 values and sign-extends them to 16 int16 lanes.
