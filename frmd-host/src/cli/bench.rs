@@ -2,7 +2,8 @@
 //! side, in one process, batch 1, after warm-up, median and p99 over >= 200 calls (DESIGN.md
 //! section 6), with the ratio of each row to the first row: the frmd-core int8 one-step policy
 //! (the candle one-step student if the student cannot be exported). On x86-64 CPUs with AVX2 the
-//! int8 policy is timed a second time with frmd-core's portable kernels (`... portable` row).
+//! int8 policy is timed again with frmd-core's lower kernel levels (`... avx2` without AVX-VNNI,
+//! `... portable`).
 //!
 //! By default it times the checkpoints `frmd quickstart` wrote (`runs/quickstart/{student,
 //! teacher,dp}`): student 1 step, teacher 10 Heun steps, DP 100 (DDPM) and 10 (DDIM) steps, all
@@ -200,8 +201,8 @@ pub fn bench_rows(args: &BenchArgs) -> anyhow::Result<(Vec<BenchRow>, Option<Str
         let backbone = backbone_label(&first.config().backbone);
         let (median_us, p99_us) = time_policy(policy.as_mut(), &fixed.input(), args.warmup, args.calls)?;
         rows.push(BenchRow { label: label.clone(), backbone: backbone.clone(), median_us, p99_us, calls: args.calls });
-        if let Some((median_us, p99_us)) = time_portable_kernels(policy.as_mut(), &fixed.input(), args)? {
-            rows.push(BenchRow { label: format!("{label} portable"), backbone, median_us, p99_us, calls: args.calls });
+        for (level, median_us, p99_us) in time_kernel_levels(policy.as_mut(), &fixed.input(), args)? {
+            rows.push(BenchRow { label: format!("{label} {level}"), backbone: backbone.clone(), median_us, p99_us, calls: args.calls });
         }
     }
     for mut policy in floats {
@@ -213,23 +214,34 @@ pub fn bench_rows(args: &BenchArgs) -> anyhow::Result<(Vec<BenchRow>, Option<Str
     Ok((rows, note))
 }
 
-/// On x86-64 CPUs where frmd-core's int8 kernels use AVX2: the same policy timed again with the
-/// portable (SSE2) kernels, which give identical outputs (what a CPU without AVX2 runs).
+/// On x86-64 CPUs where frmd-core's int8 kernels use AVX2 (and AVX-VNNI): the same policy timed
+/// again with the lower kernel levels, which give identical outputs (what CPUs without those
+/// instructions run): `avx2` (without AVX-VNNI, if it was active) and `portable` (SSE2).
 #[cfg(target_arch = "x86_64")]
-fn time_portable_kernels(policy: &mut dyn Policy, input: &PolicyInput<'_>, args: &BenchArgs) -> anyhow::Result<Option<(f64, f64)>> {
+fn time_kernel_levels(policy: &mut dyn Policy, input: &PolicyInput<'_>, args: &BenchArgs) -> anyhow::Result<Vec<(&'static str, f64, f64)>> {
     use frmd_core::kernels::x86;
+    let mut rows = Vec::new();
     if !policy.name().contains("int8") || !x86::avx2_active() {
-        return Ok(None);
+        return Ok(rows);
+    }
+    if x86::avx_vnni_active() {
+        x86::set_avx_vnni_enabled(false);
+        let timed = time_policy(policy, input, args.warmup, args.calls);
+        x86::set_avx_vnni_enabled(true);
+        let (median, p99) = timed?;
+        rows.push(("avx2", median, p99));
     }
     x86::set_avx2_enabled(false);
     let timed = time_policy(policy, input, args.warmup, args.calls);
     x86::set_avx2_enabled(true);
-    timed.map(Some)
+    let (median, p99) = timed?;
+    rows.push(("portable", median, p99));
+    Ok(rows)
 }
 
 #[cfg(not(target_arch = "x86_64"))]
-fn time_portable_kernels(_: &mut dyn Policy, _: &PolicyInput<'_>, _: &BenchArgs) -> anyhow::Result<Option<(f64, f64)>> {
-    Ok(None)
+fn time_kernel_levels(_: &mut dyn Policy, _: &PolicyInput<'_>, _: &BenchArgs) -> anyhow::Result<Vec<(&'static str, f64, f64)>> {
+    Ok(Vec::new())
 }
 
 /// Prints the rows with ratios to the first row.

@@ -19,10 +19,11 @@ use super::requant::{pack_i8, requantize_lanes, RequantBlock};
 use super::Avx2;
 use crate::kernels::dot::dot_i8_prefix;
 use core::arch::x86_64::{
-    __m128i, __m256i, _mm256_add_epi32, _mm256_cvtepi8_epi16, _mm256_hadd_epi32,
-    _mm256_loadu_si256, _mm256_madd_epi16, _mm256_permute2x128_si256, _mm256_setzero_si256,
-    _mm256_storeu_si256, _mm256_zextsi128_si256, _mm_cvtepi8_epi16, _mm_loadl_epi64,
-    _mm_loadu_si128, _mm_madd_epi16,
+    __m128i, __m256i, _mm256_add_epi32, _mm256_cvtepi8_epi16, _mm256_dpbusd_avx_epi32,
+    _mm256_hadd_epi32, _mm256_loadu_si256, _mm256_madd_epi16, _mm256_permute2x128_si256,
+    _mm256_set1_epi8, _mm256_setzero_si256, _mm256_storeu_si256, _mm256_sub_epi32,
+    _mm256_xor_si256, _mm256_zextsi128_si256, _mm_cvtepi8_epi16, _mm_loadl_epi64, _mm_loadu_si128,
+    _mm_madd_epi16,
 };
 
 /// Output channels (weight rows) per call.
@@ -45,7 +46,7 @@ impl Avx2 {
         bias: &[i32; BLOCK_ROWS],
     ) -> [i32; BLOCK_ROWS] {
         // SAFETY: an `Avx2` token exists only after `avx2_active()` returned true.
-        unsafe { accumulate_rows(rows, input, bias) }
+        unsafe { accumulate_rows(self.vnni(), rows, input, bias) }
     }
 
     /// `requantize_to_i8(bias[r] + dot(row r, input), ...)` for the eight rows of `rows`;
@@ -59,13 +60,18 @@ impl Avx2 {
         requant: RequantBlock<'_>,
     ) -> [i8; BLOCK_ROWS] {
         // SAFETY: an `Avx2` token exists only after `avx2_active()` returned true.
-        unsafe { requantize_rows(rows, input, bias, requant) }
+        unsafe { requantize_rows(self.vnni(), rows, input, bias, requant) }
     }
 }
 
 #[target_feature(enable = "avx2")]
-fn accumulate_rows(rows: &[i8], input: &[i8], bias: &[i32; BLOCK_ROWS]) -> [i32; BLOCK_ROWS] {
-    let sums = _mm256_add_epi32(row_sums(rows, input), load_i32(bias));
+fn accumulate_rows(
+    vnni: bool,
+    rows: &[i8],
+    input: &[i8],
+    bias: &[i32; BLOCK_ROWS],
+) -> [i32; BLOCK_ROWS] {
+    let sums = _mm256_add_epi32(row_sums(vnni, rows, input), load_i32(bias));
     let mut out = [0_i32; BLOCK_ROWS];
     // SAFETY: the pointer comes from a `&mut [i32; 8]`: 32 writable bytes; no alignment needed.
     unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast::<__m256i>(), sums) };
@@ -74,25 +80,44 @@ fn accumulate_rows(rows: &[i8], input: &[i8], bias: &[i32; BLOCK_ROWS]) -> [i32;
 
 #[target_feature(enable = "avx2")]
 fn requantize_rows(
+    vnni: bool,
     rows: &[i8],
     input: &[i8],
     bias: &[i32; BLOCK_ROWS],
     requant: RequantBlock<'_>,
 ) -> [i8; BLOCK_ROWS] {
-    let acc = _mm256_add_epi32(row_sums(rows, input), load_i32(bias));
+    let acc = _mm256_add_epi32(row_sums(vnni, rows, input), load_i32(bias));
     pack_i8(requantize_lanes(acc, requant))
 }
 
-/// `[dot(row r, input) for r in 0..8]` as one vector (wrapping int32 sums).
+/// `[dot(row r, input) for r in 0..8]` as one vector (wrapping int32 sums); with `vnni` (the
+/// caller's `Avx2` token says AVX-VNNI is available) the 32-column blocks use `vpdpbusd`.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn row_sums(rows: &[i8], input: &[i8]) -> __m256i {
-    if input.is_empty() {
-        return _mm256_setzero_si256();
+fn row_sums(vnni: bool, rows: &[i8], input: &[i8]) -> __m256i {
+    if vnni {
+        // SAFETY: `vnni` comes from an `Avx2` token whose flag `avx_vnni_active()` set only after
+        // detecting AVX-VNNI (and AVX2 with OS support).
+        unsafe { row_sums_vnni(rows, input) }
+    } else {
+        row_sums_from(
+            split_rows(rows, input.len()),
+            input,
+            [_mm256_setzero_si256(); BLOCK_ROWS],
+            0,
+        )
+    }
+}
+
+/// The eight rows of `rows` (`columns` weights each; missing rows are empty).
+#[inline]
+fn split_rows(rows: &[i8], columns: usize) -> [&[i8]; BLOCK_ROWS] {
+    if columns == 0 {
+        return [&[]; BLOCK_ROWS];
     }
     // Plain `next()` calls rather than `array::from_fn`: closures do not inherit the target
     // features, and LLVM left them as out-of-line calls.
-    let mut split = rows.chunks_exact(input.len());
+    let mut split = rows.chunks_exact(columns);
     let r0 = split.next().unwrap_or(&[]);
     let r1 = split.next().unwrap_or(&[]);
     let r2 = split.next().unwrap_or(&[]);
@@ -101,8 +126,112 @@ fn row_sums(rows: &[i8], input: &[i8]) -> __m256i {
     let r5 = split.next().unwrap_or(&[]);
     let r6 = split.next().unwrap_or(&[]);
     let r7 = split.next().unwrap_or(&[]);
-    let (x_blocks, x_tail) = input.as_chunks::<COLUMNS>();
+    [r0, r1, r2, r3, r4, r5, r6, r7]
+}
+
+/// AVX-VNNI front of [`row_sums`]: the 32-column blocks with `vpdpbusd` (unsigned x signed bytes),
+/// four rows at a time, then [`row_sums_from`] for the remaining columns.
+///
+/// `vpdpbusd` needs an unsigned operand: the input is offset to `u = x + 128` (flipping the sign
+/// bit), so each lane accumulates `sum u * w = sum x * w + 128 * sum w`; a second `vpdpbusd` with
+/// the constant 128 accumulates `128 * sum w`, which is subtracted. Each group of four products
+/// is at most `4 * 255 * 128` in magnitude and is added modulo 2^32 (the non-saturating
+/// instruction), so the difference equals the wrapping sum of `x * w` exactly.
+#[target_feature(enable = "avx2,avxvnni")]
+fn row_sums_vnni(rows: &[i8], input: &[i8]) -> __m256i {
+    let rows = split_rows(rows, input.len());
+    let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
+    let (x_blocks, _) = input.as_chunks::<WIDE>();
     let mut acc = [_mm256_setzero_si256(); BLOCK_ROWS];
+    let [a0, a1, a2, a3, a4, a5, a6, a7] = &mut acc;
+    dpbusd_four_rows([a0, a1, a2, a3], [r0, r1, r2, r3], x_blocks);
+    dpbusd_four_rows([a4, a5, a6, a7], [r4, r5, r6, r7], x_blocks);
+    row_sums_from(rows, input, acc, x_blocks.len() * WIDE)
+}
+
+/// Columns per `vpdpbusd` step.
+const WIDE: usize = 32;
+
+/// `acc[r] += sum over the blocks of x * w` for four rows (see [`row_sums_vnni`]).
+#[inline]
+#[target_feature(enable = "avx2,avxvnni")]
+fn dpbusd_four_rows(acc: [&mut __m256i; 4], rows: [&[i8]; 4], x_blocks: &[[i8; WIDE]]) {
+    let offset = _mm256_set1_epi8(i8::MIN);
+    let [r0, r1, r2, r3] = rows;
+    let blocks = x_blocks
+        .iter()
+        .zip(r0.as_chunks::<WIDE>().0)
+        .zip(r1.as_chunks::<WIDE>().0)
+        .zip(r2.as_chunks::<WIDE>().0)
+        .zip(r3.as_chunks::<WIDE>().0);
+    let zero = _mm256_setzero_si256();
+    let (mut p0, mut p1, mut p2, mut p3) = (zero, zero, zero, zero);
+    let (mut s0, mut s1, mut s2, mut s3) = (zero, zero, zero, zero);
+    for ((((x, w0), w1), w2), w3) in blocks {
+        let u = _mm256_xor_si256(load_bytes(x), offset);
+        let (w0, w1, w2, w3) = (
+            load_bytes(w0),
+            load_bytes(w1),
+            load_bytes(w2),
+            load_bytes(w3),
+        );
+        p0 = _mm256_dpbusd_avx_epi32(p0, u, w0);
+        s0 = _mm256_dpbusd_avx_epi32(s0, offset, w0);
+        p1 = _mm256_dpbusd_avx_epi32(p1, u, w1);
+        s1 = _mm256_dpbusd_avx_epi32(s1, offset, w1);
+        p2 = _mm256_dpbusd_avx_epi32(p2, u, w2);
+        s2 = _mm256_dpbusd_avx_epi32(s2, offset, w2);
+        p3 = _mm256_dpbusd_avx_epi32(p3, u, w3);
+        s3 = _mm256_dpbusd_avx_epi32(s3, offset, w3);
+    }
+    let [a0, a1, a2, a3] = acc;
+    *a0 = _mm256_add_epi32(*a0, _mm256_sub_epi32(p0, s0));
+    *a1 = _mm256_add_epi32(*a1, _mm256_sub_epi32(p1, s1));
+    *a2 = _mm256_add_epi32(*a2, _mm256_sub_epi32(p2, s2));
+    *a3 = _mm256_add_epi32(*a3, _mm256_sub_epi32(p3, s3));
+}
+
+/// `row[start..]`, empty if `start` is past the end.
+#[inline(always)]
+fn from(row: &[i8], start: usize) -> &[i8] {
+    row.get(start..).unwrap_or(&[])
+}
+
+/// Loads 32 int8 values.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn load_bytes(block: &[i8; WIDE]) -> __m256i {
+    // SAFETY: the pointer comes from a `&[i8; 32]`: 32 initialized, readable bytes; `loadu` has
+    // no alignment requirement.
+    unsafe { _mm256_loadu_si256(block.as_ptr().cast::<__m256i>()) }
+}
+
+/// Adds columns `start..` of the eight `rows` times `input` to the partial sums `acc` (16-column
+/// `vpmaddwd` blocks, one 8-column step, then scalar) and reduces them to one vector of row sums.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn row_sums_from(
+    rows: [&[i8]; BLOCK_ROWS],
+    input: &[i8],
+    mut acc: [__m256i; BLOCK_ROWS],
+    start: usize,
+) -> __m256i {
+    let input = input.get(start..).unwrap_or(&[]);
+    let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
+    let (r0, r1, r2, r3) = (
+        from(r0, start),
+        from(r1, start),
+        from(r2, start),
+        from(r3, start),
+    );
+    let (r4, r5, r6, r7) = (
+        from(r4, start),
+        from(r5, start),
+        from(r6, start),
+        from(r7, start),
+    );
+
+    let (x_blocks, x_tail) = input.as_chunks::<COLUMNS>();
     let blocks = x_blocks
         .iter()
         .zip(r0.as_chunks::<COLUMNS>().0)
@@ -210,31 +339,43 @@ mod tests {
         sums
     }
 
+    /// The tokens to test: AVX2 alone, and with AVX-VNNI when the CPU has it.
+    fn tokens() -> Vec<Avx2> {
+        let Some(detected) = Avx2::get() else {
+            std::eprintln!("no AVX2 on this CPU: only the portable kernel is exercised");
+            return Vec::new();
+        };
+        let mut tokens = std::vec![Avx2 { vnni: false }];
+        if detected.vnni() {
+            tokens.push(detected);
+        } else {
+            std::eprintln!("no AVX-VNNI on this CPU: its kernel is not exercised");
+        }
+        tokens
+    }
+
     #[test]
     fn eight_row_sums_match_wide_sums() {
-        let Some(avx2) = Avx2::get() else {
-            std::eprintln!("no AVX2 on this CPU: only the portable kernel is exercised");
-            return;
-        };
-        random_cases(0xA7, |weights, input| {
-            let got: Vec<i64> = kernel_row_sums(avx2, weights, input)
-                .into_iter()
-                .map(i64::from)
-                .collect();
-            assert_eq!(
-                got,
-                wide_row_sums(weights, input),
-                "columns {}",
-                input.len()
-            );
-        });
+        for avx2 in tokens() {
+            random_cases(0xA7, |weights, input| {
+                let got: Vec<i64> = kernel_row_sums(avx2, weights, input)
+                    .into_iter()
+                    .map(i64::from)
+                    .collect();
+                let want = wide_row_sums(weights, input);
+                assert_eq!(got, want, "{avx2:?} columns {}", input.len());
+            });
+        }
     }
 
     #[test]
     fn sums_wrap_like_the_portable_kernel() {
-        let Some(avx2) = Avx2::get() else {
-            return;
-        };
+        for avx2 in tokens() {
+            sums_wrap(avx2);
+        }
+    }
+
+    fn sums_wrap(avx2: Avx2) {
         // 131 074 products of 16384 exceed i32::MAX: the sums wrap like `dot_i8`.
         static COLUMN: [i8; 131_074] = [-128; 131_074];
         let weights: Vec<i8> = (0..BLOCK_ROWS).flat_map(|_| COLUMN).collect();
@@ -246,9 +387,12 @@ mod tests {
 
     #[test]
     fn requantized_rows_match_scalar_requantization() {
-        let Some(avx2) = Avx2::get() else {
-            return;
-        };
+        for avx2 in tokens() {
+            requantized_rows_match(avx2);
+        }
+    }
+
+    fn requantized_rows_match(avx2: Avx2) {
         let mut rng = SplitMix64::new(0xB10C);
         for case in 0..2_000 {
             let columns = 1 + (rng.next_u64() % 70) as usize;

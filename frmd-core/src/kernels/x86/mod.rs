@@ -2,13 +2,14 @@
 //! (`kernels::matvec`, SSE2 through LLVM, and `quant::requantize_to_i8`) are the fallback and the
 //! definition: the tests compare both on random and extreme inputs.
 //!
-//! - [`matvec`]: eight rows of a fully connected layer at once (`vpmaddwd`), with the bias added
-//!   and, for hidden layers, requantized in registers;
+//! - [`matvec`]: eight rows of a fully connected layer at once (`vpmaddwd`, or `vpdpbusd` on
+//!   CPUs with AVX-VNNI), with the bias added and, for hidden layers, requantized in registers;
 //! - [`requant`]: requantization of eight accumulators at once.
 //!
 //! Detection is `no_std`: `CPUID` leaf 1 (AVX and OSXSAVE bits), `XGETBV` (the OS saves the SSE
 //! and AVX register state: XCR0 bits 1 and 2) and `CPUID` leaf 7 (AVX2 bit), cached in an
-//! atomic. [`set_avx2_enabled`] turns the AVX2 path off (or back on, if the CPU has it) for A/B
+//! atomic; AVX-VNNI is `CPUID` leaf 7 subleaf 1. [`set_avx2_enabled`] and
+//! [`set_avx_vnni_enabled`] turn the paths off (or back on, if the CPU has them) for A/B
 //! measurements.
 //!
 //! Safety audit: `unsafe` is allowed in this module and its two submodules only (and in
@@ -18,8 +19,9 @@
 //! - calls of `#[target_feature(enable = "avx2")]` functions from the methods of the [`Avx2`]
 //!   token: sound when the CPU supports AVX2 and the OS enabled the AVX state. A token is made
 //!   only by [`Avx2::get`] after [`avx2_active`] returned true, and that state only becomes
-//!   "active" through [`detect_avx2`]. (Disabling AVX2 later with [`set_avx2_enabled`] leaves
-//!   existing tokens valid: the CPU still has AVX2.)
+//!   "active" through [`detect_avx2`]. The `avx2,avxvnni` functions are called only when the
+//!   token's `vnni` flag is set, which [`avx_vnni_active`] sets only after [`detect_avx_vnni`].
+//!   (Disabling a path later leaves existing tokens valid: the CPU still has the instructions.)
 //! - unaligned loads and stores (`_mm_loadu_si128`, `_mm256_loadu_si256`, `_mm256_storeu_si256`)
 //!   through pointers made from references to fixed-size arrays of exactly the accessed size
 //!   (`&[i8; 16]`, `&[i32; 8]`, `&mut [i32; 8]`): in bounds, initialized, no alignment needed.
@@ -46,18 +48,61 @@ const INACTIVE: u8 = 2;
 static AVX2_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
 
 /// Proof that the AVX2 kernels may run: [`Avx2::get`] hands one out only while [`avx2_active`]
-/// is true. The kernels are methods of this token (`matvec`, `requant`).
+/// is true. The kernels are methods of this token (`matvec`, `requant`). `vnni` records whether
+/// the AVX-VNNI variant of the matrix-vector kernel may run too ([`avx_vnni_active`]).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Avx2 {
-    _checked: (),
+    vnni: bool,
 }
 
 impl Avx2 {
     /// The token, if the CPU and OS support AVX2 and the path is enabled.
     #[inline]
     pub(crate) fn get() -> Option<Self> {
-        avx2_active().then_some(Self { _checked: () })
+        avx2_active().then(|| Self {
+            vnni: avx_vnni_active(),
+        })
     }
+
+    /// Whether the AVX-VNNI instructions (`vpdpbusd`, VEX-encoded) may be used.
+    #[inline]
+    pub(crate) fn vnni(self) -> bool {
+        self.vnni
+    }
+}
+
+/// Same states as `AVX2_STATE`, for AVX-VNNI (only consulted while AVX2 is active).
+static VNNI_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
+
+/// Whether the CPU supports AVX-VNNI (VEX-encoded `vpdpbusd`; Intel Alder Lake and later, AMD
+/// Zen 5; also reported by Zen 4) besides AVX2.
+pub fn avx_vnni_supported() -> bool {
+    detect_avx2() && detect_avx_vnni()
+}
+
+/// Whether the int8 matrix-vector kernel currently uses the AVX-VNNI variant.
+#[inline]
+pub fn avx_vnni_active() -> bool {
+    if !avx2_active() {
+        return false;
+    }
+    match VNNI_STATE.load(Ordering::Relaxed) {
+        ACTIVE => true,
+        INACTIVE => false,
+        _ => {
+            let supported = detect_avx_vnni();
+            VNNI_STATE.store(if supported { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
+            supported
+        }
+    }
+}
+
+/// Enables (if supported) or disables the AVX-VNNI variant, process-wide; returns whether it is
+/// active afterwards. All variants give identical results (for A/B measurements).
+pub fn set_avx_vnni_enabled(enabled: bool) -> bool {
+    let active = enabled && avx_vnni_supported();
+    VNNI_STATE.store(if active { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
+    active && avx2_active()
 }
 
 /// Whether the CPU and the OS support AVX2 (probed once with `CPUID`/`XGETBV`).
@@ -107,4 +152,14 @@ fn detect_avx2() -> bool {
         return false;
     }
     __cpuid_count(7, 0).ebx & AVX2 != 0
+}
+
+/// `CPUID.(7,1):EAX.AVX-VNNI` (bit 4); the register state is the AVX one, checked by
+/// [`detect_avx2`], which every caller requires as well.
+fn detect_avx_vnni() -> bool {
+    const AVX_VNNI: u32 = 1 << 4;
+    if __cpuid(0).eax < 7 || __cpuid_count(7, 0).eax < 1 {
+        return false;
+    }
+    __cpuid_count(7, 1).eax & AVX_VNNI != 0
 }
