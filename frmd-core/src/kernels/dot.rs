@@ -42,20 +42,84 @@ pub(crate) fn dot_i8_prefix(a: &[i8], b: &[i8]) -> i32 {
     total
 }
 
-/// The fully connected layer's matrix-vector product: `emit(dot(row, input))` for every row of
-/// the row-major `weights` in order. On Arm cores with the DSP extension (`cfg(frmd_arm_dsp)`) it
-/// is the `SMLAD` kernel of `kernels::dsp`; elsewhere the row-blocked kernel of `kernels::matvec`
-/// (with an AVX2 build on x86-64). All give the sums of [`dot_i8_prefix`].
+/// Calls `emit(dot(row, input))` for every row of the row-major `weights` (`input.len()` columns
+/// per row) in order; a partial last row is ignored (callers check the shapes).
+///
+/// This is the fully connected layer's matrix-vector product. On Arm cores with the DSP extension
+/// (`cfg(frmd_arm_dsp)`, module `kernels::dsp`) it runs an `SMLAD` kernel over four rows at a
+/// time; elsewhere it is [`dot_i8_prefix`] per row. Both give identical sums. (On x86-64 CPUs
+/// with AVX2, `FullyConnected` uses the eight-row kernels of `kernels::x86` instead. A four-row
+/// SSE2 version of this loop ran fewer instructions but was slower: LLVM's `punpcklbw`
+/// sign extension read a stale register and chained the whole loop body.)
 #[cfg(not(frmd_arm_dsp))]
-pub(crate) use super::matvec::for_each_row_dot;
+#[inline]
+pub(crate) fn for_each_row_dot(weights: &[i8], input: &[i8], mut emit: impl FnMut(i32)) {
+    if input.is_empty() {
+        return;
+    }
+    for row in weights.chunks_exact(input.len()) {
+        emit(dot_i8_prefix(row, input));
+    }
+}
 
 #[cfg(frmd_arm_dsp)]
 pub(crate) use super::dsp::for_each_row_dot;
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
+    extern crate std;
     use super::*;
     use crate::rng::SplitMix64;
+    use std::vec::Vec;
+
+    /// Row sums in i64 (no wrapping possible at these sizes).
+    pub(crate) fn wide_row_sums(weights: &[i8], input: &[i8]) -> Vec<i64> {
+        weights
+            .chunks_exact(input.len())
+            .map(|row| {
+                row.iter()
+                    .zip(input)
+                    .map(|(w, x)| i64::from(*w) * i64::from(*x))
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// Random shapes (row counts not multiples of 4, column counts not multiples of 16), one
+    /// case in five with only -128/127 entries.
+    pub(crate) fn random_cases(seed: u64, mut check: impl FnMut(&[i8], &[i8])) {
+        let mut rng = SplitMix64::new(seed);
+        for case in 0..300 {
+            let columns = 1 + (rng.next_u64() % 300) as usize;
+            let rows = 1 + (rng.next_u64() % 11) as usize;
+            let extreme = case % 5 == 0;
+            let mut byte = || {
+                let bits = rng.next_u64();
+                match (extreme, bits % 2) {
+                    (true, 0) => -128,
+                    (true, _) => 127,
+                    (false, _) => (bits >> 8) as i8,
+                }
+            };
+            let weights: Vec<i8> = (0..rows * columns).map(|_| byte()).collect();
+            let input: Vec<i8> = (0..columns).map(|_| byte()).collect();
+            check(&weights, &input);
+        }
+    }
+
+    #[test]
+    fn row_dots_match_wide_sums() {
+        random_cases(0x3A7, |weights, input| {
+            let mut got = Vec::new();
+            for_each_row_dot(weights, input, |sum| got.push(i64::from(sum)));
+            assert_eq!(
+                got,
+                wide_row_sums(weights, input),
+                "columns {}",
+                input.len()
+            );
+        });
+    }
 
     fn naive(a: &[i8], b: &[i8]) -> i64 {
         a.iter()

@@ -18,8 +18,6 @@ pub mod dot;
 mod dsp;
 pub mod fc;
 pub mod lut;
-#[cfg(not(frmd_arm_dsp))]
-mod matvec;
 pub mod norm;
 pub mod softmax;
 #[cfg(target_arch = "x86_64")]

@@ -320,7 +320,7 @@ pub(super) fn load_i32(values: &[i32; BLOCK_ROWS]) -> __m256i {
 mod tests {
     extern crate std;
     use super::*;
-    use crate::kernels::matvec::tests::{random_cases, wide_row_sums};
+    use crate::kernels::dot::tests::{random_cases, wide_row_sums};
     use crate::quant::requantize_to_i8;
     use crate::rng::SplitMix64;
     use std::vec::Vec;

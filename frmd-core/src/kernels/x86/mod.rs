@@ -1,6 +1,6 @@
 //! AVX2 builds of the int8 kernels for x86-64, chosen at run time; the portable kernels
-//! (`kernels::matvec`, SSE2 through LLVM, and `quant::requantize_to_i8`) are the fallback and the
-//! definition: the tests compare both on random and extreme inputs.
+//! (`kernels::dot::for_each_row_dot`, SSE2 through LLVM, and `quant::requantize_to_i8`) are the
+//! fallback and the definition: the tests compare both on random and extreme inputs.
 //!
 //! - [`matvec`]: eight rows of a fully connected layer at once (`vpmaddwd`, or `vpdpbusd` on
 //!   CPUs with AVX-VNNI), with the bias added and, for hidden layers, requantized in registers;
