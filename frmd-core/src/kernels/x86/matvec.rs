@@ -90,6 +90,87 @@ fn requantize_rows(
     pack_i8(requantize_lanes(acc, requant))
 }
 
+/// The end of both row-sum functions, expanded in each so that everything stays in registers (as
+/// a function, LLVM did not inline it and passed the eight accumulators through memory): adds
+/// columns `$start..` of the eight `$rows` times `$input` to the partial sums `$acc` (16-column
+/// `vpmaddwd` blocks, one 8-column step, then scalar) and reduces them to one vector of row sums.
+macro_rules! finish_row_sums {
+    ($rows:expr, $input:expr, $acc:expr, $start:expr) => {{
+        let rows: [&[i8]; BLOCK_ROWS] = $rows;
+        let start: usize = $start;
+        let mut acc: [__m256i; BLOCK_ROWS] = $acc;
+        let input = $input.get(start..).unwrap_or(&[]);
+        let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
+        let (r0, r1, r2, r3) = (
+            from(r0, start),
+            from(r1, start),
+            from(r2, start),
+            from(r3, start),
+        );
+        let (r4, r5, r6, r7) = (
+            from(r4, start),
+            from(r5, start),
+            from(r6, start),
+            from(r7, start),
+        );
+
+        let (x_blocks, x_tail) = input.as_chunks::<COLUMNS>();
+        let blocks = x_blocks
+            .iter()
+            .zip(r0.as_chunks::<COLUMNS>().0)
+            .zip(r1.as_chunks::<COLUMNS>().0)
+            .zip(r2.as_chunks::<COLUMNS>().0)
+            .zip(r3.as_chunks::<COLUMNS>().0)
+            .zip(r4.as_chunks::<COLUMNS>().0)
+            .zip(r5.as_chunks::<COLUMNS>().0)
+            .zip(r6.as_chunks::<COLUMNS>().0)
+            .zip(r7.as_chunks::<COLUMNS>().0);
+        for ((((((((x, w0), w1), w2), w3), w4), w5), w6), w7) in blocks {
+            let x = widen(x);
+            let [a0, a1, a2, a3, a4, a5, a6, a7] = &mut acc;
+            *a0 = _mm256_add_epi32(*a0, _mm256_madd_epi16(widen(w0), x));
+            *a1 = _mm256_add_epi32(*a1, _mm256_madd_epi16(widen(w1), x));
+            *a2 = _mm256_add_epi32(*a2, _mm256_madd_epi16(widen(w2), x));
+            *a3 = _mm256_add_epi32(*a3, _mm256_madd_epi16(widen(w3), x));
+            *a4 = _mm256_add_epi32(*a4, _mm256_madd_epi16(widen(w4), x));
+            *a5 = _mm256_add_epi32(*a5, _mm256_madd_epi16(widen(w5), x));
+            *a6 = _mm256_add_epi32(*a6, _mm256_madd_epi16(widen(w6), x));
+            *a7 = _mm256_add_epi32(*a7, _mm256_madd_epi16(widen(w7), x));
+        }
+        let rows = [r0, r1, r2, r3, r4, r5, r6, r7];
+        // Eight more columns with 128-bit registers when at least eight are left.
+        let mut column = input.len() - x_tail.len();
+        if let Some((x_half, _)) = x_tail.split_first_chunk::<HALF>() {
+            let x = widen_half(x_half);
+            for (a, row) in acc.iter_mut().zip(rows) {
+                let weights = row
+                    .get(column..)
+                    .and_then(|w| w.split_first_chunk::<HALF>());
+                if let Some((w, _)) = weights {
+                    let products = _mm_madd_epi16(widen_half(w), x);
+                    *a = _mm256_add_epi32(*a, _mm256_zextsi128_si256(products));
+                }
+            }
+            column += HALF;
+        }
+        let [a0, a1, a2, a3, a4, a5, a6, a7] = acc;
+        // Per 128-bit half: [row 0 .. row 3 partial sums] and [row 4 .. row 7 partial sums].
+        let first = _mm256_hadd_epi32(_mm256_hadd_epi32(a0, a1), _mm256_hadd_epi32(a2, a3));
+        let second = _mm256_hadd_epi32(_mm256_hadd_epi32(a4, a5), _mm256_hadd_epi32(a6, a7));
+        let low_halves = _mm256_permute2x128_si256::<0x20>(first, second);
+        let high_halves = _mm256_permute2x128_si256::<0x31>(first, second);
+        let sums = _mm256_add_epi32(low_halves, high_halves);
+        let Some(x_rest) = input.get(column..).filter(|rest| !rest.is_empty()) else {
+            return sums;
+        };
+        let mut tails = [0_i32; BLOCK_ROWS];
+        for (tail, row) in tails.iter_mut().zip(rows) {
+            *tail = dot_i8_prefix(row.get(column..).unwrap_or(&[]), x_rest);
+        }
+        _mm256_add_epi32(sums, load_i32(&tails))
+    }};
+}
+
 /// `[dot(row r, input) for r in 0..8]` as one vector (wrapping int32 sums); with `vnni` (the
 /// caller's `Avx2` token says AVX-VNNI is available) the 32-column blocks use `vpdpbusd`.
 #[inline]
@@ -100,13 +181,15 @@ fn row_sums(vnni: bool, rows: &[i8], input: &[i8]) -> __m256i {
         // detecting AVX-VNNI (and AVX2 with OS support).
         unsafe { row_sums_vnni(rows, input) }
     } else {
-        row_sums_from(
-            split_rows(rows, input.len()),
-            input,
-            [_mm256_setzero_si256(); BLOCK_ROWS],
-            0,
-        )
+        row_sums_avx2(rows, input)
     }
+}
+
+/// [`row_sums`] with AVX2 only.
+#[target_feature(enable = "avx2")]
+fn row_sums_avx2(rows: &[i8], input: &[i8]) -> __m256i {
+    let rows = split_rows(rows, input.len());
+    finish_row_sums!(rows, input, [_mm256_setzero_si256(); BLOCK_ROWS], 0)
 }
 
 /// The eight rows of `rows` (`columns` weights each; missing rows are empty).
@@ -130,7 +213,7 @@ fn split_rows(rows: &[i8], columns: usize) -> [&[i8]; BLOCK_ROWS] {
 }
 
 /// AVX-VNNI front of [`row_sums`]: the 32-column blocks with `vpdpbusd` (unsigned x signed bytes),
-/// four rows at a time, then [`row_sums_from`] for the remaining columns.
+/// four rows at a time, then `finish_row_sums!` for the remaining columns.
 ///
 /// `vpdpbusd` needs an unsigned operand: the input is offset to `u = x + 128` (flipping the sign
 /// bit), so each lane accumulates `sum u * w = sum x * w + 128 * sum w`; a second `vpdpbusd` with
@@ -146,7 +229,7 @@ fn row_sums_vnni(rows: &[i8], input: &[i8]) -> __m256i {
     let [a0, a1, a2, a3, a4, a5, a6, a7] = &mut acc;
     dpbusd_four_rows([a0, a1, a2, a3], [r0, r1, r2, r3], x_blocks);
     dpbusd_four_rows([a4, a5, a6, a7], [r4, r5, r6, r7], x_blocks);
-    row_sums_from(rows, input, acc, x_blocks.len() * WIDE)
+    finish_row_sums!(rows, input, acc, x_blocks.len() * WIDE)
 }
 
 /// Columns per `vpdpbusd` step.
@@ -204,87 +287,6 @@ fn load_bytes(block: &[i8; WIDE]) -> __m256i {
     // SAFETY: the pointer comes from a `&[i8; 32]`: 32 initialized, readable bytes; `loadu` has
     // no alignment requirement.
     unsafe { _mm256_loadu_si256(block.as_ptr().cast::<__m256i>()) }
-}
-
-/// Adds columns `start..` of the eight `rows` times `input` to the partial sums `acc` (16-column
-/// `vpmaddwd` blocks, one 8-column step, then scalar) and reduces them to one vector of row sums.
-#[inline]
-#[target_feature(enable = "avx2")]
-fn row_sums_from(
-    rows: [&[i8]; BLOCK_ROWS],
-    input: &[i8],
-    mut acc: [__m256i; BLOCK_ROWS],
-    start: usize,
-) -> __m256i {
-    let input = input.get(start..).unwrap_or(&[]);
-    let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
-    let (r0, r1, r2, r3) = (
-        from(r0, start),
-        from(r1, start),
-        from(r2, start),
-        from(r3, start),
-    );
-    let (r4, r5, r6, r7) = (
-        from(r4, start),
-        from(r5, start),
-        from(r6, start),
-        from(r7, start),
-    );
-
-    let (x_blocks, x_tail) = input.as_chunks::<COLUMNS>();
-    let blocks = x_blocks
-        .iter()
-        .zip(r0.as_chunks::<COLUMNS>().0)
-        .zip(r1.as_chunks::<COLUMNS>().0)
-        .zip(r2.as_chunks::<COLUMNS>().0)
-        .zip(r3.as_chunks::<COLUMNS>().0)
-        .zip(r4.as_chunks::<COLUMNS>().0)
-        .zip(r5.as_chunks::<COLUMNS>().0)
-        .zip(r6.as_chunks::<COLUMNS>().0)
-        .zip(r7.as_chunks::<COLUMNS>().0);
-    for ((((((((x, w0), w1), w2), w3), w4), w5), w6), w7) in blocks {
-        let x = widen(x);
-        let [a0, a1, a2, a3, a4, a5, a6, a7] = &mut acc;
-        *a0 = _mm256_add_epi32(*a0, _mm256_madd_epi16(widen(w0), x));
-        *a1 = _mm256_add_epi32(*a1, _mm256_madd_epi16(widen(w1), x));
-        *a2 = _mm256_add_epi32(*a2, _mm256_madd_epi16(widen(w2), x));
-        *a3 = _mm256_add_epi32(*a3, _mm256_madd_epi16(widen(w3), x));
-        *a4 = _mm256_add_epi32(*a4, _mm256_madd_epi16(widen(w4), x));
-        *a5 = _mm256_add_epi32(*a5, _mm256_madd_epi16(widen(w5), x));
-        *a6 = _mm256_add_epi32(*a6, _mm256_madd_epi16(widen(w6), x));
-        *a7 = _mm256_add_epi32(*a7, _mm256_madd_epi16(widen(w7), x));
-    }
-    let rows = [r0, r1, r2, r3, r4, r5, r6, r7];
-    // Eight more columns with 128-bit registers when at least eight are left.
-    let mut column = input.len() - x_tail.len();
-    if let Some((x_half, _)) = x_tail.split_first_chunk::<HALF>() {
-        let x = widen_half(x_half);
-        for (a, row) in acc.iter_mut().zip(rows) {
-            let weights = row
-                .get(column..)
-                .and_then(|w| w.split_first_chunk::<HALF>());
-            if let Some((w, _)) = weights {
-                let products = _mm_madd_epi16(widen_half(w), x);
-                *a = _mm256_add_epi32(*a, _mm256_zextsi128_si256(products));
-            }
-        }
-        column += HALF;
-    }
-    let [a0, a1, a2, a3, a4, a5, a6, a7] = acc;
-    // Per 128-bit half: [row 0 .. row 3 partial sums] and [row 4 .. row 7 partial sums].
-    let first = _mm256_hadd_epi32(_mm256_hadd_epi32(a0, a1), _mm256_hadd_epi32(a2, a3));
-    let second = _mm256_hadd_epi32(_mm256_hadd_epi32(a4, a5), _mm256_hadd_epi32(a6, a7));
-    let low_halves = _mm256_permute2x128_si256::<0x20>(first, second);
-    let high_halves = _mm256_permute2x128_si256::<0x31>(first, second);
-    let sums = _mm256_add_epi32(low_halves, high_halves);
-    let Some(x_rest) = input.get(column..).filter(|rest| !rest.is_empty()) else {
-        return sums;
-    };
-    let mut tails = [0_i32; BLOCK_ROWS];
-    for (tail, row) in tails.iter_mut().zip(rows) {
-        *tail = dot_i8_prefix(row.get(column..).unwrap_or(&[]), x_rest);
-    }
-    _mm256_add_epi32(sums, load_i32(&tails))
 }
 
 /// Loads 8 int8 values and sign-extends them to 8 int16 lanes.
