@@ -1,8 +1,9 @@
 //! Instruction counts per chunk under callgrind: runs `CHUNKS` (argument 2, default 1) int8 or
-//! float chunks (argument 1: int8 | core-f32 | candle-f32) of a randomly initialized student at
-//! the reach shape with backbone argument 3 (default `mlp`; `transformer-lite` exports the `FRMT`
-//! blob and runs frmd-core's int8 transformer policy). Per-chunk Ir = (Ir(101 chunks) -
-//! Ir(1 chunk)) / 100.
+//! float chunks (argument 1: int8 | int8-avx2 | int8-portable | core-f32 | candle-f32) of a
+//! randomly initialized student at the reach shape with backbone argument 3 (default `mlp`;
+//! `transformer-lite` exports the `FRMT` blob and runs frmd-core's int8 transformer policy). Per-chunk Ir = (Ir(101 chunks) -
+//! Ir(1 chunk)) / 100. `int8-avx2` / `int8-portable` run the int8 policy with frmd-core's AVX-VNNI
+//! / AVX2 kernels turned off (x86-64; callgrind's virtual CPU reports no AVX-VNNI anyway).
 use frmd_host::bench::{reach_input, reach_student};
 use frmd_host::eval::policy::{Policy, PolicyInput};
 use frmd_host::policy::int8::Int8Policy;
@@ -31,7 +32,14 @@ fn main() -> anyhow::Result<()> {
         (None, Ok(core)) => core.flash_bytes,
         (None, Err(_)) => 0,
     };
-    let policy: &mut dyn Policy = match (which, &mut transformer, &mut p.core) {
+    #[cfg(target_arch = "x86_64")]
+    match which {
+        "int8-portable" => drop(frmd_core::kernels::x86::set_avx2_enabled(false)),
+        "int8-avx2" => drop(frmd_core::kernels::x86::set_avx_vnni_enabled(false)),
+        _ => {}
+    }
+    let which_policy = if which.starts_with("int8") { "int8" } else { which };
+    let policy: &mut dyn Policy = match (which_policy, &mut transformer, &mut p.core) {
         ("candle-f32", _, _) => &mut p.float,
         ("int8", Some((int8, _, _)), _) => int8,
         ("core-f32", Some((_, twin, _)), _) => twin,
