@@ -9,6 +9,8 @@ use crate::eval::{run_episodes, EvalConfig};
 use crate::models::{BackboneConfig, HeadConfig, ModelConfig, OwnedNetwork};
 use crate::policy::float::{FloatPolicy, Sampler};
 use crate::train::distill::{distill, DistillConfig};
+use crate::train::holdout::{generalization, windows_in, ChunkSampler, GeneralizationReport};
+use crate::train::batch::CondAugment;
 use crate::train::optim::OptimConfig;
 use crate::train::{curve::plot_learning_curve, dp::train_dp, teacher::train_teacher, LoopConfig, Progress, TrainReport};
 use anyhow::Context;
@@ -27,6 +29,47 @@ pub enum TrainCommand {
     Student(StudentArgs),
     /// The action-space Diffusion Policy baseline (epsilon prediction, DDPM/DDIM).
     Dp(CommonArgs),
+    /// Open-loop chunk error of a teacher or student checkpoint on its training data and on
+    /// held-out demonstrations (generalization vs underfitting).
+    Probe(ProbeArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct ProbeArgs {
+    /// Teacher or student checkpoint directory.
+    #[arg(long)]
+    pub ckpt: PathBuf,
+    /// The demonstrations it was trained on.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Held-out demonstrations of the same task (`frmd collect` with other seeds).
+    #[arg(long)]
+    pub holdout: PathBuf,
+    /// Sampling steps (teacher default 10, student 1).
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Teacher solver: euler | heun | dpm++2m.
+    #[arg(long, default_value = "dpm++2m")]
+    pub solver: String,
+    /// Windows measured per set (evenly spaced).
+    #[arg(long, default_value_t = 1024)]
+    pub windows: usize,
+}
+
+fn probe(args: &ProbeArgs) -> anyhow::Result<ExitCode> {
+    let (meta, net) = checkpoint::load(&args.ckpt).with_context(|| format!("loading {}", args.ckpt.display()))?;
+    let norm = meta.normalization.clone().with_context(|| format!("{}: checkpoint has no normalization", args.ckpt.display()))?;
+    let cfg = net.net.config().clone();
+    let sampler = match meta.role {
+        Role::Teacher => ChunkSampler::Teacher { solver: Solver::parse(&args.solver)?, steps: args.steps.unwrap_or(10) },
+        Role::Student => ChunkSampler::Student { steps: args.steps.unwrap_or(1) },
+        Role::Dp => anyhow::bail!("probe measures ProDMP teachers and students, not the DP baseline"),
+    };
+    let train = windows_in(&Dataset::load(&args.data)?, cfg.history, cfg.horizon, &norm)?;
+    let held_out = windows_in(&Dataset::load(&args.holdout)?, cfg.history, cfg.horizon, &norm)?;
+    let report = generalization(&net.net, &meta.sigma.into(), sampler, &train, &held_out, &norm.action.scale(), args.windows, 0)?;
+    println!("{} {:?}: {report}", args.ckpt.display(), sampler);
+    Ok(ExitCode::SUCCESS)
 }
 
 #[derive(Args, Debug)]
@@ -54,6 +97,9 @@ pub struct CommonArgs {
     pub weight_decay: f64,
     #[arg(long, default_value_t = 500)]
     pub warmup: usize,
+    /// Learning-rate multiplier of the output (ProDMP parameter) layer, teacher and student.
+    #[arg(long, default_value_t = 1.0)]
+    pub head_lr_scale: f64,
     /// Observation history m.
     #[arg(long, default_value_t = 2)]
     pub history: usize,
@@ -81,6 +127,10 @@ pub struct CommonArgs {
     /// Sampling steps used by evaluation (teacher default 10, student 1, DP 10).
     #[arg(long)]
     pub eval_steps: Option<usize>,
+    /// Held-out demonstrations (teacher and student): at every evaluation, the open-loop chunk
+    /// error on up to 512 training windows and on this file's windows is printed and saved.
+    #[arg(long)]
+    pub holdout: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -102,6 +152,28 @@ pub struct TeacherArgs {
     /// Solver for evaluation: euler | heun | dpm++2m.
     #[arg(long, default_value = "heun")]
     pub eval_solver: String,
+    #[command(flatten)]
+    pub augment: AugmentArgs,
+}
+
+/// Initial-condition perturbation of training windows (see `train::batch::CondAugment`).
+#[derive(Args, Debug, Clone)]
+pub struct AugmentArgs {
+    /// Fraction of training windows whose chunk start (y0, v0) is perturbed.
+    #[arg(long, default_value_t = 0.0)]
+    pub aug_prob: f64,
+    /// Standard deviation of the y0 perturbation, normalized action units.
+    #[arg(long, default_value_t = 0.0)]
+    pub aug_y0_std: f64,
+    /// Standard deviation of the v0 perturbation, normalized action units per second.
+    #[arg(long, default_value_t = 0.0)]
+    pub aug_v0_std: f64,
+}
+
+impl AugmentArgs {
+    fn config(&self) -> CondAugment {
+        CondAugment { prob: self.aug_prob, y0_std: self.aug_y0_std, v0_std: self.aug_v0_std }
+    }
 }
 
 #[derive(Args, Debug)]
@@ -125,6 +197,8 @@ pub struct StudentArgs {
     /// Slow EMA of the student that is evaluated and saved.
     #[arg(long, default_value_t = 0.999)]
     pub eval_ema: f64,
+    #[command(flatten)]
+    pub augment: AugmentArgs,
 }
 
 struct Prepared {
@@ -147,7 +221,7 @@ fn loop_config(c: &CommonArgs) -> LoopConfig {
         steps: c.steps,
         batch_size: c.batch,
         seed: c.seed,
-        optim: OptimConfig { lr: c.lr, weight_decay: c.weight_decay, warmup_steps: c.warmup, total_steps: c.steps, min_lr_ratio: 0.0 },
+        optim: OptimConfig { lr: c.lr, weight_decay: c.weight_decay, warmup_steps: c.warmup, total_steps: c.steps, min_lr_ratio: 0.0, head_lr_scale: c.head_lr_scale },
         log_every: c.log_every,
     }
 }
@@ -175,10 +249,38 @@ struct Monitor<'a> {
     sampler: Sampler,
     success: Vec<(usize, f64)>,
     last_eval: Option<serde_json::Value>,
+    probe: Option<HoldoutProbe>,
+    generalization: Vec<(usize, GeneralizationReport)>,
+}
+
+/// Training and held-out windows for the open-loop generalization check.
+struct HoldoutProbe {
+    train: WindowSet,
+    held_out: WindowSet,
+    sampler: ChunkSampler,
+    action_scale: Vec<f32>,
+}
+
+/// Windows per set used by the generalization check.
+const PROBE_WINDOWS: usize = 512;
+
+fn holdout_probe(common: &CommonArgs, prepared: &Prepared, history: usize, horizon: usize, sampler: ChunkSampler) -> anyhow::Result<Option<HoldoutProbe>> {
+    let Some(path) = &common.holdout else { return Ok(None) };
+    let data = Dataset::load(path).with_context(|| format!("loading held-out data {}", path.display()))?;
+    if data.obs_dim != prepared.dataset.obs_dim || data.action_dim != prepared.dataset.action_dim {
+        anyhow::bail!("held-out data {} has obs/action dims {}/{}, training data {}/{}", path.display(), data.obs_dim, data.action_dim, prepared.dataset.obs_dim, prepared.dataset.action_dim);
+    }
+    let held_out = windows_in(&data, history, horizon, &prepared.norm)?;
+    Ok(Some(HoldoutProbe { train: prepared.windows.clone(), held_out, sampler, action_scale: prepared.norm.action.scale() }))
 }
 
 impl Monitor<'_> {
     fn evaluate(&mut self, step: usize, model: &OwnedNetwork) -> anyhow::Result<()> {
+        if let Some(probe) = &self.probe {
+            let report = generalization(&model.net, &self.sigma, probe.sampler, &probe.train, &probe.held_out, &probe.action_scale, PROBE_WINDOWS, self.common.seed)?;
+            self.bar.println(format!("step {step}: {report}"));
+            self.generalization.push((step, report));
+        }
         if self.common.eval_episodes == 0 {
             return Ok(());
         }
@@ -212,7 +314,7 @@ fn monitor<'a>(common: &'a CommonArgs, task: &str, norm: &Normalization, sampler
     let bar = ProgressBar::new(common.steps as u64);
     bar.set_style(ProgressStyle::with_template("{prefix} [{elapsed_precise}] {bar:30} {pos}/{len} {msg} (eta {eta})").unwrap_or_else(|_| ProgressStyle::default_bar()));
     bar.set_prefix(label.to_string());
-    Monitor { bar, common, task: task.to_string(), norm: norm.clone(), sigma: SigmaConfig::default(), sampler, success: Vec::new(), last_eval: None }
+    Monitor { bar, common, task: task.to_string(), norm: norm.clone(), sigma: SigmaConfig::default(), sampler, success: Vec::new(), last_eval: None, probe: None, generalization: Vec::new() }
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -234,7 +336,7 @@ fn finish(
         "steps": report.steps, "seconds": report.seconds, "seed": common.seed, "batch_size": common.batch,
         "lr": common.lr, "weight_decay": common.weight_decay, "warmup_steps": common.warmup,
         "final_loss": report.final_loss(), "loss_curve": report.loss_curve, "success_curve": mon.success,
-        "final_eval": mon.last_eval, "threads": std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into()),
+        "final_eval": mon.last_eval, "generalization": mon.generalization, "threads": std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into()),
     });
     if let (Some(obj), Some(add)) = (extra.as_object_mut(), summary.as_object()) {
         for (k, v) in add {
@@ -288,9 +390,14 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {
             let weight = LossWeight::parse(&args.loss_weight)?;
             let sampler = Sampler::for_role(Role::Teacher, c.eval_steps, Some(Solver::parse(&args.eval_solver)?))?;
             let mut mon = monitor(c, &prepared.dataset.task, &prepared.norm, sampler, "teacher");
+            let (solver, steps) = match sampler {
+                Sampler::Teacher { solver, steps } => (solver, steps),
+                _ => (Solver::Heun, 10),
+            };
+            mon.probe = holdout_probe(c, &prepared, c.history, c.horizon, ChunkSampler::Teacher { solver, steps })?;
             let sampling = SigmaSampling { uniform_fraction: args.sigma_uniform_fraction };
-            let (net, report) = train_teacher(&prepared.windows, &model, &sigma, weight, sampling, &loop_config(c), &mut |p: &Progress| mon.on_progress(p))?;
-            let extra = json!({ "loss_weight": weight, "sigma_sampling": sampling });
+            let (net, report) = train_teacher(&prepared.windows, &model, &sigma, weight, sampling, args.augment.config(), &loop_config(c), &mut |p: &Progress| mon.on_progress(p))?;
+            let extra = json!({ "loss_weight": weight, "sigma_sampling": sampling, "augment": args.augment.config() });
             finish(&c.out, Role::Teacher, &net, &prepared, &report, mon, extra)
         }
         TrainCommand::Student(args) => {
@@ -306,13 +413,15 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {
                     anyhow::bail!("the data's normalization differs from the teacher's (different data set?)");
                 }
             }
-            let dcfg = DistillConfig { levels: args.levels, teacher_steps: args.k, solver: Solver::parse(&args.solver)?, target_ema: args.target_ema, eval_ema: args.eval_ema };
+            let dcfg = DistillConfig { levels: args.levels, teacher_steps: args.k, solver: Solver::parse(&args.solver)?, target_ema: args.target_ema, eval_ema: args.eval_ema, augment: args.augment.config() };
             let sampler = Sampler::for_role(Role::Student, c.eval_steps, None)?;
             let mut mon = monitor(c, &prepared.dataset.task, &prepared.norm, sampler, "student");
+            mon.probe = holdout_probe(c, &prepared, tcfg.history, tcfg.horizon, ChunkSampler::Student { steps: c.eval_steps.unwrap_or(1) })?;
             let distilled = distill(&teacher, &prepared.windows, &sigma, &dcfg, &loop_config(c), &mut |p: &Progress| mon.on_progress(p))?;
             let extra = json!({ "distill": dcfg, "teacher": args.teacher.display().to_string(), "teacher_digest": tmeta.dataset.digest });
             finish(&c.out, Role::Student, &distilled.eval_student, &prepared, &distilled.report, mon, extra)
         }
+        TrainCommand::Probe(args) => probe(&args),
         TrainCommand::Dp(c) => {
             let prepared = prepare(&c, c.history, c.horizon)?;
             let model = model_config(&c, &prepared, HeadConfig::Raw)?;

@@ -5,6 +5,7 @@ pub mod batch;
 pub mod curve;
 pub mod distill;
 pub mod dp;
+pub mod holdout;
 pub mod optim;
 pub mod teacher;
 #[cfg(test)]

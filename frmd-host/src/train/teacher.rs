@@ -1,5 +1,5 @@
 //! Teacher (MPD) training: EDM denoising loss through the ProDMP decoder.
-use super::batch::{check_windows, sample};
+use super::batch::{check_windows, sample_augmented, CondAugment};
 use super::optim::ScheduledAdamW;
 use super::{run_loop, LoopConfig, ProgressFn, TrainReport};
 use crate::data::windows::WindowSet;
@@ -16,6 +16,7 @@ pub fn train_teacher(
     sig: &SigmaConfig,
     weight: LossWeight,
     sampling: SigmaSampling,
+    augment: CondAugment,
     cfg: &LoopConfig,
     progress: &mut ProgressFn<'_>,
 ) -> anyhow::Result<(OwnedNetwork, TrainReport)> {
@@ -25,12 +26,12 @@ pub fn train_teacher(
     }
     let device = Device::Cpu;
     let net = OwnedNetwork::new_seeded(model, cfg.seed, &device)?;
-    let mut opt = ScheduledAdamW::new(net.varmap.all_vars(), cfg.optim.clone())?;
+    let mut opt = ScheduledAdamW::for_network(&net, cfg.optim.clone())?;
     let mut rng = HostRng::derive(cfg.seed, "teacher-batches");
     let report = run_loop(
         cfg,
         |_| {
-            let batch = sample(windows, model, cfg.batch_size, &mut rng, &device)?;
+            let batch = sample_augmented(windows, model, cfg.batch_size, &augment, &mut rng, &device)?;
             let loss = teacher_loss(&net.net, sig, &batch.x0, &batch.cond, weight, sampling, &mut rng)?;
             let lr = opt.current_lr();
             opt.backward_step(&loss)?;
