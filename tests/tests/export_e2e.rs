@@ -28,6 +28,8 @@ fn common(data: &Path, out: PathBuf, steps: usize) -> CommonArgs {
         exec_steps: 8,
         eval_steps: None,
         holdout: None,
+        pad_end: 0,
+        head_lr_scale: 1.0,
     }
 }
 

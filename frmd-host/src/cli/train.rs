@@ -12,7 +12,8 @@ use crate::train::distill::{distill, DistillConfig};
 use crate::train::holdout::{generalization, windows_in, ChunkSampler, GeneralizationReport};
 use crate::train::batch::CondAugment;
 use crate::train::optim::OptimConfig;
-use crate::train::{curve::plot_learning_curve, dp::train_dp, teacher::train_teacher, LoopConfig, Progress, TrainReport};
+use crate::train::padding::pad_episode_ends;
+use crate::train::{curve::plot_learning_curve, dp::train_dp, teacher::{train_teacher, TeacherConfig}, LoopConfig, Progress, TrainReport};
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use frmd_core::sigma::SigmaConfig;
@@ -97,6 +98,10 @@ pub struct CommonArgs {
     pub weight_decay: f64,
     #[arg(long, default_value_t = 500)]
     pub warmup: usize,
+    /// Teacher and student: repeat each episode's final observation/action this many steps
+    /// (hold-at-goal windows, see `train::padding`). Not used by the DP baseline.
+    #[arg(long, default_value_t = 0)]
+    pub pad_end: usize,
     /// Learning-rate multiplier of the output (ProDMP parameter) layer, teacher and student.
     #[arg(long, default_value_t = 1.0)]
     pub head_lr_scale: f64,
@@ -152,6 +157,9 @@ pub struct TeacherArgs {
     /// Solver for evaluation: euler | heun | dpm++2m.
     #[arg(long, default_value = "heun")]
     pub eval_solver: String,
+    /// EMA decay of the saved teacher weights (0: the raw weights).
+    #[arg(long, default_value_t = 0.0)]
+    pub ema: f64,
     #[command(flatten)]
     pub augment: AugmentArgs,
 }
@@ -209,9 +217,15 @@ struct Prepared {
 }
 
 fn prepare(common: &CommonArgs, history: usize, horizon: usize) -> anyhow::Result<Prepared> {
+    prepare_padded(common, history, horizon, 0)
+}
+
+/// [`prepare`] with each episode's end padded by `pad_end` steps (teacher and student, see
+/// `train::padding`).
+fn prepare_padded(common: &CommonArgs, history: usize, horizon: usize, pad_end: usize) -> anyhow::Result<Prepared> {
     let dataset = Dataset::load(&common.data).with_context(|| format!("loading {}", common.data.display()))?;
     let bytes = std::fs::read(&common.data)?;
-    let (windows, norm) = dataset.windows(history, horizon)?;
+    let (windows, norm) = pad_episode_ends(&dataset, pad_end)?.windows(history, horizon)?;
     let info = DatasetInfo { task: dataset.task.clone(), path: common.data.display().to_string(), digest: fnv1a_hex(&bytes), windows: windows.len() };
     Ok(Prepared { dataset, windows, norm, info })
 }
@@ -385,7 +399,7 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {
     match cmd {
         TrainCommand::Teacher(args) => {
             let c = &args.common;
-            let prepared = prepare(c, c.history, c.horizon)?;
+            let prepared = prepare_padded(c, c.history, c.horizon, c.pad_end)?;
             let model = model_config(c, &prepared, HeadConfig::ProDmp { num_basis: c.num_basis })?;
             let weight = LossWeight::parse(&args.loss_weight)?;
             let sampler = Sampler::for_role(Role::Teacher, c.eval_steps, Some(Solver::parse(&args.eval_solver)?))?;
@@ -396,8 +410,9 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {
             };
             mon.probe = holdout_probe(c, &prepared, c.history, c.horizon, ChunkSampler::Teacher { solver, steps })?;
             let sampling = SigmaSampling { uniform_fraction: args.sigma_uniform_fraction };
-            let (net, report) = train_teacher(&prepared.windows, &model, &sigma, weight, sampling, args.augment.config(), &loop_config(c), &mut |p: &Progress| mon.on_progress(p))?;
-            let extra = json!({ "loss_weight": weight, "sigma_sampling": sampling, "augment": args.augment.config() });
+            let tcfg = TeacherConfig { weight, sampling, augment: args.augment.config(), ema: args.ema };
+            let (net, report) = train_teacher(&prepared.windows, &model, &sigma, &tcfg, &loop_config(c), &mut |p: &Progress| mon.on_progress(p))?;
+            let extra = json!({ "loss_weight": weight, "sigma_sampling": sampling, "augment": tcfg.augment, "teacher_ema": tcfg.ema });
             finish(&c.out, Role::Teacher, &net, &prepared, &report, mon, extra)
         }
         TrainCommand::Student(args) => {
@@ -407,7 +422,7 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {
                 anyhow::bail!("{} holds a {:?} checkpoint, not a teacher", args.teacher.display(), tmeta.role);
             }
             let tcfg = teacher.net.config().clone();
-            let prepared = prepare(c, tcfg.history, tcfg.horizon)?;
+            let prepared = prepare_padded(c, tcfg.history, tcfg.horizon, c.pad_end)?;
             if let Some(tnorm) = &tmeta.normalization {
                 if tnorm != &prepared.norm {
                     anyhow::bail!("the data's normalization differs from the teacher's (different data set?)");

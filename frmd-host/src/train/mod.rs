@@ -7,6 +7,7 @@ pub mod distill;
 pub mod dp;
 pub mod holdout;
 pub mod optim;
+pub mod padding;
 pub mod teacher;
 #[cfg(test)]
 mod tests;
