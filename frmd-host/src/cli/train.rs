@@ -191,8 +191,10 @@ pub struct StudentArgs {
     /// Teacher checkpoint directory.
     #[arg(long)]
     pub teacher: PathBuf,
-    /// Karras levels N of the consistency discretization.
-    #[arg(long, default_value_t = 18)]
+    /// Karras levels N of the consistency discretization. Measured on avoid (v2 teacher, 3000
+    /// steps, lr 1e-3, eval EMA 0.99, 30 episodes, one step): N = 10 0 %, 18 26.7 %, 40 36.7 %,
+    /// 80 36.7 % (coarse levels make the K teacher steps between paired levels inaccurate).
+    #[arg(long, default_value_t = 40)]
     pub levels: usize,
     /// Teacher ODE steps K between paired levels.
     #[arg(long, default_value_t = 2)]
@@ -202,8 +204,10 @@ pub struct StudentArgs {
     pub solver: String,
     #[arg(long, default_value_t = 0.95)]
     pub target_ema: f64,
-    /// Slow EMA of the student that is evaluated and saved.
-    #[arg(long, default_value_t = 0.999)]
+    /// Slow EMA of the student that is evaluated and saved. 0.99 (an average over the last
+    /// ~100 steps): with 0.999 and a 2-3k step run the saved EMA still holds a few percent of the
+    /// initial weights, i.e. of the teacher's denoiser, whose one-step output is the mode average.
+    #[arg(long, default_value_t = 0.99)]
     pub eval_ema: f64,
     #[command(flatten)]
     pub augment: AugmentArgs,
