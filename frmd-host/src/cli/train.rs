@@ -157,7 +157,9 @@ pub struct TeacherArgs {
     /// Solver for evaluation: euler | heun | dpm++2m.
     #[arg(long, default_value = "heun")]
     pub eval_solver: String,
-    /// EMA decay of the saved teacher weights (0: the raw weights).
+    /// EMA decay of the saved teacher weights (0: the raw weights). Measured on insert (8k
+    /// steps, head lr x10): 0.999 gave held-out chunk error 8.5 vs 8.3 mm and the same 20 %
+    /// success (30 episodes) — the cosine decay to zero already averages the last steps.
     #[arg(long, default_value_t = 0.0)]
     pub ema: f64,
     #[command(flatten)]
@@ -176,6 +178,13 @@ pub struct AugmentArgs {
     /// Standard deviation of the v0 perturbation, normalized action units per second.
     #[arg(long, default_value_t = 0.0)]
     pub aug_v0_std: f64,
+}
+
+impl Default for AugmentArgs {
+    /// The command-line defaults (no perturbation).
+    fn default() -> Self {
+        AugmentArgs { aug_prob: 0.0, aug_y0_std: 0.0, aug_v0_std: 0.0 }
+    }
 }
 
 impl AugmentArgs {

@@ -67,6 +67,10 @@ pub fn sample(windows: &WindowSet, cfg: &ModelConfig, size: usize, rng: &mut Hos
 /// offsets of standard deviation `y0_std` and `v0_std` (per second) while the target stays the
 /// demonstrated chunk: the model learns chunks that start from the perturbed state and blend
 /// back onto the demonstration (the ProDMP fixes the start, so the first steps cannot match).
+///
+/// Measured on insert (8k steps, prob 0.5, y0 std 0.01, v0 std 0.1/s): held-out chunk error
+/// 9.9 vs 9.5 mm (8.5 vs 8.3 mm with the output-layer lr x10), success 20 % either way with
+/// x10 and 5 % vs 5 % when re-planning every 2 steps: no measurable gain, off by default.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CondAugment {
     pub prob: f64,

@@ -9,6 +9,10 @@
 //! `steps` times adds windows that start at the final state with a zero action rate and hold the
 //! final action; windows that already overlapped the end are unchanged (they were padded with the
 //! final action anyway), and the min/max normalization is unchanged (only existing rows repeat).
+//!
+//! Measured (avoid, output-layer lr x10, 20k steps, 8 padded steps): the failure mode changed
+//! from turning back at the goal to stopping 10-30 cm short of it; success 17 % vs 20 % without
+//! padding (30 episodes), so padding is off by default (`--pad-end 0`).
 use crate::data::Dataset;
 
 /// A copy of `data` with each episode's last observation/action row repeated `steps` more times.
