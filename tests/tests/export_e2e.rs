@@ -44,7 +44,7 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
     dataset.save(&data).unwrap();
 
     let (teacher, student, baked) = (dir.join("teacher"), dir.join("student"), dir.join("baked"));
-    train(TrainCommand::Teacher(TeacherArgs { common: common(&data, teacher.clone(), 300), loss_weight: "edm".into(), eval_solver: "heun".into(), sigma_uniform_fraction: 0.2, augment: Default::default() })).unwrap();
+    train(TrainCommand::Teacher(TeacherArgs { common: common(&data, teacher.clone(), 300), loss_weight: "edm".into(), eval_solver: "heun".into(), sigma_uniform_fraction: 0.2, ema: 0.0, augment: Default::default() })).unwrap();
     train(TrainCommand::Student(StudentArgs {
         common: common(&data, student.clone(), 150),
         teacher: teacher.clone(),
