@@ -28,6 +28,9 @@ fn common(data: &Path, out: PathBuf, steps: usize) -> CommonArgs {
         eval_episodes: 0,
         exec_steps: 8,
         eval_steps: None,
+        holdout: None,
+        pad_end: 0,
+        head_lr_scale: 1.0,
     }
 }
 
@@ -42,7 +45,7 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
     dataset.save(&data).unwrap();
 
     let (teacher, student, baked) = (dir.join("teacher"), dir.join("student"), dir.join("baked"));
-    train(TrainCommand::Teacher(TeacherArgs { common: common(&data, teacher.clone(), 60), loss_weight: "uniform".into(), eval_solver: "heun".into(), sigma_uniform_fraction: 0.2 })).unwrap();
+    train(TrainCommand::Teacher(TeacherArgs { common: common(&data, teacher.clone(), 60), loss_weight: "uniform".into(), eval_solver: "heun".into(), sigma_uniform_fraction: 0.2, ema: 0.0, augment: Default::default() })).unwrap();
     train(TrainCommand::Student(StudentArgs {
         common: common(&data, student.clone(), 20),
         teacher: teacher.clone(),
@@ -51,6 +54,7 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
         solver: "heun".into(),
         target_ema: 0.95,
         eval_ema: 0.9,
+        augment: Default::default(),
     }))
     .unwrap();
     assert!(student.join("calibration.safetensors").exists());

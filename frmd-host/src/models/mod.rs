@@ -95,6 +95,15 @@ impl Network {
         &self.cfg
     }
 
+    /// Name prefix of the output layer's variables (the layer that emits ProDMP parameters or
+    /// the raw trajectory).
+    pub fn output_layer_prefix(&self) -> String {
+        match &self.cfg.backbone {
+            BackboneConfig::Mlp { hidden, .. } => format!("mlp.layers.{}.", hidden.len()),
+            BackboneConfig::Transformer { .. } => "transformer.head.".to_string(),
+        }
+    }
+
     /// The backbone's raw output [B, output_dim] (ProDMP parameters or a raw trajectory).
     pub fn raw_output(&self, x_scaled: &Tensor, cond: &Condition, emb: &Tensor) -> anyhow::Result<Tensor> {
         Ok(match &self.backbone {

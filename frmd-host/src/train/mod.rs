@@ -5,7 +5,9 @@ pub mod batch;
 pub mod curve;
 pub mod distill;
 pub mod dp;
+pub mod holdout;
 pub mod optim;
+pub mod padding;
 pub mod teacher;
 #[cfg(test)]
 mod tests;

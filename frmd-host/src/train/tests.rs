@@ -1,7 +1,7 @@
 //! Training tests on the toy bimodal set (kept to a few seconds each).
 use super::distill::{distill, DistillConfig};
 use super::toy::{bimodal_windows, positive_fraction, toy_config, MODE_GOAL};
-use super::{teacher::train_teacher, LoopConfig, Progress};
+use super::{teacher::{train_teacher, TeacherConfig}, LoopConfig, Progress};
 use crate::diffusion::loss::{LossWeight, SigmaSampling};
 const LOGNORMAL: SigmaSampling = SigmaSampling { uniform_fraction: 0.0 };
 use crate::diffusion::precond::consistency;
@@ -30,12 +30,12 @@ fn teacher_loss_decreases_on_fixed_seed() {
     let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
     let windows = bimodal_windows(&cfg, 256, 1).unwrap();
     let sig = SigmaConfig::default();
-    let (_, report) = train_teacher(&windows, &cfg, &sig, LossWeight::Edm, LOGNORMAL, &quick_loop(300, 3), &mut |_: &Progress| Ok(())).unwrap();
+    let (_, report) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &quick_loop(300, 3), &mut |_: &Progress| Ok(())).unwrap();
     let first = report.loss_curve.first().unwrap().1;
     let last = report.final_loss().unwrap();
     assert!(last < 0.5 * first, "loss {first} -> {last}");
     // Same seed, same curve.
-    let (_, again) = train_teacher(&windows, &cfg, &sig, LossWeight::Edm, LOGNORMAL, &quick_loop(300, 3), &mut |_: &Progress| Ok(())).unwrap();
+    let (_, again) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &quick_loop(300, 3), &mut |_: &Progress| Ok(())).unwrap();
     assert_eq!(report.loss_curve, again.loss_curve);
 }
 
@@ -60,7 +60,7 @@ fn one_step_student_matches_teacher_on_bimodal_toy() {
     let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
     let sig = SigmaConfig::default();
-    let (teacher, _) = train_teacher(&windows, &cfg, &sig, LossWeight::Edm, LOGNORMAL, &quick_loop(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
+    let (teacher, _) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &quick_loop(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
     let batch = 400;
     let cond = toy_condition(batch);
     let mut rng = HostRng::new(11);
@@ -124,7 +124,7 @@ fn experiment_teacher_weights() {
         for (steps, lr) in [(1500, 3e-3), (1500, 1e-3), (4000, 3e-3)] {
             let mut lc = quick_loop(steps, 4);
             lc.optim.lr = lr;
-            let (teacher, rep) = train_teacher(&windows, &cfg, &sig, weight, LOGNORMAL, &lc, &mut |_: &Progress| Ok(())).unwrap();
+            let (teacher, rep) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(weight, LOGNORMAL), &lc, &mut |_: &Progress| Ok(())).unwrap();
             let batch = 400;
             let cond = toy_condition(batch);
             let mut rng = HostRng::new(11);
@@ -146,7 +146,7 @@ fn experiment_distill() {
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
     let sig = SigmaConfig::default();
     let goal_end = windows.actions[cfg.horizon - 1].abs() as f64;
-    let (teacher, _) = train_teacher(&windows, &cfg, &sig, LossWeight::Edm, LOGNORMAL, &quick_loop(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
+    let (teacher, _) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &quick_loop(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
     let batch = 400;
     let cond = toy_condition(batch);
     for (levels, lr, steps, solver) in [(18, 1e-3, 2000, Solver::Heun), (18, 3e-4, 2000, Solver::Heun), (18, 1e-3, 5000, Solver::Heun), (40, 1e-3, 5000, Solver::Heun), (10, 1e-3, 2000, Solver::Heun), (18, 1e-3, 2000, Solver::Euler)] {
