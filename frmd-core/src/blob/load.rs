@@ -10,7 +10,7 @@ use super::format::{
 use super::writer::data_start;
 use super::{BlobError, Dimension};
 use crate::kernels::{FcRequant, FullyConnected, Lut8};
-use crate::model::mlp::Int8Layer;
+use crate::model::mlp::{InputPrecision, Int8Layer};
 use crate::policy::{
     validate_steps, InputLayout, Int8Network, Policy, PolicyConfig, PolicyError, RangeNormalizer,
     Sampler, StepConstants, MAX_HIDDEN_LAYERS, MAX_STEPS,
@@ -75,6 +75,7 @@ pub struct LoadedPolicy<
     layout: InputLayout,
     control_dt: f32,
     input: QuantParams,
+    input_precision: InputPrecision,
     luts: [Lut8; MAX_HIDDEN_LAYERS],
     hidden: [HiddenLayer<'a>; MAX_HIDDEN_LAYERS],
     num_hidden: usize,
@@ -291,6 +292,11 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
         } = Self::read_shared(&data, shared_fields!(d))?;
         let input = QuantParams::new(d.input_scale, d.input_zero_point)
             .map_err(|_| BlobError::InputQuantization)?;
+        let input_precision = match (d.input_two_plane, d.hidden.is_empty()) {
+            (false, _) => InputPrecision::Int8,
+            (true, false) => InputPrecision::TwoPlane,
+            (true, true) => return Err(BlobError::InputQuantization),
+        };
         d.layout.validate().map_err(|_| BlobError::InputLayout)?;
         let input_width = d.layout.width(M, O, K, N).ok_or(BlobError::InputLayout)?;
 
@@ -412,6 +418,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
             layout: d.layout,
             control_dt: d.control_dt,
             input,
+            input_precision,
             luts,
             hidden,
             num_hidden: d.hidden.len(),
@@ -564,7 +571,8 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
             self.output,
             self.output_scales,
             self.first_layer_biases,
-        )
+        )?
+        .with_input_precision(self.input_precision)
     }
 
     /// The policy configuration (normalization, sampler) borrowing this blob.

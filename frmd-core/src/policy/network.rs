@@ -6,7 +6,9 @@
 //! variant by index (see [`super::StepConstants::first_layer_bias_index`]).
 
 use crate::kernels::{FcRequant, FullyConnected};
-use crate::model::mlp::{F32Layer, F32Mlp, F32Scratch, Int8Layer, Int8Mlp, Int8Scratch};
+use crate::model::mlp::{
+    F32Layer, F32Mlp, F32Scratch, InputPrecision, Int8Layer, Int8Mlp, Int8Scratch, ModelError,
+};
 use crate::quant::QuantParams;
 
 use super::PolicyError;
@@ -90,6 +92,7 @@ pub struct Int8Network<'a, const WIDTH: usize> {
     output_scales: &'a [f32],
     first_layer_biases: &'a [i32],
     num_variants: usize,
+    input_precision: InputPrecision,
     scratch: Int8Scratch<WIDTH>,
 }
 
@@ -146,8 +149,25 @@ impl<'a, const WIDTH: usize> Int8Network<'a, WIDTH> {
             output_scales,
             first_layer_biases,
             num_variants,
+            input_precision: InputPrecision::Int8,
             scratch: Int8Scratch::new(),
         })
+    }
+
+    /// The same network quantizing its input as `precision` says (default
+    /// [`InputPrecision::Int8`]); [`InputPrecision::TwoPlane`] needs a hidden layer and first-layer
+    /// multipliers made for it (see [`crate::model::mlp`]).
+    pub fn with_input_precision(mut self, precision: InputPrecision) -> Result<Self, PolicyError> {
+        if precision == InputPrecision::TwoPlane && self.num_hidden == 0 {
+            return Err(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer));
+        }
+        self.input_precision = precision;
+        Ok(self)
+    }
+
+    /// How the input is quantized.
+    pub fn input_precision(&self) -> InputPrecision {
+        self.input_precision
     }
 
     /// The output layer's int32 accumulators of the last forward pass (for bit-exactness checks).
@@ -206,7 +226,7 @@ impl<const WIDTH: usize> Network for Int8Network<'_, WIDTH> {
             output: last,
             output_scales: self.output_scales,
         };
-        mlp.forward(input, output, &mut self.scratch)
+        mlp.forward_with_input(self.input_precision, input, output, &mut self.scratch)
             .map_err(PolicyError::Model)
     }
 }
