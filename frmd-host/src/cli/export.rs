@@ -39,6 +39,12 @@ pub struct ExportArgs {
     /// Keep the raw input segments (no range balancing of the trajectory and rate inputs).
     #[arg(long)]
     pub no_balance_inputs: bool,
+    /// Quantize the model input to one int8 plane (default: two planes, ~16-bit input).
+    #[arg(long)]
+    pub int8_input: bool,
+    /// Two-plane input: widen the calibrated input range by this factor (>= 1).
+    #[arg(long, default_value_t = frmd_export::export::DEFAULT_INPUT_HEADROOM)]
+    pub input_headroom: f32,
     /// With --data: also store the calibration rows as the checkpoint's calibration.safetensors.
     #[arg(long)]
     pub save_calibration: bool,
@@ -54,6 +60,16 @@ pub struct ExportInfo {
     /// Input range balancing (`frmd_export::fold::FoldedMlp::with_input_gains`).
     #[serde(default = "default_true")]
     pub balance_inputs: bool,
+    /// Two-plane input quantization (`frmd_core::model::mlp::InputPrecision::TwoPlane`).
+    #[serde(default = "default_true")]
+    pub two_plane_input: bool,
+    /// Input range widening with two-plane input.
+    #[serde(default = "default_headroom")]
+    pub input_headroom: f32,
+}
+
+fn default_headroom() -> f32 {
+    frmd_export::export::DEFAULT_INPUT_HEADROOM
 }
 
 fn default_true() -> bool {
@@ -82,7 +98,7 @@ pub fn export(info: &ExportInfo) -> anyhow::Result<Exported> {
         }
         None => None,
     };
-    export_checkpoint(ckpt, ExportOptions { steps: info.steps, ranges, balance_inputs: info.balance_inputs }, set)
+    export_checkpoint(ckpt, ExportOptions { steps: info.steps, ranges, balance_inputs: info.balance_inputs, two_plane_input: info.two_plane_input, input_headroom: info.input_headroom }, set)
 }
 
 pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
@@ -95,6 +111,8 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
         calibration: args.calibration.clone(),
         calibration_data: args.data.as_ref().map(|p| p.display().to_string()),
         balance_inputs: !args.no_balance_inputs,
+        two_plane_input: !args.int8_input,
+        input_headroom: args.input_headroom,
     };
     if args.save_calibration {
         let data = args.data.as_ref().context("--save-calibration needs --data")?;
@@ -123,8 +141,8 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     );
     let gains = exported.folded.gains;
     println!(
-        "  input  int8 scale {:.5} (zero point {}) over the whole input vector; segment gains: trajectory {:.4}, rate {:.4}",
-        policy.input.scale, policy.input.zero_point, gains.traj_gain, gains.rate_gain
+        "  input  int8 scale {:.5} (zero point {}, {:?}) over the whole input vector; segment gains: trajectory {:.4}, rate {:.4}",
+        policy.input.scale, policy.input.zero_point, policy.input_precision, gains.traj_gain, gains.rate_gain
     );
     println!("  RAM    scratch {} B (width {}) + state {} B = {} B", m.scratch_bytes, m.scratch_width, m.state_bytes, m.scratch_bytes + m.state_bytes);
     println!("  flash  weights {} B + tables {} B = {} B (blob {} B)", m.weights_bytes, m.table_bytes, m.flash_bytes(), blob.len());
