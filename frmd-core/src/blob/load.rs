@@ -67,11 +67,7 @@ pub struct LoadedPolicy<
     const N: usize,
     const P: usize,
 > {
-    obs_norm: RangeNormalizer<O>,
-    action_norm: RangeNormalizer<K>,
-    decoder: BakedProDmp<N, P>,
-    steps: [StepConstants; MAX_STEPS],
-    num_steps: usize,
+    shared: SharedTables<O, K, N, P>,
     layout: InputLayout,
     control_dt: f32,
     input: QuantParams,
@@ -251,13 +247,36 @@ macro_rules! shared_fields {
 }
 pub(crate) use shared_fields;
 
-/// The validated, copied tables every policy blob kind carries.
+/// The validated, copied tables every policy blob kind carries (embedded by [`LoadedPolicy`] and
+/// `LoadedTransformer`).
+#[derive(Clone, Debug)]
 pub(crate) struct SharedTables<const O: usize, const K: usize, const N: usize, const P: usize> {
     pub(crate) obs_norm: RangeNormalizer<O>,
     pub(crate) action_norm: RangeNormalizer<K>,
     pub(crate) decoder: BakedProDmp<N, P>,
     pub(crate) steps: [StepConstants; MAX_STEPS],
     pub(crate) num_steps: usize,
+}
+
+impl<const O: usize, const K: usize, const N: usize, const P: usize> SharedTables<O, K, N, P> {
+    /// The active steps.
+    pub(crate) fn steps(&self) -> &[StepConstants] {
+        self.steps.get(..self.num_steps).unwrap_or(&[])
+    }
+
+    /// The policy configuration over these tables with the blob's `layout` and `control_dt`.
+    pub(crate) fn config(&self, layout: InputLayout, control_dt: f32) -> PolicyConfig<'_, O, K, N, P> {
+        PolicyConfig {
+            obs_norm: self.obs_norm,
+            action_norm: self.action_norm,
+            sampler: Sampler {
+                steps: self.steps(),
+                decoder: &self.decoder,
+                layout,
+                control_dt,
+            },
+        }
+    }
 }
 
 /// Checks the header and CRC (see [`split`]) and decodes the descriptor, which must fill the
@@ -283,13 +302,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
     /// at a 4-byte aligned address.
     pub fn load(bytes: &'a [u8]) -> Result<Self, BlobError> {
         let (d, data) = parse_descriptor::<Descriptor>(bytes, MAGIC)?;
-        let SharedTables {
-            obs_norm,
-            action_norm,
-            decoder,
-            steps,
-            num_steps,
-        } = Self::read_shared(&data, shared_fields!(d))?;
+        let shared = Self::read_shared(&data, shared_fields!(d))?;
         let input = QuantParams::new(d.input_scale, d.input_zero_point)
             .map_err(|_| BlobError::InputQuantization)?;
         let input_precision = match (d.input_two_plane, d.hidden.is_empty()) {
@@ -401,8 +414,8 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
             .filter(|_| first_layer_biases.len().is_multiple_of(first_width))
             .ok_or(BlobError::SectionLength(SectionId::FirstLayerBiases))?
             .max(1);
-        let active_steps = steps.get(..num_steps).unwrap_or(&[]);
-        if active_steps
+        if shared
+            .steps()
             .iter()
             .any(|s| s.first_layer_bias_index as usize >= variants)
         {
@@ -410,11 +423,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
         }
 
         Ok(Self {
-            obs_norm,
-            action_norm,
-            decoder,
-            steps,
-            num_steps,
+            shared,
             layout: d.layout,
             control_dt: d.control_dt,
             input,
@@ -537,7 +546,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
 
     /// The step table.
     pub fn steps(&self) -> &[StepConstants] {
-        self.steps.get(..self.num_steps).unwrap_or(&[])
+        self.shared.steps()
     }
 
     /// The model input layout.
@@ -547,7 +556,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
 
     /// The baked ProDMP decoder.
     pub fn decoder(&self) -> &BakedProDmp<N, P> {
-        &self.decoder
+        &self.shared.decoder
     }
 
     /// Control period, seconds.
@@ -577,16 +586,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
 
     /// The policy configuration (normalization, sampler) borrowing this blob.
     pub fn config(&self) -> PolicyConfig<'_, O, K, N, P> {
-        PolicyConfig {
-            obs_norm: self.obs_norm,
-            action_norm: self.action_norm,
-            sampler: Sampler {
-                steps: self.steps(),
-                decoder: &self.decoder,
-                layout: self.layout,
-                control_dt: self.control_dt,
-            },
-        }
+        self.shared.config(self.layout, self.control_dt)
     }
 
     /// A ready policy: int8 network with `WIDTH` scratch, input buffer of `I` values.
