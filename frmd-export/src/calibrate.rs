@@ -6,7 +6,11 @@
 //! min/max or a symmetric percentile of the recorded values. Quantization then follows
 //! DESIGN.md section 5 with frmd-core's `quant` helpers (per-channel symmetric weights, int32 bias
 //! with the input zero point folded, Q31 requantization to the pre-activation range, a 256-entry
-//! LUT to the output range, a dequantized output layer).
+//! LUT to the output range, a dequantized output layer). With two-plane input
+//! (`frmd_core::model::mlp::InputPrecision::TwoPlane`, the default of
+//! [`crate::export::ExportOptions`]) the first layer's multipliers are made for the fine input
+//! scale `input_scale / 2^8`, and the exporter widens the input range (see
+//! [`crate::export::ExportOptions::input_headroom`]).
 use crate::fold::{FloatLayer, FoldedMlp, InputGains};
 use crate::{QuantizedLayer, QuantizedOutput, QuantizedPolicy};
 use anyhow::{bail, Context};

@@ -5,6 +5,12 @@
 //! network on the same inputs.
 //!
 //! `cargo run -p frmd-host --example int8_breakdown -- CKPT DATA [ROWS] [CALIBRATION]`
+//!
+//! Environment: `EPISODES=n` also runs every variant closed loop on the checkpoint's task (the
+//! f32 sampler with the variant's fake quantization; `VARIANTS=a;b` picks variants by label);
+//! `HEADROOM` / `ACT_HEADROOM` widen the simulated input / activation ranges; `OBS_STATS=1`
+//! prints how far closed-loop observations leave the training range; `INT8_INPUT=1` and
+//! `EXPORT_HEADROOM` set the export options of the "real int8" line.
 use anyhow::Context;
 use frmd_export::calibrate::RangeMethod;
 use frmd_export::export::{export_checkpoint, ExportOptions};

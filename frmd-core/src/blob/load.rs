@@ -265,7 +265,11 @@ impl<const O: usize, const K: usize, const N: usize, const P: usize> SharedTable
     }
 
     /// The policy configuration over these tables with the blob's `layout` and `control_dt`.
-    pub(crate) fn config(&self, layout: InputLayout, control_dt: f32) -> PolicyConfig<'_, O, K, N, P> {
+    pub(crate) fn config(
+        &self,
+        layout: InputLayout,
+        control_dt: f32,
+    ) -> PolicyConfig<'_, O, K, N, P> {
         PolicyConfig {
             obs_norm: self.obs_norm,
             action_norm: self.action_norm,

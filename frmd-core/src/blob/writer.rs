@@ -11,8 +11,8 @@ use super::format::{
     HEADER_LEN, LUT_LEN, MAGIC, SECTION_ALIGN, STEP_WORDS,
 };
 use super::BlobError;
-use crate::policy::{InputLayout, StepConstants};
 use crate::model::mlp::InputPrecision;
+use crate::policy::{InputLayout, StepConstants};
 use crate::quant::QuantParams;
 
 /// ProDMP decoder tables, row-major (`[N][P]` and `[N]`), as in

@@ -21,9 +21,7 @@ use crate::kernels::dot::for_each_row_dot;
 use crate::kernels::{
     dequantize_accumulators, Activation, FcRequant, FullyConnected, KernelError, Lut8,
 };
-use crate::quant::{
-    combine_plane_accumulators, quantize_two_plane, requantize_to_i8, QuantParams,
-};
+use crate::quant::{combine_plane_accumulators, quantize_two_plane, requantize_to_i8, QuantParams};
 
 /// Why a forward pass refused its arguments.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -111,7 +109,11 @@ impl Int8Layer<'_> {
 
     /// Requantizes accumulators (`out_features` long) with this layer's per-channel parameters
     /// into `output` and applies its LUT.
-    pub fn requantize_and_activate(&self, acc: &[i32], output: &mut [i8]) -> Result<(), KernelError> {
+    pub fn requantize_and_activate(
+        &self,
+        acc: &[i32],
+        output: &mut [i8],
+    ) -> Result<(), KernelError> {
         let out = self.fc.out_features;
         self.requant.validate(out)?;
         if acc.len() != out || output.len() != out {
@@ -291,7 +293,9 @@ impl Int8Mlp<'_> {
                     .hidden
                     .split_first()
                     .ok_or(ModelError::TwoPlaneWithoutHiddenLayer)?;
-                let fine = next.get_mut(..in_width).ok_or(ModelError::ScratchTooSmall)?;
+                let fine = next
+                    .get_mut(..in_width)
+                    .ok_or(ModelError::ScratchTooSmall)?;
                 quantize_input_two_plane(input, self.input, first, fine);
                 let out_width = layer.fc.out_features;
                 let acc = accumulators

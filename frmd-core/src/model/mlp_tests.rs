@@ -493,7 +493,10 @@ fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
             .iter()
             .map(|v| {
                 let coarse = fix.input_params.quantize(*v);
-                (coarse, fine_params.quantize(v - fix.input_params.dequantize(coarse)))
+                (
+                    coarse,
+                    fine_params.quantize(v - fix.input_params.dequantize(coarse)),
+                )
             })
             .collect();
         let mut pre_real = Vec::new();
@@ -536,12 +539,18 @@ fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
             let row = &first.fc_weights[o * first.in_features..(o + 1) * first.in_features];
             let scale = f64::from(first.weight_scales[o]);
             let exact = f64::from(fix.float_hidden[0].bias[o])
-                + row.iter().zip(&x).map(|(w, v)| f64::from(*w) * scale * f64::from(*v)).sum::<f64>();
+                + row
+                    .iter()
+                    .zip(&x)
+                    .map(|(w, v)| f64::from(*w) * scale * f64::from(*v))
+                    .sum::<f64>();
             error_two_plane += (two - exact).abs();
             error_int8 += (one - exact).abs();
         }
     }
-    std::eprintln!("first-layer pre-activation abs error sums: two-plane {error_two_plane}, int8 {error_int8}");
+    std::eprintln!(
+        "first-layer pre-activation abs error sums: two-plane {error_two_plane}, int8 {error_int8}"
+    );
     assert!(error_two_plane < 0.05 * error_int8);
     // Without a hidden layer no layer takes the fine plane.
     let no_hidden = Int8Mlp {
@@ -551,7 +560,12 @@ fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
     };
     let mut output = [0.0_f32; 12];
     assert_eq!(
-        no_hidden.forward_with_input(InputPrecision::TwoPlane, &[0.0; 20], &mut output, &mut scratch),
+        no_hidden.forward_with_input(
+            InputPrecision::TwoPlane,
+            &[0.0; 20],
+            &mut output,
+            &mut scratch
+        ),
         Err(ModelError::TwoPlaneWithoutHiddenLayer)
     );
 }

@@ -18,7 +18,11 @@ fn combined_accumulator_matches_wide_model_on_edges() {
     for &coarse in &values {
         for &fine in &values {
             let got = combine_plane_accumulators(coarse, fine);
-            assert_eq!(got, reference::combine_planes(coarse, fine), "{coarse} {fine}");
+            assert_eq!(
+                got,
+                reference::combine_planes(coarse, fine),
+                "{coarse} {fine}"
+            );
             saturated += usize::from(got == i32::MAX || got == i32::MIN);
         }
     }
@@ -29,8 +33,14 @@ fn combined_accumulator_matches_wide_model_on_edges() {
     assert_eq!(combine_plane_accumulators(-(1 << 23), 0), i32::MIN);
     let mut rng = SplitMix64::new(0x2b1a);
     for _ in 0..100_000 {
-        let (coarse, fine) = (rng.next_u64() as i32 >> (rng.next_u64() % 24), rng.next_u64() as i32 >> 8);
-        assert_eq!(combine_plane_accumulators(coarse, fine), reference::combine_planes(coarse, fine));
+        let (coarse, fine) = (
+            rng.next_u64() as i32 >> (rng.next_u64() % 24),
+            rng.next_u64() as i32 >> 8,
+        );
+        assert_eq!(
+            combine_plane_accumulators(coarse, fine),
+            reference::combine_planes(coarse, fine)
+        );
     }
 }
 
@@ -44,11 +54,18 @@ fn two_plane_codes_represent_the_value_to_a_fine_step() {
         let u = (rng.next_u64() >> 40) as f32 / (1_u64 << 24) as f32;
         let value = lo + u * (hi - lo);
         let (coarse, fine) = quantize_two_plane(value, params);
-        assert_eq!(coarse, params.quantize(value), "the coarse plane is the int8 code");
+        assert_eq!(
+            coarse,
+            params.quantize(value),
+            "the coarse plane is the int8 code"
+        );
         let represented = params.dequantize(coarse) + f32::from(fine) * fine_step;
         // Half a fine step, or one where the residual sits at +half a coarse step (128 fine
         // steps saturate to 127).
-        assert!((represented - value).abs() <= fine_step + 1e-6, "{value}: {represented}");
+        assert!(
+            (represented - value).abs() <= fine_step + 1e-6,
+            "{value}: {represented}"
+        );
     }
     // A residual of exactly +-1.5 fine steps rounds half away from zero.
     let (coarse, fine) = quantize_two_plane(params.dequantize(10) + 1.5 * fine_step, params);
