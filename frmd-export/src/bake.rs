@@ -366,7 +366,7 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
     let (variants, out_weights, out_bias) = (entries[base], entries[base + 1], entries[base + 2]);
     writeln!(
         w,
-        "    ];\n    let output = FullyConnected::new(\n        {},\n        {},\n        baked_slice(bytes, {}, {})?,\n        baked_slice(bytes, {}, {})?,\n    );\n    let first_layer_biases = baked_slice(bytes, {}, {})?;\n    Int8Network::from_parts(INPUT, &layers, output, &OUTPUT_SCALES, first_layer_biases)?\n        .with_input_precision(INPUT_PRECISION)\n}}\n",
+        "    ];\n    let output = FullyConnected::new(\n        {},\n        {},\n        baked_slice(bytes, {}, {})?,\n        baked_slice(bytes, {}, {})?,\n    );\n    let first_layer_biases = baked_slice(bytes, {}, {})?;\n    Int8Network::from_parts_with_input(\n        INPUT,\n        INPUT_PRECISION,\n        &layers,\n        output,\n        &OUTPUT_SCALES,\n        first_layer_biases,\n    )\n}}\n",
         q.output.in_features,
         q.output.out_features,
         out_weights.offset,

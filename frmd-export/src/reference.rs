@@ -116,14 +116,14 @@ pub fn int8_network<'a, const WIDTH: usize>(policy: &'a QuantizedPolicy, luts: &
         })
         .collect();
     let out = &policy.output;
-    Int8Network::from_parts(
+    Int8Network::from_parts_with_input(
         policy.input,
+        policy.input_precision,
         &layers,
         FullyConnected::new(out.in_features, out.out_features, &out.weights, &out.bias),
         &out.scales,
         &policy.first_layer_biases,
     )
-    .and_then(|net| net.with_input_precision(policy.input_precision))
     .map_err(|e| anyhow::anyhow!("int8 network: {e}"))
 }
 

@@ -188,7 +188,9 @@ fn main() -> anyhow::Result<()> {
         Ok(())
     };
     let all = Sources { input: true, hidden_weights: true, output_weights: true, pre_activation: true, post_activation: true, clip: 0.0, fine: 1.0, input_mode: 0 };
-    let variants: [(&str, Sources); 21] = [
+    let variants: [(&str, Sources); 23] = [
+        ("activations only, int16-like", Sources { pre_activation: true, post_activation: true, fine: 256.0, ..Default::default() }),
+        ("activations only, 2^-16 of int16", Sources { pre_activation: true, post_activation: true, fine: 16_777_216.0, ..Default::default() }),
         ("all, two-plane input", Sources { input: false, input_mode: 3, ..all }),
         ("clamp obs", Sources { input_mode: 4, ..Default::default() }),
         ("clamp prev action", Sources { input_mode: 5, ..Default::default() }),

@@ -578,14 +578,14 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
                 activation: layer.lut.and_then(|i| self.luts.get(i)),
             };
         }
-        Int8Network::from_parts(
+        Int8Network::from_parts_with_input(
             self.input,
+            self.input_precision,
             layers.get(..self.num_hidden).unwrap_or(&[]),
             self.output,
             self.output_scales,
             self.first_layer_biases,
-        )?
-        .with_input_precision(self.input_precision)
+        )
     }
 
     /// The policy configuration (normalization, sampler) borrowing this blob.

@@ -568,4 +568,18 @@ fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
         ),
         Err(ModelError::TwoPlaneWithoutHiddenLayer)
     );
+    let network = crate::policy::Int8Network::<WIDTH>::from_parts_with_input(
+        fix.input_params,
+        InputPrecision::TwoPlane,
+        &[],
+        no_hidden.output,
+        &fix.output_scales,
+        &[],
+    );
+    assert_eq!(
+        network.err(),
+        Some(crate::policy::PolicyError::Model(
+            ModelError::TwoPlaneWithoutHiddenLayer
+        ))
+    );
 }

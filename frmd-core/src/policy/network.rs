@@ -111,7 +111,7 @@ impl<'a, const WIDTH: usize> Int8Network<'a, WIDTH> {
     }
 
     /// As [`Self::new`] from the parts of an [`Int8Mlp`]; the hidden layers are copied, so their
-    /// slice may be short-lived.
+    /// slice may be short-lived. The input is quantized to int8 ([`InputPrecision::Int8`]).
     pub fn from_parts(
         input: QuantParams,
         layers: &[Int8Layer<'a>],
@@ -119,6 +119,30 @@ impl<'a, const WIDTH: usize> Int8Network<'a, WIDTH> {
         output_scales: &'a [f32],
         first_layer_biases: &'a [i32],
     ) -> Result<Self, PolicyError> {
+        Self::from_parts_with_input(
+            input,
+            InputPrecision::Int8,
+            layers,
+            output,
+            output_scales,
+            first_layer_biases,
+        )
+    }
+
+    /// [`Self::from_parts`] with the input quantized as `precision` says;
+    /// [`InputPrecision::TwoPlane`] needs a hidden layer and first-layer multipliers made for it
+    /// (see [`crate::model::mlp`]).
+    pub fn from_parts_with_input(
+        input: QuantParams,
+        precision: InputPrecision,
+        layers: &[Int8Layer<'a>],
+        output: FullyConnected<'a>,
+        output_scales: &'a [f32],
+        first_layer_biases: &'a [i32],
+    ) -> Result<Self, PolicyError> {
+        if precision == InputPrecision::TwoPlane && layers.is_empty() {
+            return Err(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer));
+        }
         if layers.len() > MAX_HIDDEN_LAYERS {
             return Err(PolicyError::TooManyLayers);
         }
@@ -149,20 +173,9 @@ impl<'a, const WIDTH: usize> Int8Network<'a, WIDTH> {
             output_scales,
             first_layer_biases,
             num_variants,
-            input_precision: InputPrecision::Int8,
+            input_precision: precision,
             scratch: Int8Scratch::new(),
         })
-    }
-
-    /// The same network quantizing its input as `precision` says (default
-    /// [`InputPrecision::Int8`]); [`InputPrecision::TwoPlane`] needs a hidden layer and first-layer
-    /// multipliers made for it (see [`crate::model::mlp`]).
-    pub fn with_input_precision(mut self, precision: InputPrecision) -> Result<Self, PolicyError> {
-        if precision == InputPrecision::TwoPlane && self.num_hidden == 0 {
-            return Err(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer));
-        }
-        self.input_precision = precision;
-        Ok(self)
     }
 
     /// How the input is quantized.

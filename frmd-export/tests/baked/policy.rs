@@ -151,8 +151,14 @@ pub fn network<const WIDTH: usize>() -> Result<Int8Network<'static, WIDTH>, Poli
         baked_slice(bytes, 2160, 15)?,
     );
     let first_layer_biases = baked_slice(bytes, 1568, 72)?;
-    Int8Network::from_parts(INPUT, &layers, output, &OUTPUT_SCALES, first_layer_biases)?
-        .with_input_precision(INPUT_PRECISION)
+    Int8Network::from_parts_with_input(
+        INPUT,
+        INPUT_PRECISION,
+        &layers,
+        output,
+        &OUTPUT_SCALES,
+        first_layer_biases,
+    )
 }
 
 /// Normalization and sampler configuration.
