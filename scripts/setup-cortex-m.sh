@@ -23,7 +23,7 @@ while [ $# -gt 0 ]; do
     case "$1" in
         --path) choice="${2:?--path needs auto, rustup or debian}"; shift 2 ;;
         --path=*) choice="${1#--path=}"; shift ;;
-        -h|--help) sed -n '2,13p' "${BASH_SOURCE[0]}"; exit 0 ;;
+        -h|--help) sed -n '2,14p' "${BASH_SOURCE[0]}"; exit 0 ;;
         *) echo "setup-cortex-m: unknown argument '$1' (expected --path auto|rustup|debian)" >&2; exit 2 ;;
     esac
 done

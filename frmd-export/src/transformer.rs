@@ -12,11 +12,17 @@
 //! The result ([`FoldedTransformer`]) runs on frmd-core's own f32 path
 //! ([`F32Transformer`]); [`quantize`] calibrates it with the transformer probes and quantizes it
 //! into an owned [`QuantizedTransformer`] that views as frmd-core's [`Int8Transformer`].
+//! [`blob::write`] encodes it as the `FRMT` blob (the supported firmware form), [`bake`] writes a
+//! module that embeds that blob with compile-time sizes, `QuantizedTransformer::memory` gives the
+//! RAM/flash figures and [`reference::check_layers`] is check (d) of the bit-accuracy harness.
 //!
 //! [`Int8Transformer`]: frmd_core::model::transformer::Int8Transformer
 
+pub mod bake;
 pub mod blob;
+mod memory;
 mod quantize;
+pub mod reference;
 #[cfg(test)]
 mod tests;
 

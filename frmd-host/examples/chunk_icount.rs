@@ -1,8 +1,12 @@
 //! Instruction counts per chunk under callgrind: runs `CHUNKS` (argument 2, default 1) int8 or
-//! float chunks (argument 1: int8 | core-f32 | candle-f32) of the MLP-256 reach-shape student.
-//! Per-chunk Ir = (Ir(101 chunks) - Ir(1 chunk)) / 100.
+//! float chunks (argument 1: int8 | core-f32 | candle-f32) of a randomly initialized student at
+//! the reach shape with backbone argument 3 (default `mlp`; `transformer-lite` exports the `FRMT`
+//! blob and runs frmd-core's int8 transformer policy). Per-chunk Ir = (Ir(101 chunks) -
+//! Ir(1 chunk)) / 100.
 use frmd_host::bench::{reach_input, reach_student};
 use frmd_host::eval::policy::{Policy, PolicyInput};
+use frmd_host::policy::int8::Int8Policy;
+use frmd_host::policy::transformer as transformer_policy;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -11,13 +15,30 @@ fn main() -> anyhow::Result<()> {
     let backbone = args.get(3).map(String::as_str).unwrap_or("mlp");
     let dir = std::env::temp_dir().join(format!("frmd-icount-{}", std::process::id()));
     let mut p = reach_student(&dir, backbone, 1)?;
-    let flash = p.core.as_ref().map(|c| c.flash_bytes).unwrap_or(0);
-    let policy: &mut dyn Policy = match (which, &mut p.core) {
-        ("candle-f32", _) => &mut p.float,
-        ("int8", Ok(core)) => &mut core.int8,
-        ("core-f32", Ok(core)) => &mut core.core_f32,
-        ("int8" | "core-f32", Err(reason)) => anyhow::bail!("no frmd-core policy for {backbone}: {reason}"),
-        (other, _) => anyhow::bail!("unknown policy {other}"),
+    // Transformer students: `reach_student` saved the checkpoint and calibration rows; export them
+    // with the transformer exporter.
+    let mut transformer: Option<(Int8Policy, Int8Policy, usize)> = None;
+    if backbone.starts_with("transformer") {
+        let exported = frmd_export::export::export_transformer_checkpoint(&dir, Default::default(), None)?;
+        let norm = exported.checkpoint.meta.normalization.clone().ok_or_else(|| anyhow::anyhow!("no normalization"))?;
+        let blob = frmd_export::transformer::blob::write(&exported.model, &norm).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
+        let int8 = transformer_policy::int8_policy(&blob, "int8")?;
+        let twin = transformer_policy::f32_twin(&blob, exported.model.folded.clone(), "core-f32")?;
+        transformer = Some((int8, twin, exported.model.memory().flash_bytes()));
+    }
+    let flash = match (&transformer, &p.core) {
+        (Some((_, _, flash)), _) => *flash,
+        (None, Ok(core)) => core.flash_bytes,
+        (None, Err(_)) => 0,
+    };
+    let policy: &mut dyn Policy = match (which, &mut transformer, &mut p.core) {
+        ("candle-f32", _, _) => &mut p.float,
+        ("int8", Some((int8, _, _)), _) => int8,
+        ("core-f32", Some((_, twin, _)), _) => twin,
+        ("int8", None, Ok(core)) => &mut core.int8,
+        ("core-f32", None, Ok(core)) => &mut core.core_f32,
+        ("int8" | "core-f32", None, Err(reason)) => anyhow::bail!("no frmd-core policy for {backbone}: {reason}"),
+        (other, _, _) => anyhow::bail!("unknown policy {other}"),
     };
     let (history, prev, rate) = reach_input();
     let input = PolicyInput { obs_history: &history, prev_action: &prev, prev_rate: &rate };

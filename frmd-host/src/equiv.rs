@@ -11,6 +11,7 @@
 //!   exported network's accumulators on the (a) inputs plus saturating/zero-point edge inputs.
 //!
 //! Also checked: the baked blob is reproduced bit for bit by re-exporting the checkpoint.
+//! Transformer-lite students (`FRMT` blob) get the same rows; see [`run_transformer`] for (d).
 use crate::checkpoint::{self, CheckpointMeta};
 use crate::cli::export::{export, ExportInfo, BAKED_BLOB_FILE, EXPORT_INFO_FILE};
 use crate::diffusion::samplers::{gaussian, sample_consistency};
@@ -19,6 +20,7 @@ use crate::eval::{run_episodes, EvalConfig};
 use crate::models::Condition;
 use crate::policy::float::FloatPolicy;
 use crate::policy::int8::Int8Policy;
+use crate::policy::transformer as transformer_policy;
 use anyhow::Context;
 use candle_core::Device;
 use frmd_core::model::mlp::Probe;
@@ -90,8 +92,17 @@ fn row(check: &str, metric: &str, value: f64, bound: Option<f64>, note: String) 
     EquivRow { check: check.into(), metric: metric.into(), value, bound, pass: bound.map(|b| value <= b), note }
 }
 
-/// Runs every check.
-pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
+/// Everything the checks share: the export settings, the candle student, calibration rows.
+struct Setup {
+    info: ExportInfo,
+    meta: CheckpointMeta,
+    net: crate::models::OwnedNetwork,
+    norm: crate::data::Normalization,
+    set: frmd_export::calibrate::CalibrationSet,
+    blob: Vec<u8>,
+}
+
+fn setup(cfg: &EquivConfig) -> anyhow::Result<Setup> {
     let info_path = cfg.baked.join(EXPORT_INFO_FILE);
     let mut info: ExportInfo = serde_json::from_str(&std::fs::read_to_string(&info_path).with_context(|| format!("reading {}", info_path.display()))?)
         .with_context(|| format!("parsing {}", info_path.display()))?;
@@ -99,28 +110,29 @@ pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
     if let Some(data) = &cfg.data {
         info.calibration_data = Some(data.display().to_string());
     }
-    let exported = export(&info)?;
     let blob_path = cfg.baked.join(BAKED_BLOB_FILE);
     let blob = std::fs::read(&blob_path).with_context(|| format!("reading {}", blob_path.display()))?;
-    let rebuilt = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding: {e}"))?;
-    let mut rows = vec![row("export", "baked blob differs from a re-export (0 = identical)", f64::from(u8::from(rebuilt != blob)), Some(0.0), blob_path.display().to_string())];
-
     let (meta, net): (CheckpointMeta, _) = checkpoint::load(&cfg.ckpt)?;
     let norm = meta.normalization.clone().context("checkpoint has no normalization")?;
-    let sigma: SigmaConfig = meta.sigma.into();
-    let model = meta.model.clone();
-    let folded = &exported.folded;
-    let steps = folded.steps.len();
-    let (k, traj, obs_w) = (model.action_dim, model.traj_dim(), model.history * model.obs_dim);
-    let mut int8 = Int8Policy::from_blob(&blob, "int8")?;
     let set = match &info.calibration_data {
         Some(d) => crate::cli::export::calibration_from_data(std::path::Path::new(d), &cfg.ckpt)?,
-        None => frmd_export::calibration_file::read(&cfg.ckpt.join(checkpoint::CALIBRATION_FILE), model.cond_dim())?,
+        None => frmd_export::calibration_file::read(&cfg.ckpt.join(checkpoint::CALIBRATION_FILE), meta.model.cond_dim())?,
     };
+    Ok(Setup { info, meta, net, norm, set, blob })
+}
+
+/// Checks (a) and (b) open loop: the candle student, frmd-core's f32 path (`core_f32(cond,
+/// noise)`, normalized units) and the int8 policy on the first `cfg.inputs` calibration rows with
+/// fresh noise.
+fn open_loop(cfg: &EquivConfig, s: &Setup, steps: usize, int8: &mut Int8Policy, mut core_f32: impl FnMut(&[f32], &[f32]) -> anyhow::Result<Vec<f32>>) -> anyhow::Result<Vec<EquivRow>> {
+    let model = &s.meta.model;
+    let sigma: SigmaConfig = s.meta.sigma.into();
+    let (k, traj, obs_w) = (model.action_dim, model.traj_dim(), model.history * model.obs_dim);
+    let norm = &s.norm;
+    let set = &s.set;
     let rate_scale = norm.action.scale();
     let range: f64 = norm.action.min.iter().zip(&norm.action.max).map(|(lo, hi)| f64::from(hi - lo)).sum::<f64>() / k as f64;
     let (mut max_a, mut max_b, mut sum_b, mut count_b) = (0f64, 0f64, 0f64, 0usize);
-    let mut network_inputs = Vec::new();
     let rows_used = cfg.inputs.min(set.rows());
     for r in 0..rows_used {
         let cond = &set.cond[r * set.cond_dim..(r + 1) * set.cond_dim];
@@ -130,14 +142,9 @@ pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
         // Candle float student, noise from the same generator and seed.
         let mut rng = Rng::new(seed);
         let z = gaussian(&mut rng, 1, traj, &Device::Cpu)?;
-        let condition = Condition::from_slices(&model, &cond[..obs_w], &cond[obs_w..obs_w + k], &cond[obs_w + k..], &Device::Cpu)?;
-        let float: Vec<f32> = sample_consistency(&net.net, &sigma, &condition, &z, steps, &mut rng)?.flatten_all()?.to_vec1()?;
-        // frmd-core f32 path.
-        let core = folded.sample(cond, &noise, |step, probe, values| {
-            if step == 0 && probe == Probe::Input {
-                network_inputs.push(values.to_vec());
-            }
-        })?;
+        let condition = Condition::from_slices(model, &cond[..obs_w], &cond[obs_w..obs_w + k], &cond[obs_w + k..], &Device::Cpu)?;
+        let float: Vec<f32> = sample_consistency(&s.net.net, &sigma, &condition, &z, steps, &mut rng)?.flatten_all()?.to_vec1()?;
+        let core = core_f32(cond, &noise)?;
         max_a = float.iter().zip(&core).map(|(a, b)| f64::from((a - b).abs())).fold(max_a, f64::max);
         // frmd-core int8 policy on raw inputs.
         let history: Vec<Vec<f32>> = cond[..obs_w]
@@ -162,34 +169,110 @@ pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
         }
     }
     let mean_b = sum_b / count_b.max(1) as f64;
-    rows.push(row("a", "core f32 vs candle float: max abs error (normalized)", max_a, Some(cfg.max_f32_error), format!("{rows_used} inputs, {steps} step(s)")));
-    rows.push(row("b", "core int8 vs candle float: max abs error (action units)", max_b, Some(cfg.max_int8_error_frac * range), format!("bound {:.0} % of mean action range {range:.4}", 100.0 * cfg.max_int8_error_frac)));
-    rows.push(row("b", "core int8 vs candle float: mean abs error (action units)", mean_b, Some(cfg.mean_int8_error_frac * range), format!("bound {:.0} % of mean action range", 100.0 * cfg.mean_int8_error_frac)));
-    if cfg.episodes > 0 {
-        let task = meta.dataset.task.clone();
-        let eval = EvalConfig { episodes: cfg.episodes, history: model.history, ..EvalConfig::default() };
-        let mut float = FloatPolicy::load(&cfg.ckpt, Some(steps), None)?;
-        let f = run_episodes(&task, &mut float, &eval)?;
-        int8.reset(0);
-        let i = run_episodes(&task, &mut int8, &eval)?;
-        let mut twin = Int8Policy::f32_twin(&blob, folded.clone(), "core-f32")?;
-        let t = run_episodes(&task, &mut twin, &eval)?;
-        rows.push(row("a", "success-rate difference core f32 vs candle (points)", 100.0 * (f.success_rate - t.success_rate).abs(), Some(cfg.max_success_diff_points), format!(
+    Ok(vec![
+        row("a", "core f32 vs candle float: max abs error (normalized)", max_a, Some(cfg.max_f32_error), format!("{rows_used} inputs, {steps} step(s)")),
+        row("b", "core int8 vs candle float: max abs error (action units)", max_b, Some(cfg.max_int8_error_frac * range), format!("bound {:.0} % of mean action range {range:.4}", 100.0 * cfg.max_int8_error_frac)),
+        row("b", "core int8 vs candle float: mean abs error (action units)", mean_b, Some(cfg.mean_int8_error_frac * range), format!("bound {:.0} % of mean action range", 100.0 * cfg.mean_int8_error_frac)),
+    ])
+}
+
+/// Success rates of the candle student, the int8 policy and the runtime policy with frmd-core's
+/// f32 network (`twin`) on the checkpoint's task.
+fn closed_loop(cfg: &EquivConfig, s: &Setup, steps: usize, int8: &mut Int8Policy, twin: &mut Int8Policy) -> anyhow::Result<Vec<EquivRow>> {
+    let task = s.meta.dataset.task.clone();
+    let eval = EvalConfig { episodes: cfg.episodes, history: s.meta.model.history, ..EvalConfig::default() };
+    let mut float = FloatPolicy::load(&cfg.ckpt, Some(steps), None)?;
+    let f = run_episodes(&task, &mut float, &eval)?;
+    int8.reset(0);
+    let i = run_episodes(&task, int8, &eval)?;
+    let t = run_episodes(&task, twin, &eval)?;
+    let diff = 100.0 * (f.success_rate - i.success_rate).abs();
+    Ok(vec![
+        row("a", "success-rate difference core f32 vs candle (points)", 100.0 * (f.success_rate - t.success_rate).abs(), Some(cfg.max_success_diff_points), format!(
             "{task}, {} episodes: candle {:.1} %, core f32 (runtime policy, f32 network) {:.1} %", cfg.episodes, 100.0 * f.success_rate, 100.0 * t.success_rate
-        )));
-        let diff = 100.0 * (f.success_rate - i.success_rate).abs();
-        rows.push(row("b", "success-rate difference (points)", diff, Some(cfg.max_success_diff_points), format!(
+        )),
+        row("b", "success-rate difference (points)", diff, Some(cfg.max_success_diff_points), format!(
             "{task}, {} episodes: float {:.1} %, int8 {:.1} %; latency median float {:.1} us, int8 {:.1} us",
             cfg.episodes, 100.0 * f.success_rate, 100.0 * i.success_rate, f.latency_us_median, i.latency_us_median
-        )));
-    }
-    rows.push(EquivRow { check: "c".into(), metric: "x86-64 vs Cortex-M bytes".into(), value: f64::NAN, bound: None, pass: None, note: "not run here: see examples/cortex-m/run-qemu.sh (digest line)".into() });
+        )),
+    ])
+}
+
+fn blob_row(blob: &[u8], rebuilt: &[u8], cfg: &EquivConfig) -> EquivRow {
+    let path = cfg.baked.join(BAKED_BLOB_FILE);
+    row("export", "baked blob differs from a re-export (0 = identical)", f64::from(u8::from(rebuilt != blob)), Some(0.0), path.display().to_string())
+}
+
+fn qemu_row() -> EquivRow {
+    EquivRow { check: "c".into(), metric: "x86-64 vs Cortex-M bytes".into(), value: f64::NAN, bound: None, pass: None, note: "not run here: see examples/cortex-m/run-qemu.sh (digest line)".into() }
+}
+
+fn requant_row(cfg: &EquivConfig) -> EquivRow {
     let requant = frmd_export::reference::check_requantization(cfg.random_requant, 0x0dd5);
-    rows.push(row("d", "requantization mismatches vs i128 model", requant.mismatches as f64, Some(0.0), format!("{} cases{}", requant.cases, requant.first_mismatch.map(|m| format!("; first: {m}")).unwrap_or_default())));
+    row("d", "requantization mismatches vs i128 model", requant.mismatches as f64, Some(0.0), format!("{} cases{}", requant.cases, requant.first_mismatch.map(|m| format!("; first: {m}")).unwrap_or_default()))
+}
+
+fn report(rows: Vec<EquivRow>) -> EquivReport {
+    let passed = rows.iter().all(|r| r.pass != Some(false));
+    EquivReport { rows, passed }
+}
+
+/// Runs every check; the checkpoint's backbone picks the MLP or the transformer path.
+pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
+    let s = setup(cfg)?;
+    if crate::cli::export::is_transformer(&s.info)? {
+        return run_transformer(cfg, &s);
+    }
+    let exported = export(&s.info)?;
+    let rebuilt = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding: {e}"))?;
+    let mut rows = vec![blob_row(&s.blob, &rebuilt, cfg)];
+    let folded = &exported.folded;
+    let steps = folded.steps.len();
+    let mut int8 = Int8Policy::from_blob(&s.blob, "int8")?;
+    let mut network_inputs = Vec::new();
+    rows.extend(open_loop(cfg, &s, steps, &mut int8, |cond, noise| {
+        folded.sample(cond, noise, |step, probe, values| {
+            if step == 0 && probe == Probe::Input {
+                network_inputs.push(values.to_vec());
+            }
+        })
+    })?);
+    if cfg.episodes > 0 {
+        let mut twin = Int8Policy::f32_twin(&s.blob, folded.clone(), "core-f32")?;
+        rows.extend(closed_loop(cfg, &s, steps, &mut int8, &mut twin)?);
+    }
+    rows.push(qemu_row());
+    rows.push(requant_row(cfg));
     let network = frmd_export::reference::check_network::<MAX_WIDTH>(&exported.policy, &network_inputs)?;
     rows.push(row("d", "int8 network accumulator mismatches vs wide model", network.mismatches as f64, Some(0.0), format!("{} cases{}", network.cases, network.first_mismatch.map(|m| format!("; first: {m}")).unwrap_or_default())));
-    let passed = rows.iter().all(|r| r.pass != Some(false));
-    Ok(EquivReport { rows, passed })
+    Ok(report(rows))
+}
+
+/// The checks for a transformer-lite student (`FRMT` blob): the same (a), (b), (c) rows; (d) is
+/// the requantization check plus every exported int8 linear layer against the wide-integer model
+/// ([`frmd_export::transformer::reference::check_layers`]; the f32 LayerNorm/attention/residual
+/// parts are covered by (a) and (b)).
+fn run_transformer(cfg: &EquivConfig, s: &Setup) -> anyhow::Result<EquivReport> {
+    let exported = crate::cli::export::export_transformer(&s.info)?;
+    let rebuilt = crate::cli::export::transformer_blob(&exported)?;
+    let mut rows = vec![blob_row(&s.blob, &rebuilt, cfg)];
+    let folded = &exported.model.folded;
+    let steps = folded.steps.len();
+    let mut int8 = transformer_policy::int8_policy(&s.blob, "int8")?;
+    rows.extend(open_loop(cfg, s, steps, &mut int8, |cond, noise| folded.sample(cond, noise, |_, _, _| {}))?);
+    if cfg.episodes > 0 {
+        let mut twin = transformer_policy::f32_twin(&s.blob, folded.clone(), "core-f32")?;
+        rows.extend(closed_loop(cfg, s, steps, &mut int8, &mut twin)?);
+    }
+    rows.push(qemu_row());
+    rows.push(requant_row(cfg));
+    let layers = frmd_export::transformer::reference::check_layers(&exported.model, 16, 0x7f3e)?;
+    rows.push(row("d", "int8 transformer layer mismatches vs wide model", layers.mismatches as f64, Some(0.0), format!(
+        "{} cases (every int8 linear layer, fc1 requantization + GELU table){}",
+        layers.cases,
+        layers.first_mismatch.map(|m| format!("; first: {m}")).unwrap_or_default()
+    )));
+    Ok(report(rows))
 }
 
 /// The report as a table.

@@ -15,6 +15,7 @@ use crate::shape::{
 use crate::synthetic_mlp::{generate_with, LayerData};
 use frmd_core::policy::{InputLayout, StepConstants};
 use frmd_core::prodmp::BakedProDmp;
+use frmd_core::sigma::SigmaConfig;
 use frmd_export::{ProDmpTablesOwned, QuantizedLayer, QuantizedOutput, QuantizedPolicy};
 
 /// Seed of the weight stream.
@@ -22,21 +23,17 @@ pub const POLICY_WEIGHT_SEED: u64 = 0x4652_4D44_504F_4C31;
 /// Real range of the model input (normalized observations/actions in [-1, 1], rates and the
 /// c_in-scaled noisy trajectory mostly within a few units).
 const MODEL_INPUT_RANGE: (f32, f32) = (-4.0, 4.0);
-/// EDM constants of DESIGN.md s.3 (sigma_max 80, sigma_min 0.002, sigma_data 0.5).
-const SIGMA_MAX: f64 = 80.0;
-const SIGMA_MIN: f64 = 0.002;
-const SIGMA_DATA: f64 = 0.5;
-
-/// One-step constants at sigma_max (consistency-model c_skip/c_out, EDM c_in).
+/// One-step constants at sigma_max from frmd-core's EDM/consistency schedule (defaults of
+/// DESIGN.md s.3: sigma_min 0.002, sigma_max 80, sigma_data 0.5).
 fn first_step() -> StepConstants {
-    let norm = (SIGMA_MAX * SIGMA_MAX + SIGMA_DATA * SIGMA_DATA).sqrt();
-    let shifted = SIGMA_MAX - SIGMA_MIN;
+    let sigma = SigmaConfig::default();
+    let at_max = |value: Result<f64, _>| value.expect("schedule defined at sigma_max") as f32;
     StepConstants {
-        sigma: SIGMA_MAX as f32,
+        sigma: sigma.sigma_max as f32,
         renoise_std: 0.0,
-        c_in: (1.0 / norm) as f32,
-        c_skip: (SIGMA_DATA * SIGMA_DATA / (shifted * shifted + SIGMA_DATA * SIGMA_DATA)) as f32,
-        c_out: (shifted * SIGMA_DATA / norm) as f32,
+        c_in: at_max(sigma.c_in(sigma.sigma_max)),
+        c_skip: at_max(sigma.c_skip(sigma.sigma_max)),
+        c_out: at_max(sigma.c_out(sigma.sigma_max)),
         first_layer_bias_index: 0,
     }
 }

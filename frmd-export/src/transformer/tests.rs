@@ -317,3 +317,20 @@ fn core_policy_int8_blob_chunk_tracks_f32_policy_chunk() {
     assert!(mean <= 0.0075 * spread, "mean error {mean} exceeds 0.75% of the f32 spread {spread}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Check (d) for the transformer: the exported layers agree with the wide-integer model, and the
+/// check notices a difference (an int32 overflow the kernel wraps and the i64 model does not).
+#[test]
+fn layer_check_passes_on_the_export_and_detects_accumulator_overflow() {
+    let (quantized, _norm, dir) = exported_lite("layers", 1);
+    let check = reference::check_layers(&quantized, 4, 1).unwrap();
+    assert_eq!(check.mismatches, 0, "{:?}", check.first_mismatch);
+    // 7 linear layer kinds (traj_in, cond_in, head + 4 per block) and fc1 once more, 8 rows each.
+    assert_eq!(check.cases, (3 + 5 * quantized.blocks.len() as u64) * 8);
+    let mut overflowing = quantized.clone();
+    overflowing.head.bias[0] = i32::MAX;
+    let check = reference::check_layers(&overflowing, 4, 1).unwrap();
+    assert!(check.mismatches >= 1, "overflow not detected");
+    assert!(check.first_mismatch.unwrap().starts_with("head"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

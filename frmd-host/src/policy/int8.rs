@@ -23,8 +23,8 @@ pub trait ChunkRunner {
     fn run(&mut self, input: &PolicyInput<'_>, noise: Noise<'_>) -> anyhow::Result<Vec<Vec<f32>>>;
 }
 
-struct Runner<Net, const M: usize, const O: usize, const K: usize, const N: usize, const P: usize> {
-    policy: CorePolicy<'static, Net, M, O, K, N, P, MAX_WIDTH>,
+pub(crate) struct Runner<Net, const M: usize, const O: usize, const K: usize, const N: usize, const P: usize> {
+    pub(crate) policy: CorePolicy<'static, Net, M, O, K, N, P, MAX_WIDTH>,
 }
 
 fn array<const L: usize>(values: &[f32], what: &str) -> anyhow::Result<[f32; L]> {
@@ -55,7 +55,7 @@ impl<Net: Network, const M: usize, const O: usize, const K: usize, const N: usiz
     }
 }
 
-fn leak_aligned(bytes: &[u8]) -> &'static [u8] {
+pub(crate) fn leak_aligned(bytes: &[u8]) -> &'static [u8] {
     let mut words = vec![0u32; bytes.len().div_ceil(4)];
     bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..bytes.len()].copy_from_slice(bytes);
     let words: &'static [u32] = Box::leak(words.into_boxed_slice());
@@ -127,10 +127,15 @@ impl Int8Policy {
         Ok(Int8Policy { runner: load_runner(bytes, Some(folded))?, rng: Rng::new(0), label: label.into() })
     }
 
-    /// Loads a blob file.
+    /// A policy over any runner (e.g. [`super::transformer::load_runner`]).
+    pub fn from_runner(runner: Box<dyn ChunkRunner>, label: &str) -> Self {
+        Int8Policy { runner, rng: Rng::new(0), label: label.into() }
+    }
+
+    /// Loads a blob file (MLP `FRMD` or transformer `FRMT`, by its magic).
     pub fn load(path: &Path) -> anyhow::Result<Self> {
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-        Self::from_blob(&bytes, "int8").with_context(|| format!("loading {}", path.display()))
+        super::transformer::int8_policy(&bytes, "int8").with_context(|| format!("loading {}", path.display()))
     }
 
     /// Observation history the policy needs.

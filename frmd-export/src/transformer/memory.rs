@@ -1,0 +1,66 @@
+//! RAM and flash figures of an exported transformer policy (the blob form), in the same
+//! [`MemoryFigures`] terms as the MLP.
+
+use super::quantize::{QuantizedLinear, QuantizedTransformer};
+use super::FloatNorm;
+use crate::MemoryFigures;
+
+fn linear_weight_bytes(layer: &QuantizedLinear) -> usize {
+    layer.weights.len() + 4 * layer.bias.len()
+}
+
+/// f32 tables of a linear layer: per-channel output scales.
+fn linear_table_bytes(layer: &QuantizedLinear) -> usize {
+    4 * layer.output_scales.len()
+}
+
+fn norm_bytes(norm: &FloatNorm) -> usize {
+    4 * (norm.gamma.len() + norm.beta.len())
+}
+
+impl QuantizedTransformer {
+    /// RAM/flash figures. RAM: frmd-core's int8 transformer scratch
+    /// ([`frmd_core::model::transformer::TransformerShape::int8_scratch`], exact) plus the policy
+    /// state (the same f32 buffers as the MLP policy: history, noise, trajectories, input vector,
+    /// parameters). Flash: int8 weights and int32 biases ("weights"), and every f32/int8 table
+    /// the loader views ("tables": output scales, fc1 requantization, GELU LUTs, LayerNorms,
+    /// positions, noise tokens, ProDMP tables, normalization, steps). The blob adds its header,
+    /// descriptor and alignment padding on top.
+    pub fn memory(&self) -> MemoryFigures {
+        let f = &self.folded;
+        let c = &f.config;
+        let (m, o, k, n) = (c.history, c.obs_dim, c.action_dim, c.horizon);
+        let p = c.output_dim() / k.max(1);
+        let input = f.layout.width(m, o, k, n).unwrap_or(0);
+        let floats = 2 * m * o + 2 * n * k + 6 * n * k + input + k * p + 2 * k;
+        let scratch = f.shape.int8_scratch();
+        // fc1 is requantized to int8 (multipliers and shifts below), so its output scales are not
+        // stored; every other linear layer dequantizes with its output scales.
+        let mut linears: Vec<&QuantizedLinear> = vec![&self.traj_in, &self.cond_in, &self.head];
+        for b in &self.blocks {
+            linears.extend([&b.qkv, &b.proj, &b.fc2]);
+        }
+        let weights_bytes = linears.iter().copied().chain(self.blocks.iter().map(|b| &b.fc1)).map(linear_weight_bytes).sum();
+        let block_tables: usize = self
+            .blocks
+            .iter()
+            .map(|b| norm_bytes(&b.norm1) + norm_bytes(&b.norm2) + 4 * (b.fc1_multipliers.len() + b.fc1_shifts.len()) + b.gelu.table.len())
+            .sum();
+        let t = &f.prodmp;
+        let prodmp = 4 * (t.pos_params.len() + t.vel_params.len() + t.pos_y0.len() + t.pos_v0.len() + t.vel_y0.len() + t.vel_v0.len());
+        let table_bytes = linears.iter().map(|l| linear_table_bytes(l)).sum::<usize>()
+            + block_tables
+            + norm_bytes(&f.final_norm)
+            + 4 * (f.positions.len() + f.noise_tokens.iter().map(Vec::len).sum::<usize>())
+            + prodmp
+            + 8 * (o + k)
+            + 24 * f.steps.len();
+        MemoryFigures {
+            scratch_width: f.shape.width,
+            scratch_bytes: scratch.ram_bytes(),
+            state_bytes: 4 * floats,
+            weights_bytes,
+            table_bytes,
+        }
+    }
+}
