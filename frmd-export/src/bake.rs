@@ -177,7 +177,7 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
     .map_err(fmt_err)?;
     w.push_str(
         "\nuse frmd_core::kernels::{FcRequant, FullyConnected, Lut8};\n\
-         use frmd_core::model::mlp::Int8Layer;\n\
+         use frmd_core::model::mlp::{InputPrecision, Int8Layer};\n\
          use frmd_core::policy::{\n    baked_slice, AlignedBytes, InputLayout, InputSegment, Int8Network, Policy, PolicyConfig,\n    PolicyError, RangeNormalizer, Sampler, StepConstants,\n};\n\
          use frmd_core::prodmp::BakedProDmp;\n\
          use frmd_core::quant::QuantParams;\n\n",
@@ -236,6 +236,12 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
         "/// Quantization of the f32 input vector.\npub const INPUT: QuantParams = QuantParams {{ scale: {}, zero_point: {} }};",
         float(&q.input.scale),
         q.input.zero_point
+    )
+    .map_err(fmt_err)?;
+    writeln!(
+        w,
+        "/// How the first layer quantizes the input (its multipliers are made for it).\npub const INPUT_PRECISION: InputPrecision = InputPrecision::{:?};",
+        q.input_precision
     )
     .map_err(fmt_err)?;
     let segments = q.layout.segments();
@@ -360,7 +366,7 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
     let (variants, out_weights, out_bias) = (entries[base], entries[base + 1], entries[base + 2]);
     writeln!(
         w,
-        "    ];\n    let output = FullyConnected::new(\n        {},\n        {},\n        baked_slice(bytes, {}, {})?,\n        baked_slice(bytes, {}, {})?,\n    );\n    let first_layer_biases = baked_slice(bytes, {}, {})?;\n    Int8Network::from_parts(INPUT, &layers, output, &OUTPUT_SCALES, first_layer_biases)\n}}\n",
+        "    ];\n    let output = FullyConnected::new(\n        {},\n        {},\n        baked_slice(bytes, {}, {})?,\n        baked_slice(bytes, {}, {})?,\n    );\n    let first_layer_biases = baked_slice(bytes, {}, {})?;\n    Int8Network::from_parts_with_input(\n        INPUT,\n        INPUT_PRECISION,\n        &layers,\n        output,\n        &OUTPUT_SCALES,\n        first_layer_biases,\n    )\n}}\n",
         q.output.in_features,
         q.output.out_features,
         out_weights.offset,

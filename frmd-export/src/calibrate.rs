@@ -6,14 +6,19 @@
 //! min/max or a symmetric percentile of the recorded values. Quantization then follows
 //! DESIGN.md section 5 with frmd-core's `quant` helpers (per-channel symmetric weights, int32 bias
 //! with the input zero point folded, Q31 requantization to the pre-activation range, a 256-entry
-//! LUT to the output range, a dequantized output layer).
+//! LUT to the output range, a dequantized output layer). With two-plane input
+//! (`frmd_core::model::mlp::InputPrecision::TwoPlane`, the default of
+//! [`crate::export::ExportOptions`]) the first layer's multipliers are made for the fine input
+//! scale `input_scale / 2^8`, and the exporter widens the input range (see
+//! [`crate::export::ExportOptions::input_headroom`]).
 use crate::fold::{FloatLayer, FoldedMlp, InputGains};
 use crate::{QuantizedLayer, QuantizedOutput, QuantizedPolicy};
 use anyhow::{bail, Context};
 use frmd_core::blob::LUT_LEN;
 use frmd_core::kernels::Lut8;
 use frmd_core::model::mlp::Probe;
-use frmd_core::quant::{fold_input_zero_point, quantize_bias, quantize_weights_per_channel, requantization_multiplier, QuantParams};
+use frmd_core::model::mlp::InputPrecision;
+use frmd_core::quant::{fold_input_zero_point, quantize_bias, quantize_weights_per_channel, requantization_multiplier, QuantParams, FINE_INPUT_BITS};
 use frmd_core::rng::Rng;
 
 /// How activation ranges are chosen from the calibration values.
@@ -99,6 +104,16 @@ pub struct Ranges {
     pub hidden: Vec<(QuantParams, QuantParams)>,
     /// Calibration rows run (each through every sampling step).
     pub rows: usize,
+}
+
+/// `params` with its represented range (`dequantize(-128) ..= dequantize(127)`) scaled by
+/// `factor` (finite, >= 1).
+pub fn widen(params: QuantParams, factor: f32) -> anyhow::Result<QuantParams> {
+    if !(factor.is_finite() && factor >= 1.0) {
+        bail!("range widening factor {factor} must be finite and at least 1");
+    }
+    let (lo, hi) = (params.dequantize(i8::MIN) * factor, params.dequantize(i8::MAX) * factor);
+    QuantParams::from_range(lo, hi).map_err(|e| anyhow::anyhow!("range [{lo}, {hi}]: {e:?}"))
 }
 
 /// Runs the f32 sampler over `set` and derives the activation parameters.
@@ -188,9 +203,24 @@ pub(crate) fn int_bias(bias: &[f32], q: &QuantizedWeights, input: QuantParams, i
         .collect()
 }
 
+/// Checks that no two-plane accumulator of the first layer can saturate
+/// (`frmd_core::quant::combine_plane_accumulators`): with int8 codes of magnitude at most 128,
+/// `2^8 (|bias| + 128 sum|w|) + 128 sum|w|` must fit in i32 for every channel and bias variant.
+fn check_two_plane_range(weights: &[i8], in_features: usize, biases: &[i32]) -> anyhow::Result<()> {
+    for (o, row) in weights.chunks_exact(in_features).enumerate() {
+        let weight_sum: i64 = row.iter().map(|w| i64::from(*w).abs()).sum();
+        let bias = biases.iter().skip(o).step_by(weights.len() / in_features).map(|b| i64::from(*b).abs()).max().unwrap_or(0);
+        let bound = ((bias + 128 * weight_sum) << FINE_INPUT_BITS) + 128 * weight_sum;
+        if bound > i64::from(i32::MAX) {
+            bail!("first layer channel {o}: two-plane input accumulators could reach {bound} and saturate i32 (export with plain int8 input)");
+        }
+    }
+    Ok(())
+}
+
 /// Quantizes `model` with the calibrated `ranges`, normalization and ProDMP tables into a
-/// [`QuantizedPolicy`].
-pub fn quantize(model: &FoldedMlp, ranges: &Ranges, norm: &crate::checkpoint::Normalization) -> anyhow::Result<QuantizedPolicy> {
+/// [`QuantizedPolicy`] whose first layer takes its input as `input_precision` says.
+pub fn quantize(model: &FoldedMlp, ranges: &Ranges, norm: &crate::checkpoint::Normalization, input_precision: InputPrecision) -> anyhow::Result<QuantizedPolicy> {
     let c = &model.config;
     let mut current = ranges.input;
     let mut hidden = Vec::new();
@@ -199,14 +229,21 @@ pub fn quantize(model: &FoldedMlp, ranges: &Ranges, norm: &crate::checkpoint::No
     for (l, (layer, &(pre, out))) in model.hidden.iter().zip(&ranges.hidden).enumerate() {
         let q = quantize_weights(layer).with_context(|| format!("hidden layer {l}"))?;
         let bias = int_bias(&layer.bias, &q, current, layer.in_features).with_context(|| format!("hidden layer {l}"))?;
+        // The scale of the accumulators this layer requantizes.
+        let mut accumulator_input_scale = current.scale;
         if l == 0 {
             for variant in &model.first_layer_biases {
                 first_layer_biases.extend(int_bias(variant, &q, current, layer.in_features).context("first-layer bias variant")?);
             }
+            if input_precision == InputPrecision::TwoPlane {
+                check_two_plane_range(&q.weights, layer.in_features, &first_layer_biases)?;
+                check_two_plane_range(&q.weights, layer.in_features, &bias)?;
+                accumulator_input_scale = current.scale / (1_u32 << FINE_INPUT_BITS) as f32;
+            }
         }
         let (mut multipliers, mut shifts) = (Vec::new(), Vec::new());
         for (o, scale) in q.scales.iter().enumerate() {
-            let (m, s) = requantization_multiplier(current.scale, *scale, pre.scale)
+            let (m, s) = requantization_multiplier(accumulator_input_scale, *scale, pre.scale)
                 .map_err(|e| anyhow::anyhow!("hidden layer {l} channel {o}: requantization multiplier: {e:?}"))?;
             multipliers.push(m);
             shifts.push(s);
@@ -250,6 +287,7 @@ pub fn quantize(model: &FoldedMlp, ranges: &Ranges, norm: &crate::checkpoint::No
         control_dt: c.control_dt as f32,
         layout: model.layout,
         input: ranges.input,
+        input_precision: if model.hidden.is_empty() { InputPrecision::Int8 } else { input_precision },
         obs_min: norm.obs.min.clone(),
         obs_max: norm.obs.max.clone(),
         action_min: norm.action.min.clone(),

@@ -1,10 +1,11 @@
 //! Checkpoint directory -> [`QuantizedPolicy`] in one call (usable from a firmware build.rs).
-use crate::calibrate::{calibrate, input_gains, quantize, CalibrationSet, RangeMethod, Ranges};
+use crate::calibrate::{calibrate, input_gains, quantize, widen, CalibrationSet, RangeMethod, Ranges};
 use crate::checkpoint::{Checkpoint, CALIBRATION_FILE};
 use crate::fold::FoldedMlp;
 use crate::transformer::{FoldedTransformer, QuantizedTransformer, TransformerRanges};
 use crate::QuantizedPolicy;
 use anyhow::Context;
+use frmd_core::model::mlp::InputPrecision;
 use std::path::Path;
 
 /// Export settings.
@@ -15,11 +16,23 @@ pub struct ExportOptions {
     pub ranges: RangeMethod,
     /// Balance the input segments' ranges with [`crate::fold::FoldedMlp::with_input_gains`].
     pub balance_inputs: bool,
+    /// Quantize the MLP input in two int8 planes (about 16-bit input precision, see
+    /// `frmd_core::model::mlp::InputPrecision::TwoPlane`) instead of one.
+    pub two_plane_input: bool,
+    /// With `two_plane_input`: the calibrated input range is widened by this factor (>= 1), so
+    /// observations beyond the training range (closed-loop states the demonstrations never
+    /// visited) reach the network instead of saturating; the fine plane keeps the resolution
+    /// (`range / 2^16`). Ignored for plain int8 input.
+    pub input_headroom: f32,
 }
+
+/// Default [`ExportOptions::input_headroom`]: the weaker built-in task policies reach normalized
+/// observations of 3-16 in closed loop (training range +-1).
+pub const DEFAULT_INPUT_HEADROOM: f32 = 8.0;
 
 impl Default for ExportOptions {
     fn default() -> Self {
-        ExportOptions { steps: 1, ranges: RangeMethod::MinMax, balance_inputs: true }
+        ExportOptions { steps: 1, ranges: RangeMethod::MinMax, balance_inputs: true, two_plane_input: true, input_headroom: DEFAULT_INPUT_HEADROOM }
     }
 }
 
@@ -44,8 +57,12 @@ pub fn export_checkpoint(dir: &Path, options: ExportOptions, calibration: Option
             .context("no calibration data given and the checkpoint's calibration file is unusable (pass --data)")?,
     };
     let folded = if options.balance_inputs { folded.with_input_gains(input_gains(&folded, &set)?)? } else { folded };
-    let ranges = calibrate(&folded, &set, options.ranges)?;
-    let policy = quantize(&folded, &ranges, &norm)?;
+    let mut ranges = calibrate(&folded, &set, options.ranges)?;
+    let precision = if options.two_plane_input { InputPrecision::TwoPlane } else { InputPrecision::Int8 };
+    if options.two_plane_input {
+        ranges.input = widen(ranges.input, options.input_headroom).context("input headroom")?;
+    }
+    let policy = quantize(&folded, &ranges, &norm, precision)?;
     Ok(Exported { checkpoint, folded, ranges, policy })
 }
 
@@ -60,7 +77,8 @@ pub struct ExportedTransformer {
 
 /// [`export_checkpoint`] for a transformer student: reads `dir`, folds the per-step noise tokens,
 /// calibrates with the transformer probes on `calibration` (or `dir/calibration.safetensors`)
-/// and quantizes. `options.balance_inputs` does not apply (each input layer has its own scale).
+/// and quantizes. `options.balance_inputs` and `options.two_plane_input` do not apply (each input
+/// layer has its own scale).
 pub fn export_transformer_checkpoint(dir: &Path, options: ExportOptions, calibration: Option<CalibrationSet>) -> anyhow::Result<ExportedTransformer> {
     let checkpoint = Checkpoint::read(dir).with_context(|| format!("checkpoint {}", dir.display()))?;
     let folded = FoldedTransformer::new(&checkpoint, options.steps).with_context(|| format!("cannot export {}", dir.display()))?;

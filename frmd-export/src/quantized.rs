@@ -2,6 +2,7 @@
 //! output forms (blob and baked module) are written.
 
 use frmd_core::blob::{BlobParts, HiddenLayerParts, OutputLayerParts, ProDmpTables, LUT_LEN};
+use frmd_core::model::mlp::InputPrecision;
 use frmd_core::policy::{InputLayout, StepConstants};
 use frmd_core::prodmp::BakedProDmp;
 use frmd_core::quant::QuantParams;
@@ -107,6 +108,9 @@ pub struct QuantizedPolicy {
     pub layout: InputLayout,
     /// Quantization of the f32 input vector.
     pub input: QuantParams,
+    /// How the first layer quantizes the input; with [`InputPrecision::TwoPlane`] the first
+    /// layer's multipliers are for the input scale `input.scale / 2^FINE_INPUT_BITS`.
+    pub input_precision: InputPrecision,
     /// `[O]` observation minimum (raw units).
     pub obs_min: Vec<f32>,
     /// `[O]` observation maximum.
@@ -195,6 +199,7 @@ impl QuantizedPolicy {
             control_dt: self.control_dt,
             layout: self.layout,
             input: self.input,
+            input_precision: self.input_precision,
             obs_min: &self.obs_min,
             obs_max: &self.obs_max,
             action_min: &self.action_min,

@@ -3,9 +3,9 @@
 //! floor divisions; i64 dot products here), on random and edge inputs.
 use crate::QuantizedPolicy;
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
-use frmd_core::model::mlp::Int8Layer;
 use frmd_core::policy::{Int8Network, Network};
-use frmd_core::quant::{multiply_by_quantized_multiplier, reference, requantize_to_i8, Q31_MANTISSA_MIN, SHIFT_MAX, SHIFT_MIN};
+use frmd_core::model::mlp::{InputPrecision, Int8Layer};
+use frmd_core::quant::{multiply_by_quantized_multiplier, reference, requantize_to_i8, QuantParams, FINE_INPUT_BITS, Q31_MANTISSA_MIN, SHIFT_MAX, SHIFT_MIN};
 use frmd_core::rng::Rng;
 
 /// Outcome of one check: how many cases ran and how many differed (the first is described).
@@ -116,8 +116,9 @@ pub fn int8_network<'a, const WIDTH: usize>(policy: &'a QuantizedPolicy, luts: &
         })
         .collect();
     let out = &policy.output;
-    Int8Network::from_parts(
+    Int8Network::from_parts_with_input(
         policy.input,
+        policy.input_precision,
         &layers,
         FullyConnected::new(out.in_features, out.out_features, &out.weights, &out.bias),
         &out.scales,
@@ -139,7 +140,13 @@ pub fn wide_network(policy: &QuantizedPolicy, step: usize, input: &[f32]) -> any
     if !policy.first_layer_biases.is_empty() && (step + 1) * first_out > policy.first_layer_biases.len() {
         anyhow::bail!("no first-layer bias variant {step}");
     }
-    let mut x: Vec<i64> = input.iter().map(|&v| i64::from(policy.input.quantize(v))).collect();
+    let coarse: Vec<i64> = input.iter().map(|&v| i64::from(policy.input.quantize(v))).collect();
+    // Two-plane input: the residual of each value after its coarse code, in steps of
+    // `scale / 2^FINE_INPUT_BITS`, rounded half away from zero and saturated to int8.
+    let fine_params = QuantParams { scale: policy.input.scale / (1_u32 << FINE_INPUT_BITS) as f32, zero_point: 0 };
+    let fine: Vec<i64> = input.iter().map(|&v| i64::from(fine_params.quantize(v - policy.input.dequantize(policy.input.quantize(v))))).collect();
+    let two_plane = policy.input_precision == InputPrecision::TwoPlane;
+    let mut x = coarse;
     for (l, layer) in policy.hidden.iter().enumerate() {
         let bias: &[i32] = if l == 0 && !policy.first_layer_biases.is_empty() {
             &policy.first_layer_biases[step * layer.out_features..(step + 1) * layer.out_features]
@@ -149,7 +156,11 @@ pub fn wide_network(policy: &QuantizedPolicy, step: usize, input: &[f32]) -> any
         x = (0..layer.out_features)
             .map(|o| {
                 let row = &layer.weights[o * layer.in_features..(o + 1) * layer.in_features];
-                let acc = i64::from(bias[o]) + row.iter().zip(&x).map(|(w, v)| i64::from(*w) * v).sum::<i64>();
+                let mut acc = i64::from(bias[o]) + row.iter().zip(&x).map(|(w, v)| i64::from(*w) * v).sum::<i64>();
+                if l == 0 && two_plane {
+                    let fine_dot = row.iter().zip(&fine).map(|(w, v)| i64::from(*w) * v).sum::<i64>();
+                    acc = i64::from(reference::combine_planes(acc as i32, fine_dot as i32));
+                }
                 let q = reference::requantize(acc as i32, layer.multipliers[o], layer.shifts[o], layer.output_zero_point, layer.activation_min, layer.activation_max);
                 let q = match layer.lut {
                     Some(t) => policy.luts[t][(i32::from(q) + 128) as usize],
@@ -190,6 +201,12 @@ pub fn check_network<const WIDTH: usize>(policy: &QuantizedPolicy, inputs: &[Vec
     all.push(vec![-1e9; width]);
     all.push(vec![0.0; width]);
     all.push((0..width).map(|i| if i % 2 == 0 { 1e9 } else { -1e9 }).collect());
+    // Residuals of exactly +-half a coarse step (the fine plane's saturation and ties) and of
+    // quarter steps.
+    let step = policy.input.scale;
+    all.push((0..width).map(|i| policy.input.dequantize(((i % 200) as i32 - 100) as i8) + 0.5 * step).collect());
+    all.push((0..width).map(|i| policy.input.dequantize(((i % 200) as i32 - 100) as i8) - 0.5 * step).collect());
+    all.push((0..width).map(|i| policy.input.dequantize((i % 100) as i8) + 0.25 * step * if i % 2 == 0 { 1.0 } else { -1.0 }).collect());
     let mut out = vec![0.0; net.output_width()];
     for (n, input) in all.iter().enumerate() {
         if input.len() != width {

@@ -202,3 +202,60 @@ fn requantization_matches_the_wide_model() {
     assert!(check.passed(), "{check:?}");
     assert!(check.cases > 1_000_000);
 }
+
+/// Two-plane input with headroom: the default export carries it into the blob, matches the wide
+/// model, and follows the f32 path on inputs beyond the calibrated range (observations the
+/// demonstrations never reached), where plain int8 input saturates.
+#[test]
+fn two_plane_input_follows_f32_beyond_the_calibrated_range() {
+    use frmd_core::model::mlp::InputPrecision;
+    use frmd_core::policy::Network;
+    let (dir, meta) = checkpoint("two-plane", Role::Student, mlp());
+    let set = calibration(meta.model.cond_dim(), 32);
+    let two = export_checkpoint(&dir, ExportOptions::default(), Some(set.clone())).unwrap();
+    let int8 = export_checkpoint(&dir, ExportOptions { two_plane_input: false, ..Default::default() }, Some(set.clone())).unwrap();
+    assert_eq!(two.policy.input_precision, InputPrecision::TwoPlane);
+    assert_eq!(int8.policy.input_precision, InputPrecision::Int8);
+    let headroom = frmd_export::export::DEFAULT_INPUT_HEADROOM;
+    assert!((two.policy.input.scale / int8.policy.input.scale - headroom).abs() < 0.05 * headroom);
+    // The blob keeps the flag; its network is the wide model's.
+    let blob = frmd_export::blob::write(&two.policy).unwrap();
+    let mut words = vec![0u32; blob.len().div_ceil(4)];
+    bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
+    let loaded = frmd_core::blob::LoadedPolicy::<2, 3, 2, 5, 4>::load(&bytemuck::cast_slice::<u32, u8>(&words)[..blob.len()]).unwrap();
+    let mut loaded_net = loaded.network::<64>().unwrap();
+    assert_eq!(loaded_net.input_precision(), InputPrecision::TwoPlane);
+    let luts = [frmd_export::reference::luts(&two.policy), frmd_export::reference::luts(&int8.policy)];
+    let mut nets = [
+        frmd_export::reference::int8_network::<64>(&two.policy, &luts[0]).unwrap(),
+        frmd_export::reference::int8_network::<64>(&int8.policy, &luts[1]).unwrap(),
+    ];
+    let (mut error_two, mut error_int8) = (0f64, 0f64);
+    for row in 0..set.rows() {
+        let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
+        let mut input = Vec::new();
+        two.folded.sample(cond, &set.noise(row, 1, 10), |_, p, v| if p == frmd_core::model::mlp::Probe::Input { input = v.to_vec() }).unwrap();
+        // Observations (the first 6 values) at three times their calibrated magnitude.
+        for v in input.iter_mut().take(6) {
+            *v *= 3.0;
+        }
+        let float = two.folded.forward_observed(0, &input, |_, _| {}).unwrap();
+        let mut outs = [vec![0f32; 8], vec![0f32; 8]];
+        for (net, out) in nets.iter_mut().zip(outs.iter_mut()) {
+            net.forward(0, &input, out).unwrap();
+        }
+        let mut loaded_out = vec![0f32; 8];
+        loaded_net.forward(0, &input, &mut loaded_out).unwrap();
+        assert_eq!(loaded_out, outs[0]);
+        let wide = frmd_export::reference::wide_network(&two.policy, 0, &input).unwrap();
+        assert_eq!(nets[0].accumulators().iter().map(|&a| i64::from(a)).collect::<Vec<_>>(), wide);
+        for ((a, b), f) in outs[0].iter().zip(&outs[1]).zip(&float) {
+            error_two += f64::from((a - f).abs());
+            error_int8 += f64::from((b - f).abs());
+        }
+    }
+    eprintln!("inputs beyond the calibrated range: abs error sum two-plane {error_two}, int8 {error_int8}");
+    assert!(error_two < 0.7 * error_int8, "two-plane {error_two} vs int8 {error_int8}");
+    let check = frmd_export::reference::check_network::<64>(&two.policy, &[]).unwrap();
+    assert!(check.passed(), "{check:?}");
+}

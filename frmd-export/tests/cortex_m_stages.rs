@@ -87,7 +87,8 @@ fn staged_mlp_network_matches_int8_network() {
         &quantized.first_layer_biases,
         counting_clock,
     )
-    .expect("staged network");
+    .expect("staged network")
+    .with_input_precision(quantized.input_precision);
     let policy = Policy::<_, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>::new(
         loaded.config(),
         network,

@@ -67,6 +67,8 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
         calibration: "minmax".into(),
         data: None,
         no_balance_inputs: false,
+        int8_input: false,
+        input_headroom: frmd_export::export::DEFAULT_INPUT_HEADROOM,
         save_calibration: false,
     };
     // The exporter refuses the teacher, naming the reason.

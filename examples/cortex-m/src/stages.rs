@@ -4,7 +4,7 @@
 //! staged network computes exactly what frmd-core's `Int8Network` computes.
 
 use frmd_core::kernels::{dequantize_accumulators, FullyConnected};
-use frmd_core::model::mlp::{Int8Layer, ModelError};
+use frmd_core::model::mlp::{quantize_input_two_plane, InputPrecision, Int8Layer, ModelError};
 use frmd_core::policy::{Network, PolicyError};
 use frmd_core::quant::QuantParams;
 
@@ -62,6 +62,7 @@ pub struct StagedMlpNetwork<'a, const L: usize, const S: usize, const WIDTH: usi
     output: FullyConnected<'a>,
     output_scales: &'a [f32],
     first_layer_biases: &'a [i32],
+    input_precision: InputPrecision,
     ping: [i8; WIDTH],
     pong: [i8; WIDTH],
     accumulators: [i32; WIDTH],
@@ -93,11 +94,20 @@ impl<'a, const L: usize, const S: usize, const WIDTH: usize> StagedMlpNetwork<'a
             output,
             output_scales,
             first_layer_biases,
+            input_precision: InputPrecision::Int8,
             ping: [0; WIDTH],
             pong: [0; WIDTH],
             accumulators: [0; WIDTH],
             marks: Marks::new(clock),
         })
+    }
+
+    /// The same network quantizing its input as `precision` says (as `Int8Network`'s
+    /// `with_input_precision`; the two-plane first layer is one stage with its input planes
+    /// quantized in the `quantize` stage).
+    pub fn with_input_precision(mut self, precision: InputPrecision) -> Self {
+        self.input_precision = precision;
+        self
     }
 
     /// Readings of the last forward pass (see [`mlp_marks`]).
@@ -144,12 +154,32 @@ impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNe
         let model = |error| PolicyError::Model(ModelError::Kernel(error));
         let (mut current, mut next) = (&mut self.ping, &mut self.pong);
         let first = current.get_mut(..input.len()).ok_or(PolicyError::InputWidth)?;
-        for (code, value) in first.iter_mut().zip(input) {
-            *code = self.input.quantize(*value);
-        }
-        self.marks.mark();
         let mut width = input.len();
-        for layer in &hidden {
+        let mut layers = &hidden[..];
+        match self.input_precision {
+            InputPrecision::Int8 => {
+                for (code, value) in first.iter_mut().zip(input) {
+                    *code = self.input.quantize(*value);
+                }
+                self.marks.mark();
+            }
+            InputPrecision::TwoPlane => {
+                let fine = next.get_mut(..input.len()).ok_or(PolicyError::InputWidth)?;
+                quantize_input_two_plane(input, self.input, first, fine);
+                self.marks.mark();
+                let (layer, rest) = hidden.split_first().ok_or(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer))?;
+                let out_width = layer.fc.out_features;
+                let accumulators = self.accumulators.get_mut(..out_width).ok_or(PolicyError::OutputWidth)?;
+                layer.two_plane_accumulators(first, fine, accumulators).map_err(model)?;
+                let layer_output = next.get_mut(..out_width).ok_or(PolicyError::OutputWidth)?;
+                layer.requantize_and_activate(accumulators, layer_output).map_err(model)?;
+                core::mem::swap(&mut current, &mut next);
+                width = out_width;
+                layers = rest;
+                self.marks.mark();
+            }
+        }
+        for layer in layers {
             let out_width = layer.fc.out_features;
             let layer_input = current.get(..width).ok_or(PolicyError::InputWidth)?;
             let layer_output = next.get_mut(..out_width).ok_or(PolicyError::OutputWidth)?;

@@ -71,6 +71,7 @@ pub fn generate() -> QuantizedPolicy {
         control_dt: CONTROL_DT as f32,
         layout,
         input: model.input,
+        input_precision: frmd_core::model::mlp::InputPrecision::Int8,
         obs_min: vec![-1.0; POLICY_OBS_DIM],
         obs_max: vec![1.0; POLICY_OBS_DIM],
         action_min: vec![-0.3; DOF],

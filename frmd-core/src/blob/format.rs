@@ -26,7 +26,7 @@ use crate::policy::{InputLayout, MAX_HIDDEN_LAYERS};
 /// First four bytes of every blob.
 pub const MAGIC: [u8; 4] = *b"FRMD";
 /// The format version this crate reads and writes.
-pub const FORMAT_VERSION: u16 = 1;
+pub const FORMAT_VERSION: u16 = 2;
 /// Header length in bytes (the descriptor starts here).
 pub const HEADER_LEN: usize = 20;
 /// Alignment of the data area and of every section offset, in bytes.
@@ -108,6 +108,9 @@ pub struct Descriptor {
     pub input_scale: f32,
     /// Input quantization zero point.
     pub input_zero_point: i32,
+    /// Two-plane input quantization (`model::mlp::InputPrecision::TwoPlane`); added in format
+    /// version 2.
+    pub input_two_plane: bool,
     /// f32 `[min; O]` then `[max; O]`.
     pub obs_norm: Section,
     /// f32 `[min; K]` then `[max; K]`.

@@ -10,7 +10,7 @@ use super::format::{
 use super::writer::data_start;
 use super::{BlobError, Dimension};
 use crate::kernels::{FcRequant, FullyConnected, Lut8};
-use crate::model::mlp::Int8Layer;
+use crate::model::mlp::{InputPrecision, Int8Layer};
 use crate::policy::{
     validate_steps, InputLayout, Int8Network, Policy, PolicyConfig, PolicyError, RangeNormalizer,
     Sampler, StepConstants, MAX_HIDDEN_LAYERS, MAX_STEPS,
@@ -67,14 +67,11 @@ pub struct LoadedPolicy<
     const N: usize,
     const P: usize,
 > {
-    obs_norm: RangeNormalizer<O>,
-    action_norm: RangeNormalizer<K>,
-    decoder: BakedProDmp<N, P>,
-    steps: [StepConstants; MAX_STEPS],
-    num_steps: usize,
+    shared: SharedTables<O, K, N, P>,
     layout: InputLayout,
     control_dt: f32,
     input: QuantParams,
+    input_precision: InputPrecision,
     luts: [Lut8; MAX_HIDDEN_LAYERS],
     hidden: [HiddenLayer<'a>; MAX_HIDDEN_LAYERS],
     num_hidden: usize,
@@ -250,13 +247,40 @@ macro_rules! shared_fields {
 }
 pub(crate) use shared_fields;
 
-/// The validated, copied tables every policy blob kind carries.
+/// The validated, copied tables every policy blob kind carries (embedded by [`LoadedPolicy`] and
+/// `LoadedTransformer`).
+#[derive(Clone, Debug)]
 pub(crate) struct SharedTables<const O: usize, const K: usize, const N: usize, const P: usize> {
     pub(crate) obs_norm: RangeNormalizer<O>,
     pub(crate) action_norm: RangeNormalizer<K>,
     pub(crate) decoder: BakedProDmp<N, P>,
     pub(crate) steps: [StepConstants; MAX_STEPS],
     pub(crate) num_steps: usize,
+}
+
+impl<const O: usize, const K: usize, const N: usize, const P: usize> SharedTables<O, K, N, P> {
+    /// The active steps.
+    pub(crate) fn steps(&self) -> &[StepConstants] {
+        self.steps.get(..self.num_steps).unwrap_or(&[])
+    }
+
+    /// The policy configuration over these tables with the blob's `layout` and `control_dt`.
+    pub(crate) fn config(
+        &self,
+        layout: InputLayout,
+        control_dt: f32,
+    ) -> PolicyConfig<'_, O, K, N, P> {
+        PolicyConfig {
+            obs_norm: self.obs_norm,
+            action_norm: self.action_norm,
+            sampler: Sampler {
+                steps: self.steps(),
+                decoder: &self.decoder,
+                layout,
+                control_dt,
+            },
+        }
+    }
 }
 
 /// Checks the header and CRC (see [`split`]) and decodes the descriptor, which must fill the
@@ -282,15 +306,14 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
     /// at a 4-byte aligned address.
     pub fn load(bytes: &'a [u8]) -> Result<Self, BlobError> {
         let (d, data) = parse_descriptor::<Descriptor>(bytes, MAGIC)?;
-        let SharedTables {
-            obs_norm,
-            action_norm,
-            decoder,
-            steps,
-            num_steps,
-        } = Self::read_shared(&data, shared_fields!(d))?;
+        let shared = Self::read_shared(&data, shared_fields!(d))?;
         let input = QuantParams::new(d.input_scale, d.input_zero_point)
             .map_err(|_| BlobError::InputQuantization)?;
+        let input_precision = match (d.input_two_plane, d.hidden.is_empty()) {
+            (false, _) => InputPrecision::Int8,
+            (true, false) => InputPrecision::TwoPlane,
+            (true, true) => return Err(BlobError::InputQuantization),
+        };
         d.layout.validate().map_err(|_| BlobError::InputLayout)?;
         let input_width = d.layout.width(M, O, K, N).ok_or(BlobError::InputLayout)?;
 
@@ -395,8 +418,8 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
             .filter(|_| first_layer_biases.len().is_multiple_of(first_width))
             .ok_or(BlobError::SectionLength(SectionId::FirstLayerBiases))?
             .max(1);
-        let active_steps = steps.get(..num_steps).unwrap_or(&[]);
-        if active_steps
+        if shared
+            .steps()
             .iter()
             .any(|s| s.first_layer_bias_index as usize >= variants)
         {
@@ -404,14 +427,11 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
         }
 
         Ok(Self {
-            obs_norm,
-            action_norm,
-            decoder,
-            steps,
-            num_steps,
+            shared,
             layout: d.layout,
             control_dt: d.control_dt,
             input,
+            input_precision,
             luts,
             hidden,
             num_hidden: d.hidden.len(),
@@ -530,7 +550,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
 
     /// The step table.
     pub fn steps(&self) -> &[StepConstants] {
-        self.steps.get(..self.num_steps).unwrap_or(&[])
+        self.shared.steps()
     }
 
     /// The model input layout.
@@ -540,7 +560,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
 
     /// The baked ProDMP decoder.
     pub fn decoder(&self) -> &BakedProDmp<N, P> {
-        &self.decoder
+        &self.shared.decoder
     }
 
     /// Control period, seconds.
@@ -558,8 +578,9 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
                 activation: layer.lut.and_then(|i| self.luts.get(i)),
             };
         }
-        Int8Network::from_parts(
+        Int8Network::from_parts_with_input(
             self.input,
+            self.input_precision,
             layers.get(..self.num_hidden).unwrap_or(&[]),
             self.output,
             self.output_scales,
@@ -569,16 +590,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
 
     /// The policy configuration (normalization, sampler) borrowing this blob.
     pub fn config(&self) -> PolicyConfig<'_, O, K, N, P> {
-        PolicyConfig {
-            obs_norm: self.obs_norm,
-            action_norm: self.action_norm,
-            sampler: Sampler {
-                steps: self.steps(),
-                decoder: &self.decoder,
-                layout: self.layout,
-                control_dt: self.control_dt,
-            },
-        }
+        self.shared.config(self.layout, self.control_dt)
     }
 
     /// A ready policy: int8 network with `WIDTH` scratch, input buffer of `I` values.

@@ -165,7 +165,9 @@ impl core::fmt::Display for BlobError {
             Self::NonFinite(s) => write!(f, "section {s:?} contains NaN or infinity"),
             Self::Normalization => f.write_str("normalization range has min > max"),
             Self::InputLayout => f.write_str("input layout invalid or width mismatch"),
-            Self::InputQuantization => f.write_str("input quantization parameters invalid"),
+            Self::InputQuantization => {
+                f.write_str("input quantization parameters invalid (or two-plane without a hidden layer)")
+            }
             Self::Steps => f.write_str("step table invalid"),
             Self::ControlPeriod => f.write_str("control period is not finite and positive"),
             Self::LayerWidth { index } => write!(f, "layer {index} width mismatch"),

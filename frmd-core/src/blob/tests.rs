@@ -164,11 +164,14 @@ fn header_damage_is_named() {
     bad[0] = b'G';
     assert_eq!(load_copy(&bad), Err(BlobError::BadMagic));
     let mut bad = blob.clone();
-    bad[4..6].copy_from_slice(&2_u16.to_le_bytes());
-    assert_eq!(
-        load_copy(&bad),
-        Err(BlobError::UnsupportedVersion { found: 2 })
-    );
+    // Version 1 (before the two-plane input flag) and a future version.
+    for version in [1_u16, FORMAT_VERSION + 1] {
+        bad[4..6].copy_from_slice(&version.to_le_bytes());
+        assert_eq!(
+            load_copy(&bad),
+            Err(BlobError::UnsupportedVersion { found: version })
+        );
+    }
     let mut bad = blob.clone();
     bad[6] = 1;
     assert_eq!(load_copy(&bad), Err(BlobError::ReservedField));
@@ -432,4 +435,25 @@ proptest! {
             }
         }
     }
+}
+
+#[test]
+fn two_plane_flag_reaches_the_network() {
+    let model = TestModel::new(31, &[80.0]);
+    let blob = model_blob(&model);
+    let plain = Aligned::new(&blob, 0);
+    let loaded = load(plain.bytes()).unwrap();
+    let precision = loaded.network::<WIDTH>().unwrap().input_precision();
+    assert_eq!(precision, crate::model::mlp::InputPrecision::Int8);
+    let flagged = with_descriptor(&blob, |d| d.input_two_plane = true);
+    let buffer = Aligned::new(&flagged, 0);
+    let loaded = load(buffer.bytes()).unwrap();
+    let precision = loaded.network::<WIDTH>().unwrap().input_precision();
+    assert_eq!(precision, crate::model::mlp::InputPrecision::TwoPlane);
+    // The flag without a hidden layer to take the fine plane is refused.
+    let no_hidden = with_descriptor(&blob, |d| {
+        d.input_two_plane = true;
+        d.hidden.clear();
+    });
+    assert_eq!(load_copy(&no_hidden), Err(BlobError::InputQuantization));
 }

@@ -11,6 +11,7 @@ use super::format::{
     HEADER_LEN, LUT_LEN, MAGIC, SECTION_ALIGN, STEP_WORDS,
 };
 use super::BlobError;
+use crate::model::mlp::InputPrecision;
 use crate::policy::{InputLayout, StepConstants};
 use crate::quant::QuantParams;
 
@@ -91,6 +92,8 @@ pub struct BlobParts<'p> {
     pub layout: InputLayout,
     /// Quantization of the f32 input vector.
     pub input: QuantParams,
+    /// How the first layer quantizes the input (its multipliers must match).
+    pub input_precision: InputPrecision,
     /// `[O]` observation minimum.
     pub obs_min: &'p [f32],
     /// `[O]` observation maximum.
@@ -231,6 +234,7 @@ fn plan(parts: &BlobParts<'_>) -> Result<(Descriptor, usize), BlobError> {
         layout: parts.layout,
         input_scale: parts.input.scale,
         input_zero_point: parts.input.zero_point,
+        input_two_plane: parts.input_precision == InputPrecision::TwoPlane,
         obs_norm,
         action_norm,
         prodmp,

@@ -7,13 +7,21 @@
 //! is quantized with [`Int8Mlp::input`]; the last layer's int32 accumulators are dequantized per
 //! channel with `output_scales[o] = input_scale * weight_scale[o]`.
 //!
+//! With [`InputPrecision::TwoPlane`] the input gets about 16 bits instead of 8: each value becomes
+//! a coarse int8 code and a fine int8 code of the residual at `1/2^FINE_INPUT_BITS` of the input
+//! scale ([`quantize_two_plane`]); the first hidden layer runs its int8 kernel on both planes and
+//! requantizes `coarse_acc * 2^8 + fine_dot` ([`combine_plane_accumulators`]), so its multipliers
+//! are those of the input scale `input_scale / 2^FINE_INPUT_BITS`. Everything after the first
+//! layer is unchanged. Cost: one more int8 matrix-vector product of the first layer.
+//!
 //! Scratch memory is caller-owned and sized by a const generic `WIDTH` that must be at least the
 //! widest layer (input, hidden and output widths); nothing is allocated.
 
+use crate::kernels::dot::for_each_row_dot;
 use crate::kernels::{
     dequantize_accumulators, Activation, FcRequant, FullyConnected, KernelError, Lut8,
 };
-use crate::quant::QuantParams;
+use crate::quant::{combine_plane_accumulators, quantize_two_plane, requantize_to_i8, QuantParams};
 
 /// Why a forward pass refused its arguments.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -33,6 +41,9 @@ pub enum ModelError {
     OutputLength,
     /// The input quantization parameters are invalid.
     InputParams,
+    /// [`InputPrecision::TwoPlane`] needs a hidden first layer (the output layer's accumulators
+    /// are dequantized at the coarse input scale).
+    TwoPlaneWithoutHiddenLayer,
 }
 
 impl From<KernelError> for ModelError {
@@ -55,6 +66,9 @@ impl core::fmt::Display for ModelError {
             Self::InputLength => f.write_str("input length differs from the first layer's width"),
             Self::OutputLength => f.write_str("output length differs from the last layer's width"),
             Self::InputParams => f.write_str("input quantization parameters are invalid"),
+            Self::TwoPlaneWithoutHiddenLayer => {
+                f.write_str("two-plane input quantization needs a hidden first layer")
+            }
         }
     }
 }
@@ -68,6 +82,83 @@ pub struct Int8Layer<'a> {
     pub requant: FcRequant<'a>,
     /// Activation table from pre-activation to output params; `None` for identity/clamp-only.
     pub activation: Option<&'a Lut8>,
+}
+
+impl Int8Layer<'_> {
+    /// First-layer accumulators of a two-plane input ([`InputPrecision::TwoPlane`]):
+    /// `acc[o] = combine_plane_accumulators(bias[o] + w[o] . coarse, w[o] . fine)`.
+    /// `coarse` and `fine` are `in_features` long, `acc` is `out_features` long.
+    pub fn two_plane_accumulators(
+        &self,
+        coarse: &[i8],
+        fine: &[i8],
+        acc: &mut [i32],
+    ) -> Result<(), KernelError> {
+        self.fc.forward_accumulators(coarse, acc)?;
+        if fine.len() != self.fc.in_features {
+            return Err(KernelError::InputLength);
+        }
+        let mut slots = acc.iter_mut();
+        for_each_row_dot(self.fc.weights, fine, |dot| {
+            if let Some(slot) = slots.next() {
+                *slot = combine_plane_accumulators(*slot, dot);
+            }
+        });
+        Ok(())
+    }
+
+    /// Requantizes accumulators (`out_features` long) with this layer's per-channel parameters
+    /// into `output` and applies its LUT.
+    pub fn requantize_and_activate(
+        &self,
+        acc: &[i32],
+        output: &mut [i8],
+    ) -> Result<(), KernelError> {
+        let out = self.fc.out_features;
+        self.requant.validate(out)?;
+        if acc.len() != out || output.len() != out {
+            return Err(KernelError::OutputLength);
+        }
+        let channels = self.requant.multipliers.iter().zip(self.requant.shifts);
+        for ((slot, a), (multiplier, shift)) in output.iter_mut().zip(acc).zip(channels) {
+            *slot = requantize_to_i8(
+                *a,
+                *multiplier,
+                *shift,
+                self.requant.output_zero_point,
+                self.requant.activation_min,
+                self.requant.activation_max,
+            );
+        }
+        if let Some(lut) = self.activation {
+            lut.apply_in_place(output);
+        }
+        Ok(())
+    }
+}
+
+/// How the f32 input vector is quantized for the first layer.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum InputPrecision {
+    /// One int8 code per value ([`QuantParams::quantize`]), as TFLite.
+    #[default]
+    Int8,
+    /// A coarse and a fine int8 plane per value (see the module docs); the first hidden layer's
+    /// multipliers must be for the input scale `input_scale / 2^FINE_INPUT_BITS`.
+    TwoPlane,
+}
+
+/// Writes the two-plane codes ([`quantize_two_plane`]) of `input` into `coarse` and `fine`
+/// (pairs beyond the shortest slice are left alone).
+pub fn quantize_input_two_plane(
+    input: &[f32],
+    params: QuantParams,
+    coarse: &mut [i8],
+    fine: &mut [i8],
+) {
+    for ((c, f), x) in coarse.iter_mut().zip(fine.iter_mut()).zip(input) {
+        (*c, *f) = quantize_two_plane(*x, params);
+    }
 }
 
 /// int8 MLP: hidden [`Int8Layer`]s, then a raw-accumulator output layer dequantized to f32.
@@ -153,9 +244,21 @@ impl Int8Mlp<'_> {
     }
 
     /// Runs the network on `input` (f32, `input_width()` long) and writes the dequantized last
-    /// layer into `output` (`output_width()` long).
+    /// layer into `output` (`output_width()` long); the input is quantized to int8
+    /// ([`InputPrecision::Int8`]).
     pub fn forward<const WIDTH: usize>(
         &self,
+        input: &[f32],
+        output: &mut [f32],
+        scratch: &mut Int8Scratch<WIDTH>,
+    ) -> Result<(), ModelError> {
+        self.forward_with_input(InputPrecision::Int8, input, output, scratch)
+    }
+
+    /// [`Self::forward`] with the input quantized as `precision` says.
+    pub fn forward_with_input<const WIDTH: usize>(
+        &self,
+        precision: InputPrecision,
         input: &[f32],
         output: &mut [f32],
         scratch: &mut Int8Scratch<WIDTH>,
@@ -177,11 +280,38 @@ impl Int8Mlp<'_> {
         let first = current
             .get_mut(..in_width)
             .ok_or(ModelError::ScratchTooSmall)?;
-        for (q, x) in first.iter_mut().zip(input) {
-            *q = self.input.quantize(*x);
-        }
         let mut width = in_width;
-        for layer in self.hidden {
+        let mut hidden = self.hidden;
+        match precision {
+            InputPrecision::Int8 => {
+                for (q, x) in first.iter_mut().zip(input) {
+                    *q = self.input.quantize(*x);
+                }
+            }
+            InputPrecision::TwoPlane => {
+                let (layer, rest) = self
+                    .hidden
+                    .split_first()
+                    .ok_or(ModelError::TwoPlaneWithoutHiddenLayer)?;
+                let fine = next
+                    .get_mut(..in_width)
+                    .ok_or(ModelError::ScratchTooSmall)?;
+                quantize_input_two_plane(input, self.input, first, fine);
+                let out_width = layer.fc.out_features;
+                let acc = accumulators
+                    .get_mut(..out_width)
+                    .ok_or(ModelError::ScratchTooSmall)?;
+                layer.two_plane_accumulators(first, fine, acc)?;
+                let layer_output = next
+                    .get_mut(..out_width)
+                    .ok_or(ModelError::ScratchTooSmall)?;
+                layer.requantize_and_activate(acc, layer_output)?;
+                core::mem::swap(&mut current, &mut next);
+                width = out_width;
+                hidden = rest;
+            }
+        }
+        for layer in hidden {
             let out_width = layer.fc.out_features;
             let layer_input = current.get(..width).ok_or(ModelError::ScratchTooSmall)?;
             let layer_output = next

@@ -8,7 +8,7 @@ use super::mlp::*;
 use crate::kernels::{Activation, FcRequant, FullyConnected, KernelError, Lut8};
 use crate::quant::{
     fold_input_zero_point, quantize_bias, quantize_weights_per_channel, reference,
-    requantization_multiplier, QuantParams,
+    requantization_multiplier, QuantParams, FINE_INPUT_BITS,
 };
 use crate::rng::Rng;
 use std::{vec, vec::Vec};
@@ -230,11 +230,16 @@ fn int8_layers(quant: &[QuantLayer]) -> Vec<Int8Layer<'_>> {
 
 /// Naive int8 forward: i64 dot products, the wide requantization model, table lookups by index.
 fn naive_int8_forward(fix: &Fixture, input: &[f32]) -> Vec<f32> {
-    let mut x: Vec<i8> = input
+    let x: Vec<i8> = input
         .iter()
         .map(|v| fix.input_params.quantize(*v))
         .collect();
-    for q in &fix.quant_hidden {
+    naive_int8_tail(fix, &fix.quant_hidden, x)
+}
+
+/// [`naive_int8_forward`] from int8 codes `x` through `layers`, then the output layer.
+fn naive_int8_tail(fix: &Fixture, layers: &[QuantLayer], mut x: Vec<i8>) -> Vec<f32> {
+    for q in layers {
         let mut y = Vec::new();
         for o in 0..q.out_features {
             let row = &q.fc_weights[o * q.in_features..(o + 1) * q.in_features];
@@ -433,5 +438,148 @@ fn shape_errors() {
     assert_eq!(
         broken.validate::<WIDTH>(),
         Err(ModelError::LayerWidth { index: 1 })
+    );
+}
+
+/// The fixture's first hidden layer re-quantized for a two-plane input: same weights and bias,
+/// multipliers for the input scale `input_scale / 2^FINE_INPUT_BITS`.
+fn two_plane_first_layer(fix: &Fixture) -> QuantLayer {
+    let first = &fix.quant_hidden[0];
+    let mut layer = QuantLayer {
+        fc_weights: first.fc_weights.clone(),
+        bias: first.bias.clone(),
+        multipliers: Vec::new(),
+        shifts: Vec::new(),
+        weight_scales: first.weight_scales.clone(),
+        pre: first.pre,
+        lut: first.lut,
+        in_features: first.in_features,
+        out_features: first.out_features,
+    };
+    let fine_scale = fix.input_params.scale / (1_u32 << FINE_INPUT_BITS) as f32;
+    for w in &first.weight_scales {
+        let (m, s) = requantization_multiplier(fine_scale, *w, first.pre.scale).unwrap();
+        layer.multipliers.push(m);
+        layer.shifts.push(s);
+    }
+    layer
+}
+
+#[test]
+fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
+    let fix = fixture(4321);
+    let first = two_plane_first_layer(&fix);
+    let first_layer = int8_layers(core::slice::from_ref(&first));
+    let int8_hidden = int8_layers(&fix.quant_hidden);
+    let mut hidden = first_layer.clone();
+    hidden.extend_from_slice(&int8_hidden[1..]);
+    let q = &fix.quant_output;
+    let net = Int8Mlp {
+        input: fix.input_params,
+        hidden: &hidden,
+        output: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
+        output_scales: &fix.output_scales,
+    };
+    // Naive first layer: both planes from their definition, i64 dot products, the wide
+    // combination and requantization models, the LUT by index.
+    let fine_params = QuantParams {
+        scale: fix.input_params.scale / 256.0,
+        zero_point: 0,
+    };
+    // Returns the codes and, per channel, the real pre-activation of both planes and of the coarse
+    // plane alone (what int8 input quantization gives).
+    let naive_first = |x: &[f32]| -> (Vec<i8>, Vec<(f64, f64)>) {
+        let planes: Vec<(i8, i8)> = x
+            .iter()
+            .map(|v| {
+                let coarse = fix.input_params.quantize(*v);
+                (
+                    coarse,
+                    fine_params.quantize(v - fix.input_params.dequantize(coarse)),
+                )
+            })
+            .collect();
+        let mut pre_real = Vec::new();
+        let codes = (0..first.out_features)
+            .map(|o| {
+                let row = &first.fc_weights[o * first.in_features..(o + 1) * first.in_features];
+                let dot = |plane: fn(&(i8, i8)) -> i8| -> i64 {
+                    row.iter()
+                        .zip(&planes)
+                        .map(|(w, p)| i64::from(*w) * i64::from(plane(p)))
+                        .sum()
+                };
+                let coarse = (i64::from(first.bias[o]) + dot(|p| p.0)) as i32;
+                let acc = reference::combine_planes(coarse, dot(|p| p.1) as i32);
+                let unit = f64::from(fix.input_params.scale) * f64::from(first.weight_scales[o]);
+                pre_real.push((f64::from(acc) * unit / 256.0, f64::from(coarse) * unit));
+                let m = (first.multipliers[o], first.shifts[o]);
+                let pre = reference::requantize(acc, m.0, m.1, first.pre.zero_point, -128, 127);
+                first.lut.as_ref().unwrap().table[(i32::from(pre) + 128) as usize]
+            })
+            .collect();
+        (codes, pre_real)
+    };
+    let mut scratch = Int8Scratch::<WIDTH>::new();
+    let mut rng = Rng::new(5);
+    let (mut error_two_plane, mut error_int8) = (0.0_f64, 0.0_f64);
+    for _ in 0..200 {
+        let x = random_input(&mut rng, 20);
+        let mut got = [0.0_f32; 12];
+        net.forward_with_input(InputPrecision::TwoPlane, &x, &mut got, &mut scratch)
+            .unwrap();
+        let (codes, pre_real) = naive_first(&x);
+        let want = naive_int8_tail(&fix, &fix.quant_hidden[1..], codes);
+        for (g, w) in got.iter().zip(&want) {
+            assert_eq!(g.to_bits(), w.to_bits());
+        }
+        // First-layer pre-activations against the exact affine map of the quantized weights
+        // (so only the input and bias rounding remain).
+        for (o, (two, one)) in pre_real.iter().enumerate() {
+            let row = &first.fc_weights[o * first.in_features..(o + 1) * first.in_features];
+            let scale = f64::from(first.weight_scales[o]);
+            let exact = f64::from(fix.float_hidden[0].bias[o])
+                + row
+                    .iter()
+                    .zip(&x)
+                    .map(|(w, v)| f64::from(*w) * scale * f64::from(*v))
+                    .sum::<f64>();
+            error_two_plane += (two - exact).abs();
+            error_int8 += (one - exact).abs();
+        }
+    }
+    std::eprintln!(
+        "first-layer pre-activation abs error sums: two-plane {error_two_plane}, int8 {error_int8}"
+    );
+    assert!(error_two_plane < 0.05 * error_int8);
+    // Without a hidden layer no layer takes the fine plane.
+    let no_hidden = Int8Mlp {
+        hidden: &[],
+        output: FullyConnected::new(20, 12, &q.fc_weights[..240], &q.bias),
+        ..net
+    };
+    let mut output = [0.0_f32; 12];
+    assert_eq!(
+        no_hidden.forward_with_input(
+            InputPrecision::TwoPlane,
+            &[0.0; 20],
+            &mut output,
+            &mut scratch
+        ),
+        Err(ModelError::TwoPlaneWithoutHiddenLayer)
+    );
+    let network = crate::policy::Int8Network::<WIDTH>::from_parts_with_input(
+        fix.input_params,
+        InputPrecision::TwoPlane,
+        &[],
+        no_hidden.output,
+        &fix.output_scales,
+        &[],
+    );
+    assert_eq!(
+        network.err(),
+        Some(crate::policy::PolicyError::Model(
+            ModelError::TwoPlaneWithoutHiddenLayer
+        ))
     );
 }

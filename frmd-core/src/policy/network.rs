@@ -6,7 +6,9 @@
 //! variant by index (see [`super::StepConstants::first_layer_bias_index`]).
 
 use crate::kernels::{FcRequant, FullyConnected};
-use crate::model::mlp::{F32Layer, F32Mlp, F32Scratch, Int8Layer, Int8Mlp, Int8Scratch};
+use crate::model::mlp::{
+    F32Layer, F32Mlp, F32Scratch, InputPrecision, Int8Layer, Int8Mlp, Int8Scratch, ModelError,
+};
 use crate::quant::QuantParams;
 
 use super::PolicyError;
@@ -90,6 +92,7 @@ pub struct Int8Network<'a, const WIDTH: usize> {
     output_scales: &'a [f32],
     first_layer_biases: &'a [i32],
     num_variants: usize,
+    input_precision: InputPrecision,
     scratch: Int8Scratch<WIDTH>,
 }
 
@@ -108,7 +111,7 @@ impl<'a, const WIDTH: usize> Int8Network<'a, WIDTH> {
     }
 
     /// As [`Self::new`] from the parts of an [`Int8Mlp`]; the hidden layers are copied, so their
-    /// slice may be short-lived.
+    /// slice may be short-lived. The input is quantized to int8 ([`InputPrecision::Int8`]).
     pub fn from_parts(
         input: QuantParams,
         layers: &[Int8Layer<'a>],
@@ -116,6 +119,30 @@ impl<'a, const WIDTH: usize> Int8Network<'a, WIDTH> {
         output_scales: &'a [f32],
         first_layer_biases: &'a [i32],
     ) -> Result<Self, PolicyError> {
+        Self::from_parts_with_input(
+            input,
+            InputPrecision::Int8,
+            layers,
+            output,
+            output_scales,
+            first_layer_biases,
+        )
+    }
+
+    /// [`Self::from_parts`] with the input quantized as `precision` says;
+    /// [`InputPrecision::TwoPlane`] needs a hidden layer and first-layer multipliers made for it
+    /// (see [`crate::model::mlp`]).
+    pub fn from_parts_with_input(
+        input: QuantParams,
+        precision: InputPrecision,
+        layers: &[Int8Layer<'a>],
+        output: FullyConnected<'a>,
+        output_scales: &'a [f32],
+        first_layer_biases: &'a [i32],
+    ) -> Result<Self, PolicyError> {
+        if precision == InputPrecision::TwoPlane && layers.is_empty() {
+            return Err(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer));
+        }
         if layers.len() > MAX_HIDDEN_LAYERS {
             return Err(PolicyError::TooManyLayers);
         }
@@ -146,8 +173,14 @@ impl<'a, const WIDTH: usize> Int8Network<'a, WIDTH> {
             output_scales,
             first_layer_biases,
             num_variants,
+            input_precision: precision,
             scratch: Int8Scratch::new(),
         })
+    }
+
+    /// How the input is quantized.
+    pub fn input_precision(&self) -> InputPrecision {
+        self.input_precision
     }
 
     /// The output layer's int32 accumulators of the last forward pass (for bit-exactness checks).
@@ -206,7 +239,7 @@ impl<const WIDTH: usize> Network for Int8Network<'_, WIDTH> {
             output: last,
             output_scales: self.output_scales,
         };
-        mlp.forward(input, output, &mut self.scratch)
+        mlp.forward_with_input(self.input_precision, input, output, &mut self.scratch)
             .map_err(PolicyError::Model)
     }
 }

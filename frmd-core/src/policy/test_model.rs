@@ -365,6 +365,7 @@ impl TestModel {
             control_dt: DT,
             layout: self.layout,
             input: self.input,
+            input_precision: crate::model::mlp::InputPrecision::Int8,
             obs_min: &self.obs_norm.min,
             obs_max: &self.obs_norm.max,
             action_min: &self.action_norm.min,

@@ -23,15 +23,18 @@ pub use fixed_point::{
     SHIFT_MIN,
 };
 pub use params::{
-    dequantize, dequantize_accumulator, fold_input_zero_point, quantize, quantize_bias,
-    quantize_weight, quantize_weights_per_channel, requantization_multiplier,
-    symmetric_weight_scale, QuantParams, WEIGHT_MAX, WEIGHT_MIN,
+    combine_plane_accumulators, dequantize, dequantize_accumulator, fold_input_zero_point,
+    quantize, quantize_bias, quantize_two_plane, quantize_weight, quantize_weights_per_channel,
+    requantization_multiplier, symmetric_weight_scale, QuantParams, FINE_INPUT_BITS, WEIGHT_MAX,
+    WEIGHT_MIN,
 };
 
 #[cfg(any(test, feature = "reference"))]
 pub mod reference;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod two_plane_tests;
 
 /// Why a quantization parameter cannot be computed. Small and `Copy`; each variant names the
 /// offending quantity.

@@ -106,6 +106,41 @@ pub fn quantize(value: f32, params: QuantParams) -> i8 {
     code as i8
 }
 
+/// Bits of precision the fine input plane adds: its scale is the input scale `/ 2^FINE_INPUT_BITS`.
+pub const FINE_INPUT_BITS: u32 = 8;
+
+/// Two-plane quantization of one f32 input (about 16-bit precision from two int8 codes):
+/// `coarse = quantize(value, params)` (the ordinary int8 code), then the residual
+/// `value - dequantize(coarse)` (f32) is quantized symmetrically with scale
+/// `params.scale / 2^FINE_INPUT_BITS` into `fine` (saturating to `[-128, 127]`).
+///
+/// Inside the calibrated range the residual is at most half a coarse step, so `fine` lies in
+/// `[-128, 128]` before saturation and `value` is represented to half a fine step (one fine step
+/// where the residual is +128 fine steps and saturates to 127); outside the range both planes
+/// saturate (the represented value then ends about half a coarse step beyond the range).
+/// The scale division by a power of two is exact in f32 for every valid scale above `2^-118`.
+#[inline]
+pub fn quantize_two_plane(value: f32, params: QuantParams) -> (i8, i8) {
+    let coarse = quantize(value, params);
+    let residual = value - dequantize(coarse, params);
+    let fine_params = QuantParams {
+        scale: params.scale / (1_u32 << FINE_INPUT_BITS) as f32,
+        zero_point: 0,
+    };
+    (coarse, quantize(residual, fine_params))
+}
+
+/// The accumulator of both input planes at scale `input_scale * weight_scale / 2^FINE_INPUT_BITS`:
+/// `coarse * 2^FINE_INPUT_BITS + fine` (exact in i64), saturated to i32. `coarse` is the layer's
+/// accumulator of the coarse codes (bias included, at scale `input_scale * weight_scale`), `fine`
+/// the bias-free dot product of the weights with the fine codes. The exporter checks that its
+/// layers cannot reach the saturation.
+#[inline]
+pub fn combine_plane_accumulators(coarse: i32, fine: i32) -> i32 {
+    let wide = i64::from(coarse) * (1_i64 << FINE_INPUT_BITS) + i64::from(fine);
+    wide.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
+}
+
 /// `scale * (code - zero_point)` in f32 (the integer difference is exact).
 #[inline]
 pub fn dequantize(code: i8, params: QuantParams) -> f32 {

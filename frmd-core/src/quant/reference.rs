@@ -43,6 +43,11 @@ pub fn requantize(
     sum.clamp(i128::from(lo), i128::from(hi)) as i8
 }
 
+/// The two input planes' accumulator: `coarse * 2^8 + fine` exactly, then saturated to i32.
+pub fn combine_planes(coarse: i32, fine: i32) -> i32 {
+    saturate(i128::from(coarse) * 256 + i128::from(fine))
+}
+
 fn saturate(value: i128) -> i32 {
     value.clamp(i128::from(i32::MIN), i128::from(i32::MAX)) as i32
 }

@@ -2,7 +2,7 @@
 // Needs `weights.bin` next to this file; only depends on frmd-core.
 
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
-use frmd_core::model::mlp::Int8Layer;
+use frmd_core::model::mlp::{InputPrecision, Int8Layer};
 use frmd_core::policy::{
     baked_slice, AlignedBytes, InputLayout, InputSegment, Int8Network, Policy, PolicyConfig,
     PolicyError, RangeNormalizer, Sampler, StepConstants,
@@ -42,6 +42,8 @@ pub const POLICY_RAM_BYTES: usize = core::mem::size_of::<BakedPolicy>();
 pub const CONTROL_DT: f32 = 0.05;
 /// Quantization of the f32 input vector.
 pub const INPUT: QuantParams = QuantParams { scale: 0.02, zero_point: -5 };
+/// How the first layer quantizes the input (its multipliers are made for it).
+pub const INPUT_PRECISION: InputPrecision = InputPrecision::Int8;
 /// Model input layout.
 pub const LAYOUT: InputLayout = InputLayout::from_segments(
     [InputSegment::ObsHistory, InputSegment::PrevAction, InputSegment::PrevRate, InputSegment::NoisyTrajectory],
@@ -149,7 +151,14 @@ pub fn network<const WIDTH: usize>() -> Result<Int8Network<'static, WIDTH>, Poli
         baked_slice(bytes, 2160, 15)?,
     );
     let first_layer_biases = baked_slice(bytes, 1568, 72)?;
-    Int8Network::from_parts(INPUT, &layers, output, &OUTPUT_SCALES, first_layer_biases)
+    Int8Network::from_parts_with_input(
+        INPUT,
+        INPUT_PRECISION,
+        &layers,
+        output,
+        &OUTPUT_SCALES,
+        first_layer_biases,
+    )
 }
 
 /// Normalization and sampler configuration.

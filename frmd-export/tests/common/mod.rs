@@ -135,6 +135,7 @@ pub fn random_policy(seed: u64, steps: usize, dims: &Dims) -> QuantizedPolicy {
         control_dt: DT,
         layout,
         input: QuantParams::new(0.02, -5).unwrap(),
+        input_precision: frmd_core::model::mlp::InputPrecision::Int8,
         obs_min: vec![-1.0; o],
         obs_max: vec![1.0; o],
         action_min: vec![-0.5; k],

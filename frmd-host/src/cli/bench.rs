@@ -161,7 +161,7 @@ fn core_policies(args: &BenchArgs) -> Result<Vec<(String, Box<dyn Policy>)>, Str
             return Ok(policies?.core.map(|c| (c.int8, c.core_f32)));
         }
         let ckpt = args.dir.join("student");
-        let info = ExportInfo { checkpoint: ckpt.display().to_string(), steps: 1, calibration: "minmax".into(), calibration_data: None, balance_inputs: true };
+        let info = ExportInfo { checkpoint: ckpt.display().to_string(), steps: 1, calibration: "minmax".into(), calibration_data: None, balance_inputs: true, two_plane_input: true, input_headroom: frmd_export::export::DEFAULT_INPUT_HEADROOM };
         let exported = export(&info).with_context(|| format!("exporting {}", ckpt.display()))?;
         let blob = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
         Ok(Ok((Int8Policy::from_blob(&blob, "int8")?, Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?)))

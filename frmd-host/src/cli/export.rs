@@ -43,6 +43,12 @@ pub struct ExportArgs {
     /// Keep the raw input segments (no range balancing of the trajectory and rate inputs).
     #[arg(long)]
     pub no_balance_inputs: bool,
+    /// Quantize the model input to one int8 plane (default: two planes, ~16-bit input).
+    #[arg(long)]
+    pub int8_input: bool,
+    /// Two-plane input: widen the calibrated input range by this factor (>= 1).
+    #[arg(long, default_value_t = frmd_export::export::DEFAULT_INPUT_HEADROOM)]
+    pub input_headroom: f32,
     /// With --data: also store the calibration rows as the checkpoint's calibration.safetensors.
     #[arg(long)]
     pub save_calibration: bool,
@@ -58,6 +64,16 @@ pub struct ExportInfo {
     /// Input range balancing (`frmd_export::fold::FoldedMlp::with_input_gains`).
     #[serde(default = "default_true")]
     pub balance_inputs: bool,
+    /// Two-plane input quantization (`frmd_core::model::mlp::InputPrecision::TwoPlane`).
+    #[serde(default = "default_true")]
+    pub two_plane_input: bool,
+    /// Input range widening with two-plane input.
+    #[serde(default = "default_headroom")]
+    pub input_headroom: f32,
+}
+
+fn default_headroom() -> f32 {
+    frmd_export::export::DEFAULT_INPUT_HEADROOM
 }
 
 fn default_true() -> bool {
@@ -94,7 +110,7 @@ fn calibration_set(info: &ExportInfo) -> anyhow::Result<Option<CalibrationSet>> 
 
 fn options(info: &ExportInfo) -> anyhow::Result<ExportOptions> {
     let ranges: RangeMethod = info.calibration.parse()?;
-    Ok(ExportOptions { steps: info.steps, ranges, balance_inputs: info.balance_inputs })
+    Ok(ExportOptions { steps: info.steps, ranges, balance_inputs: info.balance_inputs, two_plane_input: info.two_plane_input, input_headroom: info.input_headroom })
 }
 
 /// Whether the checkpoint `info` names has a transformer backbone (which picks the exporter).
@@ -163,6 +179,8 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
         calibration: args.calibration.clone(),
         calibration_data: args.data.as_ref().map(|p| p.display().to_string()),
         balance_inputs: !args.no_balance_inputs,
+        two_plane_input: !args.int8_input,
+        input_headroom: args.input_headroom,
     };
     if args.save_calibration {
         let data = args.data.as_ref().context("--save-calibration needs --data")?;
@@ -194,8 +212,8 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     );
     let gains = exported.folded.gains;
     println!(
-        "  input  int8 scale {:.5} (zero point {}) over the whole input vector; segment gains: trajectory {:.4}, rate {:.4}",
-        policy.input.scale, policy.input.zero_point, gains.traj_gain, gains.rate_gain
+        "  input  int8 scale {:.5} (zero point {}, {:?}) over the whole input vector; segment gains: trajectory {:.4}, rate {:.4}",
+        policy.input.scale, policy.input.zero_point, policy.input_precision, gains.traj_gain, gains.rate_gain
     );
     print_memory(&m, blob.len());
     Ok(ExitCode::SUCCESS)

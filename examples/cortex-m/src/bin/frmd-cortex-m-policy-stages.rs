@@ -13,6 +13,7 @@ use frmd_cortex_m::timer::Calibration;
 use frmd_cortex_m::policy_workload::{PolicyWorkload, CASES};
 use frmd_cortex_m::report::exit_failure;
 use frmd_cortex_m::stages::{mlp_marks, StagedMlpNetwork};
+use frmd_core::model::mlp::InputPrecision;
 use frmd_cortex_m::{bench, stage_report};
 
 /// The module frmd-export generated (policy.rs + weights.bin in OUT_DIR/policy), plus build.rs's
@@ -46,7 +47,11 @@ fn main() -> ! {
 #[inline(never)]
 fn breakdown(calibration: &Calibration, digest: u64) -> Result<(), PolicyError> {
     let (hidden, output, variants) = baked::mlp_parts()?;
-    let layer_macs = hidden.map(|layer| (layer.fc.in_features * layer.fc.out_features) as u64);
+    let mut layer_macs = hidden.map(|layer| (layer.fc.in_features * layer.fc.out_features) as u64);
+    if baked::INPUT_PRECISION == InputPrecision::TwoPlane {
+        // The first layer's kernel runs on both input planes.
+        layer_macs[0] *= 2;
+    }
     let output_macs = (output.in_features * output.out_features) as u64;
     let network = StagedMlpNetwork::<LAYERS, { mlp_marks(LAYERS) }, { baked::SCRATCH_WIDTH }>::new(
         baked::INPUT,
@@ -55,7 +60,8 @@ fn breakdown(calibration: &Calibration, digest: u64) -> Result<(), PolicyError> 
         &baked::OUTPUT_SCALES,
         variants,
         stage_report::systick,
-    )?;
+    )?
+    .with_input_precision(baked::INPUT_PRECISION);
     let policy = Policy::<
         _,
         { baked::HISTORY },

@@ -14,10 +14,8 @@ use crate::model::transformer::{
     TransformerScratch, TransformerShape,
 };
 use crate::policy::{
-    InputLayout, Int8TransformerNetwork, PolicyConfig, PolicyError, RangeNormalizer, Sampler,
-    StepConstants, MAX_STEPS,
+    InputLayout, Int8TransformerNetwork, PolicyConfig, PolicyError, StepConstants,
 };
-use crate::prodmp::BakedProDmp;
 use crate::quant::QuantParams;
 
 /// Per-block data borrowed from the blob; the GELU table is copied into [`LoadedTransformer`].
@@ -99,11 +97,7 @@ pub struct LoadedTransformer<
     const N: usize,
     const P: usize,
 > {
-    obs_norm: RangeNormalizer<O>,
-    action_norm: RangeNormalizer<K>,
-    decoder: BakedProDmp<N, P>,
-    steps: [StepConstants; MAX_STEPS],
-    num_steps: usize,
+    shared: SharedTables<O, K, N, P>,
     layout: InputLayout,
     control_dt: f32,
     shape: TransformerShape,
@@ -220,13 +214,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
     /// The buffer must start at a 4-byte aligned address.
     pub fn load(bytes: &'a [u8]) -> Result<Self, BlobError> {
         let (d, data) = parse_descriptor::<TransformerDescriptor>(bytes, TRANSFORMER_MAGIC)?;
-        let SharedTables {
-            obs_norm,
-            action_norm,
-            decoder,
-            steps,
-            num_steps,
-        } = LoadedPolicy::<M, O, K, N, P>::read_shared(&data, shared_fields!(d))?;
+        let shared = LoadedPolicy::<M, O, K, N, P>::read_shared(&data, shared_fields!(d))?;
         d.layout.validate().map_err(|_| BlobError::InputLayout)?;
         if d.layout.segments() != crate::policy::STANDARD_SEGMENTS {
             return Err(BlobError::InputLayout);
@@ -263,7 +251,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
                 Part::NoiseToken,
                 TensorField::Values,
             )))?;
-        let active = steps.get(..num_steps).unwrap_or(&[]);
+        let active = shared.steps();
         if active
             .iter()
             .any(|s| s.first_layer_bias_index as usize >= variants)
@@ -287,11 +275,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
             (*block, *lut) = read_block(&data, desc, width, layer)?;
         }
         let loaded = Self {
-            obs_norm,
-            action_norm,
-            decoder,
-            steps,
-            num_steps,
+            shared,
             layout: d.layout,
             control_dt: d.control_dt,
             shape,
@@ -319,7 +303,7 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
 
     /// The step table.
     pub fn steps(&self) -> &[StepConstants] {
-        self.steps.get(..self.num_steps).unwrap_or(&[])
+        self.shared.steps()
     }
 
     /// The per-step noise tokens, `W` values each.
@@ -390,15 +374,6 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
 
     /// The policy configuration (normalization, sampler) borrowing this blob.
     pub fn config(&self) -> PolicyConfig<'_, O, K, N, P> {
-        PolicyConfig {
-            obs_norm: self.obs_norm,
-            action_norm: self.action_norm,
-            sampler: Sampler {
-                steps: self.steps(),
-                decoder: &self.decoder,
-                layout: self.layout,
-                control_dt: self.control_dt,
-            },
-        }
+        self.shared.config(self.layout, self.control_dt)
     }
 }
