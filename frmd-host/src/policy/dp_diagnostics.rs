@@ -1,5 +1,15 @@
 //! Manual diagnostics for the DP baseline (ignored tests; they need FRMD_CKPT and FRMD_DATA and
-//! print measurements). Used to find why the DP failed in closed loop (see `diffusion::ddpm`).
+//! print measurements). Used to find why the DP failed in closed loop (0 % on reach and push):
+//! - `dp_denoising_on_training_windows`: chunks of the direct-epsilon DP were 5-6x rougher than
+//!   the demonstrations (RMS second difference), and the roughness came from the t = 0 step
+//!   (noise MSE 0.12 there); estimates at high noise were poor (clean-estimate error 0.13 at
+//!   t = 80). The preconditioned network (`EpsParametrization`) fixes both.
+//! - v0-jitter, goal-swap (FRMD_GOAL_DIMS) and `cond_vs_input`: the DP uses the goal and the
+//!   rate about as much as the teacher does; no train/eval conditioning mismatch.
+//! - `closed_vs_demo_trace`, `start_travel`, `regression_start_travel`: on `reach` every DP
+//!   variant moves about 3x too far in the first chunk of an episode (a deterministic regressor
+//!   with the same backbone: 2x, the ProDMP teacher 1.8x), which puts the closed loop off the
+//!   demonstrations (no recovery data) — the remaining reach failure.
 #![allow(clippy::needless_range_loop)]
 use super::*;
 use crate::diffusion::ddpm::predict_noise;
