@@ -17,7 +17,6 @@
 use super::*;
 use crate::diffusion::ddpm::predict_noise;
 use crate::rng::HostRng;
-use candle_core::Tensor;
 
 /// Mean over windows of the RMS second difference of a chunk along time (normalized units).
 fn roughness(chunk: &[f32], k: usize) -> f64 {
@@ -113,10 +112,9 @@ fn dp_denoising_on_training_windows() {
     let policy = FloatPolicy::load(Path::new(&ckpt), Some(10), None).unwrap();
     let cfg = policy.net.net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
-    let (obs_w, k, traj) = (cfg.history * cfg.obs_dim, cfg.action_dim, cfg.traj_dim());
+    let (k, traj) = (cfg.action_dim, cfg.traj_dim());
     let idx: Vec<usize> = (0..w.len()).step_by(w.len() / 256 + 1).collect();
     let batch = crate::train::batch::gather(&w, &cfg, &idx, &Device::Cpu).unwrap();
-    let _ = obs_w;
     let mut rng = HostRng::new(3);
     for t in [0usize, 1, 2, 5, 10, 20, 40, 60, 80, 90, 99] {
         let abar = policy.schedule.alpha_bars[t];
@@ -131,8 +129,6 @@ fn dp_denoising_on_training_windows() {
         let rough = flat.chunks_exact(traj).map(|c| roughness(c, k)).sum::<f64>() / idx.len() as f64;
         eprintln!("t {t:3} (sigma {sigma:9.4}): eps mse {mse:.4}, one-shot x0 abs error {x0_err:.4}, roughness {rough:.4}");
     }
-    let _: Option<Tensor> = None;
-    let _ = k;
 }
 
 /// Closed loop on demonstration seed 0 next to the demonstration itself: per query, the
@@ -338,8 +334,8 @@ fn cond_vs_input() {
     let (k, traj) = (cfg.action_dim, cfg.traj_dim());
     let mut rng = HostRng::new(5);
     for (ci, xi) in [(0usize, 0usize), (0, 8), (8, 0), (8, 8)] {
-        let cond = crate::train::batch::gather(&w, &cfg, &vec![ci; 16], &Device::Cpu).unwrap().cond;
-        let x0 = crate::train::batch::gather(&w, &cfg, &vec![xi; 16], &Device::Cpu).unwrap().x0;
+        let cond = crate::train::batch::gather(&w, &cfg, &[ci; 16], &Device::Cpu).unwrap().cond;
+        let x0 = crate::train::batch::gather(&w, &cfg, &[xi; 16], &Device::Cpu).unwrap().x0;
         let y0 = &w.prev_action[ci * k..(ci + 1) * k];
         let mut line = String::new();
         for t in [0usize, 5, 20, 50, 80, 95] {
