@@ -3,17 +3,18 @@
 //! (model.safetensors + frmd.json) and learning_curve.png into `--out`.
 use crate::checkpoint::{self, fnv1a_hex, CheckpointMeta, DatasetInfo, Role};
 use crate::data::{Dataset, Normalization, WindowSet};
+use crate::diffusion::ddpm::EpsParametrization;
 use crate::diffusion::loss::{LossWeight, SigmaSampling};
 use crate::diffusion::samplers::Solver;
 use crate::eval::{run_episodes, EvalConfig};
 use crate::models::{BackboneConfig, HeadConfig, ModelConfig, OwnedNetwork};
-use crate::policy::float::{FloatPolicy, Sampler};
+use crate::policy::float::{FloatPolicy, Sampler, DP_TRAINING_KEY};
 use crate::train::distill::{distill, DistillConfig};
 use crate::train::holdout::{generalization, windows_in, ChunkSampler, GeneralizationReport};
 use crate::train::batch::CondAugment;
 use crate::train::optim::OptimConfig;
 use crate::train::padding::pad_episode_ends;
-use crate::train::{curve::plot_learning_curve, dp::train_dp, teacher::{train_teacher, TeacherConfig}, LoopConfig, Progress, TrainReport};
+use crate::train::{curve::plot_learning_curve, dp::{train_dp, DpConfig}, teacher::{train_teacher, TeacherConfig}, LoopConfig, Progress, TrainReport};
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use frmd_core::sigma::SigmaConfig;
@@ -29,7 +30,7 @@ pub enum TrainCommand {
     /// The one-step consistency student, distilled from `--teacher`.
     Student(StudentArgs),
     /// The action-space Diffusion Policy baseline (epsilon prediction, DDPM/DDIM).
-    Dp(CommonArgs),
+    Dp(DpArgs),
     /// Open-loop chunk error of a teacher or student checkpoint on its training data and on
     /// held-out demonstrations (generalization vs underfitting).
     Probe(ProbeArgs),
@@ -226,6 +227,19 @@ pub struct StudentArgs {
     pub augment: AugmentArgs,
 }
 
+#[derive(Args, Debug)]
+pub struct DpArgs {
+    #[command(flatten)]
+    pub common: CommonArgs,
+    /// Decay of the weight EMA that is evaluated and saved (0: the trained weights).
+    #[arg(long, default_value_t = 0.999)]
+    pub ema: f64,
+    /// Noise network: direct (eps = F, Chi et al.) | preconditioned (EDM-style skip and
+    /// scaling around F; see `diffusion::ddpm::EpsParametrization`).
+    #[arg(long, default_value = "preconditioned")]
+    pub parametrization: String,
+}
+
 struct Prepared {
     dataset: Dataset,
     windows: WindowSet,
@@ -278,6 +292,8 @@ struct Monitor<'a> {
     norm: Normalization,
     sigma: SigmaConfig,
     sampler: Sampler,
+    /// Noise-network parametrization of a DP model (ignored for the other roles).
+    dp_parametrization: EpsParametrization,
     success: Vec<(usize, f64)>,
     last_eval: Option<serde_json::Value>,
     probe: Option<HoldoutProbe>,
@@ -315,7 +331,7 @@ impl Monitor<'_> {
         if self.common.eval_episodes == 0 {
             return Ok(());
         }
-        let mut policy = FloatPolicy::new(model.duplicate(&candle_core::Device::Cpu)?, self.norm.clone(), self.sigma, self.sampler)?;
+        let mut policy = FloatPolicy::new(model.duplicate(&candle_core::Device::Cpu)?, self.norm.clone(), self.sigma, self.sampler)?.with_dp_parametrization(self.dp_parametrization);
         let cfg = EvalConfig { episodes: self.common.eval_episodes, exec_steps: self.common.exec_steps, history: model.net.config().history, ..EvalConfig::default() };
         let report = run_episodes(&self.task, &mut policy, &cfg)?;
         self.bar.println(format!(
@@ -345,7 +361,7 @@ fn monitor<'a>(common: &'a CommonArgs, task: &str, norm: &Normalization, sampler
     let bar = ProgressBar::new(common.steps as u64);
     bar.set_style(ProgressStyle::with_template("{prefix} [{elapsed_precise}] {bar:30} {pos}/{len} {msg} (eta {eta})").unwrap_or_else(|_| ProgressStyle::default_bar()));
     bar.set_prefix(label.to_string());
-    Monitor { bar, common, task: task.to_string(), norm: norm.clone(), sigma: SigmaConfig::default(), sampler, success: Vec::new(), last_eval: None, probe: None, generalization: Vec::new() }
+    Monitor { bar, common, task: task.to_string(), norm: norm.clone(), sigma: SigmaConfig::default(), sampler, dp_parametrization: EpsParametrization::Direct, success: Vec::new(), last_eval: None, probe: None, generalization: Vec::new() }
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -454,13 +470,17 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {
             finish(&c.out, Role::Student, &distilled.eval_student, &prepared, &distilled.report, mon, extra)
         }
         TrainCommand::Probe(args) => probe(&args),
-        TrainCommand::Dp(c) => {
-            let prepared = prepare(&c, c.history, c.horizon)?;
-            let model = model_config(&c, &prepared, HeadConfig::Raw)?;
+        TrainCommand::Dp(args) => {
+            let c = &args.common;
+            let prepared = prepare(c, c.history, c.horizon)?;
+            let model = model_config(c, &prepared, HeadConfig::Raw)?;
             let sampler = Sampler::for_role(Role::Dp, c.eval_steps, None)?;
-            let mut mon = monitor(&c, &prepared.dataset.task, &prepared.norm, sampler, "dp");
-            let (net, report) = train_dp(&prepared.windows, &model, &loop_config(&c), &mut |p: &Progress| mon.on_progress(p))?;
-            finish(&c.out, Role::Dp, &net, &prepared, &report, mon, json!({ "ddpm_train_steps": crate::train::dp::DP_TRAIN_STEPS }))
+            let dp = DpConfig { parametrization: EpsParametrization::parse(&args.parametrization)?, eval_ema: args.ema };
+            let mut mon = monitor(c, &prepared.dataset.task, &prepared.norm, sampler, "dp");
+            mon.dp_parametrization = dp.parametrization;
+            let (net, report) = train_dp(&prepared.windows, &model, &loop_config(c), &dp, &mut |p: &Progress| mon.on_progress(p))?;
+            let extra = json!({ "ddpm_train_steps": crate::train::dp::DP_TRAIN_STEPS, DP_TRAINING_KEY: dp });
+            finish(&c.out, Role::Dp, &net, &prepared, &report, mon, extra)
         }
     }
 }

@@ -4,7 +4,7 @@
 //! generator the firmware uses.
 use crate::checkpoint::{self, CheckpointMeta, Role};
 use crate::data::Normalization;
-use crate::diffusion::ddpm::{sample_dp, DdpmSchedule, DpSampler};
+use crate::diffusion::ddpm::{sample_dp, DdpmSchedule, DpSampler, EpsParametrization};
 use crate::diffusion::samplers::{gaussian, sample_consistency, sample_teacher, Solver};
 use crate::eval::policy::{Policy, PolicyInput};
 use crate::models::{Condition, OwnedNetwork};
@@ -14,6 +14,18 @@ use candle_core::Device;
 use frmd_core::rng::Rng;
 use frmd_core::sigma::SigmaConfig;
 use std::path::Path;
+
+/// Key of the DP settings (`train::dp::DpConfig`) in a checkpoint's training summary.
+pub const DP_TRAINING_KEY: &str = "dp";
+
+/// The noise-network parametrization recorded in a DP checkpoint's training summary; checkpoints
+/// written before it was recorded used `Direct`.
+pub fn dp_parametrization(meta: &CheckpointMeta) -> anyhow::Result<EpsParametrization> {
+    match meta.training.get(DP_TRAINING_KEY).and_then(|dp| dp.get("parametrization")) {
+        None => Ok(EpsParametrization::Direct),
+        Some(value) => serde_json::from_value(value.clone()).with_context(|| format!("checkpoint training.{DP_TRAINING_KEY}.parametrization {value} is not a DP parametrization")),
+    }
+}
 
 /// How a float policy turns noise into a chunk.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -79,12 +91,19 @@ impl FloatPolicy {
         Ok(FloatPolicy { net, norm, sigma, sampler, schedule: DdpmSchedule::cosine(DP_TRAIN_STEPS), rng: Rng::new(0), device: Device::Cpu })
     }
 
+    /// Sets the noise-network parametrization used by DP sampling (default `Direct`).
+    pub fn with_dp_parametrization(mut self, parametrization: EpsParametrization) -> Self {
+        self.schedule = self.schedule.with_parametrization(parametrization);
+        self
+    }
+
     /// Loads a checkpoint directory; `steps`/`solver` override the role's default sampler.
     pub fn load(dir: &Path, steps: Option<usize>, solver: Option<Solver>) -> anyhow::Result<Self> {
         let (meta, net): (CheckpointMeta, OwnedNetwork) = checkpoint::load(dir)?;
         let norm = meta.normalization.clone().with_context(|| format!("{}: checkpoint has no normalization", dir.display()))?;
         let sampler = Sampler::for_role(meta.role, steps, solver)?;
-        FloatPolicy::new(net, norm, meta.sigma.into(), sampler)
+        let parametrization = dp_parametrization(&meta).with_context(|| format!("{}", dir.display()))?;
+        Ok(FloatPolicy::new(net, norm, meta.sigma.into(), sampler)?.with_dp_parametrization(parametrization))
     }
 
     /// (obs_dim, action_dim, history) the policy expects.
@@ -202,5 +221,49 @@ mod tests {
 }
 
 #[cfg(test)]
+mod dp_checkpoint_tests {
+    use super::*;
+    use crate::data::Normalizer;
+    use crate::models::HeadConfig;
+    use crate::train::toy::toy_config;
+
+    /// A DP checkpoint records its noise-network parametrization and `load` samples with it:
+    /// the loaded policy reproduces the in-memory preconditioned policy, not the direct one.
+    /// Old checkpoints without the record load as `Direct`; a bad record is an error.
+    #[test]
+    fn dp_parametrization_is_saved_and_loaded() {
+        let cfg = toy_config(HeadConfig::Raw);
+        let net = OwnedNetwork::new_seeded(&cfg, 5, &Device::Cpu).unwrap();
+        let norm = Normalization { obs: Normalizer { min: vec![-2.0], max: vec![2.0] }, action: Normalizer { min: vec![10.0], max: vec![20.0] } };
+        let sampler = Sampler::Dp { sampler: DpSampler::Ddim, steps: 10 };
+        let dir = std::env::temp_dir().join(format!("frmd-dp-param-{}", std::process::id()));
+        let mut meta = CheckpointMeta::describe(Role::Dp, &cfg, SigmaConfig::default());
+        meta.normalization = Some(norm.clone());
+        meta.training = serde_json::json!({ DP_TRAINING_KEY: crate::train::dp::DpConfig { parametrization: EpsParametrization::Preconditioned, eval_ema: 0.0 } });
+        checkpoint::save(&dir, &meta, &net).unwrap();
+        let obs = vec![vec![0.5f32]];
+        let input = PolicyInput { obs_history: &obs, prev_action: &[15.0], prev_rate: &[1.0] };
+        let chunk = |policy: &mut FloatPolicy| {
+            policy.reset(3);
+            policy.act(&input).unwrap()
+        };
+        let loaded = chunk(&mut FloatPolicy::load(&dir, None, None).unwrap());
+        let pre = chunk(&mut FloatPolicy::new(net.duplicate(&Device::Cpu).unwrap(), norm.clone(), SigmaConfig::default(), sampler).unwrap().with_dp_parametrization(EpsParametrization::Preconditioned));
+        let direct = chunk(&mut FloatPolicy::new(net.duplicate(&Device::Cpu).unwrap(), norm.clone(), SigmaConfig::default(), sampler).unwrap());
+        assert_eq!(loaded, pre);
+        assert_ne!(loaded, direct);
+        meta.training = serde_json::json!({ "steps": 1 });
+        assert_eq!(dp_parametrization(&meta).unwrap(), EpsParametrization::Direct);
+        meta.training = serde_json::json!({ DP_TRAINING_KEY: { "parametrization": "sideways" } });
+        assert!(dp_parametrization(&meta).is_err());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
+
+#[cfg(test)]
 #[path = "float_diagnostics.rs"]
 mod diagnostics;
+
+#[cfg(test)]
+#[path = "dp_diagnostics.rs"]
+mod dp_diagnostics;

@@ -175,7 +175,7 @@ fn dp_baseline_learns_bimodal_toy() {
     use crate::diffusion::ddpm::{sample_dp, DdpmSchedule, DpSampler};
     let cfg = toy_config(HeadConfig::Raw);
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
-    let (net, report) = super::dp::train_dp(&windows, &cfg, &quick_loop(2000, 4), &mut |_: &Progress| Ok(())).unwrap();
+    let (net, report) = super::dp::train_dp(&windows, &cfg, &quick_loop(2000, 4), &super::dp::DpConfig { eval_ema: 0.0, parametrization: crate::diffusion::ddpm::EpsParametrization::Direct }, &mut |_: &Progress| Ok(())).unwrap();
     assert!(report.final_loss().unwrap() < 0.5 * report.loss_curve[0].1, "{:?}", report.loss_curve);
     let sched = DdpmSchedule::cosine(super::dp::DP_TRAIN_STEPS);
     let batch = 300;
