@@ -287,7 +287,7 @@ fn regression_start_travel() {
     let cfg = ModelConfig { obs_dim: ds.obs_dim, history: 2, action_dim: ds.action_dim, horizon: 12, control_dt: f64::from(ds.dt), embed_dim: 16,
         backbone: BackboneConfig::Mlp { hidden: vec![256, 256, 256], activation: Activation::Silu }, head: HeadConfig::Raw };
     let net = OwnedNetwork::new_seeded(&cfg, 0, &Device::Cpu).unwrap();
-    let mut opt = ScheduledAdamW::new(net.varmap.all_vars(), OptimConfig { lr: 1e-3, weight_decay: 1e-6, warmup_steps: 500, total_steps: steps, min_lr_ratio: 0.0 }).unwrap();
+    let mut opt = ScheduledAdamW::new(net.varmap.all_vars(), OptimConfig { lr: 1e-3, weight_decay: 1e-6, warmup_steps: 500, total_steps: steps, min_lr_ratio: 0.0, head_lr_scale: 1.0 }).unwrap();
     let mut rng = HostRng::new(1);
     let (k, traj) = (cfg.action_dim, cfg.traj_dim());
     for step in 0..steps {
