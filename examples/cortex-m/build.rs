@@ -8,9 +8,11 @@
 //!    everything else as `synthetic_mlp.rs`.
 //! 4. Exports the checked-in trained student (`policy/reach/`: `model.safetensors`, `frmd.json`,
 //!    `calibration.safetensors`) with `frmd_export::export::export_checkpoint` and bakes it into
-//!    `$OUT_DIR/student/` (`policy.rs` + `weights.bin`) for the `policy` image.
-//!    The synthetic one-step policy (src/synthetic_policy.rs) is still baked into `$OUT_DIR/policy/`
-//!    for the `transformer` images (its configuration) and the `policy-stages` image.
+//!    `$OUT_DIR/student/` (`policy.rs` + `weights.bin`, plus `policy_parts.rs` for the per-stage
+//!    breakdown) for the `policy` and `policy-stages` images.
+//!    The synthetic one-step policy (src/synthetic_policy.rs) is baked into
+//!    `$OUT_DIR/synthetic_policy/` only for the `transformer` images, which use its configuration
+//!    (normalization, step constants, decoder, 44-input layout), not its MLP.
 //! 5. Generates the synthetic transformer-lite (src/synthetic_transformer.rs): weights as
 //!    `synthetic_transformer.bin`, everything else as `synthetic_transformer.rs`.
 use std::{env, fmt::Write as _, fs, path::{Path, PathBuf}};
@@ -61,7 +63,7 @@ fn bake_prodmp(out: &Path) {
 /// baked MLP's hidden layers, output layer and first-layer bias variants as separate values (the
 /// generated `network()` only hands out the assembled `Int8Network`), over the same statics and
 /// weight file, at the offsets of `frmd_export::bake::weight_file_layout`. The per-stage
-/// breakdown runs them through `stages::StagedMlpNetwork`.
+/// breakdown (`policy-stages` image) runs them through `stages::StagedMlpNetwork`.
 fn policy_parts(policy: &frmd_export::QuantizedPolicy) -> String {
     let (entries, _) = frmd_export::bake::weight_file_layout(policy);
     let slice = |index: usize| format!("baked_slice(bytes, {}, {})?", entries[index].offset, entries[index].count);
@@ -122,6 +124,7 @@ fn bake_student(out: &Path) {
     assert_eq!(shape, expected, "{STUDENT_DIR}: (history, obs_dim, dof, horizon, params) disagree with src/shape.rs");
     frmd_export::bake::write_module(policy, &out.join("student"))
         .unwrap_or_else(|error| panic!("baking the student {STUDENT_DIR} failed: {error:#}"));
+    fs::write(out.join("student/policy_parts.rs"), policy_parts(policy)).expect("write policy_parts.rs");
     let layers = policy.hidden.iter().map(|layer| (layer.in_features, layer.out_features));
     let network_macs: usize = layers
         .chain([(policy.output.in_features, policy.output.out_features)])
@@ -165,11 +168,8 @@ fn main() {
     fs::write(out.join("synthetic_mlp.bin"), model.weight_bytes()).expect("write synthetic_mlp.bin");
     fs::write(out.join("synthetic_mlp.rs"), model.rust_source()).expect("write synthetic_mlp.rs");
     bake_student(&out);
-    let policy = synthetic_policy::generate();
-    frmd_export::bake::write_module(&policy, &out.join("policy"))
+    frmd_export::bake::write_module(&synthetic_policy::generate(), &out.join("synthetic_policy"))
         .expect("bake the synthetic policy with frmd-export");
-    fs::write(out.join("policy/policy_parts.rs"), policy_parts(&policy))
-        .expect("write policy_parts.rs");
     let transformer = synthetic_transformer::generate();
     fs::write(out.join("synthetic_transformer.bin"), transformer.weight_bytes())
         .expect("write synthetic_transformer.bin");

@@ -10,8 +10,8 @@
 #   policy: firmware frmd-cortex-m-policy, the trained student in policy/reach/ baked by frmd-export
 #   transformer: firmware frmd-cortex-m-transformer, a synthetic one-step policy with a
 #     transformer-lite network
-#   policy-stages, transformer-stages: the synthetic MLP policy and the transformer measurement,
-#     each plus the per-stage breakdown
+#   policy-stages, transformer-stages: the policy (same baked student) and the transformer
+#     measurement, each plus the per-stage breakdown
 #     (`stage <name>: <instructions>` lines)
 #
 # Prints the firmware's `key: value` lines on stdout (build and setup chatter go to stderr) and

@@ -1,11 +1,13 @@
 //! The per-stage breakdown of the Cortex-M policy firmware measures the real computation.
 //!
-//! `examples/cortex-m` (binary `frmd-cortex-m-policy`) times each layer by running the baked MLP
+//! `examples/cortex-m` (binary `frmd-cortex-m-policy-stages`) times each layer by running the baked MLP
 //! through `stages::StagedMlpNetwork`, which re-composes `Int8Mlp::forward` from frmd-core's
 //! kernels with a clock reading between layers. The firmware itself checks that the staged chunks
 //! hash to the measured policy's digest; this host test checks the same without QEMU: the staged
 //! network behind `Policy` gives bit-identical chunks to frmd-core's `Int8Network` (the blob form of
-//! the same synthetic policy), and records one clock reading per stage boundary.
+//! the same policy: the checked-in trained student `examples/cortex-m/policy/reach/`, exported
+//! as the firmware's build.rs exports it, two-plane first layer included), and records one clock
+//! reading per stage boundary.
 
 #[allow(dead_code)]
 #[path = "../../examples/cortex-m/src/digest.rs"]
@@ -17,10 +19,6 @@ mod policy_workload;
 mod shape;
 #[path = "../../examples/cortex-m/src/stages.rs"]
 mod stages;
-#[path = "../../examples/cortex-m/src/synthetic_mlp.rs"]
-mod synthetic_mlp;
-#[path = "../../examples/cortex-m/src/synthetic_policy.rs"]
-mod synthetic_policy;
 #[allow(dead_code)]
 #[path = "../../examples/cortex-m/src/workload_api.rs"]
 mod workload_api;
@@ -28,13 +26,16 @@ mod workload_api;
 #[path = "../../examples/cortex-m/host-test-support.rs"]
 mod qemu;
 
+use std::path::Path;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use frmd_core::blob::LoadedPolicy;
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
-use frmd_core::model::mlp::Int8Layer;
+use frmd_core::model::mlp::{InputPrecision, Int8Layer};
 use frmd_core::policy::Policy;
-use shape::{DOF, HORIZON, MLP_HIDDEN, MLP_WIDTH, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM};
+use frmd_export::export::{export_checkpoint, ExportOptions};
+use frmd_export::QuantizedPolicy;
+use shape::{DOF, HORIZON, MLP_HIDDEN, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM};
 use stages::{mlp_marks, StagedMlpNetwork};
 
 const LAYERS: usize = MLP_HIDDEN.len();
@@ -51,20 +52,20 @@ fn aligned(blob: &[u8]) -> Vec<u128> {
     words
 }
 
-#[test]
-fn staged_mlp_network_matches_int8_network() {
-    let quantized = synthetic_policy::generate();
-    let blob = frmd_export::blob::write(&quantized).expect("write the blob");
-    let words = aligned(&blob);
-    let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
-    let loaded = LoadedPolicy::<POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS>::load(bytes)
-        .expect("load the blob");
-    let reference = loaded.policy::<POLICY_INPUT, MLP_WIDTH>().expect("policy from the blob");
-    let mut reference = policy_workload::PolicyWorkload::new(reference);
-    let expected = workload_api::digest_all(&mut reference).expect("reference chunks");
+/// The student the firmware's build.rs bakes, exported with the same call and options.
+fn student() -> QuantizedPolicy {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/cortex-m/policy/reach");
+    export_checkpoint(&dir, ExportOptions::default(), None).expect("export the checked-in student").policy
+}
 
-    let luts: Vec<Lut8> = quantized.luts.iter().map(|table| Lut8::from_table(*table)).collect();
-    let hidden: [Int8Layer<'_>; LAYERS] = std::array::from_fn(|i| {
+/// The SiLU tables of `quantized`, indexed as its layers' `lut` fields index them.
+fn tables(quantized: &QuantizedPolicy) -> Vec<Lut8> {
+    quantized.luts.iter().map(|table| Lut8::from_table(*table)).collect()
+}
+
+/// The hidden layers of `quantized` as frmd-core layers over its own arrays.
+fn hidden_layers<'a>(quantized: &'a QuantizedPolicy, luts: &'a [Lut8]) -> [Int8Layer<'a>; LAYERS] {
+    std::array::from_fn(|i| {
         let layer = &quantized.hidden[i];
         Int8Layer {
             fc: FullyConnected::new(layer.in_features, layer.out_features, &layer.weights, &layer.bias),
@@ -77,7 +78,26 @@ fn staged_mlp_network_matches_int8_network() {
             },
             activation: layer.lut.map(|index| &luts[index]),
         }
-    });
+    })
+}
+
+#[test]
+fn staged_mlp_network_matches_int8_network() {
+    let quantized = student();
+    // The firmware's breakdown must cover the exporter's default two-plane first layer.
+    assert_eq!(quantized.input_precision, InputPrecision::TwoPlane);
+    assert_eq!(quantized.hidden.len(), LAYERS);
+    let blob = frmd_export::blob::write(&quantized).expect("write the blob");
+    let words = aligned(&blob);
+    let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
+    let loaded = LoadedPolicy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS>::load(bytes)
+        .expect("load the blob");
+    let reference = loaded.policy::<STUDENT_INPUT, MLP_WIDTH>().expect("policy from the blob");
+    let mut reference = policy_workload::PolicyWorkload::new(reference);
+    let expected = workload_api::digest_all(&mut reference).expect("reference chunks");
+
+    let luts = tables(&quantized);
+    let hidden = hidden_layers(&quantized, &luts);
     let output = &quantized.output;
     let network = StagedMlpNetwork::<LAYERS, { mlp_marks(LAYERS) }, MLP_WIDTH>::new(
         quantized.input,
@@ -89,7 +109,7 @@ fn staged_mlp_network_matches_int8_network() {
     )
     .expect("staged network")
     .with_input_precision(quantized.input_precision);
-    let policy = Policy::<_, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>::new(
+    let policy = Policy::<_, STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT>::new(
         loaded.config(),
         network,
     )
@@ -103,9 +123,9 @@ fn staged_mlp_network_matches_int8_network() {
 
 #[test]
 fn staged_mlp_network_refuses_small_scratch() {
-    let quantized = synthetic_policy::generate();
-    let model = synthetic_mlp::generate_with(POLICY_INPUT, synthetic_policy::POLICY_WEIGHT_SEED, (-4.0, 4.0));
-    let hidden: [Int8Layer<'_>; LAYERS] = model.hidden_layers().try_into().expect("three layers");
+    let quantized = student();
+    let luts = tables(&quantized);
+    let hidden = hidden_layers(&quantized, &luts);
     let output = &quantized.output;
     let fc = FullyConnected::new(output.in_features, output.out_features, &output.weights, &output.bias);
     // WIDTH 128 is narrower than the 256-wide hidden layers.

@@ -9,9 +9,9 @@
 //!   in, action chunk out).
 //! - `frmd-cortex-m-transformer` (src/bin/frmd-cortex-m-transformer.rs): a synthetic one-step
 //!   policy configuration with a synthetic int8 transformer-lite backbone instead of the MLP.
-//! - `frmd-cortex-m-policy-stages`, `frmd-cortex-m-transformer-stages`: the synthetic MLP policy
-//!   and the transformer measurements followed by a per-stage breakdown (`stage <name>: <instructions>` lines, see
-//!   src/stage_report.rs).
+//! - `frmd-cortex-m-policy-stages`, `frmd-cortex-m-transformer-stages`: the policy (same baked
+//!   student) and the transformer measurements followed by a per-stage breakdown
+//!   (`stage <name>: <instructions>` lines, see src/stage_report.rs).
 //!
 //! Each prints `digest: <16 hex>` (FNV-1a 64 over the little-endian bytes of every output, in
 //! order), `instructions: <n>` (median per call, from SysTick under QEMU `-icount shift=0`),

@@ -17,7 +17,11 @@ use crate::workload_api::Workload;
 use frmd_core::policy::{Network, Noise, Policy, PolicyError, Trajectory};
 use frmd_core::rng::Rng;
 
-pub const NAME: &str = "policy act: one-step int8 MLP 44-256-256-256-42 + decode (synthetic weights)";
+/// Printed as the `workload:` line unless [`PolicyWorkload::with_name`] says otherwise.
+pub const NAME: &str = "policy act: one-step int8 policy + decode";
+/// The `workload:` line of the `policy` and `policy-stages` images (the same baked student).
+pub const STUDENT_NAME: &str =
+    "policy act: trained one-step int8 MLP student (reach, policy/reach) + decode";
 /// Distinct inputs.
 pub const CASES: usize = 8;
 pub const OBS_SEED: u64 = 0x4652_4D44_4F42_5301;

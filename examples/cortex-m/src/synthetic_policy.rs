@@ -1,6 +1,8 @@
 //! A deterministic synthetic one-step policy as a `frmd_export::QuantizedPolicy` (std; used by
-//! `build.rs`, which bakes it with `frmd_export::bake::write_module`, and by the host test, which
-//! writes it as a blob and runs it with `frmd_core::blob::LoadedPolicy`).
+//! `build.rs`, which bakes it with `frmd_export::bake::write_module` for the `transformer` images,
+//! and by the host test `frmd-export/tests/cortex_m_transformer.rs`, which writes it as a blob and
+//! runs it with `frmd_core::blob::LoadedPolicy`). Only its configuration (normalization, step
+//! constants, decoder, input layout) is used: the transformer replaces its MLP as the network.
 //!
 //! Shape: history 2 x 8 observations, 2 DoF, horizon 12, 20 basis functions, one sampling step at
 //! sigma_max, standard input layout (44 inputs), int8 MLP 44-256-256-256-42 with SiLU LUTs from

@@ -1,30 +1,32 @@
 //! Firmware: the per-stage breakdown of the policy image (src/bin/frmd-cortex-m-policy.rs). It
-//! first measures `Policy::act` exactly as that image does (same report lines), then runs the same
-//! baked MLP through a layer-marking network and prints `stage` lines (src/stage_report.rs). The
-//! breakdown lives in its own image because its second policy instance changes how the compiler
-//! inlines the shared code: the totals of the two images differ by about 1 %; the policy image's
-//! `instructions:` is the reference, the stage lines show where the time goes.
+//! first measures `Policy::act` of the same baked trained student exactly as that image does (same
+//! inputs, seeds and report lines, so the same digest), then runs the student's baked MLP through
+//! a layer-marking network and prints `stage` lines (src/stage_report.rs). The breakdown lives in
+//! its own image because its second policy instance changes how the compiler inlines the shared
+//! code: the totals of the two images differ slightly; the policy image's `instructions:` is the
+//! reference, the stage lines show where the time goes.
 #![no_std]
 #![no_main]
 
 use cortex_m_rt::entry;
+use frmd_core::model::mlp::InputPrecision;
 use frmd_core::policy::{Policy, PolicyError};
-use frmd_cortex_m::timer::Calibration;
-use frmd_cortex_m::policy_workload::{PolicyWorkload, CASES};
+use frmd_cortex_m::policy_workload::{policy_act_macs, PolicyWorkload, CASES, STUDENT_NAME};
 use frmd_cortex_m::report::exit_failure;
 use frmd_cortex_m::stages::{mlp_marks, StagedMlpNetwork};
-use frmd_core::model::mlp::InputPrecision;
+use frmd_cortex_m::timer::Calibration;
 use frmd_cortex_m::{bench, stage_report};
 
-/// The module frmd-export generated (policy.rs + weights.bin in OUT_DIR/policy), plus build.rs's
-/// `mlp_parts()` over the same statics.
+/// The module frmd-export generated from the student (policy.rs + weights.bin in
+/// OUT_DIR/student), plus build.rs's `mlp_parts()` over the same statics.
 #[allow(dead_code)]
 mod baked {
-    include!(concat!(env!("OUT_DIR"), "/policy/policy.rs"));
-    include!(concat!(env!("OUT_DIR"), "/policy/policy_parts.rs"));
+    include!(concat!(env!("OUT_DIR"), "/student/policy.rs"));
+    include!(concat!(env!("OUT_DIR"), "/student/network_macs.rs"));
+    include!(concat!(env!("OUT_DIR"), "/student/policy_parts.rs"));
 }
 
-/// Hidden layers of the synthetic policy's MLP.
+/// Hidden layers of the student's MLP.
 const LAYERS: usize = frmd_cortex_m::shape::MLP_HIDDEN.len();
 
 #[entry]
@@ -34,7 +36,8 @@ fn main() -> ! {
         Ok(policy) => policy,
         Err(error) => exit_failure(&error),
     };
-    let mut workload = PolicyWorkload::new(policy);
+    let macs = policy_act_macs(baked::NETWORK_MACS, baked::HORIZON, baked::ACTION_DIM, baked::PARAMS_PER_DOF);
+    let mut workload = PolicyWorkload::with_name(policy, STUDENT_NAME).with_macs(macs);
     bench::run_then::<_, { CASES * 5 }>(&mut workload, stack, |_, calibration, digest| {
         if let Err(error) = breakdown(calibration, digest) {
             exit_failure(&error);
@@ -71,6 +74,6 @@ fn breakdown(calibration: &Calibration, digest: u64) -> Result<(), PolicyError> 
         { baked::PARAMS_PER_DOF },
         { baked::INPUT_WIDTH },
     >::new(baked::config(), network)?;
-    let mut staged = PolicyWorkload::new(policy);
+    let mut staged = PolicyWorkload::with_name(policy, STUDENT_NAME);
     stage_report::mlp_policy(&mut staged, &layer_macs, output_macs, calibration, digest)
 }

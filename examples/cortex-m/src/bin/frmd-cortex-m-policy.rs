@@ -7,7 +7,7 @@
 #![no_main]
 
 use cortex_m_rt::entry;
-use frmd_cortex_m::policy_workload::{policy_act_macs, PolicyWorkload, CASES};
+use frmd_cortex_m::policy_workload::{policy_act_macs, PolicyWorkload, CASES, STUDENT_NAME};
 use frmd_cortex_m::report::exit_failure;
 use frmd_cortex_m::bench;
 
@@ -18,8 +18,6 @@ mod baked {
     include!(concat!(env!("OUT_DIR"), "/student/network_macs.rs"));
 }
 
-const NAME: &str = "policy act: trained one-step int8 MLP student (reach, policy/reach) + decode";
-
 #[entry]
 fn main() -> ! {
     let stack = bench::start();
@@ -28,6 +26,6 @@ fn main() -> ! {
         Err(error) => exit_failure(&error),
     };
     let macs = policy_act_macs(baked::NETWORK_MACS, baked::HORIZON, baked::ACTION_DIM, baked::PARAMS_PER_DOF);
-    let mut workload = PolicyWorkload::with_name(policy, NAME).with_macs(macs);
+    let mut workload = PolicyWorkload::with_name(policy, STUDENT_NAME).with_macs(macs);
     bench::run::<_, { CASES * 5 }>(&mut workload, stack)
 }

@@ -18,11 +18,12 @@ use frmd_cortex_m::shape::{
 use frmd_cortex_m::transformer_network::TransformerNetwork;
 use frmd_cortex_m::{baked_transformer, bench};
 
-/// The module frmd-export generated for the MLP policy; only its `config()` is used here (the
+/// The module frmd-export generated for the synthetic MLP policy (src/synthetic_policy.rs); only
+/// its `config()` is used here (the
 /// MLP weights are not referenced, so the linker drops them).
 #[allow(dead_code)]
 mod baked {
-    include!(concat!(env!("OUT_DIR"), "/policy/policy.rs"));
+    include!(concat!(env!("OUT_DIR"), "/synthetic_policy/policy.rs"));
 }
 
 /// Printed as the `workload:` line.
