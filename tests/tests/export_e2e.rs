@@ -2,64 +2,35 @@
 //! (through the `frmd train` code paths, which also write calibration.safetensors), export it
 //! (`frmd export`), load the blob with frmd-core and run the bit-accuracy harness.
 use frmd_host::cli::export::{ExportArgs, BAKED_BLOB_FILE};
-use frmd_host::cli::train::{run as train, CommonArgs, StudentArgs, TeacherArgs, TrainCommand};
-use frmd_host::data::collect::collect_demos;
 use frmd_host::equiv::{run as equiv, EquivConfig};
-use std::path::{Path, PathBuf};
 
-fn common(data: &Path, out: PathBuf, steps: usize) -> CommonArgs {
-    CommonArgs {
-        data: data.to_path_buf(),
-        out,
-        backbone: "mlp:32,32:silu".into(),
-        steps,
-        seed: 3,
-        batch: 32,
-        lr: 3e-3,
-        weight_decay: 1e-6,
-        warmup: 20,
-        history: 2,
-        horizon: 8,
-        num_basis: 6,
-        embed_dim: 8,
-        log_every: 50,
-        eval_every: 0,
-        eval_episodes: 0,
-        exec_steps: 8,
-        eval_steps: None,
-        holdout: None,
-        pad_end: 0,
-        head_lr_scale: 1.0,
-    }
-}
+mod support;
+use support::{train_tiny, Tiny, TinyRun};
 
 #[test]
 fn tiny_student_exports_and_meets_the_harness_bounds() {
-    std::env::set_var("RAYON_NUM_THREADS", "1");
-    let dir = std::env::temp_dir().join(format!("frmd-export-e2e-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let data = dir.join("reach.safetensors");
-    let (dataset, _) = collect_demos("reach", 12, 7, &mut |_| {}).unwrap();
-    dataset.save(&data).unwrap();
-
-    let (teacher, student, baked) = (dir.join("teacher"), dir.join("student"), dir.join("baked"));
-    train(TrainCommand::Teacher(TeacherArgs { common: common(&data, teacher.clone(), 300), loss_weight: "edm".into(), eval_solver: "heun".into(), sigma_uniform_fraction: 0.2, ema: 0.0, augment: Default::default() })).unwrap();
-    train(TrainCommand::Student(StudentArgs {
-        common: common(&data, student.clone(), 150),
-        teacher: teacher.clone(),
-        levels: 18,
-        k: 2,
-        solver: "heun".into(),
-        target_ema: 0.95,
-        eval_ema: 0.9,
-        augment: Default::default(),
-    }))
-    .unwrap();
-    assert!(student.join("calibration.safetensors").exists());
+    let TinyRun {
+        dir,
+        teacher,
+        student,
+        baked,
+    } = train_tiny(
+        "frmd-export-e2e",
+        &Tiny {
+            backbone: "mlp:32,32:silu",
+            seed: 3,
+            batch: 32,
+            lr: 3e-3,
+            warmup: 20,
+            teacher_steps: 300,
+            loss_weight: "edm",
+            student_steps: 150,
+        },
+    );
 
     // The exporter refuses the teacher, naming the reason.
-    let err = frmd_export::export::export_checkpoint(&teacher, Default::default(), None).unwrap_err();
+    let err =
+        frmd_export::export::export_checkpoint(&teacher, Default::default(), None).unwrap_err();
     assert!(format!("{err:#}").contains("Teacher"), "{err:#}");
 
     frmd_host::cli::export::run(ExportArgs {
@@ -75,7 +46,10 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
         save_calibration: false,
     })
     .unwrap();
-    assert_eq!(std::fs::read(dir.join("student.blob")).unwrap(), std::fs::read(baked.join(BAKED_BLOB_FILE)).unwrap());
+    assert_eq!(
+        std::fs::read(dir.join("student.blob")).unwrap(),
+        std::fs::read(baked.join(BAKED_BLOB_FILE)).unwrap()
+    );
     for file in ["policy.rs", "weights.bin", "export.json"] {
         assert!(baked.join(file).exists(), "{file}");
     }
@@ -102,14 +76,31 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
     cfg.max_success_diff_points = 100.0;
     let report = equiv(&cfg).unwrap();
     frmd_host::equiv::print(&report);
-    let value = |metric: &str| report.rows.iter().find(|r| r.metric.starts_with(metric)).unwrap_or_else(|| panic!("row {metric}"));
+    let value = |metric: &str| {
+        report
+            .rows
+            .iter()
+            .find(|r| r.metric.starts_with(metric))
+            .unwrap_or_else(|| panic!("row {metric}"))
+    };
     assert_eq!(value("baked blob differs").value, 0.0);
-    assert!(value("core f32 vs candle float: max").value < 1e-4, "f32 path vs candle");
-    assert_eq!(value("success-rate difference core f32").value, 0.0, "runtime f32 policy must reproduce candle in closed loop");
+    assert!(
+        value("core f32 vs candle float: max").value < 1e-4,
+        "f32 path vs candle"
+    );
+    assert_eq!(
+        value("success-rate difference core f32").value,
+        0.0,
+        "runtime f32 policy must reproduce candle in closed loop"
+    );
     assert_eq!(value("requantization mismatches").value, 0.0);
     assert_eq!(value("int8 network accumulator").value, 0.0);
     // int8 vs float: stated bounds, 10 % (max) and 2 % (mean) of the mean action range.
-    for r in report.rows.iter().filter(|r| r.check == "b" && r.metric.contains("abs error")) {
+    for r in report
+        .rows
+        .iter()
+        .filter(|r| r.check == "b" && r.metric.contains("abs error"))
+    {
         assert_eq!(r.pass, Some(true), "{r:?}");
     }
     assert!(report.passed);

@@ -3,61 +3,32 @@
 //! with `frmd export` (the backbone picks the transformer exporter: `FRMT` blob plus generated
 //! loader module), load the blob with frmd-core and run the bit-accuracy harness.
 use frmd_host::cli::export::{ExportArgs, BAKED_BLOB_FILE};
-use frmd_host::cli::train::{run as train, CommonArgs, StudentArgs, TeacherArgs, TrainCommand};
-use frmd_host::data::collect::collect_demos;
 use frmd_host::equiv::{run as equiv, EquivConfig};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn common(data: &Path, out: PathBuf, steps: usize) -> CommonArgs {
-    CommonArgs {
-        data: data.to_path_buf(),
-        out,
-        backbone: "transformer-lite".into(),
-        steps,
-        seed: 5,
-        batch: 16,
-        lr: 1e-3,
-        weight_decay: 1e-6,
-        warmup: 10,
-        history: 2,
-        horizon: 8,
-        num_basis: 6,
-        embed_dim: 8,
-        log_every: 20,
-        eval_every: 0,
-        eval_episodes: 0,
-        exec_steps: 8,
-        eval_steps: None,
-        holdout: None,
-        pad_end: 0,
-        head_lr_scale: 1.0,
-    }
-}
+mod support;
+use support::{train_tiny, Tiny, TinyRun};
 
 #[test]
 fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
-    std::env::set_var("RAYON_NUM_THREADS", "1");
-    let dir = std::env::temp_dir().join(format!("frmd-transformer-e2e-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let data = dir.join("reach.safetensors");
-    let (dataset, _) = collect_demos("reach", 12, 7, &mut |_| {}).unwrap();
-    dataset.save(&data).unwrap();
-
-    let (teacher, student, baked) = (dir.join("teacher"), dir.join("student"), dir.join("baked"));
-    train(TrainCommand::Teacher(TeacherArgs { common: common(&data, teacher.clone(), 60), loss_weight: "uniform".into(), eval_solver: "heun".into(), sigma_uniform_fraction: 0.2, ema: 0.0, augment: Default::default() })).unwrap();
-    train(TrainCommand::Student(StudentArgs {
-        common: common(&data, student.clone(), 20),
-        teacher: teacher.clone(),
-        levels: 18,
-        k: 2,
-        solver: "heun".into(),
-        target_ema: 0.95,
-        eval_ema: 0.9,
-        augment: Default::default(),
-    }))
-    .unwrap();
-    assert!(student.join("calibration.safetensors").exists());
+    let TinyRun {
+        dir,
+        teacher,
+        student,
+        baked,
+    } = train_tiny(
+        "frmd-transformer-e2e",
+        &Tiny {
+            backbone: "transformer-lite",
+            seed: 5,
+            batch: 16,
+            lr: 1e-3,
+            warmup: 10,
+            teacher_steps: 60,
+            loss_weight: "uniform",
+            student_steps: 20,
+        },
+    );
 
     let args = |ckpt: &Path| ExportArgs {
         ckpt: ckpt.to_path_buf(),
@@ -82,18 +53,36 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
     for file in ["policy.rs", "export.json"] {
         assert!(baked.join(file).exists(), "{file}");
     }
-    assert!(!baked.join("weights.bin").exists(), "the MLP weight file is not written for a transformer");
+    assert!(
+        !baked.join("weights.bin").exists(),
+        "the MLP weight file is not written for a transformer"
+    );
     let module = std::fs::read_to_string(baked.join("policy.rs")).unwrap();
-    for line in ["pub const HORIZON: usize = 8;", "pub const LAYERS: usize = 3;", "pub const WIDTH: usize = 128;", &format!("pub const BLOB_BYTES: usize = {};", blob.len())] {
+    for line in [
+        "pub const HORIZON: usize = 8;",
+        "pub const LAYERS: usize = 3;",
+        "pub const WIDTH: usize = 128;",
+        &format!("pub const BLOB_BYTES: usize = {};", blob.len()),
+    ] {
         assert!(module.contains(line), "policy.rs lacks `{line}`");
     }
 
     // The flash figure counts every section the loader views: the blob adds only its header,
     // descriptor and alignment padding.
-    let exported = frmd_export::export::export_transformer_checkpoint(&student, Default::default(), None).unwrap();
+    let exported =
+        frmd_export::export::export_transformer_checkpoint(&student, Default::default(), None)
+            .unwrap();
     let memory = exported.model.memory();
-    assert_eq!(memory.scratch_bytes, exported.model.folded.shape.int8_scratch().ram_bytes());
-    assert!(memory.flash_bytes() <= blob.len() && blob.len() - memory.flash_bytes() < 4096, "flash {} vs blob {}", memory.flash_bytes(), blob.len());
+    assert_eq!(
+        memory.scratch_bytes,
+        exported.model.folded.shape.int8_scratch().ram_bytes()
+    );
+    assert!(
+        memory.flash_bytes() <= blob.len() && blob.len() - memory.flash_bytes() < 4096,
+        "flash {} vs blob {}",
+        memory.flash_bytes(),
+        blob.len()
+    );
 
     // frmd-core loads the blob zero-copy with the shapes of this model, and only with those.
     let mut words = vec![0u32; blob.len().div_ceil(4)];
@@ -101,12 +90,22 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
     let bytes = &bytemuck::cast_slice::<u32, u8>(&words)[..blob.len()];
     let loaded = frmd_core::blob::LoadedTransformer::<2, 6, 2, 8, 7>::load(bytes).unwrap();
     assert_eq!(loaded.steps().len(), 1);
-    assert_eq!((loaded.shape().layers, loaded.shape().heads, loaded.shape().width), (3, 2, 128));
+    assert_eq!(
+        (
+            loaded.shape().layers,
+            loaded.shape().heads,
+            loaded.shape().width
+        ),
+        (3, 2, 128)
+    );
     assert!(matches!(
         frmd_core::blob::LoadedTransformer::<2, 6, 2, 12, 21>::load(bytes),
         Err(frmd_core::blob::BlobError::DimensionMismatch(_))
     ));
-    assert_eq!(frmd_core::blob::LoadedPolicy::<2, 6, 2, 8, 7>::load(bytes).err(), Some(frmd_core::blob::BlobError::BadMagic));
+    assert_eq!(
+        frmd_core::blob::LoadedPolicy::<2, 6, 2, 8, 7>::load(bytes).err(),
+        Some(frmd_core::blob::BlobError::BadMagic)
+    );
 
     let mut cfg = EquivConfig::new(student.clone(), baked.clone());
     cfg.episodes = 5;
@@ -117,13 +116,26 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
     cfg.max_success_diff_points = 100.0;
     let report = equiv(&cfg).unwrap();
     frmd_host::equiv::print(&report);
-    let value = |metric: &str| report.rows.iter().find(|r| r.metric.starts_with(metric)).unwrap_or_else(|| panic!("row {metric}"));
+    let value = |metric: &str| {
+        report
+            .rows
+            .iter()
+            .find(|r| r.metric.starts_with(metric))
+            .unwrap_or_else(|| panic!("row {metric}"))
+    };
     assert_eq!(value("baked blob differs").value, 0.0);
-    assert!(value("core f32 vs candle float: max").value < 1e-4, "f32 path vs candle");
+    assert!(
+        value("core f32 vs candle float: max").value < 1e-4,
+        "f32 path vs candle"
+    );
     assert_eq!(value("requantization mismatches").value, 0.0);
     assert_eq!(value("int8 transformer layer mismatches").value, 0.0);
     // int8 vs float: stated bounds, 10 % (max) and 2 % (mean) of the mean action range.
-    for r in report.rows.iter().filter(|r| r.check == "b" && r.metric.contains("abs error")) {
+    for r in report
+        .rows
+        .iter()
+        .filter(|r| r.check == "b" && r.metric.contains("abs error"))
+    {
         assert_eq!(r.pass, Some(true), "{r:?}");
     }
     assert!(report.passed);

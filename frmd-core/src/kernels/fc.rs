@@ -120,6 +120,29 @@ impl<'a> FullyConnected<'a> {
         Ok(())
     }
 
+    /// Calls `emit(dot(w[o], input))` (bias-free, wrapping) for `o = 0..out_features` in order,
+    /// e.g. for the fine plane of a two-plane input. Same kernels as [`Self::forward_accumulators`].
+    pub fn for_each_dot(&self, input: &[i8], mut emit: impl FnMut(i32)) -> Result<(), KernelError> {
+        self.check_input(input)?;
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx2) = super::x86::Avx2::get() {
+            use super::x86::BLOCK_ROWS;
+            let Some(block_len) = self.in_features.checked_mul(BLOCK_ROWS) else {
+                return Err(KernelError::WeightsLength);
+            };
+            let mut row_blocks = self.weights.chunks_exact(block_len);
+            for rows in row_blocks.by_ref() {
+                avx2.accumulate_rows(rows, input, &[0; BLOCK_ROWS]).into_iter().for_each(&mut emit);
+            }
+            for row in row_blocks.remainder().chunks_exact(self.in_features) {
+                emit(dot_i8_prefix(row, input));
+            }
+            return Ok(());
+        }
+        for_each_row_dot(self.weights, input, emit);
+        Ok(())
+    }
+
     /// Requantized int8 output:
     /// `output[o] = requantize_to_i8(bias[o] + dot(w[o], input), multiplier[o], shift[o], ...)`.
     pub fn forward(
@@ -379,6 +402,11 @@ mod tests {
             };
             let mut acc = vec![0_i32; case.out_features];
             layer.forward_accumulators(&case.input, &mut acc).unwrap();
+            let mut dots = Vec::new();
+            layer.for_each_dot(&case.input, |dot| dots.push(dot)).unwrap();
+            let without_bias: Vec<i32> =
+                acc.iter().zip(&case.bias).map(|(a, b)| a.wrapping_sub(*b)).collect();
+            assert_eq!(dots, without_bias);
             let mut out = vec![0_i8; case.out_features];
             layer.forward(&requant, &case.input, &mut out).unwrap();
             for (o, wide) in naive_accumulators(&case).into_iter().enumerate() {

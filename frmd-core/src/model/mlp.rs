@@ -17,7 +17,6 @@
 //! Scratch memory is caller-owned and sized by a const generic `WIDTH` that must be at least the
 //! widest layer (input, hidden and output widths); nothing is allocated.
 
-use crate::kernels::dot::for_each_row_dot;
 use crate::kernels::{
     dequantize_accumulators, Activation, FcRequant, FullyConnected, KernelError, Lut8,
 };
@@ -95,15 +94,12 @@ impl Int8Layer<'_> {
         acc: &mut [i32],
     ) -> Result<(), KernelError> {
         self.fc.forward_accumulators(coarse, acc)?;
-        if fine.len() != self.fc.in_features {
-            return Err(KernelError::InputLength);
-        }
         let mut slots = acc.iter_mut();
-        for_each_row_dot(self.fc.weights, fine, |dot| {
+        self.fc.for_each_dot(fine, |dot| {
             if let Some(slot) = slots.next() {
                 *slot = combine_plane_accumulators(*slot, dot);
             }
-        });
+        })?;
         Ok(())
     }
 

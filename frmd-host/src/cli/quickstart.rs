@@ -55,8 +55,9 @@ pub struct QuickstartArgs {
     /// Student (consistency distillation) gradient steps.
     #[arg(long, default_value_t = 2500)]
     pub student_steps: usize,
-    /// DP baseline gradient steps.
-    #[arg(long, default_value_t = 10000)]
+    /// DP baseline gradient steps. 25k: at 10k the (preconditioned) DP still overshoots the first
+    /// chunk of every reach episode and scores 0 %; at 25k it reaches 84-92 % (measured).
+    #[arg(long, default_value_t = 25000)]
     pub dp_steps: usize,
     /// Backbone shared by teacher, student and DP (see `frmd train --backbone`).
     #[arg(long, default_value = "mlp-silu")]
