@@ -139,7 +139,7 @@ impl<'a> FullyConnected<'a> {
             }
             return Ok(());
         }
-        for_each_row_dot(self.weights, input, emit);
+        for_each_row_dot(self.weights, input, &mut emit);
         Ok(())
     }
 
