@@ -2,10 +2,9 @@
 //! (through the `frmd train` code paths, which also write calibration.safetensors), export it
 //! (`frmd export`), load the blob with frmd-core and run the bit-accuracy harness.
 use frmd_host::cli::export::{ExportArgs, BAKED_BLOB_FILE};
-use frmd_host::equiv::{run as equiv, EquivConfig};
 
 mod support;
-use support::{train_tiny, Tiny, TinyRun};
+use support::{equiv_within_bounds, row, train_tiny, Tiny, TinyRun};
 
 #[test]
 fn tiny_student_exports_and_meets_the_harness_bounds() {
@@ -67,42 +66,12 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
         Err(frmd_core::blob::BlobError::DimensionMismatch(_))
     ));
 
-    let mut cfg = EquivConfig::new(student.clone(), baked.clone());
-    cfg.episodes = 10;
-    cfg.inputs = 64;
-    cfg.random_requant = 20_000;
-    // A tiny, briefly trained student: its closed-loop success is not meaningful, so the
-    // success-rate bound is not asserted here (the f32 twin must still match exactly).
-    cfg.max_success_diff_points = 100.0;
-    let report = equiv(&cfg).unwrap();
-    frmd_host::equiv::print(&report);
-    let value = |metric: &str| {
-        report
-            .rows
-            .iter()
-            .find(|r| r.metric.starts_with(metric))
-            .unwrap_or_else(|| panic!("row {metric}"))
-    };
-    assert_eq!(value("baked blob differs").value, 0.0);
-    assert!(
-        value("core f32 vs candle float: max").value < 1e-4,
-        "f32 path vs candle"
-    );
+    let report = equiv_within_bounds(&student, &baked, 10, 64);
     assert_eq!(
-        value("success-rate difference core f32").value,
+        row(&report, "success-rate difference core f32"),
         0.0,
         "runtime f32 policy must reproduce candle in closed loop"
     );
-    assert_eq!(value("requantization mismatches").value, 0.0);
-    assert_eq!(value("int8 network accumulator").value, 0.0);
-    // int8 vs float: stated bounds, 10 % (max) and 2 % (mean) of the mean action range.
-    for r in report
-        .rows
-        .iter()
-        .filter(|r| r.check == "b" && r.metric.contains("abs error"))
-    {
-        assert_eq!(r.pass, Some(true), "{r:?}");
-    }
-    assert!(report.passed);
+    assert_eq!(row(&report, "int8 network accumulator"), 0.0);
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -2,6 +2,7 @@
 //! student, both through the `frmd train` code paths (which also write calibration.safetensors).
 use frmd_host::cli::train::{run as train, CommonArgs, StudentArgs, TeacherArgs, TrainCommand};
 use frmd_host::data::collect::collect_demos;
+use frmd_host::equiv::{run as equiv, EquivConfig, EquivReport};
 use std::path::{Path, PathBuf};
 
 /// What differs between the tiny training runs of the tests.
@@ -91,4 +92,50 @@ pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
         student,
         baked,
     }
+}
+
+/// Runs `frmd equiv` on an exported tiny student and asserts the bounds every backbone shares:
+/// the blob equals a re-export, the f32 twin matches candle within 1e-4, requantization agrees
+/// with the wide-integer model, the int8 vs float errors are within their stated bounds (10 % max,
+/// 2 % mean of the action range), and the report passes. `episodes`/`inputs` set the effort; the
+/// success-rate bound is not asserted (a briefly trained student's success is not meaningful).
+/// Returns the report for backbone-specific checks.
+pub fn equiv_within_bounds(
+    student: &Path,
+    baked: &Path,
+    episodes: usize,
+    inputs: usize,
+) -> EquivReport {
+    let mut cfg = EquivConfig::new(student.to_path_buf(), baked.to_path_buf());
+    cfg.episodes = episodes;
+    cfg.inputs = inputs;
+    cfg.random_requant = 20_000;
+    cfg.max_success_diff_points = 100.0;
+    let report = equiv(&cfg).unwrap();
+    frmd_host::equiv::print(&report);
+    assert_eq!(row(&report, "baked blob differs"), 0.0);
+    assert!(
+        row(&report, "core f32 vs candle float: max") < 1e-4,
+        "f32 path vs candle"
+    );
+    assert_eq!(row(&report, "requantization mismatches"), 0.0);
+    for r in report
+        .rows
+        .iter()
+        .filter(|r| r.check == "b" && r.metric.contains("abs error"))
+    {
+        assert_eq!(r.pass, Some(true), "{r:?}");
+    }
+    assert!(report.passed);
+    report
+}
+
+/// The value of the report row whose metric starts with `metric`.
+pub fn row(report: &EquivReport, metric: &str) -> f64 {
+    report
+        .rows
+        .iter()
+        .find(|r| r.metric.starts_with(metric))
+        .unwrap_or_else(|| panic!("row {metric}"))
+        .value
 }
