@@ -106,17 +106,18 @@ impl<'a> FullyConnected<'a> {
         if acc.len() != self.out_features {
             return Err(KernelError::OutputLength);
         }
-        #[cfg(target_arch = "x86_64")]
-        if let Some(avx2) = super::x86::Avx2::get() {
-            self.accumulators_avx2(avx2, input, acc);
-            return Ok(());
-        }
         let mut outputs = acc.iter_mut();
-        self.for_each_accumulator(input, |acc| {
+        let mut write = |acc| {
             if let Some(out) = outputs.next() {
                 *out = acc;
             }
-        });
+        };
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx2) = super::x86::Avx2::get() {
+            self.for_each_sum_avx2(avx2, input, true, &mut write);
+            return Ok(());
+        }
+        self.for_each_accumulator(input, write);
         Ok(())
     }
 
@@ -126,17 +127,7 @@ impl<'a> FullyConnected<'a> {
         self.check_input(input)?;
         #[cfg(target_arch = "x86_64")]
         if let Some(avx2) = super::x86::Avx2::get() {
-            use super::x86::BLOCK_ROWS;
-            let Some(block_len) = self.in_features.checked_mul(BLOCK_ROWS) else {
-                return Err(KernelError::WeightsLength);
-            };
-            let mut row_blocks = self.weights.chunks_exact(block_len);
-            for rows in row_blocks.by_ref() {
-                avx2.accumulate_rows(rows, input, &[0; BLOCK_ROWS]).into_iter().for_each(&mut emit);
-            }
-            for row in row_blocks.remainder().chunks_exact(self.in_features) {
-                emit(dot_i8_prefix(row, input));
-            }
+            self.for_each_sum_avx2(avx2, input, false, emit);
             return Ok(());
         }
         for_each_row_dot(self.weights, input, &mut emit);
@@ -225,26 +216,34 @@ impl<'a> FullyConnected<'a> {
         }
     }
 
-    /// [`Self::forward_accumulators`] with the AVX2 kernels (x86-64; shapes checked).
+    /// Calls `emit(bias[o] + dot(w[o], input))` (or the bias-free dot when `with_bias` is false)
+    /// for `o = 0..out_features` in order with the AVX2 kernel, eight rows per call (x86-64;
+    /// callers checked the shapes). Same sums as the portable loop.
     #[cfg(target_arch = "x86_64")]
-    fn accumulators_avx2(&self, avx2: super::x86::Avx2, input: &[i8], acc: &mut [i32]) {
+    fn for_each_sum_avx2(
+        &self,
+        avx2: super::x86::Avx2,
+        input: &[i8],
+        with_bias: bool,
+        mut emit: impl FnMut(i32),
+    ) {
         use super::x86::BLOCK_ROWS;
         let Some(block_len) = self.in_features.checked_mul(BLOCK_ROWS) else {
             return;
         };
+        let no_bias = [0_i32; BLOCK_ROWS];
         let mut row_blocks = self.weights.chunks_exact(block_len);
-        let (acc_blocks, acc_tail) = acc.as_chunks_mut::<BLOCK_ROWS>();
         let (bias_blocks, bias_tail) = self.bias.as_chunks::<BLOCK_ROWS>();
-        let blocks = acc_blocks
-            .iter_mut()
-            .zip(row_blocks.by_ref())
-            .zip(bias_blocks);
-        for ((out, rows), bias) in blocks {
-            *out = avx2.accumulate_rows(rows, input, bias);
+        for (rows, bias) in row_blocks.by_ref().zip(bias_blocks) {
+            let bias = if with_bias { bias } else { &no_bias };
+            avx2.accumulate_rows(rows, input, bias)
+                .into_iter()
+                .for_each(&mut emit);
         }
         let rows = row_blocks.remainder().chunks_exact(self.in_features);
-        for ((out, row), bias) in acc_tail.iter_mut().zip(rows).zip(bias_tail) {
-            *out = bias.wrapping_add(dot_i8_prefix(row, input));
+        for (row, bias) in rows.zip(bias_tail) {
+            let bias = if with_bias { *bias } else { 0 };
+            emit(bias.wrapping_add(dot_i8_prefix(row, input)));
         }
     }
 
@@ -403,9 +402,14 @@ mod tests {
             let mut acc = vec![0_i32; case.out_features];
             layer.forward_accumulators(&case.input, &mut acc).unwrap();
             let mut dots = Vec::new();
-            layer.for_each_dot(&case.input, |dot| dots.push(dot)).unwrap();
-            let without_bias: Vec<i32> =
-                acc.iter().zip(&case.bias).map(|(a, b)| a.wrapping_sub(*b)).collect();
+            layer
+                .for_each_dot(&case.input, |dot| dots.push(dot))
+                .unwrap();
+            let without_bias: Vec<i32> = acc
+                .iter()
+                .zip(&case.bias)
+                .map(|(a, b)| a.wrapping_sub(*b))
+                .collect();
             assert_eq!(dots, without_bias);
             let mut out = vec![0_i8; case.out_features];
             layer.forward(&requant, &case.input, &mut out).unwrap();
