@@ -1,5 +1,6 @@
 //! `frmd collect`: runs a task's scripted expert and writes a demonstration dataset.
 use crate::data::collect::collect_demos;
+use crate::data::perturb::ActionNoise;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
@@ -19,6 +20,14 @@ pub struct CollectArgs {
     /// Output safetensors file.
     #[arg(long)]
     pub out: PathBuf,
+    /// Perturb the executed actions with smooth noise of this standard deviation (metres) and
+    /// record the expert's clean actions (DART), so the demonstrations contain recoveries.
+    /// 0 = unperturbed.
+    #[arg(long, default_value_t = 0.0)]
+    pub perturb_std: f64,
+    /// Correlation time of the perturbation, seconds.
+    #[arg(long, default_value_t = 0.5)]
+    pub perturb_time: f64,
 }
 
 pub fn run(args: CollectArgs) -> anyhow::Result<ExitCode> {
@@ -28,9 +37,18 @@ pub fn run(args: CollectArgs) -> anyhow::Result<ExitCode> {
             .progress_chars("=> "),
     );
     bar.set_message(format!("collect {}", args.task));
-    let (data, stats) = collect_demos(&args.task, args.episodes, args.seed, &mut |done| {
-        bar.set_position(done as u64)
-    })?;
+    let noise = ActionNoise {
+        std: args.perturb_std,
+        correlation_time: args.perturb_time,
+    };
+    noise.validate()?;
+    let (data, stats) = collect_demos(
+        &args.task,
+        args.episodes,
+        args.seed,
+        Some(noise),
+        &mut |done| bar.set_position(done as u64),
+    )?;
     bar.finish();
     data.save(&args.out)?;
     let size = std::fs::metadata(&args.out)?.len();

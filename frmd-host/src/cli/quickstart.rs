@@ -210,7 +210,14 @@ pub fn run_pipeline(args: &QuickstartArgs) -> anyhow::Result<QuickstartSummary> 
     let (teacher, student, dp) = (a.out.join("teacher"), a.out.join("student"), a.out.join("dp"));
 
     stages.begin(&format!("collect {} expert demonstrations of `{}`", a.demos, a.task));
-    collect::run(CollectArgs { task: a.task.clone(), episodes: a.demos, seed: a.seed, out: data.clone() })?;
+    collect::run(CollectArgs {
+        task: a.task.clone(),
+        episodes: a.demos,
+        seed: a.seed,
+        out: data.clone(),
+        perturb_std: 0.0,
+        perturb_time: 0.5,
+    })?;
     artifacts.push(("demonstrations".to_string(), data.clone()));
 
     stages.begin(&format!("train teacher: {} steps, {}", a.teacher_steps, a.backbone));

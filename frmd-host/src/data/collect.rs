@@ -1,5 +1,7 @@
 //! Demonstration collection: runs a task's scripted expert and gathers successful episodes.
+use super::perturb::{ActionNoise, PerturbedExpert};
 use super::Dataset;
+use crate::eval::policy::Policy;
 use crate::eval::{rollout, EVAL_SEED_OFFSET};
 use crate::tasks::make_task;
 
@@ -15,22 +17,41 @@ pub struct CollectStats {
 }
 
 /// Collects `episodes` successful expert demonstrations of `task` on seeds `seed`, `seed + 1`, ...
-/// (failed expert episodes are skipped, at most `episodes + 10 + episodes / 5` seeds are tried).
-/// Seeds must stay below the evaluation stream ([`EVAL_SEED_OFFSET`]).
+/// Failed expert episodes are skipped; at most `episodes + 10 + episodes / 5` seeds are tried,
+/// three times as many with `noise` (see [`super::perturb`]: the executed actions are perturbed,
+/// the recorded ones are the expert's). Seeds must stay below the evaluation stream
+/// ([`EVAL_SEED_OFFSET`]).
 pub fn collect_demos(
     task_name: &str,
     episodes: usize,
     seed: u64,
+    noise: Option<ActionNoise>,
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<(Dataset, CollectStats)> {
     anyhow::ensure!(episodes >= 1, "at least one episode must be collected");
-    let max_attempts = episodes + 10 + episodes / 5;
+    if let Some(noise) = &noise {
+        noise.validate()?;
+    }
+    let noise = noise.filter(|n| n.std > 0.0);
+    let base_attempts = episodes + 10 + episodes / 5;
+    let max_attempts = if noise.is_some() {
+        3 * base_attempts
+    } else {
+        base_attempts
+    };
     anyhow::ensure!(
         seed.checked_add(max_attempts as u64).is_some_and(|end| end <= EVAL_SEED_OFFSET),
         "collection seeds must stay below 2^63 (the evaluation seed stream); seed {seed} is too large"
     );
     let mut task = make_task(task_name)?;
-    let mut expert = task.expert();
+    let (mut expert, clean_action): (Box<dyn Policy>, _) = match noise {
+        Some(noise) => {
+            let (wrapped, clean) =
+                PerturbedExpert::new(task.expert(), noise, task.dt(), task.action_dim());
+            (Box::new(wrapped), Some(clean))
+        }
+        None => (task.expert(), None),
+    };
     let mut data = Dataset {
         obs: Vec::new(),
         action: Vec::new(),
@@ -59,9 +80,12 @@ pub fn collect_demos(
             episode_seed,
             1,
             1,
-            &mut |o, a| {
+            &mut |o, executed| {
                 obs.extend_from_slice(o);
-                action.extend_from_slice(a);
+                match &clean_action {
+                    Some(clean) => action.extend_from_slice(&clean.borrow()),
+                    None => action.extend_from_slice(executed),
+                }
             },
         )?;
         step_time += run.step_time;
@@ -81,8 +105,15 @@ pub fn collect_demos(
     } else {
         0.0
     };
+    let perturbation = match noise {
+        Some(n) => format!(
+            ", executed actions perturbed (Ornstein-Uhlenbeck, std {} m, correlation {} s)",
+            n.std, n.correlation_time
+        ),
+        None => String::new(),
+    };
     data.source = format!(
-        "frmd collect: scripted expert, seeds {seed}..{} ({} failed episodes skipped)",
+        "frmd collect: scripted expert, seeds {seed}..{} ({} failed episodes skipped){perturbation}",
         seed + stats.attempted as u64,
         stats.failed
     );

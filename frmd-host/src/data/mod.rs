@@ -2,6 +2,7 @@
 //! windows and [-1, 1] normalization.
 pub mod collect;
 pub mod dataset;
+pub mod perturb;
 pub mod windows;
 
 #[cfg(test)]

@@ -57,7 +57,7 @@ fn error_of(bytes: &[u8]) -> String {
 
 #[test]
 fn collected_dataset_round_trips_through_a_file() {
-    let (data, stats) = collect_demos("avoid", 3, 17, &mut |_| {}).unwrap();
+    let (data, stats) = collect_demos("avoid", 3, 17, None, &mut |_| {}).unwrap();
     assert_eq!(stats.failed, 0);
     assert_eq!(data.num_episodes(), 3);
     assert_eq!(data.obs_dim, 9);
@@ -244,7 +244,7 @@ fn windows_follow_the_padding_and_rate_conventions() {
 
 #[test]
 fn windows_of_collected_demos_are_normalized() {
-    let (data, _) = collect_demos("push", 2, 0, &mut |_| {}).unwrap();
+    let (data, _) = collect_demos("push", 2, 0, None, &mut |_| {}).unwrap();
     let (set, norm) = data.windows(2, 12).unwrap();
     assert_eq!(set.len(), data.len());
     assert_eq!(set.obs.len(), set.len() * 2 * data.obs_dim);
@@ -274,4 +274,59 @@ fn normalizer_round_trips_and_maps_constants_to_zero() {
         assert!((a - b).abs() < 1e-6);
     }
     assert_eq!(norm.scale(), vec![0.4, 0.0]);
+}
+
+#[test]
+fn perturbed_demonstrations_record_the_experts_clean_actions() {
+    use super::perturb::ActionNoise;
+    use crate::eval::policy::PolicyInput;
+    use crate::tasks::make_task;
+    let noise = ActionNoise {
+        std: 0.02,
+        correlation_time: 0.5,
+    };
+    for task in ["avoid", "push", "insert"] {
+        let (plain, _) = collect_demos(task, 3, 5, None, &mut |_| {}).unwrap();
+        let (noisy, stats) = collect_demos(task, 3, 5, Some(noise), &mut |_| {}).unwrap();
+        let (again, _) = collect_demos(task, 3, 5, Some(noise), &mut |_| {}).unwrap();
+        assert_eq!(
+            noisy, again,
+            "{task}: perturbed collection is deterministic"
+        );
+        assert_ne!(
+            noisy.obs, plain.obs,
+            "{task}: the noise moved the end effector"
+        );
+        assert!(noisy.source.contains("perturbed"), "{}", noisy.source);
+        // Replaying the recorded observations through a fresh expert gives the recorded
+        // actions: the labels are the expert's answers to the perturbed states.
+        let mut expert = make_task(task).unwrap().expert();
+        assert_eq!(stats.failed, 0, "{task}");
+        for (episode, range) in noisy.episode_ranges().into_iter().enumerate() {
+            expert.reset(5 + episode as u64);
+            for t in range {
+                let obs = noisy.obs[t * noisy.obs_dim..][..noisy.obs_dim].to_vec();
+                let input = PolicyInput {
+                    obs_history: &[obs],
+                    prev_action: &[0.0, 0.0],
+                    prev_rate: &[0.0, 0.0],
+                };
+                let action = expert.act(&input).unwrap();
+                assert_eq!(action[0], noisy.action[t * 2..][..2], "{task} step {t}");
+            }
+        }
+    }
+    let zero = ActionNoise { std: 0.0, ..noise };
+    assert_eq!(
+        collect_demos("insert", 2, 5, Some(zero), &mut |_| {})
+            .unwrap()
+            .0,
+        collect_demos("insert", 2, 5, None, &mut |_| {}).unwrap().0
+    );
+    let bad = ActionNoise {
+        std: f64::NAN,
+        ..noise
+    };
+    let err = collect_demos("reach", 1, 0, Some(bad), &mut |_| {}).unwrap_err();
+    assert!(format!("{err:#}").contains("std"), "{err:#}");
 }

@@ -93,8 +93,8 @@ fn evaluation_seeds_are_disjoint_from_collection_seeds() {
         assert!(eval_seed(12345, index) >= EVAL_SEED_OFFSET);
     }
     // Collection refuses seeds that would reach into the evaluation stream.
-    assert!(collect_demos("reach", 1, EVAL_SEED_OFFSET - 3, &mut |_| {}).is_err());
-    assert!(collect_demos("reach", 1, 0, &mut |_| {}).is_ok());
+    assert!(collect_demos("reach", 1, EVAL_SEED_OFFSET - 3, None, &mut |_| {}).is_err());
+    assert!(collect_demos("reach", 1, 0, None, &mut |_| {}).is_ok());
 }
 
 #[test]

@@ -14,11 +14,15 @@
 //! Success: the tip is within 2 cm of the slot bottom.
 //! Expert: one smooth path, a circular-arc approach that ends 15 cm above the slot centre heading
 //! straight down, then a straight descent aimed 1 cm below the slot bottom, with minimum-jerk
-//! timing at 0.5 m/s on average (so the descent is the slow end of the profile).
+//! timing at 0.5 m/s on average (so the descent is the slow end of the profile). One closed-loop
+//! rule guards the descent: while the tip is above the slot entrance and more than 5 mm beside
+//! the slot centre, the expert commands no lower than 3 cm above the wall, so it realigns (and
+//! lifts a jammed peg) instead of pressing down beside the slot. On its own path the rule never
+//! fires; it matters for perturbed demonstrations (`frmd collect --perturb-std`).
 use super::geom::{Cubic, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass, OMEGA, SUBSTEP};
 use super::rng::TaskRng;
-use super::{last_obs, LayoutItem, Role, Shape, Task, CONTROL_DT};
+use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
 use crate::eval::policy::{Policy, PolicyInput};
 
 const OBS_FIELDS: &[&str] = &[
@@ -221,6 +225,49 @@ pub struct InsertExpert {
 
 /// Height above the wall top where the approach arc ends and the straight descent begins, metres.
 const PRE_INSERT_HEIGHT: f64 = 0.15;
+/// The expert descends below [`HOVER_HEIGHT`] only with the tip this close to the slot centre,
+/// metres (half the clearance).
+const ALIGN_TOLERANCE: f64 = 0.005;
+/// Lowest command above the wall top while the tip is not aligned with the slot, metres.
+const HOVER_HEIGHT: f64 = 0.03;
+
+/// The descent guard: `command` unchanged when the tip at `tip` is aligned with the slot or
+/// already inside it, else raised to [`HOVER_HEIGHT`] above the wall.
+fn guard_descent(command: V2, tip: V2, slot_x: f64, wall_y: f64) -> V2 {
+    let entering = tip.y < wall_y;
+    let aligned = (tip.x - slot_x).abs() <= ALIGN_TOLERANCE;
+    if entering || aligned {
+        command
+    } else {
+        V2::new(command.x, command.y.max(wall_y + HOVER_HEIGHT))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn descent_guard_holds_a_misaligned_tip_above_the_wall() {
+        let (slot_x, wall_y) = (0.4, -1.0);
+        let press = V2::new(slot_x, wall_y - 0.21);
+        let hover = V2::new(slot_x, wall_y + HOVER_HEIGHT);
+        // Misaligned above the wall (or resting on it): held at the hover height.
+        for tip in [V2::new(0.42, -0.9), V2::new(0.38, wall_y)] {
+            assert_eq!(guard_descent(press, tip, slot_x, wall_y), hover);
+        }
+        // Aligned, or already inside the entrance: the command passes unchanged.
+        for tip in [V2::new(0.404, -0.9), V2::new(0.409, wall_y - 0.001)] {
+            assert_eq!(guard_descent(press, tip, slot_x, wall_y), press);
+        }
+        // Commands above the hover height are never lowered or moved.
+        let high = V2::new(0.0, wall_y + 0.5);
+        assert_eq!(
+            guard_descent(high, V2::new(0.3, -0.9), slot_x, wall_y),
+            high
+        );
+    }
+}
 
 fn plan(start: V2, slot_x: f64, wall_y: f64) -> TimedPath {
     let above = V2::new(slot_x, wall_y + PRE_INSERT_HEIGHT);
@@ -245,11 +292,9 @@ impl Policy for InsertExpert {
 
     fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
         let obs = last_obs(input, OBS_FIELDS.len(), "insert")?;
-        let plan = self.plan.get_or_insert_with(|| {
-            let start = V2::new(f64::from(obs[0]), f64::from(obs[1]));
-            plan(start, f64::from(obs[4]), f64::from(obs[5]))
-        });
-        let command = plan.at(self.step as f64 * CONTROL_DT);
+        let (tip, slot_x, wall_y) = (v2_at(obs, 0), f64::from(obs[4]), f64::from(obs[5]));
+        let plan = self.plan.get_or_insert_with(|| plan(tip, slot_x, wall_y));
+        let command = guard_descent(plan.at(self.step as f64 * CONTROL_DT), tip, slot_x, wall_y);
         self.step += 1;
         Ok(vec![command.to_f32().to_vec()])
     }

@@ -13,7 +13,10 @@
 //! Expert: one smooth path, a circular-arc approach (curvature about 1 rad/m at most) that ends
 //! behind the puck heading along the push line, then straight through to where the puck sits on the target, with minimum-jerk
 //! timing at 0.4 m/s on average; contact happens at speed, without a stop. While pushing, the
-//! expert steers sideways against the puck's drift off the line.
+//! expert steers sideways against the puck's drift off the line. If the path has ended, the puck
+//! has come to rest and it is not on the target (which happens only when the pusher was
+//! disturbed, e.g. in perturbed demonstrations), the expert plans a new approach and push from
+//! where things are.
 use super::geom::{Cubic, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass};
 use super::rng::TaskRng;
@@ -217,6 +220,11 @@ struct PushPlan {
     target: V2,
 }
 
+/// After its path has ended, the expert re-plans once the puck is slower than this (m/s) ...
+const REST_SPEED: f64 = 0.02;
+/// ... and its centre is farther than this from the target, metres (inside the success radius).
+const REPLAN_DISTANCE: f64 = 0.03;
+
 /// Gap left between pusher and puck at the end of the approach curve, metres.
 const APPROACH_GAP: f64 = 0.05;
 /// Lateral steering gain while pushing (metres of pusher offset per metre of puck drift); above 1
@@ -252,6 +260,15 @@ impl Policy for PushExpert {
     fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
         let obs = last_obs(input, OBS_FIELDS.len(), "push")?;
         let (ee, puck, target) = (v2_at(obs, 0), v2_at(obs, 4), v2_at(obs, 8));
+        let puck_speed = v2_at(obs, 6).norm();
+        let finished = self
+            .plan
+            .as_ref()
+            .is_some_and(|p| self.step as f64 * CONTROL_DT > p.path.duration);
+        if finished && puck_speed < REST_SPEED && (puck - target).norm() > REPLAN_DISTANCE {
+            self.plan = None;
+            self.step = 0;
+        }
         let plan = self.plan.get_or_insert_with(|| plan(ee, puck, target));
         let command = plan.path.at(self.step as f64 * CONTROL_DT);
         // Steer against the puck's sideways drift (zero until contact): the pusher moves past

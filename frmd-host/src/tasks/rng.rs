@@ -36,6 +36,13 @@ impl TaskRng {
         low + (high - low) * self.unit()
     }
 
+    /// A standard normal sample (Box-Muller; one of the pair is discarded to keep no state).
+    pub fn gaussian(&mut self) -> f64 {
+        // 1 - unit() lies in (0, 1], so the logarithm is finite.
+        let radius = (-2.0 * (1.0 - self.unit()).ln()).sqrt();
+        radius * (std::f64::consts::TAU * self.unit()).cos()
+    }
+
     /// A fair coin as +1.0 or -1.0.
     pub fn sign(&mut self) -> f64 {
         if self.next_u64() >> 63 == 0 {
@@ -70,5 +77,17 @@ mod tests {
         let mut d = TaskRng::new(1, b"u");
         let mean = (0..10_000).map(|_| d.unit()).sum::<f64>() / 10_000.0;
         assert!((mean - 0.5).abs() < 0.02, "mean {mean}");
+        let samples: Vec<f64> = (0..20_000).map(|_| d.gaussian()).collect();
+        let mean = samples.iter().sum::<f64>() / samples.len() as f64;
+        let var = samples.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / samples.len() as f64;
+        let tail = samples.iter().filter(|x| x.abs() > 1.96).count() as f64 / 20_000.0;
+        assert!(
+            mean.abs() < 0.03 && (var - 1.0).abs() < 0.04,
+            "mean {mean} var {var}"
+        );
+        assert!(
+            (tail - 0.05).abs() < 0.01,
+            "two-sided 5 % tail holds {tail}"
+        );
     }
 }

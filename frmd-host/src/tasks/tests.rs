@@ -217,7 +217,8 @@ fn demonstrations_start_at_the_end_effector_position() {
     // The first commanded action equals the initial end-effector position, so the window
     // padding a_{-1} = a_0 agrees with the evaluator's prev_action at episode start.
     for &name in TASK_NAMES {
-        let (data, _) = crate::data::collect::collect_demos(name, 3, 40, &mut |_| {}).unwrap();
+        let (data, _) =
+            crate::data::collect::collect_demos(name, 3, 40, None, &mut |_| {}).unwrap();
         for range in data.episode_ranges() {
             let obs = &data.obs[range.start * data.obs_dim..][..2];
             let action = &data.action[range.start * data.action_dim..][..2];
@@ -265,5 +266,72 @@ fn step_cost_is_well_under_50_us() {
             times.len()
         );
         assert!(median < 25.0, "{name}: median step {median} us");
+    }
+}
+
+/// Adds a fixed offset to a policy's commands for the first `steps` control steps.
+struct Shifted {
+    inner: Box<dyn Policy>,
+    shift: [f32; 2],
+    steps: usize,
+    step: usize,
+}
+
+impl Policy for Shifted {
+    fn name(&self) -> String {
+        "shifted".into()
+    }
+
+    fn reset(&mut self, seed: u64) {
+        self.inner.reset(seed);
+        self.step = 0;
+    }
+
+    fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
+        let mut chunk = self.inner.act(input)?;
+        if self.step < self.steps {
+            for action in &mut chunk {
+                action[0] += self.shift[0];
+                action[1] += self.shift[1];
+            }
+        }
+        self.step += 1;
+        Ok(chunk)
+    }
+}
+
+#[test]
+fn insert_expert_realigns_instead_of_jamming() {
+    // A 3 cm sideways disturbance through the whole approach and descent: pressing down there
+    // jams the peg for good (see above). The expert's descent guard holds it above the wall
+    // instead, so once the disturbance ends the peg still goes in.
+    let mut task = make_task("insert").unwrap();
+    for seed in [3, 11, 27] {
+        let mut shifted = Shifted {
+            inner: task.expert(),
+            shift: [0.03, 0.0],
+            steps: 90,
+            step: 0,
+        };
+        let run = rollout(task.as_mut(), &mut shifted, seed, 1, 1, &mut |_, _| {}).unwrap();
+        assert!(run.success, "seed {seed}: tip at {:?}", task.ee_position());
+        assert!(run.steps > 90, "seed {seed}: inserted while disturbed");
+    }
+}
+
+#[test]
+fn push_expert_pushes_again_when_the_puck_stops_short() {
+    // Pushing 6 cm off the planned line for the first half of the episode leaves the puck off
+    // the target; the expert re-plans from where the puck came to rest.
+    let mut task = make_task("push").unwrap();
+    for seed in [1, 5, 9] {
+        let mut shifted = Shifted {
+            inner: task.expert(),
+            shift: [0.06, -0.06],
+            steps: 60,
+            step: 0,
+        };
+        let run = rollout(task.as_mut(), &mut shifted, seed, 1, 1, &mut |_, _| {}).unwrap();
+        assert!(run.success, "seed {seed}: {:?}", task.observe());
     }
 }
