@@ -6,6 +6,13 @@
 //! callers cast to `f32` where a network needs it. No function panics: invalid inputs give a
 //! [`SigmaError`].
 
+/// Highest re-noising level of few-step consistency sampling, as a multiple of `sigma_data`
+/// (see [`SigmaConfig::consistency_sampling_sigma`]).
+pub const RENOISE_HIGH: f64 = 0.6;
+/// Lowest (last) re-noising level of few-step consistency sampling, as a multiple of
+/// `sigma_data`.
+pub const RENOISE_LOW: f64 = 0.04;
+
 /// Why a noise-level computation was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SigmaError {
@@ -94,6 +101,37 @@ impl SigmaConfig {
         let lo = libm::pow(self.sigma_min, inv_rho);
         let frac = i as f64 / (n - 1) as f64;
         Ok(libm::pow(hi + frac * (lo - hi), self.rho))
+    }
+
+    /// Noise level of step `i` of `steps`-step consistency sampling (`i < steps`). Step 0
+    /// starts from `sigma_max`. Each later step re-noises the previous output to a level between
+    /// [`RENOISE_HIGH`] and [`RENOISE_LOW`] times `sigma_data`, spaced geometrically and ending
+    /// at the low one (a single later step uses the low one), clamped to `sigma_min`.
+    ///
+    /// Low re-noising turns the later steps into refinements of the one-step sample rather than
+    /// new draws. Measured (200 episodes, perturbed demonstrations, `mlp-paper` students), versus
+    /// the Karras split of `sigma_max..sigma_min` used before: avoid 2 steps 74.5 -> 87.0 %,
+    /// 3 steps 84.5 -> 89.0 %; insert 2 steps 54.5 -> 66.5 %, 3 steps 58.5 -> 66.5 % (one step:
+    /// 70.0 and 56.0 %). With MLP 256x3 students it helped on avoid (3 steps 60.5 -> 78.0 %) and
+    /// push (19.0 -> 23.0 %) but not for one insert student (47.5 -> 24.0 %).
+    pub fn consistency_sampling_sigma(&self, i: usize, steps: usize) -> Result<f64, SigmaError> {
+        self.validate()?;
+        if i >= steps {
+            return Err(SigmaError::IndexOutOfRange);
+        }
+        if i == 0 {
+            return Ok(self.sigma_max);
+        }
+        let high = RENOISE_HIGH * self.sigma_data;
+        let low = RENOISE_LOW * self.sigma_data;
+        let later = steps - 1;
+        let level = if later == 1 {
+            low
+        } else {
+            let frac = (i - 1) as f64 / (later - 1) as f64;
+            high * libm::pow(low / high, frac)
+        };
+        Ok(level.clamp(self.sigma_min, self.sigma_max))
     }
 
     /// Input scaling `c_in = 1 / sqrt(sigma^2 + sigma_data^2)`.
@@ -208,6 +246,35 @@ mod tests {
         assert_eq!(cfg.karras_sigma(n, n), Err(SigmaError::IndexOutOfRange));
         assert_eq!(cfg.karras_sigma(0, 0), Err(SigmaError::IndexOutOfRange));
         assert_eq!(cfg.karras_sigma(0, 1), Ok(80.0));
+    }
+
+    #[test]
+    fn consistency_sampling_levels() {
+        let cfg = SigmaConfig::default();
+        let levels = |steps: usize| {
+            let mut out = [0.0f64; 4];
+            for (i, level) in out.iter_mut().enumerate().take(steps) {
+                *level = cfg.consistency_sampling_sigma(i, steps).unwrap();
+            }
+            out
+        };
+        assert_eq!(levels(1), [80.0, 0.0, 0.0, 0.0]);
+        assert_eq!(levels(2), [80.0, 0.02, 0.0, 0.0]);
+        let three = levels(3);
+        assert_eq!(three[..2], [80.0, 0.3]);
+        assert!((three[2] - 0.02).abs() < 1e-15);
+        let four = levels(4);
+        assert!((four[2] - libm::sqrt(0.3 * 0.02)).abs() < 1e-12, "{four:?}");
+        assert_eq!(
+            cfg.consistency_sampling_sigma(2, 2),
+            Err(SigmaError::IndexOutOfRange)
+        );
+        // Never below sigma_min, whatever sigma_data is.
+        let tiny = SigmaConfig {
+            sigma_data: 0.01,
+            ..cfg
+        };
+        assert_eq!(tiny.consistency_sampling_sigma(1, 2), Ok(tiny.sigma_min));
     }
 
     #[test]

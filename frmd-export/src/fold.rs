@@ -5,8 +5,8 @@
 //!
 //! The student is the piecewise consistency function of frmd-host (`diffusion/precond.rs`):
 //! `f(x, sigma) = G(E(c_in x, o, c_noise))` for every sampling level above `sigma_min`, so every
-//! step has `c_skip = 0`, `c_out = 1`. Sampling levels are `karras_sigma(i, steps + 1)` for
-//! `i < steps`, re-noised with `sqrt(sigma_i^2 - sigma_min^2)` (frmd-host
+//! step has `c_skip = 0`, `c_out = 1`. Sampling levels are `consistency_sampling_sigma(i, steps)`
+//! of frmd-core's `sigma` module, re-noised with `sqrt(sigma_i^2 - sigma_min^2)` (frmd-host
 //! `samplers::sample_consistency`).
 //!
 //! Input gains: the model input is quantized with one int8 scale for the whole vector, and the
@@ -96,7 +96,7 @@ pub fn step_constants(sigma: &SigmaConfig, steps: usize) -> anyhow::Result<Vec<S
     let err = |what: &'static str| move |e| anyhow::anyhow!("{what}: {e:?}");
     (0..steps)
         .map(|i| {
-            let level = sigma.karras_sigma(i, steps + 1).map_err(err("sampling level"))?;
+            let level = sigma.consistency_sampling_sigma(i, steps).map_err(err("sampling level"))?;
             let renoise = if i == 0 { 0.0 } else { (level * level - sigma.sigma_min * sigma.sigma_min).max(0.0).sqrt() };
             Ok(StepConstants {
                 sigma: level as f32,
@@ -204,7 +204,7 @@ impl FoldedMlp {
         let mut embedding = vec![0.0f64; config.embed_dim];
         let mut first_layer_biases = Vec::new();
         for i in 0..steps.len() {
-            let level = sigma.karras_sigma(i, steps.len() + 1).map_err(|e| anyhow::anyhow!("sampling level: {e:?}"))?;
+            let level = sigma.consistency_sampling_sigma(i, steps.len()).map_err(|e| anyhow::anyhow!("sampling level: {e:?}"))?;
             let c_noise = sigma.c_noise(level).map_err(|e| anyhow::anyhow!("c_noise: {e:?}"))?;
             noise_embedding(c_noise, &mut embedding).map_err(|e| anyhow::anyhow!("noise embedding: {e:?}"))?;
             let bias: Vec<f32> = (0..first.out_features)

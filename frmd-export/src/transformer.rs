@@ -163,7 +163,7 @@ impl FoldedTransformer {
         let mut embedding = vec![0.0f64; config.embed_dim];
         let mut noise_tokens = Vec::with_capacity(steps.len());
         for i in 0..steps.len() {
-            let level = sigma.karras_sigma(i, steps.len() + 1).map_err(|e| anyhow::anyhow!("sampling level: {e:?}"))?;
+            let level = sigma.consistency_sampling_sigma(i, steps.len()).map_err(|e| anyhow::anyhow!("sampling level: {e:?}"))?;
             let c_noise = sigma.c_noise(level).map_err(|e| anyhow::anyhow!("c_noise: {e:?}"))?;
             noise_embedding(c_noise, &mut embedding).map_err(|e| anyhow::anyhow!("noise embedding: {e:?}"))?;
             let embedding32: Vec<f32> = embedding.iter().map(|&e| e as f32).collect();

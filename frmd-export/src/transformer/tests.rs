@@ -25,7 +25,9 @@ fn lite_config() -> ModelConfig {
 }
 
 /// Writes `frmd.json` + `model.safetensors` with random weights of the right names and shapes
-/// into a fresh temporary directory.
+/// into a fresh temporary directory. The output head is scaled down so that chunks span about
+/// the [-1, 1] range of normalized data, as a trained student's do (few-step sampling feeds a
+/// step's output back in as the next step's input).
 fn write_checkpoint(name: &str, config: &ModelConfig, seed: u64) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("frmd-tfexport-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -49,6 +51,8 @@ fn write_checkpoint(name: &str, config: &ModelConfig, seed: u64) -> PathBuf {
                         || spec.name.ends_with("final_norm.weight")
                     {
                         1.0 + 0.1 * g
+                    } else if spec.name == "transformer.head.weight" {
+                        0.25 * g / fan_in.sqrt()
                     } else if spec.shape.len() == 2 && !spec.name.ends_with("pos_embedding") {
                         g / fan_in.sqrt()
                     } else {

@@ -127,12 +127,16 @@ pub fn sample_teacher(net: &Network, sig: &SigmaConfig, cond: &Condition, x: Ten
     Ok(x)
 }
 
-/// Noise levels of `steps`-step consistency sampling: sigma_max, then interior Karras levels.
+/// Noise levels of `steps`-step consistency sampling: sigma_max, then the low re-noising levels
+/// of [`SigmaConfig::consistency_sampling_sigma`].
 pub fn consistency_levels(sig: &SigmaConfig, steps: usize) -> anyhow::Result<Vec<f64>> {
     if steps == 0 {
         bail!("consistency sampling needs at least one step");
     }
-    (0..steps).map(|i| sig.karras_sigma(i, steps + 1)).collect::<Result<Vec<_>, _>>().map_err(sigma_err("consistency levels"))
+    (0..steps)
+        .map(|i| sig.consistency_sampling_sigma(i, steps))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(sigma_err("consistency levels"))
 }
 
 /// Consistency sampling: x0 = f(sigma_max z); for each further level tau,
