@@ -243,32 +243,6 @@ fn guard_descent(command: V2, tip: V2, slot_x: f64, wall_y: f64) -> V2 {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn descent_guard_holds_a_misaligned_tip_above_the_wall() {
-        let (slot_x, wall_y) = (0.4, -1.0);
-        let press = V2::new(slot_x, wall_y - 0.21);
-        let hover = V2::new(slot_x, wall_y + HOVER_HEIGHT);
-        // Misaligned above the wall (or resting on it): held at the hover height.
-        for tip in [V2::new(0.42, -0.9), V2::new(0.38, wall_y)] {
-            assert_eq!(guard_descent(press, tip, slot_x, wall_y), hover);
-        }
-        // Aligned, or already inside the entrance: the command passes unchanged.
-        for tip in [V2::new(0.404, -0.9), V2::new(0.409, wall_y - 0.001)] {
-            assert_eq!(guard_descent(press, tip, slot_x, wall_y), press);
-        }
-        // Commands above the hover height are never lowered or moved.
-        let high = V2::new(0.0, wall_y + 0.5);
-        assert_eq!(
-            guard_descent(high, V2::new(0.3, -0.9), slot_x, wall_y),
-            high
-        );
-    }
-}
-
 fn plan(start: V2, slot_x: f64, wall_y: f64) -> TimedPath {
     let above = V2::new(slot_x, wall_y + PRE_INSERT_HEIGHT);
     let down = V2::new(0.0, -1.0);
@@ -297,5 +271,31 @@ impl Policy for InsertExpert {
         let command = guard_descent(plan.at(self.step as f64 * CONTROL_DT), tip, slot_x, wall_y);
         self.step += 1;
         Ok(vec![command.to_f32().to_vec()])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn descent_guard_holds_a_misaligned_tip_above_the_wall() {
+        let (slot_x, wall_y) = (0.4, -1.0);
+        let press = V2::new(slot_x, wall_y - 0.21);
+        let hover = V2::new(slot_x, wall_y + HOVER_HEIGHT);
+        // Misaligned above the wall (or resting on it): held at the hover height.
+        for tip in [V2::new(0.42, -0.9), V2::new(0.38, wall_y)] {
+            assert_eq!(guard_descent(press, tip, slot_x, wall_y), hover);
+        }
+        // Aligned, or already inside the entrance: the command passes unchanged.
+        for tip in [V2::new(0.404, -0.9), V2::new(0.409, wall_y - 0.001)] {
+            assert_eq!(guard_descent(press, tip, slot_x, wall_y), press);
+        }
+        // Commands above the hover height are never lowered or moved.
+        let high = V2::new(0.0, wall_y + 0.5);
+        assert_eq!(
+            guard_descent(high, V2::new(0.3, -0.9), slot_x, wall_y),
+            high
+        );
     }
 }
