@@ -1,19 +1,14 @@
 //! End to end: collect a small `reach` dataset, train a tiny teacher, distill a tiny student
 //! (through the `frmd train` code paths, which also write calibration.safetensors), export it
 //! (`frmd export`), load the blob with frmd-core and run the bit-accuracy harness.
-use frmd_host::cli::export::{ExportArgs, BAKED_BLOB_FILE};
+use frmd_host::cli::export::BAKED_BLOB_FILE;
 
 mod support;
 use support::{equiv_within_bounds, row, train_tiny, Tiny, TinyRun};
 
 #[test]
 fn tiny_student_exports_and_meets_the_harness_bounds() {
-    let TinyRun {
-        dir,
-        teacher,
-        student,
-        baked,
-    } = train_tiny(
+    let run = train_tiny(
         "frmd-export-e2e",
         &Tiny {
             backbone: "mlp:32,32:silu",
@@ -26,25 +21,19 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
             student_steps: 150,
         },
     );
+    let TinyRun {
+        dir,
+        teacher,
+        student,
+        baked,
+    } = &run;
 
     // The exporter refuses the teacher, naming the reason.
     let err =
         frmd_export::export::export_checkpoint(&teacher, Default::default(), None).unwrap_err();
     assert!(format!("{err:#}").contains("Teacher"), "{err:#}");
 
-    frmd_host::cli::export::run(ExportArgs {
-        ckpt: student.clone(),
-        out: Some(baked.clone()),
-        blob: Some(dir.join("student.blob")),
-        steps: 1,
-        calibration: "minmax".into(),
-        data: None,
-        no_balance_inputs: false,
-        int8_input: false,
-        input_headroom: frmd_export::export::DEFAULT_INPUT_HEADROOM,
-        save_calibration: false,
-    })
-    .unwrap();
+    frmd_host::cli::export::run(run.export_args(&student)).unwrap();
     assert_eq!(
         std::fs::read(dir.join("student.blob")).unwrap(),
         std::fs::read(baked.join(BAKED_BLOB_FILE)).unwrap()

@@ -2,20 +2,14 @@
 //! transformer-lite teacher and student through the `frmd train` code paths, export the student
 //! with `frmd export` (the backbone picks the transformer exporter: `FRMT` blob plus generated
 //! loader module), load the blob with frmd-core and run the bit-accuracy harness.
-use frmd_host::cli::export::{ExportArgs, BAKED_BLOB_FILE};
-use std::path::Path;
+use frmd_host::cli::export::BAKED_BLOB_FILE;
 
 mod support;
 use support::{equiv_within_bounds, row, train_tiny, Tiny, TinyRun};
 
 #[test]
 fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
-    let TinyRun {
-        dir,
-        teacher,
-        student,
-        baked,
-    } = train_tiny(
+    let run = train_tiny(
         "frmd-transformer-e2e",
         &Tiny {
             backbone: "transformer-lite",
@@ -28,24 +22,18 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
             student_steps: 20,
         },
     );
+    let TinyRun {
+        dir,
+        teacher,
+        student,
+        baked,
+    } = &run;
 
-    let args = |ckpt: &Path| ExportArgs {
-        ckpt: ckpt.to_path_buf(),
-        out: Some(baked.clone()),
-        blob: Some(dir.join("student.blob")),
-        steps: 1,
-        calibration: "minmax".into(),
-        data: None,
-        no_balance_inputs: false,
-        int8_input: false,
-        input_headroom: frmd_export::export::DEFAULT_INPUT_HEADROOM,
-        save_calibration: false,
-    };
     // The exporter refuses the teacher, naming the reason.
-    let err = frmd_host::cli::export::run(args(&teacher)).unwrap_err();
+    let err = frmd_host::cli::export::run(run.export_args(&teacher)).unwrap_err();
     assert!(format!("{err:#}").contains("Teacher"), "{err:#}");
 
-    frmd_host::cli::export::run(args(&student)).unwrap();
+    frmd_host::cli::export::run(run.export_args(&student)).unwrap();
     let blob = std::fs::read(baked.join(BAKED_BLOB_FILE)).unwrap();
     assert_eq!(std::fs::read(dir.join("student.blob")).unwrap(), blob);
     assert_eq!(&blob[..4], b"FRMT");

@@ -1,5 +1,6 @@
 //! Shared setup of the end-to-end tests: a small `reach` dataset and a briefly trained teacher and
 //! student, both through the `frmd train` code paths (which also write calibration.safetensors).
+use frmd_host::cli::export::ExportArgs;
 use frmd_host::cli::train::{run as train, CommonArgs, StudentArgs, TeacherArgs, TrainCommand};
 use frmd_host::data::collect::collect_demos;
 use frmd_host::equiv::{run as equiv, EquivConfig, EquivReport};
@@ -55,6 +56,25 @@ fn common(tiny: &Tiny, data: &Path, out: PathBuf, steps: usize) -> CommonArgs {
 
 /// Collects 12 `reach` demonstrations and trains the teacher and the student of `tiny` in
 /// `<temp>/<name>-<pid>`.
+impl TinyRun {
+    /// `frmd export` arguments writing `ckpt` to `baked` and to `dir/student.blob` (one step,
+    /// min-max calibration, the default two-plane input).
+    pub fn export_args(&self, ckpt: &Path) -> ExportArgs {
+        ExportArgs {
+            ckpt: ckpt.to_path_buf(),
+            out: Some(self.baked.clone()),
+            blob: Some(self.dir.join("student.blob")),
+            steps: 1,
+            calibration: "minmax".into(),
+            data: None,
+            no_balance_inputs: false,
+            int8_input: false,
+            input_headroom: frmd_export::export::DEFAULT_INPUT_HEADROOM,
+            save_calibration: false,
+        }
+    }
+}
+
 pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
     std::env::set_var("RAYON_NUM_THREADS", "1");
     let dir = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
