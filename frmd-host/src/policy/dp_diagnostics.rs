@@ -37,8 +37,7 @@ fn roughness(chunk: &[f32], k: usize) -> f64 {
 #[test]
 #[ignore]
 fn dp_denoising_on_training_windows() {
-    let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else { return };
-    let ds = crate::data::Dataset::load(Path::new(&data)).unwrap();
+    let Some((ckpt, ds)) = diagnostic_inputs() else { return };
     for steps in [10usize, 100] {
         if FloatPolicy::load(Path::new(&ckpt), None, None).unwrap().config().prodmp().is_some() {
             break;
@@ -138,8 +137,7 @@ fn dp_denoising_on_training_windows() {
 #[test]
 #[ignore]
 fn closed_vs_demo_trace() {
-    let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else { return };
-    let ds = crate::data::Dataset::load(Path::new(&data)).unwrap();
+    let Some((ckpt, ds)) = diagnostic_inputs() else { return };
     let mut policy = FloatPolicy::load(Path::new(&ckpt), None, None).unwrap();
     let cfg = policy.net.net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
@@ -209,8 +207,7 @@ fn reach_endings() {
 #[test]
 #[ignore]
 fn ddim_chain_on_first_windows() {
-    let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else { return };
-    let ds = crate::data::Dataset::load(Path::new(&data)).unwrap();
+    let Some((ckpt, ds)) = diagnostic_inputs() else { return };
     let policy = FloatPolicy::load(Path::new(&ckpt), Some(10), None).unwrap();
     let cfg = policy.net.net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
@@ -248,8 +245,7 @@ fn ddim_chain_on_first_windows() {
 #[test]
 #[ignore]
 fn start_travel() {
-    let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else { return };
-    let ds = crate::data::Dataset::load(Path::new(&data)).unwrap();
+    let Some((ckpt, ds)) = diagnostic_inputs() else { return };
     let mut policy = FloatPolicy::load(Path::new(&ckpt), None, None).unwrap();
     let cfg = policy.net.net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
@@ -326,8 +322,7 @@ fn regression_start_travel() {
 #[test]
 #[ignore]
 fn cond_vs_input() {
-    let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else { return };
-    let ds = crate::data::Dataset::load(Path::new(&data)).unwrap();
+    let Some((ckpt, ds)) = diagnostic_inputs() else { return };
     let policy = FloatPolicy::load(Path::new(&ckpt), Some(10), None).unwrap();
     let cfg = policy.net.net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();

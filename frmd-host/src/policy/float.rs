@@ -260,6 +260,17 @@ mod dp_checkpoint_tests {
     }
 }
 
+/// The checkpoint directory and demonstrations named by FRMD_CKPT and FRMD_DATA, for the manual
+/// diagnostics below; `None` (the diagnostic does nothing) when either variable is unset.
+#[cfg(test)]
+fn diagnostic_inputs() -> Option<(String, crate::data::Dataset)> {
+    let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else {
+        return None;
+    };
+    let dataset = crate::data::Dataset::load(Path::new(&data)).unwrap();
+    Some((ckpt, dataset))
+}
+
 #[cfg(test)]
 #[path = "float_diagnostics.rs"]
 mod diagnostics;

@@ -105,8 +105,7 @@ mod first_window {
     #[test]
     #[ignore]
     fn first_window_samples() {
-        let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else { return };
-        let ds = crate::data::Dataset::load(Path::new(&data)).unwrap();
+        let Some((ckpt, ds)) = diagnostic_inputs() else { return };
         for (steps, solver) in [(10, Solver::Heun), (10, Solver::DpmPp2m), (40, Solver::Heun), (1, Solver::Euler)] {
             let mut policy = FloatPolicy::load(Path::new(&ckpt), Some(steps), Some(solver)).unwrap();
             let cfg = policy.net.net.config().clone();
