@@ -37,11 +37,11 @@ pub fn run(args: CollectArgs) -> anyhow::Result<ExitCode> {
             .progress_chars("=> "),
     );
     bar.set_message(format!("collect {}", args.task));
+    // `collect_demos` validates the noise and treats std 0 as unperturbed.
     let noise = ActionNoise {
         std: args.perturb_std,
         correlation_time: args.perturb_time,
     };
-    noise.validate()?;
     let (data, stats) = collect_demos(
         &args.task,
         args.episodes,
