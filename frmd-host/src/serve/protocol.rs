@@ -750,10 +750,9 @@ fn check_finite(what: &str, values: &[f64], row_len: usize) -> Result<()> {
         Some(i) => {
             let v = values[i];
             let kind = if v.is_nan() { "NaN".to_string() } else { format!("{v}") };
-            let place = if row_len > 0 {
-                format!("{what} {} element {}", i / row_len, i % row_len)
-            } else {
-                format!("{what} element {i}")
+            let place = match (i.checked_div(row_len), i.checked_rem(row_len)) {
+                (Some(row), Some(col)) => format!("{what} {row} element {col}"),
+                _ => format!("{what} element {i}"),
             };
             Err(ProtocolError::new(ErrorCode::NonFinite, format!("{place} is {kind}")))
         }
