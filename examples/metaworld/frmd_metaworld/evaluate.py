@@ -93,7 +93,7 @@ def rollout(env: SeededEnv, policy, seed: int, exec_steps: int, timings: dict) -
             history.append(obs)
             ee_path.append(obs[:3].copy())
             cmd_path.append(env.commanded_position())
-            failed = failed or bool(env.env._did_see_sim_exception)
+            failed = failed or env.unstable()
             if success or truncated or steps >= MAX_STEPS:
                 break
     return {"seed": seed, "success": success, "failed": failed, "length": steps,

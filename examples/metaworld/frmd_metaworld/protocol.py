@@ -479,10 +479,3 @@ class Client:
         except subprocess.TimeoutExpired:
             self.proc.kill()
             return self.proc.wait()
-
-    def __enter__(self) -> "Client":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if self.proc is not None and self.proc.poll() is None or self.sock is not None and self.sock.fileno() >= 0:
-            self.close()

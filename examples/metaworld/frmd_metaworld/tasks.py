@@ -64,6 +64,10 @@ class SeededEnv:
         obs, _, _, truncated, info = self.env.step(np.asarray(action, dtype=np.float64))
         return obs, bool(info["success"]), bool(truncated)
 
+    def unstable(self) -> bool:
+        """True once the simulator became unstable in this episode (MetaWorld then freezes it)."""
+        return bool(self.env._did_see_sim_exception)
+
     def commanded_position(self) -> np.ndarray:
         """Where the hand is being driven to: the mocap target that the actions move."""
         return np.array(self.env.data.mocap_pos[0], dtype=np.float64)
