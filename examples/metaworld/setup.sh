@@ -6,8 +6,8 @@ here="$(cd "$(dirname "$0")" && pwd)"
 python="${PYTHON:-python3}"
 "$python" - <<'PY'
 import sys
-if sys.version_info < (3, 10):
-    sys.exit(f"Python >= 3.10 is needed (metaworld 3.1.1), found {sys.version.split()[0]}")
+if not (3, 11) <= sys.version_info[:2] < (3, 14):
+    sys.exit(f"Python 3.11-3.13 is needed (numpy 2.4 needs >= 3.11, metaworld 3.1.1 < 3.14), found {sys.version.split()[0]}")
 PY
 if [ ! -x "$here/.venv/bin/python" ]; then
     "$python" -m venv "$here/.venv"
