@@ -131,7 +131,10 @@ pub struct ProtocolError {
 
 impl ProtocolError {
     fn new(code: ErrorCode, text: impl Into<String>) -> Self {
-        ProtocolError { code, text: text.into() }
+        ProtocolError {
+            code,
+            text: text.into(),
+        }
     }
 }
 
@@ -453,7 +456,11 @@ impl Request {
                 p.extend_from_slice(&(init_action.len() as u32).to_le_bytes());
                 put_values(&mut p, init_action, float_type);
             }
-            Request::Act { executed, obs_count, obs } => {
+            Request::Act {
+                executed,
+                obs_count,
+                obs,
+            } => {
                 p.extend_from_slice(&executed.to_le_bytes());
                 p.extend_from_slice(&obs_count.to_le_bytes());
                 put_values(&mut p, obs, float_type);
@@ -618,7 +625,10 @@ pub fn decode_request(msg_type: MsgType, payload: &[u8], info: &ModelInfo) -> Re
                     info.action_dim
                 )));
             }
-            Ok(Request::Reset { seed, init_action: f.values(count as usize, info.float_type) })
+            Ok(Request::Reset {
+                seed,
+                init_action: f.values(count as usize, info.float_type),
+            })
         }
         MsgType::Act => {
             expect_at_least("ACT", payload, 8)?;
@@ -638,7 +648,11 @@ pub fn decode_request(msg_type: MsgType, payload: &[u8], info: &ModelInfo) -> Re
                 )));
             }
             let values = count as usize * usize::from(info.obs_dim);
-            Ok(Request::Act { executed, obs_count: count, obs: f.values(values, info.float_type) })
+            Ok(Request::Act {
+                executed,
+                obs_count: count,
+                obs: f.values(values, info.float_type),
+            })
         }
         MsgType::Close => {
             expect_len("CLOSE", payload, 0, 0)?;
@@ -652,12 +666,15 @@ pub fn decode_request(msg_type: MsgType, payload: &[u8], info: &ModelInfo) -> Re
 }
 
 fn utf8(what: &str, bytes: &[u8]) -> Result<String> {
-    String::from_utf8(bytes.to_vec())
-        .map_err(|_| bad_value(format!("{what} is not valid UTF-8")))
+    String::from_utf8(bytes.to_vec()).map_err(|_| bad_value(format!("{what} is not valid UTF-8")))
 }
 
 /// Decodes a reply payload (client side). CHUNK needs the float type HELLO_OK announced.
-pub fn decode_reply(msg_type: MsgType, payload: &[u8], float_type: Option<FloatType>) -> Result<Reply> {
+pub fn decode_reply(
+    msg_type: MsgType,
+    payload: &[u8],
+    float_type: Option<FloatType>,
+) -> Result<Reply> {
     let mut f = Fields::new(payload);
     match msg_type {
         MsgType::HelloOk => {
@@ -675,10 +692,15 @@ pub fn decode_reply(msg_type: MsgType, payload: &[u8], float_type: Option<FloatT
                 format_args!("26 + {name_len}"),
             )?;
             if reserved != 0 {
-                return Err(bad_value(format!("HELLO_OK reserved byte is {reserved}, must be 0")));
+                return Err(bad_value(format!(
+                    "HELLO_OK reserved byte is {reserved}, must be 0"
+                )));
             }
-            let float_type = FloatType::from_u8(float_byte)
-                .ok_or_else(|| bad_value(format!("HELLO_OK float_type is {float_byte}, expected 1 or 2")))?;
+            let float_type = FloatType::from_u8(float_byte).ok_or_else(|| {
+                bad_value(format!(
+                    "HELLO_OK float_type is {float_byte}, expected 1 or 2"
+                ))
+            })?;
             let info = ModelInfo {
                 obs_dim: dims[0],
                 action_dim: dims[1],
@@ -690,7 +712,8 @@ pub fn decode_reply(msg_type: MsgType, payload: &[u8], float_type: Option<FloatT
                 dt,
                 name: utf8("HELLO_OK name", f.rest())?,
             };
-            info.validate().map_err(|e| bad_value(format!("HELLO_OK: {e}")))?;
+            info.validate()
+                .map_err(|e| bad_value(format!("HELLO_OK: {e}")))?;
             Ok(Reply::HelloOk(info))
         }
         MsgType::ResetOk => {
@@ -699,7 +722,10 @@ pub fn decode_reply(msg_type: MsgType, payload: &[u8], float_type: Option<FloatT
         }
         MsgType::Chunk => {
             let float_type = float_type.ok_or_else(|| {
-                ProtocolError::new(ErrorCode::OutOfOrder, "CHUNK before HELLO_OK: value type unknown")
+                ProtocolError::new(
+                    ErrorCode::OutOfOrder,
+                    "CHUNK before HELLO_OK: value type unknown",
+                )
             })?;
             expect_at_least("CHUNK", payload, 16)?;
             let policy_ns = f.u64();
@@ -713,10 +739,18 @@ pub fn decode_reply(msg_type: MsgType, payload: &[u8], float_type: Option<FloatT
                 format_args!("16 + {horizon} x {action_dim} x {w} = {expected}"),
             )?;
             if reserved != 0 {
-                return Err(bad_value(format!("CHUNK reserved field is {reserved}, must be 0")));
+                return Err(bad_value(format!(
+                    "CHUNK reserved field is {reserved}, must be 0"
+                )));
             }
             let actions = f.values(usize::from(horizon) * usize::from(action_dim), float_type);
-            Ok(Reply::Chunk(Chunk { policy_ns, horizon, action_dim, exec_steps, actions }))
+            Ok(Reply::Chunk(Chunk {
+                policy_ns,
+                horizon,
+                action_dim,
+                exec_steps,
+                actions,
+            }))
         }
         MsgType::CloseOk => {
             expect_len("CLOSE_OK", payload, 0, 0)?;
@@ -725,9 +759,16 @@ pub fn decode_reply(msg_type: MsgType, payload: &[u8], float_type: Option<FloatT
         MsgType::Error => {
             expect_at_least("ERROR", payload, 6)?;
             let (code, request_type, fatal, text_len) = (f.u16(), f.u8(), f.u8(), f.u16());
-            expect_len("ERROR", payload, 6 + u64::from(text_len), format_args!("6 + {text_len}"))?;
+            expect_len(
+                "ERROR",
+                payload,
+                6 + u64::from(text_len),
+                format_args!("6 + {text_len}"),
+            )?;
             if fatal > 1 {
-                return Err(bad_value(format!("ERROR fatal flag is {fatal}, expected 0 or 1")));
+                return Err(bad_value(format!(
+                    "ERROR fatal flag is {fatal}, expected 0 or 1"
+                )));
             }
             Ok(Reply::Error(ErrorReply {
                 code,
@@ -749,12 +790,19 @@ fn check_finite(what: &str, values: &[f64], row_len: usize) -> Result<()> {
         None => Ok(()),
         Some(i) => {
             let v = values[i];
-            let kind = if v.is_nan() { "NaN".to_string() } else { format!("{v}") };
+            let kind = if v.is_nan() {
+                "NaN".to_string()
+            } else {
+                format!("{v}")
+            };
             let place = match (i.checked_div(row_len), i.checked_rem(row_len)) {
                 (Some(row), Some(col)) => format!("{what} {row} element {col}"),
                 _ => format!("{what} element {i}"),
             };
-            Err(ProtocolError::new(ErrorCode::NonFinite, format!("{place} is {kind}")))
+            Err(ProtocolError::new(
+                ErrorCode::NonFinite,
+                format!("{place} is {kind}"),
+            ))
         }
     }
 }
@@ -765,7 +813,10 @@ pub enum ReadOutcome {
     /// A frame whose header passed [`Header::check`].
     Frame { msg_type: MsgType, payload: Vec<u8> },
     /// A header that failed its checks; answered at once, its payload is skipped by the next call.
-    Rejected { header: Header, error: ProtocolError },
+    Rejected {
+        header: Header,
+        error: ProtocolError,
+    },
     /// End of input at a frame boundary.
     Eof,
     /// End of input inside a header, payload or skipped payload.
@@ -796,7 +847,11 @@ fn read_full<R: Read>(reader: &mut R, buf: &mut [u8]) -> io::Result<usize> {
 impl<R: Read> FrameReader<R> {
     /// `requests`: true on the server (frames must be requests), false on a client.
     pub fn new(inner: R, requests: bool) -> Self {
-        FrameReader { inner, requests, skip: 0 }
+        FrameReader {
+            inner,
+            requests,
+            skip: 0,
+        }
     }
 
     pub fn next_frame(&mut self) -> io::Result<ReadOutcome> {
@@ -898,7 +953,12 @@ impl Session {
                 info.action_dim
             ));
         }
-        Ok(Session { info, default_init, hello: false, episode: None })
+        Ok(Session {
+            info,
+            default_init,
+            hello: false,
+            episode: None,
+        })
     }
 
     pub fn info(&self) -> &ModelInfo {
@@ -906,17 +966,34 @@ impl Session {
     }
 
     /// Answers one request frame whose header passed its checks.
-    pub fn handle(&mut self, msg_type: MsgType, payload: &[u8], policy: &mut dyn ServedPolicy) -> (Reply, Next) {
+    pub fn handle(
+        &mut self,
+        msg_type: MsgType,
+        payload: &[u8],
+        policy: &mut dyn ServedPolicy,
+    ) -> (Reply, Next) {
         match self.try_handle(msg_type, payload, policy) {
             Ok(reply) => {
-                let next = if reply == Reply::CloseOk { Next::Close } else { Next::Continue };
+                let next = if reply == Reply::CloseOk {
+                    Next::Close
+                } else {
+                    Next::Continue
+                };
                 (reply, next)
             }
-            Err(e) => (Reply::Error(ErrorReply::from_error(&e, msg_type as u8)), Next::Continue),
+            Err(e) => (
+                Reply::Error(ErrorReply::from_error(&e, msg_type as u8)),
+                Next::Continue,
+            ),
         }
     }
 
-    fn try_handle(&mut self, msg_type: MsgType, payload: &[u8], policy: &mut dyn ServedPolicy) -> Result<Reply> {
+    fn try_handle(
+        &mut self,
+        msg_type: MsgType,
+        payload: &[u8],
+        policy: &mut dyn ServedPolicy,
+    ) -> Result<Reply> {
         let out_of_order = |text: &str| Err(ProtocolError::new(ErrorCode::OutOfOrder, text));
         match msg_type {
             MsgType::Hello | MsgType::Close => {}
@@ -935,9 +1012,17 @@ impl Session {
             Request::Close => Ok(Reply::CloseOk),
             Request::Reset { seed, init_action } => {
                 check_finite("RESET init_action", &init_action, 0)?;
-                let init = if init_action.is_empty() { self.default_init.clone() } else { init_action };
+                let init = if init_action.is_empty() {
+                    self.default_init.clone()
+                } else {
+                    init_action
+                };
                 policy.reset(seed);
-                self.episode = Some(Episode { chunk: None, prev: init.clone(), prev2: init });
+                self.episode = Some(Episode {
+                    chunk: None,
+                    prev: init.clone(),
+                    prev2: init,
+                });
                 Ok(Reply::ResetOk { seed })
             }
             Request::Act { executed, obs, .. } => {
@@ -970,19 +1055,32 @@ impl Session {
                     .collect();
                 let started = Instant::now();
                 let actions = policy
-                    .act(&ActInput { obs: &obs, prev_action: &prev, prev_rate: &rate })
-                    .map_err(|e| ProtocolError::new(ErrorCode::PolicyFailed, format!("policy: {e}")))?;
+                    .act(&ActInput {
+                        obs: &obs,
+                        prev_action: &prev,
+                        prev_rate: &rate,
+                    })
+                    .map_err(|e| {
+                        ProtocolError::new(ErrorCode::PolicyFailed, format!("policy: {e}"))
+                    })?;
                 let policy_ns = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
                 let expected = usize::from(self.info.horizon) * k;
                 if actions.len() != expected {
                     return Err(ProtocolError::new(
                         ErrorCode::PolicyFailed,
-                        format!("policy returned {} values, expected horizon x action_dim = {expected}", actions.len()),
+                        format!(
+                            "policy returned {} values, expected horizon x action_dim = {expected}",
+                            actions.len()
+                        ),
                     ));
                 }
                 check_finite("policy action", &actions, k)
                     .map_err(|e| ProtocolError::new(ErrorCode::PolicyFailed, e.text))?;
-                self.episode = Some(Episode { chunk: Some(actions.clone()), prev, prev2 });
+                self.episode = Some(Episode {
+                    chunk: Some(actions.clone()),
+                    prev,
+                    prev2,
+                });
                 Ok(Reply::Chunk(Chunk {
                     policy_ns,
                     horizon: self.info.horizon,
@@ -1022,7 +1120,9 @@ pub fn serve_stream<R: Read, W: Write>(
             ReadOutcome::Truncated(error) => {
                 let reply = Reply::Error(ErrorReply::from_error(&error, 0));
                 // Best effort: the client may already be gone.
-                let _ = output.write_all(&reply.encode(float_type)).and_then(|()| output.flush());
+                let _ = output
+                    .write_all(&reply.encode(float_type))
+                    .and_then(|()| output.flush());
                 return Ok(StreamEnd::Truncated);
             }
             ReadOutcome::Rejected { header, error } => (
@@ -1038,7 +1138,6 @@ pub fn serve_stream<R: Read, W: Write>(
         }
     }
 }
-
 
 #[cfg(test)]
 mod tests {
@@ -1082,7 +1181,12 @@ mod tests {
                 return Err(text.to_string());
             }
             let mut out: Vec<f64> = (0..3)
-                .flat_map(|t| [input.prev_action[0] + t as f64, input.prev_rate[0] + input.obs[0]])
+                .flat_map(|t| {
+                    [
+                        input.prev_action[0] + t as f64,
+                        input.prev_rate[0] + input.obs[0],
+                    ]
+                })
                 .collect();
             if self.wrong_len {
                 out.pop();
@@ -1099,11 +1203,19 @@ mod tests {
     }
 
     fn act(executed: u32, obs: &[f64]) -> Request {
-        Request::Act { executed, obs_count: (obs.len() / 3) as u32, obs: obs.to_vec() }
+        Request::Act {
+            executed,
+            obs_count: (obs.len() / 3) as u32,
+            obs: obs.to_vec(),
+        }
     }
 
     /// Runs `input` through a server and decodes every reply frame (which must all be valid).
-    fn run_server(input: &[u8], session: &mut Session, policy: &mut Echo) -> (Vec<Reply>, StreamEnd) {
+    fn run_server(
+        input: &[u8],
+        session: &mut Session,
+        policy: &mut Echo,
+    ) -> (Vec<Reply>, StreamEnd) {
         let mut out = Vec::new();
         let end = serve_stream(Cursor::new(input), &mut out, session, policy).unwrap();
         (decode_all_replies(&out, session.info().float_type), end)
@@ -1143,9 +1255,14 @@ mod tests {
 
     /// Frame with an arbitrary header and payload.
     fn raw(msg_type: u8, payload: &[u8]) -> Vec<u8> {
-        let mut out = Header { payload_len: payload.len() as u32, version: VERSION, msg_type, reserved: 0 }
-            .encode()
-            .to_vec();
+        let mut out = Header {
+            payload_len: payload.len() as u32,
+            version: VERSION,
+            msg_type,
+            reserved: 0,
+        }
+        .encode()
+        .to_vec();
         out.extend_from_slice(payload);
         out
     }
@@ -1158,8 +1275,14 @@ mod tests {
             let info = toy_info(ft);
             for request in [
                 Request::Hello,
-                Request::Reset { seed: u64::MAX, init_action: vec![] },
-                Request::Reset { seed: 3, init_action: vec![0.25, -1.5] },
+                Request::Reset {
+                    seed: u64::MAX,
+                    init_action: vec![],
+                },
+                Request::Reset {
+                    seed: 3,
+                    init_action: vec![0.25, -1.5],
+                },
                 act(7, &OBS),
                 Request::Close,
             ] {
@@ -1167,7 +1290,10 @@ mod tests {
                 let header = Header::decode(bytes[..HEADER_LEN].try_into().unwrap());
                 assert_eq!(header.payload_len as usize, bytes.len() - HEADER_LEN);
                 let t = header.check(true).unwrap();
-                assert_eq!(decode_request(t, &bytes[HEADER_LEN..], &info).unwrap(), request);
+                assert_eq!(
+                    decode_request(t, &bytes[HEADER_LEN..], &info).unwrap(),
+                    request
+                );
             }
             let replies = [
                 Reply::HelloOk(info.clone()),
@@ -1180,14 +1306,27 @@ mod tests {
                     actions: vec![0.0, 0.25, 0.5, 0.75, 1.0, -1.0],
                 }),
                 Reply::CloseOk,
-                Reply::Error(ErrorReply { code: 6, request_type: 3, fatal: false, text: "x é".into() }),
-                Reply::Error(ErrorReply { code: 999, request_type: 0, fatal: true, text: String::new() }),
+                Reply::Error(ErrorReply {
+                    code: 6,
+                    request_type: 3,
+                    fatal: false,
+                    text: "x é".into(),
+                }),
+                Reply::Error(ErrorReply {
+                    code: 999,
+                    request_type: 0,
+                    fatal: true,
+                    text: String::new(),
+                }),
             ];
             for reply in replies {
                 let bytes = reply.encode(ft);
                 let header = Header::decode(bytes[..HEADER_LEN].try_into().unwrap());
                 let t = header.check(false).unwrap();
-                assert_eq!(decode_reply(t, &bytes[HEADER_LEN..], Some(ft)).unwrap(), reply);
+                assert_eq!(
+                    decode_reply(t, &bytes[HEADER_LEN..], Some(ft)).unwrap(),
+                    reply
+                );
             }
         }
     }
@@ -1196,13 +1335,27 @@ mod tests {
     fn f64_values_survive_exactly_and_f32_values_round_to_f32() {
         let v = [0.1f64, -1e-300, 1e300];
         let info = toy_info(FloatType::F64);
-        let bytes = Request::Reset { seed: 0, init_action: v[..2].to_vec() }.encode(FloatType::F64);
+        let bytes = Request::Reset {
+            seed: 0,
+            init_action: v[..2].to_vec(),
+        }
+        .encode(FloatType::F64);
         match decode_request(MsgType::Reset, &bytes[HEADER_LEN..], &info).unwrap() {
             Request::Reset { init_action, .. } => assert_eq!(init_action, v[..2]),
             other => panic!("{other:?}"),
         }
-        let bytes = Request::Reset { seed: 0, init_action: vec![0.1, 0.2] }.encode(FloatType::F32);
-        match decode_request(MsgType::Reset, &bytes[HEADER_LEN..], &toy_info(FloatType::F32)).unwrap() {
+        let bytes = Request::Reset {
+            seed: 0,
+            init_action: vec![0.1, 0.2],
+        }
+        .encode(FloatType::F32);
+        match decode_request(
+            MsgType::Reset,
+            &bytes[HEADER_LEN..],
+            &toy_info(FloatType::F32),
+        )
+        .unwrap()
+        {
             Request::Reset { init_action, .. } => {
                 assert_eq!(init_action, vec![f64::from(0.1f32), f64::from(0.2f32)])
             }
@@ -1231,7 +1384,11 @@ mod tests {
         let mut decoded = Vec::new();
         for bytes in &blocks {
             let header = Header::decode(bytes[..HEADER_LEN].try_into().unwrap());
-            assert_eq!(header.payload_len as usize, bytes.len() - HEADER_LEN, "{bytes:02x?}");
+            assert_eq!(
+                header.payload_len as usize,
+                bytes.len() - HEADER_LEN,
+                "{bytes:02x?}"
+            );
             let t = MsgType::from_u8(header.msg_type).unwrap();
             let payload = &bytes[HEADER_LEN..];
             let (reencoded, text) = if t.is_request() {
@@ -1250,14 +1407,23 @@ mod tests {
         assert_eq!(decoded[3], "Reset { seed: 7, init_action: [0.0, 0.5] }");
         assert_eq!(decoded[4], "ResetOk { seed: 7 }");
         assert_eq!(decoded[5], format!("{:?}", act(0, &OBS)));
-        assert!(decoded[6].contains("policy_ns: 15000") && decoded[6].contains("[0.0, 0.25, 0.5, 0.75, 1.0, -1.0]"));
+        assert!(
+            decoded[6].contains("policy_ns: 15000")
+                && decoded[6].contains("[0.0, 0.25, 0.5, 0.75, 1.0, -1.0]")
+        );
         assert!(decoded[7].contains("executed: 2") && decoded[7].contains("NaN"));
-        assert!(decoded[8].contains("code: 6") && decoded[8].contains("\"ACT observation 1 element 0 is NaN\""));
+        assert!(
+            decoded[8].contains("code: 6")
+                && decoded[8].contains("\"ACT observation 1 element 0 is NaN\"")
+        );
         assert_eq!(decoded[9], "Close");
         assert_eq!(decoded[10], "CloseOk");
         // The example session, replayed against the server: the ERROR text is the server's.
         let mut s = session(FloatType::F32);
-        let input: Vec<u8> = [0usize, 2, 5, 7].iter().flat_map(|&i| blocks[i].clone()).collect();
+        let input: Vec<u8> = [0usize, 2, 5, 7]
+            .iter()
+            .flat_map(|&i| blocks[i].clone())
+            .collect();
         let (replies, _) = run_server(&input, &mut s, &mut Echo::default());
         assert_eq!(replies.last().unwrap().encode(FloatType::F32), blocks[8]);
     }
@@ -1269,12 +1435,18 @@ mod tests {
         let input = requests(
             &[
                 Request::Hello,
-                Request::Reset { seed: 42, init_action: vec![] },
+                Request::Reset {
+                    seed: 42,
+                    init_action: vec![],
+                },
                 act(0, &OBS),
                 act(2, &OBS),
                 act(1, &OBS),
                 act(0, &OBS),
-                Request::Reset { seed: 43, init_action: vec![10.0, 0.0] },
+                Request::Reset {
+                    seed: 43,
+                    init_action: vec![10.0, 0.0],
+                },
                 act(0, &OBS),
                 Request::Close,
                 Request::Hello, // after CLOSE: never read
@@ -1287,11 +1459,18 @@ mod tests {
         assert_eq!(replies[0], Reply::HelloOk(toy_info(FloatType::F64)));
         assert_eq!(replies[1], Reply::ResetOk { seed: 42 });
         // First chunk: y0 = default 0, rate 0: actions (t, obs[0]).
-        assert_eq!(chunk(&replies[2]).actions, vec![0.0, 0.5, 1.0, 0.5, 2.0, 0.5]);
+        assert_eq!(
+            chunk(&replies[2]).actions,
+            vec![0.0, 0.5, 1.0, 0.5, 2.0, 0.5]
+        );
         // Executed 2 of [0, 1, 2] (first component): y0 = 1, rate (1 - 0) / dt = 80.
         let c = chunk(&replies[3]);
         assert_eq!(c.actions[0], 1.0);
-        assert!((c.actions[1] - (80.0 + 0.5)).abs() < 1e-9, "{:?}", c.actions);
+        assert!(
+            (c.actions[1] - (80.0 + 0.5)).abs() < 1e-9,
+            "{:?}",
+            c.actions
+        );
         // Executed 1 of [1, 2, 3]: y0 = 1 again, rate 0.
         assert_eq!(chunk(&replies[4]).actions[..2], [1.0, 0.5]);
         // Executed 0: the previous chunk was discarded, nothing changes.
@@ -1308,7 +1487,11 @@ mod tests {
     fn every_malformed_frame_gets_its_named_error_and_the_server_keeps_serving() {
         let ft = FloatType::F32;
         let hello = Request::Hello.encode(ft);
-        let reset = Request::Reset { seed: 1, init_action: vec![] }.encode(ft);
+        let reset = Request::Reset {
+            seed: 1,
+            init_action: vec![],
+        }
+        .encode(ft);
         let good_act = act(0, &OBS).encode(ft);
         let mut with_version = hello.clone();
         with_version[4] = 2;
@@ -1318,29 +1501,129 @@ mod tests {
         nan[4] = f64::NAN;
         let mut inf = OBS;
         inf[0] = f64::INFINITY;
-        let mut huge = Header { payload_len: MAX_PAYLOAD + 1, version: 1, msg_type: 3, reserved: 0 }.encode().to_vec();
+        let mut huge = Header {
+            payload_len: MAX_PAYLOAD + 1,
+            version: 1,
+            msg_type: 3,
+            reserved: 0,
+        }
+        .encode()
+        .to_vec();
         huge.extend(std::iter::repeat_n(0xAB, MAX_PAYLOAD as usize + 1));
         let mut act_payload = act(0, &OBS).encode(ft)[HEADER_LEN..].to_vec();
         act_payload.push(0);
         let cases: Vec<(&str, Vec<u8>, ErrorCode, &str)> = vec![
-            ("version 2", with_version, ErrorCode::UnsupportedVersion, "version 2 is not supported"),
-            ("unknown type", raw(0x05, &[1, 2, 3]), ErrorCode::UnknownType, "unknown request type 0x05"),
-            ("reply type sent to the server", raw(0x83, &[]), ErrorCode::UnknownType, "CHUNK"),
-            ("too large", huge, ErrorCode::FrameTooLarge, "exceeds the limit of 1048576"),
+            (
+                "version 2",
+                with_version,
+                ErrorCode::UnsupportedVersion,
+                "version 2 is not supported",
+            ),
+            (
+                "unknown type",
+                raw(0x05, &[1, 2, 3]),
+                ErrorCode::UnknownType,
+                "unknown request type 0x05",
+            ),
+            (
+                "reply type sent to the server",
+                raw(0x83, &[]),
+                ErrorCode::UnknownType,
+                "CHUNK",
+            ),
+            (
+                "too large",
+                huge,
+                ErrorCode::FrameTooLarge,
+                "exceeds the limit of 1048576",
+            ),
             ("reserved header", reserved, ErrorCode::BadValue, "reserved"),
-            ("short HELLO", raw(0x01, b"FRM"), ErrorCode::BadLength, "HELLO payload is 3 bytes"),
-            ("bad magic", raw(0x01, b"frmd"), ErrorCode::BadValue, "magic"),
-            ("short RESET", raw(0x02, &[0; 11]), ErrorCode::BadLength, "at least 12"),
-            ("RESET count/length", raw(0x02, &[0, 0, 0, 0, 0, 0, 0, 0, 2, 0, 0, 0]), ErrorCode::BadLength, "12 + 2 x 4 = 20"),
-            ("RESET init_count", Request::Reset { seed: 0, init_action: vec![1.0] }.encode(ft), ErrorCode::BadValue, "init_count is 1"),
-            ("RESET NaN", Request::Reset { seed: 0, init_action: vec![0.0, f64::NAN] }.encode(ft), ErrorCode::NonFinite, "init_action element 1 is NaN"),
-            ("short ACT", raw(0x03, &[0; 7]), ErrorCode::BadLength, "at least 8"),
-            ("ACT length", raw(0x03, &act_payload), ErrorCode::BadLength, "ACT payload is 33 bytes, expected 8 + 2 x 3 x 4 = 32"),
-            ("ACT obs_count", act(0, &OBS[..3]).encode(ft), ErrorCode::BadValue, "obs_count is 1"),
-            ("ACT executed without chunk", act(1, &OBS).encode(ft), ErrorCode::BadValue, "no chunk"),
-            ("ACT NaN", act(0, &nan).encode(ft), ErrorCode::NonFinite, "observation 1 element 1 is NaN"),
-            ("ACT inf", act(0, &inf).encode(ft), ErrorCode::NonFinite, "observation 0 element 0 is inf"),
-            ("CLOSE with payload", raw(0x04, &[0]), ErrorCode::BadLength, "CLOSE payload is 1 bytes"),
+            (
+                "short HELLO",
+                raw(0x01, b"FRM"),
+                ErrorCode::BadLength,
+                "HELLO payload is 3 bytes",
+            ),
+            (
+                "bad magic",
+                raw(0x01, b"frmd"),
+                ErrorCode::BadValue,
+                "magic",
+            ),
+            (
+                "short RESET",
+                raw(0x02, &[0; 11]),
+                ErrorCode::BadLength,
+                "at least 12",
+            ),
+            (
+                "RESET count/length",
+                raw(0x02, &[0, 0, 0, 0, 0, 0, 0, 0, 2, 0, 0, 0]),
+                ErrorCode::BadLength,
+                "12 + 2 x 4 = 20",
+            ),
+            (
+                "RESET init_count",
+                Request::Reset {
+                    seed: 0,
+                    init_action: vec![1.0],
+                }
+                .encode(ft),
+                ErrorCode::BadValue,
+                "init_count is 1",
+            ),
+            (
+                "RESET NaN",
+                Request::Reset {
+                    seed: 0,
+                    init_action: vec![0.0, f64::NAN],
+                }
+                .encode(ft),
+                ErrorCode::NonFinite,
+                "init_action element 1 is NaN",
+            ),
+            (
+                "short ACT",
+                raw(0x03, &[0; 7]),
+                ErrorCode::BadLength,
+                "at least 8",
+            ),
+            (
+                "ACT length",
+                raw(0x03, &act_payload),
+                ErrorCode::BadLength,
+                "ACT payload is 33 bytes, expected 8 + 2 x 3 x 4 = 32",
+            ),
+            (
+                "ACT obs_count",
+                act(0, &OBS[..3]).encode(ft),
+                ErrorCode::BadValue,
+                "obs_count is 1",
+            ),
+            (
+                "ACT executed without chunk",
+                act(1, &OBS).encode(ft),
+                ErrorCode::BadValue,
+                "no chunk",
+            ),
+            (
+                "ACT NaN",
+                act(0, &nan).encode(ft),
+                ErrorCode::NonFinite,
+                "observation 1 element 1 is NaN",
+            ),
+            (
+                "ACT inf",
+                act(0, &inf).encode(ft),
+                ErrorCode::NonFinite,
+                "observation 0 element 0 is inf",
+            ),
+            (
+                "CLOSE with payload",
+                raw(0x04, &[0]),
+                ErrorCode::BadLength,
+                "CLOSE payload is 1 bytes",
+            ),
         ];
         for (what, bad, code, text) in cases {
             let mut s = session(ft);
@@ -1348,11 +1631,21 @@ mod tests {
             let (replies, end) = run_server(&input, &mut s, &mut Echo::default());
             assert_eq!(end, StreamEnd::Eof, "{what}");
             assert_eq!(replies.len(), 4, "{what}: {replies:?}");
-            let Reply::Error(e) = &replies[2] else { panic!("{what}: expected ERROR, got {:?}", replies[2]) };
+            let Reply::Error(e) = &replies[2] else {
+                panic!("{what}: expected ERROR, got {:?}", replies[2])
+            };
             assert_eq!(e.kind(), Some(code), "{what}: {e:?}");
-            assert!(e.text.contains(text), "{what}: text {:?} lacks {text:?}", e.text);
+            assert!(
+                e.text.contains(text),
+                "{what}: text {:?} lacks {text:?}",
+                e.text
+            );
             assert!(!e.fatal, "{what}");
-            assert!(matches!(replies[3], Reply::Chunk(_)), "{what}: {:?}", replies[3]);
+            assert!(
+                matches!(replies[3], Reply::Chunk(_)),
+                "{what}: {:?}",
+                replies[3]
+            );
         }
     }
 
@@ -1362,11 +1655,17 @@ mod tests {
         let mut s = session(ft);
         let input = requests(
             &[
-                Request::Reset { seed: 1, init_action: vec![] },
+                Request::Reset {
+                    seed: 1,
+                    init_action: vec![],
+                },
                 act(0, &OBS),
                 Request::Hello,
                 act(0, &OBS),
-                Request::Reset { seed: 1, init_action: vec![] },
+                Request::Reset {
+                    seed: 1,
+                    init_action: vec![],
+                },
                 act(0, &OBS),
                 Request::Hello,
                 act(2, &OBS),
@@ -1377,13 +1676,26 @@ mod tests {
         let codes: Vec<_> = replies.iter().map(error_code).collect();
         assert_eq!(
             codes,
-            [Some(ErrorCode::OutOfOrder), Some(ErrorCode::OutOfOrder), None, Some(ErrorCode::OutOfOrder), None, None, None, None]
+            [
+                Some(ErrorCode::OutOfOrder),
+                Some(ErrorCode::OutOfOrder),
+                None,
+                Some(ErrorCode::OutOfOrder),
+                None,
+                None,
+                None,
+                None
+            ]
         );
         // Order is checked before length: a short ACT before HELLO is OUT_OF_ORDER.
         let (replies, _) = run_server(&raw(0x03, &[]), &mut session(ft), &mut Echo::default());
         assert_eq!(error_code(&replies[0]), Some(ErrorCode::OutOfOrder));
         // CLOSE is accepted before HELLO.
-        let (replies, end) = run_server(&Request::Close.encode(ft), &mut session(ft), &mut Echo::default());
+        let (replies, end) = run_server(
+            &Request::Close.encode(ft),
+            &mut session(ft),
+            &mut Echo::default(),
+        );
         assert_eq!((replies, end), (vec![Reply::CloseOk], StreamEnd::Closed));
     }
 
@@ -1393,18 +1705,32 @@ mod tests {
         let mut nan = OBS;
         nan[2] = f64::NAN;
         let run = |extra: &[Request]| {
-            let mut list = vec![Request::Hello, Request::Reset { seed: 5, init_action: vec![] }, act(0, &OBS)];
+            let mut list = vec![
+                Request::Hello,
+                Request::Reset {
+                    seed: 5,
+                    init_action: vec![],
+                },
+                act(0, &OBS),
+            ];
             list.extend_from_slice(extra);
             list.push(act(2, &OBS));
-            let (replies, _) = run_server(&requests(&list, ft), &mut session(ft), &mut Echo::default());
+            let (replies, _) =
+                run_server(&requests(&list, ft), &mut session(ft), &mut Echo::default());
             chunk(replies.last().unwrap()).actions.clone()
         };
         let clean = run(&[]);
         let after_errors = run(&[
             act(2, &nan),
             act(4, &OBS),
-            Request::Reset { seed: 6, init_action: vec![f64::NAN, 0.0] },
-            Request::Reset { seed: 6, init_action: vec![1.0] },
+            Request::Reset {
+                seed: 6,
+                init_action: vec![f64::NAN, 0.0],
+            },
+            Request::Reset {
+                seed: 6,
+                init_action: vec![1.0],
+            },
         ]);
         assert_eq!(clean, after_errors);
     }
@@ -1412,17 +1738,51 @@ mod tests {
     #[test]
     fn policy_failures_are_reported_and_the_session_goes_on() {
         let ft = FloatType::F32;
-        let input = requests(&[Request::Hello, Request::Reset { seed: 1, init_action: vec![] }, act(0, &OBS), act(0, &OBS)], ft);
+        let input = requests(
+            &[
+                Request::Hello,
+                Request::Reset {
+                    seed: 1,
+                    init_action: vec![],
+                },
+                act(0, &OBS),
+                act(0, &OBS),
+            ],
+            ft,
+        );
         for (policy, text) in [
-            (Echo { fail: Some("model exploded"), ..Echo::default() }, "policy: model exploded"),
-            (Echo { wrong_len: true, ..Echo::default() }, "returned 5 values, expected horizon x action_dim = 6"),
-            (Echo { emit_nan: true, ..Echo::default() }, "policy action 0 element 1 is NaN"),
+            (
+                Echo {
+                    fail: Some("model exploded"),
+                    ..Echo::default()
+                },
+                "policy: model exploded",
+            ),
+            (
+                Echo {
+                    wrong_len: true,
+                    ..Echo::default()
+                },
+                "returned 5 values, expected horizon x action_dim = 6",
+            ),
+            (
+                Echo {
+                    emit_nan: true,
+                    ..Echo::default()
+                },
+                "policy action 0 element 1 is NaN",
+            ),
         ] {
             let mut policy = policy;
             let (replies, _) = run_server(&input, &mut session(ft), &mut policy);
             for reply in &replies[2..] {
-                let Reply::Error(e) = reply else { panic!("{reply:?}") };
-                assert_eq!((e.kind(), e.request_type), (Some(ErrorCode::PolicyFailed), 3));
+                let Reply::Error(e) = reply else {
+                    panic!("{reply:?}")
+                };
+                assert_eq!(
+                    (e.kind(), e.request_type),
+                    (Some(ErrorCode::PolicyFailed), 3)
+                );
                 assert!(e.text.contains(text), "{e:?}");
             }
             assert_eq!(policy.calls, 2);
@@ -1439,19 +1799,43 @@ mod tests {
         let (replies, end) = run_server(&[], &mut session(ft), &mut Echo::default());
         assert_eq!((replies.len(), end), (0, StreamEnd::Eof));
         // Inside a header, a payload and a skipped payload: TRUNCATED, fatal.
-        let mut big = Header { payload_len: MAX_PAYLOAD + 10, version: 1, msg_type: 1, reserved: 0 }.encode().to_vec();
+        let mut big = Header {
+            payload_len: MAX_PAYLOAD + 10,
+            version: 1,
+            msg_type: 1,
+            reserved: 0,
+        }
+        .encode()
+        .to_vec();
         big.extend_from_slice(&[0; 100]);
         for (input, expect_errors, text) in [
             (hello[..5].to_vec(), 1, "after 5 of 8 header bytes"),
-            ([hello.clone(), hello[..10].to_vec()].concat(), 1, "after 2 of 4 payload bytes of a HELLO frame"),
-            (big, 2, "after 100 of 1048586 bytes of a rejected frame's payload"),
+            (
+                [hello.clone(), hello[..10].to_vec()].concat(),
+                1,
+                "after 2 of 4 payload bytes of a HELLO frame",
+            ),
+            (
+                big,
+                2,
+                "after 100 of 1048586 bytes of a rejected frame's payload",
+            ),
         ] {
             let (replies, end) = run_server(&input, &mut session(ft), &mut Echo::default());
             assert_eq!(end, StreamEnd::Truncated);
-            let errors: Vec<_> = replies.iter().filter_map(|r| match r { Reply::Error(e) => Some(e), _ => None }).collect();
+            let errors: Vec<_> = replies
+                .iter()
+                .filter_map(|r| match r {
+                    Reply::Error(e) => Some(e),
+                    _ => None,
+                })
+                .collect();
             assert_eq!(errors.len(), expect_errors, "{replies:?}");
             let last = errors.last().unwrap();
-            assert_eq!((last.kind(), last.fatal, last.request_type), (Some(ErrorCode::Truncated), true, 0));
+            assert_eq!(
+                (last.kind(), last.fatal, last.request_type),
+                (Some(ErrorCode::Truncated), true, 0)
+            );
             assert!(last.text.contains(text), "{last:?}");
         }
     }
@@ -1471,7 +1855,14 @@ mod tests {
                 Ok(n)
             }
         }
-        let head = Header { payload_len: u32::MAX, version: 1, msg_type: 3, reserved: 0 }.encode().to_vec();
+        let head = Header {
+            payload_len: u32::MAX,
+            version: 1,
+            msg_type: 3,
+            reserved: 0,
+        }
+        .encode()
+        .to_vec();
         let mut reader = FrameReader::new(HeaderOnly(head), true);
         match reader.next_frame().unwrap() {
             ReadOutcome::Rejected { error, .. } => assert_eq!(error.code, ErrorCode::FrameTooLarge),
@@ -1482,11 +1873,27 @@ mod tests {
     #[test]
     fn client_side_reply_checks() {
         let ft = Some(FloatType::F32);
-        let chunk_bytes = Reply::Chunk(Chunk { policy_ns: 1, horizon: 3, action_dim: 2, exec_steps: 2, actions: vec![0.0; 6] })
-            .encode(FloatType::F32);
+        let chunk_bytes = Reply::Chunk(Chunk {
+            policy_ns: 1,
+            horizon: 3,
+            action_dim: 2,
+            exec_steps: 2,
+            actions: vec![0.0; 6],
+        })
+        .encode(FloatType::F32);
         let payload = &chunk_bytes[HEADER_LEN..];
-        assert_eq!(decode_reply(MsgType::Chunk, payload, None).unwrap_err().code, ErrorCode::OutOfOrder);
-        assert_eq!(decode_reply(MsgType::Chunk, &payload[..20], ft).unwrap_err().code, ErrorCode::BadLength);
+        assert_eq!(
+            decode_reply(MsgType::Chunk, payload, None)
+                .unwrap_err()
+                .code,
+            ErrorCode::OutOfOrder
+        );
+        assert_eq!(
+            decode_reply(MsgType::Chunk, &payload[..20], ft)
+                .unwrap_err()
+                .code,
+            ErrorCode::BadLength
+        );
         let mut bad_info = toy_info(FloatType::F32);
         bad_info.exec_steps = 4;
         let hello_ok = Reply::HelloOk(bad_info).encode(FloatType::F32);
@@ -1497,8 +1904,21 @@ mod tests {
         let err = decode_reply(MsgType::HelloOk, &hello_ok[HEADER_LEN..], None).unwrap_err();
         assert!(err.text.contains("float_type is 3"), "{err}");
         let error = [6u8, 0, 3, 0, 2, 0, 0xff, 0xfe];
-        assert!(decode_reply(MsgType::Error, &error, ft).unwrap_err().text.contains("UTF-8"));
-        assert_eq!(Header::decode(&Request::Hello.encode(FloatType::F32)[..8].try_into().unwrap()).check(false).unwrap_err().code, ErrorCode::UnknownType);
+        assert!(decode_reply(MsgType::Error, &error, ft)
+            .unwrap_err()
+            .text
+            .contains("UTF-8"));
+        assert_eq!(
+            Header::decode(
+                &Request::Hello.encode(FloatType::F32)[..8]
+                    .try_into()
+                    .unwrap()
+            )
+            .check(false)
+            .unwrap_err()
+            .code,
+            ErrorCode::UnknownType
+        );
         // Long texts and names are cut at a character boundary.
         let long = "é".repeat(MAX_TEXT);
         let e = ErrorReply::from_error(&ProtocolError::new(ErrorCode::PolicyFailed, long), 3);
@@ -1544,11 +1964,17 @@ mod tests {
             let valid = requests(
                 &[
                     Request::Hello,
-                    Request::Reset { seed: 3, init_action: vec![0.5, 0.5] },
+                    Request::Reset {
+                        seed: 3,
+                        init_action: vec![0.5, 0.5],
+                    },
                     act(0, &OBS),
                     act(2, &OBS),
                     act(3, &OBS),
-                    Request::Reset { seed: 4, init_action: vec![] },
+                    Request::Reset {
+                        seed: 4,
+                        init_action: vec![],
+                    },
                     act(0, &OBS),
                     Request::Close,
                 ],
@@ -1590,10 +2016,13 @@ mod tests {
                 };
                 let mut s = session(ft);
                 let mut out = Vec::new();
-                let end = serve_stream(Cursor::new(&input), &mut out, &mut s, &mut Echo::default()).unwrap();
+                let end = serve_stream(Cursor::new(&input), &mut out, &mut s, &mut Echo::default())
+                    .unwrap();
                 let replies = decode_all_replies(&out, ft);
                 if end == StreamEnd::Truncated {
-                    let Some(Reply::Error(e)) = replies.last() else { panic!("no TRUNCATED reply") };
+                    let Some(Reply::Error(e)) = replies.last() else {
+                        panic!("no TRUNCATED reply")
+                    };
                     assert!(e.fatal);
                 }
                 for reply in &replies {
