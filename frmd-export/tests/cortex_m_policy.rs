@@ -37,6 +37,49 @@ fn student_export_is_deterministic_and_acts() {
     assert_eq!(host_digest(), host_digest());
 }
 
+/// The default 16-bit first-layer input is no less accurate than the two-plane input it replaced:
+/// int8 network against the folded f32 model on the student's own calibration conditions
+/// (network outputs, normalized units), and on the same inputs with the observations at three
+/// times their calibrated magnitude (closed-loop states the demonstrations never reached).
+#[test]
+fn student_sixteen_bit_input_is_as_accurate_as_two_planes() {
+    use frmd_core::model::mlp::{InputPrecision, Probe};
+    use frmd_core::policy::Network;
+    use frmd_export::export::{export_checkpoint, ExportOptions};
+    let dir = frmd_firmware_support::host::student::student_dir();
+    let export = |input_precision| export_checkpoint(&dir, ExportOptions { input_precision, ..Default::default() }, None).expect("export the student");
+    let (wide, two) = (export(InputPrecision::Int16), export(InputPrecision::TwoPlane));
+    let set = frmd_export::calibration_file::read(&dir.join("calibration.safetensors"), wide.checkpoint.meta.model.cond_dim()).expect("calibration rows");
+    let luts = [frmd_export::reference::luts(&wide.policy), frmd_export::reference::luts(&two.policy)];
+    let mut nets = [
+        frmd_export::reference::int8_network::<MLP_WIDTH>(&wide.policy, &luts[0]).unwrap(),
+        frmd_export::reference::int8_network::<MLP_WIDTH>(&two.policy, &luts[1]).unwrap(),
+    ];
+    let traj = wide.policy.horizon * wide.policy.action_dim;
+    let mut errors = [[0_f64; 2]; 2];
+    for row in 0..set.rows() {
+        let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
+        let mut input = Vec::new();
+        wide.folded.sample(cond, &set.noise(row, 1, traj), |_, probe, values| if probe == Probe::Input { input = values.to_vec() }).unwrap();
+        let mut beyond = input.clone();
+        for v in beyond.iter_mut().take(wide.policy.history * wide.policy.obs_dim) {
+            *v *= 3.0;
+        }
+        for (case, input) in [input, beyond].iter().enumerate() {
+            let float = wide.folded.forward_observed(0, input, |_, _| {}).unwrap();
+            for (error, net) in errors[case].iter_mut().zip(nets.iter_mut()) {
+                let mut out = vec![0_f32; float.len()];
+                net.forward(0, input, &mut out).unwrap();
+                *error += out.iter().zip(&float).map(|(a, f)| f64::from((a - f).abs())).sum::<f64>();
+            }
+        }
+    }
+    eprintln!("int8 vs f32 abs error sums (16-bit, two-plane): in range {:?}, observations x3 {:?}", errors[0], errors[1]);
+    for [sixteen_bit, two_plane] in errors {
+        assert!(sixteen_bit <= 1.02 * two_plane, "16-bit {sixteen_bit} vs two-plane {two_plane}");
+    }
+}
+
 #[test]
 fn qemu_policy_digest_matches_host() {
     let root = qemu::repo_root();

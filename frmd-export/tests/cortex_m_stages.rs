@@ -6,7 +6,7 @@
 //! hash to the measured policy's digest; this host test checks the same without QEMU: the staged
 //! network behind `Policy` gives bit-identical chunks to frmd-core's `Int8Network` (the blob form of
 //! the same policy: the checked-in trained student `examples/cortex-m/policy/reach/`, exported
-//! as the firmware's build.rs exports it, two-plane first layer included), and records one clock
+//! as the firmware's build.rs exports it, 16-bit first-layer input included), and records one clock
 //! reading per stage boundary.
 
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -57,8 +57,8 @@ fn hidden_layers<'a>(quantized: &'a QuantizedPolicy, luts: &'a [Lut8]) -> [Int8L
 #[test]
 fn staged_mlp_network_matches_int8_network() {
     let quantized = student();
-    // The firmware's breakdown must cover the exporter's default two-plane first layer.
-    assert_eq!(quantized.input_precision, InputPrecision::TwoPlane);
+    // The firmware's breakdown must cover the exporter's default 16-bit first-layer input.
+    assert_eq!(quantized.input_precision, InputPrecision::Int16);
     assert_eq!(quantized.hidden.len(), LAYERS);
     let blob = AlignedBlob::of(&quantized);
     let loaded = LoadedPolicy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS>::load(blob.bytes())
