@@ -12,6 +12,7 @@ use std::env;
 
 fn main() {
     println!("cargo::rustc-check-cfg=cfg(frmd_arm_dsp)");
+    println!("cargo::rustc-check-cfg=cfg(frmd_no_clz)");
     println!("cargo::rerun-if-changed=build.rs");
     println!("cargo::rerun-if-env-changed=FRMD_PORTABLE_KERNELS");
     let var = |name: &str| env::var(name).unwrap_or_default();

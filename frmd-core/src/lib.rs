@@ -17,6 +17,7 @@
 )]
 
 pub mod blob;
+pub mod hash;
 pub mod kernels;
 pub mod model;
 pub mod policy;

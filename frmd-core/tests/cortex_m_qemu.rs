@@ -1,7 +1,8 @@
 //! The Cortex-M firmware (examples/cortex-m) computes the same bytes as the host.
 //!
-//! The firmware's workload files are plain `core` + frmd-core code (and the synthetic MLP
-//! generator is std code that its build.rs runs), so they compile here for the host as well.
+//! The firmware's workloads are plain `core` + frmd-core code in `frmd-firmware-support`
+//! (`examples/cortex-m/support`, whose synthetic MLP generator its build.rs runs), so they run
+//! here on the host as well.
 //! `qemu_digests_match_host` builds both firmware images, runs them on QEMU mps2-an386
 //! (Cortex-M4F) and mps2-an500 (Cortex-M7) and requires each printed digest to equal the host's:
 //! ProDMP decode (f32) and int8 MLP + decode are bit-identical on x86-64 and Cortex-M. It needs
@@ -9,24 +10,9 @@
 //! FRMD_SKIP_QEMU=1, it prints why and passes without checking
 //! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
 
-#[allow(dead_code)]
-#[path = "../../examples/cortex-m/src/digest.rs"]
-mod digest;
-#[allow(dead_code)] // firmware-only names
-#[path = "../../examples/cortex-m/src/mlp_workload.rs"]
-mod mlp_workload;
-#[allow(dead_code)]
-#[path = "../../examples/cortex-m/src/prodmp_workload.rs"]
-mod prodmp_workload;
-#[path = "../../examples/cortex-m/src/shape.rs"]
-mod shape;
-#[path = "../../examples/cortex-m/src/synthetic_mlp.rs"]
-mod synthetic_mlp;
-#[allow(dead_code)] // `name` is printed by the firmware only
-#[path = "../../examples/cortex-m/src/workload_api.rs"]
-mod workload_api;
-#[path = "../../examples/cortex-m/host-test-support.rs"]
-mod qemu;
+use frmd_firmware_support::host::qemu;
+use frmd_firmware_support::synthetic::mlp as synthetic_mlp;
+use frmd_firmware_support::{mlp_workload, prodmp_workload, shape, workload};
 
 fn baked() -> prodmp_workload::Baked {
     prodmp_workload::Baked::from_config(&shape::config()).expect("bake the policy decoder")
@@ -35,7 +21,7 @@ fn baked() -> prodmp_workload::Baked {
 fn prodmp_digest() -> u64 {
     let baked = baked();
     let mut workload = prodmp_workload::ProDmpWorkload::new(&baked);
-    workload_api::digest_all(&mut workload).expect("decode the fixed inputs")
+    workload::digest_all(&mut workload).expect("decode the fixed inputs")
 }
 
 fn mlp_digest() -> u64 {
@@ -43,19 +29,7 @@ fn mlp_digest() -> u64 {
     let model = synthetic_mlp::generate();
     let hidden = model.hidden_layers();
     let mut workload = mlp_workload::MlpWorkload::new(model.mlp(&hidden), &baked);
-    workload_api::digest_all(&mut workload).expect("run the synthetic policy on the fixed inputs")
-}
-
-#[test]
-fn fnv1a64_matches_published_vectors() {
-    let hash = |bytes: &[u8]| {
-        let mut digest = digest::Fnv1a64::new();
-        digest.bytes(bytes);
-        digest.finish()
-    };
-    assert_eq!(hash(b""), 0xcbf2_9ce4_8422_2325);
-    assert_eq!(hash(b"a"), 0xaf63_dc4c_8601_ec8c);
-    assert_eq!(hash(b"foobar"), 0x8594_4171_f739_67e8);
+    workload::digest_all(&mut workload).expect("run the synthetic policy on the fixed inputs")
 }
 
 #[test]
@@ -94,7 +68,7 @@ fn synthetic_mlp_is_deterministic_and_valid() {
 
 #[test]
 fn qemu_digests_match_host() {
-    let root = qemu::repo_root(env!("CARGO_MANIFEST_DIR"));
+    let root = qemu::repo_root();
     if !qemu::available("qemu_digests_match_host", &root) {
         return;
     }

@@ -2,8 +2,8 @@
 //! parameters, LUTs, normalization, ProDMP tables and step constants, plus an aligned
 //! `weights.bin` (int8 weights and int32 biases) that the module reads with `include_bytes!`.
 //!
-//! The module has no inner attributes, so it works both as a file module
-//! (`#[path = "..."] mod baked;`) and with `include!` from a build script's `OUT_DIR`
+//! The module has no inner attributes, so it works as a plain file module (`mod policy;`) and
+//! with `include!` from a build script's `OUT_DIR`
 //! (`mod baked { include!(concat!(env!("OUT_DIR"), "/policy.rs")); }`); `weights.bin` must sit
 //! next to it. It needs only `frmd-core` and exposes `network()`, `config()`, `policy()`, the
 //! `BakedPolicy` type and RAM/flash figures (`SCRATCH_BYTES`, `FLASH_BYTES`, `POLICY_RAM_BYTES`).
@@ -14,7 +14,7 @@ use std::path::Path;
 
 use frmd_core::policy::InputSegment;
 
-use crate::QuantizedPolicy;
+use crate::{ProDmpTablesOwned, QuantizedPolicy};
 
 /// File name of the generated module.
 pub const MODULE_FILE: &str = "policy.rs";
@@ -146,6 +146,29 @@ fn float(value: &f32) -> String {
     format!("{value:?}")
 }
 
+/// The tables of a baked ProDMP decoder as a Rust expression `BakedProDmp { pos_params: .., .. }`
+/// (`BakedProDmp` = `frmd_core::prodmp::BakedProDmp` must be in scope), every f32 as a literal that
+/// reads back to the same bits; `params_per_dof` values per row of the `[N][P]` tables. The
+/// generated policy module's `DECODER` and the firmware's stand-alone decoder use it.
+pub fn decoder_expression(prodmp: &ProDmpTablesOwned, params_per_dof: usize) -> String {
+    let rows = |table: &[f32]| {
+        let rows: Vec<String> = table
+            .chunks(params_per_dof.max(1))
+            .map(|row| format!("        {},", list(row, float)))
+            .collect();
+        format!("[\n{}\n    ]", rows.join("\n"))
+    };
+    format!(
+        "BakedProDmp {{\n    pos_params: {},\n    vel_params: {},\n    pos_y0: {},\n    pos_v0: {},\n    vel_y0: {},\n    vel_v0: {},\n}}",
+        rows(&prodmp.pos_params),
+        rows(&prodmp.vel_params),
+        list(&prodmp.pos_y0, float),
+        list(&prodmp.pos_v0, float),
+        list(&prodmp.vel_y0, float),
+        list(&prodmp.vel_v0, float)
+    )
+}
+
 fn segment_name(segment: InputSegment) -> &'static str {
     match segment {
         InputSegment::ObsHistory => "ObsHistory",
@@ -271,23 +294,10 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
         list(&q.action_max, float)
     )
     .map_err(fmt_err)?;
-    let p = &q.prodmp;
-    let rows = |table: &[f32]| {
-        let rows: Vec<String> = table
-            .chunks(q.params_per_dof.max(1))
-            .map(|row| format!("        {},", list(row, float)))
-            .collect();
-        format!("[\n{}\n    ]", rows.join("\n"))
-    };
     writeln!(
         w,
-        "/// Baked ProDMP decoder.\npub static DECODER: BakedProDmp<HORIZON, PARAMS_PER_DOF> = BakedProDmp {{\n    pos_params: {},\n    vel_params: {},\n    pos_y0: {},\n    pos_v0: {},\n    vel_y0: {},\n    vel_v0: {},\n}};",
-        rows(&p.pos_params),
-        rows(&p.vel_params),
-        list(&p.pos_y0, float),
-        list(&p.pos_v0, float),
-        list(&p.vel_y0, float),
-        list(&p.vel_v0, float)
+        "/// Baked ProDMP decoder.\npub static DECODER: BakedProDmp<HORIZON, PARAMS_PER_DOF> = {};",
+        decoder_expression(&q.prodmp, q.params_per_dof)
     )
     .map_err(fmt_err)?;
     let steps = list(&q.steps, |s| {

@@ -6,11 +6,12 @@
 //! min/max or a symmetric percentile of the recorded values. Quantization then follows
 //! DESIGN.md section 5 with frmd-core's `quant` helpers (per-channel symmetric weights, int32 bias
 //! with the input zero point folded, Q31 requantization to the pre-activation range, a 256-entry
-//! LUT to the output range, a dequantized output layer). With two-plane input
-//! (`frmd_core::model::mlp::InputPrecision::TwoPlane`, the default of
-//! [`crate::export::ExportOptions`]) the first layer's multipliers are made for the fine input
-//! scale `input_scale / 2^8`, and the exporter widens the input range (see
-//! [`crate::export::ExportOptions::input_headroom`]).
+//! LUT to the output range, a dequantized output layer). With a 16-bit input
+//! (`frmd_core::model::mlp::InputPrecision::Int16`, the default of
+//! [`crate::export::ExportOptions`]) the first layer's bias and multipliers are made for the
+//! fine input scale `input_scale / 2^8` (zero point `frmd_core::quant::wide_zero_point`); with a
+//! two-plane input (`TwoPlane`) only its multipliers are; for both the exporter widens the input
+//! range (see [`crate::export::ExportOptions::input_headroom`]).
 use crate::fold::{FloatLayer, FoldedMlp, InputGains};
 use crate::{QuantizedLayer, QuantizedOutput, QuantizedPolicy};
 use anyhow::{bail, Context};
@@ -18,7 +19,7 @@ use frmd_core::blob::LUT_LEN;
 use frmd_core::kernels::Lut8;
 use frmd_core::model::mlp::Probe;
 use frmd_core::model::mlp::InputPrecision;
-use frmd_core::quant::{fold_input_zero_point, quantize_bias, quantize_weights_per_channel, requantization_multiplier, QuantParams, FINE_INPUT_BITS};
+use frmd_core::quant::{fold_input_zero_point, quantize_bias, quantize_weights_per_channel, requantization_multiplier, wide_scale, wide_zero_point, QuantParams, FINE_INPUT_BITS};
 use frmd_core::rng::Rng;
 
 /// How activation ranges are chosen from the calibration values.
@@ -218,6 +219,20 @@ fn check_two_plane_range(weights: &[i8], in_features: usize, biases: &[i32]) -> 
     Ok(())
 }
 
+/// Checks that no first-layer accumulator of a 16-bit input can wrap: with codes of magnitude at
+/// most 2^15, `|bias| + 2^15 sum|w|` must fit in i32 for every channel and bias variant.
+fn check_int16_range(weights: &[i8], in_features: usize, biases: &[i32]) -> anyhow::Result<()> {
+    for (o, row) in weights.chunks_exact(in_features).enumerate() {
+        let weight_sum: i64 = row.iter().map(|w| i64::from(*w).abs()).sum();
+        let bias = biases.iter().skip(o).step_by(weights.len() / in_features).map(|b| i64::from(*b).abs()).max().unwrap_or(0);
+        let bound = bias + (weight_sum << 15);
+        if bound > i64::from(i32::MAX) {
+            bail!("first layer channel {o}: 16-bit input accumulators could reach {bound} and wrap i32 (export with int8 input)");
+        }
+    }
+    Ok(())
+}
+
 /// Quantizes `model` with the calibrated `ranges`, normalization and ProDMP tables into a
 /// [`QuantizedPolicy`] whose first layer takes its input as `input_precision` says.
 pub fn quantize(model: &FoldedMlp, ranges: &Ranges, norm: &crate::checkpoint::Normalization, input_precision: InputPrecision) -> anyhow::Result<QuantizedPolicy> {
@@ -228,12 +243,21 @@ pub fn quantize(model: &FoldedMlp, ranges: &Ranges, norm: &crate::checkpoint::No
     let mut first_layer_biases = Vec::new();
     for (l, (layer, &(pre, out))) in model.hidden.iter().zip(&ranges.hidden).enumerate() {
         let q = quantize_weights(layer).with_context(|| format!("hidden layer {l}"))?;
-        let bias = int_bias(&layer.bias, &q, current, layer.in_features).with_context(|| format!("hidden layer {l}"))?;
+        // The 16-bit input's codes are on the fine grid: so are the first layer's biases.
+        let bias_input = match (l, input_precision) {
+            (0, InputPrecision::Int16) => QuantParams { scale: wide_scale(current), zero_point: wide_zero_point(current) },
+            _ => current,
+        };
+        let bias = int_bias(&layer.bias, &q, bias_input, layer.in_features).with_context(|| format!("hidden layer {l}"))?;
         // The scale of the accumulators this layer requantizes.
-        let mut accumulator_input_scale = current.scale;
+        let mut accumulator_input_scale = bias_input.scale;
         if l == 0 {
             for variant in &model.first_layer_biases {
-                first_layer_biases.extend(int_bias(variant, &q, current, layer.in_features).context("first-layer bias variant")?);
+                first_layer_biases.extend(int_bias(variant, &q, bias_input, layer.in_features).context("first-layer bias variant")?);
+            }
+            if input_precision == InputPrecision::Int16 {
+                check_int16_range(&q.weights, layer.in_features, &first_layer_biases)?;
+                check_int16_range(&q.weights, layer.in_features, &bias)?;
             }
             if input_precision == InputPrecision::TwoPlane {
                 check_two_plane_range(&q.weights, layer.in_features, &first_layer_biases)?;

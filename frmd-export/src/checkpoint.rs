@@ -131,11 +131,7 @@ pub struct CheckpointMeta {
 
 /// FNV-1a 64-bit digest as 16 hex digits.
 pub fn fnv1a_hex(bytes: &[u8]) -> String {
-    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in bytes {
-        hash = (hash ^ u64::from(b)).wrapping_mul(0x100_0000_01b3);
-    }
-    format!("{hash:016x}")
+    format!("{:016x}", frmd_core::hash::Fnv1a64::of(bytes))
 }
 
 /// Names and shapes of the variables a model config implies, sorted by name (the layout of

@@ -16,12 +16,14 @@ pub struct ExportOptions {
     pub ranges: RangeMethod,
     /// Balance the input segments' ranges with [`crate::fold::FoldedMlp::with_input_gains`].
     pub balance_inputs: bool,
-    /// Quantize the MLP input in two int8 planes (about 16-bit input precision, see
-    /// `frmd_core::model::mlp::InputPrecision::TwoPlane`) instead of one.
-    pub two_plane_input: bool,
-    /// With `two_plane_input`: the calibrated input range is widened by this factor (>= 1), so
-    /// observations beyond the training range (closed-loop states the demonstrations never
-    /// visited) reach the network instead of saturating; the fine plane keeps the resolution
+    /// How the MLP's first layer takes the input: one 16-bit plane
+    /// (`frmd_core::model::mlp::InputPrecision::Int16`, the default: about 16-bit input precision
+    /// in one pass), two int8 planes (`TwoPlane`: the same precision in two passes) or one int8
+    /// plane (`Int8`).
+    pub input_precision: InputPrecision,
+    /// With a 16-bit or two-plane input: the calibrated input range is widened by this factor
+    /// (>= 1), so observations beyond the training range (closed-loop states the demonstrations
+    /// never visited) reach the network instead of saturating; the fine grid keeps the resolution
     /// (`range / 2^16`). Ignored for plain int8 input.
     pub input_headroom: f32,
 }
@@ -32,7 +34,7 @@ pub const DEFAULT_INPUT_HEADROOM: f32 = 8.0;
 
 impl Default for ExportOptions {
     fn default() -> Self {
-        ExportOptions { steps: 1, ranges: RangeMethod::MinMax, balance_inputs: true, two_plane_input: true, input_headroom: DEFAULT_INPUT_HEADROOM }
+        ExportOptions { steps: 1, ranges: RangeMethod::MinMax, balance_inputs: true, input_precision: InputPrecision::Int16, input_headroom: DEFAULT_INPUT_HEADROOM }
     }
 }
 
@@ -58,11 +60,10 @@ pub fn export_checkpoint(dir: &Path, options: ExportOptions, calibration: Option
     };
     let folded = if options.balance_inputs { folded.with_input_gains(input_gains(&folded, &set)?)? } else { folded };
     let mut ranges = calibrate(&folded, &set, options.ranges)?;
-    let precision = if options.two_plane_input { InputPrecision::TwoPlane } else { InputPrecision::Int8 };
-    if options.two_plane_input {
+    if options.input_precision != InputPrecision::Int8 {
         ranges.input = widen(ranges.input, options.input_headroom).context("input headroom")?;
     }
-    let policy = quantize(&folded, &ranges, &norm, precision)?;
+    let policy = quantize(&folded, &ranges, &norm, options.input_precision)?;
     Ok(Exported { checkpoint, folded, ranges, policy })
 }
 
@@ -77,7 +78,7 @@ pub struct ExportedTransformer {
 
 /// [`export_checkpoint`] for a transformer student: reads `dir`, folds the per-step noise tokens,
 /// calibrates with the transformer probes on `calibration` (or `dir/calibration.safetensors`)
-/// and quantizes. `options.balance_inputs` and `options.two_plane_input` do not apply (each input
+/// and quantizes. `options.balance_inputs` and `options.input_precision` do not apply (each input
 /// layer has its own scale).
 pub fn export_transformer_checkpoint(dir: &Path, options: ExportOptions, calibration: Option<CalibrationSet>) -> anyhow::Result<ExportedTransformer> {
     let checkpoint = Checkpoint::read(dir).with_context(|| format!("checkpoint {}", dir.display()))?;

@@ -109,7 +109,8 @@ pub struct QuantizedPolicy {
     /// Quantization of the f32 input vector.
     pub input: QuantParams,
     /// How the first layer quantizes the input; with [`InputPrecision::TwoPlane`] the first
-    /// layer's multipliers are for the input scale `input.scale / 2^FINE_INPUT_BITS`.
+    /// layer's multipliers, with [`InputPrecision::Int16`] also its biases, are for the input
+    /// scale `input.scale / 2^FINE_INPUT_BITS`.
     pub input_precision: InputPrecision,
     /// `[O]` observation minimum (raw units).
     pub obs_min: Vec<f32>,

@@ -146,7 +146,11 @@ pub fn wide_network(policy: &QuantizedPolicy, step: usize, input: &[f32]) -> any
     let fine_params = QuantParams { scale: policy.input.scale / (1_u32 << FINE_INPUT_BITS) as f32, zero_point: 0 };
     let fine: Vec<i64> = input.iter().map(|&v| i64::from(fine_params.quantize(v - policy.input.dequantize(policy.input.quantize(v))))).collect();
     let two_plane = policy.input_precision == InputPrecision::TwoPlane;
-    let mut x = coarse;
+    // 16-bit input: `round_half_away(v / (scale / 2^8)) + 2^8 zero_point + 2^7` (f32 division,
+    // f64 rounding), saturated to int16.
+    let wide_zero = i64::from(policy.input.zero_point) * 256 + 128;
+    let wide: Vec<i64> = input.iter().map(|&v| (f64::from(v / fine_params.scale).round() as i64).saturating_add(wide_zero).clamp(-32768, 32767)).collect();
+    let mut x = if policy.input_precision == InputPrecision::Int16 && !policy.hidden.is_empty() { wide } else { coarse };
     for (l, layer) in policy.hidden.iter().enumerate() {
         let bias: &[i32] = if l == 0 && !policy.first_layer_biases.is_empty() {
             &policy.first_layer_biases[step * layer.out_features..(step + 1) * layer.out_features]
@@ -201,8 +205,8 @@ pub fn check_network<const WIDTH: usize>(policy: &QuantizedPolicy, inputs: &[Vec
     all.push(vec![-1e9; width]);
     all.push(vec![0.0; width]);
     all.push((0..width).map(|i| if i % 2 == 0 { 1e9 } else { -1e9 }).collect());
-    // Residuals of exactly +-half a coarse step (the fine plane's saturation and ties) and of
-    // quarter steps.
+    // Residuals of exactly +-half a coarse step (the fine plane's saturation and ties, the 16-bit
+    // plane's ends) and of quarter steps.
     let step = policy.input.scale;
     all.push((0..width).map(|i| policy.input.dequantize(((i % 200) as i32 - 100) as i8) + 0.5 * step).collect());
     all.push((0..width).map(|i| policy.input.dequantize(((i % 200) as i32 - 100) as i8) - 0.5 * step).collect());

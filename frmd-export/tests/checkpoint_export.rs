@@ -204,34 +204,44 @@ fn requantization_matches_the_wide_model() {
     assert!(check.cases > 1_000_000);
 }
 
-/// Two-plane input with headroom: the default export carries it into the blob, matches the wide
-/// model, and follows the f32 path on inputs beyond the calibrated range (observations the
-/// demonstrations never reached), where plain int8 input saturates.
+/// The 16-bit input with headroom (the default) and the two-plane input: each export carries its
+/// precision into the blob, matches the wide model, and follows the f32 path on inputs beyond the
+/// calibrated range (observations the demonstrations never reached), where plain int8 input
+/// saturates; the 16-bit input is at least as accurate as the two planes.
 #[test]
-fn two_plane_input_follows_f32_beyond_the_calibrated_range() {
+fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
     use frmd_core::model::mlp::InputPrecision;
     use frmd_core::policy::Network;
-    let (dir, meta) = checkpoint("two-plane", Role::Student, mlp());
+    let (dir, meta) = checkpoint("wide-input", Role::Student, mlp());
     let set = calibration(meta.model.cond_dim(), 32);
-    let two = export_checkpoint(&dir, ExportOptions::default(), Some(set.clone())).unwrap();
-    let int8 = export_checkpoint(&dir, ExportOptions { two_plane_input: false, ..Default::default() }, Some(set.clone())).unwrap();
+    let export = |input_precision| export_checkpoint(&dir, ExportOptions { input_precision, ..Default::default() }, Some(set.clone())).unwrap();
+    let wide = export_checkpoint(&dir, ExportOptions::default(), Some(set.clone())).unwrap();
+    let two = export(InputPrecision::TwoPlane);
+    let int8 = export(InputPrecision::Int8);
+    assert_eq!(wide.policy.input_precision, InputPrecision::Int16);
     assert_eq!(two.policy.input_precision, InputPrecision::TwoPlane);
     assert_eq!(int8.policy.input_precision, InputPrecision::Int8);
     let headroom = frmd_export::export::DEFAULT_INPUT_HEADROOM;
     assert!((two.policy.input.scale / int8.policy.input.scale - headroom).abs() < 0.05 * headroom);
-    // The blob keeps the flag; its network is the wide model's.
-    let blob = frmd_export::blob::write(&two.policy).unwrap();
-    let mut words = vec![0u32; blob.len().div_ceil(4)];
-    bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
-    let loaded = frmd_core::blob::LoadedPolicy::<2, 3, 2, 5, 4>::load(&bytemuck::cast_slice::<u32, u8>(&words)[..blob.len()]).unwrap();
-    let mut loaded_net = loaded.network::<64>().unwrap();
-    assert_eq!(loaded_net.input_precision(), InputPrecision::TwoPlane);
-    let luts = [frmd_export::reference::luts(&two.policy), frmd_export::reference::luts(&int8.policy)];
-    let mut nets = [
-        frmd_export::reference::int8_network::<64>(&two.policy, &luts[0]).unwrap(),
-        frmd_export::reference::int8_network::<64>(&int8.policy, &luts[1]).unwrap(),
-    ];
-    let (mut error_two, mut error_int8) = (0f64, 0f64);
+    assert_eq!(wide.policy.input, two.policy.input);
+    let policies = [&wide.policy, &two.policy, &int8.policy];
+    // The blobs keep the precision; their networks are the wide model's.
+    let blobs: Vec<Vec<u32>> = policies[..2]
+        .iter()
+        .map(|policy| {
+            let blob = frmd_export::blob::write(policy).unwrap();
+            let mut words = vec![0u32; blob.len().div_ceil(4) + 1];
+            bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
+            words
+        })
+        .collect();
+    let loaded: Vec<_> = blobs.iter().map(|words| frmd_core::blob::LoadedPolicy::<2, 3, 2, 5, 4>::load(bytemuck::cast_slice::<u32, u8>(words)).unwrap()).collect();
+    let mut loaded_nets: Vec<_> = loaded.iter().map(|policy| policy.network::<64>().unwrap()).collect();
+    assert_eq!(loaded_nets[0].input_precision(), InputPrecision::Int16);
+    assert_eq!(loaded_nets[1].input_precision(), InputPrecision::TwoPlane);
+    let luts: Vec<_> = policies.iter().map(|policy| frmd_export::reference::luts(policy)).collect();
+    let mut nets: Vec<_> = policies.iter().zip(&luts).map(|(policy, luts)| frmd_export::reference::int8_network::<64>(policy, luts).unwrap()).collect();
+    let mut errors = [0f64; 3];
     for row in 0..set.rows() {
         let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
         let mut input = Vec::new();
@@ -241,22 +251,28 @@ fn two_plane_input_follows_f32_beyond_the_calibrated_range() {
             *v *= 3.0;
         }
         let float = two.folded.forward_observed(0, &input, |_, _| {}).unwrap();
-        let mut outs = [vec![0f32; 8], vec![0f32; 8]];
+        let mut outs = [vec![0f32; 8], vec![0f32; 8], vec![0f32; 8]];
         for (net, out) in nets.iter_mut().zip(outs.iter_mut()) {
             net.forward(0, &input, out).unwrap();
         }
-        let mut loaded_out = vec![0f32; 8];
-        loaded_net.forward(0, &input, &mut loaded_out).unwrap();
-        assert_eq!(loaded_out, outs[0]);
-        let wide = frmd_export::reference::wide_network(&two.policy, 0, &input).unwrap();
-        assert_eq!(nets[0].accumulators().iter().map(|&a| i64::from(a)).collect::<Vec<_>>(), wide);
-        for ((a, b), f) in outs[0].iter().zip(&outs[1]).zip(&float) {
-            error_two += f64::from((a - f).abs());
-            error_int8 += f64::from((b - f).abs());
+        for (n, loaded_net) in loaded_nets.iter_mut().enumerate() {
+            let mut loaded_out = vec![0f32; 8];
+            loaded_net.forward(0, &input, &mut loaded_out).unwrap();
+            assert_eq!(loaded_out, outs[n]);
+            let model = frmd_export::reference::wide_network(policies[n], 0, &input).unwrap();
+            assert_eq!(nets[n].accumulators().iter().map(|&a| i64::from(a)).collect::<Vec<_>>(), model);
+        }
+        for (error, out) in errors.iter_mut().zip(&outs) {
+            *error += out.iter().zip(&float).map(|(a, f)| f64::from((a - f).abs())).sum::<f64>();
         }
     }
-    eprintln!("inputs beyond the calibrated range: abs error sum two-plane {error_two}, int8 {error_int8}");
+    let [error_wide, error_two, error_int8] = errors;
+    eprintln!("inputs beyond the calibrated range: abs error sum 16-bit {error_wide}, two-plane {error_two}, int8 {error_int8}");
     assert!(error_two < 0.7 * error_int8, "two-plane {error_two} vs int8 {error_int8}");
-    let check = frmd_export::reference::check_network::<64>(&two.policy, &[]).unwrap();
-    assert!(check.passed(), "{check:?}");
+    assert!(error_wide < 0.7 * error_int8, "16-bit {error_wide} vs int8 {error_int8}");
+    assert!(error_wide <= 1.05 * error_two, "16-bit {error_wide} vs two-plane {error_two}");
+    for policy in &policies[..2] {
+        let check = frmd_export::reference::check_network::<64>(policy, &[]).unwrap();
+        assert!(check.passed(), "{check:?}");
+    }
 }

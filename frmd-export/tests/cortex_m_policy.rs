@@ -3,58 +3,29 @@
 //! The firmware `examples/cortex-m` (binary `frmd-cortex-m-policy`) exports the checked-in trained
 //! student `examples/cortex-m/policy/reach/` with `export::export_checkpoint` and bakes it with
 //! `bake::write_module` in its build.rs, then times `Policy::act` on QEMU. Here the same checkpoint
-//! goes through the same export call, is written as a blob, loaded with
-//! `frmd_core::blob::LoadedPolicy` and driven through the same workload file; `qemu_policy_digest_matches_host` requires the
-//! firmware's printed digest on mps2-an386 (Cortex-M4F) and mps2-an500 (Cortex-M7) to equal the
-//! host's. It needs `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without
+//! goes through the same export call (`frmd_firmware_support::host::student`), is written as a
+//! blob, loaded with `frmd_core::blob::LoadedPolicy` and driven through the same workload;
+//! `qemu_policy_digest_matches_host` requires the firmware's printed digest on mps2-an386
+//! (Cortex-M4F) and mps2-an500 (Cortex-M7) to equal the host's. It needs `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without
 //! it, or with FRMD_SKIP_QEMU=1, it prints why and passes without checking
 //! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
 
-#[allow(dead_code)]
-#[path = "../../examples/cortex-m/src/digest.rs"]
-mod digest;
-#[allow(dead_code)]
-#[path = "../../examples/cortex-m/src/policy_workload.rs"]
-mod policy_workload;
-#[path = "../../examples/cortex-m/src/shape.rs"]
-mod shape;
-#[allow(dead_code)] // `name` is printed by the firmware only
-#[path = "../../examples/cortex-m/src/workload_api.rs"]
-mod workload_api;
-#[path = "../../examples/cortex-m/host-test-support.rs"]
-mod qemu;
-
-use std::path::Path;
-
 use frmd_core::blob::LoadedPolicy;
-use frmd_export::export::{export_checkpoint, ExportOptions};
-use frmd_export::QuantizedPolicy;
-use shape::{DOF, HORIZON, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM};
-
-/// The student the firmware's build.rs bakes, exported with the same call and options.
-fn student() -> QuantizedPolicy {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/cortex-m/policy/reach");
-    export_checkpoint(&dir, ExportOptions::default(), None).expect("export the checked-in student").policy
-}
-
-/// The blob in 16-byte aligned storage, as the loader requires.
-fn aligned(blob: &[u8]) -> Vec<u128> {
-    let mut words = vec![0_u128; blob.len().div_ceil(16)];
-    bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..blob.len()].copy_from_slice(blob);
-    words
-}
+use frmd_firmware_support::host::qemu;
+use frmd_firmware_support::host::student::{student, AlignedBlob};
+use frmd_firmware_support::policy_workload::PolicyWorkload;
+use frmd_firmware_support::shape::{DOF, HORIZON, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM};
+use frmd_firmware_support::workload::digest_all;
 
 fn host_digest() -> u64 {
-    let blob = frmd_export::blob::write(&student()).expect("write the blob");
-    let words = aligned(&blob);
-    let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
-    let loaded = LoadedPolicy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS>::load(bytes)
+    let blob = AlignedBlob::of(&student());
+    let loaded = LoadedPolicy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS>::load(blob.bytes())
         .expect("load the blob");
     let policy = loaded
         .policy::<STUDENT_INPUT, MLP_WIDTH>()
         .expect("policy from the blob");
-    let mut workload = policy_workload::PolicyWorkload::new(policy);
-    workload_api::digest_all(&mut workload).expect("run the fixed cases")
+    let mut workload = PolicyWorkload::new(policy);
+    digest_all(&mut workload).expect("run the fixed cases")
 }
 
 #[test]
@@ -66,9 +37,52 @@ fn student_export_is_deterministic_and_acts() {
     assert_eq!(host_digest(), host_digest());
 }
 
+/// The default 16-bit first-layer input is no less accurate than the two-plane input it replaced:
+/// int8 network against the folded f32 model on the student's own calibration conditions
+/// (network outputs, normalized units), and on the same inputs with the observations at three
+/// times their calibrated magnitude (closed-loop states the demonstrations never reached).
+#[test]
+fn student_sixteen_bit_input_is_as_accurate_as_two_planes() {
+    use frmd_core::model::mlp::{InputPrecision, Probe};
+    use frmd_core::policy::Network;
+    use frmd_export::export::{export_checkpoint, ExportOptions};
+    let dir = frmd_firmware_support::host::student::student_dir();
+    let export = |input_precision| export_checkpoint(&dir, ExportOptions { input_precision, ..Default::default() }, None).expect("export the student");
+    let (wide, two) = (export(InputPrecision::Int16), export(InputPrecision::TwoPlane));
+    let set = frmd_export::calibration_file::read(&dir.join("calibration.safetensors"), wide.checkpoint.meta.model.cond_dim()).expect("calibration rows");
+    let luts = [frmd_export::reference::luts(&wide.policy), frmd_export::reference::luts(&two.policy)];
+    let mut nets = [
+        frmd_export::reference::int8_network::<MLP_WIDTH>(&wide.policy, &luts[0]).unwrap(),
+        frmd_export::reference::int8_network::<MLP_WIDTH>(&two.policy, &luts[1]).unwrap(),
+    ];
+    let traj = wide.policy.horizon * wide.policy.action_dim;
+    let mut errors = [[0_f64; 2]; 2];
+    for row in 0..set.rows() {
+        let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
+        let mut input = Vec::new();
+        wide.folded.sample(cond, &set.noise(row, 1, traj), |_, probe, values| if probe == Probe::Input { input = values.to_vec() }).unwrap();
+        let mut beyond = input.clone();
+        for v in beyond.iter_mut().take(wide.policy.history * wide.policy.obs_dim) {
+            *v *= 3.0;
+        }
+        for (case, input) in [input, beyond].iter().enumerate() {
+            let float = wide.folded.forward_observed(0, input, |_, _| {}).unwrap();
+            for (error, net) in errors[case].iter_mut().zip(nets.iter_mut()) {
+                let mut out = vec![0_f32; float.len()];
+                net.forward(0, input, &mut out).unwrap();
+                *error += out.iter().zip(&float).map(|(a, f)| f64::from((a - f).abs())).sum::<f64>();
+            }
+        }
+    }
+    eprintln!("int8 vs f32 abs error sums (16-bit, two-plane): in range {:?}, observations x3 {:?}", errors[0], errors[1]);
+    for [sixteen_bit, two_plane] in errors {
+        assert!(sixteen_bit <= 1.02 * two_plane, "16-bit {sixteen_bit} vs two-plane {two_plane}");
+    }
+}
+
 #[test]
 fn qemu_policy_digest_matches_host() {
-    let root = qemu::repo_root(env!("CARGO_MANIFEST_DIR"));
+    let root = qemu::repo_root();
     if !qemu::available("qemu_policy_digest_matches_host", &root) {
         return;
     }

@@ -6,37 +6,22 @@
 //! hash to the measured policy's digest; this host test checks the same without QEMU: the staged
 //! network behind `Policy` gives bit-identical chunks to frmd-core's `Int8Network` (the blob form of
 //! the same policy: the checked-in trained student `examples/cortex-m/policy/reach/`, exported
-//! as the firmware's build.rs exports it, two-plane first layer included), and records one clock
+//! as the firmware's build.rs exports it, 16-bit first-layer input included), and records one clock
 //! reading per stage boundary.
 
-#[allow(dead_code)]
-#[path = "../../examples/cortex-m/src/digest.rs"]
-mod digest;
-#[allow(dead_code)]
-#[path = "../../examples/cortex-m/src/policy_workload.rs"]
-mod policy_workload;
-#[path = "../../examples/cortex-m/src/shape.rs"]
-mod shape;
-#[path = "../../examples/cortex-m/src/stages.rs"]
-mod stages;
-#[allow(dead_code)]
-#[path = "../../examples/cortex-m/src/workload_api.rs"]
-mod workload_api;
-#[allow(dead_code)] // the digest helpers serve the other QEMU tests
-#[path = "../../examples/cortex-m/host-test-support.rs"]
-mod qemu;
-
-use std::path::Path;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use frmd_core::blob::LoadedPolicy;
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
 use frmd_core::model::mlp::{InputPrecision, Int8Layer};
 use frmd_core::policy::Policy;
-use frmd_export::export::{export_checkpoint, ExportOptions};
 use frmd_export::QuantizedPolicy;
-use shape::{DOF, HORIZON, MLP_HIDDEN, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM};
-use stages::{mlp_marks, StagedMlpNetwork};
+use frmd_firmware_support::host::qemu::{self, line_value};
+use frmd_firmware_support::host::student::{student, AlignedBlob};
+use frmd_firmware_support::policy_workload::PolicyWorkload;
+use frmd_firmware_support::shape::{DOF, HORIZON, MLP_HIDDEN, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM};
+use frmd_firmware_support::stages::{mlp_marks, StagedMlpNetwork};
+use frmd_firmware_support::workload::digest_all;
 
 const LAYERS: usize = MLP_HIDDEN.len();
 
@@ -44,18 +29,6 @@ const LAYERS: usize = MLP_HIDDEN.len();
 static TICKS: AtomicU32 = AtomicU32::new(0);
 fn counting_clock() -> u32 {
     TICKS.fetch_add(1, Ordering::Relaxed)
-}
-
-fn aligned(blob: &[u8]) -> Vec<u128> {
-    let mut words = vec![0_u128; blob.len().div_ceil(16)];
-    bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..blob.len()].copy_from_slice(blob);
-    words
-}
-
-/// The student the firmware's build.rs bakes, exported with the same call and options.
-fn student() -> QuantizedPolicy {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/cortex-m/policy/reach");
-    export_checkpoint(&dir, ExportOptions::default(), None).expect("export the checked-in student").policy
 }
 
 /// The SiLU tables of `quantized`, indexed as its layers' `lut` fields index them.
@@ -84,17 +57,15 @@ fn hidden_layers<'a>(quantized: &'a QuantizedPolicy, luts: &'a [Lut8]) -> [Int8L
 #[test]
 fn staged_mlp_network_matches_int8_network() {
     let quantized = student();
-    // The firmware's breakdown must cover the exporter's default two-plane first layer.
-    assert_eq!(quantized.input_precision, InputPrecision::TwoPlane);
+    // The firmware's breakdown must cover the exporter's default 16-bit first-layer input.
+    assert_eq!(quantized.input_precision, InputPrecision::Int16);
     assert_eq!(quantized.hidden.len(), LAYERS);
-    let blob = frmd_export::blob::write(&quantized).expect("write the blob");
-    let words = aligned(&blob);
-    let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
-    let loaded = LoadedPolicy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS>::load(bytes)
+    let blob = AlignedBlob::of(&quantized);
+    let loaded = LoadedPolicy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS>::load(blob.bytes())
         .expect("load the blob");
     let reference = loaded.policy::<STUDENT_INPUT, MLP_WIDTH>().expect("policy from the blob");
-    let mut reference = policy_workload::PolicyWorkload::new(reference);
-    let expected = workload_api::digest_all(&mut reference).expect("reference chunks");
+    let mut reference = PolicyWorkload::new(reference);
+    let expected = digest_all(&mut reference).expect("reference chunks");
 
     let luts = tables(&quantized);
     let hidden = hidden_layers(&quantized, &luts);
@@ -114,8 +85,8 @@ fn staged_mlp_network_matches_int8_network() {
         network,
     )
     .expect("staged policy");
-    let mut staged = policy_workload::PolicyWorkload::new(policy);
-    assert_eq!(workload_api::digest_all(&mut staged).expect("staged chunks"), expected);
+    let mut staged = PolicyWorkload::new(policy);
+    assert_eq!(digest_all(&mut staged).expect("staged chunks"), expected);
     let marks = staged.policy().network().marks().ticks();
     assert_eq!(marks.len(), mlp_marks(LAYERS));
     assert!(marks.windows(2).all(|pair| pair[1] == pair[0] + 1), "{marks:?}");
@@ -135,18 +106,12 @@ fn staged_mlp_network_refuses_small_scratch() {
     assert!(result.is_err());
 }
 
-/// `key: value` of the first line starting with `key: `.
-fn line_value<'a>(output: &'a str, key: &str) -> Option<&'a str> {
-    let prefix = format!("{key}: ");
-    output.lines().find_map(|line| line.strip_prefix(prefix.as_str()))
-}
-
 /// Runs both breakdown images on the Cortex-M4F board: each must print stage lines whose sum is
 /// within 2 % of its measured `instructions:` and a `stage_digest` equal to its `digest` (the
 /// firmware also refuses to finish otherwise). Skips like the other QEMU tests.
 #[test]
 fn qemu_stage_breakdowns_add_up() {
-    let root = qemu::repo_root(env!("CARGO_MANIFEST_DIR"));
+    let root = qemu::repo_root();
     if !qemu::available("qemu_stage_breakdowns_add_up", &root) {
         return;
     }

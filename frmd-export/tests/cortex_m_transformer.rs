@@ -1,48 +1,27 @@
 //! transformer-lite runs bit-identically on Cortex-M and on the host.
 //!
 //! The firmware `examples/cortex-m` (binary `frmd-cortex-m-transformer`) bakes a synthetic int8
-//! transformer-lite (src/synthetic_transformer.rs) in its build.rs and runs it as the network of
+//! transformer-lite (`frmd_firmware_support::synthetic::transformer`) in its build.rs and runs it as the network of
 //! the synthetic one-step policy's configuration (baked by frmd-export), timing `Policy::act` on
 //! QEMU. Here the same backbone is regenerated in memory, the configuration comes from the blob
-//! form of the same policy (`frmd_core::blob::LoadedPolicy::config`), and the same workload file
+//! form of the same policy (`frmd_core::blob::LoadedPolicy::config`), and the same workload
 //! runs it; `qemu_transformer_digest_matches_host` requires the firmware's printed digest on
 //! mps2-an386 (Cortex-M4F) and mps2-an500 (Cortex-M7) to equal the host's. It needs
 //! `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without it, or with
 //! FRMD_SKIP_QEMU=1, it prints why and passes without checking (unless FRMD_REQUIRE_QEMU is set,
 //! as in CI: then it fails).
 
-#[allow(dead_code)]
-#[path = "../../examples/cortex-m/src/digest.rs"]
-mod digest;
-#[allow(dead_code)]
-#[path = "../../examples/cortex-m/src/policy_workload.rs"]
-mod policy_workload;
-#[path = "../../examples/cortex-m/src/shape.rs"]
-mod shape;
-#[allow(dead_code)] // the staged MLP network is firmware-only here
-#[path = "../../examples/cortex-m/src/stages.rs"]
-mod stages;
-#[path = "../../examples/cortex-m/src/synthetic_mlp.rs"]
-mod synthetic_mlp;
-#[path = "../../examples/cortex-m/src/synthetic_policy.rs"]
-mod synthetic_policy;
-#[path = "../../examples/cortex-m/src/synthetic_transformer.rs"]
-mod synthetic_transformer;
-#[allow(dead_code)]
-#[path = "../../examples/cortex-m/src/transformer_network.rs"]
-mod transformer_network;
-#[allow(dead_code)] // `name` is printed by the firmware only
-#[path = "../../examples/cortex-m/src/workload_api.rs"]
-mod workload_api;
-#[path = "../../examples/cortex-m/host-test-support.rs"]
-mod qemu;
-
 use frmd_core::blob::LoadedPolicy;
 use frmd_core::policy::{Policy, PolicyError};
-use shape::{
-    DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
+use frmd_firmware_support::host::qemu;
+use frmd_firmware_support::host::student::AlignedBlob;
+use frmd_firmware_support::policy_workload::PolicyWorkload;
+use frmd_firmware_support::shape::{
+    self, DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
 };
-use transformer_network::TransformerNetwork;
+use frmd_firmware_support::synthetic::{policy as synthetic_policy, transformer as synthetic_transformer};
+use frmd_firmware_support::transformer_network::{TransformerNetwork, TransformerNetworkError};
+use frmd_firmware_support::workload::digest_all;
 
 type Network<'a> = TransformerNetwork<
     'a,
@@ -57,19 +36,10 @@ type Scratch = frmd_core::model::transformer::TransformerScratch<
     { TRANSFORMER_SCRATCH.accumulators },
 >;
 
-/// The blob in 16-byte aligned storage, as the loader requires.
-fn aligned(blob: &[u8]) -> Vec<u128> {
-    let mut words = vec![0_u128; blob.len().div_ceil(16)];
-    bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..blob.len()].copy_from_slice(blob);
-    words
-}
-
 /// Digest of the fixed cases (and the first chunk's positions, to check they vary).
 fn host_digest() -> Result<u64, PolicyError> {
-    let blob = frmd_export::blob::write(&synthetic_policy::generate()).expect("write the blob");
-    let words = aligned(&blob);
-    let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
-    let loaded = LoadedPolicy::<POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS>::load(bytes)
+    let blob = AlignedBlob::of(&synthetic_policy::generate());
+    let loaded = LoadedPolicy::<POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS>::load(blob.bytes())
         .expect("load the blob");
     let config = loaded.config();
     let data = synthetic_transformer::generate();
@@ -80,8 +50,8 @@ fn host_digest() -> Result<u64, PolicyError> {
     let policy = Policy::<_, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>::new(
         config, network,
     )?;
-    let mut workload = policy_workload::PolicyWorkload::with_name(policy, "transformer");
-    workload_api::digest_all(&mut workload)
+    let mut workload = PolicyWorkload::with_name(policy, "transformer");
+    digest_all(&mut workload)
 }
 
 #[test]
@@ -114,13 +84,13 @@ fn transformer_network_rejects_a_non_standard_layout() {
     let mut scratch = Box::new(Scratch::new());
     assert_eq!(
         Network::new(data.model(&blocks), &layout, &mut scratch).err(),
-        Some(transformer_network::TransformerNetworkError::Layout)
+        Some(TransformerNetworkError::Layout)
     );
 }
 
 #[test]
 fn qemu_transformer_digest_matches_host() {
-    let root = qemu::repo_root(env!("CARGO_MANIFEST_DIR"));
+    let root = qemu::repo_root();
     if !qemu::available("qemu_transformer_digest_matches_host", &root) {
         return;
     }

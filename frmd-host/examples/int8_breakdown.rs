@@ -139,7 +139,7 @@ fn main() -> anyhow::Result<()> {
     let rows: usize = args.get(3).map(|s| s.parse()).transpose()?.unwrap_or(200);
     let ranges: RangeMethod = args.get(4).map(String::as_str).unwrap_or("minmax").parse()?;
     let set = frmd_host::cli::export::calibration_from_data(data, ckpt)?;
-    let exported = export_checkpoint(ckpt, ExportOptions { ranges, two_plane_input: std::env::var_os("INT8_INPUT").is_none(), input_headroom: std::env::var("EXPORT_HEADROOM").ok().and_then(|h| h.parse().ok()).unwrap_or(frmd_export::export::DEFAULT_INPUT_HEADROOM), ..ExportOptions::default() }, Some(set.clone()))?;
+    let exported = export_checkpoint(ckpt, ExportOptions { ranges, input_precision: if std::env::var_os("INT8_INPUT").is_none() { frmd_core::model::mlp::InputPrecision::Int16 } else { frmd_core::model::mlp::InputPrecision::Int8 }, input_headroom: std::env::var("EXPORT_HEADROOM").ok().and_then(|h| h.parse().ok()).unwrap_or(frmd_export::export::DEFAULT_INPUT_HEADROOM), ..ExportOptions::default() }, Some(set.clone()))?;
     let folded = &exported.folded;
     let c = &folded.config;
     let norm = exported.checkpoint.meta.normalization.clone().context("normalization")?;

@@ -1,7 +1,7 @@
 //! The synthetic int8 MLP as baked by build.rs: weights in a byte blob (`include_bytes!`), biases,
 //! requantization and LUTs as generated statics. Firmware only.
 
-use crate::shape::{MLP_HIDDEN, MLP_OUTPUT};
+use frmd_firmware_support::shape::{MLP_HIDDEN, MLP_OUTPUT};
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
 use frmd_core::model::mlp::{Int8Layer, Int8Mlp};
 use frmd_core::quant::QuantParams;

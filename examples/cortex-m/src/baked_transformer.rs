@@ -1,7 +1,7 @@
-//! The synthetic transformer-lite as baked by build.rs (src/synthetic_transformer.rs): int8
+//! The synthetic transformer-lite as baked by build.rs (`frmd_firmware_support::synthetic::transformer`): int8
 //! weights in a byte blob (`include_bytes!`), everything else as generated statics. Firmware only.
 
-use crate::shape::{TRANSFORMER_LINEARS, TRANSFORMER_NORMS, TRANSFORMER_SHAPE};
+use frmd_firmware_support::shape::{TRANSFORMER_LINEARS, TRANSFORMER_NORMS, TRANSFORMER_SHAPE};
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
 use frmd_core::model::transformer::{
     Int8Block, Int8FeedForward, Int8Linear, Int8Transformer, LayerNormWeights, TokenLinear,

@@ -1,11 +1,11 @@
 //! The measurement harness shared by the firmware binaries: calibrates SysTick, runs every case of
 //! a [`Workload`] `CALLS / cases` times, timing each call, and prints the report lines.
 
-use crate::digest::Fnv1a64;
+use frmd_core::hash::Fnv1a64;
 use crate::memory::{ImageSizes, StackProbe};
 use crate::report::{self, exit_failure, exit_success, report};
 use crate::timer::{calibrate, Calibration, CycleCounter, TickCounter};
-use crate::workload_api::Workload;
+use frmd_firmware_support::workload::Workload;
 
 /// Core name from the CPUID part number.
 fn core_name(cpuid: u32) -> &'static str {

@@ -1,5 +1,7 @@
 //! FRMD on a Cortex-M4F / Cortex-M7 (QEMU mps2-an386 / mps2-an500, or a real board with `defmt`):
-//! the measurement harness and workloads shared by the firmware binaries.
+//! the measurement harness and the baked data of the firmware binaries. The workloads, shapes and
+//! staged networks they run live in the `frmd-firmware-support` crate (`support/`), which the
+//! build script and the host digest tests use too.
 //!
 //! - `frmd-cortex-m` (src/main.rs): the baked ProDMP policy decoder on fixed inputs.
 //! - `frmd-cortex-m-mlp` (src/bin/frmd-cortex-m-mlp.rs): a synthetic int8 MLP (40-256-256-256-42,
@@ -25,19 +27,13 @@ use defmt_rtt as _;
 pub mod baked_mlp;
 pub mod baked_transformer;
 pub mod bench;
-pub mod digest;
 pub mod memory;
-pub mod mlp_workload;
-pub mod policy_workload;
-pub mod prodmp_workload;
 pub mod report;
-pub mod shape;
 pub mod stage_report;
-pub mod stages;
 pub mod timer;
-pub mod transformer_network;
-pub mod workload_api;
 
-/// The ProDMP decoder tables of [`shape::config`], baked on the host by build.rs.
-pub static BAKED_PRODMP: prodmp_workload::Baked =
+use frmd_core::prodmp::BakedProDmp;
+
+/// The ProDMP decoder tables of `shape::config`, baked on the host by build.rs.
+pub static BAKED_PRODMP: frmd_firmware_support::prodmp_workload::Baked =
     include!(concat!(env!("OUT_DIR"), "/baked_prodmp.rs"));

@@ -3,7 +3,7 @@
 #![no_main]
 
 use cortex_m_rt::entry;
-use frmd_cortex_m::prodmp_workload::{ProDmpWorkload, CASES};
+use frmd_firmware_support::prodmp_workload::{ProDmpWorkload, CASES};
 use frmd_cortex_m::{bench, BAKED_PRODMP};
 
 #[entry]

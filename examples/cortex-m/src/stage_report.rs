@@ -6,7 +6,7 @@
 //! How each stage is measured (SysTick under `-icount shift=0`, 40 instructions a tick, averaged
 //! over every call so the mean resolves single instructions):
 //! - inside `Policy::act`: the network marks its entry and exit (and, for the MLP, the boundary of
-//!   every layer, see [`crate::stages::StagedMlpNetwork`]); `input` is `act`'s start to the
+//!   every layer, see [`frmd_firmware_support::stages::StagedMlpNetwork`]); `input` is `act`'s start to the
 //!   network's entry; `noise` (`Rng::fill_gaussian` of the chunk) is timed on its own and `input`
 //!   is the rest (checks, history copy, `sigma z`, sampler validation, input assembly with `c_in`);
 //!   the rest of `act` after the network is decode + consistency output stage + denormalization;
@@ -28,19 +28,19 @@ use frmd_core::model::transformer::{
 use frmd_core::policy::{Network, Policy, PolicyError};
 use frmd_core::rng::Rng;
 
-use crate::digest::Fnv1a64;
-use crate::policy_workload::{PolicyWorkload, CASES, NOISE_SEED};
+use frmd_core::hash::Fnv1a64;
+use frmd_firmware_support::policy_workload::{PolicyWorkload, CASES, NOISE_SEED};
 use crate::report::{self, exit_failure, report};
-use crate::stages::StagedMlpNetwork;
+use frmd_firmware_support::stages::StagedMlpNetwork;
 use crate::timer::{Calibration, TickCounter};
-use crate::transformer_network::TransformerNetwork;
-use crate::workload_api::{prodmp_decode_macs, Workload};
+use frmd_firmware_support::transformer_network::TransformerNetwork;
+use frmd_firmware_support::workload::{prodmp_decode_macs, Workload};
 
 /// Calls per case in the breakdown (and standalone repetitions per call).
 pub const REPEATS: usize = 5;
 const MAX_STAGES: usize = 16;
 
-/// The SysTick counter (a [`crate::stages::Clock`]); SysTick must be running.
+/// The SysTick counter (a [`frmd_firmware_support::stages::Clock`]); SysTick must be running.
 pub fn systick() -> u32 {
     SYST::get_current()
 }

@@ -25,8 +25,18 @@ use crate::policy::{InputLayout, MAX_HIDDEN_LAYERS};
 
 /// First four bytes of every blob.
 pub const MAGIC: [u8; 4] = *b"FRMD";
-/// The format version this crate reads and writes.
-pub const FORMAT_VERSION: u16 = 2;
+/// The format version this crate writes. Version 3 turned the descriptor's two-plane flag into
+/// an input precision code (adding the 16-bit input plane); postcard encodes the old `bool` as
+/// the byte 0 or 1, which is the same code, so version 2 blobs read unchanged.
+pub const FORMAT_VERSION: u16 = 3;
+/// The oldest format version this crate reads.
+pub const MIN_FORMAT_VERSION: u16 = 2;
+/// [`Descriptor::input_precision`] of int8 input (`model::mlp::InputPrecision::Int8`).
+pub const INPUT_INT8: u8 = 0;
+/// [`Descriptor::input_precision`] of a two-plane input (`InputPrecision::TwoPlane`).
+pub const INPUT_TWO_PLANE: u8 = 1;
+/// [`Descriptor::input_precision`] of the 16-bit input plane (`InputPrecision::Int16`).
+pub const INPUT_INT16: u8 = 2;
 /// Header length in bytes (the descriptor starts here).
 pub const HEADER_LEN: usize = 20;
 /// Alignment of the data area and of every section offset, in bytes.
@@ -108,9 +118,9 @@ pub struct Descriptor {
     pub input_scale: f32,
     /// Input quantization zero point.
     pub input_zero_point: i32,
-    /// Two-plane input quantization (`model::mlp::InputPrecision::TwoPlane`); added in format
-    /// version 2.
-    pub input_two_plane: bool,
+    /// How the first layer takes the input ([`INPUT_INT8`], [`INPUT_TWO_PLANE`] or
+    /// [`INPUT_INT16`]); a `bool` "two-plane" flag in format version 2.
+    pub input_precision: u8,
     /// f32 `[min; O]` then `[max; O]`.
     pub obs_norm: Section,
     /// f32 `[min; K]` then `[max; K]`.

@@ -4,7 +4,8 @@ use bytemuck::PodCastError;
 
 use super::crc32::crc32;
 use super::format::{
-    Descriptor, Section, SectionId, FORMAT_VERSION, HEADER_LEN, LUT_LEN, MAGIC, SECTION_ALIGN,
+    Descriptor, Section, SectionId, FORMAT_VERSION, HEADER_LEN, INPUT_INT16, INPUT_INT8,
+    INPUT_TWO_PLANE, LUT_LEN, MAGIC, MIN_FORMAT_VERSION, SECTION_ALIGN,
     STEP_WORDS,
 };
 use super::writer::data_start;
@@ -183,7 +184,7 @@ pub(crate) fn split(bytes: &[u8], magic: [u8; 4]) -> Result<(&[u8], &[u8]), Blob
         return Err(BlobError::BadMagic);
     }
     let version = read_u16(header, 4)?;
-    if version != FORMAT_VERSION {
+    if !(MIN_FORMAT_VERSION..=FORMAT_VERSION).contains(&version) {
         return Err(BlobError::UnsupportedVersion { found: version });
     }
     if read_u16(header, 6)? != 0 {
@@ -309,10 +310,11 @@ impl<'a, const M: usize, const O: usize, const K: usize, const N: usize, const P
         let shared = Self::read_shared(&data, shared_fields!(d))?;
         let input = QuantParams::new(d.input_scale, d.input_zero_point)
             .map_err(|_| BlobError::InputQuantization)?;
-        let input_precision = match (d.input_two_plane, d.hidden.is_empty()) {
-            (false, _) => InputPrecision::Int8,
-            (true, false) => InputPrecision::TwoPlane,
-            (true, true) => return Err(BlobError::InputQuantization),
+        let input_precision = match (d.input_precision, d.hidden.is_empty()) {
+            (INPUT_INT8, _) => InputPrecision::Int8,
+            (INPUT_TWO_PLANE, false) => InputPrecision::TwoPlane,
+            (INPUT_INT16, false) => InputPrecision::Int16,
+            _ => return Err(BlobError::InputQuantization),
         };
         d.layout.validate().map_err(|_| BlobError::InputLayout)?;
         let input_width = d.layout.width(M, O, K, N).ok_or(BlobError::InputLayout)?;

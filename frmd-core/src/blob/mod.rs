@@ -19,7 +19,8 @@ mod tests;
 
 pub use format::{
     Descriptor, HiddenLayerDesc, OutputLayerDesc, Section, SectionId, FORMAT_VERSION, HEADER_LEN,
-    LUT_LEN, MAGIC, SECTION_ALIGN, STEP_WORDS,
+    INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MAGIC, MIN_FORMAT_VERSION, SECTION_ALIGN,
+    STEP_WORDS,
 };
 pub use load::LoadedPolicy;
 pub use transformer::{
@@ -56,7 +57,7 @@ pub enum BlobError {
     Truncated,
     /// The first four bytes are not `b"FRMD"` (MLP) or [`TRANSFORMER_MAGIC`] (transformer).
     BadMagic,
-    /// The format version is not [`FORMAT_VERSION`].
+    /// The format version is outside [`MIN_FORMAT_VERSION`]`..=`[`FORMAT_VERSION`].
     UnsupportedVersion {
         /// Version found in the header.
         found: u16,
@@ -147,7 +148,10 @@ impl core::fmt::Display for BlobError {
                 f.write_str("blob magic is not the expected one (FRMD: MLP, FRMT: transformer)")
             }
             Self::UnsupportedVersion { found } => {
-                write!(f, "blob format version {found} is not {FORMAT_VERSION}")
+                write!(
+                    f,
+                    "blob format version {found} is not {MIN_FORMAT_VERSION}..={FORMAT_VERSION}"
+                )
             }
             Self::ReservedField => f.write_str("reserved header field is not zero"),
             Self::InvalidLength => f.write_str("blob total or descriptor length is inconsistent"),

@@ -172,6 +172,11 @@ fn header_damage_is_named() {
             Err(BlobError::UnsupportedVersion { found: version })
         );
     }
+    // Version 2 stored the input precision as a bool, which encodes as the same byte.
+    let mut old = blob.clone();
+    old[4..6].copy_from_slice(&MIN_FORMAT_VERSION.to_le_bytes());
+    assert_eq!(MIN_FORMAT_VERSION, 2);
+    assert!(load_copy(&old).is_ok());
     let mut bad = blob.clone();
     bad[6] = 1;
     assert_eq!(load_copy(&bad), Err(BlobError::ReservedField));
@@ -445,15 +450,24 @@ fn two_plane_flag_reaches_the_network() {
     let loaded = load(plain.bytes()).unwrap();
     let precision = loaded.network::<WIDTH>().unwrap().input_precision();
     assert_eq!(precision, crate::model::mlp::InputPrecision::Int8);
-    let flagged = with_descriptor(&blob, |d| d.input_two_plane = true);
+    let flagged = with_descriptor(&blob, |d| d.input_precision = INPUT_TWO_PLANE);
     let buffer = Aligned::new(&flagged, 0);
     let loaded = load(buffer.bytes()).unwrap();
     let precision = loaded.network::<WIDTH>().unwrap().input_precision();
     assert_eq!(precision, crate::model::mlp::InputPrecision::TwoPlane);
-    // The flag without a hidden layer to take the fine plane is refused.
-    let no_hidden = with_descriptor(&blob, |d| {
-        d.input_two_plane = true;
-        d.hidden.clear();
-    });
-    assert_eq!(load_copy(&no_hidden), Err(BlobError::InputQuantization));
+    let wide = with_descriptor(&blob, |d| d.input_precision = INPUT_INT16);
+    let buffer = Aligned::new(&wide, 0);
+    let loaded = load(buffer.bytes()).unwrap();
+    let precision = loaded.network::<WIDTH>().unwrap().input_precision();
+    assert_eq!(precision, crate::model::mlp::InputPrecision::Int16);
+    // Either without a hidden layer to take the fine grid is refused, and so is an unknown code.
+    for code in [INPUT_TWO_PLANE, INPUT_INT16] {
+        let no_hidden = with_descriptor(&blob, |d| {
+            d.input_precision = code;
+            d.hidden.clear();
+        });
+        assert_eq!(load_copy(&no_hidden), Err(BlobError::InputQuantization));
+    }
+    let unknown = with_descriptor(&blob, |d| d.input_precision = 3);
+    assert_eq!(load_copy(&unknown), Err(BlobError::InputQuantization));
 }

@@ -8,7 +8,8 @@ use heapless::Vec;
 use super::crc32::crc32;
 use super::format::{
     align_up, Descriptor, HiddenLayerDesc, OutputLayerDesc, Section, SectionId, FORMAT_VERSION,
-    HEADER_LEN, LUT_LEN, MAGIC, SECTION_ALIGN, STEP_WORDS,
+    HEADER_LEN, INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MAGIC, SECTION_ALIGN,
+    STEP_WORDS,
 };
 use super::BlobError;
 use crate::model::mlp::InputPrecision;
@@ -234,7 +235,11 @@ fn plan(parts: &BlobParts<'_>) -> Result<(Descriptor, usize), BlobError> {
         layout: parts.layout,
         input_scale: parts.input.scale,
         input_zero_point: parts.input.zero_point,
-        input_two_plane: parts.input_precision == InputPrecision::TwoPlane,
+        input_precision: match parts.input_precision {
+            InputPrecision::Int8 => INPUT_INT8,
+            InputPrecision::TwoPlane => INPUT_TWO_PLANE,
+            InputPrecision::Int16 => INPUT_INT16,
+        },
         obs_norm,
         action_norm,
         prodmp,

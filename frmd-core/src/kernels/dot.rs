@@ -42,28 +42,14 @@ pub(crate) fn dot_i8_prefix(a: &[i8], b: &[i8]) -> i32 {
     total
 }
 
-/// Calls `emit(dot(row, input))` for every row of the row-major `weights` (`input.len()` columns
-/// per row) in order; a partial last row is ignored (callers check the shapes).
-///
-/// This is the fully connected layer's matrix-vector product. On Arm cores with the DSP extension
-/// (`cfg(frmd_arm_dsp)`, module `kernels::dsp`) it runs an `SMLAD` kernel over four rows at a
-/// time; elsewhere it is [`dot_i8_prefix`] per row. Both give identical sums. (On x86-64 CPUs
-/// with AVX2, `FullyConnected` uses the eight-row kernels of `kernels::x86` instead. A four-row
-/// SSE2 version of this loop ran fewer instructions but was slower: LLVM's `punpcklbw`
-/// sign extension read a stale register and chained the whole loop body.)
-#[cfg(not(frmd_arm_dsp))]
+/// `sum_i a[i] * b[i]` of int8 `a` and int16 `b` over their common prefix, int32 wrapping (the
+/// first layer of a 16-bit input plane; each product lies in `[-4194304, 4194304]`).
 #[inline]
-pub(crate) fn for_each_row_dot(weights: &[i8], input: &[i8], mut emit: impl FnMut(i32)) {
-    if input.is_empty() {
-        return;
-    }
-    for row in weights.chunks_exact(input.len()) {
-        emit(dot_i8_prefix(row, input));
-    }
+pub(crate) fn dot_i8_i16_prefix(a: &[i8], b: &[i16]) -> i32 {
+    a.iter().zip(b).fold(0_i32, |sum, (w, x)| {
+        sum.wrapping_add(i32::from(*w) * i32::from(*x))
+    })
 }
-
-#[cfg(frmd_arm_dsp)]
-pub(crate) use super::dsp::for_each_row_dot;
 
 #[cfg(test)]
 pub(crate) mod tests {
@@ -111,7 +97,7 @@ pub(crate) mod tests {
     fn row_dots_match_wide_sums() {
         random_cases(0x3A7, |weights, input| {
             let mut got = Vec::new();
-            for_each_row_dot(weights, input, |sum| got.push(i64::from(sum)));
+            crate::kernels::rows::for_each_sum(input, weights, &[], |sum| got.push(i64::from(sum)));
             assert_eq!(
                 got,
                 wide_row_sums(weights, input),

@@ -2,15 +2,43 @@
 //!
 //! Weights are int8 symmetric per output channel, row-major `[out_features, in_features]`; the
 //! int32 bias already contains the folded input zero point (`quant::fold_input_zero_point`), so the
-//! kernel is a plain int8 matrix-vector product. Requantization per output channel uses
+//! kernel is a plain int8 matrix-vector product. The input is int8, or int16 for a first layer fed
+//! the 16-bit input plane ([`LayerInput::Int16`]). Requantization per output channel uses
 //! [`crate::quant::requantize_to_i8`]; the activation clamp (`activation_min..=activation_max`)
-//! implements ReLU-like activations for free.
+//! implements ReLU-like activations for free, and an optional [`Lut8`] maps every requantized
+//! output in the same pass.
 
 #[cfg(target_arch = "x86_64")]
 use super::dot::dot_i8_prefix;
-use super::dot::for_each_row_dot;
-use super::KernelError;
-use crate::quant::{dequantize_accumulator, requantize_to_i8, SHIFT_MAX, SHIFT_MIN};
+use super::rows::{for_each_block, for_each_sum, RowInput};
+use super::{KernelError, Lut8};
+#[cfg(target_arch = "x86_64")]
+use crate::quant::requantize_to_i8;
+use crate::quant::{dequantize_accumulator, requantize_valid, SHIFT_MAX, SHIFT_MIN};
+
+/// The input vector of a fully connected layer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LayerInput<'a> {
+    /// int8 codes (every hidden layer, and a first layer with int8 input).
+    Int8(&'a [i8]),
+    /// int16 codes of the 16-bit input plane (`model::mlp::InputPrecision::Int16`).
+    Int16(&'a [i16]),
+}
+
+impl LayerInput<'_> {
+    /// Number of input values.
+    pub fn len(&self) -> usize {
+        match self {
+            Self::Int8(values) => values.len(),
+            Self::Int16(values) => values.len(),
+        }
+    }
+
+    /// Whether there are no input values.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
 
 /// Weights and bias of one fully connected layer, borrowed (typically `&'static` baked data).
 ///
@@ -91,9 +119,9 @@ impl<'a> FullyConnected<'a> {
         Ok(())
     }
 
-    fn check_input(&self, input: &[i8]) -> Result<(), KernelError> {
+    fn check_input(&self, input_len: usize) -> Result<(), KernelError> {
         self.validate()?;
-        if input.len() != self.in_features {
+        if input_len != self.in_features {
             return Err(KernelError::InputLength);
         }
         Ok(())
@@ -102,35 +130,38 @@ impl<'a> FullyConnected<'a> {
     /// Raw int32 accumulators `acc[o] = bias[o] + sum_i w[o][i] * input[i]` (wrapping), e.g. for the
     /// last layer, whose output is dequantized to f32 ([`dequantize_accumulators`]).
     pub fn forward_accumulators(&self, input: &[i8], acc: &mut [i32]) -> Result<(), KernelError> {
-        self.check_input(input)?;
+        self.check_input(input.len())?;
         if acc.len() != self.out_features {
             return Err(KernelError::OutputLength);
         }
-        let mut outputs = acc.iter_mut();
-        let mut write = |acc| {
-            if let Some(out) = outputs.next() {
-                *out = acc;
-            }
-        };
         #[cfg(target_arch = "x86_64")]
         if let Some(avx2) = super::x86::Avx2::get() {
-            self.for_each_sum_avx2(avx2, input, true, &mut write);
+            let mut outputs = acc.iter_mut();
+            self.for_each_sum_avx2(avx2, input, true, |sum| {
+                if let Some(out) = outputs.next() {
+                    *out = sum;
+                }
+            });
             return Ok(());
         }
-        self.for_each_accumulator(input, write);
+        for_each_block(input, self.weights, self.bias, |first, sums| {
+            if let Some(out) = acc.get_mut(first..first + sums.len()) {
+                out.copy_from_slice(sums);
+            }
+        });
         Ok(())
     }
 
     /// Calls `emit(dot(w[o], input))` (bias-free, wrapping) for `o = 0..out_features` in order,
     /// e.g. for the fine plane of a two-plane input. Same kernels as [`Self::forward_accumulators`].
     pub fn for_each_dot(&self, input: &[i8], mut emit: impl FnMut(i32)) -> Result<(), KernelError> {
-        self.check_input(input)?;
+        self.check_input(input.len())?;
         #[cfg(target_arch = "x86_64")]
         if let Some(avx2) = super::x86::Avx2::get() {
             self.for_each_sum_avx2(avx2, input, false, emit);
             return Ok(());
         }
-        for_each_row_dot(self.weights, input, &mut emit);
+        for_each_sum(input, self.weights, &[], &mut emit);
         Ok(())
     }
 
@@ -142,31 +173,84 @@ impl<'a> FullyConnected<'a> {
         input: &[i8],
         output: &mut [i8],
     ) -> Result<(), KernelError> {
-        self.check_input(input)?;
+        self.forward_activated(requant, None, LayerInput::Int8(input), output)
+    }
+
+    /// [`Self::forward`] for any [`LayerInput`], with `activation` (if any) applied to every
+    /// requantized output: `output[o] = lut(requantize_to_i8(...))`.
+    pub fn forward_activated(
+        &self,
+        requant: &FcRequant<'_>,
+        activation: Option<&Lut8>,
+        input: LayerInput<'_>,
+        output: &mut [i8],
+    ) -> Result<(), KernelError> {
         requant.validate(self.out_features)?;
-        if output.len() != self.out_features {
+        self.forward_validated(requant, activation, input, output)
+    }
+
+    /// [`Self::forward_activated`] for a `requant` that passed [`FcRequant::validate`] for this
+    /// layer (the per-channel checks are not repeated; the shapes are). With unvalidated
+    /// parameters the outputs are unspecified, never a panic.
+    pub(crate) fn forward_validated(
+        &self,
+        requant: &FcRequant<'_>,
+        activation: Option<&Lut8>,
+        input: LayerInput<'_>,
+        output: &mut [i8],
+    ) -> Result<(), KernelError> {
+        self.check_input(input.len())?;
+        let channels = self.out_features;
+        if requant.multipliers.len() != channels || requant.shifts.len() != channels {
+            return Err(KernelError::RequantLength);
+        }
+        if output.len() != channels {
             return Err(KernelError::OutputLength);
         }
-        #[cfg(target_arch = "x86_64")]
-        if let Some(avx2) = super::x86::Avx2::get() {
-            self.forward_avx2(avx2, requant, input, output);
-            return Ok(());
+        match (input, activation) {
+            (LayerInput::Int8(values), lut) => {
+                #[cfg(target_arch = "x86_64")]
+                if let Some(avx2) = super::x86::Avx2::get() {
+                    self.forward_avx2(avx2, requant, values, output);
+                    if let Some(lut) = lut {
+                        lut.apply_in_place(output);
+                    }
+                    return Ok(());
+                }
+                match lut {
+                    Some(lut) => self.requantize_rows(requant, values, output, |v| lut.lookup(v)),
+                    None => self.requantize_rows(requant, values, output, |v| v),
+                }
+            }
+            (LayerInput::Int16(values), Some(lut)) => {
+                self.requantize_rows(requant, values, output, |v| lut.lookup(v));
+            }
+            (LayerInput::Int16(values), None) => {
+                self.requantize_rows(requant, values, output, |v| v);
+            }
         }
-        let channels = requant.multipliers.iter().zip(requant.shifts);
-        let mut outputs = output.iter_mut().zip(channels);
-        self.for_each_accumulator(input, |acc| {
-            if let Some((out, (multiplier, shift))) = outputs.next() {
-                *out = requantize_to_i8(
-                    acc,
-                    *multiplier,
-                    *shift,
-                    requant.output_zero_point,
-                    requant.activation_min,
-                    requant.activation_max,
-                );
+        Ok(())
+    }
+
+    /// Requantizes `bias[o] + dot(w[o], input)` for every row into `output`, through `map`, two
+    /// rows per kernel call (callers checked the shapes; `requant` must be valid for the results
+    /// to equal [`requantize_to_i8`]'s).
+    #[inline(always)]
+    fn requantize_rows<T: RowInput>(
+        &self,
+        requant: &FcRequant<'_>,
+        input: &[T],
+        output: &mut [i8],
+        map: impl Fn(i8) -> i8,
+    ) {
+        let Self { weights, bias, .. } = *self;
+        let (multipliers, shifts) = (requant.multipliers, requant.shifts);
+        for_each_block(input, weights, bias, |first, sums| {
+            let end = first + sums.len();
+            if let (Some(out), Some(m), Some(s)) = (output.get_mut(first..end), multipliers.get(first..end), shifts.get(first..end)) {
+                requantize_block(sums, m, s, requant, out, &map);
             }
         });
-        Ok(())
     }
 
     /// [`Self::forward`] with the AVX2 kernels (x86-64; callers checked the shapes and
@@ -246,17 +330,31 @@ impl<'a> FullyConnected<'a> {
             emit(bias.wrapping_add(dot_i8_prefix(row, input)));
         }
     }
+}
 
-    /// Calls `emit(bias[o] + sum_i w[o][i] * input[i])` for `o = 0..out_features` in order
-    /// (callers have checked the shapes). The products come from [`for_each_row_dot`], which on
-    /// Cortex-M4/M7 is the `SMLAD` kernel (four rows per pass over the input).
-    #[inline]
-    fn for_each_accumulator(&self, input: &[i8], mut emit: impl FnMut(i32)) {
-        let mut biases = self.bias.iter();
-        for_each_row_dot(self.weights, input, |dot| {
-            let bias = biases.next().copied().unwrap_or(0);
-            emit(bias.wrapping_add(dot));
-        });
+/// `out[r] = map(requantize_valid(sums[r], multipliers[r], shifts[r], ...))` for one block of
+/// rows. Not inlined, so that its loop has the registers to itself; a full int8 clamp range (the
+/// common case) takes a loop without the two compares.
+#[inline(never)]
+fn requantize_block(
+    sums: &[i32],
+    multipliers: &[i32],
+    shifts: &[i32],
+    requant: &FcRequant<'_>,
+    out: &mut [i8],
+    map: &impl Fn(i8) -> i8,
+) {
+    let zero_point = requant.output_zero_point;
+    let channels = out.iter_mut().zip(sums).zip(multipliers.iter().zip(shifts));
+    if (requant.activation_min, requant.activation_max) == (i8::MIN, i8::MAX) {
+        for ((out, sum), (multiplier, shift)) in channels {
+            *out = map(requantize_valid(*sum, *multiplier, *shift, zero_point, i8::MIN, i8::MAX));
+        }
+    } else {
+        let (lo, hi) = (requant.activation_min, requant.activation_max);
+        for ((out, sum), (multiplier, shift)) in channels {
+            *out = map(requantize_valid(*sum, *multiplier, *shift, zero_point, lo, hi));
+        }
     }
 }
 
@@ -306,244 +404,4 @@ pub fn dequantize_accumulators(
 }
 
 #[cfg(test)]
-mod tests {
-    extern crate std;
-    use super::*;
-    use crate::quant::{quantize_multiplier, reference};
-    use crate::rng::SplitMix64;
-    use std::{vec, vec::Vec};
-
-    struct Case {
-        in_features: usize,
-        out_features: usize,
-        weights: Vec<i8>,
-        bias: Vec<i32>,
-        multipliers: Vec<i32>,
-        shifts: Vec<i32>,
-        zero_point: i32,
-        clamp: (i8, i8),
-        input: Vec<i8>,
-    }
-
-    fn random_case(rng: &mut SplitMix64) -> Case {
-        let in_features = 1 + (rng.next_u64() % 97) as usize;
-        let out_features = 1 + (rng.next_u64() % 23) as usize;
-        let weights = (0..in_features * out_features)
-            .map(|_| (rng.next_u64() as u8 as i8).max(-127))
-            .collect();
-        let bias = (0..out_features)
-            .map(|_| (rng.next_u64() as i32) >> 16)
-            .collect();
-        let mut multipliers = Vec::new();
-        let mut shifts = Vec::new();
-        for _ in 0..out_features {
-            // Real multipliers between 1e-5 and 5e-3, typical of FC layers.
-            let u = (rng.next_u64() >> 11) as f64 / (1_u64 << 53) as f64;
-            let (m, s) = quantize_multiplier(1e-5 * 500f64.powf(u)).unwrap();
-            multipliers.push(m);
-            shifts.push(s);
-        }
-        let zero_point = (rng.next_u64() as u8 as i8) as i32;
-        let clamp = if rng.next_u64().is_multiple_of(3) {
-            (zero_point as i8, 127) // ReLU
-        } else {
-            (-128, 127)
-        };
-        let input = (0..in_features)
-            .map(|_| rng.next_u64() as u8 as i8)
-            .collect();
-        Case {
-            in_features,
-            out_features,
-            weights,
-            bias,
-            multipliers,
-            shifts,
-            zero_point,
-            clamp,
-            input,
-        }
-    }
-
-    fn naive_accumulators(case: &Case) -> Vec<i64> {
-        (0..case.out_features)
-            .map(|o| {
-                let row = &case.weights[o * case.in_features..(o + 1) * case.in_features];
-                let dot: i64 = row
-                    .iter()
-                    .zip(&case.input)
-                    .map(|(w, x)| i64::from(*w) * i64::from(*x))
-                    .sum();
-                i64::from(case.bias[o]) + dot
-            })
-            .collect()
-    }
-
-    #[test]
-    fn matches_naive_wide_reference_on_random_shapes() {
-        let mut rng = SplitMix64::new(0xFC);
-        let mut unclamped = 0_usize;
-        let mut total = 0_usize;
-        for _ in 0..400 {
-            let case = random_case(&mut rng);
-            let layer = FullyConnected::new(
-                case.in_features,
-                case.out_features,
-                &case.weights,
-                &case.bias,
-            );
-            let requant = FcRequant {
-                multipliers: &case.multipliers,
-                shifts: &case.shifts,
-                output_zero_point: case.zero_point,
-                activation_min: case.clamp.0,
-                activation_max: case.clamp.1,
-            };
-            let mut acc = vec![0_i32; case.out_features];
-            layer.forward_accumulators(&case.input, &mut acc).unwrap();
-            let mut dots = Vec::new();
-            layer
-                .for_each_dot(&case.input, |dot| dots.push(dot))
-                .unwrap();
-            let without_bias: Vec<i32> = acc
-                .iter()
-                .zip(&case.bias)
-                .map(|(a, b)| a.wrapping_sub(*b))
-                .collect();
-            assert_eq!(dots, without_bias);
-            let mut out = vec![0_i8; case.out_features];
-            layer.forward(&requant, &case.input, &mut out).unwrap();
-            for (o, wide) in naive_accumulators(&case).into_iter().enumerate() {
-                let wide_i32 = i32::try_from(wide).expect("test accumulators fit i32");
-                assert_eq!(acc[o], wide_i32);
-                let want = reference::requantize(
-                    wide_i32,
-                    case.multipliers[o],
-                    case.shifts[o],
-                    case.zero_point,
-                    case.clamp.0,
-                    case.clamp.1,
-                );
-                assert_eq!(out[o], want, "channel {o}");
-                total += 1;
-                if want != case.clamp.0 && want != case.clamp.1 {
-                    unclamped += 1;
-                }
-            }
-        }
-        assert!(
-            unclamped * 4 > total,
-            "{unclamped} of {total} outputs unclamped"
-        );
-    }
-
-    #[test]
-    fn length_and_parameter_errors() {
-        let weights = [1_i8; 6];
-        let bias = [0_i32; 2];
-        let layer = FullyConnected::new(3, 2, &weights, &bias);
-        let m = [1 << 30; 2];
-        let s = [-3; 2];
-        let good = FcRequant {
-            multipliers: &m,
-            shifts: &s,
-            output_zero_point: 0,
-            activation_min: -128,
-            activation_max: 127,
-        };
-        let mut out = [0_i8; 2];
-        let mut acc = [0_i32; 2];
-        assert!(layer.forward(&good, &[1, 2, 3], &mut out).is_ok());
-        assert_eq!(
-            layer.forward(&good, &[1, 2], &mut out),
-            Err(KernelError::InputLength)
-        );
-        assert_eq!(
-            layer.forward(&good, &[1, 2, 3], &mut out[..1]),
-            Err(KernelError::OutputLength)
-        );
-        assert_eq!(
-            layer.forward_accumulators(&[1, 2, 3], &mut acc[..1]),
-            Err(KernelError::OutputLength)
-        );
-        assert_eq!(
-            layer.forward_accumulators(&[1, 2, 3, 4], &mut acc),
-            Err(KernelError::InputLength)
-        );
-        let bad_weights = FullyConnected::new(3, 2, &weights[..5], &bias);
-        assert_eq!(
-            bad_weights.forward_accumulators(&[1, 2, 3], &mut acc),
-            Err(KernelError::WeightsLength)
-        );
-        let zero_in = FullyConnected::new(0, 2, &[], &bias);
-        assert_eq!(
-            zero_in.forward_accumulators(&[], &mut acc),
-            Err(KernelError::WeightsLength)
-        );
-        let overflow = FullyConnected::new(usize::MAX, 2, &weights, &bias);
-        assert_eq!(overflow.validate(), Err(KernelError::WeightsLength));
-        let bad_bias = FullyConnected::new(3, 2, &weights, &bias[..1]);
-        assert_eq!(
-            bad_bias.forward_accumulators(&[1, 2, 3], &mut acc),
-            Err(KernelError::BiasLength)
-        );
-        let short = FcRequant {
-            multipliers: &m[..1],
-            ..good
-        };
-        assert_eq!(
-            layer.forward(&short, &[1, 2, 3], &mut out),
-            Err(KernelError::RequantLength)
-        );
-        let zp = FcRequant {
-            output_zero_point: 128,
-            ..good
-        };
-        assert_eq!(
-            layer.forward(&zp, &[1, 2, 3], &mut out),
-            Err(KernelError::ZeroPoint)
-        );
-        let range = FcRequant {
-            activation_min: 5,
-            activation_max: 4,
-            ..good
-        };
-        assert_eq!(
-            layer.forward(&range, &[1, 2, 3], &mut out),
-            Err(KernelError::ActivationRange)
-        );
-        let shift = [-3, 31];
-        let bad_shift = FcRequant {
-            shifts: &shift,
-            ..good
-        };
-        assert_eq!(
-            layer.forward(&bad_shift, &[1, 2, 3], &mut out),
-            Err(KernelError::Multiplier)
-        );
-        let neg = [1 << 30, -1];
-        let bad_mult = FcRequant {
-            multipliers: &neg,
-            ..good
-        };
-        assert_eq!(
-            layer.forward(&bad_mult, &[1, 2, 3], &mut out),
-            Err(KernelError::Multiplier)
-        );
-    }
-
-    #[test]
-    fn dequantizes_accumulators_per_channel() {
-        let mut out = [0.0_f32; 3];
-        dequantize_accumulators(&[4, -8, 0], &[0.5, 0.25, 3.0], &mut out).unwrap();
-        assert_eq!(out, [2.0, -2.0, 0.0]);
-        assert_eq!(
-            dequantize_accumulators(&[1, 2], &[1.0], &mut out[..2]),
-            Err(KernelError::ScaleLength)
-        );
-        assert_eq!(
-            dequantize_accumulators(&[1, 2], &[1.0, 1.0], &mut out),
-            Err(KernelError::OutputLength)
-        );
-    }
-}
+mod tests;

@@ -42,8 +42,8 @@ impl Lut8 {
     /// The output code for input code `x`.
     #[inline]
     pub fn lookup(&self, x: i8) -> i8 {
-        // `x as u8 ^ 0x80` maps -128..=127 to 0..=255, always in bounds.
-        let index = usize::from((x as u8) ^ 0x80);
+        // `x + 128` maps -128..=127 to 0..=255, always in bounds.
+        let index = (i32::from(x) + 128) as usize;
         self.table.get(index).copied().unwrap_or(x)
     }
 

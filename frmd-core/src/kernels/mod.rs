@@ -16,16 +16,19 @@ pub mod activation;
 pub mod dot;
 #[cfg(frmd_arm_dsp)]
 mod dsp;
+#[cfg(frmd_arm_dsp)]
+mod dsp_asm;
 pub mod fc;
 pub mod lut;
 pub mod norm;
+pub(crate) mod rows;
 pub mod softmax;
 #[cfg(target_arch = "x86_64")]
 pub mod x86;
 
 pub use activation::{gelu, gelu_sigmoid, gelu_tanh, mish, silu, softplus, Activation};
 pub use dot::dot_i8;
-pub use fc::{dequantize_accumulators, FcRequant, FullyConnected};
+pub use fc::{dequantize_accumulators, FcRequant, FullyConnected, LayerInput};
 pub use lut::Lut8;
 pub use norm::{layer_norm, layer_norm_in_place};
 pub use softmax::softmax_in_place;

@@ -14,13 +14,21 @@
 //! are those of the input scale `input_scale / 2^FINE_INPUT_BITS`. Everything after the first
 //! layer is unchanged. Cost: one more int8 matrix-vector product of the first layer.
 //!
+//! [`InputPrecision::Int16`] gives the same precision in one pass: each value becomes one 16-bit
+//! code on the fine grid (`input_scale / 2^8`, zero point `input_zero_point * 2^8`,
+//! [`quantize_i16`]) and the first layer multiplies int8 weights by int16 codes (on Arm DSP cores
+//! `SMLAD` takes the 16-bit codes as they are). Its bias is at the fine scale and its multipliers
+//! are made for the fine scale, as for two planes.
+//!
 //! Scratch memory is caller-owned and sized by a const generic `WIDTH` that must be at least the
 //! widest layer (input, hidden and output widths); nothing is allocated.
 
 use crate::kernels::{
-    dequantize_accumulators, Activation, FcRequant, FullyConnected, KernelError, Lut8,
+    dequantize_accumulators, Activation, FcRequant, FullyConnected, KernelError, LayerInput, Lut8,
 };
-use crate::quant::{combine_plane_accumulators, quantize_two_plane, requantize_to_i8, QuantParams};
+use crate::quant::{
+    combine_plane_accumulators, quantize_i16, quantize_two_plane, requantize_to_i8, QuantParams,
+};
 
 /// Why a forward pass refused its arguments.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -40,8 +48,8 @@ pub enum ModelError {
     OutputLength,
     /// The input quantization parameters are invalid.
     InputParams,
-    /// [`InputPrecision::TwoPlane`] needs a hidden first layer (the output layer's accumulators
-    /// are dequantized at the coarse input scale).
+    /// [`InputPrecision::TwoPlane`] and [`InputPrecision::Int16`] need a hidden first layer (the
+    /// output layer's accumulators are dequantized at the int8 input scale).
     TwoPlaneWithoutHiddenLayer,
 }
 
@@ -66,7 +74,7 @@ impl core::fmt::Display for ModelError {
             Self::OutputLength => f.write_str("output length differs from the last layer's width"),
             Self::InputParams => f.write_str("input quantization parameters are invalid"),
             Self::TwoPlaneWithoutHiddenLayer => {
-                f.write_str("two-plane input quantization needs a hidden first layer")
+                f.write_str("two-plane or 16-bit input quantization needs a hidden first layer")
             }
         }
     }
@@ -84,6 +92,26 @@ pub struct Int8Layer<'a> {
 }
 
 impl Int8Layer<'_> {
+    /// The layer on `input`: fully connected, requantized, activation table applied, in one pass
+    /// (`output` is `out_features` long).
+    pub fn forward(&self, input: LayerInput<'_>, output: &mut [i8]) -> Result<(), KernelError> {
+        self.fc
+            .forward_activated(&self.requant, self.activation, input, output)
+    }
+
+    /// [`Self::forward`] without repeating the per-channel checks of `requant`
+    /// ([`FcRequant::validate`], O(out_features)), for a layer whose requantization was validated
+    /// once, e.g. when a network was built; shapes are still checked. With parameters that would
+    /// not validate the outputs are unspecified (never a panic).
+    pub fn forward_prevalidated(
+        &self,
+        input: LayerInput<'_>,
+        output: &mut [i8],
+    ) -> Result<(), KernelError> {
+        self.fc
+            .forward_validated(&self.requant, self.activation, input, output)
+    }
+
     /// First-layer accumulators of a two-plane input ([`InputPrecision::TwoPlane`]):
     /// `acc[o] = combine_plane_accumulators(bias[o] + w[o] . coarse, w[o] . fine)`.
     /// `coarse` and `fine` are `in_features` long, `acc` is `out_features` long.
@@ -142,6 +170,17 @@ pub enum InputPrecision {
     /// A coarse and a fine int8 plane per value (see the module docs); the first hidden layer's
     /// multipliers must be for the input scale `input_scale / 2^FINE_INPUT_BITS`.
     TwoPlane,
+    /// One 16-bit code per value on the fine grid (see the module docs); the first hidden
+    /// layer's bias and multipliers must be for the input scale `input_scale / 2^FINE_INPUT_BITS`.
+    Int16,
+}
+
+/// Writes the 16-bit codes ([`quantize_i16`]) of `input` into `codes` (values beyond the shorter
+/// slice are left alone).
+pub fn quantize_input_i16(input: &[f32], params: QuantParams, codes: &mut [i16]) {
+    for (code, x) in codes.iter_mut().zip(input) {
+        *code = quantize_i16(*x, params);
+    }
 }
 
 /// Writes the two-plane codes ([`quantize_two_plane`]) of `input` into `coarse` and `fine`
@@ -251,8 +290,30 @@ impl Int8Mlp<'_> {
         self.forward_with_input(InputPrecision::Int8, input, output, scratch)
     }
 
+    /// Checks every hidden layer's requantization parameters ([`FcRequant::validate`]).
+    pub fn validate_requantization(&self) -> Result<(), ModelError> {
+        for layer in self.hidden {
+            layer.requant.validate(layer.fc.out_features)?;
+        }
+        Ok(())
+    }
+
     /// [`Self::forward`] with the input quantized as `precision` says.
     pub fn forward_with_input<const WIDTH: usize>(
+        &self,
+        precision: InputPrecision,
+        input: &[f32],
+        output: &mut [f32],
+        scratch: &mut Int8Scratch<WIDTH>,
+    ) -> Result<(), ModelError> {
+        self.validate_requantization()?;
+        self.forward_prevalidated(precision, input, output, scratch)
+    }
+
+    /// [`Self::forward_with_input`] for a network whose requantization passed
+    /// [`Self::validate_requantization`] before (the per-channel checks are not repeated; see
+    /// [`Int8Layer::forward_prevalidated`]).
+    pub fn forward_prevalidated<const WIDTH: usize>(
         &self,
         precision: InputPrecision,
         input: &[f32],
@@ -306,6 +367,25 @@ impl Int8Mlp<'_> {
                 width = out_width;
                 hidden = rest;
             }
+            InputPrecision::Int16 => {
+                let (layer, rest) = self
+                    .hidden
+                    .split_first()
+                    .ok_or(ModelError::TwoPlaneWithoutHiddenLayer)?;
+                // The accumulators are free until the output layer: they hold the 16-bit codes.
+                let codes = bytemuck::cast_slice_mut::<i32, i16>(accumulators.as_mut_slice())
+                    .get_mut(..in_width)
+                    .ok_or(ModelError::ScratchTooSmall)?;
+                quantize_input_i16(input, self.input, codes);
+                let out_width = layer.fc.out_features;
+                let layer_output = next
+                    .get_mut(..out_width)
+                    .ok_or(ModelError::ScratchTooSmall)?;
+                layer.forward_prevalidated(LayerInput::Int16(codes), layer_output)?;
+                core::mem::swap(&mut current, &mut next);
+                width = out_width;
+                hidden = rest;
+            }
         }
         for layer in hidden {
             let out_width = layer.fc.out_features;
@@ -313,12 +393,7 @@ impl Int8Mlp<'_> {
             let layer_output = next
                 .get_mut(..out_width)
                 .ok_or(ModelError::ScratchTooSmall)?;
-            layer
-                .fc
-                .forward(&layer.requant, layer_input, layer_output)?;
-            if let Some(lut) = layer.activation {
-                lut.apply_in_place(layer_output);
-            }
+            layer.forward_prevalidated(LayerInput::Int8(layer_input), layer_output)?;
             core::mem::swap(&mut current, &mut next);
             width = out_width;
         }

@@ -13,6 +13,8 @@ use crate::quant::{
 use crate::rng::Rng;
 use std::{vec, vec::Vec};
 
+mod wide_input;
+
 const WIDTH: usize = 48;
 
 struct FloatLayer {

@@ -130,8 +130,8 @@ impl<'a, const WIDTH: usize> Int8Network<'a, WIDTH> {
     }
 
     /// [`Self::from_parts`] with the input quantized as `precision` says;
-    /// [`InputPrecision::TwoPlane`] needs a hidden layer and first-layer multipliers made for it
-    /// (see [`crate::model::mlp`]).
+    /// [`InputPrecision::TwoPlane`] and [`InputPrecision::Int16`] need a hidden layer and a first
+    /// layer made for them (see [`crate::model::mlp`]).
     pub fn from_parts_with_input(
         input: QuantParams,
         precision: InputPrecision,
@@ -140,7 +140,7 @@ impl<'a, const WIDTH: usize> Int8Network<'a, WIDTH> {
         output_scales: &'a [f32],
         first_layer_biases: &'a [i32],
     ) -> Result<Self, PolicyError> {
-        if precision == InputPrecision::TwoPlane && layers.is_empty() {
+        if precision != InputPrecision::Int8 && layers.is_empty() {
             return Err(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer));
         }
         if layers.len() > MAX_HIDDEN_LAYERS {
@@ -157,6 +157,8 @@ impl<'a, const WIDTH: usize> Int8Network<'a, WIDTH> {
             output_scales,
         };
         mlp.validate::<WIDTH>().map_err(PolicyError::Model)?;
+        // Once here, so that `forward` need not repeat the per-channel checks.
+        mlp.validate_requantization().map_err(PolicyError::Model)?;
         let first_width = layers
             .first()
             .map_or(output.out_features, |layer| layer.fc.out_features);
@@ -239,7 +241,7 @@ impl<const WIDTH: usize> Network for Int8Network<'_, WIDTH> {
             output: last,
             output_scales: self.output_scales,
         };
-        mlp.forward_with_input(self.input_precision, input, output, &mut self.scratch)
+        mlp.forward_prevalidated(self.input_precision, input, output, &mut self.scratch)
             .map_err(PolicyError::Model)
     }
 }

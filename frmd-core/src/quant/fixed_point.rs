@@ -138,7 +138,11 @@ pub fn requantize_to_i8(
     activation_min: i8,
     activation_max: i8,
 ) -> i8 {
-    let scaled = multiply_by_quantized_multiplier(acc, multiplier, shift);
+    let scaled = if (SHIFT_MIN..=0).contains(&shift) && multiplier != i32::MIN {
+        scale_down(acc, multiplier, shift.unsigned_abs())
+    } else {
+        multiply_by_quantized_multiplier(acc, multiplier, shift)
+    };
     let with_offset = scaled.saturating_add(output_zero_point);
     let clamped = with_offset
         .max(i32::from(activation_min))
@@ -147,7 +151,47 @@ pub fn requantize_to_i8(
     clamped as i8
 }
 
+/// [`requantize_to_i8`] for parameters that passed `kernels::FcRequant::validate` (multiplier
+/// non-negative, shift in `SHIFT_MIN..=SHIFT_MAX`), with one branch on the shift's sign instead
+/// of the full range check; equal to [`requantize_to_i8`] there, defined (never a panic) anywhere.
+#[inline(always)]
+pub fn requantize_valid(
+    acc: i32,
+    multiplier: i32,
+    shift: i32,
+    output_zero_point: i32,
+    activation_min: i8,
+    activation_max: i8,
+) -> i8 {
+    let scaled = if shift <= 0 {
+        scale_down(acc, multiplier, shift.unsigned_abs())
+    } else {
+        multiply_by_quantized_multiplier(acc, multiplier, shift)
+    };
+    let with_offset = scaled.saturating_add(output_zero_point);
+    with_offset
+        .max(i32::from(activation_min))
+        .min(i32::from(activation_max)) as i8
+}
+
 #[inline]
 fn saturate_to_i32(value: i64) -> i32 {
     value.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
+}
+
+/// [`multiply_by_quantized_multiplier`] for `shift = -exponent` with `exponent` in `0..=31` and
+/// `multiplier != i32::MIN` (every layer whose real multiplier is below 1), without branches:
+/// the high multiply is `floor((acc * multiplier + 2^30) / 2^31)` (one 64-bit product; its only
+/// saturating case needs `multiplier == i32::MIN`), and the rounding division of `x` by
+/// `2^exponent`, half away from zero, is the half-up division of `y = x - [x < 0]`:
+/// `floor(y / 2^e + 1/2) = (y >> e) + bit_{e-1}(y)` for `e >= 1` (`y = x` for `e = 0`).
+/// `x >= 1 - 2^31`, so `y` does not overflow.
+#[inline(always)]
+pub(crate) fn scale_down(acc: i32, multiplier: i32, exponent: u32) -> i32 {
+    let exponent = exponent & 31;
+    let product = i64::from(acc) * i64::from(multiplier);
+    let high = ((product + (1_i64 << 30)) >> 31) as i32;
+    let divides = 0_i32.wrapping_sub(i32::from(exponent != 0));
+    let y = high.wrapping_add((high >> 31) & divides);
+    (y >> exponent).wrapping_add((y.wrapping_shl(1) >> exponent) & 1)
 }

@@ -18,14 +18,15 @@ mod fixed_point;
 mod params;
 
 pub use fixed_point::{
-    multiply_by_quantized_multiplier, quantize_multiplier, requantize_to_i8,
+    multiply_by_quantized_multiplier, quantize_multiplier, requantize_to_i8, requantize_valid,
     rounding_divide_by_pot, saturating_rounding_doubling_high_mul, Q31_MANTISSA_MIN, SHIFT_MAX,
     SHIFT_MIN,
 };
 pub use params::{
-    combine_plane_accumulators, dequantize, dequantize_accumulator, fold_input_zero_point,
-    quantize, quantize_bias, quantize_two_plane, quantize_weight, quantize_weights_per_channel,
-    requantization_multiplier, symmetric_weight_scale, QuantParams, FINE_INPUT_BITS, WEIGHT_MAX,
+    combine_plane_accumulators, dequantize, dequantize_accumulator, dequantize_i16,
+    fold_input_zero_point, quantize, quantize_bias, quantize_i16, quantize_two_plane,
+    quantize_weight, quantize_weights_per_channel, requantization_multiplier, round_to_i32,
+    symmetric_weight_scale, wide_scale, wide_zero_point, QuantParams, FINE_INPUT_BITS, WEIGHT_MAX,
     WEIGHT_MIN,
 };
 
@@ -35,6 +36,8 @@ pub mod reference;
 mod tests;
 #[cfg(test)]
 mod two_plane_tests;
+#[cfg(test)]
+mod wide_input_tests;
 
 /// Why a quantization parameter cannot be computed. Small and `Copy`; each variant names the
 /// offending quantity.

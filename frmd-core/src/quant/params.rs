@@ -99,14 +99,65 @@ impl QuantParams {
 /// (TFLite reference `Quantize`). NaN maps to `zero_point`; infinities saturate.
 #[inline]
 pub fn quantize(value: f32, params: QuantParams) -> i8 {
-    let steps = libm::roundf(value / params.scale) as i32; // `as` saturates, NaN -> 0
-    let code = steps
+    let code = round_to_i32(value / params.scale)
         .saturating_add(params.zero_point)
         .clamp(ACTIVATION_QMIN, ACTIVATION_QMAX);
     code as i8
 }
 
-/// Bits of precision the fine input plane adds: its scale is the input scale `/ 2^FINE_INPUT_BITS`.
+/// `libm::roundf(value) as i32` (round half away from zero, saturating, NaN to 0) without
+/// branches on the value, so that quantizing an observation costs the same instructions whatever
+/// it is: `t = value as i32` truncates toward zero (saturating), and the fraction `value - t`
+/// (exact: for `|value| < 2^23` it is the fractional part, above that 0 or beyond the saturated
+/// range) moves `t` one step away from zero when it is at least one half.
+#[inline]
+pub fn round_to_i32(value: f32) -> i32 {
+    let truncated = value as i32;
+    let fraction = value - truncated as f32;
+    truncated
+        .saturating_add(i32::from(fraction >= 0.5))
+        .saturating_sub(i32::from(fraction <= -0.5))
+}
+
+/// The 16-bit input plane (`model::mlp::InputPrecision::Int16`): the code of `value` on a grid
+/// `2^FINE_INPUT_BITS` times finer than the int8 grid of `params`:
+/// `clamp(round_half_away_from_zero(value / wide_scale) + wide_zero_point, -32768, 32767)` with
+/// [`wide_scale`] and [`wide_zero_point`]. The codes span exactly the real range of the two-plane
+/// input: from half an int8 step below the int8 range to half an int8 step (less one fine step)
+/// above it. `scale / 2^8` is exact in f32 for every valid scale above `2^-118`.
+#[inline]
+pub fn quantize_i16(value: f32, params: QuantParams) -> i16 {
+    let code = round_to_i32(value / wide_scale(params))
+        .saturating_add(wide_zero_point(params))
+        .clamp(i32::from(i16::MIN), i32::from(i16::MAX));
+    code as i16
+}
+
+/// `wide_scale * (code - wide_zero_point)` in f32: the real value of a 16-bit input code.
+#[inline]
+pub fn dequantize_i16(code: i16, params: QuantParams) -> f32 {
+    let steps = i32::from(code).saturating_sub(wide_zero_point(params));
+    wide_scale(params) * steps as f32
+}
+
+/// Scale of the 16-bit input plane: `params.scale / 2^FINE_INPUT_BITS`.
+#[inline]
+pub fn wide_scale(params: QuantParams) -> f32 {
+    params.scale / (1_u32 << FINE_INPUT_BITS) as f32
+}
+
+/// Zero point of the 16-bit input plane: `params.zero_point * 2^FINE_INPUT_BITS + 2^7`, which
+/// centres the 65536 codes on the int8 range (`[-32640, 32640]` for valid int8 zero points).
+#[inline]
+pub fn wide_zero_point(params: QuantParams) -> i32 {
+    params
+        .zero_point
+        .saturating_mul(1 << FINE_INPUT_BITS)
+        .saturating_add(1 << (FINE_INPUT_BITS - 1))
+}
+
+/// Bits of precision the fine input plane of a two-plane input, and the 16-bit input plane, add
+/// below the int8 grid: their scale is the input scale `/ 2^FINE_INPUT_BITS`.
 pub const FINE_INPUT_BITS: u32 = 8;
 
 /// Two-plane quantization of one f32 input (about 16-bit precision from two int8 codes):
@@ -124,7 +175,7 @@ pub fn quantize_two_plane(value: f32, params: QuantParams) -> (i8, i8) {
     let coarse = quantize(value, params);
     let residual = value - dequantize(coarse, params);
     let fine_params = QuantParams {
-        scale: params.scale / (1_u32 << FINE_INPUT_BITS) as f32,
+        scale: wide_scale(params),
         zero_point: 0,
     };
     (coarse, quantize(residual, fine_params))

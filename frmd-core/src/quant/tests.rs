@@ -141,6 +141,7 @@ fn requantization_edges_match_model() {
                             got, want,
                             "acc={acc} m={m} shift={shift} zp={zp} clamp={lo}..={hi}"
                         );
+                        assert_eq!(requantize_valid(acc, m, shift, zp, lo, hi), want);
                         checked += 1;
                     }
                 }
@@ -156,6 +157,35 @@ fn requantization_edges_match_model() {
                 reference::scale(acc, Q31_MAX, shift),
                 "acc={acc} shift={shift}"
             );
+        }
+    }
+}
+
+/// The branch-free path `requantize_to_i8` takes for right shifts equals the general formula for
+/// every accumulator edge, multiplier (negative ones too, all but `i32::MIN`) and exponent.
+#[test]
+fn scale_down_equals_general_path() {
+    let multipliers = [
+        0,
+        1,
+        -1,
+        Q31_MANTISSA_MIN,
+        1_518_500_250,
+        -1_518_500_250,
+        Q31_MAX,
+        i32::MIN + 1,
+    ];
+    let mut rng = SplitMix64::new(0xD0);
+    let random = (0..2000).map(|_| rng.next_u64() as i32);
+    for acc in edge_accumulators().into_iter().chain(random) {
+        for &m in &multipliers {
+            for exponent in 0..=31_u32 {
+                assert_eq!(
+                    fixed_point::scale_down(acc, m, exponent),
+                    multiply_by_quantized_multiplier(acc, m, -(exponent as i32)),
+                    "acc={acc} m={m} exponent={exponent}"
+                );
+            }
         }
     }
 }
@@ -222,6 +252,7 @@ fn requantization_one_million_random_inputs_match_model() {
         };
         let got = requantize_to_i8(acc, multiplier, shift, zero_point, lo, hi);
         let want = reference::requantize(acc, multiplier, shift, zero_point, lo, hi);
+        assert_eq!(requantize_valid(acc, multiplier, shift, zero_point, lo, hi), want);
         assert_eq!(
             got, want,
             "acc={acc} m={multiplier} shift={shift} zp={zero_point} {lo}..={hi}"

@@ -11,6 +11,7 @@ use frmd_export::calibrate::{CalibrationSet, RangeMethod};
 use frmd_export::checkpoint::BackboneConfig;
 use frmd_export::export::{export_checkpoint, export_transformer_checkpoint, ExportOptions, Exported, ExportedTransformer};
 use frmd_export::MemoryFigures;
+use frmd_core::model::mlp::InputPrecision;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -43,10 +44,10 @@ pub struct ExportArgs {
     /// Keep the raw input segments (no range balancing of the trajectory and rate inputs).
     #[arg(long)]
     pub no_balance_inputs: bool,
-    /// Quantize the model input to one int8 plane (default: two planes, ~16-bit input).
+    /// Quantize the model input to one int8 plane (default: one 16-bit plane).
     #[arg(long)]
     pub int8_input: bool,
-    /// Two-plane input: widen the calibrated input range by this factor (>= 1).
+    /// 16-bit input: widen the calibrated input range by this factor (>= 1).
     #[arg(long, default_value_t = frmd_export::export::DEFAULT_INPUT_HEADROOM)]
     pub input_headroom: f32,
     /// With --data: also store the calibration rows as the checkpoint's calibration.safetensors.
@@ -64,10 +65,11 @@ pub struct ExportInfo {
     /// Input range balancing (`frmd_export::fold::FoldedMlp::with_input_gains`).
     #[serde(default = "default_true")]
     pub balance_inputs: bool,
-    /// Two-plane input quantization (`frmd_core::model::mlp::InputPrecision::TwoPlane`).
+    /// About 16-bit input precision: the 16-bit input plane
+    /// (`frmd_core::model::mlp::InputPrecision::Int16`; before blob format 3, two int8 planes).
     #[serde(default = "default_true")]
     pub two_plane_input: bool,
-    /// Input range widening with two-plane input.
+    /// Input range widening with the 16-bit input.
     #[serde(default = "default_headroom")]
     pub input_headroom: f32,
 }
@@ -110,7 +112,7 @@ fn calibration_set(info: &ExportInfo) -> anyhow::Result<Option<CalibrationSet>> 
 
 fn options(info: &ExportInfo) -> anyhow::Result<ExportOptions> {
     let ranges: RangeMethod = info.calibration.parse()?;
-    Ok(ExportOptions { steps: info.steps, ranges, balance_inputs: info.balance_inputs, two_plane_input: info.two_plane_input, input_headroom: info.input_headroom })
+    Ok(ExportOptions { steps: info.steps, ranges, balance_inputs: info.balance_inputs, input_precision: if info.two_plane_input { InputPrecision::Int16 } else { InputPrecision::Int8 }, input_headroom: info.input_headroom })
 }
 
 /// Whether the checkpoint `info` names has a transformer backbone (which picks the exporter).

@@ -58,7 +58,7 @@ fn common(tiny: &Tiny, data: &Path, out: PathBuf, steps: usize) -> CommonArgs {
 /// `<temp>/<name>-<pid>`.
 impl TinyRun {
     /// `frmd export` arguments writing `ckpt` to `baked` and to `dir/student.blob` (one step,
-    /// min-max calibration, the default two-plane input).
+    /// min-max calibration, the default 16-bit input).
     pub fn export_args(&self, ckpt: &Path) -> ExportArgs {
         ExportArgs {
             ckpt: ckpt.to_path_buf(),

@@ -1,10 +1,10 @@
 //! Firmware: synthetic int8 MLP + baked ProDMP decoder on a fixed list of observations (see the
-//! crate docs and src/mlp_workload.rs).
+//! crate docs and `frmd_firmware_support::mlp_workload`).
 #![no_std]
 #![no_main]
 
 use cortex_m_rt::entry;
-use frmd_cortex_m::mlp_workload::{MlpWorkload, CASES};
+use frmd_firmware_support::mlp_workload::{MlpWorkload, CASES};
 use frmd_cortex_m::report::exit_failure;
 use frmd_cortex_m::{baked_mlp, bench, BAKED_PRODMP};
 

@@ -11,9 +11,9 @@
 use cortex_m_rt::entry;
 use frmd_core::model::mlp::InputPrecision;
 use frmd_core::policy::{Policy, PolicyError};
-use frmd_cortex_m::policy_workload::{policy_act_macs, PolicyWorkload, CASES, STUDENT_NAME};
+use frmd_firmware_support::policy_workload::{policy_act_macs, PolicyWorkload, CASES, STUDENT_NAME};
 use frmd_cortex_m::report::exit_failure;
-use frmd_cortex_m::stages::{mlp_marks, StagedMlpNetwork};
+use frmd_firmware_support::stages::{mlp_marks, StagedMlpNetwork};
 use frmd_cortex_m::timer::Calibration;
 use frmd_cortex_m::{bench, stage_report};
 
@@ -27,7 +27,7 @@ mod baked {
 }
 
 /// Hidden layers of the student's MLP.
-const LAYERS: usize = frmd_cortex_m::shape::MLP_HIDDEN.len();
+const LAYERS: usize = frmd_firmware_support::shape::MLP_HIDDEN.len();
 
 #[entry]
 fn main() -> ! {

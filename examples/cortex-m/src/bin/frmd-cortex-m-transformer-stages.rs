@@ -8,19 +8,19 @@
 
 use cortex_m_rt::entry;
 use frmd_core::policy::Policy;
-use frmd_cortex_m::policy_workload::{PolicyWorkload, CASES};
+use frmd_firmware_support::policy_workload::{PolicyWorkload, CASES};
 use frmd_cortex_m::report::exit_failure;
-use frmd_cortex_m::shape::{
+use frmd_firmware_support::shape::{
     DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
     TRANSFORMER_SHAPE,
 };
 use frmd_core::model::transformer::{Int8Transformer, TransformerScratch};
 use frmd_core::policy::PolicyError;
 use frmd_cortex_m::timer::Calibration;
-use frmd_cortex_m::transformer_network::TransformerNetwork;
+use frmd_firmware_support::transformer_network::TransformerNetwork;
 use frmd_cortex_m::{baked_transformer, bench, stage_report};
 
-/// The module frmd-export generated for the synthetic MLP policy (src/synthetic_policy.rs); only
+/// The module frmd-export generated for the synthetic MLP policy (`frmd_firmware_support::synthetic::policy`); only
 /// its `config()` is used here (the
 /// MLP weights are not referenced, so the linker drops them).
 #[allow(dead_code)]

@@ -1,7 +1,7 @@
 //! Firmware: the synthetic one-step policy configuration baked by frmd-export (normalization,
 //! step constants, decoder, input layout) with a synthetic int8 transformer-lite backbone
-//! (src/synthetic_transformer.rs) as its network; `Policy::act` on the fixed observation
-//! histories of src/policy_workload.rs. The per-stage breakdown is a separate image
+//! (`frmd_firmware_support::synthetic::transformer`) as its network; `Policy::act` on the fixed observation
+//! histories of `frmd_firmware_support::policy_workload`. The per-stage breakdown is a separate image
 //! (src/bin/frmd-cortex-m-transformer-stages.rs), so that its code does not change this one's
 //! inlining or size.
 #![no_std]
@@ -10,15 +10,15 @@
 use cortex_m_rt::entry;
 use frmd_core::model::transformer::TransformerScratch;
 use frmd_core::policy::Policy;
-use frmd_cortex_m::policy_workload::{PolicyWorkload, CASES};
+use frmd_firmware_support::policy_workload::{PolicyWorkload, CASES};
 use frmd_cortex_m::report::exit_failure;
-use frmd_cortex_m::shape::{
+use frmd_firmware_support::shape::{
     DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
 };
-use frmd_cortex_m::transformer_network::TransformerNetwork;
+use frmd_firmware_support::transformer_network::TransformerNetwork;
 use frmd_cortex_m::{baked_transformer, bench};
 
-/// The module frmd-export generated for the synthetic MLP policy (src/synthetic_policy.rs); only
+/// The module frmd-export generated for the synthetic MLP policy (`frmd_firmware_support::synthetic::policy`); only
 /// its `config()` is used here (the
 /// MLP weights are not referenced, so the linker drops them).
 #[allow(dead_code)]

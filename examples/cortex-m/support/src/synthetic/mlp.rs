@@ -1,12 +1,11 @@
-//! A deterministic synthetic int8 MLP with the firmware policy's shape (std; used by `build.rs`,
-//! which bakes it into the firmware, and by the host test, which rebuilds it in memory).
+//! A deterministic synthetic int8 MLP with the firmware policy's shape (used by `build.rs`, which
+//! bakes it into the `mlp` image, and by the host test, which rebuilds it in memory).
 //!
-//! It stands in for an exported student until frmd-export bakes real ones: float weights are drawn
+//! Float weights are drawn
 //! from `frmd_core::rng::Rng` and quantized with `frmd_core::quant` the way the exporter does
 //! (symmetric per-channel weights, asymmetric per-tensor activations, int32 bias with the input
 //! zero point folded, Q31 requantization, SiLU as a 256-entry LUT). Only the instruction count,
 //! memory and host/firmware bit-equality matter here, not what the network computes.
-#![allow(dead_code)]
 
 use frmd_core::kernels::{silu, FcRequant, FullyConnected, Lut8};
 use frmd_core::model::mlp::{Int8Layer, Int8Mlp};

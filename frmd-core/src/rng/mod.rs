@@ -9,13 +9,11 @@
 //!   outputs `a`, `b` and sets `state = [lo(a), hi(a), lo(b), hi(b)]` (same as `rand_xoshiro`'s
 //!   `seed_from_u64`). SplitMix64 never outputs zero twice in a row, so the state is never all zero.
 //! - [`Rng::uniform`]: `(next_u32() >> 8) * 2^-24`, exactly representable, in `[0, 1)`.
-//! - [`Rng::gaussian`]: Box-Muller in f32 with `libm`. Each pair uses two `u32` draws,
-//!   `u1 = ((x1 >> 8) + 1) * 2^-24` in `(0, 1]` and `u2 = (x2 >> 8) * 2^-24`; with
-//!   `r = sqrt(-2 ln u1)` and `theta = 2 pi u2` it yields `r cos theta` first and caches
-//!   `r sin theta` for the next call. Samples are bounded by `sqrt(48 ln 2) ~ 5.77`.
-//!
-//! Only IEEE-754 basic operations and `libm`'s software functions are used, and Rust never fuses
-//! `a * b + c` into an FMA implicitly, so the f32 samples are the same bits on x86-64 and Cortex-M.
+//! - [`Rng::gaussian`]: one `u32` draw through the integer quantile table of [`normal`]
+//!   (sign bit, octave of the tail probability by leading zeros, linear interpolation), giving `z`
+//!   in units of `2^-20` that converts exactly to f32. Samples are bounded by 5.663. Integer
+//!   arithmetic only, so the samples are the same bits on every target, and the same
+//!   instructions for every draw.
 
 /// SplitMix64 generator (used to expand seeds).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -40,11 +38,15 @@ impl SplitMix64 {
     }
 }
 
-/// xoshiro128++ generator with a Box-Muller Gaussian on top.
-#[derive(Clone, Copy, Debug, PartialEq)]
+mod normal;
+mod normal_table;
+
+pub use normal::normal_q20;
+
+/// xoshiro128++ generator with a table-driven Gaussian on top.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Rng {
     state: [u32; 4],
-    spare_gaussian: Option<f32>,
 }
 
 impl Rng {
@@ -55,7 +57,6 @@ impl Rng {
         let b = seeder.next_u64();
         Self {
             state: [a as u32, (a >> 32) as u32, b as u32, (b >> 32) as u32],
-            spare_gaussian: None,
         }
     }
 
@@ -64,10 +65,7 @@ impl Rng {
         if state == [0; 4] {
             return None;
         }
-        Some(Self {
-            state,
-            spare_gaussian: None,
-        })
+        Some(Self { state })
     }
 
     /// Next 32-bit output of xoshiro128++.
@@ -92,17 +90,10 @@ impl Rng {
         (self.next_u32() >> 8) as f32 * UNIT_STEP
     }
 
-    /// Standard normal f32 sample (Box-Muller; the second value of each pair is cached).
+    /// Standard normal f32 sample: [`normal_q20`] of the next draw, times `2^-20` (exact).
+    #[inline]
     pub fn gaussian(&mut self) -> f32 {
-        if let Some(spare) = self.spare_gaussian.take() {
-            return spare;
-        }
-        let u1 = ((self.next_u32() >> 8) + 1) as f32 * UNIT_STEP;
-        let u2 = (self.next_u32() >> 8) as f32 * UNIT_STEP;
-        let radius = libm::sqrtf(-2.0 * libm::logf(u1));
-        let (sin, cos) = libm::sincosf(core::f32::consts::TAU * u2);
-        self.spare_gaussian = Some(radius * sin);
-        radius * cos
+        normal_q20(self.next_u32()) as f32 * normal::Z_UNIT
     }
 
     /// Fills `out` with consecutive [`Rng::gaussian`] samples.
@@ -165,50 +156,6 @@ mod tests {
         for _ in 0..16 {
             assert_eq!(manual.next_u32(), seeded.next_u32());
         }
-    }
-
-    #[test]
-    fn gaussian_stream_is_pinned() {
-        // Pins the exact Box-Muller stream: recomputes the first pair from the raw u32 draws.
-        let mut raw = Rng::new(2024);
-        let (x1, x2) = (raw.next_u32(), raw.next_u32());
-        let u1 = ((x1 >> 8) + 1) as f32 * UNIT_STEP;
-        let u2 = (x2 >> 8) as f32 * UNIT_STEP;
-        let r = libm::sqrtf(-2.0 * libm::logf(u1));
-        let mut rng = Rng::new(2024);
-        let mut pair = [0.0_f32; 2];
-        rng.fill_gaussian(&mut pair);
-        let (sin, cos) = libm::sincosf(core::f32::consts::TAU * u2);
-        assert_eq!(pair[0].to_bits(), (r * cos).to_bits());
-        assert_eq!(pair[1].to_bits(), (r * sin).to_bits());
-        assert_eq!(rng.next_u32(), raw.next_u32());
-    }
-
-    #[test]
-    fn gaussian_moments() {
-        let mut rng = Rng::new(7);
-        let n = 100_000;
-        let (mut sum, mut sum2, mut sum3, mut sum4) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
-        let mut max_abs = 0.0_f32;
-        for _ in 0..n {
-            let z = rng.gaussian();
-            assert!(z.is_finite());
-            max_abs = max_abs.max(z.abs());
-            let z = f64::from(z);
-            sum += z;
-            sum2 += z * z;
-            sum3 += z * z * z;
-            sum4 += z * z * z * z;
-        }
-        let n = f64::from(n);
-        let mean = sum / n;
-        let var = sum2 / n - mean * mean;
-        // Standard errors: mean 1/sqrt(n) = 0.0032, variance sqrt(2/n) = 0.0045.
-        assert!(mean.abs() < 0.015, "mean {mean}");
-        assert!((var - 1.0).abs() < 0.02, "variance {var}");
-        assert!((sum3 / n).abs() < 0.05, "third moment {}", sum3 / n);
-        assert!((sum4 / n - 3.0).abs() < 0.1, "fourth moment {}", sum4 / n);
-        assert!(max_abs > 3.5 && max_abs <= 5.8, "max |z| {max_abs}");
     }
 
     #[test]

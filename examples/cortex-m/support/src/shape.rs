@@ -1,9 +1,7 @@
-//! Shape of the policy the firmware runs, shared by `build.rs` (which bakes the ProDMP tables on
-//! the host), the firmware, `src/synthetic_mlp.rs` and the host-side digest check
-//! (`frmd-core/tests/cortex_m_qemu.rs`).
+//! Shape of the policies the firmware runs, shared by `build.rs` (which bakes the ProDMP tables on
+//! the host), the firmware images, the synthetic generators and the host digest tests.
 //! Values follow the built-in tasks: 2 DoF (x, y targets in metres), 0.1 s control period,
 //! horizon 12, 20 basis functions (DESIGN.md s.2 policy convention).
-#![allow(dead_code)]
 
 use frmd_core::prodmp::ProDmpConfig;
 
@@ -18,7 +16,7 @@ pub const PARAMS: usize = NUM_BASIS + 1;
 /// Control period, seconds.
 pub const CONTROL_DT: f64 = 0.1;
 
-/// Synthetic int8 MLP (src/synthetic_mlp.rs): input width (observation history, noisy trajectory
+/// Synthetic int8 MLP (`synthetic::mlp`): input width (observation history, noisy trajectory
 /// and noise features of a small policy, rounded to 40), hidden widths, widest layer.
 pub const MLP_INPUT: usize = 40;
 pub const MLP_HIDDEN: [usize; 3] = [256, 256, 256];
@@ -26,7 +24,7 @@ pub const MLP_WIDTH: usize = 256;
 /// MLP output: the ProDMP parameters of every DoF, DoF-major.
 pub const MLP_OUTPUT: usize = DOF * PARAMS;
 
-/// Synthetic one-step policy (src/synthetic_policy.rs): observation history length, observation
+/// Synthetic one-step policy (`synthetic::policy`): observation history length, observation
 /// dimension, sampling steps, model input width (standard layout: `M*O + K + K + N*K`).
 pub const POLICY_HISTORY: usize = 2;
 pub const POLICY_OBS_DIM: usize = 8;
@@ -45,7 +43,7 @@ pub fn config() -> ProDmpConfig {
     ProDmpConfig::policy(DOF, NUM_BASIS, HORIZON, CONTROL_DT)
 }
 
-/// Synthetic transformer-lite policy network (src/synthetic_transformer.rs): 3 pre-LayerNorm
+/// Synthetic transformer-lite policy network (`synthetic::transformer`): 3 pre-LayerNorm
 /// blocks of width 128 with 2 heads over `HORIZON + 2 = 14` tokens; the condition is the standard
 /// layout's first three segments (observation history, previous action, its rate times the control
 /// period), the trajectory tokens the `c_in`-scaled noisy trajectory; the head outputs the ProDMP

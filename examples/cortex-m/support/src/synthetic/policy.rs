@@ -1,4 +1,4 @@
-//! A deterministic synthetic one-step policy as a `frmd_export::QuantizedPolicy` (std; used by
+//! A deterministic synthetic one-step policy as a `frmd_export::QuantizedPolicy` (used by
 //! `build.rs`, which bakes it with `frmd_export::bake::write_module` for the `transformer` images,
 //! and by the host test `frmd-export/tests/cortex_m_transformer.rs`, which writes it as a blob and
 //! runs it with `frmd_core::blob::LoadedPolicy`). Only its configuration (normalization, step
@@ -6,15 +6,14 @@
 //!
 //! Shape: history 2 x 8 observations, 2 DoF, horizon 12, 20 basis functions, one sampling step at
 //! sigma_max, standard input layout (44 inputs), int8 MLP 44-256-256-256-42 with SiLU LUTs from
-//! `src/synthetic_mlp.rs`. Weights are random: only cost, memory and host/firmware equality
+//! [`super::mlp`]. Weights are random: only cost, memory and host/firmware equality
 //! matter, not what it computes.
-#![allow(dead_code)]
 
 use crate::shape::{
     config, CONTROL_DT, DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM,
     POLICY_STEPS,
 };
-use crate::synthetic_mlp::{generate_with, LayerData};
+use super::mlp::{generate_with, LayerData};
 use frmd_core::policy::{InputLayout, StepConstants};
 use frmd_core::prodmp::BakedProDmp;
 use frmd_core::sigma::SigmaConfig;

@@ -1,7 +1,7 @@
-//! What the benchmark harness needs from a workload. `core` only: the host test compiles this file
-//! too and computes the same digest with [`digest_all`].
+//! What the benchmark harness needs from a workload. `core` only: the host tests compute the same
+//! digest with [`digest_all`].
 
-use crate::digest::Fnv1a64;
+use frmd_core::hash::Fnv1a64;
 
 /// A fixed list of inputs, each processed by a measured [`Workload::run`] call.
 pub trait Workload {

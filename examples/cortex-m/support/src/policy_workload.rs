@@ -3,7 +3,7 @@
 //! frmd-core PRNG, input assembly, int8 MLP, consistency output stage, ProDMP decode,
 //! denormalization.
 //!
-//! `core` + frmd-core only and generic over the network, so the host test runs this same file on
+//! `core` + frmd-core only and generic over the network, so the host test runs the same code on
 //! the blob form of the same policy (`frmd_core::blob::LoadedPolicy`) and must reproduce the
 //! firmware's digest.
 //!
@@ -12,8 +12,8 @@
 //! measured call samples with `Noise::Rng(Rng::new(NOISE_SEED + c))`. Digest per case: the chunk's
 //! positions, then velocities (`[time][dof]`, little-endian f32).
 
-use crate::digest::Fnv1a64;
-use crate::workload_api::Workload;
+use frmd_core::hash::Fnv1a64;
+use crate::workload::Workload;
 use frmd_core::policy::{Network, Noise, Policy, PolicyError, Trajectory};
 use frmd_core::rng::Rng;
 
@@ -29,11 +29,11 @@ pub const NOISE_SEED: u64 = 0x4652_4D44_4E4F_4953;
 
 /// Multiply-accumulates of one one-step `Policy::act` call whose network does `network_macs`:
 /// the network, the ProDMP decode, the output stage (`c_skip x + c_out decode`, 2 per value) and
-/// the denormalization (2 per value), counted as the per-stage breakdown (src/stage_report.rs)
+/// the denormalization (2 per value), counted as the per-stage breakdown (the firmware's src/stage_report.rs)
 /// counts them.
 pub const fn policy_act_macs(network_macs: u64, horizon: usize, dof: usize, params: usize) -> u64 {
     network_macs
-        + crate::workload_api::prodmp_decode_macs(horizon, dof, params)
+        + crate::workload::prodmp_decode_macs(horizon, dof, params)
         + 2 * (2 * horizon * dof) as u64
 }
 

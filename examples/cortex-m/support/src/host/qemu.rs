@@ -1,5 +1,4 @@
-//! Host-test support for the QEMU firmware checks, included by each such test with
-//! `#[path = "../../examples/cortex-m/host-test-support.rs"] mod qemu;`.
+//! Running the firmware images under QEMU from a host test.
 //!
 //! A QEMU check runs only when `bash scripts/setup-cortex-m.sh` has written its env file
 //! (`FRMD_CORTEX_M_ENV`, default `<repo>/target/cortex-m.env`), `qemu-system-arm` runs and
@@ -9,10 +8,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// The repository root, from the including crate's `CARGO_MANIFEST_DIR` (each crate sits one
-/// level below the root).
-pub fn repo_root(manifest_dir: &str) -> PathBuf {
-    Path::new(manifest_dir).join("..")
+/// The repository root (this crate sits at `examples/cortex-m/support`).
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../..")
 }
 
 /// Whether the QEMU check named `test` can run. Returns `false` after printing why it is skipped;
@@ -66,6 +64,12 @@ pub fn run(root: &Path, board: &str, image: &str) -> String {
 /// The first `digest: <16 hex digits>` line the firmware printed, whole.
 pub fn digest_line(stdout: &str) -> Option<&str> {
     stdout.lines().find(|line| line.starts_with("digest: "))
+}
+
+/// The value of the first `key: value` line of `stdout`.
+pub fn line_value<'a>(stdout: &'a str, key: &str) -> Option<&'a str> {
+    let prefix = format!("{key}: ");
+    stdout.lines().find_map(|line| line.strip_prefix(prefix.as_str()))
 }
 
 /// All output lines joined by ` | `, for one-line logging.

@@ -2,18 +2,18 @@
 //! parameters (dequantized f32), which the baked decoder turns into a 12-step trajectory. This is
 //! the one-step student's path without the sampler's noise and normalization.
 //!
-//! `core` + frmd-core only; the host test compiles this file with the same synthetic network
-//! (built from `src/synthetic_mlp.rs` in memory) and must reproduce the firmware's digest.
+//! `core` + frmd-core only; the host test runs it on the same synthetic network (rebuilt in memory
+//! by `synthetic::mlp`) and must reproduce the firmware's digest.
 //!
 //! Inputs: case `c` draws from `Rng::new(OBS_SEED + c)` the observation (`MLP_INPUT` values
 //! `2u - 1`) and then the decoder's `y0` (`u - 0.5`) and `v0` (`0.5 u - 0.25`) per DoF. Digest per
 //! case: the MLP outputs (ProDMP parameters, DoF-major), then `pos` and `vel` as in
 //! [`crate::prodmp_workload`].
 
-use crate::digest::Fnv1a64;
+use frmd_core::hash::Fnv1a64;
 use crate::prodmp_workload::{digest_trajectory, Baked};
 use crate::shape::{DOF, HORIZON, MLP_INPUT, MLP_WIDTH, PARAMS};
-use crate::workload_api::Workload;
+use crate::workload::Workload;
 use frmd_core::model::mlp::{Int8Mlp, Int8Scratch, ModelError};
 use frmd_core::prodmp::ProDmpError;
 use frmd_core::rng::Rng;
@@ -113,6 +113,6 @@ impl Workload for MlpWorkload<'_> {
     fn macs(&self) -> u64 {
         let layers = self.mlp.hidden.iter().map(|layer| &layer.fc).chain([&self.mlp.output]);
         let network: usize = layers.map(|fc| fc.in_features * fc.out_features).sum();
-        network as u64 + crate::workload_api::prodmp_decode_macs(HORIZON, DOF, PARAMS)
+        network as u64 + crate::workload::prodmp_decode_macs(HORIZON, DOF, PARAMS)
     }
 }

@@ -3,8 +3,10 @@
 //! only: the host test runs the same code with a clock that always reads 0 and checks that the
 //! staged network computes exactly what frmd-core's `Int8Network` computes.
 
-use frmd_core::kernels::{dequantize_accumulators, FullyConnected};
-use frmd_core::model::mlp::{quantize_input_two_plane, InputPrecision, Int8Layer, ModelError};
+use frmd_core::kernels::{dequantize_accumulators, FullyConnected, LayerInput};
+use frmd_core::model::mlp::{
+    quantize_input_i16, quantize_input_two_plane, InputPrecision, Int8Layer, ModelError,
+};
 use frmd_core::policy::{Network, PolicyError};
 use frmd_core::quant::QuantParams;
 
@@ -52,8 +54,8 @@ pub const fn mlp_marks(hidden_layers: usize) -> usize {
 }
 
 /// An int8 MLP as a policy [`Network`] that marks every stage boundary. It runs the same frmd-core
-/// kernels in the same order as `Int8Mlp::forward` (input quantization, per hidden layer
-/// `FullyConnected::forward` + LUT, output `forward_accumulators` + `dequantize_accumulators`),
+/// kernels in the same order as `Int8Network` (input quantization, per hidden layer
+/// `Int8Layer::forward_prevalidated`, output `forward_accumulators` + `dequantize_accumulators`),
 /// with the first-layer bias variant selected as `Int8Network` does; `L` hidden layers, `S`
 /// readings (`mlp_marks(L)`), activations up to `WIDTH` wide.
 pub struct StagedMlpNetwork<'a, const L: usize, const S: usize, const WIDTH: usize> {
@@ -88,6 +90,10 @@ impl<'a, const L: usize, const S: usize, const WIDTH: usize> StagedMlpNetwork<'a
         if L == 0 || S < mlp_marks(L) || !widths_fit {
             return Err(PolicyError::Model(ModelError::ScratchTooSmall));
         }
+        // Once here, as `Int8Network` does, so that `forward` need not repeat it.
+        for layer in &hidden {
+            layer.requant.validate(layer.fc.out_features).map_err(|e| PolicyError::Model(ModelError::Kernel(e)))?;
+        }
         Ok(Self {
             input,
             hidden,
@@ -103,8 +109,8 @@ impl<'a, const L: usize, const S: usize, const WIDTH: usize> StagedMlpNetwork<'a
     }
 
     /// The same network quantizing its input as `precision` says (as `Int8Network`'s
-    /// `with_input_precision`; the two-plane first layer is one stage with its input planes
-    /// quantized in the `quantize` stage).
+    /// `with_input_precision`; the first layer is one stage whatever its input, whose codes are
+    /// made in the `quantize` stage).
     pub fn with_input_precision(mut self, precision: InputPrecision) -> Self {
         self.input_precision = precision;
         self
@@ -163,6 +169,21 @@ impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNe
                 }
                 self.marks.mark();
             }
+            InputPrecision::Int16 => {
+                let (layer, rest) = hidden.split_first().ok_or(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer))?;
+                let codes = bytemuck::cast_slice_mut::<i32, i16>(self.accumulators.as_mut_slice())
+                    .get_mut(..input.len())
+                    .ok_or(PolicyError::InputWidth)?;
+                quantize_input_i16(input, self.input, codes);
+                self.marks.mark();
+                let out_width = layer.fc.out_features;
+                let layer_output = next.get_mut(..out_width).ok_or(PolicyError::OutputWidth)?;
+                layer.forward_prevalidated(LayerInput::Int16(codes), layer_output).map_err(model)?;
+                core::mem::swap(&mut current, &mut next);
+                width = out_width;
+                layers = rest;
+                self.marks.mark();
+            }
             InputPrecision::TwoPlane => {
                 let fine = next.get_mut(..input.len()).ok_or(PolicyError::InputWidth)?;
                 quantize_input_two_plane(input, self.input, first, fine);
@@ -183,10 +204,7 @@ impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNe
             let out_width = layer.fc.out_features;
             let layer_input = current.get(..width).ok_or(PolicyError::InputWidth)?;
             let layer_output = next.get_mut(..out_width).ok_or(PolicyError::OutputWidth)?;
-            layer.fc.forward(&layer.requant, layer_input, layer_output).map_err(model)?;
-            if let Some(lut) = layer.activation {
-                lut.apply_in_place(layer_output);
-            }
+            layer.forward_prevalidated(LayerInput::Int8(layer_input), layer_output).map_err(model)?;
             core::mem::swap(&mut current, &mut next);
             width = out_width;
             self.marks.mark();

@@ -1,17 +1,16 @@
-//! A deterministic synthetic transformer-lite ([`TRANSFORMER_SHAPE`]) in int8 form (std; used by
+//! A deterministic synthetic transformer-lite ([`TRANSFORMER_SHAPE`]) in int8 form (used by
 //! `build.rs`, which bakes it into the transformer firmware, and by the host test, which rebuilds
 //! it in memory and must reproduce the firmware's digest).
 //!
 //! Linear layers come from the same generator as the synthetic MLP
-//! ([`crate::synthetic_mlp::layer`]: uniform weights of variance `1 / in_features`, symmetric
+//! ([`super::mlp::layer`]: uniform weights of variance `1 / in_features`, symmetric
 //! per-channel int8, int32 bias with the input zero point folded); `fc1` is requantized to int8
 //! and mapped through a GELU (`x sigmoid(1.702 x)`) table, every other layer is dequantized to
 //! f32. LayerNorm gains are `1 + u`, shifts and positions small uniform values. Only cost, memory
 //! and host/firmware bit-equality matter, not what the network computes.
-#![allow(dead_code)]
 
 use crate::shape::{TRANSFORMER_LINEARS, TRANSFORMER_NORMS, TRANSFORMER_SHAPE};
-use crate::synthetic_mlp::{layer, params, LayerData};
+use super::mlp::{layer, params, LayerData};
 use frmd_core::kernels::{gelu_sigmoid, FcRequant, FullyConnected};
 use frmd_core::model::transformer::{
     Int8Block, Int8FeedForward, Int8Linear, Int8Transformer, LayerNormWeights, TokenLinear,
@@ -160,7 +159,7 @@ impl TransformerData {
     }
 
     /// Rust source of everything but the weights (`LINEARS`, `NORMS`, `NOISE_TOKEN`,
-    /// `POSITIONS`, `WEIGHT_BYTES`; types from src/baked_transformer.rs).
+    /// `POSITIONS`, `WEIGHT_BYTES`; types from the firmware's src/baked_transformer.rs).
     pub fn rust_source(&self) -> String {
         let ints = |values: &[i32]| values.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(", ");
         let floats = |values: &[f32]| {

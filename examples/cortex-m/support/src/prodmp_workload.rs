@@ -1,7 +1,7 @@
 //! The measured workload: the baked ProDMP policy decoder on a fixed list of inputs.
 //!
-//! Uses only `core` and frmd-core, so the host-side check (`frmd-core/tests/cortex_m_qemu.rs`) compiles
-//! this same file and must reproduce the firmware's digest bit for bit.
+//! Uses only `core` and frmd-core, so the host-side check (`frmd-core/tests/cortex_m_qemu.rs`) runs
+//! the same code and must reproduce the firmware's digest bit for bit.
 //!
 //! Inputs: case `c` (0-based) draws from `frmd_core::rng::Rng::new(INPUT_SEED + c)`, in order,
 //! `uniform()` values mapped by `2u - 1` to the DoF-major parameters `[w_0 .. w_19, g]` (DoF 0
@@ -9,9 +9,9 @@
 //! over the little-endian bytes of `pos` then `vel` (`[time][dof]`, row-major) of every case in
 //! order, each case decoded once for the digest (repeats give identical outputs).
 
-use crate::digest::Fnv1a64;
+use frmd_core::hash::Fnv1a64;
 use crate::shape::{DOF, HORIZON, PARAMS};
-use crate::workload_api::Workload;
+use crate::workload::Workload;
 use frmd_core::prodmp::{BakedProDmp, ProDmpError};
 use frmd_core::rng::Rng;
 
@@ -95,7 +95,7 @@ impl Workload for ProDmpWorkload<'_> {
     }
 
     fn macs(&self) -> u64 {
-        crate::workload_api::prodmp_decode_macs(HORIZON, DOF, PARAMS)
+        crate::workload::prodmp_decode_macs(HORIZON, DOF, PARAMS)
     }
 }
 

@@ -1,0 +1,31 @@
+//! Support library of the FRMD Cortex-M firmware (`examples/cortex-m`): everything the firmware
+//! images share with their build script and with the host tests that check them.
+//!
+//! - no_std (the firmware links these): [`shape`] (the policy shapes the images bake),
+//!   [`workload`] (the [`workload::Workload`] trait and the digest over a workload's cases),
+//!   the workloads [`prodmp_workload`], [`mlp_workload`] and [`policy_workload`],
+//!   [`stages`] (the layer-marking MLP network of the per-stage breakdown) and
+//!   [`transformer_network`] (transformer-lite behind the policy's `Network` trait);
+//! - `std` feature (host only): [`synthetic`] (the deterministic synthetic MLP and
+//!   transformer-lite, which build.rs bakes and the tests rebuild in memory) and [`host`] (running
+//!   the images under QEMU from a test);
+//! - `export` feature (host only, with frmd-export): the synthetic one-step policy and the export
+//!   of the checked-in trained student, exactly as build.rs exports it.
+//!
+//! A digest is FNV-1a 64 ([`frmd_core::hash::Fnv1a64`]) over the little-endian bytes of every
+//! output, in order: the firmware prints it, the host tests recompute it with the same workload
+//! code and require equality.
+#![cfg_attr(not(feature = "std"), no_std)]
+
+pub mod mlp_workload;
+pub mod policy_workload;
+pub mod prodmp_workload;
+pub mod shape;
+pub mod stages;
+pub mod transformer_network;
+pub mod workload;
+
+#[cfg(feature = "std")]
+pub mod host;
+#[cfg(feature = "std")]
+pub mod synthetic;

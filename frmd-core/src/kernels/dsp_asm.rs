@@ -1,0 +1,174 @@
+//! The `asm!` inner loops of [`super::dsp`] (Armv7E-M / Armv8-M Mainline DSP extension).
+//!
+//! Each function checks its slice bounds before the assembly block and returns plain sums; the
+//! blocks only read memory inside the borrowed slices and change only declared registers and
+//! the flags (NZCV by `CMP`/`LSRS`, the sticky Q flag by `SMLAD`). Unaligned `LDR` is fine on
+//! Armv7-M/Armv8-M Mainline (CCR.UNALIGN_TRP is 0 at reset; LLVM emits unaligned loads for these
+//! targets too), `LDRD` and `LDM` need word alignment: the functions refuse rows that do not start
+//! on a word boundary (their callers use the portable loop there), and the pair buffer is a `u32`
+//! array.
+
+#![allow(unsafe_code)]
+
+/// Columns per step of the assembly loops.
+pub(crate) const BLOCK: usize = 8;
+
+/// Input words of eight columns into `r0..r3` as halfword pairs: `pairs` loads them (one `LDM`,
+/// which needs the registers in ascending order, hence explicit `r0..r3`); `bytes` loads eight
+/// int8 values with two `LDR`s and unpacks them with four `SXTB16`.
+macro_rules! input_words {
+    (pairs) => {
+        "ldm {xp}!, {{r0, r1, r2, r3}}\n"
+    };
+    (bytes) => {
+        concat!(
+            "ldr {wa}, [{xp}], #4\n",
+            "ldr {wb}, [{xp}], #4\n",
+            "sxtb16 r0, {wa}\n",
+            "sxtb16 r1, {wa}, ror #8\n",
+            "sxtb16 r2, {wb}\n",
+            "sxtb16 r3, {wb}, ror #8\n",
+        )
+    };
+}
+
+/// Eight weights of one row into `wa`, `wb` (one `LDRD`: the row must be word-aligned).
+macro_rules! row_words {
+    ($row:literal) => {
+        concat!("ldrd {wa}, {wb}, [{", $row, "}], #8\n")
+    };
+}
+
+/// `acc += wa . (r0, r1) + wb . (r2, r3)`: each weight word split by `SXTB16` /
+/// `SXTB16 ROR #8` and accumulated with two `SMLAD`s.
+macro_rules! accumulate {
+    ($acc:literal) => {
+        concat!(
+            "sxtb16 {t}, {wa}\n",
+            "smlad {", $acc, "}, {t}, r0, {", $acc, "}\n",
+            "sxtb16 {wa}, {wa}, ror #8\n",
+            "smlad {", $acc, "}, {wa}, r1, {", $acc, "}\n",
+            "sxtb16 {t}, {wb}\n",
+            "smlad {", $acc, "}, {t}, r2, {", $acc, "}\n",
+            "sxtb16 {wb}, {wb}, ror #8\n",
+            "smlad {", $acc, "}, {wb}, r3, {", $acc, "}\n",
+        )
+    };
+}
+
+/// Eight columns of two rows; the row pointers advance 8 bytes, the input pointer 16 (pairs) or
+/// 8 (bytes).
+macro_rules! two_rows_eight_columns {
+    ($input:ident) => {
+        concat!(
+            input_words!($input),
+            row_words!("row_0"),
+            accumulate!("acc0"),
+            row_words!("row_1"),
+            accumulate!("acc1"),
+        )
+    };
+}
+
+/// The whole two-row product as one `asm!` block: an odd first step on its own, then a
+/// bottom-tested loop over pairs of steps (`xp` advances `$step_bytes << 1` per iteration up to
+/// the end it computes). Both branches depend on the width only.
+macro_rules! two_row_asm {
+    ($input:ident, $shift:literal, $blocks:expr, $xp:expr, $r0:expr, $r1:expr, $acc0:ident, $acc1:ident) => {
+        core::arch::asm!(
+            "lsrs {n}, {n}, #1",
+            "bcc 3f",
+            two_rows_eight_columns!($input),
+            "3:",
+            "cmp {n}, #0",
+            "beq 5f",
+            concat!("add {n}, {xp}, {n}, lsl #", $shift),
+            "4:",
+            two_rows_eight_columns!($input),
+            two_rows_eight_columns!($input),
+            "cmp {xp}, {n}",
+            "bne 4b",
+            "5:",
+            n = inout(reg) $blocks => _,
+            xp = inout(reg) $xp => _,
+            row_0 = inout(reg) $r0 => _,
+            row_1 = inout(reg) $r1 => _,
+            wa = out(reg) _,
+            wb = out(reg) _,
+            t = out(reg) _,
+            acc0 = inout(reg) $acc0,
+            acc1 = inout(reg) $acc1,
+            out("r0") _,
+            out("r1") _,
+            out("r2") _,
+            out("r3") _,
+            options(nostack, readonly),
+        )
+    };
+}
+
+/// Where the input comes from for [`row_pairs`].
+#[derive(Clone, Copy)]
+pub(crate) enum Input<'a> {
+    /// Halfword pairs (see `dsp::Prepared`), at least `4 * blocks` words.
+    Pairs(&'a [u32]),
+    /// int8 codes unpacked in the loop, at least `8 * blocks` of them.
+    Bytes(&'a [i8]),
+}
+
+/// `out[k] = start[k] + (rows 2k and 2k+1 of `rows`) . x` over the first `8 * blocks` columns, for
+/// every `k < out.len()`; `rows` is row-major with `width` columns. Returns `false` (and leaves
+/// `out` alone) unless `1 <= blocks`, `8 * blocks <= width`, `width` is a multiple of 4, `rows`
+/// starts on a word boundary (`LDRD` faults otherwise), `rows` holds `2 * out.len()` rows,
+/// `start` has `out.len()` entries and the input is long enough. Not inlined: its loop keeps
+/// few values live around the assembly block, which needs 13 registers.
+#[inline(never)]
+pub(crate) fn row_pairs(
+    rows: &[i8],
+    width: usize,
+    input: Input<'_>,
+    blocks: usize,
+    start: &[[i32; 2]],
+    out: &mut [[i32; 2]],
+) -> bool {
+    let columns = blocks.saturating_mul(BLOCK);
+    let input_len = match input {
+        Input::Pairs(pairs) => pairs.len().saturating_mul(2),
+        Input::Bytes(bytes) => bytes.len(),
+    };
+    let ok = blocks >= 1
+        && columns <= width
+        && columns <= input_len
+        && width % 4 == 0
+        && (rows.as_ptr() as usize) % 4 == 0
+        && start.len() >= out.len()
+        && out.len().checked_mul(2 * width).is_some_and(|len| len <= rows.len());
+    if !ok {
+        return false;
+    }
+    let mut row_0 = rows.as_ptr();
+    for (sums, bias) in out.iter_mut().zip(start) {
+        let row_1 = row_0.wrapping_add(width);
+        let [mut acc0, mut acc1] = *bias;
+        // SAFETY: rows `2k` and `2k + 1` start at `row_0` and `row_1`, inside `rows` (it holds
+        // `2 * out.len()` rows of `width` bytes, checked above) and on word boundaries (`rows` is
+        // word-aligned and `width` a multiple of 4), as `LDRD` needs; the block reads bytes
+        // [0, 8 blocks) of each row (`8 blocks <= width`) and the input's first `8 blocks` columns
+        // (`4 blocks` words of a `u32` slice, aligned for `LDM`, or `8 blocks` bytes by `LDR`,
+        // which may be unaligned), all inside the borrowed slices. It runs `blocks` eight-column
+        // steps in all (an odd one first, then pairs).
+        unsafe {
+            match input {
+                Input::Pairs(pairs) => {
+                    two_row_asm!(pairs, "5", blocks, pairs.as_ptr(), row_0, row_1, acc0, acc1)
+                }
+                Input::Bytes(bytes) => {
+                    two_row_asm!(bytes, "4", blocks, bytes.as_ptr(), row_0, row_1, acc0, acc1)
+                }
+            }
+        }
+        *sums = [acc0, acc1];
+        row_0 = row_0.wrapping_add(2 * width);
+    }
+    true
+}

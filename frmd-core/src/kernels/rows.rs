@@ -1,0 +1,117 @@
+//! The matrix-vector product of a fully connected layer, two output rows at a time:
+//! `bias[o] + sum_i w[o][i] * x[i]` (int32, wrapping) for int8 weights and an int8 or int16 input.
+//!
+//! [`for_each_block`] prepares the input once per layer call and hands the sums to its caller in
+//! blocks of [`BLOCK_ROWS`] rows, which the caller requantizes before the next block. On Arm cores
+//! with the DSP extension (`cfg(frmd_arm_dsp)`, module `kernels::dsp`) the input is unpacked to
+//! halfword pairs once and two rows at a time go through an `SMLAD` kernel; elsewhere each row is
+//! [`dot_i8_prefix`] / [`dot_i8_i16_prefix`]. Both give identical sums: wrapping int32 addition is
+//! associative and commutative. (On x86-64 CPUs with AVX2, `FullyConnected` uses the eight-row
+//! kernels of `kernels::x86` for int8 inputs instead. A four-row SSE2 version of the portable loop
+//! ran fewer instructions but was slower: LLVM's `punpcklbw` sign extension read a stale register
+//! and chained the whole loop body.)
+
+use super::dot::{dot_i8_i16_prefix, dot_i8_prefix};
+
+/// An input element type of the row kernels.
+pub(crate) trait RowInput: Copy {
+    /// `sum_i row[i] * input[i]` over the common prefix (int32, wrapping).
+    fn dot(row: &[i8], input: &[Self]) -> i32;
+    /// The value as a sign-extended halfword (low 16 bits of the `u32`).
+    #[cfg(frmd_arm_dsp)]
+    fn half(self) -> u32;
+    /// The input as int8 codes, if it is int8.
+    #[cfg(frmd_arm_dsp)]
+    fn as_i8(input: &[Self]) -> Option<&[i8]>;
+}
+
+impl RowInput for i8 {
+    #[inline(always)]
+    fn dot(row: &[i8], input: &[i8]) -> i32 {
+        dot_i8_prefix(row, input)
+    }
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn half(self) -> u32 {
+        u32::from(i16::from(self) as u16)
+    }
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn as_i8(input: &[i8]) -> Option<&[i8]> {
+        Some(input)
+    }
+}
+
+impl RowInput for i16 {
+    #[inline(always)]
+    fn dot(row: &[i8], input: &[i16]) -> i32 {
+        dot_i8_i16_prefix(row, input)
+    }
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn half(self) -> u32 {
+        u32::from(self as u16)
+    }
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn as_i8(_: &[i16]) -> Option<&[i8]> {
+        None
+    }
+}
+
+/// Rows per block that [`Rows::for_each_block`] hands to its caller.
+pub(crate) const BLOCK_ROWS: usize = 16;
+
+/// Calls `block(first, sums)` for consecutive blocks of up to [`BLOCK_ROWS`] rows of the
+/// row-major `weights` (`input.len()` columns; a partial last row is ignored), in order, with
+/// `sums[r] = bias[first + r] + dot(row_{first + r}, input)` (int32, wrapping); missing bias
+/// entries count as 0, so an empty `bias` gives plain dot products. The input is prepared once
+/// (on DSP cores: unpacked to halfword pairs, when at most `dsp::EXPANDED_COLUMNS` wide).
+#[inline(always)]
+pub(crate) fn for_each_block<T: RowInput>(
+    input: &[T],
+    weights: &[i8],
+    bias: &[i32],
+    mut block: impl FnMut(usize, &[i32]),
+) {
+    let width = input.len();
+    if width == 0 {
+        return;
+    }
+    #[cfg(frmd_arm_dsp)]
+    let mut prepared = super::dsp::Prepared::new();
+    #[cfg(frmd_arm_dsp)]
+    prepared.fill(input);
+    let mut sums = [0_i32; BLOCK_ROWS];
+    let mut first = 0;
+    for rows in weights.chunks(BLOCK_ROWS * width) {
+        let count = rows.len() / width;
+        let out = sums.get_mut(..count).unwrap_or(&mut []);
+        let block_bias = bias.get(first..).unwrap_or(&[]);
+        #[cfg(frmd_arm_dsp)]
+        super::dsp::block_sums(&prepared, input, rows, block_bias, out);
+        #[cfg(not(frmd_arm_dsp))]
+        for ((sum, row), b) in out
+            .iter_mut()
+            .zip(rows.chunks_exact(width))
+            .zip(block_bias.iter().chain(core::iter::repeat(&0)))
+        {
+            *sum = b.wrapping_add(T::dot(row, input));
+        }
+        block(first, out);
+        first += count;
+    }
+}
+
+/// Calls `emit(bias[o] + dot(row_o, input))` for every row, in order (see [`for_each_block`]).
+#[inline(always)]
+pub(crate) fn for_each_sum<T: RowInput>(
+    input: &[T],
+    weights: &[i8],
+    bias: &[i32],
+    mut emit: impl FnMut(i32),
+) {
+    for_each_block(input, weights, bias, |_, sums| {
+        sums.iter().copied().for_each(&mut emit)
+    });
+}
