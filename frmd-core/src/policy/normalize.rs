@@ -6,29 +6,41 @@
 
 use super::PolicyError;
 
-/// Baked min/max of `D` dimensions (raw units). Invariant (checked by [`Self::validate`]): every
-/// bound finite and `min[i] <= max[i]`.
+/// Baked min/max of every dimension (raw units), borrowed (`&'static` baked arrays or blob
+/// sections). Invariant (checked by [`Self::validate`]): equal lengths, every bound finite and
+/// `min[i] <= max[i]`. Each method processes the common length of its slices.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RangeNormalizer<const D: usize> {
+pub struct RangeNormalizer<'a> {
     /// Per-dimension minimum over the training data (raw units).
-    pub min: [f32; D],
+    pub min: &'a [f32],
     /// Per-dimension maximum over the training data (raw units).
-    pub max: [f32; D],
+    pub max: &'a [f32],
 }
 
-impl<const D: usize> RangeNormalizer<D> {
+impl<'a> RangeNormalizer<'a> {
     /// Unchecked constructor usable in `const` items; [`Self::validate`] checks the invariant.
-    pub const fn new(min: [f32; D], max: [f32; D]) -> Self {
+    pub const fn new(min: &'a [f32], max: &'a [f32]) -> Self {
         Self { min, max }
     }
 
-    /// Checks that every bound is finite and `min <= max`.
+    /// Number of dimensions.
+    pub fn len(&self) -> usize {
+        self.min.len()
+    }
+
+    /// Whether there are no dimensions.
+    pub fn is_empty(&self) -> bool {
+        self.min.is_empty()
+    }
+
+    /// Checks equal lengths, that every bound is finite and `min <= max`.
     pub fn validate(&self) -> Result<(), PolicyError> {
-        let ok = self
-            .min
-            .iter()
-            .zip(&self.max)
-            .all(|(lo, hi)| lo.is_finite() && hi.is_finite() && lo <= hi);
+        let ok = self.min.len() == self.max.len()
+            && self
+                .min
+                .iter()
+                .zip(self.max)
+                .all(|(lo, hi)| lo.is_finite() && hi.is_finite() && lo <= hi);
         if ok {
             Ok(())
         } else {
@@ -37,8 +49,8 @@ impl<const D: usize> RangeNormalizer<D> {
     }
 
     /// Raw to normalized, element-wise.
-    pub fn normalize(&self, raw: &[f32; D], out: &mut [f32; D]) {
-        for (((o, v), lo), hi) in out.iter_mut().zip(raw).zip(&self.min).zip(&self.max) {
+    pub fn normalize(&self, raw: &[f32], out: &mut [f32]) {
+        for (((o, v), lo), hi) in out.iter_mut().zip(raw).zip(self.min).zip(self.max) {
             *o = if hi > lo {
                 2.0 * (*v - lo) / (hi - lo) - 1.0
             } else {
@@ -48,8 +60,8 @@ impl<const D: usize> RangeNormalizer<D> {
     }
 
     /// Normalized to raw, element-wise (constant dimensions give their constant).
-    pub fn denormalize(&self, normalized: &[f32; D], out: &mut [f32; D]) {
-        for (((o, v), lo), hi) in out.iter_mut().zip(normalized).zip(&self.min).zip(&self.max) {
+    pub fn denormalize(&self, normalized: &[f32], out: &mut [f32]) {
+        for (((o, v), lo), hi) in out.iter_mut().zip(normalized).zip(self.min).zip(self.max) {
             *o = if hi > lo {
                 (*v + 1.0) * 0.5 * (hi - lo) + lo
             } else {
@@ -59,15 +71,15 @@ impl<const D: usize> RangeNormalizer<D> {
     }
 
     /// Raw rate (units/s) to normalized rate (normalized units/s): `rate * 2 / (max - min)`.
-    pub fn normalize_rate(&self, raw: &[f32; D], out: &mut [f32; D]) {
-        for (((o, v), lo), hi) in out.iter_mut().zip(raw).zip(&self.min).zip(&self.max) {
+    pub fn normalize_rate(&self, raw: &[f32], out: &mut [f32]) {
+        for (((o, v), lo), hi) in out.iter_mut().zip(raw).zip(self.min).zip(self.max) {
             *o = if hi > lo { *v * 2.0 / (hi - lo) } else { 0.0 };
         }
     }
 
     /// Normalized rate to raw rate: `rate * 0.5 (max - min)` (0 for constant dimensions).
-    pub fn denormalize_rate(&self, normalized: &[f32; D], out: &mut [f32; D]) {
-        for (((o, v), lo), hi) in out.iter_mut().zip(normalized).zip(&self.min).zip(&self.max) {
+    pub fn denormalize_rate(&self, normalized: &[f32], out: &mut [f32]) {
+        for (((o, v), lo), hi) in out.iter_mut().zip(normalized).zip(self.min).zip(self.max) {
             *o = if hi > lo { *v * 0.5 * (hi - lo) } else { 0.0 };
         }
     }

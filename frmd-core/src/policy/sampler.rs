@@ -15,12 +15,12 @@
 //! the same combination of the decoded velocities, the initial-condition velocities and the
 //! backward difference of `x` / control_dt (with `x` before the first query time taken as `y0`).
 
-use crate::prodmp::BakedProDmp;
 use crate::rng::Rng;
 
+use super::decoder::ProDmpTables;
 use super::layout::{InputLayout, InputSources};
 use super::network::Network;
-use super::PolicyError;
+use super::{PolicyDims, PolicyError};
 
 /// Most sampling steps a table may hold.
 pub const MAX_STEPS: usize = 4;
@@ -39,8 +39,9 @@ pub struct StepConstants {
     pub c_skip: f32,
     /// Output scale `c_out(sigma)`.
     pub c_out: f32,
-    /// Which first-layer bias variant (noise embedding at `sigma` folded in) this step uses.
-    pub first_layer_bias_index: u32,
+    /// Which of the network's noise-level variants this step uses (the noise embedding at
+    /// `sigma` folded in: an MLP's first-layer bias, a transformer's noise token).
+    pub noise_variant: u32,
 }
 
 impl StepConstants {
@@ -78,12 +79,56 @@ pub fn validate_steps(steps: &[StepConstants]) -> Result<(), PolicyError> {
         .try_for_each(|(i, step)| step.validate(i == 0))
 }
 
+/// A step table held by value: up to [`MAX_STEPS`] steps (heapless style, so that a loaded blob's
+/// configuration borrows nothing but the blob).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepTable {
+    steps: [StepConstants; MAX_STEPS],
+    len: usize,
+}
+
+impl StepTable {
+    /// A copy of `steps` (a longer table keeps its first [`MAX_STEPS`] steps and fails
+    /// [`Self::validate`]).
+    pub fn new(steps: &[StepConstants]) -> Self {
+        let empty = StepConstants {
+            sigma: 0.0,
+            renoise_std: 0.0,
+            c_in: 0.0,
+            c_skip: 0.0,
+            c_out: 0.0,
+            noise_variant: 0,
+        };
+        let mut table = Self {
+            steps: [empty; MAX_STEPS],
+            len: steps.len(),
+        };
+        for (slot, step) in table.steps.iter_mut().zip(steps) {
+            *slot = *step;
+        }
+        table
+    }
+
+    /// The steps in order.
+    pub fn as_slice(&self) -> &[StepConstants] {
+        self.steps.get(..self.len).unwrap_or(&self.steps)
+    }
+
+    /// [`validate_steps`] of the table.
+    pub fn validate(&self) -> Result<(), PolicyError> {
+        if self.len > MAX_STEPS {
+            return Err(PolicyError::StepCount);
+        }
+        validate_steps(self.as_slice())
+    }
+}
+
 /// Where the Gaussian noise comes from.
 #[derive(Debug)]
 pub enum Noise<'n> {
-    /// Drawn from a seeded generator, `N * K` values per step in step-major order.
+    /// Drawn from a seeded generator, `n k` values per step in step-major order.
     Rng(&'n mut Rng),
-    /// Supplied by the caller: `steps * N * K` values, step after step, each step-major.
+    /// Supplied by the caller: `steps n k` values, step after step, each step-major.
     Given(&'n [f32]),
 }
 
@@ -111,7 +156,9 @@ impl Noise<'_> {
     }
 }
 
-/// Positions and velocities of a trajectory, `[t][d]` for the query times `dt .. N dt`.
+/// Positions and velocities of a trajectory for the query times `dt .. n dt`, with capacity for
+/// `N` times of `K` DoFs: the `n k` values of a policy with smaller sizes are the first ones of
+/// the flattened arrays, step-major (for `n = N`, `k = K` simply `[t][d]`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Trajectory<const N: usize, const K: usize> {
     /// Positions (normalized or robot units, as stated where used).
@@ -128,6 +175,18 @@ impl<const N: usize, const K: usize> Trajectory<N, K> {
             velocities: [[0.0; K]; N],
         }
     }
+
+    /// The first `len` positions and velocities (flattened), or `None` beyond the capacity.
+    pub fn values(&self, len: usize) -> Option<(&[f32], &[f32])> {
+        let positions = self.positions.as_flattened().get(..len)?;
+        Some((positions, self.velocities.as_flattened().get(..len)?))
+    }
+
+    /// [`Self::values`], mutable.
+    pub fn values_mut(&mut self, len: usize) -> Option<(&mut [f32], &mut [f32])> {
+        let positions = self.positions.as_flattened_mut().get_mut(..len)?;
+        Some((positions, self.velocities.as_flattened_mut().get_mut(..len)?))
+    }
 }
 
 impl<const N: usize, const K: usize> Default for Trajectory<N, K> {
@@ -138,16 +197,36 @@ impl<const N: usize, const K: usize> Default for Trajectory<N, K> {
 
 /// Conditioning of one chunk, normalized units.
 #[derive(Clone, Copy, Debug)]
-pub struct Conditioning<'c, const M: usize, const O: usize, const K: usize> {
-    /// Observation history, oldest first.
-    pub obs_history: &'c [[f32; O]; M],
-    /// Last commanded action (ProDMP `y0`).
-    pub prev_action: &'c [f32; K],
-    /// Its rate, normalized units per second (ProDMP `v0`).
-    pub prev_rate: &'c [f32; K],
+pub struct Conditioning<'c> {
+    /// Observation history, oldest first (`m o` values).
+    pub obs_history: &'c [f32],
+    /// Last commanded action (ProDMP `y0`, `k` values).
+    pub prev_action: &'c [f32],
+    /// Its rate, normalized units per second (ProDMP `v0`, `k` values).
+    pub prev_rate: &'c [f32],
 }
 
-/// Working memory of [`Sampler::sample`]; `I` must be at least the network input width.
+/// Working memory of [`Sampler::sample`], borrowed: `noisy` and `noise` (`n k`), the network
+/// `input` (its width), the ProDMP `params` (`k p`, DoF-major) and the decoded trajectory
+/// (`n k` each).
+#[derive(Debug)]
+pub struct SamplerBuffers<'w> {
+    /// The noisy trajectory `x` of the current step.
+    pub noisy: &'w mut [f32],
+    /// The step's standard-normal noise.
+    pub noise: &'w mut [f32],
+    /// The network input.
+    pub input: &'w mut [f32],
+    /// The network output.
+    pub params: &'w mut [f32],
+    /// Decoded positions.
+    pub decoded_positions: &'w mut [f32],
+    /// Decoded velocities.
+    pub decoded_velocities: &'w mut [f32],
+}
+
+/// [`SamplerBuffers`] as fixed arrays with capacity for `K` DoFs, horizon `N`, `P` parameters per
+/// DoF and an input of `I` values.
 #[derive(Clone, Debug)]
 pub struct SamplerWork<const K: usize, const N: usize, const P: usize, const I: usize> {
     noisy: [[f32; K]; N],
@@ -169,7 +248,30 @@ impl<const K: usize, const N: usize, const P: usize, const I: usize> SamplerWork
         }
     }
 
-    /// The ProDMP parameters of the last network evaluation (`params[d] = [w.., g]`).
+    /// The arrays cut to `dims` and an input of `input` values, or [`PolicyError::Capacity`].
+    pub fn buffers(
+        &mut self,
+        dims: &PolicyDims,
+        input: usize,
+    ) -> Result<SamplerBuffers<'_>, PolicyError> {
+        let trajectory = dims.trajectory_len().ok_or(PolicyError::Capacity)?;
+        let params = dims.params_len().ok_or(PolicyError::Capacity)?;
+        let (decoded_positions, decoded_velocities) = self
+            .decoded
+            .values_mut(trajectory)
+            .ok_or(PolicyError::Capacity)?;
+        Ok(SamplerBuffers {
+            noisy: prefix(self.noisy.as_flattened_mut(), trajectory)?,
+            noise: prefix(self.noise.as_flattened_mut(), trajectory)?,
+            input: prefix(&mut self.input, input)?,
+            params: prefix(self.params.as_flattened_mut(), params)?,
+            decoded_positions,
+            decoded_velocities,
+        })
+    }
+
+    /// The ProDMP parameters of the last network evaluation, DoF-major (the first `k p`
+    /// values; for `k = K`, `p = P` `params[d] = [w.., g]`).
     pub fn params(&self) -> &[[f32; P]; K] {
         &self.params
     }
@@ -183,84 +285,98 @@ impl<const K: usize, const N: usize, const P: usize, const I: usize> Default
     }
 }
 
+/// The first `len` values, or [`PolicyError::Capacity`].
+fn prefix(values: &mut [f32], len: usize) -> Result<&mut [f32], PolicyError> {
+    values.get_mut(..len).ok_or(PolicyError::Capacity)
+}
+
 /// Everything the sampler needs besides the network: step table, decoder, input layout and the
 /// control period (s) between query times.
 #[derive(Clone, Copy, Debug)]
-pub struct Sampler<'s, const N: usize, const P: usize> {
+pub struct Sampler<'s> {
     /// Per-step constants, `1..=MAX_STEPS` entries.
-    pub steps: &'s [StepConstants],
-    /// Baked ProDMP decoder (query times `dt .. N dt`).
-    pub decoder: &'s BakedProDmp<N, P>,
+    pub steps: StepTable,
+    /// Baked ProDMP decoder tables (query times `dt .. n dt`).
+    pub decoder: ProDmpTables<'s>,
     /// Model input layout.
     pub layout: InputLayout,
-    /// Control period in seconds (the decoder's `tau / N`).
+    /// Control period in seconds (the decoder's `tau / n`).
     pub control_dt: f32,
 }
 
-impl<const N: usize, const P: usize> Sampler<'_, N, P> {
-    /// Checks the step table, the layout, the control period, and that `net` takes the layout's
-    /// width (at most `I`), outputs `K * P` values and has every bias variant the steps use.
-    pub fn validate<
-        Net: Network,
-        const M: usize,
-        const O: usize,
-        const K: usize,
-        const I: usize,
-    >(
-        &self,
-        net: &Net,
-    ) -> Result<(), PolicyError> {
-        validate_steps(self.steps)?;
+impl Sampler<'_> {
+    /// Checks the step table, the layout, the control period, that the decoder has `dims`'
+    /// horizon and parameters, and that `net` takes the layout's width, outputs `k p` values and
+    /// has every noise-level variant the steps use.
+    pub fn validate<Net: Network>(&self, dims: &PolicyDims, net: &Net) -> Result<(), PolicyError> {
+        self.steps.validate()?;
         self.layout.validate()?;
         if !(self.control_dt.is_finite() && self.control_dt > 0.0) {
             return Err(PolicyError::InvalidControlPeriod);
         }
-        let width = self
-            .layout
-            .width(M, O, K, N)
-            .ok_or(PolicyError::InputWidth)?;
-        if width != net.input_width() || width > I {
+        self.decoder.validate()?;
+        if (self.decoder.horizon(), self.decoder.params_per_dof())
+            != (dims.horizon, dims.params_per_dof)
+        {
+            return Err(PolicyError::Decode(crate::prodmp::ProDmpError::WrongLength));
+        }
+        let width = self.layout.width_of(dims).ok_or(PolicyError::InputWidth)?;
+        if width != net.input_width() {
             return Err(PolicyError::InputWidth);
         }
-        if Some(net.output_width()) != K.checked_mul(P) {
+        if Some(net.output_width()) != dims.params_len() {
             return Err(PolicyError::OutputWidth);
         }
-        let variants = net.num_first_layer_biases().max(1);
+        let variants = net.num_noise_variants().max(1);
         if self
             .steps
+            .as_slice()
             .iter()
-            .any(|s| s.first_layer_bias_index as usize >= variants)
+            .any(|s| s.noise_variant as usize >= variants)
         {
-            return Err(PolicyError::FirstLayerBiasIndex);
+            return Err(PolicyError::NoiseVariantIndex);
         }
         Ok(())
     }
 
-    /// Runs all steps and writes the chunk (normalized units) into `out`.
-    pub fn sample<Net: Network, const M: usize, const O: usize, const K: usize, const I: usize>(
+    /// Runs all steps and writes the chunk (normalized units, `n k` positions and velocities,
+    /// step-major) into `positions` and `velocities`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn sample<Net: Network>(
         &self,
+        dims: &PolicyDims,
         net: &mut Net,
-        conditioning: &Conditioning<'_, M, O, K>,
+        conditioning: &Conditioning<'_>,
         mut noise: Noise<'_>,
-        work: &mut SamplerWork<K, N, P, I>,
-        out: &mut Trajectory<N, K>,
+        work: SamplerBuffers<'_>,
+        positions: &mut [f32],
+        velocities: &mut [f32],
     ) -> Result<(), PolicyError> {
-        self.validate::<Net, M, O, K, I>(net)?;
+        self.validate(dims, net)?;
+        let k = dims.action_dim;
+        let trajectory = dims.trajectory_len().ok_or(PolicyError::Capacity)?;
         let width = net.input_width();
-        for (index, step) in self.steps.iter().enumerate() {
-            noise.fill(index, work.noise.as_flattened_mut())?;
-            let fresh = work
-                .noisy
-                .iter_mut()
-                .flatten()
-                .zip(work.noise.iter().flatten());
+        let SamplerBuffers {
+            noisy,
+            noise: z,
+            input,
+            params,
+            decoded_positions,
+            decoded_velocities,
+        } = work;
+        let input = input.get_mut(..width).ok_or(PolicyError::InputWidth)?;
+        if [noisy.len(), z.len(), positions.len(), velocities.len()] != [trajectory; 4] {
+            return Err(PolicyError::Capacity);
+        }
+        for (index, step) in self.steps.as_slice().iter().enumerate() {
+            noise.fill(index, z)?;
+            let fresh = noisy.iter_mut().zip(z.iter());
             if index == 0 {
                 for (x, z) in fresh {
                     *x = step.sigma * z;
                 }
             } else {
-                let previous = out.positions.iter().flatten();
-                for ((x, z), f) in fresh.zip(previous) {
+                for ((x, z), f) in fresh.zip(positions.iter()) {
                     *x = f + step.renoise_std * z;
                 }
             }
@@ -268,37 +384,24 @@ impl<const N: usize, const P: usize> Sampler<'_, N, P> {
                 obs_history: conditioning.obs_history,
                 prev_action: conditioning.prev_action,
                 prev_rate: conditioning.prev_rate,
-                noisy: &work.noisy,
+                noisy,
                 c_in: step.c_in,
             };
-            let input = work.input.get_mut(..width).ok_or(PolicyError::InputWidth)?;
-            self.layout.write(&sources, input)?;
-            net.forward(
-                step.first_layer_bias_index as usize,
-                input,
-                work.params.as_flattened_mut(),
-            )?;
-            decode(
-                self.decoder,
-                &work.params,
-                conditioning.prev_action,
-                conditioning.prev_rate,
-                &mut work.decoded,
-            )?;
-            self.combine(
-                step,
-                &work.noisy,
-                (conditioning.prev_action, conditioning.prev_rate),
-                &work.decoded,
-                out,
-            );
+            self.layout.write(dims, &sources, input)?;
+            net.forward(step.noise_variant as usize, input, params)?;
+            self.decoder
+                .decode(
+                    params,
+                    conditioning.prev_action,
+                    conditioning.prev_rate,
+                    decoded_positions,
+                    decoded_velocities,
+                )
+                .map_err(PolicyError::Decode)?;
+            let decoded = (&*decoded_positions, &*decoded_velocities);
+            self.combine(step, k, noisy, conditioning, decoded, (positions, velocities));
         }
-        let finite = out
-            .positions
-            .iter()
-            .chain(out.velocities.iter())
-            .flatten()
-            .all(|v| v.is_finite());
+        let finite = positions.iter().chain(velocities.iter()).all(|v| v.is_finite());
         if finite {
             Ok(())
         } else {
@@ -307,23 +410,23 @@ impl<const N: usize, const P: usize> Sampler<'_, N, P> {
     }
 
     /// `f = b + c_skip (x - b) + c_out (decoded - b)` for positions; velocities as in the module
-    /// docs.
-    fn combine<const K: usize>(
+    /// docs. All trajectories are step-major with `k` values per step.
+    fn combine(
         &self,
         step: &StepConstants,
-        noisy: &[[f32; K]; N],
-        conditioning: (&[f32; K], &[f32; K]),
-        decoded: &Trajectory<N, K>,
-        out: &mut Trajectory<N, K>,
+        k: usize,
+        noisy: &[f32],
+        conditioning: &Conditioning<'_>,
+        decoded: (&[f32], &[f32]),
+        out: (&mut [f32], &mut [f32]),
     ) {
-        let (prev_action, prev_rate) = conditioning;
+        let (prev_action, prev_rate) = (conditioning.prev_action, conditioning.prev_rate);
         let mut before = prev_action;
-        let boundary = self.decoder.boundary_rows();
         let rows = noisy
-            .iter()
-            .zip(decoded.positions.iter().zip(decoded.velocities.iter()))
-            .zip(out.positions.iter_mut().zip(out.velocities.iter_mut()))
-            .zip(boundary);
+            .chunks_exact(k)
+            .zip(decoded.0.chunks_exact(k).zip(decoded.1.chunks_exact(k)))
+            .zip(out.0.chunks_exact_mut(k).zip(out.1.chunks_exact_mut(k)))
+            .zip(self.decoder.boundary_rows());
         for (((x_t, (pos_t, vel_t)), (out_pos, out_vel)), b_t) in rows {
             let dofs = x_t
                 .iter()
@@ -354,18 +457,4 @@ impl<const N: usize, const P: usize> Sampler<'_, N, P> {
 pub fn skip_output(c_skip: f32, c_out: f32, noisy: f32, decoded: f32, boundary: f32) -> f32 {
     let rest = 1.0 - c_skip - c_out;
     c_skip * noisy + c_out * decoded + rest * boundary
-}
-
-/// The one place the policy calls the ProDMP decoder: DoF-major parameters, `y0`, `v0`
-/// (normalized units, units/s) to normalized positions and velocities.
-fn decode<const N: usize, const P: usize, const K: usize>(
-    decoder: &BakedProDmp<N, P>,
-    params: &[[f32; P]; K],
-    y0: &[f32; K],
-    v0: &[f32; K],
-    out: &mut Trajectory<N, K>,
-) -> Result<(), PolicyError> {
-    decoder
-        .decode(params, y0, v0, &mut out.positions, &mut out.velocities)
-        .map_err(PolicyError::Decode)
 }
