@@ -91,7 +91,10 @@ impl<
         config.action_norm.validate()?;
         let dims = config.dims();
         config.sampler.validate(&dims, &network)?;
-        if !dims.fits([M, O, K, N, P]) || network.input_width() > I {
+        if network.input_width() > I {
+            return Err(PolicyError::InputWidth);
+        }
+        if !dims.fits([M, O, K, N, P]) {
             return Err(PolicyError::Capacity);
         }
         let history = ObsHistory::with_sizes(dims.history, dims.obs_dim).ok_or(PolicyError::Capacity)?;

@@ -4,8 +4,8 @@
 //! - no_std (the firmware links these): [`shape`] (the policy shapes the images bake),
 //!   [`workload`] (the [`workload::Workload`] trait and the digest over a workload's cases),
 //!   the workloads [`prodmp_workload`], [`mlp_workload`] and [`policy_workload`],
-//!   [`stages`] (the layer-marking MLP network of the per-stage breakdown) and
-//!   [`transformer_network`] (transformer-lite behind the policy's `Network` trait);
+//!   and [`stages`] (the layer-marking MLP network and the entry/exit-marking wrapper of the
+//!   per-stage breakdown);
 //! - `std` feature (host only): [`synthetic`] (the deterministic synthetic MLP and
 //!   transformer-lite, which build.rs bakes and the tests rebuild in memory) and [`host`] (running
 //!   the images under QEMU from a test);
@@ -22,7 +22,6 @@ pub mod policy_workload;
 pub mod prodmp_workload;
 pub mod shape;
 pub mod stages;
-pub mod transformer_network;
 pub mod workload;
 
 #[cfg(feature = "std")]

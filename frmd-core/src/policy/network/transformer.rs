@@ -187,3 +187,182 @@ impl<'a, T: TransformerBackbone<'a>, S: TransformerWork> Network for Transformer
             .map_err(PolicyError::Transformer)
     }
 }
+
+#[cfg(test)]
+#[allow(clippy::indexing_slicing)]
+mod tests {
+    extern crate std;
+
+    use super::*;
+    use crate::model::transformer::TransformerShape;
+    use crate::policy::InputSegment;
+    use crate::kernels::Activation;
+    use crate::model::linear::F32Linear;
+    use crate::model::transformer::{F32Block, F32FeedForward, LayerNormWeights};
+    use crate::rng::Rng;
+    use std::{vec, vec::Vec};
+
+    const SHAPE: TransformerShape = TransformerShape {
+        horizon: 3,
+        action_dim: 2,
+        cond_dim: 6,
+        width: 8,
+        heads: 2,
+        layers: 1,
+        output: 4,
+    };
+    type Scratch = TransformerScratch<4096, 4096, 256>;
+
+    fn random(rng: &mut Rng, len: usize) -> Vec<f32> {
+        (0..len).map(|_| 0.3 * rng.gaussian()).collect()
+    }
+
+    fn layer(weights: &[f32], bias: &[f32], in_features: usize) -> F32Linear<'static> {
+        let weights: &'static [f32] = std::boxed::Box::leak(weights.to_vec().into_boxed_slice());
+        let bias: &'static [f32] = std::boxed::Box::leak(bias.to_vec().into_boxed_slice());
+        F32Linear {
+            in_features,
+            out_features: bias.len(),
+            weights,
+            bias,
+            activation: Activation::Identity,
+        }
+    }
+
+    fn linear(rng: &mut Rng, in_features: usize, out_features: usize) -> F32Linear<'static> {
+        let weights = random(rng, in_features * out_features);
+        let bias = random(rng, out_features);
+        layer(&weights, &bias, in_features)
+    }
+
+    fn leak(values: Vec<f32>) -> &'static [f32] {
+        std::boxed::Box::leak(values.into_boxed_slice())
+    }
+
+    fn model(rng: &mut Rng) -> F32Transformer<'static> {
+        let width = SHAPE.width;
+        let norm = LayerNormWeights {
+            gamma: leak(vec![1.0; width]),
+            beta: leak(vec![0.0; width]),
+        };
+        let block = F32Block {
+            norm1: norm,
+            qkv: linear(rng, width, 3 * width),
+            proj: linear(rng, width, width),
+            norm2: norm,
+            feed_forward: F32FeedForward {
+                fc1: F32Linear {
+                    activation: Activation::GeluSigmoid,
+                    ..linear(rng, width, 4 * width)
+                },
+                fc2: linear(rng, 4 * width, width),
+            },
+        };
+        F32Transformer {
+            shape: SHAPE,
+            traj_in: linear(rng, SHAPE.action_dim, width),
+            cond_in: linear(rng, SHAPE.cond_dim, width),
+            noise_token: leak(random(rng, width)),
+            positions: leak(random(rng, SHAPE.tokens() * width)),
+            blocks: std::boxed::Box::leak(vec![block].into_boxed_slice()),
+            final_norm: norm,
+            head: linear(rng, SHAPE.token_values(), SHAPE.output),
+        }
+    }
+
+    fn layout() -> InputLayout {
+        InputLayout::new(&STANDARD_SEGMENTS, 1.0).unwrap()
+    }
+
+    #[test]
+    fn step_index_selects_its_noise_token() {
+        let mut rng = Rng::new(7);
+        let model = model(&mut rng);
+        let tokens = random(&mut rng, 2 * SHAPE.width);
+        let mut scratch = std::boxed::Box::new(Scratch::new());
+        let mut direct_scratch = std::boxed::Box::new(Scratch::new());
+        let input = random(&mut rng, SHAPE.cond_dim + SHAPE.trajectory_len());
+        let mut network =
+            F32TransformerNetwork::new(model, &layout(), &tokens, &mut *scratch).unwrap();
+        assert_eq!(network.num_noise_variants(), 2);
+        assert_eq!(network.input_width(), 12);
+        assert_eq!(network.output_width(), 4);
+        let mut outputs = [[0.0_f32; 4]; 2];
+        for (step, output) in outputs.iter_mut().enumerate() {
+            network.forward(step, &input, output).unwrap();
+            let token = &tokens[step * SHAPE.width..(step + 1) * SHAPE.width];
+            let mut want = [0.0_f32; 4];
+            F32Transformer {
+                noise_token: token,
+                ..model
+            }
+            .forward(&input[6..], &input[..6], &mut want, &mut *direct_scratch)
+            .unwrap();
+            assert_eq!(*output, want);
+        }
+        assert_ne!(outputs[0], outputs[1], "the noise token must matter");
+        assert_eq!(
+            network.forward(2, &input, &mut [0.0; 4]),
+            Err(PolicyError::NoiseVariantIndex)
+        );
+    }
+
+    #[test]
+    fn without_tokens_only_step_zero_uses_the_model_token() {
+        let mut rng = Rng::new(8);
+        let model = model(&mut rng);
+        let mut scratch = std::boxed::Box::new(Scratch::new());
+        let input = random(&mut rng, 12);
+        let mut network = F32TransformerNetwork::new(model, &layout(), &[], &mut *scratch).unwrap();
+        assert_eq!(network.num_noise_variants(), 0);
+        network.forward(0, &input, &mut [0.0; 4]).unwrap();
+        assert_eq!(
+            network.forward(1, &input, &mut [0.0; 4]),
+            Err(PolicyError::NoiseVariantIndex)
+        );
+        assert_eq!(
+            network.forward(0, &input[..11], &mut [0.0; 4]),
+            Err(PolicyError::Transformer(TransformerError::TrajectoryLength))
+        );
+    }
+
+    #[test]
+    fn refuses_bad_layout_tokens_and_model() {
+        let mut rng = Rng::new(9);
+        let model = model(&mut rng);
+        let mut scratch = std::boxed::Box::new(Scratch::new());
+        let swapped = InputLayout::new(
+            &[
+                InputSegment::PrevAction,
+                InputSegment::ObsHistory,
+                InputSegment::PrevRate,
+                InputSegment::NoisyTrajectory,
+            ],
+            1.0,
+        )
+        .unwrap();
+        assert_eq!(
+            F32TransformerNetwork::new(model, &swapped, &[], &mut *scratch).err(),
+            Some(PolicyError::TransformerLayout)
+        );
+        let ragged = [0.0_f32; 9];
+        assert_eq!(
+            F32TransformerNetwork::new(model, &layout(), &ragged, &mut *scratch).err(),
+            Some(PolicyError::NoiseVariantLength)
+        );
+        let mut nan = [0.0_f32; 8];
+        nan[3] = f32::NAN;
+        assert_eq!(
+            F32TransformerNetwork::new(model, &layout(), &nan, &mut *scratch).err(),
+            Some(PolicyError::NonFiniteNoise)
+        );
+        let broken = F32Transformer {
+            noise_token: &[0.0; 3],
+            ..model
+        };
+        assert!(matches!(
+            F32TransformerNetwork::new(broken, &layout(), &[], &mut *scratch).err(),
+            Some(PolicyError::Transformer(_))
+        ));
+    }
+}
