@@ -59,7 +59,7 @@ fn step(sigma: f64, first: bool, index: u32) -> StepConstants {
         c_in: (1.0 / norm) as f32,
         c_skip: (sigma_data * sigma_data / (shifted * shifted + sigma_data * sigma_data)) as f32,
         c_out: (shifted * sigma_data / norm) as f32,
-        first_layer_bias_index: index,
+        noise_variant: index,
     }
 }
 
