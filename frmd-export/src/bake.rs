@@ -5,7 +5,8 @@
 //! The module has no inner attributes, so it works as a plain file module (`mod policy;`) and
 //! with `include!` from a build script's `OUT_DIR`
 //! (`mod baked { include!(concat!(env!("OUT_DIR"), "/policy.rs")); }`); `weights.bin` must sit
-//! next to it. It needs only `frmd-core` and exposes `network()`, `config()`, `policy()`, the
+//! next to it. It needs only `frmd-core` and exposes `mlp_parts()`, `network()`, `config()`,
+//! `policy()`, the
 //! `BakedPolicy` type and RAM/flash figures (`SCRATCH_BYTES`, `FLASH_BYTES`, `POLICY_RAM_BYTES`).
 
 use std::fmt::Write as _;
@@ -347,11 +348,16 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
         "/// The weight file ({weights_len} bytes, 16-aligned arrays).\npub static WEIGHTS: AlignedBytes<WEIGHTS_BYTES> = AlignedBytes(*include_bytes!(\"{WEIGHTS_FILE}\"));\n"
     )
     .map_err(fmt_err)?;
-    // network()
-    w.push_str(
-        "/// The int8 network over the baked weights (`WIDTH` >= `SCRATCH_WIDTH`).\n\
-         pub fn network<const WIDTH: usize>() -> Result<Int8MlpNetwork<'static, WIDTH>, PolicyError> {\n    let bytes = &WEIGHTS.0;\n    let layers = [\n",
-    );
+    // mlp_parts() and network()
+    let layers = q.hidden.len();
+    writeln!(
+        w,
+        "/// The hidden layers, the output layer and the first-layer bias variants over the baked\n\
+         /// weights.\n\
+         #[allow(clippy::type_complexity)]\n\
+         pub fn mlp_parts() -> Result<([RequantizedLinear<'static>; {layers}], Int8Linear<'static>, &'static [i32]), PolicyError> {{\n    let bytes = &WEIGHTS.0;\n    let hidden = ["
+    )
+    .map_err(fmt_err)?;
     for (i, layer) in q.hidden.iter().enumerate() {
         let (weights, bias) = (entries[2 * i], entries[2 * i + 1]);
         let activation = match layer.lut {
@@ -377,7 +383,9 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
     let (variants, out_weights, out_bias) = (entries[base], entries[base + 1], entries[base + 2]);
     writeln!(
         w,
-        "    ];\n    let output = Int8Linear {{\n        fc: FullyConnected::new(\n            {},\n            {},\n            baked_slice(bytes, {}, {})?,\n            baked_slice(bytes, {}, {})?,\n        ),\n        output_scales: &OUTPUT_SCALES,\n    }};\n    let first_layer_biases = baked_slice(bytes, {}, {})?;\n    Int8MlpNetwork::new(INPUT, INPUT_PRECISION, &layers, output, first_layer_biases)\n}}\n",
+        "    ];\n    let output = Int8Linear {{\n        fc: FullyConnected::new(\n            {},\n            {},\n            baked_slice(bytes, {}, {})?,\n            baked_slice(bytes, {}, {})?,\n        ),\n        output_scales: &OUTPUT_SCALES,\n    }};\n    Ok((hidden, output, baked_slice(bytes, {}, {})?))\n}}\n\n\
+         /// The int8 network over the baked weights (`WIDTH` >= `SCRATCH_WIDTH`).\n\
+         pub fn network<const WIDTH: usize>() -> Result<Int8MlpNetwork<'static, WIDTH>, PolicyError> {{\n    let (hidden, output, first_layer_biases) = mlp_parts()?;\n    Int8MlpNetwork::new(INPUT, INPUT_PRECISION, &hidden, output, first_layer_biases)\n}}\n",
         q.output.in_features,
         q.output.out_features,
         out_weights.offset,

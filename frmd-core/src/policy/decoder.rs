@@ -2,6 +2,7 @@
 //! flattened, a blob section, or the exporter's owned tables) with run-time horizon `n` and
 //! parameters per DoF `p`, decoded with [`apply_row_f32`] (the rounding every decode shares).
 
+use super::dims::{fixed_row_pairs, fixed_rows};
 use super::PolicyError;
 use crate::prodmp::{apply_row_f32, BakedProDmp, BoundaryRow, ProDmpError};
 
@@ -115,9 +116,10 @@ impl<'p> ProDmpTables<'p> {
 
     /// Decodes `k = y0.len()` DoFs: `params` DoF-major (`[k][p]`, `[w_0 .. w_{p-2}, g]` each),
     /// `y0` (units), `v0` (units/s); writes `positions` and `velocities` (`[n][k]`, step-major).
-    /// Rounds exactly as [`BakedProDmp::decode`]. Non-finite inputs or outputs are errors
-    /// (outputs are then unspecified).
-    pub fn decode(
+    /// Rounds exactly as [`BakedProDmp::decode`]. `N`, `K` and `P` are the caller's capacities:
+    /// when the sizes equal them (a firmware image), the loops have compile-time trip counts.
+    /// Non-finite inputs or outputs are errors (outputs are then unspecified).
+    pub fn decode<const N: usize, const K: usize, const P: usize>(
         &self,
         params: &[f32],
         y0: &[f32],
@@ -139,26 +141,51 @@ impl<'p> ProDmpTables<'p> {
         if !params.iter().chain(y0).chain(v0).all(|v| v.is_finite()) {
             return Err(ProDmpError::NonFiniteInput);
         }
-        let tables = self
-            .pos_params
-            .chunks_exact(p)
-            .zip(self.vel_params.chunks_exact(p))
-            .zip(self.boundary_rows());
-        let outputs = positions.chunks_exact_mut(k).zip(velocities.chunks_exact_mut(k));
-        for (((pos_row, vel_row), b), (pos_t, vel_t)) in tables.zip(outputs) {
-            let dofs = params.chunks_exact(p).zip(y0.iter().zip(v0));
-            for ((theta, (y0, v0)), (pos_out, vel_out)) in
-                dofs.zip(pos_t.iter_mut().zip(vel_t.iter_mut()))
-            {
-                *pos_out = apply_row_f32(pos_row, b.pos_y0, b.pos_v0, theta, *y0, *v0);
-                *vel_out = apply_row_f32(vel_row, b.vel_y0, b.vel_v0, theta, *y0, *v0);
+        let fixed = (
+            fixed_rows::<N, P>(self.pos_params),
+            fixed_rows::<N, P>(self.vel_params),
+            fixed_rows::<K, P>(params),
+        );
+        if let ((Some(pos_rows), Some(vel_rows), Some(thetas)), true) = (fixed, (k, p) == (K, P)) {
+            if let Some(outputs) = fixed_row_pairs::<N, K>(positions, velocities) {
+                self.decode_rows(pos_rows, vel_rows, thetas, y0, v0, outputs);
             }
+        } else {
+            let thetas = params.chunks_exact(p);
+            let outputs = positions
+                .chunks_exact_mut(k)
+                .zip(velocities.chunks_exact_mut(k));
+            let (pos_rows, vel_rows) = (self.pos_params.chunks_exact(p), self.vel_params.chunks_exact(p));
+            self.decode_rows(pos_rows, vel_rows, thetas, y0, v0, outputs);
         }
         let finite = positions.iter().chain(velocities.iter()).all(|v| v.is_finite());
         if finite {
             Ok(())
         } else {
             Err(ProDmpError::NonFiniteResult)
+        }
+    }
+
+    /// The decode loop over rows of the tables, the parameters and the outputs.
+    #[inline(always)]
+    fn decode_rows<'r, 'o>(
+        &self,
+        pos_rows: impl Iterator<Item = &'r [f32]>,
+        vel_rows: impl Iterator<Item = &'r [f32]>,
+        thetas: impl Iterator<Item = &'r [f32]> + Clone,
+        y0: &[f32],
+        v0: &[f32],
+        outputs: impl Iterator<Item = (&'o mut [f32], &'o mut [f32])>,
+    ) {
+        let tables = pos_rows.zip(vel_rows).zip(self.boundary_rows());
+        for (((pos_row, vel_row), b), (pos_t, vel_t)) in tables.zip(outputs) {
+            let dofs = thetas.clone().zip(y0.iter().zip(v0));
+            for ((theta, (y0, v0)), (pos_out, vel_out)) in
+                dofs.zip(pos_t.iter_mut().zip(vel_t.iter_mut()))
+            {
+                *pos_out = apply_row_f32(pos_row, b.pos_y0, b.pos_v0, theta, *y0, *v0);
+                *vel_out = apply_row_f32(vel_row, b.vel_y0, b.vel_v0, theta, *y0, *v0);
+            }
         }
     }
 }

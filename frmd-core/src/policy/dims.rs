@@ -48,3 +48,22 @@ impl PolicyDims {
             .all(|(size, cap)| *size > 0 && *size <= cap)
     }
 }
+
+/// `values` as `N` rows of `L` (for capacities equal to the run-time sizes, so that loops over
+/// the rows and within them have constant trip counts); `None` for any other length.
+pub(crate) fn fixed_rows<const N: usize, const L: usize>(
+    values: &[f32],
+) -> Option<impl Iterator<Item = &[f32]> + Clone> {
+    let table: &[[f32; L]; N] = values.as_chunks::<L>().0.try_into().ok()?;
+    Some(table.iter().map(|row| &row[..]))
+}
+
+/// Rows of two buffers, side by side (see [`fixed_rows`]).
+pub(crate) fn fixed_row_pairs<'a, const N: usize, const L: usize>(
+    a: &'a mut [f32],
+    b: &'a mut [f32],
+) -> Option<impl Iterator<Item = (&'a mut [f32], &'a mut [f32])>> {
+    let a: &mut [[f32; L]; N] = a.as_chunks_mut::<L>().0.try_into().ok()?;
+    let b: &mut [[f32; L]; N] = b.as_chunks_mut::<L>().0.try_into().ok()?;
+    Some(a.iter_mut().zip(b.iter_mut()).map(|(a, b)| (&mut a[..], &mut b[..])))
+}

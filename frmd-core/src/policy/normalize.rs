@@ -4,6 +4,7 @@
 //! a constant dimension (`max == min`) maps to 0 and back to its constant. Rates (differences per
 //! second) scale by `2 / (max - min)` (0 for constant dimensions).
 
+use super::dims::{fixed_row_pairs, fixed_rows};
 use super::PolicyError;
 
 /// Baked min/max of every dimension (raw units), borrowed (`&'static` baked arrays or blob
@@ -81,6 +82,44 @@ impl<'a> RangeNormalizer<'a> {
     pub fn denormalize_rate(&self, normalized: &[f32], out: &mut [f32]) {
         for (((o, v), lo), hi) in out.iter_mut().zip(normalized).zip(self.min).zip(self.max) {
             *o = if hi > lo { *v * 0.5 * (hi - lo) } else { 0.0 };
+        }
+    }
+
+    /// A trajectory (`[n][k]` positions and rates, `k` = [`Self::len`]) to raw units:
+    /// [`Self::denormalize`] and [`Self::denormalize_rate`] per query time. `N` and `K` are the
+    /// caller's capacities: when the sizes equal them, the loops have constant trip counts.
+    pub fn denormalize_trajectory<const N: usize, const K: usize>(
+        &self,
+        normalized: (&[f32], &[f32]),
+        out: (&mut [f32], &mut [f32]),
+    ) {
+        let fixed = (
+            fixed_rows::<1, K>(self.min),
+            fixed_rows::<1, K>(self.max),
+            fixed_rows::<N, K>(normalized.0),
+            fixed_rows::<N, K>(normalized.1),
+        );
+        if let (Some(mut min), Some(mut max), Some(positions), Some(velocities)) = fixed {
+            if let (Some(min), Some(max), Some(outputs)) =
+                (min.next(), max.next(), fixed_row_pairs::<N, K>(out.0, out.1))
+            {
+                let fixed = Self { min, max };
+                for ((pos, vel), (pos_out, vel_out)) in positions.zip(velocities).zip(outputs) {
+                    fixed.denormalize(pos, pos_out);
+                    fixed.denormalize_rate(vel, vel_out);
+                }
+            }
+            return;
+        }
+        let k = self.len().max(1);
+        let rows = normalized
+            .0
+            .chunks_exact(k)
+            .zip(normalized.1.chunks_exact(k))
+            .zip(out.0.chunks_exact_mut(k).zip(out.1.chunks_exact_mut(k)));
+        for ((pos, vel), (pos_out, vel_out)) in rows {
+            self.denormalize(pos, pos_out);
+            self.denormalize_rate(vel, vel_out);
         }
     }
 }

@@ -90,6 +90,7 @@ impl<
         config.obs_norm.validate()?;
         config.action_norm.validate()?;
         let dims = config.dims();
+        config.sampler.decoder.validate()?;
         config.sampler.validate(&dims, &network)?;
         if network.input_width() > I {
             return Err(PolicyError::InputWidth);
@@ -211,7 +212,7 @@ impl<
             .as_flattened_mut()
             .get_mut(..history_len)
             .ok_or(PolicyError::Capacity)?;
-        for (slot, obs) in ordered.chunks_exact_mut(o).zip(self.history.iter_oldest_first()).take(m) {
+        for (slot, obs) in ordered.chunks_exact_mut(o.max(1)).zip(self.history.iter_oldest_first()).take(m) {
             slot.copy_from_slice(obs);
         }
         let conditioning = Conditioning {
@@ -224,7 +225,7 @@ impl<
             .normalized
             .values_mut(trajectory)
             .ok_or(PolicyError::Capacity)?;
-        self.config.sampler.sample(
+        self.config.sampler.sample::<N, K, P, Net>(
             &dims,
             &mut self.network,
             &conditioning,
@@ -236,14 +237,7 @@ impl<
         let norm = &self.config.action_norm;
         let (out_positions, out_velocities) =
             self.chunk.values_mut(trajectory).ok_or(PolicyError::Capacity)?;
-        let rows = positions
-            .chunks_exact(k)
-            .zip(velocities.chunks_exact(k))
-            .zip(out_positions.chunks_exact_mut(k).zip(out_velocities.chunks_exact_mut(k)));
-        for ((pos, vel), (pos_out, vel_out)) in rows {
-            norm.denormalize(pos, pos_out);
-            norm.denormalize_rate(vel, vel_out);
-        }
+        norm.denormalize_trajectory::<N, K>((positions, velocities), (out_positions, out_velocities));
         self.chunk_ready = true;
         self.cursor = 0;
         Ok(&self.chunk)

@@ -20,6 +20,7 @@ use crate::rng::Rng;
 use super::decoder::ProDmpTables;
 use super::layout::{InputLayout, InputSources};
 use super::network::Network;
+use super::dims::{fixed_row_pairs, fixed_rows};
 use super::{PolicyDims, PolicyError};
 
 /// Most sampling steps a table may hold.
@@ -307,14 +308,14 @@ pub struct Sampler<'s> {
 impl Sampler<'_> {
     /// Checks the step table, the layout, the control period, that the decoder has `dims`'
     /// horizon and parameters, and that `net` takes the layout's width, outputs `k p` values and
-    /// has every noise-level variant the steps use.
+    /// has every noise-level variant the steps use (the decoder tables' own consistency and
+    /// values are [`ProDmpTables::validate`]'s, which [`super::Policy::new`] runs once).
     pub fn validate<Net: Network>(&self, dims: &PolicyDims, net: &Net) -> Result<(), PolicyError> {
         self.steps.validate()?;
         self.layout.validate()?;
         if !(self.control_dt.is_finite() && self.control_dt > 0.0) {
             return Err(PolicyError::InvalidControlPeriod);
         }
-        self.decoder.validate()?;
         if (self.decoder.horizon(), self.decoder.params_per_dof())
             != (dims.horizon, dims.params_per_dof)
         {
@@ -340,9 +341,10 @@ impl Sampler<'_> {
     }
 
     /// Runs all steps and writes the chunk (normalized units, `n k` positions and velocities,
-    /// step-major) into `positions` and `velocities`.
+    /// step-major) into `positions` and `velocities`. `N`, `K` and `P` are the caller's
+    /// capacities (see [`ProDmpTables::decode`]).
     #[allow(clippy::too_many_arguments)]
-    pub fn sample<Net: Network>(
+    pub fn sample<const N: usize, const K: usize, const P: usize, Net: Network>(
         &self,
         dims: &PolicyDims,
         net: &mut Net,
@@ -354,6 +356,9 @@ impl Sampler<'_> {
     ) -> Result<(), PolicyError> {
         self.validate(dims, net)?;
         let k = dims.action_dim;
+        if k == 0 {
+            return Err(PolicyError::Capacity);
+        }
         let trajectory = dims.trajectory_len().ok_or(PolicyError::Capacity)?;
         let width = net.input_width();
         let SamplerBuffers {
@@ -390,7 +395,7 @@ impl Sampler<'_> {
             self.layout.write(dims, &sources, input)?;
             net.forward(step.noise_variant as usize, input, params)?;
             self.decoder
-                .decode(
+                .decode::<N, K, P>(
                     params,
                     conditioning.prev_action,
                     conditioning.prev_rate,
@@ -399,7 +404,21 @@ impl Sampler<'_> {
                 )
                 .map_err(PolicyError::Decode)?;
             let decoded = (&*decoded_positions, &*decoded_velocities);
-            self.combine(step, k, noisy, conditioning, decoded, (positions, velocities));
+            let fixed = (
+                fixed_rows::<N, K>(noisy),
+                fixed_rows::<N, K>(decoded.0),
+                fixed_rows::<N, K>(decoded.1),
+            );
+            if let (Some(noisy), Some(decoded_pos), Some(decoded_vel)) = fixed {
+                if let Some(outputs) = fixed_row_pairs::<N, K>(positions, velocities) {
+                    let decoded = decoded_pos.zip(decoded_vel);
+                    self.combine(step, noisy, conditioning, decoded, outputs);
+                }
+            } else {
+                let outputs = positions.chunks_exact_mut(k).zip(velocities.chunks_exact_mut(k));
+                let decoded = decoded.0.chunks_exact(k).zip(decoded.1.chunks_exact(k));
+                self.combine(step, noisy.chunks_exact(k), conditioning, decoded, outputs);
+            }
         }
         let finite = positions.iter().chain(velocities.iter()).all(|v| v.is_finite());
         if finite {
@@ -410,22 +429,21 @@ impl Sampler<'_> {
     }
 
     /// `f = b + c_skip (x - b) + c_out (decoded - b)` for positions; velocities as in the module
-    /// docs. All trajectories are step-major with `k` values per step.
-    fn combine(
+    /// docs. Every trajectory comes as rows of `k` values, one per query time.
+    #[inline(always)]
+    fn combine<'r, 'o>(
         &self,
         step: &StepConstants,
-        k: usize,
-        noisy: &[f32],
+        noisy: impl Iterator<Item = &'r [f32]>,
         conditioning: &Conditioning<'_>,
-        decoded: (&[f32], &[f32]),
-        out: (&mut [f32], &mut [f32]),
+        decoded: impl Iterator<Item = (&'r [f32], &'r [f32])>,
+        outputs: impl Iterator<Item = (&'o mut [f32], &'o mut [f32])>,
     ) {
         let (prev_action, prev_rate) = (conditioning.prev_action, conditioning.prev_rate);
         let mut before = prev_action;
         let rows = noisy
-            .chunks_exact(k)
-            .zip(decoded.0.chunks_exact(k).zip(decoded.1.chunks_exact(k)))
-            .zip(out.0.chunks_exact_mut(k).zip(out.1.chunks_exact_mut(k)))
+            .zip(decoded)
+            .zip(outputs)
             .zip(self.decoder.boundary_rows());
         for (((x_t, (pos_t, vel_t)), (out_pos, out_vel)), b_t) in rows {
             let dofs = x_t

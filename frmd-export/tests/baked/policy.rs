@@ -108,10 +108,12 @@ pub static OUTPUT_SCALES: [f32; 15] = [0.00014810734, 0.00010032332, 0.000177054
 /// The weight file (2224 bytes, 16-aligned arrays).
 pub static WEIGHTS: AlignedBytes<WEIGHTS_BYTES> = AlignedBytes(*include_bytes!("weights.bin"));
 
-/// The int8 network over the baked weights (`WIDTH` >= `SCRATCH_WIDTH`).
-pub fn network<const WIDTH: usize>() -> Result<Int8MlpNetwork<'static, WIDTH>, PolicyError> {
+/// The hidden layers, the output layer and the first-layer bias variants over the baked
+/// weights.
+#[allow(clippy::type_complexity)]
+pub fn mlp_parts() -> Result<([RequantizedLinear<'static>; 2], Int8Linear<'static>, &'static [i32]), PolicyError> {
     let bytes = &WEIGHTS.0;
-    let layers = [
+    let hidden = [
         RequantizedLinear {
             fc: FullyConnected::new(
                 38,
@@ -154,8 +156,13 @@ pub fn network<const WIDTH: usize>() -> Result<Int8MlpNetwork<'static, WIDTH>, P
         ),
         output_scales: &OUTPUT_SCALES,
     };
-    let first_layer_biases = baked_slice(bytes, 1568, 72)?;
-    Int8MlpNetwork::new(INPUT, INPUT_PRECISION, &layers, output, first_layer_biases)
+    Ok((hidden, output, baked_slice(bytes, 1568, 72)?))
+}
+
+/// The int8 network over the baked weights (`WIDTH` >= `SCRATCH_WIDTH`).
+pub fn network<const WIDTH: usize>() -> Result<Int8MlpNetwork<'static, WIDTH>, PolicyError> {
+    let (hidden, output, first_layer_biases) = mlp_parts()?;
+    Int8MlpNetwork::new(INPUT, INPUT_PRECISION, &hidden, output, first_layer_biases)
 }
 
 /// Normalization and sampler configuration.
