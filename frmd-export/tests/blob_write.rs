@@ -1,8 +1,7 @@
 //! The exporter's blob round-trips through frmd-core's loader into a working policy.
 
-mod common;
 
-use common::*;
+use frmd_test_support::random_policy::*;
 use frmd_core::blob::{BlobError, LoadedMlp, SectionId};
 use frmd_core::policy::Noise;
 use frmd_core::rng::Rng;

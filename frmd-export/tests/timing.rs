@@ -1,11 +1,10 @@
 //! Host timing of the int8 policy from a blob at firmware-like size (ignored: a measurement, not a
 //! check). `cargo test -p frmd-export --release --test timing -- --ignored --nocapture`.
 
-mod common;
 
 use std::time::Instant;
 
-use common::{random_policy, Dims};
+use frmd_test_support::random_policy::{random_policy, Dims};
 use frmd_core::blob::LoadedMlp;
 use frmd_core::policy::Noise;
 use frmd_core::rng::Rng;

@@ -191,14 +191,7 @@ fn read_steps(data: &Data<'_>, section: Section) -> Result<StepTable, BlobError>
     if count == 0 || count > MAX_STEPS {
         return Err(BlobError::Steps);
     }
-    let mut steps = [StepConstants {
-        sigma: 0.0,
-        renoise_std: 0.0,
-        c_in: 0.0,
-        c_skip: 0.0,
-        c_out: 0.0,
-        noise_variant: 0,
-    }; MAX_STEPS];
+    let mut steps = [StepConstants::ZERO; MAX_STEPS];
     for (step, chunk) in steps.iter_mut().zip(words.chunks_exact(STEP_WORDS)) {
         if let [sigma, renoise, c_in, c_skip, c_out, index] = chunk {
             *step = StepConstants {

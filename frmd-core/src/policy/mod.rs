@@ -32,6 +32,7 @@ pub mod network;
 mod normalize;
 mod runtime;
 mod sampler;
+mod steps;
 
 #[cfg(test)]
 pub(crate) mod test_model;
@@ -53,9 +54,9 @@ pub use network::{Network, NoiseVariants};
 pub use normalize::RangeNormalizer;
 pub use runtime::{Policy, PolicyConfig};
 pub use sampler::{
-    skip_output, validate_steps, Conditioning, Noise, Sampler, SamplerBuffers, SamplerWork,
-    StepConstants, StepTable, Trajectory, MAX_STEPS,
+    skip_output, Conditioning, Noise, Sampler, SamplerBuffers, SamplerWork, Trajectory,
 };
+pub use steps::{validate_steps, StepConstants, StepTable, MAX_STEPS};
 
 use crate::model::mlp::ModelError;
 use crate::model::transformer::TransformerError;
