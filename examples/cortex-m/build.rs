@@ -66,6 +66,26 @@ fn two_plane_macs(policy: &frmd_export::QuantizedPolicy) -> usize {
     }
 }
 
+/// The `pil` image's policy in `$OUT_DIR/pil/`: the baked module (`policy.rs` + `weights.bin`) of
+/// `frmd export --out DIR` when `FRMD_PIL_BAKED=DIR` is set (an MLP student), else the checked-in
+/// student baked above.
+fn bake_pil(out: &Path) {
+    println!("cargo:rerun-if-env-changed=FRMD_PIL_BAKED");
+    let source = match env::var_os("FRMD_PIL_BAKED") {
+        Some(dir) => PathBuf::from(dir),
+        None => out.join("student"),
+    };
+    let target = out.join("pil");
+    fs::create_dir_all(&target).expect("create OUT_DIR/pil");
+    for file in ["policy.rs", "weights.bin"] {
+        let from = source.join(file);
+        println!("cargo:rerun-if-changed={}", from.display());
+        fs::copy(&from, target.join(file)).unwrap_or_else(|error| {
+            panic!("FRMD_PIL_BAKED: cannot copy {} ({error}); expected the baked module of `frmd export --out DIR`", from.display())
+        });
+    }
+}
+
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     fs::copy("memory.x", out.join("memory.x")).expect("copy memory.x into OUT_DIR");
@@ -82,6 +102,7 @@ fn main() {
     fs::write(out.join("synthetic_mlp.bin"), model.weight_bytes()).expect("write synthetic_mlp.bin");
     fs::write(out.join("synthetic_mlp.rs"), model.rust_source()).expect("write synthetic_mlp.rs");
     bake_student(&out);
+    bake_pil(&out);
     frmd_export::bake::write_module(&synthetic::policy::generate(), &out.join("synthetic_policy"))
         .expect("bake the synthetic policy with frmd-export");
     let transformer = synthetic::transformer::generate();

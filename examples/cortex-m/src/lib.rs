@@ -11,6 +11,8 @@
 //!   in, action chunk out).
 //! - `frmd-cortex-m-transformer` (src/bin/frmd-cortex-m-transformer.rs): a synthetic one-step
 //!   policy configuration with a synthetic int8 transformer-lite backbone instead of the MLP.
+//! - `frmd-cortex-m-pil` (src/bin/frmd-cortex-m-pil.rs): processor in the loop, a baked policy
+//!   answering act requests from the host over semihosting (see [`pil`]).
 //! - `frmd-cortex-m-policy-stages`, `frmd-cortex-m-transformer-stages`: the policy (same baked
 //!   student) and the transformer measurements followed by a per-stage breakdown
 //!   (`stage <name>: <instructions>` lines, see src/stage_report.rs).
@@ -29,6 +31,7 @@ pub mod baked_transformer;
 pub mod bench;
 pub mod images;
 pub mod memory;
+pub mod pil;
 pub mod report;
 pub mod stage_report;
 pub mod timer;

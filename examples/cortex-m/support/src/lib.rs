@@ -5,7 +5,8 @@
 //!   [`workload`] (the [`workload::Workload`] trait and the digest over a workload's cases),
 //!   the workloads [`prodmp_workload`], [`mlp_workload`] and [`policy_workload`],
 //!   and [`stages`] (the layer-marking MLP network and the entry/exit-marking wrapper of the
-//!   per-stage breakdown);
+//!   per-stage breakdown), [`pil`] (the processor-in-the-loop frame format, used by the `pil`
+//!   image and the host driver in frmd-host);
 //! - `std` feature (host only): [`synthetic`] (the deterministic synthetic MLP and
 //!   transformer-lite, which build.rs bakes and the tests rebuild in memory) and [`host`] (running
 //!   the images under QEMU from a test);
@@ -18,6 +19,7 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 
 pub mod mlp_workload;
+pub mod pil;
 pub mod policy_workload;
 pub mod prodmp_workload;
 pub mod shape;
