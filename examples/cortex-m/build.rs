@@ -71,15 +71,15 @@ fn two_plane_macs(policy: &frmd_export::QuantizedPolicy) -> usize {
 /// student baked above.
 fn bake_pil(out: &Path) {
     println!("cargo:rerun-if-env-changed=FRMD_PIL_BAKED");
-    let source = match env::var_os("FRMD_PIL_BAKED") {
-        Some(dir) => PathBuf::from(dir),
-        None => out.join("student"),
-    };
+    let external = env::var_os("FRMD_PIL_BAKED").map(PathBuf::from);
+    let source = external.clone().unwrap_or_else(|| out.join("student"));
     let target = out.join("pil");
     fs::create_dir_all(&target).expect("create OUT_DIR/pil");
     for file in ["policy.rs", "weights.bin"] {
         let from = source.join(file);
-        println!("cargo:rerun-if-changed={}", from.display());
+        if external.is_some() {
+            println!("cargo:rerun-if-changed={}", from.display());
+        }
         fs::copy(&from, target.join(file)).unwrap_or_else(|error| {
             panic!("FRMD_PIL_BAKED: cannot copy {} ({error}); expected the baked module of `frmd export --out DIR`", from.display())
         });

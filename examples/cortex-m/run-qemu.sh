@@ -10,6 +10,8 @@
 #   policy: firmware frmd-cortex-m-policy, the trained student in policy/reach/ baked by frmd-export
 #   transformer: firmware frmd-cortex-m-transformer, a synthetic one-step policy with a
 #     transformer-lite network
+#   pil: firmware frmd-cortex-m-pil, processor in the loop: answers frames on standard input
+#     (frmd_firmware_support::pil); driven by the host (`frmd eval --firmware`), not run here
 #   policy-stages, transformer-stages: the policy (same baked student) and the transformer
 #     measurement, each plus the per-stage breakdown
 #     (`stage <name>: <instructions>` lines)
@@ -18,6 +20,8 @@
 # exits non-zero if the build fails, the firmware reports an error or panics, a required line
 # (digest, instructions, flash, ram) is missing, or QEMU runs longer than FRMD_QEMU_TIMEOUT
 # seconds (default 120).
+# FRMD_QEMU_BUILD_ONLY=1 only builds and prints `elf: <path>`, `machine: <name>`, `cpu: <name>`
+# and `qemu: <binary>` (what the host's processor-in-the-loop driver needs to start QEMU itself).
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -37,6 +41,7 @@ case "${1:-}" in
     transformer) bin=frmd-cortex-m-transformer; shift ;;
     policy-stages) bin=frmd-cortex-m-policy-stages; shift ;;
     transformer-stages) bin=frmd-cortex-m-transformer-stages; shift ;;
+    pil) bin=frmd-cortex-m-pil; shift ;;
 esac
 timeout_s="${FRMD_QEMU_TIMEOUT:-120}"
 case " $* " in *defmt*)
@@ -59,6 +64,10 @@ bash "$repo/scripts/cortex-m-cargo.sh" build --release --bin "$bin" "$@" >&2
 target_dir="${CARGO_TARGET_DIR:-$here/target}"
 elf="$target_dir/$FRMD_CM_TARGET/release/$bin"
 [ -f "$elf" ] || { echo "run-qemu: firmware ELF not found at $elf" >&2; exit 1; }
+if [ -n "${FRMD_QEMU_BUILD_ONLY:-}" ]; then
+    printf 'elf: %s\nmachine: %s\ncpu: %s\nqemu: %s\n' "$elf" "$machine" "$cpu" "$FRMD_CM_QEMU"
+    exit 0
+fi
 
 output="$(mktemp)"
 trap 'rm -f "$output"' EXIT
