@@ -7,6 +7,7 @@ pub mod diffusion;
 pub mod equiv;
 pub mod bench;
 pub mod eval;
+pub mod firmware;
 pub mod models;
 pub mod policy;
 pub mod prodmp_vectors;

@@ -50,9 +50,19 @@ pub struct EvalArgs {
     /// int8 student blob (written by `frmd export --blob`) run by frmd-core; overrides --policy.
     #[arg(long)]
     pub blob: Option<PathBuf>,
-    /// Baked module directory (`frmd export --out`): evaluates the blob written beside it.
+    /// Baked module directory (`frmd export --out`): evaluates the blob written beside it (with
+    /// --firmware: bakes its module into the firmware image).
     #[arg(long)]
     pub baked: Option<PathBuf>,
+    /// Processor in the loop: every chunk comes from the `pil` firmware image on this core (m4,
+    /// m7, m33, m0, m55) under QEMU; reports the instructions per chunk the image counted. Bakes
+    /// --baked DIR's module, else the checked-in reach student.
+    #[arg(long, value_name = "CORE")]
+    pub firmware: Option<String>,
+    /// With --firmware: also run the host int8 policy (the blob beside --baked, or --blob) on every
+    /// request and count the chunks whose bits differ from the firmware's.
+    #[arg(long, requires = "firmware")]
+    pub check_host: bool,
 }
 
 /// Prints the human-readable summary of a report.
@@ -103,6 +113,9 @@ pub fn evaluate_with_bar(
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
+    if let Some(board) = &args.firmware {
+        return super::eval_firmware::run(&args, board);
+    }
     let blob = args.blob.clone().or_else(|| args.baked.as_ref().map(|d| d.join(crate::cli::export::BAKED_BLOB_FILE)));
     let (mut policy, history): (Box<dyn crate::eval::policy::Policy>, usize) = match (&blob, &args.ckpt) {
         (Some(path), _) => {

@@ -6,6 +6,7 @@ pub mod bench;
 pub mod collect;
 pub mod equiv;
 pub mod eval;
+pub mod eval_firmware;
 pub mod export;
 pub mod prodmp;
 pub mod quickstart;

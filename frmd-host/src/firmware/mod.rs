@@ -1,0 +1,107 @@
+//! Processor in the loop: the `pil` firmware image (examples/cortex-m, src/bin/frmd-cortex-m-pil.rs)
+//! under QEMU as a closed-loop policy.
+//!
+//! [`build`] builds (or reuses) the image for a core through `examples/cortex-m/run-qemu.sh`
+//! (`FRMD_QEMU_BUILD_ONLY=1`), which owns the board table (target, machine, cpu) and the
+//! toolchain setup; [`link::QemuLink`] starts QEMU with `-icount shift=0` and exchanges the frames
+//! of `frmd_firmware_support::pil` with it over semihosting (the image's standard input and
+//! output); [`policy::FirmwarePolicy`] implements the evaluator's [`crate::eval::policy::Policy`]
+//! (and the server's `ServedPolicy`) on top, collecting the instructions the image counted for
+//! every chunk.
+use anyhow::{bail, Context};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+pub mod link;
+pub mod lockstep;
+pub mod policy;
+pub mod served;
+
+/// The cores `run-qemu.sh` boots (which of them build depends on the installed targets).
+pub const BOARDS: [&str; 5] = ["m4", "m7", "m33", "m0", "m55"];
+
+/// A built `pil` image and how QEMU runs it.
+#[derive(Clone, Debug)]
+pub struct FirmwareImage {
+    /// The core (`m4`, `m7`, ...).
+    pub board: String,
+    pub elf: PathBuf,
+    pub machine: String,
+    pub cpu: String,
+    pub qemu: PathBuf,
+}
+
+/// The repository this crate was built from (`run-qemu.sh` and the firmware sources live there).
+pub fn default_repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Builds the `pil` image for `board` with `run-qemu.sh` (a no-op when it is up to date) and
+/// returns where it is and how to boot it. `baked`: a baked module directory (`frmd export --out`,
+/// MLP students) to bake into the image instead of the checked-in reach student.
+pub fn build(repo: &Path, board: &str, baked: Option<&Path>) -> anyhow::Result<FirmwareImage> {
+    if !BOARDS.contains(&board) {
+        bail!("unknown firmware core {board:?}; expected one of {}", BOARDS.join(", "));
+    }
+    let script = repo.join("examples/cortex-m/run-qemu.sh");
+    anyhow::ensure!(script.is_file(), "{} not found (the firmware sources are needed to build the pil image)", script.display());
+    let mut command = Command::new("bash");
+    command
+        .arg(&script)
+        .args([board, "pil"])
+        .env("FRMD_QEMU_BUILD_ONLY", "1")
+        .env("CARGO_TARGET_DIR", repo.join("examples/cortex-m/target"))
+        .env_remove("FRMD_PIL_BAKED");
+    if let Some(dir) = baked {
+        for file in ["policy.rs", "weights.bin"] {
+            let path = dir.join(file);
+            anyhow::ensure!(path.is_file(), "baked module {}: {file} missing (expected the output of `frmd export --out DIR`)", dir.display());
+        }
+        let dir = dir.canonicalize().with_context(|| format!("baked module {}", dir.display()))?;
+        command.env("FRMD_PIL_BAKED", dir);
+    }
+    let output = command.output().with_context(|| format!("running {}", script.display()))?;
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    if !output.status.success() {
+        bail!(
+            "building the pil image for {board} failed ({}):\n{}{}",
+            output.status,
+            stdout,
+            tail(&String::from_utf8_lossy(&output.stderr), 40)
+        );
+    }
+    let field = |key: &str| -> anyhow::Result<String> {
+        let prefix = format!("{key}: ");
+        stdout
+            .lines()
+            .find_map(|line| line.strip_prefix(prefix.as_str()))
+            .map(str::to_owned)
+            .with_context(|| format!("run-qemu.sh {board} pil printed no `{key}:` line (output: {stdout})"))
+    };
+    Ok(FirmwareImage {
+        board: board.to_owned(),
+        elf: PathBuf::from(field("elf")?),
+        machine: field("machine")?,
+        cpu: field("cpu")?,
+        qemu: PathBuf::from(field("qemu")?),
+    })
+}
+
+/// The last `lines` lines of `text`.
+fn tail(text: &str, lines: usize) -> String {
+    let all: Vec<&str> = text.lines().collect();
+    all[all.len().saturating_sub(lines)..].join("\n")
+}
+
+/// The core a CPUID register names.
+pub fn core_name(cpuid: u32) -> &'static str {
+    match (cpuid >> 4) & 0xFFF {
+        0xC20 => "cortex-m0",
+        0xC60 => "cortex-m0+",
+        0xC24 => "cortex-m4",
+        0xC27 => "cortex-m7",
+        0xD21 => "cortex-m33",
+        0xD22 => "cortex-m55",
+        _ => "unknown",
+    }
+}
