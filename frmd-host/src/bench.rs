@@ -40,7 +40,7 @@ pub fn reach_student(dir: &Path, backbone: &str, seed: u64) -> anyhow::Result<Be
         control_dt: 0.05,
         embed_dim: 16,
         backbone: BackboneConfig::parse(backbone)?,
-        head: HeadConfig::ProDmp { num_basis: 20, output: ProDmpOutput::Direct },
+        head: HeadConfig::ProDmp { num_basis: 20, output: ProDmpOutput::Direct, auto_scale_basis: false },
     };
     let net = OwnedNetwork::new_seeded(&model, seed, &Device::Cpu)?;
     let sigma = SigmaConfig::default();

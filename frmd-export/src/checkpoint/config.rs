@@ -92,6 +92,14 @@ pub enum HeadConfig {
         /// Output parametrization (absent in older checkpoints: `direct`).
         #[serde(default)]
         output: ProDmpOutput,
+        /// mp_pytorch's `auto_scale_basis`: every basis column of the decoder is divided by its
+        /// largest value, so a unit weight moves the trajectory by about one unit. Without it
+        /// the 20 basis columns reach at most ~1e-3 at the policy's 12 query times against ~1
+        /// for the goal (singular values 3.1 then 2.6e-3 .. 9.9e-5), and the network has to
+        /// output weights of ~1000 to shape a chunk (docs/design.md, "ProDMP scaling").
+        /// Absent in older checkpoints: false.
+        #[serde(default)]
+        auto_scale_basis: bool,
     },
     /// A raw n k output (the DP baseline's noise prediction).
     Raw,
@@ -127,8 +135,10 @@ impl ModelConfig {
 
     pub fn prodmp(&self) -> Option<ProDmpConfig> {
         match self.head {
-            HeadConfig::ProDmp { num_basis, .. } => {
-                Some(ProDmpConfig::policy(self.action_dim, num_basis, self.horizon, self.control_dt))
+            HeadConfig::ProDmp { num_basis, auto_scale_basis, .. } => {
+                let mut cfg = ProDmpConfig::policy(self.action_dim, num_basis, self.horizon, self.control_dt);
+                cfg.auto_scale_basis = auto_scale_basis;
+                Some(cfg)
             }
             HeadConfig::Raw => None,
         }

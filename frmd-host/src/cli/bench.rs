@@ -117,7 +117,7 @@ pub fn synthetic_float_policy(backbone: &str, obs_dim: usize, role: Role, steps:
     let action_dim = 2;
     let head = match role {
         Role::Dp => HeadConfig::Raw,
-        Role::Teacher | Role::Student => HeadConfig::ProDmp { num_basis: 20, output: ProDmpOutput::Direct },
+        Role::Teacher | Role::Student => HeadConfig::ProDmp { num_basis: 20, output: ProDmpOutput::Direct, auto_scale_basis: false },
     };
     let cfg = ModelConfig { obs_dim, history: 2, action_dim, horizon: 12, control_dt: 0.1, embed_dim: 16, backbone: BackboneConfig::parse(backbone)?, head };
     let net = OwnedNetwork::new_seeded(&cfg, 7, &candle_core::Device::Cpu)?;

@@ -163,6 +163,9 @@ pub struct TeacherArgs {
     /// boundary-skip (EDM skip on the free part of the chunk; y0/v0 stay exact).
     #[arg(long, default_value = "direct")]
     pub parametrization: String,
+    /// Scale every ProDMP basis column to a largest value of 1 (mp_pytorch's auto_scale_basis).
+    #[arg(long)]
+    pub auto_scale_basis: bool,
     /// Solver for evaluation: euler | heun | dpm++2m.
     #[arg(long, default_value = "heun")]
     pub eval_solver: String,
@@ -442,7 +445,7 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {
             let c = &args.common;
             let prepared = prepare_padded(c, c.history, c.horizon, c.pad_end)?;
             let output = ProDmpOutput::parse(&args.parametrization)?;
-            let model = model_config(c, &prepared, HeadConfig::ProDmp { num_basis: c.num_basis, output })?;
+            let model = model_config(c, &prepared, HeadConfig::ProDmp { num_basis: c.num_basis, output, auto_scale_basis: args.auto_scale_basis })?;
             let weight = LossWeight::parse(&args.loss_weight)?;
             let sampler = Sampler::for_role(Role::Teacher, c.eval_steps, Some(Solver::parse(&args.eval_solver)?))?;
             let mut mon = monitor(c, &prepared.dataset.task, &prepared.norm, sampler, "teacher");

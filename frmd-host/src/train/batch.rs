@@ -137,7 +137,7 @@ mod tests {
 
     #[test]
     fn augmentation_perturbs_only_the_initial_condition() {
-        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
+        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
         let windows = bimodal_windows(&cfg, 64, 5).unwrap();
         let device = Device::Cpu;
         // Inactive augmentation draws exactly what `sample` draws.

@@ -207,7 +207,7 @@ mod tests {
 
     #[test]
     fn chunk_error_reports_the_hold_baseline_and_rejects_bad_input() {
-        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
+        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
         let windows = bimodal_windows(&cfg, 40, 2).unwrap();
         let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
         let sig = SigmaConfig::default();

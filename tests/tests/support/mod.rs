@@ -90,6 +90,7 @@ pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
         loss_weight: tiny.loss_weight.into(),
         eval_solver: "heun".into(),
         parametrization: "boundary-skip".into(),
+        auto_scale_basis: false,
         sigma_uniform_fraction: 0.2,
         ema: 0.0,
         augment: Default::default(),
