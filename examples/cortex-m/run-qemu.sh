@@ -2,7 +2,7 @@
 # Builds the FRMD firmware (release, thumbv7em-none-eabihf) and runs it under QEMU with
 # instruction counting:
 #
-#   bash examples/cortex-m/run-qemu.sh m4|m7 [prodmp|mlp|policy|transformer|policy-stages|transformer-stages] [extra cargo build args]
+#   bash examples/cortex-m/run-qemu.sh m4|m7 [prodmp|mlp|policy|transformer|policy-stages|transformer-stages|kernels] [extra cargo build args]
 #
 #   m4: -machine mps2-an386 -cpu cortex-m4 (Cortex-M4F)   m7: -machine mps2-an500 -cpu cortex-m7
 #   prodmp (default): firmware frmd-cortex-m, the baked ProDMP decoder
@@ -13,6 +13,8 @@
 #   policy-stages, transformer-stages: the policy (same baked student) and the transformer
 #     measurement, each plus the per-stage breakdown
 #     (`stage <name>: <instructions>` lines)
+#   kernels: firmware frmd-cortex-m-kernels, the fully connected kernels on random shapes (for
+#     the host's bit-for-bit comparison)
 #
 # Prints the firmware's `key: value` lines on stdout (build and setup chatter go to stderr) and
 # exits non-zero if the build fails, the firmware reports an error or panics, a required line
@@ -26,7 +28,7 @@ board="${1:-}"
 case "$board" in
     m4) machine=mps2-an386; cpu=cortex-m4 ;;
     m7) machine=mps2-an500; cpu=cortex-m7 ;;
-    *) echo "usage: $0 m4|m7 [prodmp|mlp|policy|transformer|policy-stages|transformer-stages] [extra cargo build args]" >&2; exit 2 ;;
+    *) echo "usage: $0 m4|m7 [prodmp|mlp|policy|transformer|policy-stages|transformer-stages|kernels] [extra cargo build args]" >&2; exit 2 ;;
 esac
 shift
 bin=frmd-cortex-m
@@ -36,6 +38,7 @@ case "${1:-}" in
     policy) bin=frmd-cortex-m-policy; shift ;;
     transformer) bin=frmd-cortex-m-transformer; shift ;;
     policy-stages) bin=frmd-cortex-m-policy-stages; shift ;;
+    kernels) bin=frmd-cortex-m-kernels; shift ;;
     transformer-stages) bin=frmd-cortex-m-transformer-stages; shift ;;
 esac
 timeout_s="${FRMD_QEMU_TIMEOUT:-120}"
