@@ -3,10 +3,11 @@
 //! The firmware's workloads are plain `core` + frmd-core code in `frmd-firmware-support`
 //! (`examples/cortex-m/support`, whose synthetic MLP generator its build.rs runs), so they run
 //! here on the host as well.
-//! `qemu_digests_match_host` builds the firmware images, runs them on QEMU mps2-an386
-//! (Cortex-M4F) and mps2-an500 (Cortex-M7) and requires each printed digest to equal the host's:
-//! ProDMP decode (f32), int8 MLP + decode and the fully connected kernels on random shapes are
-//! bit-identical on x86-64 and Cortex-M. It needs
+//! `qemu_digests_match_host` builds the firmware images, runs them on every QEMU board of
+//! `run-qemu.sh` (Cortex-M4F, M7, M33, M0, M55) and requires each printed digest to equal the
+//! host's: ProDMP decode (f32), int8 MLP + decode and the fully connected kernels on random
+//! shapes are bit-identical on x86-64 and on every core, DSP kernels or portable, FPU or soft
+//! float. It needs
 //! `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without it, or with
 //! FRMD_SKIP_QEMU=1, it prints why and passes without checking
 //! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
@@ -111,7 +112,7 @@ fn qemu_digests_match_host() {
     let images = [("prodmp", prodmp_digest()), ("mlp", mlp_digest()), ("kernels", kernels_digest())];
     for (firmware, host_digest) in images {
         let expected = format!("digest: {host_digest:016x}");
-        for board in ["m4", "m7"] {
+        for board in qemu::BOARDS {
             let stdout = qemu::run(&root, board, firmware);
             let digest_line = qemu::digest_line(&stdout);
             assert_eq!(

@@ -5,8 +5,8 @@
 //! `bake::write_module` in its build.rs, then times `Policy::act` on QEMU. Here the same checkpoint
 //! goes through the same export call (`frmd_firmware_support::host::student`), is written as a
 //! blob, loaded with `frmd_core::blob::LoadedPolicy` and driven through the same workload;
-//! `qemu_policy_digest_matches_host` requires the firmware's printed digest on mps2-an386
-//! (Cortex-M4F) and mps2-an500 (Cortex-M7) to equal the host's. It needs `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without
+//! `qemu_policy_digest_matches_host` requires the firmware's printed digest on every board of
+//! `run-qemu.sh` (Cortex-M4F, M7, M33, M0, M55) to equal the host's. It needs `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without
 //! it, or with FRMD_SKIP_QEMU=1, it prints why and passes without checking
 //! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
 
@@ -87,7 +87,7 @@ fn qemu_policy_digest_matches_host() {
         return;
     }
     let expected = format!("digest: {:016x}", host_digest());
-    for board in ["m4", "m7"] {
+    for board in qemu::BOARDS {
         let stdout = qemu::run(&root, board, "policy");
         let digest_line = qemu::digest_line(&stdout);
         assert_eq!(

@@ -10,8 +10,12 @@ use frmd_firmware_support::workload::Workload;
 /// Core name from the CPUID part number.
 fn core_name(cpuid: u32) -> &'static str {
     match (cpuid >> 4) & 0xFFF {
+        0xC20 => "cortex-m0",
+        0xC60 => "cortex-m0+",
         0xC24 => "cortex-m4",
         0xC27 => "cortex-m7",
+        0xD21 => "cortex-m33",
+        0xD22 => "cortex-m55",
         _ => "unknown",
     }
 }

@@ -77,6 +77,9 @@ macro_rules! two_rows_eight_columns {
 macro_rules! two_row_asm {
     ($input:ident, $shift:literal, $blocks:expr, $xp:expr, $r0:expr, $r1:expr, $acc0:ident, $acc1:ident) => {
         core::arch::asm!(
+            // The Armv8-M Mainline and Armv8.1-M targets leave the (optional) DSP extension off;
+            // every instruction here is Armv7E-M, encoded alike on those cores.
+            ".arch armv7e-m",
             "and {t}, {n}, #3",
             concat!("add {n}, {xp}, {n}, lsl #", $shift),
             "tbb [pc, {t}]",
