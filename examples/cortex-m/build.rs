@@ -114,30 +114,11 @@ fn two_plane_macs(policy: &frmd_export::QuantizedPolicy) -> usize {
     }
 }
 
-/// The QEMU board's memory map for a target (`run-qemu.sh` boots each target on one board):
-/// Armv7E-M on mps2-an386 / mps2-an500 (M4F, M7), Armv8-M Mainline on mps2-an505 (M33),
-/// Armv6-M on microbit (M0), Armv8.1-M on mps3-an547 (M55). `FRMD_CM_MEMORY_MAP=an547` links an
-/// Armv8-M Mainline build for mps3-an547 instead (the M55 runs M33 code).
-fn memory_map(target: &str) -> &'static str {
-    if target.starts_with("thumbv8m.main-") {
-        "memory/an505.x"
-    } else if target.starts_with("thumbv6m-") {
-        "memory/microbit.x"
-    } else if target.starts_with("thumbv8.1m.main-") {
-        "memory/an547.x"
-    } else {
-        "memory/mps2.x"
-    }
-}
-
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     let target = env::var("TARGET").unwrap_or_default();
     println!("cargo:rerun-if-env-changed=FRMD_CM_MEMORY_MAP");
-    let board = match env::var("FRMD_CM_MEMORY_MAP").as_deref() {
-        Ok("an547") => "memory/an547.x",
-        _ => memory_map(&target),
-    };
+    let board = frmd_firmware_support::host::board_memory_map(&target);
     fs::copy(board, out.join("memory.x")).expect("copy the board's memory map into OUT_DIR as memory.x");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed=memory");

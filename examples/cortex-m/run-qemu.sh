@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds the FRMD firmware (release) for a core and runs it under QEMU with instruction counting:
 #
-#   bash examples/cortex-m/run-qemu.sh m4|m7|m33|m0|m55 [prodmp|mlp|policy|transformer|policy-stages|transformer-stages|kernels] [extra cargo build args]
+#   bash examples/cortex-m/run-qemu.sh m4|m7|m33|m0|m55 [prodmp|mlp|policy|transformer|policy-stages|transformer-stages|kernels|minimal] [extra cargo build args]
 #
 #   m4:  thumbv7em-none-eabihf,     -machine mps2-an386  -cpu cortex-m4  (Cortex-M4F)
 #   m7:  thumbv7em-none-eabihf,     -machine mps2-an500  -cpu cortex-m7  (Cortex-M7, same ELF)
@@ -20,11 +20,14 @@
 #     (`stage <name>: <instructions>` lines)
 #   kernels: firmware frmd-cortex-m-kernels, the fully connected kernels on random shapes (for
 #     the host's bit-for-bit comparison)
+#   minimal: crate minimal/ (frmd-minimal), the smallest policy firmware: prints its first action
+#     (no measurement lines)
 #
 # Prints the firmware's `key: value` lines on stdout (build and setup chatter go to stderr) and
 # exits non-zero if the build fails, the firmware reports an error or panics, a required line
 # (digest, instructions, flash, ram) is missing, or QEMU runs longer than FRMD_QEMU_TIMEOUT
-# seconds (default 120).
+# seconds (default 120). FRMD_QEMU_TRACE=FILE also writes QEMU's instruction trace to FILE (for
+# qemu-cycles.py).
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -37,7 +40,7 @@ case "$board" in
     m33) machine=mps2-an505; cpu=cortex-m33; target=thumbv8m.main-none-eabihf ;;
     m0) machine=microbit; cpu=cortex-m0; target=thumbv6m-none-eabi ;;
     m55) machine=mps3-an547; cpu=cortex-m55; target=thumbv8m.main-none-eabihf; memory_map=an547 ;;
-    *) echo "usage: $0 m4|m7|m33|m0|m55 [prodmp|mlp|policy|transformer|policy-stages|transformer-stages|kernels] [extra cargo build args]" >&2; exit 2 ;;
+    *) echo "usage: $0 m4|m7|m33|m0|m55 [prodmp|mlp|policy|transformer|policy-stages|transformer-stages|kernels|minimal] [extra cargo build args]" >&2; exit 2 ;;
 esac
 shift
 bin=frmd-cortex-m
@@ -48,6 +51,7 @@ case "${1:-}" in
     transformer) bin=frmd-cortex-m-transformer; shift ;;
     policy-stages) bin=frmd-cortex-m-policy-stages; shift ;;
     kernels) bin=frmd-cortex-m-kernels; shift ;;
+    minimal) bin=frmd-minimal; shift ;;
     transformer-stages) bin=frmd-cortex-m-transformer-stages; shift ;;
 esac
 timeout_s="${FRMD_QEMU_TIMEOUT:-120}"
@@ -73,15 +77,20 @@ if [ -n "$memory_map" ]; then
     target_dir="$target_dir/board-$memory_map"
 fi
 CARGO_TARGET_DIR="$target_dir" CARGO_BUILD_TARGET="$target" FRMD_CM_MEMORY_MAP="$memory_map" \
-    bash "$repo/scripts/cortex-m-cargo.sh" build --release --bin "$bin" "$@" >&2
+    bash "$repo/scripts/cortex-m-cargo.sh" build --release --workspace --bin "$bin" "$@" >&2
 elf="$target_dir/$target/release/$bin"
 [ -f "$elf" ] || { echo "run-qemu: firmware ELF not found at $elf" >&2; exit 1; }
 
 output="$(mktemp)"
 trap 'rm -f "$output"' EXIT
 set +e
+trace=()
+if [ -n "${FRMD_QEMU_TRACE:-}" ]; then
+    # Every translated block and every block execution, for qemu-cycles.py (hundreds of MB).
+    trace=(-d in_asm,exec,nochain -D "$FRMD_QEMU_TRACE")
+fi
 timeout "$timeout_s" "$FRMD_CM_QEMU" -machine "$machine" -cpu "$cpu" -nographic \
-    -semihosting-config enable=on,target=native -icount shift=0 -kernel "$elf" >"$output" 2>&1 </dev/null
+    -semihosting-config enable=on,target=native -icount shift=0 "${trace[@]}" -kernel "$elf" >"$output" 2>&1 </dev/null
 status=$?
 set -e
 cat "$output"
@@ -94,7 +103,9 @@ if [ "$status" -ne 0 ]; then
     echo "run-qemu: firmware on $machine failed (QEMU exit status $status)" >&2
     exit 1
 fi
-for key in digest instructions flash ram; do
+required=(digest instructions flash ram)
+[ "$bin" != frmd-minimal ] || required=("first action, dof 0")
+for key in "${required[@]}"; do
     if ! grep -q "^$key: " "$output"; then
         echo "run-qemu: firmware output on $machine lacks the '$key:' line" >&2
         exit 1

@@ -80,6 +80,35 @@ fn student_sixteen_bit_input_is_as_accurate_as_two_planes() {
     }
 }
 
+/// The minimal example (`examples/cortex-m/minimal`, `run-qemu.sh CORE minimal`) acts like the
+/// host on every core: same inputs (last action 0.05, observation `0.1 step`), same noise seed,
+/// the first action's bits.
+#[test]
+fn qemu_minimal_example_acts_like_the_host() {
+    let root = qemu::repo_root();
+    if !qemu::available("qemu_minimal_example_acts_like_the_host", &root) {
+        return;
+    }
+    let blob = AlignedBlob::of(&student());
+    let loaded = LoadedPolicy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS>::load(blob.bytes()).expect("load the blob");
+    let mut policy = loaded.policy::<STUDENT_INPUT, MLP_WIDTH>().expect("policy from the blob");
+    policy.reset(&[0.05; DOF]).unwrap();
+    for step in 0..STUDENT_HISTORY {
+        policy.observe(&[0.1 * step as f32; STUDENT_OBS_DIM]).unwrap();
+    }
+    let chunk = *policy.act(frmd_core::policy::Noise::Rng(&mut frmd_core::rng::Rng::new(2024))).unwrap();
+    let expected: Vec<String> = chunk.positions[0].iter().map(|v| format!("(bits {:08x})", v.to_bits())).collect();
+    for board in qemu::BOARDS {
+        let stdout = qemu::run(&root, board, "minimal");
+        let got: Vec<String> = stdout
+            .lines()
+            .filter(|line| line.starts_with("first action, dof "))
+            .filter_map(|line| line.find("(bits").map(|bits| line[bits..].to_string()))
+            .collect();
+        assert_eq!(got, expected, "minimal example on {board}:\n{stdout}");
+    }
+}
+
 #[test]
 fn qemu_policy_digest_matches_host() {
     let root = qemu::repo_root();
