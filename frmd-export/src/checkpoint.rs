@@ -9,7 +9,7 @@
 //!   block `transformer.blocks.{i}.{norm1,qkv,proj,norm2,fc1,fc2}.{weight,bias}`.
 mod config;
 
-pub use config::{Activation, BackboneConfig, HeadConfig, ModelConfig, Normalization, Normalizer};
+pub use config::{Activation, BackboneConfig, HeadConfig, ModelConfig, Normalization, Normalizer, ProDmpOutput};
 
 use anyhow::{bail, Context};
 use frmd_core::sigma::SigmaConfig;

@@ -3,10 +3,12 @@
 //! the input layout of the float model. The result ([`FoldedMlp`]) runs on frmd-core's own f32
 //! path ([`frmd_core::model::mlp::F32Mlp`]) and is what calibration and quantization start from.
 //!
-//! The student is the piecewise consistency function of frmd-host (`diffusion/precond.rs`):
-//! `f(x, sigma) = G(E(c_in x, o, c_noise))` for every sampling level above `sigma_min`, so every
-//! step has `c_skip = 0`, `c_out = 1`. Sampling levels are `consistency_sampling_sigma(i, steps)`
-//! of frmd-core's `sigma` module, re-noised with `sqrt(sigma_i^2 - sigma_min^2)` (frmd-host
+//! The student is the consistency function of frmd-host (`diffusion/precond.rs`) in its
+//! checkpoint's output parametrization: with the boundary skip, step i has the consistency
+//! `c_skip(sigma_i)`, `c_out(sigma_i)` of frmd-core's `sigma` module and the runtime forms
+//! `b + c_skip (x - b) + c_out (g - b)` ([`frmd_core::policy::skip_output`]); a direct-output
+//! student has `c_skip = 0`, `c_out = 1`. Sampling levels are `consistency_sampling_sigma(i,
+//! steps)`, re-noised with `sqrt(sigma_i^2 - sigma_min^2)` (frmd-host
 //! `samplers::sample_consistency`).
 //!
 //! Input gains: the model input is quantized with one int8 scale for the whole vector, and the
@@ -16,11 +18,11 @@
 //! into the layout's `rate_scale`), and divides the matching first-layer weight columns by the
 //! same gains, so the f32 function is unchanged while every segment spans about the same range.
 //! The baked `c_in` is therefore `c_in(sigma) * traj_gain`.
-use crate::checkpoint::{Activation, BackboneConfig, Checkpoint, ModelConfig, Role};
+use crate::checkpoint::{Activation, BackboneConfig, Checkpoint, ModelConfig, ProDmpOutput, Role};
 use anyhow::{bail, Context};
 use frmd_core::kernels::Activation as KernelActivation;
 use frmd_core::model::mlp::{F32Layer, F32Mlp, F32Scratch, Probe};
-use frmd_core::policy::{F32Network, InputLayout, InputSegment, StepConstants, MAX_HIDDEN_LAYERS, MAX_STEPS};
+use frmd_core::policy::{skip_output, F32Network, InputLayout, InputSegment, StepConstants, MAX_HIDDEN_LAYERS, MAX_STEPS};
 use frmd_core::prodmp::{apply_row_f32, ProDmp, ProDmpConfig};
 use frmd_core::sigma::{noise_embedding, SigmaConfig};
 
@@ -88,8 +90,9 @@ fn kernel_activation(a: Activation) -> KernelActivation {
     }
 }
 
-/// The step table for `steps` (1..=4) sampling steps.
-pub fn step_constants(sigma: &SigmaConfig, steps: usize) -> anyhow::Result<Vec<StepConstants>> {
+/// The step table for `steps` (1..=4) sampling steps of a student with output parametrization
+/// `output`.
+pub fn step_constants(sigma: &SigmaConfig, output: ProDmpOutput, steps: usize) -> anyhow::Result<Vec<StepConstants>> {
     if !(1..=MAX_STEPS).contains(&steps) {
         bail!("the student samples with 1..={MAX_STEPS} steps, not {steps}");
     }
@@ -98,12 +101,16 @@ pub fn step_constants(sigma: &SigmaConfig, steps: usize) -> anyhow::Result<Vec<S
         .map(|i| {
             let level = sigma.consistency_sampling_sigma(i, steps).map_err(err("sampling level"))?;
             let renoise = if i == 0 { 0.0 } else { (level * level - sigma.sigma_min * sigma.sigma_min).max(0.0).sqrt() };
+            let (c_skip, c_out) = match output {
+                ProDmpOutput::Direct => (0.0, 1.0),
+                ProDmpOutput::BoundarySkip => (sigma.c_skip(level).map_err(err("c_skip"))?, sigma.c_out(level).map_err(err("c_out"))?),
+            };
             Ok(StepConstants {
                 sigma: level as f32,
                 renoise_std: renoise as f32,
                 c_in: sigma.c_in(level).map_err(err("c_in"))? as f32,
-                c_skip: 0.0,
-                c_out: 1.0,
+                c_skip: c_skip as f32,
+                c_out: c_out as f32,
                 first_layer_bias_index: i as u32,
             })
         })
@@ -139,6 +146,13 @@ impl ProDmpTablesOwned {
             t.vel_v0.push(c.vel_v0 as f32);
         }
         Ok(t)
+    }
+
+    /// The initial-condition part `[n][k]` of every chunk (the decode of all-zero parameters),
+    /// rounded as the firmware rounds it ([`frmd_core::prodmp::BoundaryRow::at`]).
+    pub fn boundary_positions(&self, y0: &[f32], v0: &[f32]) -> Vec<f32> {
+        let rows = self.pos_y0.iter().zip(&self.pos_v0);
+        rows.flat_map(|(&pos_y0, &pos_v0)| y0.iter().zip(v0).map(move |(&y, &v)| apply_row_f32(&[], pos_y0, pos_v0, &[], y, v))).collect()
     }
 
     /// Decoded positions `[n][k]` (step-major) of DoF-major `params`, with
@@ -186,7 +200,7 @@ impl FoldedMlp {
             bail!("layer width {widest} exceeds the exporter's limit of {MAX_WIDTH}");
         }
         let sigma: SigmaConfig = meta.sigma.into();
-        let steps = step_constants(&sigma, steps)?;
+        let steps = step_constants(&sigma, meta.model.prodmp_output().unwrap_or_default(), steps)?;
         let mut layers = Vec::new();
         let mut width = input_width + config.embed_dim;
         for (i, &out) in hidden_sizes.iter().chain([&config.output_dim()]).enumerate() {
@@ -347,6 +361,7 @@ pub fn sample_chunk(
         bail!("condition has {} values (expected {}), noise {} (expected {})", cond.len(), obs_len + 2 * k, noise.len(), steps.len() * traj);
     }
     let (y0, v0) = (&cond[obs_len..obs_len + k], &cond[obs_len + k..]);
+    let boundary = prodmp.boundary_positions(y0, v0);
     let mut f = vec![0.0f32; traj];
     for (i, step) in steps.iter().enumerate() {
         let z = &noise[i * traj..(i + 1) * traj];
@@ -358,7 +373,7 @@ pub fn sample_chunk(
         let input = model_input(config, layout, step, cond, &x)?;
         let params = forward(i, &input)?;
         let decoded = prodmp.decode_positions(&params, y0, v0);
-        f = x.iter().zip(&decoded).map(|(x, d)| step.c_skip * x + step.c_out * d).collect();
+        f = x.iter().zip(&decoded).zip(&boundary).map(|((&x, &g), &b)| skip_output(step.c_skip, step.c_out, x, g, b)).collect();
     }
     Ok(f)
 }

@@ -5,13 +5,14 @@ use frmd_core::rng::Rng;
 use frmd_core::sigma::SigmaConfig;
 use frmd_export::calibrate::{CalibrationSet, RangeMethod};
 use frmd_export::checkpoint::{
-    Activation, BackboneConfig, CheckpointMeta, HeadConfig, ModelConfig, Normalization, Normalizer, Role, CONFIG_FILE, WEIGHTS_FILE,
+    Activation, BackboneConfig, CheckpointMeta, HeadConfig, ModelConfig, Normalization, Normalizer, ProDmpOutput, Role, CONFIG_FILE,
+    WEIGHTS_FILE,
 };
 use frmd_export::export::{export_checkpoint, ExportOptions};
 use std::path::{Path, PathBuf};
 
 fn model(backbone: BackboneConfig) -> ModelConfig {
-    ModelConfig { obs_dim: 3, history: 2, action_dim: 2, horizon: 5, control_dt: 0.05, embed_dim: 4, backbone, head: HeadConfig::ProDmp { num_basis: 3 } }
+    ModelConfig { obs_dim: 3, history: 2, action_dim: 2, horizon: 5, control_dt: 0.05, embed_dim: 4, backbone, head: HeadConfig::ProDmp { num_basis: 3, output: ProDmpOutput::Direct } }
 }
 
 fn mlp() -> BackboneConfig {

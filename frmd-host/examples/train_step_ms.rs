@@ -6,7 +6,7 @@
 //! steps, and the loss after the last step (a seeded run, so two builds can be compared).
 use frmd_host::data::Dataset;
 use frmd_host::diffusion::loss::{teacher_loss, LossWeight, SigmaSampling};
-use frmd_host::models::{BackboneConfig, HeadConfig, ModelConfig, OwnedNetwork};
+use frmd_host::models::{BackboneConfig, HeadConfig, ProDmpOutput, ModelConfig, OwnedNetwork};
 use frmd_host::rng::HostRng;
 use frmd_host::train::batch::sample;
 use frmd_host::train::optim::{OptimConfig, ScheduledAdamW};
@@ -34,7 +34,7 @@ fn main() -> anyhow::Result<()> {
         control_dt: f64::from(dataset.dt),
         embed_dim: 16,
         backbone: BackboneConfig::parse(backbone)?,
-        head: HeadConfig::ProDmp { num_basis: 20 },
+        head: HeadConfig::ProDmp { num_basis: 20, output: ProDmpOutput::Direct },
     };
     let device = Device::Cpu;
     let net = OwnedNetwork::new_seeded(&model, 1, &device)?;

@@ -4,7 +4,7 @@
 //! exported, so the float student, the core f32 twin and the int8 policy run the same model.
 use crate::checkpoint::{self, CheckpointMeta, Role, CALIBRATION_FILE};
 use crate::data::{Normalization, Normalizer};
-use crate::models::{BackboneConfig, HeadConfig, ModelConfig, OwnedNetwork};
+use crate::models::{BackboneConfig, HeadConfig, ProDmpOutput, ModelConfig, OwnedNetwork};
 use crate::policy::float::{FloatPolicy, Sampler};
 use crate::policy::int8::Int8Policy;
 use candle_core::Device;
@@ -40,7 +40,7 @@ pub fn reach_student(dir: &Path, backbone: &str, seed: u64) -> anyhow::Result<Be
         control_dt: 0.05,
         embed_dim: 16,
         backbone: BackboneConfig::parse(backbone)?,
-        head: HeadConfig::ProDmp { num_basis: 20 },
+        head: HeadConfig::ProDmp { num_basis: 20, output: ProDmpOutput::Direct },
     };
     let net = OwnedNetwork::new_seeded(&model, seed, &Device::Cpu)?;
     let sigma = SigmaConfig::default();

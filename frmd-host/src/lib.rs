@@ -11,5 +11,6 @@ pub mod models;
 pub mod policy;
 pub mod prodmp_vectors;
 pub mod rng;
+pub mod serve;
 pub mod tasks;
 pub mod train;

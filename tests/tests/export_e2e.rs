@@ -49,7 +49,11 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
     let bytes = &bytemuck::cast_slice::<u32, u8>(&words)[..blob.len()];
     let loaded = frmd_core::blob::LoadedPolicy::<2, 6, 2, 8, 7>::load(bytes).unwrap();
     assert_eq!(loaded.steps().len(), 1);
-    assert_eq!(loaded.steps()[0].c_skip, 0.0);
+    // The tiny run trains with the boundary skip: the step carries the consistency c_skip and
+    // c_out at sigma_max (a direct-output student would have 0 and 1).
+    let sigma = frmd_core::sigma::SigmaConfig::default();
+    assert_eq!(loaded.steps()[0].c_skip, sigma.c_skip(sigma.sigma_max).unwrap() as f32);
+    assert_eq!(loaded.steps()[0].c_out, sigma.c_out(sigma.sigma_max).unwrap() as f32);
     assert!(matches!(
         frmd_core::blob::LoadedPolicy::<2, 6, 2, 12, 21>::load(bytes),
         Err(frmd_core::blob::BlobError::DimensionMismatch(_))

@@ -46,7 +46,8 @@ pub use transformer_network::{
     F32TransformerNetwork, Int8TransformerNetwork, TransformerBackbone, TransformerNetwork,
 };
 pub use sampler::{
-    validate_steps, Conditioning, Noise, Sampler, SamplerWork, StepConstants, Trajectory, MAX_STEPS,
+    skip_output, validate_steps, Conditioning, Noise, Sampler, SamplerWork, StepConstants, Trajectory,
+    MAX_STEPS,
 };
 
 use crate::model::mlp::ModelError;

@@ -5,11 +5,15 @@
 //! step-major, normalized action units) and `z ~ N(0, 1)` of the same shape:
 //! - step 0: `x = sigma_0 z` (`sigma_0 = sigma_max`);
 //! - step i > 0: `x = f_{i-1} + renoise_std_i z` (`renoise_std_i = sqrt(sigma_i^2 - sigma_min^2)`);
-//! - every step: `f_i = c_skip_i x + c_out_i decode(net(input(c_in_i x)), y0, v0)`.
+//! - every step: `f_i = b + c_skip_i (x - b) + c_out_i (g - b)` with
+//!   `g = decode(net(input(c_in_i x)), y0, v0)` and `b = decode(0, y0, v0)` the decoder's
+//!   initial-condition part ([`skip_output`]): the skip acts on the free part of the chunk only,
+//!   so every output starts from `y0`, `v0` (docs/design.md, "student parametrization").
+//!   A direct-output student (the decoded trajectory is the output) has `c_skip = 0`, `c_out = 1`.
 //!
 //! The result `f` of the last step is the action chunk in normalized units. Its velocities are
-//! `c_out * (decoded ProDMP velocity) + c_skip * (backward difference of x / control_dt)` with
-//! `x` before the first query time taken as `y0`, i.e. the time derivative of both parts.
+//! the same combination of the decoded velocities, the initial-condition velocities and the
+//! backward difference of `x` / control_dt (with `x` before the first query time taken as `y0`).
 
 use crate::prodmp::BakedProDmp;
 use crate::rng::Rng;
@@ -284,7 +288,7 @@ impl<const N: usize, const P: usize> Sampler<'_, N, P> {
             self.combine(
                 step,
                 &work.noisy,
-                conditioning.prev_action,
+                (conditioning.prev_action, conditioning.prev_rate),
                 &work.decoded,
                 out,
             );
@@ -302,33 +306,54 @@ impl<const N: usize, const P: usize> Sampler<'_, N, P> {
         }
     }
 
-    /// `f = c_skip x + c_out decoded` for positions; velocities as in the module docs.
+    /// `f = b + c_skip (x - b) + c_out (decoded - b)` for positions; velocities as in the module
+    /// docs.
     fn combine<const K: usize>(
         &self,
         step: &StepConstants,
         noisy: &[[f32; K]; N],
-        prev_action: &[f32; K],
+        conditioning: (&[f32; K], &[f32; K]),
         decoded: &Trajectory<N, K>,
         out: &mut Trajectory<N, K>,
     ) {
+        let (prev_action, prev_rate) = conditioning;
         let mut before = prev_action;
+        let boundary = self.decoder.boundary_rows();
         let rows = noisy
             .iter()
             .zip(decoded.positions.iter().zip(decoded.velocities.iter()))
-            .zip(out.positions.iter_mut().zip(out.velocities.iter_mut()));
-        for ((x_t, (pos_t, vel_t)), (out_pos, out_vel)) in rows {
+            .zip(out.positions.iter_mut().zip(out.velocities.iter_mut()))
+            .zip(boundary);
+        for (((x_t, (pos_t, vel_t)), (out_pos, out_vel)), b_t) in rows {
             let dofs = x_t
                 .iter()
                 .zip(before)
                 .zip(pos_t.iter().zip(vel_t))
-                .zip(out_pos.iter_mut().zip(out_vel.iter_mut()));
-            for (((x, x_before), (p, v)), (o_p, o_v)) in dofs {
-                *o_p = step.c_skip * x + step.c_out * p;
-                *o_v = step.c_skip * ((x - x_before) / self.control_dt) + step.c_out * v;
+                .zip(out_pos.iter_mut().zip(out_vel.iter_mut()))
+                .zip(prev_action.iter().zip(prev_rate));
+            for ((((x, x_before), (p, v)), (o_p, o_v)), (y0, v0)) in dofs {
+                let (b_pos, b_vel) = b_t.at(*y0, *v0);
+                *o_p = skip_output(step.c_skip, step.c_out, *x, *p, b_pos);
+                *o_v = skip_output(
+                    step.c_skip,
+                    step.c_out,
+                    (x - x_before) / self.control_dt,
+                    *v,
+                    b_vel,
+                );
             }
             before = x_t;
         }
     }
+}
+
+/// The consistency output of one value: `b + c_skip (x - b) + c_out (g - b)`, evaluated as
+/// `c_skip x + c_out g + (1 - c_skip - c_out) b` in f32 (the one place this rounding is written;
+/// the exporter's reference sampler calls it too). With `c_skip = 0`, `c_out = 1` it is `g`.
+#[inline]
+pub fn skip_output(c_skip: f32, c_out: f32, noisy: f32, decoded: f32, boundary: f32) -> f32 {
+    let rest = 1.0 - c_skip - c_out;
+    c_skip * noisy + c_out * decoded + rest * boundary
 }
 
 /// The one place the policy calls the ProDMP decoder: DoF-major parameters, `y0`, `v0`

@@ -45,6 +45,31 @@ pub fn apply_row_f32(
     acc
 }
 
+/// The initial-condition coefficients of one query time (see [`BakedProDmp::boundary_rows`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BoundaryRow {
+    /// Position coefficient of `y0`.
+    pub pos_y0: f32,
+    /// Position coefficient of `v0` (s).
+    pub pos_v0: f32,
+    /// Velocity coefficient of `y0` (1/s).
+    pub vel_y0: f32,
+    /// Velocity coefficient of `v0`.
+    pub vel_v0: f32,
+}
+
+impl BoundaryRow {
+    /// The decoder's output for all-zero parameters at this time: `(position, velocity)` of the
+    /// part fixed by `y0`, `v0`, rounded exactly as [`BakedProDmp::decode`] rounds it.
+    #[inline]
+    pub fn at(&self, y0: f32, v0: f32) -> (f32, f32) {
+        (
+            apply_row_f32(&[], self.pos_y0, self.pos_v0, &[], y0, v0),
+            apply_row_f32(&[], self.vel_y0, self.vel_v0, &[], y0, v0),
+        )
+    }
+}
+
 fn narrow(value: f64) -> Result<f32, ProDmpError> {
     let narrowed = value as f32;
     if narrowed.is_finite() {
@@ -103,6 +128,20 @@ impl<const N: usize, const P: usize> BakedProDmp<N, P> {
             *vel_v0 = narrow(coeffs.vel_v0)?;
         }
         Ok(baked)
+    }
+
+    /// Initial-condition coefficients per query time, first to last.
+    pub fn boundary_rows(&self) -> impl Iterator<Item = BoundaryRow> + '_ {
+        self.pos_y0
+            .iter()
+            .zip(self.pos_v0.iter())
+            .zip(self.vel_y0.iter().zip(self.vel_v0.iter()))
+            .map(|((&pos_y0, &pos_v0), (&vel_y0, &vel_v0))| BoundaryRow {
+                pos_y0,
+                pos_v0,
+                vel_y0,
+                vel_v0,
+            })
     }
 
     /// Decodes `K` DoFs: `params[d] = [w_0 .. w_{P-2}, g]`, `y0[d]` (units), `v0[d]` (units/s);

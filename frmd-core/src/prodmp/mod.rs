@@ -18,7 +18,7 @@ pub mod config;
 pub mod decoder;
 mod table;
 
-pub use baked::{apply_row_f32, BakedProDmp};
+pub use baked::{apply_row_f32, BakedProDmp, BoundaryRow};
 pub use config::{ProDmpConfig, MAX_GRID_STEPS_PER_TAU, MAX_NUM_BASIS, PRE_COMPUTE_LENGTH_FACTOR};
 pub use decoder::{apply_row, linear_row, BoundaryCoefficients, BoundaryTerms, ProDmp};
 

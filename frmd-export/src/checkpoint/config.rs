@@ -55,12 +55,44 @@ impl BackboneConfig {
     }
 }
 
+/// How a ProDMP model turns its decoded trajectory `g = G(E(..); y0, v0)` into its output
+/// (docs/design.md, "Parametrization"). With `b = G(0; y0, v0)` the part of every chunk fixed by
+/// the initial condition:
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ProDmpOutput {
+    /// `g`: the decoded trajectory is the output (MPD's choice; every checkpoint written before
+    /// the skip existed).
+    #[default]
+    Direct,
+    /// `b + c_skip(sigma) (x - b) + c_out(sigma) (g - b)`: a skip on the free part of the chunk
+    /// only, so `y0`, `v0` stay exact. The teacher uses EDM's `c_skip`/`c_out`, the student the
+    /// consistency ones (identity at `sigma_min`), both from `frmd_core::sigma`.
+    BoundarySkip,
+}
+
+impl ProDmpOutput {
+    /// Parses `direct` or `boundary-skip`.
+    pub fn parse(text: &str) -> anyhow::Result<Self> {
+        match text {
+            "direct" => Ok(ProDmpOutput::Direct),
+            "boundary-skip" => Ok(ProDmpOutput::BoundarySkip),
+            other => bail!("unknown ProDMP output parametrization `{other}` (direct, boundary-skip)"),
+        }
+    }
+}
+
 /// What the network outputs.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum HeadConfig {
     /// k (b+1) ProDMP parameters, decoded to positions in the graph.
-    ProDmp { num_basis: usize },
+    ProDmp {
+        num_basis: usize,
+        /// Output parametrization (absent in older checkpoints: `direct`).
+        #[serde(default)]
+        output: ProDmpOutput,
+    },
     /// A raw n k output (the DP baseline's noise prediction).
     Raw,
 }
@@ -95,16 +127,24 @@ impl ModelConfig {
 
     pub fn prodmp(&self) -> Option<ProDmpConfig> {
         match self.head {
-            HeadConfig::ProDmp { num_basis } => {
+            HeadConfig::ProDmp { num_basis, .. } => {
                 Some(ProDmpConfig::policy(self.action_dim, num_basis, self.horizon, self.control_dt))
             }
             HeadConfig::Raw => None,
         }
     }
 
+    /// The ProDMP output parametrization (`None` for a raw head).
+    pub fn prodmp_output(&self) -> Option<ProDmpOutput> {
+        match self.head {
+            HeadConfig::ProDmp { output, .. } => Some(output),
+            HeadConfig::Raw => None,
+        }
+    }
+
     pub fn output_dim(&self) -> usize {
         match self.head {
-            HeadConfig::ProDmp { num_basis } => self.action_dim * (num_basis + 1),
+            HeadConfig::ProDmp { num_basis, .. } => self.action_dim * (num_basis + 1),
             HeadConfig::Raw => self.traj_dim(),
         }
     }
@@ -130,7 +170,7 @@ impl ModelConfig {
             }
             _ => {}
         }
-        if let HeadConfig::ProDmp { num_basis } = self.head {
+        if let HeadConfig::ProDmp { num_basis, .. } = self.head {
             if num_basis == 0 {
                 bail!("model config: ProDMP needs at least one basis function");
             }

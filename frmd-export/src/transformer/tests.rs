@@ -4,7 +4,7 @@
 use super::*;
 use crate::calibrate::{CalibrationSet, RangeMethod};
 use crate::checkpoint::{
-    expected_tensors, CheckpointMeta, HeadConfig, Normalization, Normalizer, CONFIG_FILE,
+    expected_tensors, CheckpointMeta, HeadConfig, ProDmpOutput, Normalization, Normalizer, CONFIG_FILE,
     WEIGHTS_FILE,
 };
 use frmd_core::policy::{F32TransformerNetwork, Int8TransformerNetwork, Network};
@@ -20,7 +20,7 @@ fn lite_config() -> ModelConfig {
         control_dt: 0.05,
         embed_dim: 16,
         backbone: BackboneConfig::parse("transformer-lite").unwrap(),
-        head: HeadConfig::ProDmp { num_basis: 4 },
+        head: HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct },
     }
 }
 

@@ -1,6 +1,6 @@
 use super::*;
 use frmd_core::sigma::SigmaConfig;
-use crate::models::{HeadConfig, OwnedNetwork};
+use crate::models::{HeadConfig, ProDmpOutput, OwnedNetwork};
 use crate::train::toy::toy_config;
 
 fn temp_dir(tag: &str) -> std::path::PathBuf {
@@ -10,7 +10,7 @@ fn temp_dir(tag: &str) -> std::path::PathBuf {
 }
 
 fn saved(tag: &str) -> (std::path::PathBuf, CheckpointMeta, OwnedNetwork) {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
+    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
     let net = OwnedNetwork::new_seeded(&cfg, 21, &Device::Cpu).unwrap();
     let meta = CheckpointMeta::describe(Role::Student, net.net.config(), SigmaConfig::default());
     let dir = temp_dir(tag);
@@ -100,7 +100,7 @@ fn corrupted_or_mismatched_checkpoints_are_rejected_with_a_reason() {
 fn expected_tensors_match_the_candle_models() {
     use crate::models::{BackboneConfig, ModelConfig};
     for backbone in ["mlp:16,8:silu", "mlp:12", "transformer-lite"] {
-        let mut cfg: ModelConfig = toy_config(HeadConfig::ProDmp { num_basis: 3 });
+        let mut cfg: ModelConfig = toy_config(HeadConfig::ProDmp { num_basis: 3, output: ProDmpOutput::Direct });
         cfg.backbone = BackboneConfig::parse(backbone).unwrap();
         if backbone.starts_with("transformer") {
             cfg.backbone = BackboneConfig::Transformer { layers: 2, heads: 2, width: 8 };

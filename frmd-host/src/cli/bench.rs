@@ -17,7 +17,7 @@ use crate::data::{Normalization, Normalizer};
 use crate::diffusion::samplers::Solver;
 use crate::eval::metrics::quantile;
 use crate::eval::policy::{Policy, PolicyInput};
-use crate::models::{BackboneConfig, HeadConfig, ModelConfig, OwnedNetwork};
+use crate::models::{BackboneConfig, HeadConfig, ProDmpOutput, ModelConfig, OwnedNetwork};
 use crate::policy::float::{FloatPolicy, Sampler};
 use anyhow::Context;
 use clap::Args;
@@ -117,7 +117,7 @@ pub fn synthetic_float_policy(backbone: &str, obs_dim: usize, role: Role, steps:
     let action_dim = 2;
     let head = match role {
         Role::Dp => HeadConfig::Raw,
-        Role::Teacher | Role::Student => HeadConfig::ProDmp { num_basis: 20 },
+        Role::Teacher | Role::Student => HeadConfig::ProDmp { num_basis: 20, output: ProDmpOutput::Direct },
     };
     let cfg = ModelConfig { obs_dim, history: 2, action_dim, horizon: 12, control_dt: 0.1, embed_dim: 16, backbone: BackboneConfig::parse(backbone)?, head };
     let net = OwnedNetwork::new_seeded(&cfg, 7, &candle_core::Device::Cpu)?;

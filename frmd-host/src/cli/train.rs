@@ -7,7 +7,7 @@ use crate::diffusion::ddpm::EpsParametrization;
 use crate::diffusion::loss::{LossWeight, SigmaSampling};
 use crate::diffusion::samplers::Solver;
 use crate::eval::{run_episodes, EvalConfig};
-use crate::models::{BackboneConfig, HeadConfig, ModelConfig, OwnedNetwork};
+use crate::models::{BackboneConfig, HeadConfig, ProDmpOutput, ModelConfig, OwnedNetwork};
 use crate::policy::float::{FloatPolicy, Sampler, DP_TRAINING_KEY};
 use crate::train::distill::{distill, DistillConfig};
 use crate::train::holdout::{generalization, windows_in, ChunkSampler, GeneralizationReport};
@@ -159,6 +159,10 @@ pub struct TeacherArgs {
     /// was an extrapolation).
     #[arg(long, default_value_t = 0.2)]
     pub sigma_uniform_fraction: f64,
+    /// Output parametrization: direct (the decoded ProDMP trajectory is D, as in MPD) |
+    /// boundary-skip (EDM skip on the free part of the chunk; y0/v0 stay exact).
+    #[arg(long, default_value = "direct")]
+    pub parametrization: String,
     /// Solver for evaluation: euler | heun | dpm++2m.
     #[arg(long, default_value = "heun")]
     pub eval_solver: String,
@@ -223,6 +227,10 @@ pub struct StudentArgs {
     /// initial weights, i.e. of the teacher's denoiser, whose one-step output is the mode average.
     #[arg(long, default_value_t = 0.99)]
     pub eval_ema: f64,
+    /// Output parametrization of the student: direct | boundary-skip (consistency skip on the
+    /// free part of the chunk). Default: the teacher's.
+    #[arg(long)]
+    pub parametrization: Option<String>,
     #[command(flatten)]
     pub augment: AugmentArgs,
 }
@@ -433,7 +441,8 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {
         TrainCommand::Teacher(args) => {
             let c = &args.common;
             let prepared = prepare_padded(c, c.history, c.horizon, c.pad_end)?;
-            let model = model_config(c, &prepared, HeadConfig::ProDmp { num_basis: c.num_basis })?;
+            let output = ProDmpOutput::parse(&args.parametrization)?;
+            let model = model_config(c, &prepared, HeadConfig::ProDmp { num_basis: c.num_basis, output })?;
             let weight = LossWeight::parse(&args.loss_weight)?;
             let sampler = Sampler::for_role(Role::Teacher, c.eval_steps, Some(Solver::parse(&args.eval_solver)?))?;
             let mut mon = monitor(c, &prepared.dataset.task, &prepared.norm, sampler, "teacher");
@@ -461,7 +470,7 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {
                     anyhow::bail!("the data's normalization differs from the teacher's (different data set?)");
                 }
             }
-            let dcfg = DistillConfig { levels: args.levels, teacher_steps: args.k, solver: Solver::parse(&args.solver)?, target_ema: args.target_ema, eval_ema: args.eval_ema, augment: args.augment.config() };
+            let dcfg = DistillConfig { levels: args.levels, teacher_steps: args.k, solver: Solver::parse(&args.solver)?, target_ema: args.target_ema, eval_ema: args.eval_ema, augment: args.augment.config(), output: args.parametrization.as_deref().map(ProDmpOutput::parse).transpose()? };
             let sampler = Sampler::for_role(Role::Student, c.eval_steps, None)?;
             let mut mon = monitor(c, &prepared.dataset.task, &prepared.norm, sampler, "student");
             mon.probe = holdout_probe(c, &prepared, tcfg.history, tcfg.horizon, ChunkSampler::Student { steps: c.eval_steps.unwrap_or(1) })?;

@@ -85,9 +85,23 @@ impl ProDmpDecoder {
             .context("ProDMP decode")?
             .reshape((batch, k, n))?
             .transpose(1, 2)?; // [B, n, k]
+        let (y0, v0) = self.boundary_parts(y0, v0)?;
+        Ok((from_params + y0 + v0)?.reshape((batch, n * k))?)
+    }
+
+    /// The initial-condition part of every decoded chunk, `decode(0, y0, v0)` [B, n k].
+    pub fn boundary(&self, y0: &Tensor, v0: &Tensor) -> anyhow::Result<Tensor> {
+        let (batch, k) = y0.dims2()?;
+        let (y0, v0) = self.boundary_parts(y0, v0)?;
+        Ok((y0 + v0)?.reshape((batch, self.horizon * k))?)
+    }
+
+    /// The y0 and v0 terms [B, n, k] of the decoded positions.
+    fn boundary_parts(&self, y0: &Tensor, v0: &Tensor) -> anyhow::Result<(Tensor, Tensor)> {
+        let (batch, k) = y0.dims2()?;
         let y0 = y0.reshape((batch, 1, k))?.broadcast_mul(&self.y0_to_pos)?;
         let v0 = v0.reshape((batch, 1, k))?.broadcast_mul(&self.v0_to_pos)?;
-        Ok((from_params + y0 + v0)?.reshape((batch, n * k))?)
+        Ok((y0, v0))
     }
 }
 

@@ -14,7 +14,7 @@ use candle_core::{DType, Device, Tensor, D};
 use candle_nn::{VarBuilder, VarMap};
 use decoder::ProDmpDecoder;
 
-pub use frmd_export::checkpoint::{BackboneConfig, HeadConfig, ModelConfig};
+pub use frmd_export::checkpoint::{BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput};
 
 /// Conditioning of one batch, in normalized units.
 #[derive(Clone, Debug)]
@@ -112,6 +112,15 @@ impl Network {
         })
     }
 
+    /// The ProDMP decoder's initial-condition part `decode(0, y0, v0)` [B, n k] of this
+    /// condition (an error for a raw head).
+    pub fn boundary(&self, cond: &Condition) -> anyhow::Result<Tensor> {
+        match &self.decoder {
+            Some(dec) => dec.boundary(&cond.y0, &cond.v0),
+            None => anyhow::bail!("a raw-head network has no ProDMP boundary terms"),
+        }
+    }
+
     /// Trajectory-shaped output [B, n k]: the decoded ProDMP trajectory, or the raw output.
     pub fn predict(&self, x_scaled: &Tensor, cond: &Condition, emb: &Tensor) -> anyhow::Result<Tensor> {
         let raw = self.raw_output(x_scaled, cond, emb)?;
@@ -139,7 +148,13 @@ impl OwnedNetwork {
 
     /// A network with the same config and a copy of these variable values.
     pub fn duplicate(&self, device: &Device) -> anyhow::Result<Self> {
-        let copy = OwnedNetwork::new_seeded(self.net.config(), 0, device)?;
+        self.duplicate_as(self.net.config(), device)
+    }
+
+    /// A copy of these variable values in a network of config `cfg`, which must have the same
+    /// variables (e.g. another output parametrization).
+    pub fn duplicate_as(&self, cfg: &ModelConfig, device: &Device) -> anyhow::Result<Self> {
+        let copy = OwnedNetwork::new_seeded(cfg, 0, device)?;
         init::copy_values(&self.varmap, &copy.varmap)?;
         Ok(copy)
     }

@@ -183,7 +183,7 @@ pub fn boxed(dir: &Path, steps: Option<usize>, solver: Option<&str>) -> anyhow::
 mod tests {
     use super::*;
     use crate::data::Normalizer;
-    use crate::models::HeadConfig;
+    use crate::models::{HeadConfig, ProDmpOutput};
     use crate::train::toy::toy_config;
 
     fn toy_policy(head: HeadConfig, sampler: Sampler) -> anyhow::Result<FloatPolicy> {
@@ -196,9 +196,9 @@ mod tests {
     #[test]
     fn chunks_have_the_model_shape_and_are_reproducible_per_seed() {
         for (head, sampler) in [
-            (HeadConfig::ProDmp { num_basis: 4 }, Sampler::Student { steps: 1 }),
-            (HeadConfig::ProDmp { num_basis: 4 }, Sampler::Student { steps: 3 }),
-            (HeadConfig::ProDmp { num_basis: 4 }, Sampler::Teacher { solver: Solver::DpmPp2m, steps: 4 }),
+            (HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct }, Sampler::Student { steps: 1 }),
+            (HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct }, Sampler::Student { steps: 3 }),
+            (HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct }, Sampler::Teacher { solver: Solver::DpmPp2m, steps: 4 }),
             (HeadConfig::Raw, Sampler::Dp { sampler: DpSampler::Ddim, steps: 10 }),
         ] {
             let mut policy = toy_policy(head, sampler).unwrap();

@@ -128,7 +128,7 @@ pub fn sample_augmented(windows: &WindowSet, cfg: &ModelConfig, size: usize, aug
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::models::HeadConfig;
+    use crate::models::{HeadConfig, ProDmpOutput};
     use crate::train::toy::{bimodal_windows, toy_config};
 
     fn rows(t: &Tensor) -> Vec<f32> {
@@ -137,7 +137,7 @@ mod tests {
 
     #[test]
     fn augmentation_perturbs_only_the_initial_condition() {
-        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
+        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
         let windows = bimodal_windows(&cfg, 64, 5).unwrap();
         let device = Device::Cpu;
         // Inactive augmentation draws exactly what `sample` draws.

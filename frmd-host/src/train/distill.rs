@@ -11,7 +11,7 @@ use crate::diffusion::precond::consistency;
 use crate::diffusion::samplers::{gaussian, ode_step, Solver};
 use crate::diffusion::sigma_err;
 use crate::models::init::ema_update;
-use crate::models::OwnedNetwork;
+use crate::models::{HeadConfig, OwnedNetwork, ProDmpOutput};
 use crate::rng::HostRng;
 use anyhow::bail;
 use candle_core::Device;
@@ -36,11 +36,15 @@ pub struct DistillConfig {
     /// student learns the teacher's recovery chunks too).
     #[serde(default)]
     pub augment: CondAugment,
+    /// Output parametrization of the student (`None`: the teacher's). The student starts from
+    /// the teacher's weights either way.
+    #[serde(default)]
+    pub output: Option<ProDmpOutput>,
 }
 
 impl Default for DistillConfig {
     fn default() -> Self {
-        DistillConfig { levels: 40, teacher_steps: 2, solver: Solver::Heun, target_ema: 0.95, eval_ema: 0.99, augment: CondAugment::NONE }
+        DistillConfig { levels: 40, teacher_steps: 2, solver: Solver::Heun, target_ema: 0.95, eval_ema: 0.99, augment: CondAugment::NONE, output: None }
     }
 }
 
@@ -62,7 +66,10 @@ pub fn distill(
     cfg: &LoopConfig,
     progress: &mut ProgressFn<'_>,
 ) -> anyhow::Result<Distilled> {
-    let model = teacher.net.config().clone();
+    let mut model = teacher.net.config().clone();
+    if let (HeadConfig::ProDmp { output, .. }, Some(wanted)) = (&mut model.head, dcfg.output) {
+        *output = wanted;
+    }
     check_windows(windows, &model)?;
     if dcfg.solver == Solver::DpmPp2m {
         bail!("distillation steps use Euler or Heun");
@@ -75,9 +82,9 @@ pub fn distill(
         .map(|i| sig.karras_sigma(i, dcfg.levels))
         .collect::<Result<Vec<_>, _>>()
         .map_err(sigma_err("distillation levels"))?;
-    let student = teacher.duplicate(&device)?;
-    let target = teacher.duplicate(&device)?;
-    let eval_student = teacher.duplicate(&device)?;
+    let student = teacher.duplicate_as(&model, &device)?;
+    let target = teacher.duplicate_as(&model, &device)?;
+    let eval_student = teacher.duplicate_as(&model, &device)?;
     let mut opt = ScheduledAdamW::for_network(&student, cfg.optim.clone())?;
     let mut rng = HostRng::derive(cfg.seed, "distill-batches");
     let k = dcfg.teacher_steps;

@@ -159,7 +159,7 @@ pub fn generalization(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::models::{HeadConfig, OwnedNetwork};
+    use crate::models::{HeadConfig, ProDmpOutput, OwnedNetwork};
     use crate::train::toy::{bimodal_windows, toy_config};
 
     fn dataset(offset: f32) -> Dataset {
@@ -207,7 +207,7 @@ mod tests {
 
     #[test]
     fn chunk_error_reports_the_hold_baseline_and_rejects_bad_input() {
-        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
+        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
         let windows = bimodal_windows(&cfg, 40, 2).unwrap();
         let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
         let sig = SigmaConfig::default();

@@ -6,7 +6,7 @@ use crate::diffusion::loss::{LossWeight, SigmaSampling};
 const LOGNORMAL: SigmaSampling = SigmaSampling { uniform_fraction: 0.0 };
 use crate::diffusion::precond::consistency;
 use crate::diffusion::samplers::{gaussian, sample_consistency, sample_teacher, Solver};
-use crate::models::{Condition, HeadConfig, OwnedNetwork};
+use crate::models::{Condition, HeadConfig, ProDmpOutput, OwnedNetwork};
 use crate::rng::HostRng;
 use candle_core::{Device, Tensor};
 use frmd_core::sigma::SigmaConfig;
@@ -27,7 +27,7 @@ fn toy_condition(batch: usize) -> Condition {
 
 #[test]
 fn teacher_loss_decreases_on_fixed_seed() {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
+    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
     let windows = bimodal_windows(&cfg, 256, 1).unwrap();
     let sig = SigmaConfig::default();
     let (_, report) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &quick_loop(300, 3), &mut |_: &Progress| Ok(())).unwrap();
@@ -41,7 +41,7 @@ fn teacher_loss_decreases_on_fixed_seed() {
 
 #[test]
 fn consistency_boundary_is_identity() {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
+    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
     let net = OwnedNetwork::new_seeded(&cfg, 5, &Device::Cpu).unwrap();
     let sig = SigmaConfig::default();
     let mut rng = HostRng::new(9);
@@ -57,7 +57,7 @@ fn consistency_boundary_is_identity() {
 /// present, mode weights within 10 points of the data's 50 %, samples near the modes.
 #[test]
 fn one_step_student_matches_teacher_on_bimodal_toy() {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
+    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
     let sig = SigmaConfig::default();
     let (teacher, _) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &quick_loop(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
@@ -94,7 +94,7 @@ fn one_step_student_matches_teacher_on_bimodal_toy() {
 fn every_parameter_gets_a_gradient() {
     use crate::models::BackboneConfig;
     for backbone in [BackboneConfig::parse("mlp:16,16:mish").unwrap(), BackboneConfig::Transformer { layers: 1, heads: 2, width: 8 }] {
-        let mut cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
+        let mut cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
         cfg.backbone = backbone.clone();
         let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
         let mut windows = bimodal_windows(&cfg, 16, 1).unwrap();
@@ -116,7 +116,7 @@ fn every_parameter_gets_a_gradient() {
 #[test]
 #[ignore]
 fn experiment_teacher_weights() {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
+    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
     let sig = SigmaConfig::default();
     let goal_end = windows.actions[cfg.horizon - 1].abs() as f64;
@@ -142,7 +142,7 @@ fn experiment_teacher_weights() {
 #[test]
 #[ignore]
 fn experiment_distill() {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
+    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
     let sig = SigmaConfig::default();
     let goal_end = windows.actions[cfg.horizon - 1].abs() as f64;
@@ -196,7 +196,7 @@ fn transformer_backbones_have_the_documented_sizes() {
     let lite = BackboneConfig::parse("transformer-lite").unwrap();
     assert_eq!(lite, BackboneConfig::Transformer { layers: 3, heads: 2, width: 128 });
     assert_eq!(BackboneConfig::parse("transformer").unwrap(), BackboneConfig::Transformer { layers: 6, heads: 4, width: 256 });
-    let mut cfg = toy_config(HeadConfig::ProDmp { num_basis: 4 });
+    let mut cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
     cfg.backbone = lite;
     let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
     let names: Vec<String> = crate::models::init::sorted_vars(&net.varmap).into_iter().map(|(n, _)| n).collect();

@@ -89,6 +89,7 @@ pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
         common: common(tiny, &data, teacher.clone(), tiny.teacher_steps),
         loss_weight: tiny.loss_weight.into(),
         eval_solver: "heun".into(),
+        parametrization: "boundary-skip".into(),
         sigma_uniform_fraction: 0.2,
         ema: 0.0,
         augment: Default::default(),
@@ -102,6 +103,7 @@ pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
         solver: "heun".into(),
         target_ema: 0.95,
         eval_ema: 0.9,
+        parametrization: None,
         augment: Default::default(),
     }))
     .unwrap();

@@ -1,0 +1,154 @@
+"""Command line: python -m frmd_metaworld {tasks,collect,eval,info,bench} ... (--help on each)."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+from .tasks import GROUPS, TASKS
+
+
+def _progress(task: str, total: int):
+    """A progress callback printing to a terminal's standard error (silent in logs and pipes)."""
+    if not sys.stderr.isatty():
+        return None
+    return lambda n, *_: print(f"\r{task}: {n}/{total}", end="", file=sys.stderr, flush=True)
+
+
+def _tasks(value: str) -> list[str]:
+    if value == "all":
+        return list(TASKS)
+    names = value.split(",")
+    for name in names:
+        if name not in TASKS:
+            raise argparse.ArgumentTypeError(f"unknown task {name!r}; choose from: all, {', '.join(TASKS)}")
+    return names
+
+
+def cmd_tasks(args) -> int:
+    for group, names in GROUPS.items():
+        print(f"{group}: {' '.join(names)}")
+    return 0
+
+
+def cmd_collect(args) -> int:
+    from .collect import collect
+    if len(args.task) > 1 and args.out:
+        sys.exit("--out names one file; use --out-dir for several tasks")
+    out_dir = Path(args.out_dir) if args.out_dir else None
+    if out_dir:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    for task in args.task:
+        path = Path(args.out) if args.out else out_dir / f"{task}.safetensors"
+        if path.exists() and not args.force:
+            print(f"{task}: {path} exists, skipped (--force to redo)", flush=True)
+            continue
+        data, stats = collect(task, args.episodes, args.seed,
+                              progress=_progress(task, args.episodes))
+        tmp = path.with_name(path.name + ".partial")
+        data.save(tmp)
+        os.replace(tmp, path)
+        stats.update(path=str(path), bytes=path.stat().st_size)
+        print(json.dumps(stats), flush=True)
+    return 0
+
+
+def cmd_eval(args) -> int:
+    from .evaluate import ExpertPolicy, ServedPolicy, evaluate
+    if (args.server is None) == (not args.expert):
+        sys.exit("give exactly one of --expert and --server CMD")
+    if len(args.task) > 1 and args.json:
+        sys.exit("--json names one file; use --json-dir for several tasks")
+    for task in args.task:
+        policy = ExpertPolicy(task) if args.expert else ServedPolicy(args.server)
+        started = time.perf_counter()
+        try:
+            report = evaluate(task, policy, args.episodes, args.first_seed, args.exec_steps,
+                              progress=_progress(task, args.episodes))
+        finally:
+            policy.close()
+        report["wall_seconds"] = time.perf_counter() - started
+        lo, hi = report["success_ci95"]
+        print(f"{task} {report['policy']}: success {100 * report['success_rate']:.1f} % [{100 * lo:.1f}, {100 * hi:.1f}] "
+              f"over {report['episodes']} episodes, mean length {report['mean_length']:.1f}, latency "
+              f"{report['latency_us_median']:.1f} us (round trip {report['roundtrip_us_median']:.1f}), non-smooth "
+              f"{report['non_smooth_ee_mean']:.2f}/episode, RMS jerk {report['rms_jerk_mean']:.2f} m/s^3, "
+              f"{report['wall_seconds']:.1f} s", flush=True)
+        path = Path(args.json) if args.json else (Path(args.json_dir) / f"{task}-{args.label}.json" if args.json_dir else None)
+        if path:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(report, indent=1) + "\n")
+    return 0
+
+
+def cmd_info(args) -> int:
+    import numpy as np
+    from .dataset import Dataset
+    for path in args.files:
+        d = Dataset.load(path)
+        lengths = np.diff(np.concatenate([[0], d.episode_ends]))
+        constant = [int(i) for i in np.flatnonzero(d.obs.max(axis=0) == d.obs.min(axis=0))]
+        print(json.dumps({"path": str(path), "task": d.task, "episodes": len(lengths), "steps": int(len(d.obs)),
+                          "obs_dim": d.obs.shape[1], "action_dim": d.action.shape[1], "dt": d.dt,
+                          "mean_length": float(lengths.mean()), "min_length": int(lengths.min()),
+                          "max_length": int(lengths.max()), "constant_obs_dims": constant,
+                          "action_min": d.action.min(axis=0).round(3).tolist(),
+                          "action_max": d.action.max(axis=0).round(3).tolist(), "bytes": Path(path).stat().st_size}))
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from . import bench
+    if args.what == "protocol":
+        for cpu in ([None, args.cpu] if args.cpu is not None else [None]):
+            print(json.dumps(bench.protocol_roundtrip(args.calls, cpu=cpu)), flush=True)
+    else:
+        for task in args.task:
+            print(json.dumps(bench.step_costs(task, args.episodes)), flush=True)
+    return 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m frmd_metaworld", description="MetaWorld demonstrations and "
+                                 "evaluation for FRMD (see examples/metaworld/README.md)")
+    sub = ap.add_subparsers(dest="command", required=True)
+    sub.add_parser("tasks", help="list the benchmark's 12 tasks by difficulty").set_defaults(run=cmd_tasks)
+
+    c = sub.add_parser("collect", help="collect expert demonstrations into FRMD's dataset format")
+    c.add_argument("--task", type=_tasks, required=True, help="a task, a comma-separated list, or all")
+    c.add_argument("--episodes", type=int, default=100, help="successful demonstrations per task")
+    c.add_argument("--seed", type=int, default=0, help="first episode seed (below 2**63)")
+    c.add_argument("--out", help="output file (one task)")
+    c.add_argument("--out-dir", help="output directory: TASK.safetensors per task; existing files are skipped")
+    c.add_argument("--force", action="store_true", help="overwrite existing files")
+    c.set_defaults(run=cmd_collect)
+
+    e = sub.add_parser("eval", help="closed-loop evaluation: the expert, or a policy server")
+    e.add_argument("--task", type=_tasks, required=True, help="a task, a comma-separated list, or all")
+    e.add_argument("--episodes", type=int, default=50)
+    e.add_argument("--first-seed", type=int, default=0, help="index of the first seed in the evaluation stream")
+    e.add_argument("--expert", action="store_true", help="MetaWorld's scripted expert, in this process")
+    e.add_argument("--server", metavar="CMD", help="policy server command, e.g. 'frmd serve --ckpt DIR'")
+    e.add_argument("--exec-steps", type=int, help="actions executed per chunk (default: the server's)")
+    e.add_argument("--json", help="write the report here (one task)")
+    e.add_argument("--json-dir", help="write TASK-LABEL.json per task here")
+    e.add_argument("--label", default="policy", help="file label with --json-dir")
+    e.set_defaults(run=cmd_eval)
+
+    i = sub.add_parser("info", help="summarize dataset files")
+    i.add_argument("files", nargs="+")
+    i.set_defaults(run=cmd_info)
+
+    b = sub.add_parser("bench", help="protocol round trip against the mock server, or simulator step costs")
+    b.add_argument("what", choices=["protocol", "step"])
+    b.add_argument("--calls", type=int, default=2000)
+    b.add_argument("--cpu", type=int, help="also measure with client and server pinned to this CPU")
+    b.add_argument("--task", type=_tasks, default=["push-v3"])
+    b.add_argument("--episodes", type=int, default=5)
+    b.set_defaults(run=cmd_bench)
+
+    args = ap.parse_args(argv)
+    return args.run(args)

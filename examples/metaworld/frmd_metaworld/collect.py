@@ -1,0 +1,90 @@
+"""Expert demonstrations of one MetaWorld task in FRMD's dataset format.
+
+Episode seeds are `seed, seed + 1, ...` (below 2**63, the evaluation stream). An episode runs the
+scripted expert on float64 observations until `info["success"]` first becomes true (that step
+included) or 500 steps; only successful episodes are recorded, so every demonstration ends in
+success, as `frmd collect` does. Failed seeds are listed in the metadata. Each row holds the
+observation the expert saw (rounded to float32, as the format requires) and the action it then
+executed (clipped to [-1, 1], which changes nothing in the simulation: the environment clips too).
+"""
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+
+from .dataset import Dataset
+from .tasks import (ACTION_DIM, DT, EVAL_SEED_OFFSET, MAX_STEPS, OBS_DIM, SeededEnv, check_task, expert_policy,
+                    package_versions)
+
+
+def expert_episode(env: SeededEnv, expert, seed: int):
+    """(observations, actions, success) of one expert episode, stopping at the first success."""
+    obs = env.reset(seed)
+    observations, actions, success = [], [], False
+    for _ in range(MAX_STEPS):
+        action = expert(obs)
+        observations.append(obs)
+        actions.append(action)
+        obs, success, truncated = env.step(action)
+        if success or truncated:
+            break
+    return np.array(observations), np.array(actions), success
+
+
+def collect(task: str, episodes: int, seed: int = 0, max_attempts: int | None = None, progress=None):
+    """(Dataset, stats) with `episodes` successful demonstrations of `task`."""
+    check_task(task)
+    if episodes < 1:
+        raise ValueError("at least one episode must be collected")
+    max_attempts = max_attempts or episodes + 10 + episodes // 5
+    if seed < 0 or seed + max_attempts > EVAL_SEED_OFFSET:
+        raise ValueError(f"collection seeds must lie in [0, 2**63) (the evaluation stream starts at 2**63); seed {seed}")
+    started = time.perf_counter()
+    env, expert = SeededEnv(task), expert_policy(task)
+    obs_rows, action_rows, ends, seeds, failed, lengths = [], [], [], [], [], []
+    attempt, steps, step_time = 0, 0, 0.0
+    while len(ends) < episodes:
+        if attempt >= max_attempts:
+            raise RuntimeError(f"the {task} expert failed {len(failed)} of {attempt} episodes; giving up")
+        episode_seed = seed + attempt
+        attempt += 1
+        t0 = time.perf_counter()
+        obs, act, success = expert_episode(env, expert, episode_seed)
+        step_time += time.perf_counter() - t0
+        steps += len(act)
+        if not success:
+            failed.append(episode_seed)
+            continue
+        obs_rows.append(obs.astype(np.float32))
+        action_rows.append(act.astype(np.float32))
+        ends.append((ends[-1] if ends else 0) + len(act))
+        seeds.append(episode_seed)
+        lengths.append(len(act))
+        if progress:
+            progress(len(ends))
+    data = Dataset(
+        obs=np.concatenate(obs_rows), action=np.concatenate(action_rows), episode_ends=np.array(ends, dtype=np.int64),
+        task=f"metaworld/{task}", dt=DT,
+        source=(f"frmd_metaworld collect: MetaWorld {task} scripted expert (metaworld.policies), seeds "
+                f"{seed}..{seed + attempt} ({len(failed)} failed episodes skipped)"),
+        extra={
+            "metaworld_task": task,
+            "episode_seeds": json.dumps(seeds),
+            "failed_seeds": json.dumps(failed),
+            "versions": json.dumps(package_versions()),
+            "environment": "goal-observable v3, _freeze_rand_vec=False, seeded_rand_vec=True, env.seed(s) then reset()",
+            "episode_end": "first step with info['success'] true (inclusive); max 500 steps",
+            "obs_note": "float32 copy of the float64 observation the expert acted on",
+            "action_note": "expert action clipped to [-1, 1]: hand displacement (x 1 cm) xyz, gripper",
+            "eval_seeds": "evaluation uses seeds 2**63 + i, disjoint from these",
+        },
+    )
+    data.validate()
+    if data.obs.shape[1] != OBS_DIM or data.action.shape[1] != ACTION_DIM:
+        raise RuntimeError(f"unexpected shapes {data.obs.shape} {data.action.shape}")
+    stats = {"task": task, "episodes": episodes, "attempted": attempt, "failed": len(failed),
+             "steps": int(len(data.obs)), "mean_length": float(np.mean(lengths)),
+             "seconds": time.perf_counter() - started, "us_per_step": step_time / max(steps, 1) * 1e6}
+    return data, stats
