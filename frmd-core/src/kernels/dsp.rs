@@ -28,10 +28,6 @@ use super::rows::RowInput;
 /// Widest input that is rewritten to halfword pairs on the stack (2 bytes per column: 512 bytes).
 pub(crate) const EXPANDED_COLUMNS: usize = 256;
 
-/// Narrowest input the assembly kernels take (one eight-column step); narrower ones are not worth
-/// preparing.
-pub(crate) const MIN_COLUMNS: usize = BLOCK;
-
 /// The input as halfword pairs: words `2k, 2k+1` hold columns `(4k, 4k+2)`, `(4k+1, 4k+3)` (low
 /// half first), for every complete 4-column block; not `expanded` for inputs wider than
 /// [`EXPANDED_COLUMNS`].

@@ -65,53 +65,39 @@ pub(crate) const BLOCK_ROWS: usize = 16;
 /// Calls `block(first, sums)` for consecutive blocks of up to [`BLOCK_ROWS`] rows of the
 /// row-major `weights` (`input.len()` columns; a partial last row is ignored), in order, with
 /// `sums[r] = bias[first + r] + dot(row_{first + r}, input)` (int32, wrapping); missing bias
-/// entries count as 0, so an empty `bias` gives plain dot products. On DSP cores an input of at
-/// least 8 columns is prepared once (unpacked to halfword pairs, when at most
-/// `dsp::EXPANDED_COLUMNS` wide) for the assembly kernels; narrower ones take the portable loop.
+/// entries count as 0, so an empty `bias` gives plain dot products. The input is prepared once
+/// (on DSP cores: unpacked to halfword pairs, when at most `dsp::EXPANDED_COLUMNS` wide).
 #[inline(always)]
 pub(crate) fn for_each_block<T: RowInput>(
     input: &[T],
     weights: &[i8],
     bias: &[i32],
-    block: impl FnMut(usize, &[i32]),
+    mut block: impl FnMut(usize, &[i32]),
 ) {
     let width = input.len();
     if width == 0 {
         return;
     }
     #[cfg(frmd_arm_dsp)]
-    if width >= super::dsp::MIN_COLUMNS {
-        let mut prepared = super::dsp::Prepared::new();
-        prepared.fill(input);
-        let sums = |rows: &[i8], bias: &[i32], out: &mut [i32]| {
-            super::dsp::block_sums(&prepared, input, rows, bias, out);
-        };
-        return blocks(width, weights, bias, sums, block);
-    }
-    let sums = |rows: &[i8], bias: &[i32], out: &mut [i32]| {
-        let bias = bias.iter().chain(core::iter::repeat(&0));
-        for ((sum, row), b) in out.iter_mut().zip(rows.chunks_exact(width)).zip(bias) {
-            *sum = b.wrapping_add(T::dot(row, input));
-        }
-    };
-    blocks(width, weights, bias, sums, block);
-}
-
-/// The block loop of [`for_each_block`] with `sums_of(rows, bias, out)` computing one block.
-#[inline(always)]
-fn blocks(
-    width: usize,
-    weights: &[i8],
-    bias: &[i32],
-    mut sums_of: impl FnMut(&[i8], &[i32], &mut [i32]),
-    mut block: impl FnMut(usize, &[i32]),
-) {
+    let mut prepared = super::dsp::Prepared::new();
+    #[cfg(frmd_arm_dsp)]
+    prepared.fill(input);
     let mut sums = [0_i32; BLOCK_ROWS];
     let mut first = 0;
     for rows in weights.chunks(BLOCK_ROWS * width) {
         let count = rows.len() / width;
         let out = sums.get_mut(..count).unwrap_or(&mut []);
-        sums_of(rows, bias.get(first..).unwrap_or(&[]), out);
+        let block_bias = bias.get(first..).unwrap_or(&[]);
+        #[cfg(frmd_arm_dsp)]
+        super::dsp::block_sums(&prepared, input, rows, block_bias, out);
+        #[cfg(not(frmd_arm_dsp))]
+        for ((sum, row), b) in out
+            .iter_mut()
+            .zip(rows.chunks_exact(width))
+            .zip(block_bias.iter().chain(core::iter::repeat(&0)))
+        {
+            *sum = b.wrapping_add(T::dot(row, input));
+        }
         block(first, out);
         first += count;
     }
