@@ -3,7 +3,8 @@
 //!
 //! - no_std (the firmware links these): [`shape`] (the policy shapes the images bake),
 //!   [`workload`] (the [`workload::Workload`] trait and the digest over a workload's cases),
-//!   the workloads [`prodmp_workload`], [`mlp_workload`] and [`policy_workload`],
+//!   the workloads [`prodmp_workload`], [`mlp_workload`], [`policy_workload`] and
+//!   [`kernel_workload`] (the fully connected kernels on random shapes),
 //!   [`stages`] (the layer-marking MLP network of the per-stage breakdown) and
 //!   [`transformer_network`] (transformer-lite behind the policy's `Network` trait);
 //! - `std` feature (host only): [`synthetic`] (the deterministic synthetic MLP and
@@ -17,6 +18,7 @@
 //! code and require equality.
 #![cfg_attr(not(feature = "std"), no_std)]
 
+pub mod kernel_workload;
 pub mod mlp_workload;
 pub mod policy_workload;
 pub mod prodmp_workload;
