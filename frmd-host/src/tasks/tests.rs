@@ -158,7 +158,7 @@ fn insert_jams_when_pressing_beside_the_slot() {
     let mut task = make_task("insert").unwrap();
     task.reset(11);
     let obs = task.observe();
-    let (slot_x, wall_y) = (obs[4], obs[5]);
+    let (slot_x, wall_y) = (obs[0] + obs[4], obs[1] + obs[5]);
     // Hover 3 cm beside the slot, then press down: the peg lands on the top and stays there.
     for _ in 0..30 {
         task.step(&[slot_x + 0.03, wall_y + 0.2]).unwrap();
@@ -192,7 +192,8 @@ fn push_moves_the_puck_only_through_contact() {
     let mut task = make_task("push").unwrap();
     task.reset(2);
     let obs = task.observe();
-    let puck = [obs[4], obs[5]];
+    // The observation holds the puck relative to the end effector.
+    let puck = [obs[0] + obs[4], obs[1] + obs[5]];
     // Moving the end effector away from the puck leaves it where it is.
     let away = [
         obs[0] + (obs[0] - puck[0]) * 0.3,
@@ -202,7 +203,8 @@ fn push_moves_the_puck_only_through_contact() {
         task.step(&away).unwrap();
     }
     let after = task.observe();
-    assert!((after[4] - puck[0]).abs() < 1e-6 && (after[5] - puck[1]).abs() < 1e-6);
+    let moved_puck = [after[0] + after[4], after[1] + after[5]];
+    assert!((moved_puck[0] - puck[0]).abs() < 1e-5 && (moved_puck[1] - puck[1]).abs() < 1e-5);
     // Driving through the puck displaces it.
     for _ in 0..20 {
         task.step(&[puck[0], puck[1]]).unwrap();
