@@ -7,7 +7,6 @@
 use frmd_host::bench::{reach_input, reach_student};
 use frmd_host::eval::policy::{Policy, PolicyInput};
 use frmd_host::policy::int8::Int8Policy;
-use frmd_host::policy::transformer as transformer_policy;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -22,9 +21,9 @@ fn main() -> anyhow::Result<()> {
     if backbone.starts_with("transformer") {
         let exported = frmd_export::export::export_transformer_checkpoint(&dir, Default::default(), None)?;
         let norm = exported.checkpoint.meta.normalization.clone().ok_or_else(|| anyhow::anyhow!("no normalization"))?;
-        let blob = frmd_export::transformer::blob::write(&exported.model, &norm).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
-        let int8 = transformer_policy::int8_policy(&blob, "int8")?;
-        let twin = transformer_policy::f32_twin(&blob, exported.model.folded.clone(), "core-f32")?;
+        let blob = frmd_export::blob::write_transformer(&exported.model, &norm).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
+        let int8 = Int8Policy::from_blob(&blob, "int8")?;
+        let twin = Int8Policy::transformer_f32_twin(&blob, exported.model.folded.clone(), "core-f32")?;
         transformer = Some((int8, twin, exported.model.memory().flash_bytes()));
     }
     let flash = match (&transformer, &p.core) {

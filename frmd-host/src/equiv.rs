@@ -20,7 +20,6 @@ use crate::eval::{run_episodes, EvalConfig};
 use crate::models::Condition;
 use crate::policy::float::FloatPolicy;
 use crate::policy::int8::Int8Policy;
-use crate::policy::transformer as transformer_policy;
 use anyhow::Context;
 use candle_core::Device;
 use frmd_core::model::mlp::Probe;
@@ -258,10 +257,10 @@ fn run_transformer(cfg: &EquivConfig, s: &Setup) -> anyhow::Result<EquivReport> 
     let mut rows = vec![blob_row(&s.blob, &rebuilt, cfg)];
     let folded = &exported.model.folded;
     let steps = folded.steps.len();
-    let mut int8 = transformer_policy::int8_policy(&s.blob, "int8")?;
+    let mut int8 = Int8Policy::from_blob(&s.blob, "int8")?;
     rows.extend(open_loop(cfg, s, steps, &mut int8, |cond, noise| folded.sample(cond, noise, |_, _, _| {}))?);
     if cfg.episodes > 0 {
-        let mut twin = transformer_policy::f32_twin(&s.blob, folded.clone(), "core-f32")?;
+        let mut twin = Int8Policy::transformer_f32_twin(&s.blob, folded.clone(), "core-f32")?;
         rows.extend(closed_loop(cfg, s, steps, &mut int8, &mut twin)?);
     }
     rows.push(qemu_row());

@@ -134,7 +134,7 @@ pub fn export_transformer(info: &ExportInfo) -> anyhow::Result<ExportedTransform
 /// The `FRMT` blob of a transformer export.
 pub fn transformer_blob(exported: &ExportedTransformer) -> anyhow::Result<Vec<u8>> {
     let norm = exported.checkpoint.meta.normalization.as_ref().context("the checkpoint has no normalization")?;
-    frmd_export::transformer::blob::write(&exported.model, norm).map_err(|e| anyhow::anyhow!("encoding the transformer blob: {e}"))
+    frmd_export::blob::write_transformer(&exported.model, norm).map_err(|e| anyhow::anyhow!("encoding the transformer blob: {e}"))
 }
 
 fn print_memory(m: &MemoryFigures, blob_len: usize) {

@@ -1,10 +1,10 @@
 //! A deterministic random [`QuantizedPolicy`] with valid parameters (not a trained model: the
-//! export tests check that both output forms carry it exactly).
-#![allow(dead_code)] // each test crate uses a different subset
+//! export tests check that both output forms carry it exactly, the host tests that any shape
+//! runs).
 
 use frmd_core::kernels::{silu, Lut8};
 use frmd_core::policy::{InputLayout, StepConstants};
-use frmd_core::prodmp::{BakedProDmp, ProDmpConfig};
+use frmd_core::prodmp::ProDmpConfig;
 use frmd_core::quant::{quantize_multiplier, QuantParams};
 use frmd_core::rng::Rng;
 use frmd_export::{ProDmpTablesOwned, QuantizedLayer, QuantizedOutput, QuantizedPolicy};
@@ -59,7 +59,7 @@ fn step(sigma: f64, first: bool, index: u32) -> StepConstants {
         c_in: (1.0 / norm) as f32,
         c_skip: (sigma_data * sigma_data / (shifted * shifted + sigma_data * sigma_data)) as f32,
         c_out: (shifted * sigma_data / norm) as f32,
-        first_layer_bias_index: index,
+        noise_variant: index,
     }
 }
 
@@ -125,7 +125,7 @@ pub fn random_policy(seed: u64, steps: usize, dims: &Dims) -> QuantizedPolicy {
     let lut = Lut8::build(silu, pre, post).unwrap();
     let sigmas = [80.0, 1.5, 0.4, 0.1];
     let cfg = ProDmpConfig::policy(k, p - 1, n, f64::from(DT));
-    let prodmp = tables(&cfg, n, p);
+    let prodmp = ProDmpTablesOwned::from_config(&cfg, n).unwrap();
     QuantizedPolicy {
         history: m,
         obs_dim: o,
@@ -148,16 +148,5 @@ pub fn random_policy(seed: u64, steps: usize, dims: &Dims) -> QuantizedPolicy {
         luts: vec![lut.table],
         hidden,
         output,
-    }
-}
-
-/// Baked tables for the two shapes the tests use.
-fn tables(cfg: &ProDmpConfig, n: usize, p: usize) -> ProDmpTablesOwned {
-    match (n, p) {
-        (N, P) => ProDmpTablesOwned::from_baked(&BakedProDmp::<N, P>::from_config(cfg).unwrap()),
-        (12, 21) => {
-            ProDmpTablesOwned::from_baked(&BakedProDmp::<12, 21>::from_config(cfg).unwrap())
-        }
-        _ => panic!("no baked decoder for horizon {n}, {p} params"),
     }
 }

@@ -4,7 +4,8 @@
 
 extern crate std;
 
-use super::mlp::*;
+use super::*;
+use crate::model::linear::{F32Linear, Int8Linear, RequantizedLinear};
 use crate::kernels::{Activation, FcRequant, FullyConnected, KernelError, Lut8};
 use crate::quant::{
     fold_input_zero_point, quantize_bias, quantize_weights_per_channel, reference,
@@ -44,8 +45,8 @@ impl FloatLayer {
         }
     }
 
-    fn view(&self) -> F32Layer<'_> {
-        F32Layer {
+    fn view(&self) -> F32Linear<'_> {
+        F32Linear {
             in_features: self.in_features,
             out_features: self.out_features,
             weights: &self.weights,
@@ -164,7 +165,7 @@ fn fixture(seed: u64) -> Fixture {
     ];
     let float_output = FloatLayer::random(&mut rng, 32, 12, Activation::Identity);
     // Calibration: ranges of the input, every pre-activation and every hidden output.
-    let views: Vec<F32Layer<'_>> = float_hidden.iter().map(FloatLayer::view).collect();
+    let views: Vec<F32Linear<'_>> = float_hidden.iter().map(FloatLayer::view).collect();
     let net = F32Mlp {
         hidden: &views,
         output: float_output.view(),
@@ -213,10 +214,10 @@ fn fixture(seed: u64) -> Fixture {
     }
 }
 
-fn int8_layers(quant: &[QuantLayer]) -> Vec<Int8Layer<'_>> {
+fn int8_layers(quant: &[QuantLayer]) -> Vec<RequantizedLinear<'_>> {
     quant
         .iter()
-        .map(|q| Int8Layer {
+        .map(|q| RequantizedLinear {
             fc: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
             requant: FcRequant {
                 multipliers: &q.multipliers,
@@ -225,7 +226,7 @@ fn int8_layers(quant: &[QuantLayer]) -> Vec<Int8Layer<'_>> {
                 activation_min: -128,
                 activation_max: 127,
             },
-            activation: q.lut.as_ref(),
+            activation: q.lut.as_ref().map(|lut| &lut.table),
         })
         .collect()
 }
@@ -287,10 +288,12 @@ fn int8_forward_is_bit_exact_with_naive_model_and_close_to_f32() {
     let net = Int8Mlp {
         input: fix.input_params,
         hidden: &hidden,
-        output: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
-        output_scales: &fix.output_scales,
+        output: Int8Linear {
+            fc: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
+            output_scales: &fix.output_scales,
+        },
     };
-    let float_views: Vec<F32Layer<'_>> = fix.float_hidden.iter().map(FloatLayer::view).collect();
+    let float_views: Vec<F32Linear<'_>> = fix.float_hidden.iter().map(FloatLayer::view).collect();
     let float_net = F32Mlp {
         hidden: &float_views,
         output: fix.float_output.view(),
@@ -327,7 +330,7 @@ fn int8_forward_is_bit_exact_with_naive_model_and_close_to_f32() {
 #[test]
 fn f32_forward_matches_direct_computation() {
     let fix = fixture(5);
-    let views: Vec<F32Layer<'_>> = fix.float_hidden.iter().map(FloatLayer::view).collect();
+    let views: Vec<F32Linear<'_>> = fix.float_hidden.iter().map(FloatLayer::view).collect();
     let net = F32Mlp {
         hidden: &views,
         output: fix.float_output.view(),
@@ -365,8 +368,10 @@ fn shape_errors() {
     let net = Int8Mlp {
         input: fix.input_params,
         hidden: &hidden,
-        output: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
-        output_scales: &fix.output_scales,
+        output: Int8Linear {
+            fc: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
+            output_scales: &fix.output_scales,
+        },
     };
     let x = [0.0_f32; 20];
     let mut out = [0.0_f32; 12];
@@ -395,15 +400,18 @@ fn shape_errors() {
         ..net
     };
     assert_eq!(
-        broken.validate::<WIDTH>(),
+        broken.validate(WIDTH),
         Err(ModelError::LayerWidth { index: 2 })
     );
     let scales = Int8Mlp {
-        output_scales: &fix.output_scales[..3],
+        output: Int8Linear {
+            output_scales: &fix.output_scales[..3],
+            ..net.output
+        },
         ..net
     };
     assert_eq!(
-        scales.validate::<WIDTH>(),
+        scales.validate(WIDTH),
         Err(ModelError::Kernel(KernelError::ScaleLength))
     );
     let bad_input = Int8Mlp {
@@ -413,9 +421,9 @@ fn shape_errors() {
         },
         ..net
     };
-    assert_eq!(bad_input.validate::<WIDTH>(), Err(ModelError::InputParams));
+    assert_eq!(bad_input.validate(WIDTH), Err(ModelError::InputParams));
 
-    let views: Vec<F32Layer<'_>> = fix.float_hidden.iter().map(FloatLayer::view).collect();
+    let views: Vec<F32Linear<'_>> = fix.float_hidden.iter().map(FloatLayer::view).collect();
     let float_net = F32Mlp {
         hidden: &views,
         output: fix.float_output.view(),
@@ -428,7 +436,7 @@ fn shape_errors() {
         hidden: &views[1..],
         ..float_net
     };
-    assert_eq!(broken.validate::<WIDTH>(), Ok(()));
+    assert_eq!(broken.validate(WIDTH), Ok(()));
     assert_eq!(
         broken.forward(&x, &mut out, &mut F32Scratch::<WIDTH>::new()),
         Err(ModelError::InputLength)
@@ -438,7 +446,7 @@ fn shape_errors() {
         ..float_net
     };
     assert_eq!(
-        broken.validate::<WIDTH>(),
+        broken.validate(WIDTH),
         Err(ModelError::LayerWidth { index: 1 })
     );
 }
@@ -479,8 +487,10 @@ fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
     let net = Int8Mlp {
         input: fix.input_params,
         hidden: &hidden,
-        output: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
-        output_scales: &fix.output_scales,
+        output: Int8Linear {
+            fc: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
+            output_scales: &fix.output_scales,
+        },
     };
     // Naive first layer: both planes from their definition, i64 dot products, the wide
     // combination and requantization models, the LUT by index.
@@ -557,7 +567,10 @@ fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
     // Without a hidden layer no layer takes the fine plane.
     let no_hidden = Int8Mlp {
         hidden: &[],
-        output: FullyConnected::new(20, 12, &q.fc_weights[..240], &q.bias),
+        output: Int8Linear {
+            fc: FullyConnected::new(20, 12, &q.fc_weights[..240], &q.bias),
+            output_scales: &fix.output_scales,
+        },
         ..net
     };
     let mut output = [0.0_f32; 12];
@@ -570,12 +583,11 @@ fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
         ),
         Err(ModelError::TwoPlaneWithoutHiddenLayer)
     );
-    let network = crate::policy::Int8Network::<WIDTH>::from_parts_with_input(
+    let network = crate::policy::Int8MlpNetwork::<WIDTH>::new(
         fix.input_params,
         InputPrecision::TwoPlane,
         &[],
         no_hidden.output,
-        &fix.output_scales,
         &[],
     );
     assert_eq!(

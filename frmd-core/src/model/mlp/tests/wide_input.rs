@@ -19,7 +19,7 @@ fn wide_first_layer(fix: &Fixture) -> QuantLayer {
 }
 
 /// The fixture's hidden layers with `first` in place of the first one.
-fn hidden_with<'a>(fix: &'a Fixture, first: &'a QuantLayer) -> Vec<Int8Layer<'a>> {
+fn hidden_with<'a>(fix: &'a Fixture, first: &'a QuantLayer) -> Vec<RequantizedLinear<'a>> {
     let mut hidden = int8_layers(core::slice::from_ref(first));
     hidden.extend_from_slice(&int8_layers(&fix.quant_hidden)[1..]);
     hidden
@@ -33,7 +33,8 @@ fn sixteen_bit_input_is_bit_exact_with_naive_model_and_as_accurate_as_two_planes
     let (wide_hidden, two_hidden) = (hidden_with(&fix, &wide), hidden_with(&fix, &two));
     let q = &fix.quant_output;
     let output = FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias);
-    let net = |hidden| Int8Mlp { input: fix.input_params, hidden, output, output_scales: &fix.output_scales };
+    let output = Int8Linear { fc: output, output_scales: &fix.output_scales };
+    let net = |hidden| Int8Mlp { input: fix.input_params, hidden, output };
     let (wide_net, two_net) = (net(&wide_hidden), net(&two_hidden));
     let fine_scale = fix.input_params.scale / 256.0;
     let zero = i64::from(fix.input_params.zero_point) * 256 + 128;
@@ -109,7 +110,11 @@ fn sixteen_bit_input_is_bit_exact_with_naive_model_and_as_accurate_as_two_planes
     assert!(error_wide <= error_two, "16-bit {error_wide} vs two-plane {error_two}");
     // The two paths are different computations (bias rounding, saturation), not one in disguise.
     assert!(differ > 0);
-    let no_hidden = Int8Mlp { hidden: &[], output: FullyConnected::new(20, 12, &q.fc_weights[..240], &q.bias), ..wide_net };
+    let no_hidden = Int8Mlp {
+        hidden: &[],
+        output: Int8Linear { fc: FullyConnected::new(20, 12, &q.fc_weights[..240], &q.bias), ..output },
+        ..wide_net
+    };
     let mut out = [0.0_f32; 12];
     assert_eq!(
         no_hidden.forward_with_input(InputPrecision::Int16, &[0.0; 20], &mut out, &mut scratch),

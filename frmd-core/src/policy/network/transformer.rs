@@ -1,79 +1,24 @@
-//! [`TransformerNetwork`]: a transformer-lite backbone ([`Int8Transformer`] or its f32 reference
-//! [`F32Transformer`]) behind the policy's [`Network`] trait, so the sampler drives it exactly as
-//! it drives the MLP.
+//! Transformer policy networks ([`TransformerNetwork`] over either form of
+//! [`crate::model::transformer::Transformer`]).
 //!
 //! Input split: the policy assembles one vector with the standard [`InputLayout`]
 //! (`[obs history | previous action | rate * rate_scale | c_in x]`); the first three segments are
 //! the transformer's condition (`cond_dim` values), the last one its trajectory (`n k`).
 //!
-//! Noise level: the MLP folds the noise embedding of each sampling step into a first-layer bias
-//! variant; the transformer folds it into a noise token (`noise_in(embedding(sigma_i)) +
-//! positions[1]`, [`crate::model::transformer::fold_noise_token`]). The exporter writes one `W`
-//! long token per step back to back, and first-layer bias index `i` selects token `i`. With no
-//! variants, index 0 uses the model's own `noise_token`.
+//! Noise level: the exporter folds each sampling step's noise embedding into a noise token
+//! (`noise_in(embedding(sigma_i)) + positions[1]`,
+//! [`crate::model::transformer::fold_noise_token`]) and writes one `W` long token per step back
+//! to back; variant `i` selects token `i`. With no tokens, variant 0 uses the model's own
+//! `noise_token`.
 
+use super::{Network, NoiseVariants};
 use crate::model::transformer::{
-    F32Transformer, Int8Transformer, TransformerError, TransformerScratch, TransformerShape,
+    F32Transformer, Int8Transformer, TransformerBuffers, TransformerError, TransformerScratch,
+    TransformerShape,
 };
+use crate::policy::{InputLayout, InputSegment, PolicyError};
 
-use super::{InputLayout, InputSegment, Network, PolicyError};
-
-/// A transformer backbone the adapter can drive (implemented for [`Int8Transformer`] and
-/// [`F32Transformer`]).
-pub trait TransformerBackbone<'a>: Copy {
-    /// Sizes.
-    fn shape(&self) -> &TransformerShape;
-    /// Checks every part against the shape.
-    fn validate(&self) -> Result<(), TransformerError>;
-    /// The same model with another noise token (`W` values).
-    fn with_noise_token(&self, noise_token: &'a [f32]) -> Self;
-    /// One forward pass (see [`F32Transformer::forward`]).
-    fn run<const F: usize, const B: usize, const A: usize>(
-        &self,
-        trajectory: &[f32],
-        condition: &[f32],
-        output: &mut [f32],
-        scratch: &mut TransformerScratch<F, B, A>,
-    ) -> Result<(), TransformerError>;
-}
-
-/// Implements [`TransformerBackbone`] for a model type whose inherent `shape` field, `validate`,
-/// `noise_token` field and `forward` have the trait's meaning (both backbones share that API).
-macro_rules! impl_transformer_backbone {
-    ($model:ident) => {
-        impl<'a> TransformerBackbone<'a> for $model<'a> {
-            fn shape(&self) -> &TransformerShape {
-                &self.shape
-            }
-
-            fn validate(&self) -> Result<(), TransformerError> {
-                $model::validate(self)
-            }
-
-            fn with_noise_token(&self, noise_token: &'a [f32]) -> Self {
-                Self {
-                    noise_token,
-                    ..*self
-                }
-            }
-
-            fn run<const F: usize, const B: usize, const A: usize>(
-                &self,
-                trajectory: &[f32],
-                condition: &[f32],
-                output: &mut [f32],
-                scratch: &mut TransformerScratch<F, B, A>,
-            ) -> Result<(), TransformerError> {
-                self.forward(trajectory, condition, output, scratch)
-            }
-        }
-    };
-}
-
-impl_transformer_backbone!(Int8Transformer);
-impl_transformer_backbone!(F32Transformer);
-
-/// The standard layout order the adapter requires (condition first, trajectory last).
+/// The standard layout order the transformer requires (condition first, trajectory last).
 pub(crate) const STANDARD_SEGMENTS: [InputSegment; 4] = [
     InputSegment::ObsHistory,
     InputSegment::PrevAction,
@@ -81,61 +26,125 @@ pub(crate) const STANDARD_SEGMENTS: [InputSegment; 4] = [
     InputSegment::NoisyTrajectory,
 ];
 
-/// A transformer backbone with per-step noise tokens and borrowed scratch (borrowed so that
-/// moving the network or the policy copies no large buffers).
-pub struct TransformerNetwork<'a, T, const F: usize, const B: usize, const A: usize> {
+/// Working memory a [`TransformerNetwork`] runs in: a [`TransformerScratch`], or a mutable
+/// borrow of one (so that moving the network or the policy copies no large buffers).
+pub trait TransformerWork {
+    /// The buffers.
+    fn buffers(&mut self) -> TransformerBuffers<'_>;
+}
+
+impl<const F: usize, const B: usize, const A: usize> TransformerWork for TransformerScratch<F, B, A> {
+    fn buffers(&mut self) -> TransformerBuffers<'_> {
+        TransformerScratch::buffers(self)
+    }
+}
+
+impl<T: TransformerWork + ?Sized> TransformerWork for &mut T {
+    fn buffers(&mut self) -> TransformerBuffers<'_> {
+        (**self).buffers()
+    }
+}
+
+/// A transformer backbone the network can run ([`F32Transformer`], [`Int8Transformer`]).
+pub trait TransformerBackbone<'a>: Copy {
+    /// Sizes.
+    fn shape(&self) -> &TransformerShape;
+    /// Checks every part against the shape.
+    fn validate(&self) -> Result<(), TransformerError>;
+    /// The same model with another noise token (`W` values).
+    fn with_noise_token(&self, noise_token: &'a [f32]) -> Self;
+    /// One forward pass on borrowed buffers.
+    fn run(
+        &self,
+        trajectory: &[f32],
+        condition: &[f32],
+        output: &mut [f32],
+        buffers: TransformerBuffers<'_>,
+    ) -> Result<(), TransformerError>;
+}
+
+impl<'a> TransformerBackbone<'a> for F32Transformer<'a> {
+    fn shape(&self) -> &TransformerShape {
+        &self.shape
+    }
+    fn validate(&self) -> Result<(), TransformerError> {
+        F32Transformer::validate(self)
+    }
+    fn with_noise_token(&self, noise_token: &'a [f32]) -> Self {
+        F32Transformer::with_noise_token(self, noise_token)
+    }
+    fn run(
+        &self,
+        trajectory: &[f32],
+        condition: &[f32],
+        output: &mut [f32],
+        buffers: TransformerBuffers<'_>,
+    ) -> Result<(), TransformerError> {
+        self.forward_in(trajectory, condition, output, buffers, |_, _| {})
+    }
+}
+
+impl<'a> TransformerBackbone<'a> for Int8Transformer<'a> {
+    fn shape(&self) -> &TransformerShape {
+        &self.shape
+    }
+    fn validate(&self) -> Result<(), TransformerError> {
+        Int8Transformer::validate(self)
+    }
+    fn with_noise_token(&self, noise_token: &'a [f32]) -> Self {
+        Int8Transformer::with_noise_token(self, noise_token)
+    }
+    fn run(
+        &self,
+        trajectory: &[f32],
+        condition: &[f32],
+        output: &mut [f32],
+        buffers: TransformerBuffers<'_>,
+    ) -> Result<(), TransformerError> {
+        self.forward_in(trajectory, condition, output, buffers)
+    }
+}
+
+/// A transformer backbone with per-step noise tokens and its working memory `S`.
+pub struct TransformerNetwork<'a, T, S> {
     model: T,
-    noise_tokens: &'a [f32],
-    num_variants: usize,
-    scratch: &'a mut TransformerScratch<F, B, A>,
+    variants: NoiseVariants<'a, f32>,
+    scratch: S,
 }
 
 /// [`TransformerNetwork`] over the int8 backbone.
-pub type Int8TransformerNetwork<'a, const F: usize, const B: usize, const A: usize> =
-    TransformerNetwork<'a, Int8Transformer<'a>, F, B, A>;
+pub type Int8TransformerNetwork<'a, S> = TransformerNetwork<'a, Int8Transformer<'a>, S>;
 
 /// [`TransformerNetwork`] over the f32 reference backbone.
-pub type F32TransformerNetwork<'a, const F: usize, const B: usize, const A: usize> =
-    TransformerNetwork<'a, F32Transformer<'a>, F, B, A>;
+pub type F32TransformerNetwork<'a, S> = TransformerNetwork<'a, F32Transformer<'a>, S>;
 
-impl<'a, T: TransformerBackbone<'a>, const F: usize, const B: usize, const A: usize>
-    TransformerNetwork<'a, T, F, B, A>
-{
+impl<'a, T: TransformerBackbone<'a>, S: TransformerWork> TransformerNetwork<'a, T, S> {
     /// Wraps `model` for inputs laid out by `layout` (must be the standard order: observation
     /// history, previous action, previous rate, noisy trajectory). `noise_tokens` holds one
     /// `width`-long noise token per sampling step back to back, or is empty to use the model's
-    /// own token for step index 0. The model must validate.
+    /// own token for variant 0. The model must validate.
     ///
     /// Errors: [`PolicyError::Transformer`] when the model does not validate,
     /// [`PolicyError::TransformerLayout`] for another layout (the policy checks the total width
-    /// against [`Network::input_width`]), [`PolicyError::FirstLayerBiasLength`] when the tokens are not whole rows,
-    /// [`PolicyError::NonFiniteNoise`] when a token is not finite.
+    /// against [`Network::input_width`]), [`PolicyError::NoiseVariantLength`] when the tokens
+    /// are not whole rows, [`PolicyError::NonFiniteNoise`] when a token is not finite.
     pub fn new(
         model: T,
         layout: &InputLayout,
         noise_tokens: &'a [f32],
-        scratch: &'a mut TransformerScratch<F, B, A>,
+        scratch: S,
     ) -> Result<Self, PolicyError> {
         model.validate().map_err(PolicyError::Transformer)?;
         if layout.segments() != STANDARD_SEGMENTS {
             return Err(PolicyError::TransformerLayout);
         }
-        let width = model.shape().width;
-        let num_variants = if noise_tokens.is_empty() {
-            0
-        } else {
-            if width == 0 || !noise_tokens.len().is_multiple_of(width) {
-                return Err(PolicyError::FirstLayerBiasLength);
-            }
-            if noise_tokens.iter().any(|value| !value.is_finite()) {
-                return Err(PolicyError::NonFiniteNoise);
-            }
-            noise_tokens.len() / width
-        };
+        let variants = NoiseVariants::new(noise_tokens, model.shape().width)?;
+        if noise_tokens.iter().any(|value| !value.is_finite()) {
+            return Err(PolicyError::NonFiniteNoise);
+        }
         Ok(Self {
             model,
-            noise_tokens,
-            num_variants,
+            variants,
             scratch,
         })
     }
@@ -144,34 +153,9 @@ impl<'a, T: TransformerBackbone<'a>, const F: usize, const B: usize, const A: us
     pub fn model(&self) -> &T {
         &self.model
     }
-
-    /// The model for sampling step variant `index`.
-    fn variant(&self, index: usize) -> Result<T, PolicyError> {
-        if self.num_variants == 0 {
-            return if index == 0 {
-                Ok(self.model)
-            } else {
-                Err(PolicyError::FirstLayerBiasIndex)
-            };
-        }
-        let width = self.model.shape().width;
-        let start = index
-            .checked_mul(width)
-            .ok_or(PolicyError::FirstLayerBiasIndex)?;
-        let end = start
-            .checked_add(width)
-            .ok_or(PolicyError::FirstLayerBiasIndex)?;
-        let token = self
-            .noise_tokens
-            .get(start..end)
-            .ok_or(PolicyError::FirstLayerBiasIndex)?;
-        Ok(self.model.with_noise_token(token))
-    }
 }
 
-impl<'a, T: TransformerBackbone<'a>, const F: usize, const B: usize, const A: usize> Network
-    for TransformerNetwork<'a, T, F, B, A>
-{
+impl<'a, T: TransformerBackbone<'a>, S: TransformerWork> Network for TransformerNetwork<'a, T, S> {
     fn input_width(&self) -> usize {
         let shape = self.model.shape();
         shape.cond_dim.saturating_add(shape.trajectory_len())
@@ -181,22 +165,25 @@ impl<'a, T: TransformerBackbone<'a>, const F: usize, const B: usize, const A: us
         self.model.shape().output
     }
 
-    fn num_first_layer_biases(&self) -> usize {
-        self.num_variants
+    fn num_noise_variants(&self) -> usize {
+        self.variants.count()
     }
 
     fn forward(
         &mut self,
-        first_layer_bias: usize,
+        variant: usize,
         input: &[f32],
         output: &mut [f32],
     ) -> Result<(), PolicyError> {
-        let model = self.variant(first_layer_bias)?;
+        let model = match self.variants.select(variant)? {
+            Some(token) => self.model.with_noise_token(token),
+            None => self.model,
+        };
         let (condition, trajectory) = input
             .split_at_checked(model.shape().cond_dim)
             .ok_or(PolicyError::InputWidth)?;
         model
-            .run(trajectory, condition, output, self.scratch)
+            .run(trajectory, condition, output, self.scratch.buffers())
             .map_err(PolicyError::Transformer)
     }
 }
@@ -207,9 +194,11 @@ mod tests {
     extern crate std;
 
     use super::*;
+    use crate::model::transformer::TransformerShape;
+    use crate::policy::InputSegment;
     use crate::kernels::Activation;
-    use crate::model::mlp::F32Layer;
-    use crate::model::transformer::{F32Block, LayerNormWeights};
+    use crate::model::linear::F32Linear;
+    use crate::model::transformer::{F32Block, F32FeedForward, LayerNormWeights};
     use crate::rng::Rng;
     use std::{vec, vec::Vec};
 
@@ -228,10 +217,10 @@ mod tests {
         (0..len).map(|_| 0.3 * rng.gaussian()).collect()
     }
 
-    fn layer(weights: &[f32], bias: &[f32], in_features: usize) -> F32Layer<'static> {
+    fn layer(weights: &[f32], bias: &[f32], in_features: usize) -> F32Linear<'static> {
         let weights: &'static [f32] = std::boxed::Box::leak(weights.to_vec().into_boxed_slice());
         let bias: &'static [f32] = std::boxed::Box::leak(bias.to_vec().into_boxed_slice());
-        F32Layer {
+        F32Linear {
             in_features,
             out_features: bias.len(),
             weights,
@@ -240,7 +229,7 @@ mod tests {
         }
     }
 
-    fn linear(rng: &mut Rng, in_features: usize, out_features: usize) -> F32Layer<'static> {
+    fn linear(rng: &mut Rng, in_features: usize, out_features: usize) -> F32Linear<'static> {
         let weights = random(rng, in_features * out_features);
         let bias = random(rng, out_features);
         layer(&weights, &bias, in_features)
@@ -261,8 +250,13 @@ mod tests {
             qkv: linear(rng, width, 3 * width),
             proj: linear(rng, width, width),
             norm2: norm,
-            fc1: linear(rng, width, 4 * width),
-            fc2: linear(rng, 4 * width, width),
+            feed_forward: F32FeedForward {
+                fc1: F32Linear {
+                    activation: Activation::GeluSigmoid,
+                    ..linear(rng, width, 4 * width)
+                },
+                fc2: linear(rng, 4 * width, width),
+            },
         };
         F32Transformer {
             shape: SHAPE,
@@ -289,8 +283,8 @@ mod tests {
         let mut direct_scratch = std::boxed::Box::new(Scratch::new());
         let input = random(&mut rng, SHAPE.cond_dim + SHAPE.trajectory_len());
         let mut network =
-            F32TransformerNetwork::new(model, &layout(), &tokens, &mut scratch).unwrap();
-        assert_eq!(network.num_first_layer_biases(), 2);
+            F32TransformerNetwork::new(model, &layout(), &tokens, &mut *scratch).unwrap();
+        assert_eq!(network.num_noise_variants(), 2);
         assert_eq!(network.input_width(), 12);
         assert_eq!(network.output_width(), 4);
         let mut outputs = [[0.0_f32; 4]; 2];
@@ -309,7 +303,7 @@ mod tests {
         assert_ne!(outputs[0], outputs[1], "the noise token must matter");
         assert_eq!(
             network.forward(2, &input, &mut [0.0; 4]),
-            Err(PolicyError::FirstLayerBiasIndex)
+            Err(PolicyError::NoiseVariantIndex)
         );
     }
 
@@ -319,12 +313,12 @@ mod tests {
         let model = model(&mut rng);
         let mut scratch = std::boxed::Box::new(Scratch::new());
         let input = random(&mut rng, 12);
-        let mut network = F32TransformerNetwork::new(model, &layout(), &[], &mut scratch).unwrap();
-        assert_eq!(network.num_first_layer_biases(), 0);
+        let mut network = F32TransformerNetwork::new(model, &layout(), &[], &mut *scratch).unwrap();
+        assert_eq!(network.num_noise_variants(), 0);
         network.forward(0, &input, &mut [0.0; 4]).unwrap();
         assert_eq!(
             network.forward(1, &input, &mut [0.0; 4]),
-            Err(PolicyError::FirstLayerBiasIndex)
+            Err(PolicyError::NoiseVariantIndex)
         );
         assert_eq!(
             network.forward(0, &input[..11], &mut [0.0; 4]),
@@ -348,18 +342,18 @@ mod tests {
         )
         .unwrap();
         assert_eq!(
-            F32TransformerNetwork::new(model, &swapped, &[], &mut scratch).err(),
+            F32TransformerNetwork::new(model, &swapped, &[], &mut *scratch).err(),
             Some(PolicyError::TransformerLayout)
         );
         let ragged = [0.0_f32; 9];
         assert_eq!(
-            F32TransformerNetwork::new(model, &layout(), &ragged, &mut scratch).err(),
-            Some(PolicyError::FirstLayerBiasLength)
+            F32TransformerNetwork::new(model, &layout(), &ragged, &mut *scratch).err(),
+            Some(PolicyError::NoiseVariantLength)
         );
         let mut nan = [0.0_f32; 8];
         nan[3] = f32::NAN;
         assert_eq!(
-            F32TransformerNetwork::new(model, &layout(), &nan, &mut scratch).err(),
+            F32TransformerNetwork::new(model, &layout(), &nan, &mut *scratch).err(),
             Some(PolicyError::NonFiniteNoise)
         );
         let broken = F32Transformer {
@@ -367,7 +361,7 @@ mod tests {
             ..model
         };
         assert!(matches!(
-            F32TransformerNetwork::new(broken, &layout(), &[], &mut scratch).err(),
+            F32TransformerNetwork::new(broken, &layout(), &[], &mut *scratch).err(),
             Some(PolicyError::Transformer(_))
         ));
     }
