@@ -40,7 +40,7 @@ pub use history::ObsHistory;
 pub use layout::{InputLayout, InputSegment, InputSources, MAX_INPUT_SEGMENTS};
 pub(crate) use network::EMPTY_INT8_LAYER;
 pub use network::{F32Network, Int8Network, Network, MAX_HIDDEN_LAYERS};
-pub use normalize::RangeNormalizer;
+pub use normalize::{denormalize_value, normalize_value, RangeNormalizer};
 pub use runtime::{Policy, PolicyConfig};
 pub use transformer_network::{
     F32TransformerNetwork, Int8TransformerNetwork, TransformerBackbone, TransformerNetwork,

@@ -14,6 +14,10 @@ use anyhow::bail;
 use candle_core::Tensor;
 use frmd_core::sigma::SigmaConfig;
 
+/// Number of DDPM noise levels of the DP baseline: its training schedule, and the step count at
+/// which sampling is full DDPM (fewer steps sample with DDIM).
+pub const DP_TRAIN_STEPS: usize = 100;
+
 /// How the network's output F becomes the noise estimate eps(x_t, o, t).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -38,6 +42,24 @@ impl EpsParametrization {
             "preconditioned" => Ok(EpsParametrization::Preconditioned),
             other => bail!("unknown DP parametrization `{other}` (direct, preconditioned)"),
         }
+    }
+}
+
+impl std::str::FromStr for EpsParametrization {
+    type Err = anyhow::Error;
+
+    fn from_str(text: &str) -> anyhow::Result<Self> {
+        Self::parse(text)
+    }
+}
+
+/// The name [`EpsParametrization::parse`] reads.
+impl std::fmt::Display for EpsParametrization {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            EpsParametrization::Direct => "direct",
+            EpsParametrization::Preconditioned => "preconditioned",
+        })
     }
 }
 
@@ -202,7 +224,7 @@ pub fn sample_dp(net: &Network, sched: &DdpmSchedule, cond: &Condition, x: Tenso
 mod tests {
     use super::*;
     use crate::models::{HeadConfig, OwnedNetwork};
-    use crate::train::toy::toy_config;
+    use crate::data::toy::toy_config;
     use candle_core::Device;
 
     fn zero_network() -> OwnedNetwork {

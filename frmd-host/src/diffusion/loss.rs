@@ -32,6 +32,25 @@ impl LossWeight {
     }
 }
 
+impl std::str::FromStr for LossWeight {
+    type Err = anyhow::Error;
+
+    fn from_str(text: &str) -> anyhow::Result<Self> {
+        Self::parse(text)
+    }
+}
+
+/// The name [`LossWeight::parse`] reads.
+impl std::fmt::Display for LossWeight {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            LossWeight::Edm => "edm",
+            LossWeight::InvSigmaSquared => "inv-sigma2",
+            LossWeight::Uniform => "uniform",
+        })
+    }
+}
+
 /// Log-normal noise-level distribution of the teacher loss.
 pub const P_MEAN: f64 = -1.2;
 pub const P_STD: f64 = 1.2;

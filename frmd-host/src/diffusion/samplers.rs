@@ -39,6 +39,25 @@ impl Solver {
     }
 }
 
+impl std::str::FromStr for Solver {
+    type Err = anyhow::Error;
+
+    fn from_str(text: &str) -> anyhow::Result<Self> {
+        Self::parse(text)
+    }
+}
+
+/// The name [`Solver::parse`] reads.
+impl std::fmt::Display for Solver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Solver::Euler => "euler",
+            Solver::Heun => "heun",
+            Solver::DpmPp2m => "dpm++2m",
+        })
+    }
+}
+
 /// A source of standard-normal f32 samples (the host training generator, or frmd-core's
 /// firmware generator so float and firmware policies can share noise streams).
 pub trait NoiseSource {

@@ -6,7 +6,7 @@
 //! ([`SHAPES`]: the built-in tasks with the default training config, plus the small shape the
 //! end-to-end test trains) and picks the one the blob's descriptor names. The blob bytes are
 //! leaked once per loaded policy (the loaded policy borrows them for `'static`).
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
 use frmd_core::blob::LoadedPolicy;
 use frmd_core::policy::{F32Network, Network, Noise, Policy as CorePolicy};

@@ -1,17 +1,22 @@
 //! Training: the EDM teacher, consistency distillation of the student (the paper's Algorithm 1)
 //! and the DP baseline, sharing one loop shape (seeded batches, scheduled AdamW, a progress
-//! callback every `log_every` steps).
+//! callback every `log_every` steps); [`recipe`] holds the settings of a run (their `Default` is
+//! the recipe) and [`run`] turns a demonstration file into a checkpoint directory.
 pub mod batch;
 pub mod curve;
 pub mod distill;
 pub mod dp;
 pub mod holdout;
+mod monitor;
 pub mod optim;
 pub mod padding;
+pub mod recipe;
+pub mod run;
 pub mod teacher;
 #[cfg(test)]
+mod dp_checkpoint_tests;
+#[cfg(test)]
 mod tests;
-pub mod toy;
 
 use crate::models::OwnedNetwork;
 use serde::{Deserialize, Serialize};

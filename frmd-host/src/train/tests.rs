@@ -1,6 +1,6 @@
 //! Training tests on the toy bimodal set (kept to a few seconds each).
 use super::distill::{distill, DistillConfig};
-use super::toy::{bimodal_windows, positive_fraction, toy_config, MODE_GOAL};
+use crate::data::toy::{bimodal_windows, positive_fraction, toy_config, MODE_GOAL};
 use super::{teacher::{train_teacher, TeacherConfig}, LoopConfig, Progress};
 use crate::diffusion::loss::{LossWeight, SigmaSampling};
 const LOGNORMAL: SigmaSampling = SigmaSampling { uniform_fraction: 0.0 };
@@ -177,7 +177,7 @@ fn dp_baseline_learns_bimodal_toy() {
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
     let (net, report) = super::dp::train_dp(&windows, &cfg, &quick_loop(2000, 4), &super::dp::DpConfig { eval_ema: 0.0, parametrization: crate::diffusion::ddpm::EpsParametrization::Direct }, &mut |_: &Progress| Ok(())).unwrap();
     assert!(report.final_loss().unwrap() < 0.5 * report.loss_curve[0].1, "{:?}", report.loss_curve);
-    let sched = DdpmSchedule::cosine(super::dp::DP_TRAIN_STEPS);
+    let sched = DdpmSchedule::cosine(crate::diffusion::ddpm::DP_TRAIN_STEPS);
     let batch = 300;
     for (sampler, steps) in [(DpSampler::Ddpm, 100), (DpSampler::Ddim, 10)] {
         let mut rng = HostRng::new(5);

@@ -1,7 +1,7 @@
 //! A toy 1-D bimodal data set for tests and experiments: one DoF, a constant observation, y0 =
 //! v0 = 0, and every trajectory is the ProDMP decode of goal +0.5 or -0.5 (zero weights), each
 //! with probability 1/2 — so the data distribution has exactly two modes.
-use crate::data::windows::WindowSet;
+use super::windows::WindowSet;
 use crate::models::decoder::DecoderRows;
 use crate::models::{Activation, BackboneConfig, HeadConfig, ModelConfig};
 use crate::rng::HostRng;
