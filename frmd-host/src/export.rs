@@ -10,7 +10,7 @@ use anyhow::{bail, Context};
 use frmd_core::model::mlp::InputPrecision;
 use frmd_export::calibrate::{CalibrationSet, RangeMethod};
 use frmd_export::checkpoint::{BackboneConfig, CheckpointMeta, Role};
-use frmd_export::export::{export_checkpoint, export_transformer_checkpoint, ExportOptions, Exported, ExportedTransformer, DEFAULT_INPUT_HEADROOM};
+use frmd_export::export::{export_checkpoint, export_transformer_checkpoint, ExportOptions, Exported, ExportedTransformer};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -42,17 +42,19 @@ pub struct ExportConfig {
 }
 
 impl Default for ExportConfig {
-    /// One step, min-max calibration on the checkpoint's own rows, balanced inputs, the 16-bit
-    /// input with the exporter's default headroom; no checkpoint named.
+    /// The exporter's defaults (`frmd_export::export::ExportOptions::default`: one step, min-max
+    /// calibration, balanced inputs, the 16-bit input with its headroom), calibrated on the
+    /// checkpoint's own rows; no checkpoint named.
     fn default() -> Self {
+        let options = ExportOptions::default();
         ExportConfig {
             checkpoint: String::new(),
-            steps: 1,
-            calibration: "minmax".into(),
+            steps: options.steps,
+            calibration: options.ranges.to_string(),
             calibration_data: None,
-            balance_inputs: true,
-            two_plane_input: true,
-            input_headroom: DEFAULT_INPUT_HEADROOM,
+            balance_inputs: options.balance_inputs,
+            two_plane_input: options.input_precision == InputPrecision::Int16,
+            input_headroom: options.input_headroom,
         }
     }
 }

@@ -56,3 +56,9 @@ pub fn positive_fraction(traj: &[f32], horizon: usize) -> f64 {
     let positive = traj.chunks_exact(horizon).filter(|row| row.last().copied().unwrap_or(0.0) > 0.0).count();
     positive as f64 / rows.max(1) as f64
 }
+
+/// The condition of `batch` toy samples: zero observation, y0 and v0.
+pub fn toy_condition(batch: usize) -> anyhow::Result<crate::models::Condition> {
+    let zeros = candle_core::Tensor::zeros((batch, 1), candle_core::DType::F32, &candle_core::Device::Cpu)?;
+    Ok(crate::models::Condition::new(&zeros, zeros.clone(), zeros.clone(), 0.1)?)
+}

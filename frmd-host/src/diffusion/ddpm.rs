@@ -35,33 +35,7 @@ pub enum EpsParametrization {
     Preconditioned,
 }
 
-impl EpsParametrization {
-    pub fn parse(text: &str) -> anyhow::Result<Self> {
-        match text {
-            "direct" => Ok(EpsParametrization::Direct),
-            "preconditioned" => Ok(EpsParametrization::Preconditioned),
-            other => bail!("unknown DP parametrization `{other}` (direct, preconditioned)"),
-        }
-    }
-}
-
-impl std::str::FromStr for EpsParametrization {
-    type Err = anyhow::Error;
-
-    fn from_str(text: &str) -> anyhow::Result<Self> {
-        Self::parse(text)
-    }
-}
-
-/// The name [`EpsParametrization::parse`] reads.
-impl std::fmt::Display for EpsParametrization {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            EpsParametrization::Direct => "direct",
-            EpsParametrization::Preconditioned => "preconditioned",
-        })
-    }
-}
+variant_names!(EpsParametrization, "DP parametrization", { Direct = "direct", Preconditioned = "preconditioned" });
 
 /// Discrete DDPM schedule plus the parametrization of the noise network.
 #[derive(Clone, Debug)]

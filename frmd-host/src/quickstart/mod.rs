@@ -244,7 +244,7 @@ pub fn run_pipeline(a: &QuickstartConfig) -> anyhow::Result<QuickstartSummary> {
     rows.push(float_row(a, &student, 1, None, &mut artifacts)?);
     match int8 {
         Ok(mut export) => {
-            artifacts.extend(export.artifacts.drain(..));
+            artifacts.append(&mut export.artifacts);
             let mut row = evaluate(a, "int8-student-1", export.policy.as_mut(), export.history, &mut artifacts)?;
             row.int8_error = Some(export.float_error);
             rows.push(row);

@@ -37,6 +37,17 @@ impl LoopConfig {
     pub fn paper(steps: usize, seed: u64) -> Self {
         LoopConfig { steps, batch_size: 128, seed, optim: optim::OptimConfig::paper(steps), log_every: 100 }
     }
+
+    /// A short run for toy data (`data::toy`): batch 64, lr 3e-3, 50 warm-up steps, the loss
+    /// reported every 50 steps.
+    pub fn toy(steps: usize, seed: u64) -> Self {
+        let mut cfg = LoopConfig::paper(steps, seed);
+        cfg.batch_size = 64;
+        cfg.optim.lr = 3e-3;
+        cfg.optim.warmup_steps = 50;
+        cfg.log_every = 50;
+        cfg
+    }
 }
 
 /// What a trainer reports to its caller while running.

@@ -1,5 +1,6 @@
 //! Experiments: manual measurements behind the design choices, kept runnable. Every test here is
-//! `#[ignore]`d and does nothing unless its inputs are named in the environment:
+//! `#[ignore]`d; those on trained checkpoints do nothing unless their inputs are named in the
+//! environment (the toy sweeps need none):
 //!
 //! - `FRMD_CKPT`: a checkpoint directory (teacher, student or DP, as the experiment says);
 //! - `FRMD_DATA`: the demonstrations it was trained on;
@@ -13,6 +14,7 @@
 
 mod dp_baseline;
 mod float_policy;
+mod toy_sweeps;
 
 /// What the experiments share.
 mod prelude {
