@@ -157,7 +157,7 @@ pub fn plot_paths(out: &Path, report: &EvalReport) -> anyhow::Result<()> {
             }
         }
         if !mine.is_empty() {
-            let label = format!("{} ({} of {} shown)", if outcome { "success" } else { "failure (x: end)" }, mine.len(), paths.len());
+            let label = format!("{} ({} of {} shown)", if outcome { "success" } else { "failure, ends at x" }, mine.len(), paths.len());
             chart
                 .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
                 .map_err(plot_err)?
