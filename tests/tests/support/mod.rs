@@ -60,8 +60,6 @@ fn common(tiny: &Tiny, data: &Path, out: PathBuf, steps: usize) -> TrainConfig {
     }
 }
 
-/// Collects 12 `reach` demonstrations and trains the teacher and the student of `tiny` in
-/// `<temp>/<name>-<pid>`.
 impl TinyRun {
     /// What `frmd export --ckpt CKPT --out BAKED --blob DIR/student.blob` does (one step,
     /// min-max calibration, the default 16-bit input): exports `ckpt` into `baked` and
@@ -74,6 +72,8 @@ impl TinyRun {
     }
 }
 
+/// Collects 12 `reach` demonstrations and trains the teacher and the student of `tiny` in
+/// `<temp>/<name>-<pid>`.
 pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
     std::env::set_var("RAYON_NUM_THREADS", "1");
     let dir = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
