@@ -6,7 +6,7 @@
 use frmd_core::blob::LoadedMlp;
 use frmd_core::policy::{Noise, PolicyDims};
 use frmd_core::rng::Rng;
-use frmd_host::eval::policy::{Policy, PolicyInput};
+use frmd_host::tasks::{Policy, PolicyInput};
 use frmd_host::policy::int8::Int8Policy;
 use frmd_test_support::random_policy::{random_policy, Dims};
 use frmd_test_support::AlignedBlob;

@@ -2,7 +2,7 @@
 //! (through the `frmd train` code paths, which also write calibration.safetensors), export it
 //! (`frmd export`), load the blob with frmd-core and run the bit-accuracy harness.
 use frmd_core::policy::PolicyDims;
-use frmd_host::cli::export::BAKED_BLOB_FILE;
+use frmd_host::export::BAKED_BLOB_FILE;
 use frmd_test_support::AlignedBlob;
 
 mod support;
@@ -39,7 +39,7 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
         frmd_export::export::export_checkpoint(&teacher, Default::default(), None).unwrap_err();
     assert!(format!("{err:#}").contains("Teacher"), "{err:#}");
 
-    frmd_host::cli::export::run(run.export_args(&student)).unwrap();
+    run.export(&student).unwrap();
     assert_eq!(
         std::fs::read(dir.join("student.blob")).unwrap(),
         std::fs::read(baked.join(BAKED_BLOB_FILE)).unwrap()

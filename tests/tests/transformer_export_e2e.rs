@@ -3,7 +3,7 @@
 //! with `frmd export` (the backbone picks the transformer exporter: `FRMT` blob plus generated
 //! loader module), load the blob with frmd-core and run the bit-accuracy harness.
 use frmd_core::policy::PolicyDims;
-use frmd_host::cli::export::BAKED_BLOB_FILE;
+use frmd_host::export::BAKED_BLOB_FILE;
 use frmd_test_support::AlignedBlob;
 
 mod support;
@@ -35,10 +35,10 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
     } = &run;
 
     // The exporter refuses the teacher, naming the reason.
-    let err = frmd_host::cli::export::run(run.export_args(&teacher)).unwrap_err();
+    let err = run.export(&teacher).unwrap_err();
     assert!(format!("{err:#}").contains("Teacher"), "{err:#}");
 
-    frmd_host::cli::export::run(run.export_args(&student)).unwrap();
+    run.export(&student).unwrap();
     let blob = std::fs::read(baked.join(BAKED_BLOB_FILE)).unwrap();
     assert_eq!(std::fs::read(dir.join("student.blob")).unwrap(), blob);
     assert_eq!(&blob[..4], b"FRMT");

@@ -7,7 +7,7 @@
 //! policy that borrows it ([`self_cell`]), so nothing is leaked. An MLP policy is built once per
 //! load; a transformer's network and policy are built per chunk from the loaded blob (a few
 //! microseconds against a chunk of about a millisecond), with the scratch kept across chunks.
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
 use frmd_core::blob::{LoadedMlp, LoadedTransformer, TRANSFORMER_MAGIC};
 use frmd_core::policy::{F32MlpNetwork, F32TransformerNetwork, Int8MlpNetwork, Network, Noise, Policy as CorePolicy, PolicyDims, PolicyError};

@@ -1,8 +1,8 @@
 //! Task-suite tests: expert success rates, determinism, bimodality of `avoid`, bad actions.
-use super::avoid::AvoidExpert;
-use super::{make_task, TASK_NAMES};
-use crate::eval::policy::{Policy, PolicyInput};
-use crate::eval::{eval_seed, rollout, run_episodes, EvalConfig};
+use frmd_host::tasks::avoid::AvoidExpert;
+use frmd_host::tasks::{make_task, TASK_NAMES};
+use frmd_host::tasks::{Policy, PolicyInput};
+use frmd_host::eval::{eval_seed, rollout, run_episodes, EvalConfig};
 
 #[test]
 fn every_expert_succeeds_on_at_least_95_percent_of_50_seeds() {
@@ -220,7 +220,7 @@ fn demonstrations_start_at_the_end_effector_position() {
     // padding a_{-1} = a_0 agrees with the evaluator's prev_action at episode start.
     for &name in TASK_NAMES {
         let (data, _) =
-            crate::data::collect::collect_demos(name, 3, 40, None, &mut |_| {}).unwrap();
+            frmd_host::data::collect::collect_demos(name, 3, 40, None, &mut |_| {}).unwrap();
         for range in data.episode_ranges() {
             let obs = &data.obs[range.start * data.obs_dim..][..2];
             let action = &data.action[range.start * data.action_dim..][..2];
@@ -230,7 +230,7 @@ fn demonstrations_start_at_the_end_effector_position() {
 }
 
 /// Median wall time of one `Task::step` under the expert, microseconds (timing: run alone with
-/// `cargo test -p frmd-host step_cost -- --ignored --nocapture`).
+/// `cargo test -p frmd-host --test experts step_cost -- --ignored --nocapture`).
 #[test]
 #[ignore = "timing measurement; flaky on a loaded machine"]
 fn step_cost_is_well_under_50_us() {
@@ -261,8 +261,8 @@ fn step_cost_is_well_under_50_us() {
                 }
             }
         }
-        let median = crate::eval::metrics::quantile(&times, 0.5);
-        let p99 = crate::eval::metrics::quantile(&times, 0.99);
+        let median = frmd_host::eval::metrics::quantile(&times, 0.5);
+        let p99 = frmd_host::eval::metrics::quantile(&times, 0.99);
         println!(
             "{name}: step median {median:.2} us, p99 {p99:.2} us over {} steps",
             times.len()
