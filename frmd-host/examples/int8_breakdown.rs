@@ -132,6 +132,9 @@ impl<'a> Sim<'a> {
     }
 }
 
+/// One network evaluation: (step, model input) -> network output.
+type Forward<'a> = Box<dyn FnMut(usize, &[f32]) -> anyhow::Result<Vec<f32>> + 'a>;
+
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let ckpt = Path::new(args.get(1).context("CKPT")?);
@@ -150,7 +153,7 @@ fn main() -> anyhow::Result<()> {
     for (l, (p, o)) in exported.ranges.hidden.iter().enumerate() {
         println!("layer {l}: pre {p:?} out {o:?}");
     }
-    let run = |label: &str, mut forward: Box<dyn FnMut(usize, &[f32]) -> anyhow::Result<Vec<f32>> + '_>| -> anyhow::Result<()> {
+    let run = |label: &str, mut forward: Forward<'_>| -> anyhow::Result<()> {
         let (mut max_e, mut sum_e, mut n, mut max_p, mut sum_p, mut signed) = (0f64, 0f64, 0usize, 0f64, 0f64, 0f64);
         for r in 0..rows {
             let cond = &set.cond[r * set.cond_dim..(r + 1) * set.cond_dim];

@@ -145,10 +145,13 @@ fn default_float_policies(cfg: &BenchConfig) -> anyhow::Result<Vec<FloatPolicy>>
     Ok(out)
 }
 
+/// Policies with their table labels.
+type LabelledPolicies = Vec<(String, Box<dyn Policy>)>;
+
 /// The frmd-core int8 and f32 one-step policies for the comparison: the student in `--dir`
 /// exported as `frmd export` does it (or, with `--synthetic`, a random student of `--backbone`
 /// exported the same way). Returns the policies, or why there are none.
-fn core_policies(cfg: &BenchConfig) -> Result<Vec<(String, Box<dyn Policy>)>, String> {
+fn core_policies(cfg: &BenchConfig) -> Result<LabelledPolicies, String> {
     let build = || -> anyhow::Result<Result<(Int8Policy, Int8Policy), String>> {
         if cfg.synthetic {
             let dir = std::env::temp_dir().join(format!("frmd-bench-{}", std::process::id()));
