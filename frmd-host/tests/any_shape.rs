@@ -33,7 +33,7 @@ fn run_shape(dims: Dims) {
     let aligned = AlignedBlob::new(&blob);
     let loaded = LoadedMlp::load(aligned.bytes()).unwrap();
     if (dims.m, dims.o, dims.k, dims.n, dims.p) == (2, 39, 4, 12, 21) {
-        let mut exact = loaded.policy::<2, 39, 4, 12, 21, 134, 64>().unwrap();
+        let mut exact = loaded.policy::<2, 39, 4, 12, 21, 134, 134>().unwrap();
         exact.reset(&prev_action).unwrap();
         for obs in &history {
             exact.observe(obs).unwrap();
