@@ -8,7 +8,8 @@
 #      the same command, which shows the method can catch a violation.
 #   2. `cargo tree -e normal --target thumbv7em-none-eabihf`: frmd-core's direct dependencies are
 #      only libm, micromath, heapless, bytemuck, postcard, defmt (default and all features).
-#   3. frmd-core builds normally for the target with --release.
+#   3. frmd-core builds normally with --release for thumbv7em-none-eabihf, thumbv8m.main-none-eabihf
+#      and thumbv6m-none-eabi.
 #
 # Uses the rustup toolchain with the rust-src component if `rustup component add rust-src` works,
 # otherwise Debian's rustc-web + rust-web-src (installed by scripts/setup-cortex-m.sh --path debian).
@@ -134,11 +135,14 @@ for features in "" "--all-features"; do
     say "frmd-core${features:+ ($features)}: no target crate enables an std or alloc feature ($(echo "$enabled" | sort -u | wc -l) crates checked)"
 done
 
-# --- 3. Normal release build for the target with the toolchain chosen by setup.
-log="$build_root/frmd-core-$target-release.log"
-if ! bash scripts/cortex-m-cargo.sh build --release -p frmd-core >"$log" 2>&1; then
-    tail -n 30 "$log" >&2
-    fail "frmd-core does not build for $target --release (log: $log)"
-fi
-say "frmd-core builds for $target --release ($FRMD_CM_PATH toolchain)"
+# --- 3. Normal release build for every Cortex-M target of the firmware (Armv7E-M: M4F/M7,
+# Armv8-M Mainline: M33/M55, Armv6-M: M0) with the toolchain chosen by setup.
+for build_target in "$target" thumbv8m.main-none-eabihf thumbv6m-none-eabi; do
+    log="$build_root/frmd-core-$build_target-release.log"
+    if ! CARGO_BUILD_TARGET="$build_target" bash scripts/cortex-m-cargo.sh build --release -p frmd-core >"$log" 2>&1; then
+        tail -n 30 "$log" >&2
+        fail "frmd-core does not build for $build_target --release (log: $log)"
+    fi
+    say "frmd-core builds for $build_target --release ($FRMD_CM_PATH toolchain)"
+done
 say "OK: frmd-core links neither alloc nor std"

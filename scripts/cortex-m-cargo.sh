@@ -1,5 +1,7 @@
 #!/usr/bin/env bash
-# Runs cargo for thumbv7em-none-eabihf with the toolchain chosen by scripts/setup-cortex-m.sh:
+# Runs cargo for a Cortex-M target (thumbv7em-none-eabihf unless CARGO_BUILD_TARGET says
+# thumbv8m.main-none-eabihf or thumbv6m-none-eabi) with the toolchain chosen by
+# scripts/setup-cortex-m.sh:
 #
 #   bash scripts/cortex-m-cargo.sh build --release -p frmd-core
 #   (cd examples/cortex-m && bash ../../scripts/cortex-m-cargo.sh build --release)
@@ -23,7 +25,9 @@ export RUSTC="$FRMD_CM_RUSTC"
 export RUSTDOC="$FRMD_CM_RUSTDOC"
 export CARGO_BUILD_TARGET="${CARGO_BUILD_TARGET:-$FRMD_CM_TARGET}"
 if [ -n "$FRMD_CM_LINKER" ]; then
-    export CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER="$FRMD_CM_LINKER"
+    # CARGO_TARGET_<TRIPLE>_LINKER for the target being built (thumbv7em, thumbv8m.main, thumbv6m).
+    linker_var="CARGO_TARGET_$(echo "$CARGO_BUILD_TARGET" | tr 'a-z.-' 'A-Z__')_LINKER"
+    export "$linker_var=$FRMD_CM_LINKER"
 fi
 
 z_flags=()

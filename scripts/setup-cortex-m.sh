@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
-# Makes `thumbv7em-none-eabihf` builds and QEMU Cortex-M runs work (Debian 12, idempotent).
+# Makes Cortex-M builds (thumbv7em-none-eabihf: M4F/M7; thumbv8m.main-none-eabihf: M33/M55;
+# thumbv6m-none-eabi: M0) and QEMU Cortex-M runs work (Debian 12, idempotent).
 #
 #   bash scripts/setup-cortex-m.sh [--path auto|rustup|debian]
 #
 # Toolchain paths, tried in this order with `auto` (the default; FRMD_CORTEX_M_PATH overrides):
-#   rustup  `rustup target add thumbv7em-none-eabihf`, linked by the toolchain's rust-lld
-#           (checked by linking a tiny no_std probe).
+#   rustup  `rustup target add` of the three targets, linked by the toolchain's rust-lld
+#           (checked by linking a tiny no_std probe for each).
 #   debian  Debian's rustc-web/cargo-web (1.96), rust-web-src and lld-16: core is compiled from
 #           source (RUSTC_BOOTSTRAP=1, -Z build-std=core) and linked with ld.lld-16. Works with only
 #           the Debian archive and crates.io reachable.
@@ -17,6 +18,7 @@ set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$repo"
 target=thumbv7em-none-eabihf
+targets=(thumbv7em-none-eabihf thumbv8m.main-none-eabihf thumbv6m-none-eabi)
 env_file="${FRMD_CORTEX_M_ENV:-$repo/target/cortex-m.env}"
 choice="${FRMD_CORTEX_M_PATH:-auto}"
 while [ $# -gt 0 ]; do
@@ -67,25 +69,30 @@ fn panic(_: &core::panic::PanicInfo) -> ! { loop {} }
 #[no_mangle]
 pub extern "C" fn _start() -> ! { loop {} }
 EOF
-probe_link() { # rustc [extra args]
-    local rustc="$1"; shift
-    "$rustc" --edition 2021 --target "$target" -C panic=abort -O "$@" \
+probe_link() { # rustc target
+    "$1" --edition 2021 --target "$2" -C panic=abort -O \
         "$probe_dir/probe.rs" -o "$probe_dir/probe.elf" >"$probe_dir/probe.log" 2>&1
 }
 
 try_rustup() {
     command -v rustup >/dev/null || { log "rustup not found"; return 1; }
-    if ! rustup target list --installed 2>/dev/null | grep -qx "$target"; then
-        log "rustup target add $target"
+    local missing=() t
+    for t in "${targets[@]}"; do
+        rustup target list --installed 2>/dev/null | grep -qx "$t" || missing+=("$t")
+    done
+    if [ ${#missing[@]} -gt 0 ]; then
+        log "rustup target add ${missing[*]}"
         # Bounded: where static.rust-lang.org is unreachable, rustup may retry for a long time.
-        timeout 180 rustup target add "$target" >&2 || { log "rustup target add failed"; return 1; }
+        timeout 300 rustup target add "${missing[@]}" >&2 || { log "rustup target add failed"; return 1; }
     fi
     local rustc
     rustc="$(rustup which rustc)"
-    if ! probe_link "$rustc"; then
-        log "rustup toolchain cannot link for $target with rust-lld:"; cat "$probe_dir/probe.log" >&2
-        return 1
-    fi
+    for t in "${targets[@]}"; do
+        if ! probe_link "$rustc" "$t"; then
+            log "rustup toolchain cannot link for $t with rust-lld:"; cat "$probe_dir/probe.log" >&2
+            return 1
+        fi
+    done
     path=rustup
     cargo_bin="$(rustup which cargo)"
     rustc_bin="$rustc"
@@ -108,8 +115,10 @@ try_debian() {
         log "Debian's rustc $version is older than the workspace's rust-version $msrv (enable bookworm-security for rustc-web 1.96)"
         return 1
     fi
-    "$rustc" --print target-list | grep -qx "$target" \
-        || { log "$rustc does not know target $target"; return 1; }
+    local t
+    for t in "${targets[@]}"; do
+        "$rustc" --print target-list | grep -qx "$t" || { log "$rustc does not know target $t"; return 1; }
+    done
     sysroot="$("$rustc" --print sysroot)"
     [ -f "$sysroot/lib/rustlib/src/rust/library/core/Cargo.toml" ] \
         || { log "rust-web-src missing: no $sysroot/lib/rustlib/src/rust/library/core"; return 1; }

@@ -1,5 +1,6 @@
-//! 1. Puts `memory.x` on the linker search path and passes the cortex-m-rt (and, with the `defmt`
-//!    feature, defmt) linker scripts. Link arguments live here rather than in `.cargo/config.toml`
+//! 1. Puts the board's memory map (`memory/*.x`, chosen by the target) on the linker search path
+//!    as `memory.x` and passes the cortex-m-rt (and, with the `defmt` feature, defmt) linker
+//!    scripts. Link arguments live here rather than in `.cargo/config.toml`
 //!    so that a caller's `RUSTFLAGS` (which replaces config rustflags) cannot drop them.
 //! 2. Bakes the ProDMP policy decoder on the host with frmd-core (f64 tables rounded to f32) and
 //!    writes it as a constant expression, `$OUT_DIR/baked_prodmp.rs`, with frmd-export's table
@@ -88,9 +89,16 @@ fn bake_pil(out: &Path) {
 
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    fs::copy("memory.x", out.join("memory.x")).expect("copy memory.x into OUT_DIR");
+    let target = env::var("TARGET").unwrap_or_default();
+    println!("cargo:rerun-if-env-changed=FRMD_CM_MEMORY_MAP");
+    let board = frmd_firmware_support::host::board_memory_map(&target);
+    fs::copy(board, out.join("memory.x")).expect("copy the board's memory map into OUT_DIR as memory.x");
     println!("cargo:rustc-link-search={}", out.display());
-    println!("cargo:rerun-if-changed=memory.x");
+    println!("cargo:rerun-if-changed=memory");
+    println!("cargo:rustc-check-cfg=cfg(frmd_armv6m)");
+    if target.starts_with("thumbv6m-") {
+        println!("cargo:rustc-cfg=frmd_armv6m");
+    }
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-changed=policy/reach");
     println!("cargo:rustc-link-arg-bins=-Tlink.x");

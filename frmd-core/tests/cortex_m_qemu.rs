@@ -3,16 +3,18 @@
 //! The firmware's workloads are plain `core` + frmd-core code in `frmd-firmware-support`
 //! (`examples/cortex-m/support`, whose synthetic MLP generator its build.rs runs), so they run
 //! here on the host as well.
-//! `qemu_digests_match_host` builds both firmware images, runs them on QEMU mps2-an386
-//! (Cortex-M4F) and mps2-an500 (Cortex-M7) and requires each printed digest to equal the host's:
-//! ProDMP decode (f32) and int8 MLP + decode are bit-identical on x86-64 and Cortex-M. It needs
+//! `qemu_digests_match_host` builds the firmware images, runs them on every QEMU board of
+//! `run-qemu.sh` (Cortex-M4F, M7, M33, M0, M55) and requires each printed digest to equal the
+//! host's: ProDMP decode (f32), int8 MLP + decode and the fully connected kernels on random
+//! shapes are bit-identical on x86-64 and on every core, DSP kernels or portable, FPU or soft
+//! float. It needs
 //! `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without it, or with
 //! FRMD_SKIP_QEMU=1, it prints why and passes without checking
 //! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
 
 use frmd_firmware_support::host::qemu;
 use frmd_firmware_support::synthetic::mlp as synthetic_mlp;
-use frmd_firmware_support::{mlp_workload, prodmp_workload, shape, workload};
+use frmd_firmware_support::{kernel_workload, mlp_workload, prodmp_workload, shape, workload};
 
 fn baked() -> prodmp_workload::Baked {
     prodmp_workload::Baked::from_config(&shape::config()).expect("bake the policy decoder")
@@ -30,6 +32,41 @@ fn mlp_digest() -> u64 {
     let hidden = model.hidden_layers();
     let mut workload = mlp_workload::MlpWorkload::new(model.mlp(&hidden), &baked);
     workload::digest_all(&mut workload).expect("run the synthetic policy on the fixed inputs")
+}
+
+fn kernels_digest() -> u64 {
+    let mut workload = kernel_workload::KernelWorkload::new();
+    workload::digest_all(&mut workload).expect("run the kernel cases")
+}
+
+/// The host side of the kernel cases is itself the same on the portable and (where the CPU has
+/// it) the AVX2 path, and the cases reach what they are meant to: inputs wider than the pair
+/// buffer, every width remainder, odd row counts, int16 inputs.
+#[test]
+fn kernel_cases_agree_on_the_host_paths() {
+    let with_avx2 = kernels_digest();
+    #[cfg(target_arch = "x86_64")]
+    {
+        frmd_core::kernels::x86::set_avx2_enabled(false);
+        let portable = kernels_digest();
+        frmd_core::kernels::x86::set_avx2_enabled(true);
+        assert_eq!(portable, with_avx2);
+    }
+    let mut workload = kernel_workload::KernelWorkload::new();
+    let mut widths = Vec::new();
+    for case in 0..kernel_workload::CASES {
+        use frmd_firmware_support::workload::Workload;
+        workload.prepare(case).unwrap();
+        widths.push((workload.width(), workload.rows()));
+    }
+    assert!(widths.iter().any(|(w, _)| *w > 256));
+    for remainder in 0..8 {
+        assert!(widths.iter().any(|(w, _)| w % 8 == remainder), "no width = {remainder} mod 8");
+    }
+    for steps in 0..4 {
+        assert!(widths.iter().any(|(w, _)| (w / 8) % 4 == steps && *w >= 8), "no width with {steps} steps mod 4");
+    }
+    assert!(widths.iter().any(|(_, r)| r % 2 == 1) && widths.iter().any(|(_, r)| r % 2 == 0));
 }
 
 #[test]
@@ -72,9 +109,10 @@ fn qemu_digests_match_host() {
     if !qemu::available("qemu_digests_match_host", &root) {
         return;
     }
-    for (firmware, host_digest) in [("prodmp", prodmp_digest()), ("mlp", mlp_digest())] {
+    let images = [("prodmp", prodmp_digest()), ("mlp", mlp_digest()), ("kernels", kernels_digest())];
+    for (firmware, host_digest) in images {
         let expected = format!("digest: {host_digest:016x}");
-        for board in ["m4", "m7"] {
+        for board in qemu::BOARDS {
             let stdout = qemu::run(&root, board, firmware);
             let digest_line = qemu::digest_line(&stdout);
             assert_eq!(

@@ -12,6 +12,7 @@ mod config;
 pub use config::{Activation, BackboneConfig, HeadConfig, ModelConfig, Normalization, Normalizer, ProDmpOutput};
 
 use anyhow::{bail, Context};
+use frmd_core::prodmp::ProDmpConfig;
 use frmd_core::sigma::SigmaConfig;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -33,66 +34,6 @@ pub enum Role {
     Teacher,
     Student,
     Dp,
-}
-
-/// `frmd_core::sigma::SigmaConfig` as JSON.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SigmaJson {
-    pub sigma_min: f64,
-    pub sigma_max: f64,
-    pub rho: f64,
-    pub sigma_data: f64,
-}
-
-impl From<SigmaConfig> for SigmaJson {
-    fn from(s: SigmaConfig) -> Self {
-        SigmaJson { sigma_min: s.sigma_min, sigma_max: s.sigma_max, rho: s.rho, sigma_data: s.sigma_data }
-    }
-}
-
-impl From<SigmaJson> for SigmaConfig {
-    fn from(s: SigmaJson) -> Self {
-        SigmaConfig { sigma_min: s.sigma_min, sigma_max: s.sigma_max, rho: s.rho, sigma_data: s.sigma_data }
-    }
-}
-
-/// `frmd_core::prodmp::ProDmpConfig` as JSON (must equal the policy convention for the model's
-/// sizes).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ProDmpJson {
-    pub num_dof: usize,
-    pub num_basis: usize,
-    pub tau: f64,
-    pub delay: f64,
-    pub alpha: f64,
-    pub alpha_phase: f64,
-    pub bandwidth_factor: f64,
-    pub num_basis_outside: usize,
-    pub dt: f64,
-    pub weights_scale: f64,
-    pub goal_scale: f64,
-    pub relative_goal: bool,
-    pub auto_scale_basis: bool,
-}
-
-impl From<&frmd_core::prodmp::ProDmpConfig> for ProDmpJson {
-    fn from(c: &frmd_core::prodmp::ProDmpConfig) -> Self {
-        ProDmpJson {
-            num_dof: c.num_dof,
-            num_basis: c.num_basis,
-            tau: c.tau,
-            delay: c.delay,
-            alpha: c.alpha,
-            alpha_phase: c.alpha_phase,
-            bandwidth_factor: c.bandwidth_factor,
-            num_basis_outside: c.num_basis_outside,
-            dt: c.dt,
-            weights_scale: c.weights_scale,
-            goal_scale: c.goal_scale,
-            relative_goal: c.relative_goal,
-            auto_scale_basis: c.auto_scale_basis,
-        }
-    }
 }
 
 /// Where the training data came from.
@@ -119,8 +60,10 @@ pub struct CheckpointMeta {
     pub format_version: u32,
     pub role: Role,
     pub model: ModelConfig,
-    pub prodmp: Option<ProDmpJson>,
-    pub sigma: SigmaJson,
+    /// The decoder of a ProDMP head (must equal [`ModelConfig::prodmp`], the policy convention
+    /// for the model's sizes); `None` for a raw head.
+    pub prodmp: Option<ProDmpConfig>,
+    pub sigma: SigmaConfig,
     /// Observation and action normalization (raw units <-> [-1, 1]).
     pub normalization: Option<Normalization>,
     pub dataset: DatasetInfo,
@@ -184,10 +127,10 @@ impl CheckpointMeta {
         CheckpointMeta {
             format_version: FORMAT_VERSION,
             role,
-            prodmp: model.prodmp().as_ref().map(ProDmpJson::from),
+            prodmp: model.prodmp(),
             tensors: expected_tensors(model),
             model: model.clone(),
-            sigma: sigma.into(),
+            sigma,
             normalization: None,
             dataset: DatasetInfo::default(),
             training: serde_json::Value::Null,
@@ -200,8 +143,8 @@ impl CheckpointMeta {
             bail!("{CONFIG_FILE}: format_version {} is not supported (expected {FORMAT_VERSION})", self.format_version);
         }
         self.model.validate().with_context(|| format!("{CONFIG_FILE}: model"))?;
-        SigmaConfig::from(self.sigma).validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))?;
-        let expected_prodmp = self.model.prodmp().as_ref().map(ProDmpJson::from);
+        self.sigma.validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))?;
+        let expected_prodmp = self.model.prodmp();
         if self.prodmp != expected_prodmp {
             bail!("{CONFIG_FILE}: prodmp config {:?} differs from the policy convention for this model ({:?})", self.prodmp, expected_prodmp);
         }

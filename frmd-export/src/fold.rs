@@ -201,7 +201,7 @@ impl FoldedMlp {
         if widest > MAX_WIDTH {
             bail!("layer width {widest} exceeds the exporter's limit of {MAX_WIDTH}");
         }
-        let sigma: SigmaConfig = meta.sigma.into();
+        let sigma: SigmaConfig = meta.sigma;
         let steps = step_constants(&sigma, meta.model.prodmp_output().unwrap_or_default(), steps)?;
         let mut layers = Vec::new();
         let mut width = input_width + config.embed_dim;

@@ -147,7 +147,7 @@ impl FoldedTransformer {
         {
             bail!("transformer shape {shape:?} needs more scratch than the exporter's host scratch holds");
         }
-        let sigma: SigmaConfig = meta.sigma.into();
+        let sigma: SigmaConfig = meta.sigma;
         let steps = step_constants(&sigma, meta.model.prodmp_output().unwrap_or_default(), steps)?;
         let (w, tokens) = (width, shape.tokens());
         let positions = ckpt.tensor("transformer.pos_embedding")?.to_vec();

@@ -12,7 +12,7 @@ use frmd_export::export::{export_checkpoint, ExportOptions};
 use std::path::{Path, PathBuf};
 
 fn model(backbone: BackboneConfig) -> ModelConfig {
-    ModelConfig { obs_dim: 3, history: 2, action_dim: 2, horizon: 5, control_dt: 0.05, embed_dim: 4, backbone, head: HeadConfig::ProDmp { num_basis: 3, output: ProDmpOutput::Direct } }
+    ModelConfig { obs_dim: 3, history: 2, action_dim: 2, horizon: 5, control_dt: 0.05, embed_dim: 4, backbone, head: HeadConfig::ProDmp { num_basis: 3, output: ProDmpOutput::Direct, auto_scale_basis: false } }
 }
 
 fn mlp() -> BackboneConfig {

@@ -5,8 +5,8 @@
 //! `bake::write_module` in its build.rs, then times `Policy::act` on QEMU. Here the same checkpoint
 //! goes through the same export call (`frmd_firmware_support::host::student`), is written as a
 //! blob, loaded with `frmd_core::blob::LoadedMlp` and driven through the same workload;
-//! `qemu_policy_digest_matches_host` requires the firmware's printed digest on mps2-an386
-//! (Cortex-M4F) and mps2-an500 (Cortex-M7) to equal the host's. It needs `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without
+//! `qemu_policy_digest_matches_host` requires the firmware's printed digest on every board of
+//! `run-qemu.sh` (Cortex-M4F, M7, M33, M0, M55) to equal the host's. It needs `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without
 //! it, or with FRMD_SKIP_QEMU=1, it prints why and passes without checking
 //! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
 
@@ -80,6 +80,37 @@ fn student_sixteen_bit_input_is_as_accurate_as_two_planes() {
     }
 }
 
+/// The minimal example (`examples/cortex-m/minimal`, `run-qemu.sh CORE minimal`) acts like the
+/// host on every core: same inputs (last action 0.05, observation `0.1 step`), same noise seed,
+/// the first action's bits.
+#[test]
+fn qemu_minimal_example_acts_like_the_host() {
+    let root = qemu::repo_root();
+    if !qemu::available("qemu_minimal_example_acts_like_the_host", &root) {
+        return;
+    }
+    let blob = AlignedBlob::of(&student());
+    let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
+    let mut policy = loaded
+        .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>()
+        .expect("policy from the blob");
+    policy.reset(&[0.05; DOF]).unwrap();
+    for step in 0..STUDENT_HISTORY {
+        policy.observe(&[0.1 * step as f32; STUDENT_OBS_DIM]).unwrap();
+    }
+    let chunk = *policy.act(frmd_core::policy::Noise::Rng(&mut frmd_core::rng::Rng::new(2024))).unwrap();
+    let expected: Vec<String> = chunk.positions[0].iter().map(|v| format!("(bits {:08x})", v.to_bits())).collect();
+    for board in qemu::BOARDS {
+        let stdout = qemu::run(&root, board, "minimal");
+        let got: Vec<String> = stdout
+            .lines()
+            .filter(|line| line.starts_with("first action, dof "))
+            .filter_map(|line| line.find("(bits").map(|bits| line[bits..].to_string()))
+            .collect();
+        assert_eq!(got, expected, "minimal example on {board}:\n{stdout}");
+    }
+}
+
 #[test]
 fn qemu_policy_digest_matches_host() {
     let root = qemu::repo_root();
@@ -87,7 +118,7 @@ fn qemu_policy_digest_matches_host() {
         return;
     }
     let expected = format!("digest: {:016x}", host_digest());
-    for board in ["m4", "m7"] {
+    for board in qemu::BOARDS {
         let stdout = qemu::run(&root, board, "policy");
         let digest_line = qemu::digest_line(&stdout);
         assert_eq!(

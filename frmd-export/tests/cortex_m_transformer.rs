@@ -1,12 +1,12 @@
 //! transformer-lite runs bit-identically on Cortex-M and on the host.
 //!
 //! The firmware `examples/cortex-m` (binary `frmd-cortex-m-transformer`) bakes a synthetic int8
-//! transformer-lite (`frmd_firmware_support::synthetic::transformer`) in its build.rs and runs it as the network of
-//! the synthetic one-step policy's configuration (baked by frmd-export), timing `Policy::act` on
+//! transformer-lite (`frmd_firmware_support::synthetic::transformer`) in its build.rs and runs
+//! it as the network of the synthetic one-step policy's configuration (baked by frmd-export), timing `Policy::act` on
 //! QEMU. Here the same backbone is regenerated in memory, the configuration comes from the blob
 //! form of the same policy (`frmd_core::blob::LoadedMlp::config`), and the same workload
 //! runs it; `qemu_transformer_digest_matches_host` requires the firmware's printed digest on
-//! mps2-an386 (Cortex-M4F) and mps2-an500 (Cortex-M7) to equal the host's. It needs
+//! every board with the memory for it (Cortex-M4F, M7, M33) to equal the host's. It needs
 //! `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without it, or with
 //! FRMD_SKIP_QEMU=1, it prints why and passes without checking (unless FRMD_REQUIRE_QEMU is set,
 //! as in CI: then it fails).
@@ -88,7 +88,7 @@ fn qemu_transformer_digest_matches_host() {
         return;
     }
     let expected = format!("digest: {:016x}", host_digest().expect("host digest"));
-    for board in ["m4", "m7"] {
+    for board in qemu::TRANSFORMER_BOARDS {
         let stdout = qemu::run(&root, board, "transformer");
         let digest_line = qemu::digest_line(&stdout);
         assert_eq!(

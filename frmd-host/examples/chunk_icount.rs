@@ -4,8 +4,8 @@
 //! `transformer-lite` exports the `FRMT` blob and runs frmd-core's int8 transformer policy). Per-chunk Ir = (Ir(101 chunks) -
 //! Ir(1 chunk)) / 100. `int8-avx2` / `int8-portable` run the int8 policy with frmd-core's AVX-VNNI
 //! / AVX2 kernels turned off (x86-64; callgrind's virtual CPU reports no AVX-VNNI anyway).
-use frmd_host::bench::{reach_input, reach_student};
-use frmd_host::eval::policy::{Policy, PolicyInput};
+use frmd_host::bench::fixtures::{reach_input, reach_student};
+use frmd_host::tasks::{Policy, PolicyInput};
 use frmd_host::policy::int8::Int8Policy;
 
 fn main() -> anyhow::Result<()> {
@@ -14,7 +14,7 @@ fn main() -> anyhow::Result<()> {
     let chunks: usize = args.get(2).map(|s| s.parse()).transpose()?.unwrap_or(1);
     let backbone = args.get(3).map(String::as_str).unwrap_or("mlp");
     let dir = std::env::temp_dir().join(format!("frmd-icount-{}", std::process::id()));
-    let mut p = reach_student(&dir, backbone, 1)?;
+    let mut p = reach_student(&dir, &backbone.parse()?, 1)?;
     // Transformer students: `reach_student` saved the checkpoint and calibration rows; export them
     // with the transformer exporter.
     let mut transformer: Option<(Int8Policy, Int8Policy, usize)> = None;

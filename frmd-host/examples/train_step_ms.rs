@@ -34,7 +34,7 @@ fn main() -> anyhow::Result<()> {
         control_dt: f64::from(dataset.dt),
         embed_dim: 16,
         backbone: BackboneConfig::parse(backbone)?,
-        head: HeadConfig::ProDmp { num_basis: 20, output: ProDmpOutput::Direct },
+        head: HeadConfig::ProDmp { num_basis: 20, output: ProDmpOutput::Direct, auto_scale_basis: false },
     };
     let device = Device::Cpu;
     let net = OwnedNetwork::new_seeded(&model, 1, &device)?;

@@ -6,7 +6,7 @@
 use frmd_core::blob::LoadedMlp;
 use frmd_core::policy::{Noise, PolicyDims};
 use frmd_core::rng::Rng;
-use frmd_host::eval::policy::{Policy, PolicyInput};
+use frmd_host::tasks::{Policy, PolicyInput};
 use frmd_host::policy::int8::Int8Policy;
 use frmd_test_support::random_policy::{random_policy, Dims};
 use frmd_test_support::AlignedBlob;
@@ -33,7 +33,7 @@ fn run_shape(dims: Dims) {
     let aligned = AlignedBlob::new(&blob);
     let loaded = LoadedMlp::load(aligned.bytes()).unwrap();
     if (dims.m, dims.o, dims.k, dims.n, dims.p) == (2, 39, 4, 12, 21) {
-        let mut exact = loaded.policy::<2, 39, 4, 12, 21, 134, 64>().unwrap();
+        let mut exact = loaded.policy::<2, 39, 4, 12, 21, 134, 134>().unwrap();
         exact.reset(&prev_action).unwrap();
         for obs in &history {
             exact.observe(obs).unwrap();

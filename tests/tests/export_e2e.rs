@@ -2,7 +2,7 @@
 //! (through the `frmd train` code paths, which also write calibration.safetensors), export it
 //! (`frmd export`), load the blob with frmd-core and run the bit-accuracy harness.
 use frmd_core::policy::PolicyDims;
-use frmd_host::cli::export::BAKED_BLOB_FILE;
+use frmd_host::export::BAKED_BLOB_FILE;
 use frmd_test_support::AlignedBlob;
 
 mod support;
@@ -36,10 +36,10 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
 
     // The exporter refuses the teacher, naming the reason.
     let err =
-        frmd_export::export::export_checkpoint(&teacher, Default::default(), None).unwrap_err();
+        frmd_export::export::export_checkpoint(teacher, Default::default(), None).unwrap_err();
     assert!(format!("{err:#}").contains("Teacher"), "{err:#}");
 
-    frmd_host::cli::export::run(run.export_args(&student)).unwrap();
+    run.export(student).unwrap();
     assert_eq!(
         std::fs::read(dir.join("student.blob")).unwrap(),
         std::fs::read(baked.join(BAKED_BLOB_FILE)).unwrap()
@@ -63,12 +63,12 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
         Err(frmd_core::blob::BlobError::DimensionMismatch(_))
     ));
 
-    let report = equiv_within_bounds(&student, &baked, 10, 64);
+    let report = equiv_within_bounds(student, baked, 10, 64);
     assert_eq!(
         row(&report, "success-rate difference core f32"),
         0.0,
         "runtime f32 policy must reproduce candle in closed loop"
     );
     assert_eq!(row(&report, "int8 network accumulator"), 0.0);
-    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(dir);
 }

@@ -3,7 +3,7 @@
 //! with `frmd export` (the backbone picks the transformer exporter: `FRMT` blob plus generated
 //! loader module), load the blob with frmd-core and run the bit-accuracy harness.
 use frmd_core::policy::PolicyDims;
-use frmd_host::cli::export::BAKED_BLOB_FILE;
+use frmd_host::export::BAKED_BLOB_FILE;
 use frmd_test_support::AlignedBlob;
 
 mod support;
@@ -35,10 +35,10 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
     } = &run;
 
     // The exporter refuses the teacher, naming the reason.
-    let err = frmd_host::cli::export::run(run.export_args(&teacher)).unwrap_err();
+    let err = run.export(teacher).unwrap_err();
     assert!(format!("{err:#}").contains("Teacher"), "{err:#}");
 
-    frmd_host::cli::export::run(run.export_args(&student)).unwrap();
+    run.export(student).unwrap();
     let blob = std::fs::read(baked.join(BAKED_BLOB_FILE)).unwrap();
     assert_eq!(std::fs::read(dir.join("student.blob")).unwrap(), blob);
     assert_eq!(&blob[..4], b"FRMT");
@@ -62,7 +62,7 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
     // The flash figure counts every section the loader views: the blob adds only its header,
     // descriptor and alignment padding.
     let exported =
-        frmd_export::export::export_transformer_checkpoint(&student, Default::default(), None)
+        frmd_export::export::export_transformer_checkpoint(student, Default::default(), None)
             .unwrap();
     let memory = exported.model.memory();
     assert_eq!(
@@ -99,7 +99,7 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
         Some(frmd_core::blob::BlobError::BadMagic)
     );
 
-    let report = equiv_within_bounds(&student, &baked, 5, 32);
+    let report = equiv_within_bounds(student, baked, 5, 32);
     assert_eq!(row(&report, "int8 transformer layer mismatches"), 0.0);
-    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(dir);
 }

@@ -5,6 +5,7 @@ use frmd_firmware_support::shape::{MLP_HIDDEN, MLP_OUTPUT};
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
 use frmd_core::model::linear::{Int8Linear, RequantizedLinear};
 use frmd_core::model::mlp::Int8Mlp;
+use frmd_core::policy::AlignedBytes;
 use frmd_core::quant::QuantParams;
 
 /// A generated hidden layer; weights are `weight_offset..` in [`WEIGHTS`].
@@ -34,11 +35,12 @@ mod generated {
 }
 
 /// All int8 weights, layer by layer.
-static WEIGHTS: [u8; generated::WEIGHT_BYTES] =
-    *include_bytes!(concat!(env!("OUT_DIR"), "/synthetic_mlp.bin"));
+/// (16-byte aligned, as the DSP kernels' word loads need for their fast path.)
+static WEIGHTS: AlignedBytes<{ generated::WEIGHT_BYTES }> = AlignedBytes(
+    *include_bytes!(concat!(env!("OUT_DIR"), "/synthetic_mlp.bin")));
 
 fn weights(offset: usize, in_features: usize, out_features: usize) -> Option<&'static [i8]> {
-    let bytes = WEIGHTS.get(offset..offset.checked_add(in_features * out_features)?)?;
+    let bytes = WEIGHTS.0.get(offset..offset.checked_add(in_features * out_features)?)?;
     Some(bytemuck::cast_slice(bytes))
 }
 

@@ -7,6 +7,7 @@ use frmd_core::model::linear::{Int8Linear, QuantizedLinear, RequantizedLinear};
 use frmd_core::model::transformer::{
     Int8Block, Int8FeedForward, Int8Transformer, LayerNormWeights, TokenLinear,
 };
+use frmd_core::policy::AlignedBytes;
 use frmd_core::quant::QuantParams;
 
 /// A generated linear layer; weights are `weight_offset..` in [`WEIGHTS`]. `scales` for layers
@@ -36,8 +37,9 @@ mod generated {
 }
 
 /// All int8 weights, layer by layer.
-static WEIGHTS: [u8; generated::WEIGHT_BYTES] =
-    *include_bytes!(concat!(env!("OUT_DIR"), "/synthetic_transformer.bin"));
+/// (16-byte aligned, as the DSP kernels' word loads need for their fast path.)
+static WEIGHTS: AlignedBytes<{ generated::WEIGHT_BYTES }> = AlignedBytes(
+    *include_bytes!(concat!(env!("OUT_DIR"), "/synthetic_transformer.bin")));
 
 fn linear_at(index: usize) -> Option<&'static Linear> {
     generated::LINEARS.get(index)
@@ -45,7 +47,7 @@ fn linear_at(index: usize) -> Option<&'static Linear> {
 
 fn fully_connected(layer: &'static Linear) -> Option<FullyConnected<'static>> {
     let count = layer.in_features.checked_mul(layer.out_features)?;
-    let bytes = WEIGHTS.get(layer.weight_offset..layer.weight_offset.checked_add(count)?)?;
+    let bytes = WEIGHTS.0.get(layer.weight_offset..layer.weight_offset.checked_add(count)?)?;
     Some(FullyConnected::new(
         layer.in_features,
         layer.out_features,

@@ -10,10 +10,32 @@ use frmd_firmware_support::workload::Workload;
 /// Core name from the CPUID part number.
 fn core_name(cpuid: u32) -> &'static str {
     match (cpuid >> 4) & 0xFFF {
+        0xC20 => "cortex-m0",
+        0xC60 => "cortex-m0+",
         0xC24 => "cortex-m4",
         0xC27 => "cortex-m7",
+        0xD21 => "cortex-m33",
+        0xD22 => "cortex-m55",
         _ => "unknown",
     }
+}
+
+/// Entered right before each measured call, outside the timed interval. The two markers are
+/// separate functions (one `nop` and two, so that they are neither removed nor merged) whose
+/// addresses tell a trace of executed code (`qemu-cycles.py`) where each measured call starts and
+/// ends.
+#[no_mangle]
+#[inline(never)]
+pub extern "C" fn frmd_measure_begin() {
+    cortex_m::asm::nop();
+}
+
+/// Entered right after each measured call (see [`frmd_measure_begin`]).
+#[no_mangle]
+#[inline(never)]
+pub extern "C" fn frmd_measure_end() {
+    cortex_m::asm::nop();
+    cortex_m::asm::nop();
 }
 
 fn median(samples: &mut [u32]) -> u32 {
@@ -59,18 +81,23 @@ pub fn run_then<W: Workload, const CALLS: usize>(
     let mut tick_samples = [0u32; CALLS];
     let mut cycle_samples = [0u32; CALLS];
     let mut total_ticks: u64 = 0;
+    // Per case: ticks over its repeats (same input, so the mean is exact to 1/repeats tick).
+    let (mut case_min, mut case_max) = (u64::MAX, 0_u64);
     let mut digest = Fnv1a64::new();
     let mut samples = tick_samples.iter_mut().zip(cycle_samples.iter_mut());
     for case in 0..cases {
         if let Err(error) = workload.prepare(case) {
             exit_failure(&error);
         }
+        let case_start = total_ticks;
         for _ in 0..repeats {
+            frmd_measure_begin();
             let tick_start = ticks.now();
             let cycle_start = cycles.now();
             let result = workload.run();
             let cycle_end = cycles.now();
             let tick_end = ticks.now();
+            frmd_measure_end();
             if let Err(error) = result {
                 exit_failure(&error);
             }
@@ -81,6 +108,9 @@ pub fn run_then<W: Workload, const CALLS: usize>(
                 *cycle_sample = cycle_end.wrapping_sub(cycle_start);
             }
         }
+        let case_ticks = total_ticks - case_start;
+        case_min = case_min.min(case_ticks);
+        case_max = case_max.max(case_ticks);
         workload.digest_outputs(&mut digest);
     }
     let median_ticks = median(&mut tick_samples);
@@ -99,6 +129,9 @@ pub fn run_then<W: Workload, const CALLS: usize>(
         "instructions_mean",
         calibration.instructions(total_ticks * 1000) / CALLS as u64,
     );
+    let per_call = |ticks: u64| calibration.instructions(ticks * 1000) / repeats as u64;
+    report::milli("instructions_min", per_call(case_min));
+    report::milli("instructions_max", per_call(case_max));
     report!("systick_ticks: {}", median_ticks);
     if workload.macs() != 0 {
         report!("macs: {}", workload.macs());

@@ -46,10 +46,12 @@ impl TickCounter {
     }
 }
 
-/// DWT cycle counter, if the core has one. Reads 0 under QEMU, which does not model the DWT.
+/// DWT cycle counter, if the core has one (not Armv6-M). Reads 0 under QEMU, which does not
+/// model the DWT.
 pub struct CycleCounter;
 
 impl CycleCounter {
+    #[cfg(not(frmd_armv6m))]
     pub fn start(dcb: &mut DCB, dwt: &mut DWT) -> Self {
         dcb.enable_trace();
         DWT::unlock(); // Cortex-M7 locks DWT writes behind its lock access register
@@ -58,9 +60,17 @@ impl CycleCounter {
         Self
     }
 
+    #[cfg(frmd_armv6m)]
+    pub fn start(_: &mut DCB, _: &mut DWT) -> Self {
+        Self
+    }
+
     #[inline(always)]
     pub fn now(&self) -> u32 {
-        DWT::cycle_count()
+        #[cfg(not(frmd_armv6m))]
+        return DWT::cycle_count();
+        #[cfg(frmd_armv6m)]
+        return 0;
     }
 }
 

@@ -1,5 +1,5 @@
 //! Two rows of an int8 matrix-vector product on Arm cores with the DSP extension
-//! (Cortex-M4/M7/M33), for [`super::rows::Rows`].
+//! (Cortex-M4/M7/M33), for [`super::rows::for_each_block`].
 //!
 //! Compiled only with `cfg(frmd_arm_dsp)` (set by `build.rs`); every other target uses the
 //! portable dot products. The `asm!` inner loops are in [`super::dsp_asm`], the only module of
@@ -11,10 +11,10 @@
 //! weight word. int8 inputs are sign-extended; int16 inputs (the first layer's 16-bit input
 //! plane) are only reordered. Two output rows then go through the assembly loop eight columns per
 //! step: one `LDM` of four input words, one `LDRD` of eight weights per row, and per weight word
-//! two `SXTB16` and two `SMLAD`: 19 instructions per 32 multiply-accumulates, 0.6 per MAC with the
-//! loop branch ([`super::dsp_asm::row_pairs`]). Wider int8 inputs are unpacked in the loop
-//! instead (24 per 32). The accumulators start at the rows' biases; the last `in_features % 8`
-//! columns are added in Rust.
+//! two `SXTB16` and two `SMLAD`: 19 instructions per 16 multiply-accumulates (1.19 per MAC; the
+//! loop branch adds 2 per four steps, see [`super::dsp_asm::row_pairs`]). Wider int8 inputs are
+//! unpacked in the loop instead (24 per 16). The accumulators start at the rows' biases; the last
+//! `in_features % 8` columns are added in Rust.
 //!
 //! Bit-exactness: every product of an int8 weight and an int8 or int16 input fits a halfword
 //! product, the pair sum fits in 32 bits, and `SMLAD` adds it to the accumulator modulo 2^32 (on

@@ -2,7 +2,7 @@
 //!
 //! Each function checks its slice bounds before the assembly block and returns plain sums; the
 //! blocks only read memory inside the borrowed slices and change only declared registers and
-//! the flags (NZCV by `CMP`/`LSRS`, the sticky Q flag by `SMLAD`). Unaligned `LDR` is fine on
+//! the flags (NZCV by `CMP`, the sticky Q flag by `SMLAD`). Unaligned `LDR` is fine on
 //! Armv7-M/Armv8-M Mainline (CCR.UNALIGN_TRP is 0 at reset; LLVM emits unaligned loads for these
 //! targets too), `LDRD` and `LDM` need word alignment: the functions refuse rows that do not start
 //! on a word boundary (their callers use the portable loop there), and the pair buffer is a `u32`
@@ -70,25 +70,34 @@ macro_rules! two_rows_eight_columns {
     };
 }
 
-/// The whole two-row product as one `asm!` block: an odd first step on its own, then a
-/// bottom-tested loop over pairs of steps (`xp` advances `$step_bytes << 1` per iteration up to
-/// the end it computes). Both branches depend on the width only.
+/// The whole two-row product as one `asm!` block: a loop of four steps per iteration, entered
+/// through a `TBB` jump table at the step that leaves a multiple of four (`blocks % 4` steps in
+/// the first pass), so that the loop branch runs once per four steps; `xp` advances
+/// `1 << $shift` bytes per step up to the end computed first. The jump depends on the width only.
 macro_rules! two_row_asm {
     ($input:ident, $shift:literal, $blocks:expr, $xp:expr, $r0:expr, $r1:expr, $acc0:ident, $acc1:ident) => {
         core::arch::asm!(
-            "lsrs {n}, {n}, #1",
-            "bcc 3f",
-            two_rows_eight_columns!($input),
-            "3:",
-            "cmp {n}, #0",
-            "beq 5f",
+            // The Armv8-M Mainline and Armv8.1-M targets leave the (optional) DSP extension off;
+            // every instruction here is Armv7E-M, encoded alike on those cores.
+            ".arch armv7e-m",
+            "and {t}, {n}, #3",
             concat!("add {n}, {xp}, {n}, lsl #", $shift),
+            "tbb [pc, {t}]",
+            "0:",
+            ".byte (4f - 0b) / 2",
+            ".byte (7f - 0b) / 2",
+            ".byte (6f - 0b) / 2",
+            ".byte (5f - 0b) / 2",
             "4:",
             two_rows_eight_columns!($input),
+            "5:",
+            two_rows_eight_columns!($input),
+            "6:",
+            two_rows_eight_columns!($input),
+            "7:",
             two_rows_eight_columns!($input),
             "cmp {xp}, {n}",
             "bne 4b",
-            "5:",
             n = inout(reg) $blocks => _,
             xp = inout(reg) $xp => _,
             row_0 = inout(reg) $r0 => _,
@@ -156,14 +165,14 @@ pub(crate) fn row_pairs(
         // [0, 8 blocks) of each row (`8 blocks <= width`) and the input's first `8 blocks` columns
         // (`4 blocks` words of a `u32` slice, aligned for `LDM`, or `8 blocks` bytes by `LDR`,
         // which may be unaligned), all inside the borrowed slices. It runs `blocks` eight-column
-        // steps in all (an odd one first, then pairs).
+        // steps in all (`blocks % 4` in the first pass, then four per pass).
         unsafe {
             match input {
                 Input::Pairs(pairs) => {
-                    two_row_asm!(pairs, "5", blocks, pairs.as_ptr(), row_0, row_1, acc0, acc1)
+                    two_row_asm!(pairs, "4", blocks, pairs.as_ptr(), row_0, row_1, acc0, acc1)
                 }
                 Input::Bytes(bytes) => {
-                    two_row_asm!(bytes, "4", blocks, bytes.as_ptr(), row_0, row_1, acc0, acc1)
+                    two_row_asm!(bytes, "3", blocks, bytes.as_ptr(), row_0, row_1, acc0, acc1)
                 }
             }
         }

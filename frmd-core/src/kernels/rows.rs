@@ -59,7 +59,7 @@ impl RowInput for i16 {
     }
 }
 
-/// Rows per block that [`Rows::for_each_block`] hands to its caller.
+/// Rows per block that [`for_each_block`] hands to its caller.
 pub(crate) const BLOCK_ROWS: usize = 16;
 
 /// Calls `block(first, sums)` for consecutive blocks of up to [`BLOCK_ROWS`] rows of the

@@ -51,7 +51,7 @@ pub use network::transformer::{
     TransformerWork,
 };
 pub use network::{Network, NoiseVariants};
-pub use normalize::RangeNormalizer;
+pub use normalize::{denormalize_value, normalize_value, RangeNormalizer};
 pub use runtime::{Policy, PolicyConfig};
 pub use sampler::{
     skip_output, Conditioning, Noise, Sampler, SamplerBuffers, SamplerWork, Trajectory,

@@ -1,11 +1,35 @@
-//! Per-dimension min/max normalization to `[-1, 1]` (DESIGN.md s.4), the same formulas as the
-//! host's `frmd_host::data::Normalizer`, so the firmware sees bit-identical model inputs:
+//! Per-dimension min/max normalization to `[-1, 1]` (DESIGN.md s.4). [`normalize_value`] and
+//! [`denormalize_value`] are the one definition, also used by the exporter's fitted
+//! `frmd_export::checkpoint::Normalizer` (which training uses), so the firmware sees
+//! bit-identical model inputs:
 //! `normalized = 2 (raw - min) / (max - min) - 1`, `raw = (normalized + 1) 0.5 (max - min) + min`;
 //! a constant dimension (`max == min`) maps to 0 and back to its constant. Rates (differences per
 //! second) scale by `2 / (max - min)` (0 for constant dimensions).
 
 use super::dims::{fixed_row_pairs, fixed_rows};
 use super::PolicyError;
+
+/// One raw value to `[-1, 1]` with its dimension's bounds (0 for a constant dimension). The one
+/// definition of the formula: the runtime's [`RangeNormalizer`] and the exporter's fitted
+/// `frmd_export::checkpoint::Normalizer` both call it.
+#[inline]
+pub fn normalize_value(raw: f32, min: f32, max: f32) -> f32 {
+    if max > min {
+        2.0 * (raw - min) / (max - min) - 1.0
+    } else {
+        0.0
+    }
+}
+
+/// Inverse of [`normalize_value`] (a constant dimension gives its constant).
+#[inline]
+pub fn denormalize_value(normalized: f32, min: f32, max: f32) -> f32 {
+    if max > min {
+        (normalized + 1.0) * 0.5 * (max - min) + min
+    } else {
+        min
+    }
+}
 
 /// Baked min/max of every dimension (raw units), borrowed (`&'static` baked arrays or blob
 /// sections). Invariant (checked by [`Self::validate`]): equal lengths, every bound finite and
@@ -52,22 +76,14 @@ impl<'a> RangeNormalizer<'a> {
     /// Raw to normalized, element-wise.
     pub fn normalize(&self, raw: &[f32], out: &mut [f32]) {
         for (((o, v), lo), hi) in out.iter_mut().zip(raw).zip(self.min).zip(self.max) {
-            *o = if hi > lo {
-                2.0 * (*v - lo) / (hi - lo) - 1.0
-            } else {
-                0.0
-            };
+            *o = normalize_value(*v, *lo, *hi);
         }
     }
 
     /// Normalized to raw, element-wise (constant dimensions give their constant).
     pub fn denormalize(&self, normalized: &[f32], out: &mut [f32]) {
         for (((o, v), lo), hi) in out.iter_mut().zip(normalized).zip(self.min).zip(self.max) {
-            *o = if hi > lo {
-                (*v + 1.0) * 0.5 * (hi - lo) + lo
-            } else {
-                *lo
-            };
+            *o = denormalize_value(*v, *lo, *hi);
         }
     }
 

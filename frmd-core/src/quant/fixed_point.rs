@@ -143,12 +143,17 @@ pub fn requantize_to_i8(
     } else {
         multiply_by_quantized_multiplier(acc, multiplier, shift)
     };
-    let with_offset = scaled.saturating_add(output_zero_point);
-    let clamped = with_offset
-        .max(i32::from(activation_min))
-        .min(i32::from(activation_max));
-    // The clamp bounds are i8 values, so the conversion is exact.
-    clamped as i8
+    offset_and_clamp(scaled, output_zero_point, activation_min, activation_max)
+}
+
+/// `clamp(scaled + zero_point, lo, hi)`; the addition saturates, which equals the exact sum after
+/// the clamp. The bounds are i8 values, so the conversion is exact.
+#[inline(always)]
+fn offset_and_clamp(scaled: i32, zero_point: i32, lo: i8, hi: i8) -> i8 {
+    scaled
+        .saturating_add(zero_point)
+        .max(i32::from(lo))
+        .min(i32::from(hi)) as i8
 }
 
 /// [`requantize_to_i8`] for parameters that passed `kernels::FcRequant::validate` (multiplier
@@ -168,10 +173,7 @@ pub fn requantize_valid(
     } else {
         multiply_by_quantized_multiplier(acc, multiplier, shift)
     };
-    let with_offset = scaled.saturating_add(output_zero_point);
-    with_offset
-        .max(i32::from(activation_min))
-        .min(i32::from(activation_max)) as i8
+    offset_and_clamp(scaled, output_zero_point, activation_min, activation_max)
 }
 
 #[inline]

@@ -20,7 +20,7 @@ fn lite_config() -> ModelConfig {
         control_dt: 0.05,
         embed_dim: 16,
         backbone: BackboneConfig::parse("transformer-lite").unwrap(),
-        head: HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct },
+        head: HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false },
     }
 }
 

@@ -1,7 +1,7 @@
 use super::*;
 use frmd_core::sigma::SigmaConfig;
 use crate::models::{HeadConfig, ProDmpOutput, OwnedNetwork};
-use crate::train::toy::toy_config;
+use crate::data::toy::toy_config;
 
 fn temp_dir(tag: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("frmd-ckpt-{tag}-{}", std::process::id()));
@@ -10,7 +10,7 @@ fn temp_dir(tag: &str) -> std::path::PathBuf {
 }
 
 fn saved(tag: &str) -> (std::path::PathBuf, CheckpointMeta, OwnedNetwork) {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
+    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
     let net = OwnedNetwork::new_seeded(&cfg, 21, &Device::Cpu).unwrap();
     let meta = CheckpointMeta::describe(Role::Student, net.net.config(), SigmaConfig::default());
     let dir = temp_dir(tag);
@@ -100,7 +100,7 @@ fn corrupted_or_mismatched_checkpoints_are_rejected_with_a_reason() {
 fn expected_tensors_match_the_candle_models() {
     use crate::models::{BackboneConfig, ModelConfig};
     for backbone in ["mlp:16,8:silu", "mlp:12", "transformer-lite"] {
-        let mut cfg: ModelConfig = toy_config(HeadConfig::ProDmp { num_basis: 3, output: ProDmpOutput::Direct });
+        let mut cfg: ModelConfig = toy_config(HeadConfig::ProDmp { num_basis: 3, output: ProDmpOutput::Direct, auto_scale_basis: false });
         cfg.backbone = BackboneConfig::parse(backbone).unwrap();
         if backbone.starts_with("transformer") {
             cfg.backbone = BackboneConfig::Transformer { layers: 2, heads: 2, width: 8 };
@@ -111,5 +111,25 @@ fn expected_tensors_match_the_candle_models() {
             .map(|(name, var)| TensorSpec { name, dtype: "F32".into(), shape: var.dims().to_vec() })
             .collect();
         assert_eq!(expected_tensors(&cfg), candle, "{backbone}");
+    }
+}
+
+/// `prodmp` and `sigma` are frmd-core's configs serialized as they are: a checkpoint written
+/// before that (the firmware's checked-in student) reads, and the two sections re-serialize to
+/// the same bytes.
+#[test]
+fn existing_checkpoints_read_and_keep_their_prodmp_and_sigma_bytes() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/cortex-m/policy/reach");
+    let text = std::fs::read_to_string(dir.join(CONFIG_FILE)).unwrap();
+    let meta = CheckpointMeta::read(&dir).unwrap();
+    assert_eq!(meta.sigma, SigmaConfig::default());
+    let section = |json: &str, key: &str| {
+        let start = json.find(&format!("\n  \"{key}\": {{")).unwrap_or_else(|| panic!("no {key} in {json}"));
+        let end = start + json[start..].find("\n  }").unwrap();
+        json[start..end].to_string()
+    };
+    let written = serde_json::to_string_pretty(&meta).unwrap();
+    for key in ["prodmp", "sigma"] {
+        assert_eq!(section(&written, key), section(&text, key), "{key}");
     }
 }

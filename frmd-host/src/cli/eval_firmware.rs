@@ -1,8 +1,8 @@
 //! `frmd eval --firmware CORE`: the closed loop through the emulated MCU (the library side is
 //! [`crate::firmware`]).
-use super::eval::{evaluate_with_bar, print_report, EvalArgs};
-use crate::eval::policy::Policy;
-use crate::eval::{EvalConfig, EvalReport};
+use super::eval::{print_report, EvalArgs};
+use crate::eval::{evaluate, EvalConfig, EvalReport};
+use crate::tasks::Policy;
 use crate::firmware::lockstep::{Lockstep, LockstepCount};
 use crate::firmware::policy::{FirmwareInfo, FirmwarePolicy, InstructionStats};
 use crate::policy::int8::Int8Policy;
@@ -22,7 +22,7 @@ struct FirmwareReport<'a> {
 
 pub fn run(args: &EvalArgs, board: &str) -> anyhow::Result<ExitCode> {
     anyhow::ensure!(args.ckpt.is_none(), "--firmware runs a baked int8 policy; --ckpt does not apply (use --baked DIR)");
-    let blob = args.blob.clone().or_else(|| args.baked.as_ref().map(|d| d.join(super::export::BAKED_BLOB_FILE)));
+    let blob = args.blob.clone().or_else(|| args.baked.as_ref().map(|d| d.join(crate::export::BAKED_BLOB_FILE)));
     eprintln!("building the pil image for {board} (examples/cortex-m/run-qemu.sh) ...");
     let image = crate::firmware::build(&crate::firmware::default_repo(), board, args.baked.as_deref())?;
     let firmware = FirmwarePolicy::start(&image)?;
@@ -37,13 +37,13 @@ pub fn run(args: &EvalArgs, board: &str) -> anyhow::Result<ExitCode> {
     let (report, stats, host_check) = if args.check_host {
         let path = blob.as_ref().ok_or_else(|| anyhow::anyhow!("--check-host needs the host policy: pass --baked DIR (with policy.blob) or --blob FILE"))?;
         let mut lockstep = Lockstep::new(firmware, Int8Policy::load(path)?);
-        let report = evaluate_with_bar(&args.task, &mut lockstep, &cfg)?;
+        let report = evaluate(&args.task, &mut lockstep, &cfg)?;
         let stats = lockstep.lead.stats();
         lockstep.lead.close()?;
         (report, stats, Some(lockstep.count))
     } else {
         let mut firmware = firmware;
-        let report = evaluate_with_bar(&args.task, &mut firmware as &mut dyn Policy, &cfg)?;
+        let report = evaluate(&args.task, &mut firmware as &mut dyn Policy, &cfg)?;
         let stats = firmware.stats();
         firmware.close()?;
         (report, stats, None)

@@ -1,7 +1,7 @@
 //! Two policies in lockstep: the first one's chunks drive the loop, the second one answers the
 //! same requests and every chunk pair is compared bit for bit (the firmware against the host int8
 //! policy in `frmd eval --firmware --check-host`).
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 use serde::Serialize;
 
 /// How many chunks the two policies agreed on.

@@ -5,7 +5,7 @@
 //! (`FRMD_QEMU_BUILD_ONLY=1`), which owns the board table (target, machine, cpu) and the
 //! toolchain setup; [`link::QemuLink`] starts QEMU with `-icount shift=0` and exchanges the frames
 //! of `frmd_firmware_support::pil` with it over semihosting (the image's standard input and
-//! output); [`policy::FirmwarePolicy`] implements the evaluator's [`crate::eval::policy::Policy`]
+//! output); [`policy::FirmwarePolicy`] implements the evaluator's [`crate::tasks::Policy`]
 //! (and the server's `ServedPolicy`) on top, collecting the instructions the image counted for
 //! every chunk.
 use anyhow::{bail, Context};

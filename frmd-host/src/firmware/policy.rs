@@ -6,7 +6,7 @@
 //! `Policy::reset`, `observe`, `set_previous_action` and `act` on them, so both give the same bits.
 use super::link::{QemuLink, Reply};
 use super::{core_name, FirmwareImage};
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
 use frmd_firmware_support::pil::{self, MsgType, CHUNK_PREFIX, INFO_LEN};
 use serde::Serialize;

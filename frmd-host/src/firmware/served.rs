@@ -6,7 +6,7 @@ use crate::serve::protocol::{ActInput, ServedPolicy};
 
 impl ServedPolicy for FirmwarePolicy {
     fn reset(&mut self, seed: u64) {
-        crate::eval::policy::Policy::reset(self, seed);
+        crate::tasks::Policy::reset(self, seed);
     }
 
     fn act(&mut self, input: &ActInput<'_>) -> Result<Vec<f64>, String> {

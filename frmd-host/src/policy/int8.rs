@@ -7,7 +7,7 @@
 //! policy that borrows it ([`self_cell`]), so nothing is leaked. An MLP policy is built once per
 //! load; a transformer's network and policy are built per chunk from the loaded blob (a few
 //! microseconds against a chunk of about a millisecond), with the scratch kept across chunks.
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
 use frmd_core::blob::{LoadedMlp, LoadedTransformer, TRANSFORMER_MAGIC};
 use frmd_core::policy::{F32MlpNetwork, F32TransformerNetwork, Int8MlpNetwork, Network, Noise, Policy as CorePolicy, PolicyDims, PolicyError};
@@ -118,7 +118,7 @@ self_cell::self_cell!(
 enum Runner {
     Mlp(MlpRunner),
     MlpF32(MlpF32Runner),
-    Transformer { blob: TransformerBlob, scratch: Box<HostScratch>, f32_twin: Option<FoldedTransformer> },
+    Transformer { blob: TransformerBlob, scratch: Box<HostScratch>, f32_twin: Option<Box<FoldedTransformer>> },
 }
 
 impl Runner {
@@ -199,7 +199,7 @@ impl Int8Policy {
     pub fn transformer_f32_twin(bytes: &[u8], folded: FoldedTransformer, label: &str) -> anyhow::Result<Self> {
         let mut policy = Self::from_blob(bytes, label).context("f32 twin")?;
         match &mut policy.runner {
-            Runner::Transformer { f32_twin, .. } => *f32_twin = Some(folded),
+            Runner::Transformer { f32_twin, .. } => *f32_twin = Some(Box::new(folded)),
             _ => bail!("not a transformer blob (magic {:?}, expected FRMT)", bytes.get(..4)),
         }
         Ok(policy)

@@ -4,8 +4,8 @@
 //! few centimetres off the start-goal line. The end effector is a disc of radius 5 cm; touching
 //! the obstacle fails the episode at once.
 //!
-//! Observation (9): `[ee_x, ee_y, ee_vx, ee_vy, goal_x, goal_y, obstacle_x, obstacle_y,
-//! obstacle_radius]` (m, m/s).
+//! Observation (9): `[ee_x, ee_y, ee_vx, ee_vy, goal - ee (x, y), obstacle - ee (x, y),
+//! obstacle_radius]` (m, m/s; relative positions, see the `tasks` module docs).
 //! Success: no contact, end effector within 3 cm of the goal and slower than 0.1 m/s.
 //! Expert: flips a fair coin (from its seeded stream) for the side, then follows a half-sine
 //! detour whose apex clears the obstacle by 25 cm, with minimum-jerk timing at 0.6 m/s on
@@ -15,17 +15,17 @@ use super::geom::{Cubic, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass};
 use super::rng::TaskRng;
 use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 
 const OBS_FIELDS: &[&str] = &[
     "ee_x [m]",
     "ee_y [m]",
     "ee_vx [m/s]",
     "ee_vy [m/s]",
-    "goal_x [m]",
-    "goal_y [m]",
-    "obstacle_x [m]",
-    "obstacle_y [m]",
+    "goal_x - ee_x [m]",
+    "goal_y - ee_y [m]",
+    "obstacle_x - ee_x [m]",
+    "obstacle_y - ee_y [m]",
     "obstacle_radius [m]",
 ];
 const GOAL_TOLERANCE: f64 = 0.03;
@@ -90,7 +90,8 @@ impl Task for Avoid {
     }
 
     fn observe(&self) -> Vec<f32> {
-        let (p, v, g, o) = (self.ee.pos, self.ee.vel, self.goal, self.obstacle);
+        let (p, v) = (self.ee.pos, self.ee.vel);
+        let (g, o) = (self.goal - p, self.obstacle - p);
         [p.x, p.y, v.x, v.y, g.x, g.y, o.x, o.y, self.radius]
             .iter()
             .map(|&x| x as f32)
@@ -210,7 +211,8 @@ impl Policy for AvoidExpert {
         let plan = match self.plan.take() {
             Some(plan) => plan,
             None => {
-                let (start, goal, obstacle) = (v2_at(obs, 0), v2_at(obs, 4), v2_at(obs, 6));
+                let start = v2_at(obs, 0);
+                let (goal, obstacle) = (start + v2_at(obs, 4), start + v2_at(obs, 6));
                 let radius = f64::from(obs[8]);
                 let normal = (goal - start).unit().perp();
                 let side = self.forced_side.unwrap_or_else(|| Self::side(self.seed));

@@ -9,7 +9,8 @@
 //! downward push, Coulomb friction with mu = 0.5 holds the peg, so pressing down beside the slot
 //! jams it), and inside the slot the side walls and the bottom stop it.
 //!
-//! Observation (7): `[tip_x, tip_y, tip_vx, tip_vy, slot_x, wall_y, contact]` (m, m/s; contact is
+//! Observation (7): `[tip_x, tip_y, tip_vx, tip_vy, slot_x - tip_x, wall_y - tip_y, contact]` (m,
+//! m/s; the slot relative to the tip, see the `tasks` module docs; contact is
 //! 1 when the peg touched the wall during the last control period, else 0).
 //! Success: the tip is within 2 cm of the slot bottom.
 //! Expert: one smooth path, a circular-arc approach that ends 15 cm above the slot centre heading
@@ -23,15 +24,15 @@ use super::geom::{Cubic, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass, OMEGA, SUBSTEP};
 use super::rng::TaskRng;
 use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 
 const OBS_FIELDS: &[&str] = &[
     "tip_x [m]",
     "tip_y [m]",
     "tip_vx [m/s]",
     "tip_vy [m/s]",
-    "slot_x [m]",
-    "wall_y [m]",
+    "slot_x - tip_x [m]",
+    "wall_y - tip_y [m]",
     "contact [0/1]",
 ];
 /// Peg width, metres.
@@ -145,7 +146,7 @@ impl Task for Insert {
     fn observe(&self) -> Vec<f32> {
         let (p, v) = (self.tip.pos, self.tip.vel);
         let contact = if self.contact { 1.0 } else { 0.0 };
-        [p.x, p.y, v.x, v.y, self.slot_x, self.wall_y, contact]
+        [p.x, p.y, v.x, v.y, self.slot_x - p.x, self.wall_y - p.y, contact]
             .iter()
             .map(|&x| x as f32)
             .collect()
@@ -266,7 +267,8 @@ impl Policy for InsertExpert {
 
     fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
         let obs = last_obs(input, OBS_FIELDS.len(), "insert")?;
-        let (tip, slot_x, wall_y) = (v2_at(obs, 0), f64::from(obs[4]), f64::from(obs[5]));
+        let tip = v2_at(obs, 0);
+        let (slot_x, wall_y) = (tip.x + f64::from(obs[4]), tip.y + f64::from(obs[5]));
         let plan = self.plan.get_or_insert_with(|| plan(tip, slot_x, wall_y));
         let command = guard_descent(plan.at(self.step as f64 * CONTROL_DT), tip, slot_x, wall_y);
         self.step += 1;

@@ -7,8 +7,10 @@
 //! control period. The puck starts within 0.8 m of the centre, the target 1.0-1.4 m away, and the
 //! end effector 1.2-1.5 m behind the puck, at up to 20 degrees off the push line.
 //!
-//! Observation (10): `[ee_x, ee_y, ee_vx, ee_vy, puck_x, puck_y, puck_vx, puck_vy, target_x,
-//! target_y]` (m, m/s). The puck is rotation-symmetric, so its pose is its position.
+//! Observation (10): `[ee_x, ee_y, ee_vx, ee_vy, puck - ee (x, y), puck_vx, puck_vy,
+//! target - puck (x, y)]` (m, m/s). The puck is rotation-symmetric, so its pose is its position.
+//! The puck is given relative to the end effector and the target relative to the puck (the
+//! expert's push line); see the `tasks` module docs for why.
 //! Success: puck centre within 5 cm of the target.
 //! Expert: one smooth path, a circular-arc approach (curvature about 1 rad/m at most) that ends
 //! behind the puck heading along the push line, then straight through to where the puck sits on the target, with minimum-jerk
@@ -21,7 +23,7 @@ use super::geom::{Cubic, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass};
 use super::rng::TaskRng;
 use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 use rapier2d::prelude::*;
 
 const OBS_FIELDS: &[&str] = &[
@@ -29,12 +31,12 @@ const OBS_FIELDS: &[&str] = &[
     "ee_y [m]",
     "ee_vx [m/s]",
     "ee_vy [m/s]",
-    "puck_x [m]",
-    "puck_y [m]",
+    "puck_x - ee_x [m]",
+    "puck_y - ee_y [m]",
     "puck_vx [m/s]",
     "puck_vy [m/s]",
-    "target_x [m]",
-    "target_y [m]",
+    "target_x - puck_x [m]",
+    "target_y - puck_y [m]",
 ];
 /// End-effector (pusher) radius, metres.
 pub const PUSHER_RADIUS: f64 = 0.08;
@@ -155,7 +157,8 @@ impl Task for Push {
     fn observe(&self) -> Vec<f32> {
         let (p, v, t) = (self.ee.pos, self.ee.vel, self.target);
         let (q, w) = self.puck_state();
-        [p.x, p.y, v.x, v.y, q.x, q.y, w.x, w.y, t.x, t.y]
+        let (puck, target) = (q - p, t - q);
+        [p.x, p.y, v.x, v.y, puck.x, puck.y, w.x, w.y, target.x, target.y]
             .iter()
             .map(|&x| x as f32)
             .collect()
@@ -259,7 +262,9 @@ impl Policy for PushExpert {
 
     fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
         let obs = last_obs(input, OBS_FIELDS.len(), "push")?;
-        let (ee, puck, target) = (v2_at(obs, 0), v2_at(obs, 4), v2_at(obs, 8));
+        let ee = v2_at(obs, 0);
+        let puck = ee + v2_at(obs, 4);
+        let target = puck + v2_at(obs, 8);
         let puck_speed = v2_at(obs, 6).norm();
         let finished = self
             .plan

@@ -1,6 +1,7 @@
 //! `reach` (easy): drive the end effector to a random goal and stop there.
 //!
-//! Observation (6): `[ee_x, ee_y, ee_vx, ee_vy, goal_x, goal_y]` (m, m/s).
+//! Observation (6): `[ee_x, ee_y, ee_vx, ee_vy, goal - ee (x, y)]` (m, m/s): the goal relative
+//! to the end effector, like every built-in task's objects (see `tasks` module docs).
 //! Success: end effector within 3 cm of the goal and slower than 0.1 m/s.
 //! Expert: a gently bent path (a parabola whose apex is offset sideways by up to 8 % of the
 //! distance, side and amount from the expert's seeded stream, so curvature stays below
@@ -9,15 +10,15 @@ use super::geom::{Cubic, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass};
 use super::rng::TaskRng;
 use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 
 const OBS_FIELDS: &[&str] = &[
     "ee_x [m]",
     "ee_y [m]",
     "ee_vx [m/s]",
     "ee_vy [m/s]",
-    "goal_x [m]",
-    "goal_y [m]",
+    "goal_x - ee_x [m]",
+    "goal_y - ee_y [m]",
 ];
 const GOAL_TOLERANCE: f64 = 0.03;
 const SPEED_TOLERANCE: f64 = 0.1;
@@ -79,7 +80,7 @@ impl Task for Reach {
     }
 
     fn observe(&self) -> Vec<f32> {
-        let (p, v, g) = (self.ee.pos, self.ee.vel, self.goal);
+        let (p, v, g) = (self.ee.pos, self.ee.vel, self.goal - self.ee.pos);
         [p.x, p.y, v.x, v.y, g.x, g.y]
             .iter()
             .map(|&x| x as f32)
@@ -139,7 +140,8 @@ impl Policy for ReachExpert {
         let plan = match self.plan.take() {
             Some(plan) => plan,
             None => {
-                let (start, goal) = (v2_at(obs, 0), v2_at(obs, 4));
+                let start = v2_at(obs, 0);
+                let goal = start + v2_at(obs, 4);
                 let mut rng = TaskRng::new(self.seed, b"reach/expert");
                 let bend = rng.uniform(-0.08, 0.08) * (goal - start).norm();
                 let control = start.lerp(goal, 0.5) + (goal - start).unit().perp() * (2.0 * bend);

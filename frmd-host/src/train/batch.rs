@@ -129,7 +129,7 @@ pub fn sample_augmented(windows: &WindowSet, cfg: &ModelConfig, size: usize, aug
 mod tests {
     use super::*;
     use crate::models::{HeadConfig, ProDmpOutput};
-    use crate::train::toy::{bimodal_windows, toy_config};
+    use crate::data::toy::{bimodal_windows, toy_config};
 
     fn rows(t: &Tensor) -> Vec<f32> {
         t.flatten_all().unwrap().to_vec1::<f32>().unwrap()
@@ -137,7 +137,7 @@ mod tests {
 
     #[test]
     fn augmentation_perturbs_only_the_initial_condition() {
-        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
+        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
         let windows = bimodal_windows(&cfg, 64, 5).unwrap();
         let device = Device::Cpu;
         // Inactive augmentation draws exactly what `sample` draws.

@@ -160,7 +160,7 @@ pub fn generalization(
 mod tests {
     use super::*;
     use crate::models::{HeadConfig, ProDmpOutput, OwnedNetwork};
-    use crate::train::toy::{bimodal_windows, toy_config};
+    use crate::data::toy::{bimodal_windows, toy_config};
 
     fn dataset(offset: f32) -> Dataset {
         // Two episodes of a 2-D action and 3-D observation; `offset` shifts every value.
@@ -207,7 +207,7 @@ mod tests {
 
     #[test]
     fn chunk_error_reports_the_hold_baseline_and_rejects_bad_input() {
-        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct });
+        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
         let windows = bimodal_windows(&cfg, 40, 2).unwrap();
         let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
         let sig = SigmaConfig::default();

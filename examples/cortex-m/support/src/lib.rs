@@ -3,7 +3,8 @@
 //!
 //! - no_std (the firmware links these): [`shape`] (the policy shapes the images bake),
 //!   [`workload`] (the [`workload::Workload`] trait and the digest over a workload's cases),
-//!   the workloads [`prodmp_workload`], [`mlp_workload`] and [`policy_workload`],
+//!   the workloads [`prodmp_workload`], [`mlp_workload`], [`policy_workload`] and
+//!   [`kernel_workload`] (the fully connected kernels on random shapes),
 //!   and [`stages`] (the layer-marking MLP network and the entry/exit-marking wrapper of the
 //!   per-stage breakdown), [`pil`] (the processor-in-the-loop frame format, used by the `pil`
 //!   image and the host driver in frmd-host);
@@ -18,6 +19,7 @@
 //! code and require equality.
 #![cfg_attr(not(feature = "std"), no_std)]
 
+pub mod kernel_workload;
 pub mod mlp_workload;
 pub mod pil;
 pub mod policy_workload;

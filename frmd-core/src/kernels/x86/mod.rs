@@ -1,5 +1,5 @@
 //! AVX2 builds of the int8 kernels for x86-64, chosen at run time; the portable kernels
-//! (`kernels::dot::for_each_row_dot`, SSE2 through LLVM, and `quant::requantize_to_i8`) are the
+//! (`kernels::rows::for_each_block`, SSE2 through LLVM, and `quant::requantize_to_i8`) are the
 //! fallback and the definition: the tests compare both on random and extreme inputs.
 //!
 //! - [`matvec`]: eight rows of a fully connected layer at once (`vpmaddwd`, or `vpdpbusd` on

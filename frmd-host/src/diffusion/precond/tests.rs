@@ -4,13 +4,13 @@ use super::*;
 use crate::models::decoder::ProDmpDecoder;
 use crate::models::{HeadConfig, OwnedNetwork};
 use crate::rng::HostRng;
-use crate::train::toy::toy_config;
+use crate::data::toy::toy_config;
 use candle_core::Device;
 
 const BATCH: usize = 6;
 
 fn setup(output: ProDmpOutput) -> (OwnedNetwork, ProDmpDecoder, Condition, Tensor, Tensor) {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output });
+    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output, auto_scale_basis: true });
     let net = OwnedNetwork::new_seeded(&cfg, 7, &Device::Cpu).unwrap();
     let decoder = ProDmpDecoder::new(&cfg.prodmp().unwrap(), cfg.horizon, &Device::Cpu).unwrap();
     let mut rng = HostRng::new(21);

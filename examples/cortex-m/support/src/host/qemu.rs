@@ -8,6 +8,14 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// The cores `run-qemu.sh` runs: Cortex-M4F, M7 (same ELF), M33 (DSP kernels), M0 (portable
+/// kernels, soft float), M55 (the M33 code on its board).
+pub const BOARDS: [&str; 5] = ["m4", "m7", "m33", "m0", "m55"];
+
+/// [`BOARDS`] that hold the transformer image (779 KB of code and weights, 26 KiB of RAM): not
+/// the microbit's M0 (256 KiB flash, 16 KiB RAM) nor the M55 board's 512 KiB code memory.
+pub const TRANSFORMER_BOARDS: [&str; 3] = ["m4", "m7", "m33"];
+
 /// The repository root (this crate sits at `examples/cortex-m/support`).
 pub fn repo_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../..")

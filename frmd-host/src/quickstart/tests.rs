@@ -6,21 +6,8 @@ use super::*;
 fn tiny_quickstart_runs_every_stage_and_writes_its_artifacts() {
     let out = std::env::temp_dir().join(format!("frmd-quickstart-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
-    let args = QuickstartArgs {
-        task: DEFAULT_TASK.into(),
-        out: out.clone(),
-        demos: 100,
-        teacher_steps: 1,
-        student_steps: 1,
-        dp_steps: 1,
-        backbone: "mlp:32,32:silu".into(),
-        batch: 128,
-        no_baseline: false,
-        episodes: 50,
-        seed: 3,
-        tiny: true,
-    };
-    let summary = run_pipeline(&args).unwrap();
+    let cfg = QuickstartConfig { out: out.clone(), backbone: "mlp:32,32:silu".parse().unwrap(), seed: 3, ..QuickstartConfig::default() };
+    let summary = run_pipeline(&cfg.with_tiny_sizes()).unwrap();
     let methods: Vec<&str> = summary.rows.iter().map(|r| r.method.as_str()).collect();
     assert_eq!(methods, ["expert", "dp-ddpm-100", "dp-ddim-10", "teacher-heun-10", "student-1", "int8-student-1"]);
     let expert = summary.rows[0].report.as_ref().unwrap();
@@ -50,8 +37,9 @@ fn tiny_quickstart_runs_every_stage_and_writes_its_artifacts() {
 #[test]
 fn unknown_task_is_rejected_before_any_work() {
     let out = std::env::temp_dir().join(format!("frmd-quickstart-bad-{}", std::process::id()));
-    let args = QuickstartArgs { task: "juggle".into(), out: out.clone(), demos: 1, teacher_steps: 1, student_steps: 1, dp_steps: 1, backbone: "mlp".into(), batch: 8, no_baseline: true, episodes: 1, seed: 0, tiny: false };
-    let err = run_pipeline(&args).unwrap_err();
+    let stage = StageRecipe { steps: 1, lr: 1e-3, warmup: 0 };
+    let cfg = QuickstartConfig { task: "juggle".into(), out: out.clone(), demos: 1, teacher: stage, student: stage, dp: stage, batch: 8, baseline: false, episodes: 1, ..QuickstartConfig::default() };
+    let err = run_pipeline(&cfg).unwrap_err();
     assert!(format!("{err:#}").contains("juggle"), "{err:#}");
     assert!(!out.exists(), "nothing is written for a bad task");
 }

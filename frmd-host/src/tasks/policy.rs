@@ -1,4 +1,5 @@
-//! The policy interface every method implements for closed-loop evaluation.
+//! The controller interface: what every policy implements, the tasks' scripted experts as well as
+//! the learned float and int8 policies, so that evaluation and data collection can run any of them.
 
 /// What a policy sees when asked for a chunk, all in raw (robot) units.
 pub struct PolicyInput<'a> {

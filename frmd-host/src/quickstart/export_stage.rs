@@ -1,12 +1,10 @@
-//! Stage 5 of quickstart: int8 export of the student (`frmd export`), its frmd-core `Policy`
-//! adapter for closed-loop evaluation, and the int8-vs-float error of DESIGN.md section 6 (b)
-//! from the bit-accuracy harness (`frmd equiv`, open-loop part).
-use crate::cli::export::{self, BAKED_BLOB_FILE};
+//! Stage 5 of quickstart: int8 export of the student ([`crate::export`] with its defaults), its
+//! frmd-core `Policy` adapter for closed-loop evaluation, and the int8-vs-float error of
+//! DESIGN.md section 6 (b) from the bit-accuracy harness ([`crate::equiv`], open-loop part).
 use crate::equiv::{run as run_equiv, EquivConfig};
-use crate::eval::policy::Policy;
+use crate::export::{export_student, write_export, ExportConfig};
 use crate::policy::int8::Int8Policy;
-use anyhow::Context;
-use clap::Parser;
+use crate::tasks::Policy;
 use std::path::{Path, PathBuf};
 
 /// The exported int8 student, ready for closed-loop evaluation.
@@ -21,24 +19,18 @@ pub struct Int8Export {
     pub artifacts: Vec<(String, PathBuf)>,
 }
 
-/// Open-loop inputs of the int8-vs-float comparison.
-const EQUIV_INPUTS: usize = 200;
-
 fn export_inner(student_dir: &Path, out: &Path) -> anyhow::Result<Int8Export> {
     let baked = out.join("int8");
     std::fs::create_dir_all(&baked)?;
-    // `frmd export --ckpt STUDENT --out DIR` with that command's defaults (1 step, min-max
-    // calibration on the rows saved beside the student checkpoint).
-    let argv = ["frmd", "export", "--ckpt", &student_dir.display().to_string(), "--out", &baked.display().to_string()].map(String::from);
-    match crate::cli::Cli::try_parse_from(argv).context("building the export arguments")?.command {
-        crate::cli::Command::Export(args) => export::run(args)?,
-        other => anyhow::bail!("internal: expected an export command, got {other:?}"),
-    };
-    let blob = baked.join(BAKED_BLOB_FILE);
-    let policy = Int8Policy::from_blob(&std::fs::read(&blob)?, "int8-student-1")?;
+    // The default export (1 step, min-max calibration on the rows saved beside the student).
+    let cfg = ExportConfig::for_checkpoint(student_dir);
+    let exported = export_student(&cfg)?;
+    write_export(&cfg, &exported, Some(&baked), None)?;
+    let policy = Int8Policy::from_blob(exported.blob(), "int8-student-1")?;
     let history = policy.history();
-    // Open-loop error only: the closed-loop rows of the table are the success comparison.
-    let cfg = EquivConfig { episodes: 0, inputs: EQUIV_INPUTS, random_requant: 10_000, ..EquivConfig::new(student_dir.to_path_buf(), baked.clone()) };
+    // Open-loop error only (the harness's default inputs): the closed-loop rows of the table are
+    // the success comparison.
+    let cfg = EquivConfig { episodes: 0, random_requant: 10_000, ..EquivConfig::new(student_dir.to_path_buf(), baked.clone()) };
     let report = run_equiv(&cfg)?;
     let pick = |metric: &str| report.rows.iter().find(|r| r.check == "b" && r.metric.contains(metric)).map(|r| r.value);
     let float_error = match (pick("max abs"), pick("mean abs")) {

@@ -1,22 +1,8 @@
-//! Manual diagnostics for the DP baseline (ignored tests; they need FRMD_CKPT and FRMD_DATA and
-//! print measurements). Used to find why the DP failed in closed loop (0 % on reach and push):
-//! - `dp_denoising_on_training_windows`: chunks of the direct-epsilon DP were 5-6x rougher than
-//!   the demonstrations (RMS second difference), and the roughness came from the t = 0 step
-//!   (noise MSE 0.12 there); estimates at high noise were poor (clean-estimate error 0.13 at
-//!   t = 80). The preconditioned network (`EpsParametrization`) fixes both.
-//! - v0-jitter, goal-swap (FRMD_GOAL_DIMS) and `cond_vs_input`: the DP uses the goal and the
-//!   rate about as much as the teacher does; no train/eval conditioning mismatch.
-//! - `closed_vs_demo_trace`, `start_travel`, `regression_start_travel`: on `reach` every
-//!   direct-epsilon DP (10k-30k steps, with or without EMA, y0/v0 inputs, Min-SNR or x0 loss
-//!   weights, y0-relative actions) moved 3.5x too far in the first chunk of an episode (travel
-//!   0.33 vs 0.093 normalized; a deterministic regressor with the same backbone: 0.185, the
-//!   ProDMP teacher 0.172); the closed loop then leaves the demonstrations (no recovery data)
-//!   and flails. The preconditioned DP after 25k steps: 0.154, chunk error 0.0095 (teacher
-//!   0.0088), 84 % (DDIM-10) / 92 % (DDPM-100) on reach. After 10k steps it still had the bias.
-#![allow(clippy::needless_range_loop)]
-use super::*;
-use crate::diffusion::ddpm::predict_noise;
-use crate::rng::HostRng;
+//! DP-baseline experiments: why the direct-epsilon DP failed in closed loop (0 % on reach and
+//! push) and what the preconditioned noise network changed (findings in docs/experiments.md).
+use super::prelude::*;
+use frmd_host::diffusion::ddpm::predict_noise;
+use frmd_host::rng::HostRng;
 
 /// Mean over windows of the RMS second difference of a chunk along time (normalized units).
 fn roughness(chunk: &[f32], k: usize) -> f64 {
@@ -33,7 +19,7 @@ fn roughness(chunk: &[f32], k: usize) -> f64 {
     (sum / count.max(1) as f64).sqrt()
 }
 
-/// FRMD_CKPT=dp-dir FRMD_DATA=file cargo test -p frmd-host --lib dp_denoising -- --ignored --nocapture
+/// FRMD_CKPT=dp-dir FRMD_DATA=file cargo test -p frmd-host --test experiments dp_denoising -- --ignored --nocapture
 #[test]
 #[ignore]
 fn dp_denoising_on_training_windows() {
@@ -43,7 +29,7 @@ fn dp_denoising_on_training_windows() {
             break;
         }
         let mut policy = FloatPolicy::load(Path::new(&ckpt), Some(steps), None).unwrap();
-        let cfg = policy.net.net.config().clone();
+        let cfg = policy.network().net.config().clone();
         let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
         let (obs_w, k, traj) = (cfg.history * cfg.obs_dim, cfg.action_dim, cfg.traj_dim());
         let (mut err, mut first, mut rough_out, mut rough_truth, mut count) = (0.0, 0.0, 0.0, 0.0, 0);
@@ -63,7 +49,7 @@ fn dp_denoising_on_training_windows() {
     // per-step size (std * dt) is `jitter` normalized units, for any checkpoint role.
     {
         let mut policy = FloatPolicy::load(Path::new(&ckpt), None, None).unwrap();
-        let cfg = policy.net.net.config().clone();
+        let cfg = policy.network().net.config().clone();
         let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
         let (obs_w, k, traj) = (cfg.history * cfg.obs_dim, cfg.action_dim, cfg.traj_dim());
         let mut rng = HostRng::new(9);
@@ -109,17 +95,17 @@ fn dp_denoising_on_training_windows() {
     }
     // Noise-prediction error and one-shot clean estimate by timestep.
     let policy = FloatPolicy::load(Path::new(&ckpt), Some(10), None).unwrap();
-    let cfg = policy.net.net.config().clone();
+    let cfg = policy.network().net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
     let (k, traj) = (cfg.action_dim, cfg.traj_dim());
     let idx: Vec<usize> = (0..w.len()).step_by(w.len() / 256 + 1).collect();
-    let batch = crate::train::batch::gather(&w, &cfg, &idx, &Device::Cpu).unwrap();
+    let batch = frmd_host::train::batch::gather(&w, &cfg, &idx, &Device::Cpu).unwrap();
     let mut rng = HostRng::new(3);
     for t in [0usize, 1, 2, 5, 10, 20, 40, 60, 80, 90, 99] {
-        let abar = policy.schedule.alpha_bars[t];
+        let abar = policy.schedule().alpha_bars[t];
         let eps = gaussian(&mut rng, idx.len(), traj, &Device::Cpu).unwrap();
         let x = ((&batch.x0 * abar.sqrt()).unwrap() + (&eps * (1.0 - abar).sqrt()).unwrap()).unwrap();
-        let pred = predict_noise(&policy.net.net, &policy.schedule, &x, &batch.cond, &vec![t; idx.len()]).unwrap();
+        let pred = predict_noise(&policy.network().net, policy.schedule(), &x, &batch.cond, &vec![t; idx.len()]).unwrap();
         let mse = (&pred - &eps).unwrap().sqr().unwrap().mean_all().unwrap().to_scalar::<f32>().unwrap();
         let x0_hat = ((&x - (&pred * (1.0 - abar).sqrt()).unwrap()).unwrap() / abar.sqrt()).unwrap();
         let x0_err = (&x0_hat - &batch.x0).unwrap().abs().unwrap().mean_all().unwrap().to_scalar::<f32>().unwrap();
@@ -133,18 +119,18 @@ fn dp_denoising_on_training_windows() {
 /// Closed loop on demonstration seed 0 next to the demonstration itself: per query, the
 /// closed-loop state and chunk, the demo's state and actions at the same step, and the model's
 /// chunk when given the demo's window (open loop).
-/// FRMD_CKPT=dir FRMD_DATA=file cargo test -p frmd-host --lib closed_vs_demo -- --ignored --nocapture
+/// FRMD_CKPT=dir FRMD_DATA=file cargo test -p frmd-host --test experiments closed_vs_demo -- --ignored --nocapture
 #[test]
 #[ignore]
 fn closed_vs_demo_trace() {
     let Some((ckpt, ds)) = diagnostic_inputs() else { return };
     let mut policy = FloatPolicy::load(Path::new(&ckpt), None, None).unwrap();
-    let cfg = policy.net.net.config().clone();
+    let cfg = policy.network().net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
     let (obs_w, k, traj) = (cfg.history * cfg.obs_dim, cfg.action_dim, cfg.traj_dim());
     let (o, a) = (ds.obs_dim, ds.action_dim);
     let end = ds.episode_ends[0] as usize;
-    let mut task = crate::tasks::make_task(&ds.task).unwrap();
+    let mut task = frmd_host::tasks::make_task(&ds.task).unwrap();
     task.reset(0);
     policy.reset(1);
     eprintln!("demo obs 0 {:?} / task obs {:?}", &ds.obs[..o], task.observe());
@@ -156,7 +142,7 @@ fn closed_vs_demo_trace() {
         let t = (q * 8).min(end - 1);
         let chunk = policy.act(&PolicyInput { obs_history: &hist, prev_action: &prev, prev_rate: &rate }).unwrap();
         let mut demo_norm = policy.sample_normalized(&w.obs[t * obs_w..(t + 1) * obs_w], &w.prev_action[t * k..(t + 1) * k], &w.prev_rate[t * k..(t + 1) * k]).unwrap();
-        policy.norm.action.denormalize(&mut demo_norm);
+        policy.normalization().action.denormalize(&mut demo_norm);
         let last = (t + cfg.horizon - 1).min(end - 1);
         eprintln!("q {q} t {t}: closed obs [{}] prev [{}] rate [{}]", fmt(hist.last().unwrap()), fmt(&prev), fmt(&rate));
         eprintln!("          demo   obs [{}] prev [{}]", fmt(&ds.obs[t * o..(t + 1) * o]), fmt(&ds.action[t.saturating_sub(1) * a..t.saturating_sub(1) * a + a]));
@@ -177,7 +163,7 @@ fn closed_vs_demo_trace() {
 
 /// Closed-loop endings on 10 evaluation seeds of `reach`: closest approach to the goal, the speed
 /// there, and the final distance and speed (observation layout of `reach`).
-/// FRMD_CKPT=dir cargo test -p frmd-host --lib reach_endings -- --ignored --nocapture
+/// FRMD_CKPT=dir cargo test -p frmd-host --test experiments reach_endings -- --ignored --nocapture
 #[test]
 #[ignore]
 fn reach_endings() {
@@ -185,10 +171,10 @@ fn reach_endings() {
     let steps = std::env::var("FRMD_STEPS").ok().and_then(|s| s.parse().ok());
     let mut policy = FloatPolicy::load(Path::new(&ckpt), steps, None).unwrap();
     let history = policy.input_sizes().2;
-    let mut task = crate::tasks::make_task("reach").unwrap();
+    let mut task = frmd_host::tasks::make_task("reach").unwrap();
     for i in 0..10 {
         let mut trace: Vec<(f32, f32)> = Vec::new();
-        let run = crate::eval::rollout(task.as_mut(), &mut policy, crate::eval::eval_seed(0, i), 8, history, &mut |obs, _| {
+        let run = frmd_host::eval::rollout(task.as_mut(), &mut policy, frmd_host::eval::eval_seed(0, i), 8, history, &mut |obs, _| {
             let dist = ((obs[0] - obs[4]).powi(2) + (obs[1] - obs[5]).powi(2)).sqrt();
             let speed = (obs[2].powi(2) + obs[3].powi(2)).sqrt();
             trace.push((dist, speed));
@@ -203,21 +189,21 @@ fn reach_endings() {
 
 /// DDIM-10 chain on the first window of 3 episodes: the clean estimate's last action at every
 /// step next to the truth, and the one-shot estimate from truth + noise at the same timestep.
-/// FRMD_CKPT=dir FRMD_DATA=file cargo test -p frmd-host --lib ddim_chain -- --ignored --nocapture
+/// FRMD_CKPT=dir FRMD_DATA=file cargo test -p frmd-host --test experiments ddim_chain -- --ignored --nocapture
 #[test]
 #[ignore]
 fn ddim_chain_on_first_windows() {
     let Some((ckpt, ds)) = diagnostic_inputs() else { return };
     let policy = FloatPolicy::load(Path::new(&ckpt), Some(10), None).unwrap();
-    let cfg = policy.net.net.config().clone();
+    let cfg = policy.network().net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
     let traj = cfg.traj_dim();
     let starts: Vec<usize> = std::iter::once(0).chain(ds.episode_ends.iter().map(|&e| e as usize)).take(3).collect();
-    let sched = &policy.schedule;
-    let net = &policy.net.net;
+    let sched = policy.schedule();
+    let net = &policy.network().net;
     let mut rng = HostRng::new(4);
     for &i in &starts {
-        let batch = crate::train::batch::gather(&w, &cfg, &[i], &Device::Cpu).unwrap();
+        let batch = frmd_host::train::batch::gather(&w, &cfg, &[i], &Device::Cpu).unwrap();
         let truth = &w.actions[i * traj..(i + 1) * traj];
         eprintln!("window {i}: truth last ({:.3},{:.3}) prev ({:.3},{:.3})", truth[traj - 2], truth[traj - 1], w.prev_action[i * 2], w.prev_action[i * 2 + 1]);
         let mut x = gaussian(&mut rng, 1, traj, &Device::Cpu).unwrap();
@@ -241,13 +227,13 @@ fn ddim_chain_on_first_windows() {
 
 /// Travel of the chunk (|last action - y0|, normalized) over the first 14 windows of episode 0:
 /// truth vs the model (mean of 4 samples). Shows whether the start-up phase is resolved.
-/// FRMD_CKPT=dir FRMD_DATA=file cargo test -p frmd-host --lib start_travel -- --ignored --nocapture
+/// FRMD_CKPT=dir FRMD_DATA=file cargo test -p frmd-host --test experiments start_travel -- --ignored --nocapture
 #[test]
 #[ignore]
 fn start_travel() {
     let Some((ckpt, ds)) = diagnostic_inputs() else { return };
     let mut policy = FloatPolicy::load(Path::new(&ckpt), None, None).unwrap();
-    let cfg = policy.net.net.config().clone();
+    let cfg = policy.network().net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
     let (obs_w, k, traj) = (cfg.history * cfg.obs_dim, cfg.action_dim, cfg.traj_dim());
     let travel = |chunk: &[f32], y0: &[f32]| chunk[traj - k..].iter().zip(y0).map(|(a, b)| (a - b).powi(2)).sum::<f32>().sqrt();
@@ -270,15 +256,15 @@ fn start_travel() {
 /// Can the raw-head backbone with the DP's inputs fit the start-up windows at all? Trains the same
 /// network as a deterministic regressor (noisy input zeroed, fixed noise embedding, x0 MSE) and
 /// prints the chunk travel over the first windows of episode 0 as `start_travel` does.
-/// FRMD_DATA=file FRMD_STEPS=5000 cargo test -p frmd-host --lib regression_start -- --ignored --nocapture
+/// FRMD_DATA=file FRMD_STEPS=5000 cargo test -p frmd-host --test experiments regression_start -- --ignored --nocapture
 #[test]
 #[ignore]
 fn regression_start_travel() {
-    use crate::models::{Activation, BackboneConfig, HeadConfig, ModelConfig};
-    use crate::train::optim::{OptimConfig, ScheduledAdamW};
+    use frmd_host::models::{Activation, BackboneConfig, HeadConfig, ModelConfig};
+    use frmd_host::train::optim::{OptimConfig, ScheduledAdamW};
     let Ok(data) = std::env::var("FRMD_DATA") else { return };
     let steps: usize = std::env::var("FRMD_STEPS").ok().and_then(|s| s.parse().ok()).unwrap_or(5000);
-    let ds = crate::data::Dataset::load(Path::new(&data)).unwrap();
+    let ds = frmd_host::data::Dataset::load(Path::new(&data)).unwrap();
     let (w, _) = ds.windows(2, 12).unwrap();
     let cfg = ModelConfig { obs_dim: ds.obs_dim, history: 2, action_dim: ds.action_dim, horizon: 12, control_dt: f64::from(ds.dt), embed_dim: 16,
         backbone: BackboneConfig::Mlp { hidden: vec![256, 256, 256], activation: Activation::Silu }, head: HeadConfig::Raw };
@@ -287,9 +273,9 @@ fn regression_start_travel() {
     let mut rng = HostRng::new(1);
     let (k, traj) = (cfg.action_dim, cfg.traj_dim());
     for step in 0..steps {
-        let batch = crate::train::batch::sample(&w, &cfg, 128, &mut rng, &Device::Cpu).unwrap();
+        let batch = frmd_host::train::batch::sample(&w, &cfg, 128, &mut rng, &Device::Cpu).unwrap();
         let zeros = batch.x0.zeros_like().unwrap();
-        let emb = crate::diffusion::precond::embedding(&vec![0.0; 128], cfg.embed_dim, &Device::Cpu).unwrap();
+        let emb = frmd_host::diffusion::precond::embedding(&vec![0.0; 128], cfg.embed_dim, &Device::Cpu).unwrap();
         let out = net.net.predict(&zeros, &batch.cond, &emb).unwrap();
         let loss = (out - &batch.x0).unwrap().sqr().unwrap().mean_all().unwrap();
         opt.backward_step(&loss).unwrap();
@@ -300,15 +286,15 @@ fn regression_start_travel() {
     let mut err = 0.0;
     let idx: Vec<usize> = (0..w.len()).collect();
     for i in 0..14 {
-        let b = crate::train::batch::gather(&w, &cfg, &[i], &Device::Cpu).unwrap();
-        let emb = crate::diffusion::precond::embedding(&[0.0], cfg.embed_dim, &Device::Cpu).unwrap();
+        let b = frmd_host::train::batch::gather(&w, &cfg, &[i], &Device::Cpu).unwrap();
+        let emb = frmd_host::diffusion::precond::embedding(&[0.0], cfg.embed_dim, &Device::Cpu).unwrap();
         let out = net.net.predict(&b.x0.zeros_like().unwrap(), &b.cond, &emb).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
         let y0 = &w.prev_action[i * k..(i + 1) * k];
         line += &format!(" {i}:{:.3}/{:.3}", travel(&w.actions[i * traj..(i + 1) * traj], y0), travel(&out, y0));
     }
     for chunk in idx.chunks(512) {
-        let b = crate::train::batch::gather(&w, &cfg, chunk, &Device::Cpu).unwrap();
-        let emb = crate::diffusion::precond::embedding(&vec![0.0; chunk.len()], cfg.embed_dim, &Device::Cpu).unwrap();
+        let b = frmd_host::train::batch::gather(&w, &cfg, chunk, &Device::Cpu).unwrap();
+        let emb = frmd_host::diffusion::precond::embedding(&vec![0.0; chunk.len()], cfg.embed_dim, &Device::Cpu).unwrap();
         let out = net.net.predict(&b.x0.zeros_like().unwrap(), &b.cond, &emb).unwrap();
         err += (out - &b.x0).unwrap().abs().unwrap().sum_all().unwrap().to_scalar::<f32>().unwrap() as f64;
     }
@@ -318,26 +304,26 @@ fn regression_start_travel() {
 /// Which input decides the DP's clean estimate: for condition windows 0 and 8 of episode 0 and
 /// noisy inputs built from the truth of windows 0 and 8, the one-shot clean estimate's travel at
 /// several timesteps (mean over 16 noise draws).
-/// FRMD_CKPT=dp-dir FRMD_DATA=file cargo test -p frmd-host --lib cond_vs_input -- --ignored --nocapture
+/// FRMD_CKPT=dp-dir FRMD_DATA=file cargo test -p frmd-host --test experiments cond_vs_input -- --ignored --nocapture
 #[test]
 #[ignore]
 fn cond_vs_input() {
     let Some((ckpt, ds)) = diagnostic_inputs() else { return };
     let policy = FloatPolicy::load(Path::new(&ckpt), Some(10), None).unwrap();
-    let cfg = policy.net.net.config().clone();
+    let cfg = policy.network().net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
     let (k, traj) = (cfg.action_dim, cfg.traj_dim());
     let mut rng = HostRng::new(5);
     for (ci, xi) in [(0usize, 0usize), (0, 8), (8, 0), (8, 8)] {
-        let cond = crate::train::batch::gather(&w, &cfg, &[ci; 16], &Device::Cpu).unwrap().cond;
-        let x0 = crate::train::batch::gather(&w, &cfg, &[xi; 16], &Device::Cpu).unwrap().x0;
+        let cond = frmd_host::train::batch::gather(&w, &cfg, &[ci; 16], &Device::Cpu).unwrap().cond;
+        let x0 = frmd_host::train::batch::gather(&w, &cfg, &[xi; 16], &Device::Cpu).unwrap().x0;
         let y0 = &w.prev_action[ci * k..(ci + 1) * k];
         let mut line = String::new();
         for t in [0usize, 5, 20, 50, 80, 95] {
-            let abar = policy.schedule.alpha_bars[t];
+            let abar = policy.schedule().alpha_bars[t];
             let eps = gaussian(&mut rng, 16, traj, &Device::Cpu).unwrap();
             let x = ((&x0 * abar.sqrt()).unwrap() + (&eps * (1.0 - abar).sqrt()).unwrap()).unwrap();
-            let pred = predict_noise(&policy.net.net, &policy.schedule, &x, &cond, &[t; 16]).unwrap();
+            let pred = predict_noise(&policy.network().net, policy.schedule(), &x, &cond, &[t; 16]).unwrap();
             let est = ((&x - (&pred * (1.0 - abar).sqrt()).unwrap()).unwrap() / abar.sqrt()).unwrap().mean(0).unwrap().to_vec1::<f32>().unwrap();
             let travel = est[traj - k..].iter().zip(y0).map(|(a, b)| (a - b).powi(2)).sum::<f32>().sqrt();
             line += &format!(" t{t}:{travel:.3}");

@@ -1,11 +1,11 @@
-//! Manual diagnostics for float policies (ignored tests; they need FRMD_CKPT / FRMD_DATA /
-//! FRMD_TASK and print measurements). Used to find the start-of-chunk, skip-noise and
-//! sigma_max-extrapolation problems documented in `diffusion::precond` and `diffusion::loss`.
-#![allow(clippy::needless_range_loop)]
+//! Float-policy experiments (teacher and student): open-loop chunk error on training windows,
+//! closed loop on training vs evaluation seeds, samples at the first window of an episode, and
+//! the size of min-norm ProDMP parameters. They found the start-of-chunk, skip-noise and
+//! sigma_max-extrapolation problems (findings in docs/experiments.md).
 mod chunk_error {
-    use super::super::*;
+    use super::super::prelude::*;
 
-    /// Manual diagnostic: FRMD_CKPT=dir FRMD_DATA=file cargo test -- --ignored chunk_error
+    /// Manual diagnostic: FRMD_CKPT=dir FRMD_DATA=file cargo test -p frmd-host --test experiments -- --ignored chunk_error
     #[test]
     #[ignore]
     fn chunk_error_on_training_windows() {
@@ -13,10 +13,10 @@ mod chunk_error {
         let steps = std::env::var("FRMD_STEPS").ok().and_then(|s| s.parse().ok());
         let solver = std::env::var("FRMD_SOLVER").ok().map(|s| Solver::parse(&s).unwrap());
         let mut policy = FloatPolicy::load(Path::new(&ckpt), steps, solver).unwrap();
-        let cfg = policy.net.net.config().clone();
-        let ds = crate::data::Dataset::load(Path::new(&data)).unwrap();
+        let cfg = policy.network().net.config().clone();
+        let ds = frmd_host::data::Dataset::load(Path::new(&data)).unwrap();
         let (w, norm) = ds.windows(cfg.history, cfg.horizon).unwrap();
-        assert_eq!(norm, policy.norm);
+        assert_eq!(&norm, policy.normalization());
         let (mut err, mut base, mut count) = (0.0f64, 0.0f64, 0usize);
         let obs_w = cfg.history * cfg.obs_dim;
         let (k, traj) = (cfg.action_dim, cfg.traj_dim());
@@ -56,8 +56,8 @@ mod chunk_error {
         }
         eprintln!("act(): mean abs error {:.4} raw units over {n} queries", raw_err / n as f64);
         // Closed-loop trace of one episode.
-        let mut task = crate::tasks::make_task(&ds.task).unwrap();
-        task.reset(std::env::var("FRMD_SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(crate::eval::eval_seed(0, 0)));
+        let mut task = frmd_host::tasks::make_task(&ds.task).unwrap();
+        task.reset(std::env::var("FRMD_SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(frmd_host::eval::eval_seed(0, 0)));
         policy.reset(1);
         let mut hist = vec![task.observe(); cfg.history];
         let mut prev: Vec<f32> = task.ee_position().iter().map(|&v| v as f32).collect();
@@ -76,21 +76,21 @@ mod chunk_error {
 }
 
 mod seen_layouts {
-    use super::super::*;
+    use super::super::prelude::*;
 
     /// Manual diagnostic: closed loop on the demonstration (training) seeds vs evaluation seeds.
-    /// FRMD_CKPT=dir FRMD_TASK=avoid cargo test -- --ignored train_vs_eval_seeds --nocapture
+    /// FRMD_CKPT=dir FRMD_TASK=avoid cargo test -p frmd-host --test experiments -- --ignored train_vs_eval_seeds --nocapture
     #[test]
     #[ignore]
     fn train_vs_eval_seeds() {
         let (Ok(ckpt), Ok(task_name)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_TASK")) else { return };
         let mut policy = FloatPolicy::load(Path::new(&ckpt), None, None).unwrap();
         let history = policy.input_sizes().2;
-        let mut task = crate::tasks::make_task(&task_name).unwrap();
-        for (label, base) in [("training seeds", 0u64), ("eval seeds", crate::eval::EVAL_SEED_OFFSET)] {
+        let mut task = frmd_host::tasks::make_task(&task_name).unwrap();
+        for (label, base) in [("training seeds", 0u64), ("eval seeds", frmd_host::eval::EVAL_SEED_OFFSET)] {
             let mut ok = 0;
             for i in 0..20 {
-                let run = crate::eval::rollout(task.as_mut(), &mut policy, base + i, 8, history, &mut |_, _| {}).unwrap();
+                let run = frmd_host::eval::rollout(task.as_mut(), &mut policy, base + i, 8, history, &mut |_, _| {}).unwrap();
                 ok += usize::from(run.success);
             }
             eprintln!("{}: {label}: {ok}/20", policy.name());
@@ -99,7 +99,7 @@ mod seen_layouts {
 }
 
 mod first_window {
-    use super::super::*;
+    use super::super::prelude::*;
 
     /// Manual diagnostic: samples at the first window of episode 0 for several seeds and solvers.
     #[test]
@@ -108,7 +108,7 @@ mod first_window {
         let Some((ckpt, ds)) = diagnostic_inputs() else { return };
         for (steps, solver) in [(10, Solver::Heun), (10, Solver::DpmPp2m), (40, Solver::Heun), (1, Solver::Euler)] {
             let mut policy = FloatPolicy::load(Path::new(&ckpt), Some(steps), Some(solver)).unwrap();
-            let cfg = policy.net.net.config().clone();
+            let cfg = policy.network().net.config().clone();
             let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
             let (obs_w, k, traj) = (cfg.history * cfg.obs_dim, cfg.action_dim, cfg.traj_dim());
             let i = 0;
@@ -123,11 +123,11 @@ mod first_window {
             if steps == 1 {
                 let cond = Condition::from_slices(&cfg, &w.obs[..obs_w], &w.prev_action[..k], &w.prev_rate[..k], &Device::Cpu).unwrap();
                 let x0 = candle_core::Tensor::from_slice(truth, (1, traj), &Device::Cpu).unwrap();
-                let mut rng = crate::rng::HostRng::new(1);
+                let mut rng = frmd_host::rng::HostRng::new(1);
                 for sigma in [0.02, 0.2, 1.0, 5.0, 80.0] {
                     let noise = gaussian(&mut rng, 1, traj, &Device::Cpu).unwrap();
                     let x = (&x0 + (noise * sigma).unwrap()).unwrap();
-                    let d = crate::diffusion::precond::teacher_denoise(&policy.net.net, &policy.sigma, &x, &cond, &[sigma]).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+                    let d = frmd_host::diffusion::precond::teacher_denoise(&policy.network().net, policy.sigma(), &x, &cond, &[sigma]).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
                     eprintln!("   D(truth + {sigma} eps) last ({:.3},{:.3}) first ({:.3},{:.3}) truth first ({:.3},{:.3})", d[traj - 2], d[traj - 1], d[0], d[1], truth[0], truth[1]);
                 }
             }
@@ -136,15 +136,15 @@ mod first_window {
 }
 
 mod theta_scale {
-    use crate::models::decoder::DecoderRows;
-    use crate::models::ProDmpConfig;
+    use frmd_host::models::decoder::DecoderRows;
+    use frmd_host::models::ProDmpConfig;
 
     /// Manual diagnostic: magnitude of the min-norm ProDMP parameters that reproduce data windows.
     #[test]
     #[ignore]
     fn min_norm_theta() {
         let Ok(data) = std::env::var("FRMD_DATA") else { return };
-        let ds = crate::data::Dataset::load(std::path::Path::new(&data)).unwrap();
+        let ds = frmd_host::data::Dataset::load(std::path::Path::new(&data)).unwrap();
         let (n, k) = (12, ds.action_dim);
         let (w, _) = ds.windows(2, n).unwrap();
         let cfg = ProDmpConfig::policy(k, 20, n, f64::from(ds.dt));

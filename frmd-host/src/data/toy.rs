@@ -1,7 +1,7 @@
 //! A toy 1-D bimodal data set for tests and experiments: one DoF, a constant observation, y0 =
 //! v0 = 0, and every trajectory is the ProDMP decode of goal +0.5 or -0.5 (zero weights), each
 //! with probability 1/2 — so the data distribution has exactly two modes.
-use crate::data::windows::WindowSet;
+use super::windows::WindowSet;
 use crate::models::decoder::DecoderRows;
 use crate::models::{Activation, BackboneConfig, HeadConfig, ModelConfig};
 use crate::rng::HostRng;
@@ -55,4 +55,10 @@ pub fn positive_fraction(traj: &[f32], horizon: usize) -> f64 {
     let rows = traj.len() / horizon.max(1);
     let positive = traj.chunks_exact(horizon).filter(|row| row.last().copied().unwrap_or(0.0) > 0.0).count();
     positive as f64 / rows.max(1) as f64
+}
+
+/// The condition of `batch` toy samples: zero observation, y0 and v0.
+pub fn toy_condition(batch: usize) -> anyhow::Result<crate::models::Condition> {
+    let zeros = candle_core::Tensor::zeros((batch, 1), candle_core::DType::F32, &candle_core::Device::Cpu)?;
+    Ok(crate::models::Condition::new(&zeros, zeros.clone(), zeros.clone(), 0.1)?)
 }
