@@ -62,7 +62,7 @@ impl WindowSet {
 pub const CALIBRATION_ROWS: usize = 256;
 
 impl super::Dataset {
-    /// Training windows of DESIGN.md section 4 and the normalization fitted on this dataset.
+    /// Training windows of docs/design.md section 4 and the normalization fitted on this dataset.
     ///
     /// One window per step t of every episode: observations t-m+1..=t, the previous action
     /// a_{t-1} with rate (a_{t-1} - a_{t-2}) / dt, and actions a_t..a_{t+n-1}, all normalized.

@@ -5,7 +5,7 @@
 //! position targets `[x, y]`, and the ProDMP initial condition of a chunk is the last commanded
 //! action. All tasks use a control period of 0.1 s and live in the square [-2, 2]^2 m, a scale at
 //! which the experts' smooth paths have curvature below the 1 rad/m non-smoothness threshold of
-//! DESIGN.md section 6 almost everywhere, so that kinks stand out.
+//! docs/design.md section 6 almost everywhere, so that kinks stand out.
 //!
 //! | task   | difficulty  | what makes it hard                                               |
 //! |--------|-------------|------------------------------------------------------------------|
