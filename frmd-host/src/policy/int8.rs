@@ -138,6 +138,11 @@ impl Int8Policy {
         super::transformer::int8_policy(&bytes, "int8").with_context(|| format!("loading {}", path.display()))
     }
 
+    /// (history, obs_dim, action_dim, horizon, params per DoF) of the loaded blob.
+    pub fn shape(&self) -> [usize; 5] {
+        self.runner.shape()
+    }
+
     /// Observation history the policy needs.
     pub fn history(&self) -> usize {
         self.runner.shape()[0]

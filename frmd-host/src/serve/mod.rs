@@ -7,10 +7,13 @@
 //! - [`frame`]: constants, header, frame reader; [`error`]: error codes;
 //! - [`request`], [`reply`]: the messages, each encoded and decoded side by side ([`fields`]
 //!   holds the shared payload helpers);
-//! - [`session`]: order and `executed` rules, timing; [`server`]: the loop over a byte stream.
+//! - [`session`]: order and `executed` rules, timing; [`server`]: the loop over a byte stream,
+//!   stdin/stdout and a Unix socket;
+//! - [`load`]: the policy behind the server (checkpoint, baked module, blob) and its HELLO_OK.
 pub mod error;
 mod fields;
 pub mod frame;
+pub mod load;
 pub mod reply;
 pub mod request;
 pub mod server;
@@ -23,7 +26,10 @@ pub use frame::{
 };
 pub use reply::{decode_reply, Chunk, ErrorReply, ModelInfo, Reply};
 pub use request::{decode_request, Request};
-pub use server::{serve_stream, StreamEnd};
+pub use load::{load, PolicySource, ServeConfig, Served};
+pub use server::{serve_stdio, serve_stream, StreamEnd};
+#[cfg(unix)]
+pub use server::serve_socket;
 pub use session::{ActInput, Next, ServedPolicy, Session};
 
 #[cfg(test)]

@@ -1,8 +1,11 @@
 //! The server loop over one byte stream (stdin/stdout, a socket connection, in-memory pipes).
 use super::frame::{FrameReader, ReadOutcome};
+use super::load::Served;
 use super::reply::{ErrorReply, Reply};
 use super::session::{Next, ServedPolicy, Session};
+use anyhow::Context;
 use std::io::{self, Read, Write};
+use std::path::Path;
 
 /// How a served stream ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -48,4 +51,52 @@ pub fn serve_stream<R: Read, W: Write>(
             return Ok(StreamEnd::Closed);
         }
     }
+}
+
+/// Serves one session on stdin/stdout (the default transport). Diagnostics go to stderr only.
+pub fn serve_stdio(served: &mut Served) -> anyhow::Result<StreamEnd> {
+    let mut session = served.session()?;
+    let stdin = io::stdin().lock();
+    let stdout = io::BufWriter::new(io::stdout().lock());
+    // An error here is a failed write of a reply (the client closed its end).
+    serve_stream(stdin, stdout, &mut session, &mut served.policy).context("writing a reply to stdout")
+}
+
+/// Serves clients on a Unix socket at `path`, one connection at a time, each with a fresh session
+/// (the policy's noise stream is reseeded by RESET), until `max_connections` have been served
+/// (`None`: forever). A stale socket file at `path` is replaced; any other file is an error.
+#[cfg(unix)]
+pub fn serve_socket(served: &mut Served, path: &Path, max_connections: Option<usize>) -> anyhow::Result<()> {
+    use std::os::unix::fs::FileTypeExt;
+    use std::os::unix::net::UnixListener;
+    if let Ok(meta) = std::fs::symlink_metadata(path) {
+        if !meta.file_type().is_socket() {
+            anyhow::bail!("{}: exists and is not a socket; refusing to replace it", path.display());
+        }
+        std::fs::remove_file(path).with_context(|| format!("removing the stale socket {}", path.display()))?;
+    }
+    let listener = UnixListener::bind(path).with_context(|| format!("binding the Unix socket {}", path.display()))?;
+    eprintln!("frmd serve: listening on {}", path.display());
+    let mut served_count = 0;
+    for stream in listener.incoming() {
+        let stream = match stream {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("frmd serve: accept failed: {e}");
+                continue;
+            }
+        };
+        let mut session = served.session()?;
+        let reader = stream.try_clone().with_context(|| format!("{}: cloning the connection", path.display()))?;
+        match serve_stream(io::BufReader::new(reader), io::BufWriter::new(&stream), &mut session, &mut served.policy) {
+            Ok(end) => eprintln!("frmd serve: connection ended ({end:?})"),
+            Err(e) => eprintln!("frmd serve: connection lost: {e}"),
+        }
+        served_count += 1;
+        if max_connections.is_some_and(|m| served_count >= m) {
+            break;
+        }
+    }
+    std::fs::remove_file(path).ok();
+    Ok(())
 }

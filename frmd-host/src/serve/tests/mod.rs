@@ -130,4 +130,5 @@ const OBS: [f64; 6] = [0.5, -1.0, 2.0, 0.5, -1.0, 2.0];
 
 mod codec;
 mod session;
+mod served;
 mod stream;
