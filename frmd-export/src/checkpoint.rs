@@ -95,6 +95,18 @@ impl From<&frmd_core::prodmp::ProDmpConfig> for ProDmpJson {
     }
 }
 
+impl ProDmpJson {
+    /// Equal up to the last bits of the f64 fields: serde_json's default parser may read a
+    /// written f64 back one unit in the last place off (e.g. tau = 12 x 0.0125f32 as f64), so a
+    /// checkpoint's recorded config is compared with the recomputed one at a relative 1e-12.
+    pub fn matches(&self, other: &ProDmpJson) -> bool {
+        let close = |a: f64, b: f64| a == b || (a - b).abs() <= 1e-12 * a.abs().max(b.abs());
+        let floats = |p: &ProDmpJson| [p.tau, p.delay, p.alpha, p.alpha_phase, p.bandwidth_factor, p.dt, p.weights_scale, p.goal_scale];
+        let ints = |p: &ProDmpJson| (p.num_dof, p.num_basis, p.num_basis_outside, p.relative_goal, p.auto_scale_basis);
+        ints(self) == ints(other) && floats(self).iter().zip(floats(other)).all(|(&a, b)| close(a, b))
+    }
+}
+
 /// Where the training data came from.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct DatasetInfo {
@@ -202,7 +214,11 @@ impl CheckpointMeta {
         self.model.validate().with_context(|| format!("{CONFIG_FILE}: model"))?;
         SigmaConfig::from(self.sigma).validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))?;
         let expected_prodmp = self.model.prodmp().as_ref().map(ProDmpJson::from);
-        if self.prodmp != expected_prodmp {
+        let same = match (&self.prodmp, &expected_prodmp) {
+            (Some(a), Some(b)) => a.matches(b),
+            (a, b) => a == b,
+        };
+        if !same {
             bail!("{CONFIG_FILE}: prodmp config {:?} differs from the policy convention for this model ({:?})", self.prodmp, expected_prodmp);
         }
         match (self.role, self.prodmp.is_some()) {

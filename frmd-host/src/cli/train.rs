@@ -339,7 +339,7 @@ impl Monitor<'_> {
             self.bar.println(format!("step {step}: {report}"));
             self.generalization.push((step, report));
         }
-        if self.common.eval_episodes == 0 {
+        if self.common.eval_episodes == 0 || !crate::tasks::is_simulated(&self.task) {
             return Ok(());
         }
         let mut policy = FloatPolicy::new(model.duplicate(&candle_core::Device::Cpu)?, self.norm.clone(), self.sigma, self.sampler)?.with_dp_parametrization(self.dp_parametrization);
@@ -372,6 +372,9 @@ fn monitor<'a>(common: &'a CommonArgs, task: &str, norm: &Normalization, sampler
     let bar = ProgressBar::new(common.steps as u64);
     bar.set_style(ProgressStyle::with_template("{prefix} [{elapsed_precise}] {bar:30} {pos}/{len} {msg} (eta {eta})").unwrap_or_else(|_| ProgressStyle::default_bar()));
     bar.set_prefix(label.to_string());
+    if common.eval_episodes > 0 && !crate::tasks::is_simulated(task) {
+        eprintln!("{label}: task {task:?} of {} is not simulated by frmd-host ({}): closed-loop evaluation skipped; evaluate the checkpoint with `frmd serve` and the task's own simulator", common.data.display(), crate::tasks::TASK_NAMES.join(", "));
+    }
     Monitor { bar, common, task: task.to_string(), norm: norm.clone(), sigma: SigmaConfig::default(), sampler, dp_parametrization: EpsParametrization::Direct, success: Vec::new(), last_eval: None, probe: None, generalization: Vec::new() }
 }
 
