@@ -89,7 +89,7 @@ fn try_shape<const M: usize, const O: usize, const K: usize, const N: usize, con
 }
 
 /// Shapes (M, O, K, N, P) the host int8 runner is compiled for.
-pub const SHAPES: &[[usize; 5]] = &[[2, 6, 2, 12, 21], [2, 9, 2, 12, 21], [2, 10, 2, 12, 21], [2, 7, 2, 12, 21], [2, 6, 2, 8, 7]];
+pub const SHAPES: &[[usize; 5]] = &[[2, 6, 2, 12, 21], [2, 9, 2, 12, 21], [2, 10, 2, 12, 21], [2, 7, 2, 12, 21], [2, 6, 2, 8, 7], [2, 39, 4, 12, 21]];
 
 /// Loads a blob into a runner of the matching compiled shape.
 /// With `f32_twin`, the policy runs frmd-core's f32 network of the folded model instead of the
@@ -101,7 +101,9 @@ pub fn load_runner(bytes: &[u8], f32_twin: Option<FoldedMlp>) -> anyhow::Result<
         .or_else(|| try_shape::<2, 9, 2, 12, 21>(bytes, twin))
         .or_else(|| try_shape::<2, 10, 2, 12, 21>(bytes, twin))
         .or_else(|| try_shape::<2, 7, 2, 12, 21>(bytes, twin))
-        .or_else(|| try_shape::<2, 6, 2, 8, 7>(bytes, twin));
+        .or_else(|| try_shape::<2, 6, 2, 8, 7>(bytes, twin))
+        // MetaWorld (39 observations, 4 actions) until the any-shape runner lands.
+        .or_else(|| try_shape::<2, 39, 4, 12, 21>(bytes, twin));
     match found {
         Some(runner) => runner,
         None => bail!("the blob's sizes are not among the host's compiled int8 shapes (M, O, K, N, P) {SHAPES:?}"),
