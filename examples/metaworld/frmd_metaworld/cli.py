@@ -105,7 +105,7 @@ def cmd_bench(args) -> int:
     from . import bench
     if args.what == "protocol":
         for cpu in ([None, args.cpu] if args.cpu is not None else [None]):
-            print(json.dumps(bench.protocol_roundtrip(args.calls, cpu=cpu)), flush=True)
+            print(json.dumps(bench.protocol_roundtrip(args.calls, cpu=cpu, server=args.server)), flush=True)
     else:
         for task in args.task:
             print(json.dumps(bench.step_costs(task, args.episodes)), flush=True)
@@ -185,6 +185,7 @@ def main(argv=None) -> int:
     b.add_argument("what", choices=["protocol", "step"])
     b.add_argument("--calls", type=int, default=2000)
     b.add_argument("--cpu", type=int, help="also measure with client and server pinned to this CPU")
+    b.add_argument("--server", metavar="CMD", help="protocol: time this server command instead of the mock server")
     b.add_argument("--task", type=_tasks, default=["push-v3"])
     b.add_argument("--episodes", type=int, default=5)
     b.set_defaults(run=cmd_bench)
