@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# README's Status table: the default recipe on the built-in tasks, several training seeds.
+#
+#   scripts/recipe-table.sh [OUT_DIR] [TASKS] [SEEDS]
+#   defaults: runs/recipe "reach avoid push insert" "0 1 2"
+#
+# Every step is the plain CLI with its defaults (only --backbone mlp-paper and --seed are given;
+# --eval-episodes 0 skips the 20-episode check at the end of training, the table evaluates on 200).
+# A step whose output exists is skipped, so the script resumes after an interruption. Logs go to
+# OUT_DIR/logs. Needs `frmd` on the PATH (`cargo install --path frmd-host`) or FRMD=/path/to/frmd.
+# Summary: python3 scripts/recipe_table.py OUT_DIR
+set -euo pipefail
+OUT=${1:-runs/recipe}
+TASKS=${2:-"reach avoid push insert"}
+SEEDS=${3:-"0 1 2"}
+FRMD=${FRMD:-frmd}
+export RAYON_NUM_THREADS=${RAYON_NUM_THREADS:-1}
+mkdir -p "$OUT/data" "$OUT/logs"
+
+step() { # step NAME DONE_FILE CMD...
+    local name=$1 done=$2; shift 2
+    if [ -e "$done" ]; then echo "skip  $name"; return; fi
+    echo "$(date +%H:%M:%S) start $name"
+    "$@" > "$OUT/logs/$name.log" 2>&1 || { echo "FAILED $name (see $OUT/logs/$name.log)"; exit 1; }
+}
+
+for t in $TASKS; do
+    step "collect-$t" "$OUT/data/$t.safetensors" "$FRMD" collect --task "$t" --out "$OUT/data/$t.safetensors"
+done
+for s in $SEEDS; do
+    for t in $TASKS; do
+        d=$OUT/data/$t.safetensors; r=$OUT/$t/s$s
+        step "$t-s$s-teacher" "$r/teacher/frmd.json" "$FRMD" train teacher --data "$d" --out "$r/teacher" --backbone mlp-paper --seed "$s" --eval-episodes 0
+        step "$t-s$s-eval-teacher" "$r/teacher/eval-dpm10.json" "$FRMD" eval --task "$t" --ckpt "$r/teacher" --steps 10 --solver dpm++2m --episodes 200 --json "$r/teacher/eval-dpm10.json"
+        step "$t-s$s-student" "$r/student/frmd.json" "$FRMD" train student --teacher "$r/teacher" --data "$d" --out "$r/student" --seed "$s" --eval-episodes 0
+        step "$t-s$s-eval-student" "$r/student/eval-1.json" "$FRMD" eval --task "$t" --ckpt "$r/student" --steps 1 --episodes 200 --json "$r/student/eval-1.json"
+        step "$t-s$s-export" "$r/int8/export.json" "$FRMD" export --ckpt "$r/student" --out "$r/int8"
+        step "$t-s$s-equiv" "$r/int8/equiv2000.json" "$FRMD" equiv --ckpt "$r/student" --baked "$r/int8" --episodes 2000 --json "$r/int8/equiv2000.json"
+        step "$t-s$s-dp" "$r/dp/frmd.json" "$FRMD" train dp --data "$d" --out "$r/dp" --backbone mlp-paper --seed "$s" --eval-episodes 0
+        step "$t-s$s-eval-dp100" "$r/dp/eval-ddpm100.json" "$FRMD" eval --task "$t" --ckpt "$r/dp" --steps 100 --episodes 200 --json "$r/dp/eval-ddpm100.json"
+        step "$t-s$s-eval-dp10" "$r/dp/eval-ddim10.json" "$FRMD" eval --task "$t" --ckpt "$r/dp" --steps 10 --episodes 200 --json "$r/dp/eval-ddim10.json"
+    done
+done
+python3 "$(dirname "$0")/recipe_table.py" "$OUT"
