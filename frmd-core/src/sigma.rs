@@ -42,8 +42,8 @@ impl core::fmt::Display for SigmaError {
 }
 
 /// The EDM noise-level configuration. Defaults: `sigma_min` 0.002, `sigma_max` 80, `rho` 7,
-/// `sigma_data` 0.5.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// `sigma_data` 0.5. Serialized as is in a checkpoint's `frmd.json` (`sigma`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SigmaConfig {
     /// Smallest noise level; the consistency function is the identity there.
     pub sigma_min: f64,

@@ -88,7 +88,7 @@ fn synthetic_mlp_is_deterministic_and_valid() {
     let model = synthetic_mlp::generate();
     let hidden = model.hidden_layers();
     let mlp = model.mlp(&hidden);
-    mlp.validate::<{ shape::MLP_WIDTH }>().expect("valid synthetic network");
+    mlp.validate(shape::MLP_WIDTH).expect("valid synthetic network");
     assert_eq!(mlp.input_width(), shape::MLP_INPUT);
     assert_eq!(mlp.output_width(), shape::MLP_OUTPUT);
     assert_eq!(model.weight_bytes(), synthetic_mlp::generate().weight_bytes());

@@ -5,7 +5,8 @@
 //! The module has no inner attributes, so it works as a plain file module (`mod policy;`) and
 //! with `include!` from a build script's `OUT_DIR`
 //! (`mod baked { include!(concat!(env!("OUT_DIR"), "/policy.rs")); }`); `weights.bin` must sit
-//! next to it. It needs only `frmd-core` and exposes `network()`, `config()`, `policy()`, the
+//! next to it. It needs only `frmd-core` and exposes `mlp_parts()`, `network()`, `config()`,
+//! `policy()`, the
 //! `BakedPolicy` type and RAM/flash figures (`SCRATCH_BYTES`, `FLASH_BYTES`, `POLICY_RAM_BYTES`).
 
 use std::fmt::Write as _;
@@ -200,8 +201,9 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
     .map_err(fmt_err)?;
     w.push_str(
         "\nuse frmd_core::kernels::{FcRequant, FullyConnected, Lut8};\n\
-         use frmd_core::model::mlp::{InputPrecision, Int8Layer};\n\
-         use frmd_core::policy::{\n    baked_slice, AlignedBytes, InputLayout, InputSegment, Int8Network, Policy, PolicyConfig,\n    PolicyError, RangeNormalizer, Sampler, StepConstants,\n};\n\
+         use frmd_core::model::linear::{Int8Linear, RequantizedLinear};\n\
+         use frmd_core::model::mlp::InputPrecision;\n\
+         use frmd_core::policy::{\n    baked_slice, AlignedBytes, InputLayout, InputSegment, Int8MlpNetwork, Policy, PolicyConfig,\n    PolicyError, ProDmpTables, RangeNormalizer, Sampler, StepConstants, StepTable,\n};\n\
          use frmd_core::prodmp::BakedProDmp;\n\
          use frmd_core::quant::QuantParams;\n\n",
     );
@@ -282,14 +284,14 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
     .map_err(fmt_err)?;
     writeln!(
         w,
-        "/// Observation normalization (raw units).\npub const OBS_NORM: RangeNormalizer<OBS_DIM> = RangeNormalizer::new(\n    {},\n    {},\n);",
+        "/// Observation range (raw units).\npub static OBS_MIN: [f32; OBS_DIM] = {};\npub static OBS_MAX: [f32; OBS_DIM] = {};\n/// Observation normalization.\npub const OBS_NORM: RangeNormalizer<'static> = RangeNormalizer::new(&OBS_MIN, &OBS_MAX);",
         list(&q.obs_min, float),
         list(&q.obs_max, float)
     )
     .map_err(fmt_err)?;
     writeln!(
         w,
-        "/// Action normalization (raw units).\npub const ACTION_NORM: RangeNormalizer<ACTION_DIM> = RangeNormalizer::new(\n    {},\n    {},\n);",
+        "/// Action range (raw units).\npub static ACTION_MIN: [f32; ACTION_DIM] = {};\npub static ACTION_MAX: [f32; ACTION_DIM] = {};\n/// Action normalization.\npub const ACTION_NORM: RangeNormalizer<'static> = RangeNormalizer::new(&ACTION_MIN, &ACTION_MAX);",
         list(&q.action_min, float),
         list(&q.action_max, float)
     )
@@ -302,13 +304,13 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
     .map_err(fmt_err)?;
     let steps = list(&q.steps, |s| {
         format!(
-            "\n    StepConstants {{ sigma: {}, renoise_std: {}, c_in: {}, c_skip: {}, c_out: {}, first_layer_bias_index: {} }}",
+            "\n    StepConstants {{ sigma: {}, renoise_std: {}, c_in: {}, c_skip: {}, c_out: {}, noise_variant: {} }}",
             float(&s.sigma),
             float(&s.renoise_std),
             float(&s.c_in),
             float(&s.c_skip),
             float(&s.c_out),
-            s.first_layer_bias_index
+            s.noise_variant
         )
     });
     writeln!(
@@ -346,20 +348,25 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
         "/// The weight file ({weights_len} bytes, 16-aligned arrays).\npub static WEIGHTS: AlignedBytes<WEIGHTS_BYTES> = AlignedBytes(*include_bytes!(\"{WEIGHTS_FILE}\"));\n"
     )
     .map_err(fmt_err)?;
-    // network()
-    w.push_str(
-        "/// The int8 network over the baked weights (`WIDTH` >= `SCRATCH_WIDTH`).\n\
-         pub fn network<const WIDTH: usize>() -> Result<Int8Network<'static, WIDTH>, PolicyError> {\n    let bytes = &WEIGHTS.0;\n    let layers = [\n",
-    );
+    // mlp_parts() and network()
+    let layers = q.hidden.len();
+    writeln!(
+        w,
+        "/// The hidden layers, the output layer and the first-layer bias variants over the baked\n\
+         /// weights.\n\
+         #[allow(clippy::type_complexity)]\n\
+         pub fn mlp_parts() -> Result<([RequantizedLinear<'static>; {layers}], Int8Linear<'static>, &'static [i32]), PolicyError> {{\n    let bytes = &WEIGHTS.0;\n    let hidden = ["
+    )
+    .map_err(fmt_err)?;
     for (i, layer) in q.hidden.iter().enumerate() {
         let (weights, bias) = (entries[2 * i], entries[2 * i + 1]);
         let activation = match layer.lut {
-            Some(l) => format!("Some(&LUT_{l})"),
+            Some(l) => format!("Some(&LUT_{l}.table)"),
             None => "None".into(),
         };
         writeln!(
             w,
-            "        Int8Layer {{\n            fc: FullyConnected::new(\n                {},\n                {},\n                baked_slice(bytes, {}, {})?,\n                baked_slice(bytes, {}, {})?,\n            ),\n            requant: FcRequant {{\n                multipliers: &HIDDEN_{i}_MULTIPLIERS,\n                shifts: &HIDDEN_{i}_SHIFTS,\n                output_zero_point: {},\n                activation_min: {},\n                activation_max: {},\n            }},\n            activation: {activation},\n        }},",
+            "        RequantizedLinear {{\n            fc: FullyConnected::new(\n                {},\n                {},\n                baked_slice(bytes, {}, {})?,\n                baked_slice(bytes, {}, {})?,\n            ),\n            requant: FcRequant {{\n                multipliers: &HIDDEN_{i}_MULTIPLIERS,\n                shifts: &HIDDEN_{i}_SHIFTS,\n                output_zero_point: {},\n                activation_min: {},\n                activation_max: {},\n            }},\n            activation: {activation},\n        }},",
             layer.in_features,
             layer.out_features,
             weights.offset,
@@ -376,7 +383,9 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
     let (variants, out_weights, out_bias) = (entries[base], entries[base + 1], entries[base + 2]);
     writeln!(
         w,
-        "    ];\n    let output = FullyConnected::new(\n        {},\n        {},\n        baked_slice(bytes, {}, {})?,\n        baked_slice(bytes, {}, {})?,\n    );\n    let first_layer_biases = baked_slice(bytes, {}, {})?;\n    Int8Network::from_parts_with_input(\n        INPUT,\n        INPUT_PRECISION,\n        &layers,\n        output,\n        &OUTPUT_SCALES,\n        first_layer_biases,\n    )\n}}\n",
+        "    ];\n    let output = Int8Linear {{\n        fc: FullyConnected::new(\n            {},\n            {},\n            baked_slice(bytes, {}, {})?,\n            baked_slice(bytes, {}, {})?,\n        ),\n        output_scales: &OUTPUT_SCALES,\n    }};\n    Ok((hidden, output, baked_slice(bytes, {}, {})?))\n}}\n\n\
+         /// The int8 network over the baked weights (`WIDTH` >= `SCRATCH_WIDTH`).\n\
+         pub fn network<const WIDTH: usize>() -> Result<Int8MlpNetwork<'static, WIDTH>, PolicyError> {{\n    let (hidden, output, first_layer_biases) = mlp_parts()?;\n    Int8MlpNetwork::new(INPUT, INPUT_PRECISION, &hidden, output, first_layer_biases)\n}}\n",
         q.output.in_features,
         q.output.out_features,
         out_weights.offset,
@@ -389,9 +398,9 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
     .map_err(fmt_err)?;
     w.push_str(
         "/// Normalization and sampler configuration.\n\
-         pub fn config() -> PolicyConfig<'static, OBS_DIM, ACTION_DIM, HORIZON, PARAMS_PER_DOF> {\n    PolicyConfig {\n        obs_norm: OBS_NORM,\n        action_norm: ACTION_NORM,\n        sampler: Sampler {\n            steps: &STEPS,\n            decoder: &DECODER,\n            layout: LAYOUT,\n            control_dt: CONTROL_DT,\n        },\n    }\n}\n\n\
+         pub fn config() -> PolicyConfig<'static> {\n    PolicyConfig {\n        history: HISTORY,\n        obs_norm: OBS_NORM,\n        action_norm: ACTION_NORM,\n        sampler: Sampler {\n            steps: StepTable::new(&STEPS),\n            decoder: ProDmpTables::from_baked(&DECODER),\n            layout: LAYOUT,\n            control_dt: CONTROL_DT,\n        },\n    }\n}\n\n\
          /// The baked policy type.\n\
-         pub type BakedPolicy = Policy<\n    'static,\n    Int8Network<'static, SCRATCH_WIDTH>,\n    HISTORY,\n    OBS_DIM,\n    ACTION_DIM,\n    HORIZON,\n    PARAMS_PER_DOF,\n    INPUT_WIDTH,\n>;\n\n\
+         pub type BakedPolicy = Policy<\n    'static,\n    Int8MlpNetwork<'static, SCRATCH_WIDTH>,\n    HISTORY,\n    OBS_DIM,\n    ACTION_DIM,\n    HORIZON,\n    PARAMS_PER_DOF,\n    INPUT_WIDTH,\n>;\n\n\
          /// A ready policy (validated); call `reset` before the first chunk.\n\
          pub fn policy() -> Result<BakedPolicy, PolicyError> {\n    Policy::new(config(), network::<SCRATCH_WIDTH>()?)\n}\n",
     );

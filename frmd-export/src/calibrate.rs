@@ -48,6 +48,16 @@ impl std::str::FromStr for RangeMethod {
     }
 }
 
+/// `minmax` or `percentile:P`, what [`RangeMethod::from_str`](std::str::FromStr) reads.
+impl std::fmt::Display for RangeMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RangeMethod::MinMax => f.write_str("minmax"),
+            RangeMethod::Percentile(p) => write!(f, "percentile:{p}"),
+        }
+    }
+}
+
 /// Calibration conditions: rows of `[obs history, y0, v0]` in normalized units (v0 per second),
 /// as in training windows. Noise is drawn per row from `frmd_core::rng::Rng::new(seed + row)`.
 #[derive(Clone, Debug, PartialEq)]

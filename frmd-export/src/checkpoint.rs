@@ -12,6 +12,7 @@ mod config;
 pub use config::{Activation, BackboneConfig, HeadConfig, ModelConfig, Normalization, Normalizer, ProDmpOutput};
 
 use anyhow::{bail, Context};
+use frmd_core::prodmp::ProDmpConfig;
 use frmd_core::sigma::SigmaConfig;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -33,78 +34,6 @@ pub enum Role {
     Teacher,
     Student,
     Dp,
-}
-
-/// `frmd_core::sigma::SigmaConfig` as JSON.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SigmaJson {
-    pub sigma_min: f64,
-    pub sigma_max: f64,
-    pub rho: f64,
-    pub sigma_data: f64,
-}
-
-impl From<SigmaConfig> for SigmaJson {
-    fn from(s: SigmaConfig) -> Self {
-        SigmaJson { sigma_min: s.sigma_min, sigma_max: s.sigma_max, rho: s.rho, sigma_data: s.sigma_data }
-    }
-}
-
-impl From<SigmaJson> for SigmaConfig {
-    fn from(s: SigmaJson) -> Self {
-        SigmaConfig { sigma_min: s.sigma_min, sigma_max: s.sigma_max, rho: s.rho, sigma_data: s.sigma_data }
-    }
-}
-
-/// `frmd_core::prodmp::ProDmpConfig` as JSON (must equal the policy convention for the model's
-/// sizes).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ProDmpJson {
-    pub num_dof: usize,
-    pub num_basis: usize,
-    pub tau: f64,
-    pub delay: f64,
-    pub alpha: f64,
-    pub alpha_phase: f64,
-    pub bandwidth_factor: f64,
-    pub num_basis_outside: usize,
-    pub dt: f64,
-    pub weights_scale: f64,
-    pub goal_scale: f64,
-    pub relative_goal: bool,
-    pub auto_scale_basis: bool,
-}
-
-impl From<&frmd_core::prodmp::ProDmpConfig> for ProDmpJson {
-    fn from(c: &frmd_core::prodmp::ProDmpConfig) -> Self {
-        ProDmpJson {
-            num_dof: c.num_dof,
-            num_basis: c.num_basis,
-            tau: c.tau,
-            delay: c.delay,
-            alpha: c.alpha,
-            alpha_phase: c.alpha_phase,
-            bandwidth_factor: c.bandwidth_factor,
-            num_basis_outside: c.num_basis_outside,
-            dt: c.dt,
-            weights_scale: c.weights_scale,
-            goal_scale: c.goal_scale,
-            relative_goal: c.relative_goal,
-            auto_scale_basis: c.auto_scale_basis,
-        }
-    }
-}
-
-impl ProDmpJson {
-    /// Equal up to the last bits of the f64 fields: serde_json's default parser may read a
-    /// written f64 back one unit in the last place off (e.g. tau = 12 x 0.0125f32 as f64), so a
-    /// checkpoint's recorded config is compared with the recomputed one at a relative 1e-12.
-    pub fn matches(&self, other: &ProDmpJson) -> bool {
-        let close = |a: f64, b: f64| a == b || (a - b).abs() <= 1e-12 * a.abs().max(b.abs());
-        let floats = |p: &ProDmpJson| [p.tau, p.delay, p.alpha, p.alpha_phase, p.bandwidth_factor, p.dt, p.weights_scale, p.goal_scale];
-        let ints = |p: &ProDmpJson| (p.num_dof, p.num_basis, p.num_basis_outside, p.relative_goal, p.auto_scale_basis);
-        ints(self) == ints(other) && floats(self).iter().zip(floats(other)).all(|(&a, b)| close(a, b))
-    }
 }
 
 /// Where the training data came from.
@@ -131,8 +60,10 @@ pub struct CheckpointMeta {
     pub format_version: u32,
     pub role: Role,
     pub model: ModelConfig,
-    pub prodmp: Option<ProDmpJson>,
-    pub sigma: SigmaJson,
+    /// The decoder of a ProDMP head (must equal [`ModelConfig::prodmp`], the policy convention
+    /// for the model's sizes); `None` for a raw head.
+    pub prodmp: Option<ProDmpConfig>,
+    pub sigma: SigmaConfig,
     /// Observation and action normalization (raw units <-> [-1, 1]).
     pub normalization: Option<Normalization>,
     pub dataset: DatasetInfo,
@@ -196,10 +127,10 @@ impl CheckpointMeta {
         CheckpointMeta {
             format_version: FORMAT_VERSION,
             role,
-            prodmp: model.prodmp().as_ref().map(ProDmpJson::from),
+            prodmp: model.prodmp(),
             tensors: expected_tensors(model),
             model: model.clone(),
-            sigma: sigma.into(),
+            sigma,
             normalization: None,
             dataset: DatasetInfo::default(),
             training: serde_json::Value::Null,
@@ -212,10 +143,10 @@ impl CheckpointMeta {
             bail!("{CONFIG_FILE}: format_version {} is not supported (expected {FORMAT_VERSION})", self.format_version);
         }
         self.model.validate().with_context(|| format!("{CONFIG_FILE}: model"))?;
-        SigmaConfig::from(self.sigma).validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))?;
-        let expected_prodmp = self.model.prodmp().as_ref().map(ProDmpJson::from);
+        self.sigma.validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))?;
+        let expected_prodmp = self.model.prodmp();
         let same = match (&self.prodmp, &expected_prodmp) {
-            (Some(a), Some(b)) => a.matches(b),
+            (Some(a), Some(b)) => prodmp_matches(a, b),
             (a, b) => a == b,
         };
         if !same {
@@ -241,6 +172,16 @@ impl CheckpointMeta {
         meta.validate()?;
         Ok(meta)
     }
+}
+
+/// Equal up to the last bits of the f64 fields: serde_json's default parser may read a written
+/// f64 back one unit in the last place off (e.g. tau = 12 x 0.0125f32 as f64), so a checkpoint's
+/// recorded ProDMP config is compared with the recomputed one at a relative 1e-12.
+pub fn prodmp_matches(a: &ProDmpConfig, b: &ProDmpConfig) -> bool {
+    let close = |x: f64, y: f64| x == y || (x - y).abs() <= 1e-12 * x.abs().max(y.abs());
+    let floats = |p: &ProDmpConfig| [p.tau, p.delay, p.alpha, p.alpha_phase, p.bandwidth_factor, p.dt, p.weights_scale, p.goal_scale];
+    let exact = |p: &ProDmpConfig| (p.num_dof, p.num_basis, p.num_basis_outside, p.relative_goal, p.auto_scale_basis);
+    exact(a) == exact(b) && floats(a).iter().zip(floats(b)).all(|(&x, y)| close(x, y))
 }
 
 /// One f32 tensor read from the weights file.

@@ -21,8 +21,9 @@
 use crate::checkpoint::{Activation, BackboneConfig, Checkpoint, ModelConfig, ProDmpOutput, Role};
 use anyhow::{bail, Context};
 use frmd_core::kernels::Activation as KernelActivation;
-use frmd_core::model::mlp::{F32Layer, F32Mlp, F32Scratch, Probe};
-use frmd_core::policy::{skip_output, F32Network, InputLayout, InputSegment, StepConstants, MAX_HIDDEN_LAYERS, MAX_STEPS};
+use frmd_core::model::linear::F32Linear;
+use frmd_core::model::mlp::{F32Mlp, F32Scratch, Probe};
+use frmd_core::policy::{skip_output, F32MlpNetwork, InputLayout, InputSegment, StepConstants, MAX_HIDDEN_LAYERS, MAX_STEPS};
 use frmd_core::prodmp::{apply_row_f32, ProDmp, ProDmpConfig};
 use frmd_core::sigma::{noise_embedding, SigmaConfig};
 
@@ -42,8 +43,9 @@ pub struct FloatLayer {
 }
 
 impl FloatLayer {
-    fn view<'a>(&'a self, bias: &'a [f32]) -> F32Layer<'a> {
-        F32Layer {
+    /// frmd-core's f32 layer over these weights with `bias`.
+    pub fn view<'a>(&'a self, bias: &'a [f32]) -> F32Linear<'a> {
+        F32Linear {
             in_features: self.in_features,
             out_features: self.out_features,
             weights: &self.weights,
@@ -111,7 +113,7 @@ pub fn step_constants(sigma: &SigmaConfig, output: ProDmpOutput, steps: usize) -
                 c_in: sigma.c_in(level).map_err(err("c_in"))? as f32,
                 c_skip: c_skip as f32,
                 c_out: c_out as f32,
-                first_layer_bias_index: i as u32,
+                noise_variant: i as u32,
             })
         })
         .collect()
@@ -199,7 +201,7 @@ impl FoldedMlp {
         if widest > MAX_WIDTH {
             bail!("layer width {widest} exceeds the exporter's limit of {MAX_WIDTH}");
         }
-        let sigma: SigmaConfig = meta.sigma.into();
+        let sigma: SigmaConfig = meta.sigma;
         let steps = step_constants(&sigma, meta.model.prodmp_output().unwrap_or_default(), steps)?;
         let mut layers = Vec::new();
         let mut width = input_width + config.embed_dim;
@@ -275,17 +277,17 @@ impl FoldedMlp {
         Ok(out)
     }
 
-    /// All first-layer bias variants back to back (the layout [`F32Network`] takes).
+    /// All first-layer bias variants back to back (the layout [`F32MlpNetwork`] takes).
     pub fn flat_first_layer_biases(&self) -> Vec<f32> {
         self.first_layer_biases.concat()
     }
 
-    /// frmd-core's [`F32Network`] over these weights, with `biases` from
+    /// frmd-core's [`F32MlpNetwork`] over these weights, with `biases` from
     /// [`Self::flat_first_layer_biases`] (the f32 twin of the int8 network, for the runtime's
     /// own sampler and policy).
-    pub fn f32_network<'a, const WIDTH: usize>(&'a self, biases: &'a [f32]) -> anyhow::Result<F32Network<'a, WIDTH>> {
-        let views: Vec<F32Layer<'a>> = self.hidden.iter().map(|l| l.view(&l.bias)).collect();
-        F32Network::from_parts(&views, self.output.view(&self.output.bias), biases).map_err(|e| anyhow::anyhow!("f32 network: {e}"))
+    pub fn f32_network<'a, const WIDTH: usize>(&'a self, biases: &'a [f32]) -> anyhow::Result<F32MlpNetwork<'a, WIDTH>> {
+        let views: Vec<F32Linear<'a>> = self.hidden.iter().map(|l| l.view(&l.bias)).collect();
+        F32MlpNetwork::new(&views, self.output.view(&self.output.bias), biases).map_err(|e| anyhow::anyhow!("f32 network: {e}"))
     }
 
     /// Input width of the folded network.
@@ -297,7 +299,7 @@ impl FoldedMlp {
     /// probe to `observe`; returns the `K * P` ProDMP parameters.
     pub fn forward_observed(&self, step: usize, input: &[f32], mut observe: impl FnMut(Probe, &[f32])) -> anyhow::Result<Vec<f32>> {
         let bias = self.first_layer_biases.get(step).context("step index out of range")?;
-        let views: Vec<F32Layer<'_>> = self
+        let views: Vec<F32Linear<'_>> = self
             .hidden
             .iter()
             .enumerate()

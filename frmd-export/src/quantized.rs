@@ -1,9 +1,13 @@
 //! [`QuantizedPolicy`]: the owned, target-independent result of quantization, from which both
 //! output forms (blob and baked module) are written.
 
-use frmd_core::blob::{BlobParts, HiddenLayerParts, OutputLayerParts, ProDmpTables, LUT_LEN};
-use frmd_core::model::mlp::InputPrecision;
-use frmd_core::policy::{InputLayout, StepConstants};
+use frmd_core::blob::{MlpBlobParts, LUT_LEN};
+use frmd_core::kernels::{FcRequant, FullyConnected};
+use frmd_core::model::linear::{Int8Linear, RequantizedLinear};
+use frmd_core::model::mlp::{InputPrecision, Int8Mlp};
+use frmd_core::policy::{
+    InputLayout, PolicyConfig, ProDmpTables, RangeNormalizer, Sampler, StepConstants, StepTable,
+};
 use frmd_core::prodmp::BakedProDmp;
 use frmd_core::quant::QuantParams;
 
@@ -37,7 +41,8 @@ impl ProDmpTablesOwned {
         }
     }
 
-    fn view(&self) -> ProDmpTables<'_> {
+    /// The tables as frmd-core's decoder view.
+    pub fn view(&self) -> ProDmpTables<'_> {
         ProDmpTables {
             pos_params: &self.pos_params,
             vel_params: &self.vel_params,
@@ -173,50 +178,61 @@ impl QuantizedPolicy {
             .unwrap_or(0)
     }
 
-    /// Borrowed view for [`frmd_core::blob::encode`], given to `f`.
-    pub fn with_parts<R>(&self, f: impl FnOnce(&BlobParts<'_>) -> R) -> R {
-        let hidden: Vec<HiddenLayerParts<'_>> = self
-            .hidden
-            .iter()
-            .map(|l| HiddenLayerParts {
-                in_features: l.in_features,
-                out_features: l.out_features,
-                weights: &l.weights,
-                bias: &l.bias,
-                multipliers: &l.multipliers,
-                shifts: &l.shifts,
-                output_zero_point: l.output_zero_point,
-                activation_min: l.activation_min,
-                activation_max: l.activation_max,
-                lut: l.lut,
-            })
-            .collect();
-        let parts = BlobParts {
+    /// The policy configuration (normalization, steps, decoder, layout) as frmd-core's view.
+    pub fn config(&self) -> PolicyConfig<'_> {
+        PolicyConfig {
             history: self.history,
-            obs_dim: self.obs_dim,
-            action_dim: self.action_dim,
-            horizon: self.horizon,
-            params_per_dof: self.params_per_dof,
-            control_dt: self.control_dt,
-            layout: self.layout,
-            input: self.input,
-            input_precision: self.input_precision,
-            obs_min: &self.obs_min,
-            obs_max: &self.obs_max,
-            action_min: &self.action_min,
-            action_max: &self.action_max,
-            prodmp: self.prodmp.view(),
-            steps: &self.steps,
-            first_layer_biases: &self.first_layer_biases,
-            luts: &self.luts,
-            hidden: &hidden,
-            output: OutputLayerParts {
-                in_features: self.output.in_features,
-                out_features: self.output.out_features,
-                weights: &self.output.weights,
-                bias: &self.output.bias,
-                scales: &self.output.scales,
+            obs_norm: RangeNormalizer::new(&self.obs_min, &self.obs_max),
+            action_norm: RangeNormalizer::new(&self.action_min, &self.action_max),
+            sampler: Sampler {
+                steps: StepTable::new(&self.steps),
+                decoder: self.prodmp.view(),
+                layout: self.layout,
+                control_dt: self.control_dt,
             },
+        }
+    }
+
+    /// The hidden layers as frmd-core views (tables from [`Self::luts`]; a layer naming a missing
+    /// table gets none).
+    pub fn hidden_layers(&self) -> Vec<RequantizedLinear<'_>> {
+        self.hidden
+            .iter()
+            .map(|l| RequantizedLinear {
+                fc: FullyConnected::new(l.in_features, l.out_features, &l.weights, &l.bias),
+                requant: FcRequant {
+                    multipliers: &l.multipliers,
+                    shifts: &l.shifts,
+                    output_zero_point: l.output_zero_point,
+                    activation_min: l.activation_min,
+                    activation_max: l.activation_max,
+                },
+                activation: l.lut.and_then(|i| self.luts.get(i)),
+            })
+            .collect()
+    }
+
+    /// The output layer as a frmd-core view.
+    pub fn output_layer(&self) -> Int8Linear<'_> {
+        let o = &self.output;
+        Int8Linear {
+            fc: FullyConnected::new(o.in_features, o.out_features, &o.weights, &o.bias),
+            output_scales: &o.scales,
+        }
+    }
+
+    /// Borrowed view for [`frmd_core::blob::encode_mlp`], given to `f`.
+    pub fn with_parts<R>(&self, f: impl FnOnce(&MlpBlobParts<'_>) -> R) -> R {
+        let hidden = self.hidden_layers();
+        let parts = MlpBlobParts {
+            config: self.config(),
+            mlp: Int8Mlp {
+                input: self.input,
+                hidden: &hidden,
+                output: self.output_layer(),
+            },
+            input_precision: self.input_precision,
+            noise_variants: &self.first_layer_biases,
         };
         f(&parts)
     }

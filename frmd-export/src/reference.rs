@@ -3,8 +3,9 @@
 //! floor divisions; i64 dot products here), on random and edge inputs.
 use crate::QuantizedPolicy;
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
-use frmd_core::policy::{Int8Network, Network};
-use frmd_core::model::mlp::{InputPrecision, Int8Layer};
+use frmd_core::model::linear::RequantizedLinear;
+use frmd_core::model::mlp::InputPrecision;
+use frmd_core::policy::{Int8MlpNetwork, Network};
 use frmd_core::quant::{multiply_by_quantized_multiplier, reference, requantize_to_i8, QuantParams, FINE_INPUT_BITS, Q31_MANTISSA_MIN, SHIFT_MAX, SHIFT_MIN};
 use frmd_core::rng::Rng;
 
@@ -93,17 +94,17 @@ pub fn check_requantization(random: u64, seed: u64) -> KernelCheck {
     check
 }
 
-/// Owned LUTs so an [`Int8Network`] can borrow them.
+/// Owned LUTs so an [`Int8MlpNetwork`] can borrow them.
 pub fn luts(policy: &QuantizedPolicy) -> Vec<Lut8> {
     policy.luts.iter().map(|t| Lut8::from_table(*t)).collect()
 }
 
-/// frmd-core's [`Int8Network`] over `policy`'s tensors (scratch `WIDTH`).
-pub fn int8_network<'a, const WIDTH: usize>(policy: &'a QuantizedPolicy, luts: &'a [Lut8]) -> anyhow::Result<Int8Network<'a, WIDTH>> {
-    let layers: Vec<Int8Layer<'a>> = policy
+/// frmd-core's [`Int8MlpNetwork`] over `policy`'s tensors and the tables `luts` (scratch `WIDTH`).
+pub fn int8_network<'a, const WIDTH: usize>(policy: &'a QuantizedPolicy, luts: &'a [Lut8]) -> anyhow::Result<Int8MlpNetwork<'a, WIDTH>> {
+    let layers: Vec<RequantizedLinear<'a>> = policy
         .hidden
         .iter()
-        .map(|l| Int8Layer {
+        .map(|l| RequantizedLinear {
             fc: FullyConnected::new(l.in_features, l.out_features, &l.weights, &l.bias),
             requant: FcRequant {
                 multipliers: &l.multipliers,
@@ -112,18 +113,10 @@ pub fn int8_network<'a, const WIDTH: usize>(policy: &'a QuantizedPolicy, luts: &
                 activation_min: l.activation_min,
                 activation_max: l.activation_max,
             },
-            activation: l.lut.and_then(|i| luts.get(i)),
+            activation: l.lut.and_then(|i| luts.get(i)).map(|lut| &lut.table),
         })
         .collect();
-    let out = &policy.output;
-    Int8Network::from_parts_with_input(
-        policy.input,
-        policy.input_precision,
-        &layers,
-        FullyConnected::new(out.in_features, out.out_features, &out.weights, &out.bias),
-        &out.scales,
-        &policy.first_layer_biases,
-    )
+    Int8MlpNetwork::new(policy.input, policy.input_precision, &layers, policy.output_layer(), &policy.first_layer_biases)
     .map_err(|e| anyhow::anyhow!("int8 network: {e}"))
 }
 
@@ -131,7 +124,7 @@ pub fn int8_network<'a, const WIDTH: usize>(policy: &'a QuantizedPolicy, luts: &
 /// model, LUTs indexed directly; returns the output layer's accumulators. Errors if `policy` is
 /// inconsistent (widths, bias variants, LUT indices) or `input` has the wrong length.
 pub fn wide_network(policy: &QuantizedPolicy, step: usize, input: &[f32]) -> anyhow::Result<Vec<i64>> {
-    policy.with_parts(|parts| frmd_core::blob::encoded_len(parts).map(|_| ())).map_err(|e| anyhow::anyhow!("inconsistent policy: {e}"))?;
+    policy.with_parts(|parts| frmd_core::blob::mlp_encoded_len(parts).map(|_| ())).map_err(|e| anyhow::anyhow!("inconsistent policy: {e}"))?;
     let first_in = policy.hidden.first().map_or(policy.output.in_features, |l| l.in_features);
     let first_out = policy.hidden.first().map_or(policy.output.out_features, |l| l.out_features);
     if input.len() != first_in {

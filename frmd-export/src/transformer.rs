@@ -6,20 +6,20 @@
 //! `fc2`), `final_norm` and a `head` over the flattened tokens. Per sampling step `i` the noise
 //! level is fixed, so `noise_in(embedding(c_noise(sigma_i))) + pos_embedding[1]` is one constant
 //! `W`-long token ([`frmd_core::model::transformer::fold_noise_token`]); the runtime selects it by
-//! the step's `first_layer_bias_index` ([`frmd_core::policy::TransformerNetwork`]), the way the
+//! the step's `noise_variant` ([`frmd_core::policy::TransformerNetwork`]), the way the
 //! MLP selects its per-step first-layer bias.
 //!
 //! The result ([`FoldedTransformer`]) runs on frmd-core's own f32 path
 //! ([`F32Transformer`]); [`quantize`] calibrates it with the transformer probes and quantizes it
 //! into an owned [`QuantizedTransformer`] that views as frmd-core's [`Int8Transformer`].
-//! [`blob::write`] encodes it as the `FRMT` blob (the supported firmware form), [`bake`] writes a
+//! [`crate::blob::write_transformer`] encodes it as the `FRMT` blob (the supported firmware form),
+//! [`bake`] writes a
 //! module that embeds that blob with compile-time sizes, `QuantizedTransformer::memory` gives the
 //! RAM/flash figures and [`reference::check_layers`] is check (d) of the bit-accuracy harness.
 //!
 //! [`Int8Transformer`]: frmd_core::model::transformer::Int8Transformer
 
 pub mod bake;
-pub mod blob;
 mod memory;
 mod quantize;
 pub mod reference;
@@ -32,13 +32,14 @@ use crate::checkpoint::{BackboneConfig, Checkpoint, ModelConfig, Role};
 use crate::fold::{mlp_layout, sample_chunk, step_constants, FloatLayer};
 use crate::ProDmpTablesOwned;
 use anyhow::{bail, Context};
+use crate::checkpoint::Normalization;
 use frmd_core::kernels::Activation;
-use frmd_core::model::mlp::F32Layer;
+use frmd_core::model::linear::F32Linear;
 use frmd_core::model::transformer::{
-    fold_noise_token, F32Block, F32Transformer, LayerNormWeights, TransformerProbe,
-    TransformerScratch, TransformerShape,
+    fold_noise_token, F32Block, F32FeedForward, F32Transformer, LayerNormWeights,
+    TransformerProbe, TransformerScratch, TransformerShape,
 };
-use frmd_core::policy::{InputLayout, StepConstants};
+use frmd_core::policy::{InputLayout, PolicyConfig, RangeNormalizer, Sampler, StepConstants, StepTable};
 use frmd_core::sigma::{noise_embedding, SigmaConfig};
 
 /// Scratch for the exporter's f32 and int8 transformer passes (enough for `transformer`, 6 x 256
@@ -92,14 +93,8 @@ pub struct FoldedTransformer {
     pub prodmp: ProDmpTablesOwned,
 }
 
-pub(crate) fn f32_view<'a>(layer: &'a FloatLayer) -> F32Layer<'a> {
-    F32Layer {
-        in_features: layer.in_features,
-        out_features: layer.out_features,
-        weights: &layer.weights,
-        bias: &layer.bias,
-        activation: layer.activation,
-    }
+pub(crate) fn f32_view(layer: &FloatLayer) -> F32Linear<'_> {
+    layer.view(&layer.bias)
 }
 
 /// Reads linear layer `transformer.{name}` (`[out, in]` weight, `[out]` bias).
@@ -152,7 +147,7 @@ impl FoldedTransformer {
         {
             bail!("transformer shape {shape:?} needs more scratch than the exporter's host scratch holds");
         }
-        let sigma: SigmaConfig = meta.sigma.into();
+        let sigma: SigmaConfig = meta.sigma;
         let steps = step_constants(&sigma, meta.model.prodmp_output().unwrap_or_default(), steps)?;
         let (w, tokens) = (width, shape.tokens());
         let positions = ckpt.tensor("transformer.pos_embedding")?.to_vec();
@@ -180,7 +175,7 @@ impl FoldedTransformer {
                     qkv: linear(ckpt, &format!("{p}.qkv"), w, 3 * w)?,
                     proj: linear(ckpt, &format!("{p}.proj"), w, w)?,
                     norm2: norm(ckpt, &format!("{p}.norm2"), w)?,
-                    fc1: linear(ckpt, &format!("{p}.fc1"), w, 4 * w)?,
+                    fc1: FloatLayer { activation: Activation::GeluSigmoid, ..linear(ckpt, &format!("{p}.fc1"), w, 4 * w)? },
                     fc2: linear(ckpt, &format!("{p}.fc2"), 4 * w, w)?,
                 })
             })
@@ -213,8 +208,7 @@ impl FoldedTransformer {
                 qkv: f32_view(&b.qkv),
                 proj: f32_view(&b.proj),
                 norm2: b.norm2.view(),
-                fc1: f32_view(&b.fc1),
-                fc2: f32_view(&b.fc2),
+                feed_forward: F32FeedForward { fc1: f32_view(&b.fc1), fc2: f32_view(&b.fc2) },
             })
             .collect()
     }
@@ -232,6 +226,21 @@ impl FoldedTransformer {
             final_norm: self.final_norm.view(),
             head: f32_view(&self.head),
         })
+    }
+
+    /// The policy configuration with normalization `norm` as frmd-core's view.
+    pub fn config<'a>(&'a self, norm: &'a Normalization) -> PolicyConfig<'a> {
+        PolicyConfig {
+            history: self.config.history,
+            obs_norm: RangeNormalizer::new(&norm.obs.min, &norm.obs.max),
+            action_norm: RangeNormalizer::new(&norm.action.min, &norm.action.max),
+            sampler: Sampler {
+                steps: StepTable::new(&self.steps),
+                decoder: self.prodmp.view(),
+                layout: self.layout,
+                control_dt: self.config.control_dt as f32,
+            },
+        }
     }
 
     /// All noise tokens back to back (the layout [`frmd_core::policy::TransformerNetwork`]

@@ -2,16 +2,15 @@
 //! what `bake::write_module` produces for the sample policy. Regenerate with
 //! `FRMD_BLESS=1 cargo test -p frmd-export --test bake_golden`.
 
-mod common;
 
 use std::path::PathBuf;
 
-use common::{GOLDEN_SEED, GOLDEN_STEPS};
+use frmd_test_support::random_policy::{GOLDEN_SEED, GOLDEN_STEPS};
 use frmd_export::bake::{write_module, MODULE_FILE, WEIGHTS_FILE};
 
 #[test]
 fn committed_baked_module_is_current() {
-    let policy = common::sample_policy(GOLDEN_SEED, GOLDEN_STEPS);
+    let policy = frmd_test_support::random_policy::sample_policy(GOLDEN_SEED, GOLDEN_STEPS);
     let golden = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/baked");
     if std::env::var_os("FRMD_BLESS").is_some() {
         write_module(&policy, &golden).unwrap();
@@ -31,7 +30,7 @@ fn committed_baked_module_is_current() {
 
 #[test]
 fn bake_refuses_non_finite_values() {
-    let mut policy = common::sample_policy(GOLDEN_SEED, 1);
+    let mut policy = frmd_test_support::random_policy::sample_policy(GOLDEN_SEED, 1);
     policy.prodmp.pos_y0[2] = f32::NAN;
     let dir = std::env::temp_dir().join(format!("frmd-bake-nan-{}", std::process::id()));
     let error = write_module(&policy, &dir).unwrap_err();

@@ -1,15 +1,14 @@
 //! Compiles the committed baked module (`tests/baked/`, kept current by `bake_golden.rs`) the way a
 //! firmware crate would (`include!`), and checks it against the blob of the same policy.
 
-mod common;
 
 #[allow(dead_code)]
 mod baked {
     include!("baked/policy.rs");
 }
 
-use common::*;
-use frmd_core::blob::LoadedPolicy;
+use frmd_test_support::random_policy::*;
+use frmd_core::blob::LoadedMlp;
 use frmd_core::policy::Noise;
 use frmd_core::rng::Rng;
 
@@ -20,9 +19,9 @@ fn baked_module_runs_bit_identical_to_the_blob() {
     let mut words = vec![0_u128; blob.len().div_ceil(16)];
     bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
     let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
-    let loaded = LoadedPolicy::<M, O, K, N, P>::load(bytes).unwrap();
+    let loaded = LoadedMlp::load(bytes).unwrap();
     let mut from_blob = loaded
-        .policy::<{ baked::INPUT_WIDTH }, { baked::SCRATCH_WIDTH }>()
+        .policy::<M, O, K, N, P, { baked::INPUT_WIDTH }, { baked::SCRATCH_WIDTH }>()
         .unwrap();
     let mut from_module = baked::policy().unwrap();
     for seed in 0..4 {

@@ -1,9 +1,8 @@
 //! The exporter's blob round-trips through frmd-core's loader into a working policy.
 
-mod common;
 
-use common::*;
-use frmd_core::blob::{BlobError, LoadedPolicy, SectionId};
+use frmd_test_support::random_policy::*;
+use frmd_core::blob::{BlobError, LoadedMlp, SectionId};
 use frmd_core::policy::Noise;
 use frmd_core::rng::Rng;
 
@@ -21,15 +20,12 @@ fn written_blob_loads_and_matches_the_parts() {
         let blob = frmd_export::blob::write(&policy).unwrap();
         let words = aligned(&blob);
         let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
-        let loaded = LoadedPolicy::<M, O, K, N, P>::load(bytes).unwrap();
+        let loaded = LoadedMlp::load(bytes).unwrap();
         assert_eq!(loaded.steps(), &policy.steps[..]);
         assert_eq!(loaded.layout(), &policy.layout);
-        assert_eq!(
-            loaded.decoder().pos_params.as_flattened(),
-            &policy.prodmp.pos_params[..]
-        );
+        assert_eq!(loaded.decoder().pos_params, &policy.prodmp.pos_params[..]);
         assert_eq!(loaded.decoder().vel_v0.to_vec(), policy.prodmp.vel_v0);
-        let mut runtime = loaded.policy::<64, 64>().unwrap();
+        let mut runtime = loaded.policy::<M, O, K, N, P, 64, 64>().unwrap();
         runtime.reset(&[0.0, 0.1, 0.2]).unwrap();
         runtime.observe(&[0.1, 1.0, 0.5, 2.0]).unwrap();
         let chunk = *runtime.act(Noise::Rng(&mut Rng::new(9))).unwrap();

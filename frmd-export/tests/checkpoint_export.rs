@@ -122,7 +122,8 @@ fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
         let mut words = vec![0u32; blob.len().div_ceil(4)];
         bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
         let bytes = &bytemuck::cast_slice::<u32, u8>(&words)[..blob.len()];
-        let loaded = frmd_core::blob::LoadedPolicy::<2, 3, 2, 5, 4>::load(bytes).unwrap();
+        let loaded = frmd_core::blob::LoadedMlp::load(bytes).unwrap();
+        assert_eq!(loaded.dims(), frmd_core::policy::PolicyDims { history: 2, obs_dim: 3, action_dim: 2, horizon: 5, params_per_dof: 4 });
         assert_eq!(loaded.steps(), policy.steps.as_slice());
         // frmd-core's int8 network over the loaded blob vs the wide-integer model of the policy,
         // and vs the f32 path (quantization error only).
@@ -235,7 +236,7 @@ fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
             words
         })
         .collect();
-    let loaded: Vec<_> = blobs.iter().map(|words| frmd_core::blob::LoadedPolicy::<2, 3, 2, 5, 4>::load(bytemuck::cast_slice::<u32, u8>(words)).unwrap()).collect();
+    let loaded: Vec<_> = blobs.iter().map(|words| frmd_core::blob::LoadedMlp::load(bytemuck::cast_slice::<u32, u8>(words)).unwrap()).collect();
     let mut loaded_nets: Vec<_> = loaded.iter().map(|policy| policy.network::<64>().unwrap()).collect();
     assert_eq!(loaded_nets[0].input_precision(), InputPrecision::Int16);
     assert_eq!(loaded_nets[1].input_precision(), InputPrecision::TwoPlane);
@@ -275,4 +276,21 @@ fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
         let check = frmd_export::reference::check_network::<64>(policy, &[]).unwrap();
         assert!(check.passed(), "{check:?}");
     }
+}
+
+#[test]
+fn recorded_prodmp_config_is_compared_up_to_the_last_bits() {
+    let mut meta = CheckpointMeta::describe(Role::Student, &model(mlp()), SigmaConfig::default());
+    let exact = meta.prodmp.expect("a ProDMP head");
+    // One unit in the last place off (what serde_json's default parser may give back) passes.
+    let mut read_back = exact;
+    read_back.tau = f64::from_bits(exact.tau.to_bits() + 1);
+    meta.prodmp = Some(read_back);
+    meta.validate().unwrap();
+    // A real difference is still refused, naming the config.
+    read_back.tau = exact.tau * 1.001;
+    meta.prodmp = Some(read_back);
+    assert!(format!("{:#}", meta.validate().unwrap_err()).contains("prodmp config"));
+    meta.prodmp = Some(frmd_core::prodmp::ProDmpConfig { num_basis: exact.num_basis + 1, ..exact });
+    assert!(meta.validate().is_err());
 }

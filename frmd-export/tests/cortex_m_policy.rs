@@ -4,13 +4,13 @@
 //! student `examples/cortex-m/policy/reach/` with `export::export_checkpoint` and bakes it with
 //! `bake::write_module` in its build.rs, then times `Policy::act` on QEMU. Here the same checkpoint
 //! goes through the same export call (`frmd_firmware_support::host::student`), is written as a
-//! blob, loaded with `frmd_core::blob::LoadedPolicy` and driven through the same workload;
+//! blob, loaded with `frmd_core::blob::LoadedMlp` and driven through the same workload;
 //! `qemu_policy_digest_matches_host` requires the firmware's printed digest on every board of
 //! `run-qemu.sh` (Cortex-M4F, M7, M33, M0, M55) to equal the host's. It needs `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without
 //! it, or with FRMD_SKIP_QEMU=1, it prints why and passes without checking
 //! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
 
-use frmd_core::blob::LoadedPolicy;
+use frmd_core::blob::LoadedMlp;
 use frmd_firmware_support::host::qemu;
 use frmd_firmware_support::host::student::{student, AlignedBlob};
 use frmd_firmware_support::policy_workload::PolicyWorkload;
@@ -19,10 +19,10 @@ use frmd_firmware_support::workload::digest_all;
 
 fn host_digest() -> u64 {
     let blob = AlignedBlob::of(&student());
-    let loaded = LoadedPolicy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS>::load(blob.bytes())
+    let loaded = LoadedMlp::load(blob.bytes())
         .expect("load the blob");
     let policy = loaded
-        .policy::<STUDENT_INPUT, MLP_WIDTH>()
+        .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>()
         .expect("policy from the blob");
     let mut workload = PolicyWorkload::new(policy);
     digest_all(&mut workload).expect("run the fixed cases")
@@ -90,8 +90,10 @@ fn qemu_minimal_example_acts_like_the_host() {
         return;
     }
     let blob = AlignedBlob::of(&student());
-    let loaded = LoadedPolicy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS>::load(blob.bytes()).expect("load the blob");
-    let mut policy = loaded.policy::<STUDENT_INPUT, MLP_WIDTH>().expect("policy from the blob");
+    let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
+    let mut policy = loaded
+        .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>()
+        .expect("policy from the blob");
     policy.reset(&[0.05; DOF]).unwrap();
     for step in 0..STUDENT_HISTORY {
         policy.observe(&[0.1 * step as f32; STUDENT_OBS_DIM]).unwrap();

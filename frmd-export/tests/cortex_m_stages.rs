@@ -11,9 +11,9 @@
 
 use std::sync::atomic::{AtomicU32, Ordering};
 
-use frmd_core::blob::LoadedPolicy;
-use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
-use frmd_core::model::mlp::{InputPrecision, Int8Layer};
+use frmd_core::blob::LoadedMlp;
+use frmd_core::model::linear::RequantizedLinear;
+use frmd_core::model::mlp::InputPrecision;
 use frmd_core::policy::Policy;
 use frmd_export::QuantizedPolicy;
 use frmd_firmware_support::host::qemu::{self, line_value};
@@ -31,27 +31,10 @@ fn counting_clock() -> u32 {
     TICKS.fetch_add(1, Ordering::Relaxed)
 }
 
-/// The SiLU tables of `quantized`, indexed as its layers' `lut` fields index them.
-fn tables(quantized: &QuantizedPolicy) -> Vec<Lut8> {
-    quantized.luts.iter().map(|table| Lut8::from_table(*table)).collect()
-}
-
 /// The hidden layers of `quantized` as frmd-core layers over its own arrays.
-fn hidden_layers<'a>(quantized: &'a QuantizedPolicy, luts: &'a [Lut8]) -> [Int8Layer<'a>; LAYERS] {
-    std::array::from_fn(|i| {
-        let layer = &quantized.hidden[i];
-        Int8Layer {
-            fc: FullyConnected::new(layer.in_features, layer.out_features, &layer.weights, &layer.bias),
-            requant: FcRequant {
-                multipliers: &layer.multipliers,
-                shifts: &layer.shifts,
-                output_zero_point: layer.output_zero_point,
-                activation_min: layer.activation_min,
-                activation_max: layer.activation_max,
-            },
-            activation: layer.lut.map(|index| &luts[index]),
-        }
-    })
+fn hidden_layers(quantized: &QuantizedPolicy) -> [RequantizedLinear<'_>; LAYERS] {
+    let layers = quantized.hidden_layers();
+    std::array::from_fn(|i| layers[i])
 }
 
 #[test]
@@ -61,20 +44,16 @@ fn staged_mlp_network_matches_int8_network() {
     assert_eq!(quantized.input_precision, InputPrecision::Int16);
     assert_eq!(quantized.hidden.len(), LAYERS);
     let blob = AlignedBlob::of(&quantized);
-    let loaded = LoadedPolicy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS>::load(blob.bytes())
+    let loaded = LoadedMlp::load(blob.bytes())
         .expect("load the blob");
-    let reference = loaded.policy::<STUDENT_INPUT, MLP_WIDTH>().expect("policy from the blob");
+    let reference = loaded.policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>().expect("policy from the blob");
     let mut reference = PolicyWorkload::new(reference);
     let expected = digest_all(&mut reference).expect("reference chunks");
 
-    let luts = tables(&quantized);
-    let hidden = hidden_layers(&quantized, &luts);
-    let output = &quantized.output;
     let network = StagedMlpNetwork::<LAYERS, { mlp_marks(LAYERS) }, MLP_WIDTH>::new(
         quantized.input,
-        hidden,
-        FullyConnected::new(output.in_features, output.out_features, &output.weights, &output.bias),
-        &output.scales,
+        hidden_layers(&quantized),
+        quantized.output_layer(),
         &quantized.first_layer_biases,
         counting_clock,
     )
@@ -95,13 +74,13 @@ fn staged_mlp_network_matches_int8_network() {
 #[test]
 fn staged_mlp_network_refuses_small_scratch() {
     let quantized = student();
-    let luts = tables(&quantized);
-    let hidden = hidden_layers(&quantized, &luts);
-    let output = &quantized.output;
-    let fc = FullyConnected::new(output.in_features, output.out_features, &output.weights, &output.bias);
     // WIDTH 128 is narrower than the 256-wide hidden layers.
     let result = StagedMlpNetwork::<LAYERS, { mlp_marks(LAYERS) }, 128>::new(
-        quantized.input, hidden, fc, &output.scales, &[], counting_clock,
+        quantized.input,
+        hidden_layers(&quantized),
+        quantized.output_layer(),
+        &[],
+        counting_clock,
     );
     assert!(result.is_err());
 }

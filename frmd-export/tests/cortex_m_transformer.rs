@@ -4,15 +4,15 @@
 //! transformer-lite (`frmd_firmware_support::synthetic::transformer`) in its build.rs and runs
 //! it as the network of the synthetic one-step policy's configuration (baked by frmd-export), timing `Policy::act` on
 //! QEMU. Here the same backbone is regenerated in memory, the configuration comes from the blob
-//! form of the same policy (`frmd_core::blob::LoadedPolicy::config`), and the same workload
+//! form of the same policy (`frmd_core::blob::LoadedMlp::config`), and the same workload
 //! runs it; `qemu_transformer_digest_matches_host` requires the firmware's printed digest on
 //! every board with the memory for it (Cortex-M4F, M7, M33) to equal the host's. It needs
 //! `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without it, or with
 //! FRMD_SKIP_QEMU=1, it prints why and passes without checking (unless FRMD_REQUIRE_QEMU is set,
 //! as in CI: then it fails).
 
-use frmd_core::blob::LoadedPolicy;
-use frmd_core::policy::{Policy, PolicyError};
+use frmd_core::blob::LoadedMlp;
+use frmd_core::policy::{Int8TransformerNetwork, Policy, PolicyError};
 use frmd_firmware_support::host::qemu;
 use frmd_firmware_support::host::student::AlignedBlob;
 use frmd_firmware_support::policy_workload::PolicyWorkload;
@@ -20,15 +20,7 @@ use frmd_firmware_support::shape::{
     self, DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
 };
 use frmd_firmware_support::synthetic::{policy as synthetic_policy, transformer as synthetic_transformer};
-use frmd_firmware_support::transformer_network::{TransformerNetwork, TransformerNetworkError};
 use frmd_firmware_support::workload::digest_all;
-
-type Network<'a> = TransformerNetwork<
-    'a,
-    { TRANSFORMER_SCRATCH.floats },
-    { TRANSFORMER_SCRATCH.bytes },
-    { TRANSFORMER_SCRATCH.accumulators },
->;
 
 type Scratch = frmd_core::model::transformer::TransformerScratch<
     { TRANSFORMER_SCRATCH.floats },
@@ -36,16 +28,17 @@ type Scratch = frmd_core::model::transformer::TransformerScratch<
     { TRANSFORMER_SCRATCH.accumulators },
 >;
 
+type Network<'a> = Int8TransformerNetwork<'a, &'a mut Scratch>;
+
 /// Digest of the fixed cases (and the first chunk's positions, to check they vary).
 fn host_digest() -> Result<u64, PolicyError> {
     let blob = AlignedBlob::of(&synthetic_policy::generate());
-    let loaded = LoadedPolicy::<POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS>::load(blob.bytes())
-        .expect("load the blob");
+    let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
     let config = loaded.config();
     let data = synthetic_transformer::generate();
     let blocks = data.blocks();
     let mut scratch = Box::new(Scratch::new());
-    let network = Network::new(data.model(&blocks), &config.sampler.layout, &mut scratch)
+    let network = Network::new(data.model(&blocks), &config.sampler.layout, &[], &mut scratch)
         .expect("the synthetic transformer validates");
     let policy = Policy::<_, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>::new(
         config, network,
@@ -83,8 +76,8 @@ fn transformer_network_rejects_a_non_standard_layout() {
     .expect("a valid layout");
     let mut scratch = Box::new(Scratch::new());
     assert_eq!(
-        Network::new(data.model(&blocks), &layout, &mut scratch).err(),
-        Some(TransformerNetworkError::Layout)
+        Network::new(data.model(&blocks), &layout, &[], &mut scratch).err(),
+        Some(PolicyError::TransformerLayout)
     );
 }
 

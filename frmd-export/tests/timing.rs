@@ -1,12 +1,11 @@
 //! Host timing of the int8 policy from a blob at firmware-like size (ignored: a measurement, not a
 //! check). `cargo test -p frmd-export --release --test timing -- --ignored --nocapture`.
 
-mod common;
 
 use std::time::Instant;
 
-use common::{random_policy, Dims};
-use frmd_core::blob::LoadedPolicy;
+use frmd_test_support::random_policy::{random_policy, Dims};
+use frmd_core::blob::LoadedMlp;
 use frmd_core::policy::Noise;
 use frmd_core::rng::Rng;
 
@@ -33,8 +32,8 @@ fn int8_policy_act_time_on_host() {
         let mut words = vec![0_u128; blob.len().div_ceil(16)];
         bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
         let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
-        let loaded = LoadedPolicy::<M, O, K, N, P>::load(bytes).unwrap();
-        let mut runtime = loaded.policy::<64, 256>().unwrap();
+        let loaded = LoadedMlp::load(bytes).unwrap();
+        let mut runtime = loaded.policy::<M, O, K, N, P, 64, 256>().unwrap();
         runtime.reset(&[0.0; K]).unwrap();
         runtime.observe(&[0.1; O]).unwrap();
         let mut rng = Rng::new(1);

@@ -2,15 +2,15 @@
 //! (same MLP-256 model, random weights), plus frmd-core's f32 twin. Batch 1, RAYON_NUM_THREADS
 //! should be 1. On x86-64 with AVX2 also the int8 policy with the portable kernels.
 use criterion::{criterion_group, criterion_main, Criterion};
-use frmd_host::bench::{reach_input, reach_student};
-use frmd_host::eval::policy::{Policy, PolicyInput};
+use frmd_host::bench::fixtures::{reach_input, reach_student};
+use frmd_host::tasks::{Policy, PolicyInput};
 
 fn chunk(c: &mut Criterion) {
     let dir = std::env::temp_dir().join(format!("frmd-bench-chunk-{}", std::process::id()));
     let (history, prev, rate) = reach_input();
     let input = PolicyInput { obs_history: &history, prev_action: &prev, prev_rate: &rate };
     for backbone in ["mlp", "transformer-lite"] {
-        let mut p = reach_student(&dir, backbone, 1).expect("bench student");
+        let mut p = reach_student(&dir, &backbone.parse().expect("a backbone"), 1).expect("bench student");
         let mut group = c.benchmark_group(format!("one-step chunk, {backbone}, reach shape"));
         let mut policies: Vec<(&str, &mut dyn Policy)> = vec![("candle-f32", &mut p.float)];
         match &mut p.core {

@@ -7,12 +7,12 @@
 //! Run with `RAYON_NUM_THREADS=1 cargo bench -p frmd-host --bench policies --bench chunk`.
 use criterion::{criterion_group, criterion_main, Criterion};
 use frmd_host::checkpoint::Role;
-use frmd_host::cli::bench::{synthetic_float_policy, FixedInput};
+use frmd_host::bench::fixtures::synthetic_float_policy;
+use frmd_host::bench::{BenchConfig, FixedInput};
 use frmd_host::diffusion::samplers::Solver;
-use frmd_host::eval::policy::Policy;
+use frmd_host::tasks::Policy;
 
-/// The quickstart backbone and the `reach` observation size.
-const BACKBONE: &str = "mlp-silu";
+/// The `reach` observation size.
 const OBS_DIM: usize = 6;
 
 fn chunk_latency(c: &mut Criterion) {
@@ -22,9 +22,11 @@ fn chunk_latency(c: &mut Criterion) {
         ("candle dp-ddpm-100", Role::Dp, 100, None),
         ("candle dp-ddim-10", Role::Dp, 10, None),
     ];
+    // The quickstart backbone, as `frmd bench` times it.
+    let backbone = BenchConfig::default().backbone;
     let mut group = c.benchmark_group("chunk");
     for (name, role, steps, solver) in cases {
-        let mut policy = match synthetic_float_policy(BACKBONE, OBS_DIM, role, Some(steps), solver) {
+        let mut policy = match synthetic_float_policy(&backbone, OBS_DIM, role, Some(steps), solver) {
             Ok(p) => p,
             Err(e) => panic!("building {name}: {e:#}"),
         };

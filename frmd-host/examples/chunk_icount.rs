@@ -4,10 +4,9 @@
 //! `transformer-lite` exports the `FRMT` blob and runs frmd-core's int8 transformer policy). Per-chunk Ir = (Ir(101 chunks) -
 //! Ir(1 chunk)) / 100. `int8-avx2` / `int8-portable` run the int8 policy with frmd-core's AVX-VNNI
 //! / AVX2 kernels turned off (x86-64; callgrind's virtual CPU reports no AVX-VNNI anyway).
-use frmd_host::bench::{reach_input, reach_student};
-use frmd_host::eval::policy::{Policy, PolicyInput};
+use frmd_host::bench::fixtures::{reach_input, reach_student};
+use frmd_host::tasks::{Policy, PolicyInput};
 use frmd_host::policy::int8::Int8Policy;
-use frmd_host::policy::transformer as transformer_policy;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -15,16 +14,16 @@ fn main() -> anyhow::Result<()> {
     let chunks: usize = args.get(2).map(|s| s.parse()).transpose()?.unwrap_or(1);
     let backbone = args.get(3).map(String::as_str).unwrap_or("mlp");
     let dir = std::env::temp_dir().join(format!("frmd-icount-{}", std::process::id()));
-    let mut p = reach_student(&dir, backbone, 1)?;
+    let mut p = reach_student(&dir, &backbone.parse()?, 1)?;
     // Transformer students: `reach_student` saved the checkpoint and calibration rows; export them
     // with the transformer exporter.
     let mut transformer: Option<(Int8Policy, Int8Policy, usize)> = None;
     if backbone.starts_with("transformer") {
         let exported = frmd_export::export::export_transformer_checkpoint(&dir, Default::default(), None)?;
         let norm = exported.checkpoint.meta.normalization.clone().ok_or_else(|| anyhow::anyhow!("no normalization"))?;
-        let blob = frmd_export::transformer::blob::write(&exported.model, &norm).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
-        let int8 = transformer_policy::int8_policy(&blob, "int8")?;
-        let twin = transformer_policy::f32_twin(&blob, exported.model.folded.clone(), "core-f32")?;
+        let blob = frmd_export::blob::write_transformer(&exported.model, &norm).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
+        let int8 = Int8Policy::from_blob(&blob, "int8")?;
+        let twin = Int8Policy::transformer_f32_twin(&blob, exported.model.folded.clone(), "core-f32")?;
         transformer = Some((int8, twin, exported.model.memory().flash_bytes()));
     }
     let flash = match (&transformer, &p.core) {

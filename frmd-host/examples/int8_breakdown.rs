@@ -132,13 +132,16 @@ impl<'a> Sim<'a> {
     }
 }
 
+/// One network evaluation: (step, model input) -> network output.
+type Forward<'a> = Box<dyn FnMut(usize, &[f32]) -> anyhow::Result<Vec<f32>> + 'a>;
+
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let ckpt = Path::new(args.get(1).context("CKPT")?);
     let data = Path::new(args.get(2).context("DATA")?);
     let rows: usize = args.get(3).map(|s| s.parse()).transpose()?.unwrap_or(200);
     let ranges: RangeMethod = args.get(4).map(String::as_str).unwrap_or("minmax").parse()?;
-    let set = frmd_host::cli::export::calibration_from_data(data, ckpt)?;
+    let set = frmd_host::export::calibration_from_data(data, ckpt)?;
     let exported = export_checkpoint(ckpt, ExportOptions { ranges, input_precision: if std::env::var_os("INT8_INPUT").is_none() { frmd_core::model::mlp::InputPrecision::Int16 } else { frmd_core::model::mlp::InputPrecision::Int8 }, input_headroom: std::env::var("EXPORT_HEADROOM").ok().and_then(|h| h.parse().ok()).unwrap_or(frmd_export::export::DEFAULT_INPUT_HEADROOM), ..ExportOptions::default() }, Some(set.clone()))?;
     let folded = &exported.folded;
     let c = &folded.config;
@@ -150,7 +153,7 @@ fn main() -> anyhow::Result<()> {
     for (l, (p, o)) in exported.ranges.hidden.iter().enumerate() {
         println!("layer {l}: pre {p:?} out {o:?}");
     }
-    let run = |label: &str, mut forward: Box<dyn FnMut(usize, &[f32]) -> anyhow::Result<Vec<f32>> + '_>| -> anyhow::Result<()> {
+    let run = |label: &str, mut forward: Forward<'_>| -> anyhow::Result<()> {
         let (mut max_e, mut sum_e, mut n, mut max_p, mut sum_p, mut signed) = (0f64, 0f64, 0usize, 0f64, 0f64, 0f64);
         for r in 0..rows {
             let cond = &set.cond[r * set.cond_dim..(r + 1) * set.cond_dim];
@@ -256,14 +259,14 @@ struct SimPolicy<'a> {
     rng: Rng,
 }
 
-impl frmd_host::eval::policy::Policy for SimPolicy<'_> {
+impl frmd_host::tasks::Policy for SimPolicy<'_> {
     fn name(&self) -> String {
         "sim".into()
     }
     fn reset(&mut self, seed: u64) {
         self.rng = Rng::new(seed);
     }
-    fn act(&mut self, input: &frmd_host::eval::policy::PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
+    fn act(&mut self, input: &frmd_host::tasks::PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
         let folded = self.sim.folded;
         let c = &folded.config;
         let mut cond = Vec::new();

@@ -10,7 +10,7 @@ use candle_core::{Device, Tensor};
 use std::path::Path;
 
 pub use frmd_export::checkpoint::{
-    expected_tensors, fnv1a_hex, read_weights, CheckpointMeta, DatasetInfo, ProDmpJson, Role, SigmaJson, TensorSpec,
+    expected_tensors, fnv1a_hex, read_weights, CheckpointMeta, DatasetInfo, Role, TensorSpec,
     CALIBRATION_FILE, CONFIG_FILE, FORMAT_VERSION, WEIGHTS_FILE,
 };
 

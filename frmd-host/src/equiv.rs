@@ -13,19 +13,17 @@
 //! Also checked: the baked blob is reproduced bit for bit by re-exporting the checkpoint.
 //! Transformer-lite students (`FRMT` blob) get the same rows; see [`run_transformer`] for (d).
 use crate::checkpoint::{self, CheckpointMeta};
-use crate::cli::export::{export, ExportInfo, BAKED_BLOB_FILE, EXPORT_INFO_FILE};
+use crate::export::{calibration_from_data, export_mlp, export_transformer, is_transformer, transformer_blob, ExportConfig, BAKED_BLOB_FILE, EXPORT_INFO_FILE};
 use crate::diffusion::samplers::{gaussian, sample_consistency};
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 use crate::eval::{run_episodes, EvalConfig};
 use crate::models::Condition;
 use crate::policy::float::FloatPolicy;
 use crate::policy::int8::Int8Policy;
-use crate::policy::transformer as transformer_policy;
 use anyhow::Context;
 use candle_core::Device;
 use frmd_core::model::mlp::Probe;
 use frmd_core::rng::Rng;
-use frmd_core::sigma::SigmaConfig;
 use frmd_export::fold::MAX_WIDTH;
 use serde::Serialize;
 use std::path::PathBuf;
@@ -52,11 +50,12 @@ pub struct EquivConfig {
     pub max_success_diff_points: f64,
 }
 
-impl EquivConfig {
-    pub fn new(ckpt: PathBuf, baked: PathBuf) -> Self {
+impl Default for EquivConfig {
+    /// The bounds of DESIGN.md section 6 and the effort of `frmd equiv`; no paths named.
+    fn default() -> Self {
         EquivConfig {
-            ckpt,
-            baked,
+            ckpt: PathBuf::new(),
+            baked: PathBuf::new(),
             episodes: 100,
             inputs: 200,
             random_requant: 1_000_000,
@@ -66,6 +65,13 @@ impl EquivConfig {
             mean_int8_error_frac: 0.02,
             max_success_diff_points: 5.0,
         }
+    }
+}
+
+impl EquivConfig {
+    /// The default checks of the student in `ckpt` against its export in `baked`.
+    pub fn new(ckpt: PathBuf, baked: PathBuf) -> Self {
+        EquivConfig { ckpt, baked, ..EquivConfig::default() }
     }
 }
 
@@ -94,7 +100,7 @@ fn row(check: &str, metric: &str, value: f64, bound: Option<f64>, note: String) 
 
 /// Everything the checks share: the export settings, the candle student, calibration rows.
 struct Setup {
-    info: ExportInfo,
+    info: ExportConfig,
     meta: CheckpointMeta,
     net: crate::models::OwnedNetwork,
     norm: crate::data::Normalization,
@@ -104,7 +110,7 @@ struct Setup {
 
 fn setup(cfg: &EquivConfig) -> anyhow::Result<Setup> {
     let info_path = cfg.baked.join(EXPORT_INFO_FILE);
-    let mut info: ExportInfo = serde_json::from_str(&std::fs::read_to_string(&info_path).with_context(|| format!("reading {}", info_path.display()))?)
+    let mut info: ExportConfig = serde_json::from_str(&std::fs::read_to_string(&info_path).with_context(|| format!("reading {}", info_path.display()))?)
         .with_context(|| format!("parsing {}", info_path.display()))?;
     info.checkpoint = cfg.ckpt.display().to_string();
     if let Some(data) = &cfg.data {
@@ -115,7 +121,7 @@ fn setup(cfg: &EquivConfig) -> anyhow::Result<Setup> {
     let (meta, net): (CheckpointMeta, _) = checkpoint::load(&cfg.ckpt)?;
     let norm = meta.normalization.clone().context("checkpoint has no normalization")?;
     let set = match &info.calibration_data {
-        Some(d) => crate::cli::export::calibration_from_data(std::path::Path::new(d), &cfg.ckpt)?,
+        Some(d) => calibration_from_data(std::path::Path::new(d), &cfg.ckpt)?,
         None => frmd_export::calibration_file::read(&cfg.ckpt.join(checkpoint::CALIBRATION_FILE), meta.model.cond_dim())?,
     };
     Ok(Setup { info, meta, net, norm, set, blob })
@@ -126,7 +132,7 @@ fn setup(cfg: &EquivConfig) -> anyhow::Result<Setup> {
 /// fresh noise.
 fn open_loop(cfg: &EquivConfig, s: &Setup, steps: usize, int8: &mut Int8Policy, mut core_f32: impl FnMut(&[f32], &[f32]) -> anyhow::Result<Vec<f32>>) -> anyhow::Result<Vec<EquivRow>> {
     let model = &s.meta.model;
-    let sigma: SigmaConfig = s.meta.sigma.into();
+    let sigma = s.meta.sigma;
     let (k, traj, obs_w) = (model.action_dim, model.traj_dim(), model.history * model.obs_dim);
     let norm = &s.norm;
     let set = &s.set;
@@ -220,10 +226,10 @@ fn report(rows: Vec<EquivRow>) -> EquivReport {
 /// Runs every check; the checkpoint's backbone picks the MLP or the transformer path.
 pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
     let s = setup(cfg)?;
-    if crate::cli::export::is_transformer(&s.info)? {
+    if is_transformer(&s.info)? {
         return run_transformer(cfg, &s);
     }
-    let exported = export(&s.info)?;
+    let exported = export_mlp(&s.info)?;
     let rebuilt = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding: {e}"))?;
     let mut rows = vec![blob_row(&s.blob, &rebuilt, cfg)];
     let folded = &exported.folded;
@@ -253,15 +259,15 @@ pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
 /// ([`frmd_export::transformer::reference::check_layers`]; the f32 LayerNorm/attention/residual
 /// parts are covered by (a) and (b)).
 fn run_transformer(cfg: &EquivConfig, s: &Setup) -> anyhow::Result<EquivReport> {
-    let exported = crate::cli::export::export_transformer(&s.info)?;
-    let rebuilt = crate::cli::export::transformer_blob(&exported)?;
+    let exported = export_transformer(&s.info)?;
+    let rebuilt = transformer_blob(&exported)?;
     let mut rows = vec![blob_row(&s.blob, &rebuilt, cfg)];
     let folded = &exported.model.folded;
     let steps = folded.steps.len();
-    let mut int8 = transformer_policy::int8_policy(&s.blob, "int8")?;
+    let mut int8 = Int8Policy::from_blob(&s.blob, "int8")?;
     rows.extend(open_loop(cfg, s, steps, &mut int8, |cond, noise| folded.sample(cond, noise, |_, _, _| {}))?);
     if cfg.episodes > 0 {
-        let mut twin = transformer_policy::f32_twin(&s.blob, folded.clone(), "core-f32")?;
+        let mut twin = Int8Policy::transformer_f32_twin(&s.blob, folded.clone(), "core-f32")?;
         rows.extend(closed_loop(cfg, s, steps, &mut int8, &mut twin)?);
     }
     rows.push(qemu_row());

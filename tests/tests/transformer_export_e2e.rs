@@ -2,10 +2,15 @@
 //! transformer-lite teacher and student through the `frmd train` code paths, export the student
 //! with `frmd export` (the backbone picks the transformer exporter: `FRMT` blob plus generated
 //! loader module), load the blob with frmd-core and run the bit-accuracy harness.
-use frmd_host::cli::export::BAKED_BLOB_FILE;
+use frmd_core::policy::PolicyDims;
+use frmd_host::export::BAKED_BLOB_FILE;
+use frmd_test_support::AlignedBlob;
 
 mod support;
 use support::{equiv_within_bounds, row, train_tiny, Tiny, TinyRun};
+
+/// The sizes of the tiny runs (see `export_e2e.rs`).
+const TINY_DIMS: PolicyDims = PolicyDims { history: 2, obs_dim: 6, action_dim: 2, horizon: 8, params_per_dof: 7 };
 
 #[test]
 fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
@@ -30,10 +35,10 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
     } = &run;
 
     // The exporter refuses the teacher, naming the reason.
-    let err = frmd_host::cli::export::run(run.export_args(&teacher)).unwrap_err();
+    let err = run.export(teacher).unwrap_err();
     assert!(format!("{err:#}").contains("Teacher"), "{err:#}");
 
-    frmd_host::cli::export::run(run.export_args(&student)).unwrap();
+    run.export(student).unwrap();
     let blob = std::fs::read(baked.join(BAKED_BLOB_FILE)).unwrap();
     assert_eq!(std::fs::read(dir.join("student.blob")).unwrap(), blob);
     assert_eq!(&blob[..4], b"FRMT");
@@ -57,7 +62,7 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
     // The flash figure counts every section the loader views: the blob adds only its header,
     // descriptor and alignment padding.
     let exported =
-        frmd_export::export::export_transformer_checkpoint(&student, Default::default(), None)
+        frmd_export::export::export_transformer_checkpoint(student, Default::default(), None)
             .unwrap();
     let memory = exported.model.memory();
     assert_eq!(
@@ -72,10 +77,10 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
     );
 
     // frmd-core loads the blob zero-copy with the shapes of this model, and only with those.
-    let mut words = vec![0u32; blob.len().div_ceil(4)];
-    bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
-    let bytes = &bytemuck::cast_slice::<u32, u8>(&words)[..blob.len()];
-    let loaded = frmd_core::blob::LoadedTransformer::<2, 6, 2, 8, 7>::load(bytes).unwrap();
+    let aligned = AlignedBlob::new(&blob);
+    let bytes = aligned.bytes();
+    let loaded = frmd_core::blob::LoadedTransformer::load(bytes).unwrap();
+    assert_eq!(loaded.check_dims(&TINY_DIMS), Ok(()));
     assert_eq!(loaded.steps().len(), 1);
     assert_eq!(
         (
@@ -86,15 +91,15 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
         (3, 2, 128)
     );
     assert!(matches!(
-        frmd_core::blob::LoadedTransformer::<2, 6, 2, 12, 21>::load(bytes),
+        loaded.check_dims(&PolicyDims { horizon: 12, params_per_dof: 21, ..TINY_DIMS }),
         Err(frmd_core::blob::BlobError::DimensionMismatch(_))
     ));
     assert_eq!(
-        frmd_core::blob::LoadedPolicy::<2, 6, 2, 8, 7>::load(bytes).err(),
+        frmd_core::blob::LoadedMlp::load(bytes).err(),
         Some(frmd_core::blob::BlobError::BadMagic)
     );
 
-    let report = equiv_within_bounds(&student, &baked, 5, 32);
+    let report = equiv_within_bounds(student, baked, 5, 32);
     assert_eq!(row(&report, "int8 transformer layer mismatches"), 0.0);
-    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(dir);
 }

@@ -3,7 +3,8 @@
 
 use frmd_firmware_support::shape::{MLP_HIDDEN, MLP_OUTPUT};
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
-use frmd_core::model::mlp::{Int8Layer, Int8Mlp};
+use frmd_core::model::linear::{Int8Linear, RequantizedLinear};
+use frmd_core::model::mlp::Int8Mlp;
 use frmd_core::policy::AlignedBytes;
 use frmd_core::quant::QuantParams;
 
@@ -43,8 +44,8 @@ fn weights(offset: usize, in_features: usize, out_features: usize) -> Option<&'s
     Some(bytemuck::cast_slice(bytes))
 }
 
-fn hidden_layer(layer: &'static HiddenLayer) -> Option<Int8Layer<'static>> {
-    Some(Int8Layer {
+fn hidden_layer(layer: &'static HiddenLayer) -> Option<RequantizedLinear<'static>> {
+    Some(RequantizedLinear {
         fc: FullyConnected::new(
             layer.in_features,
             layer.out_features,
@@ -58,12 +59,12 @@ fn hidden_layer(layer: &'static HiddenLayer) -> Option<Int8Layer<'static>> {
             activation_min: i8::MIN,
             activation_max: i8::MAX,
         },
-        activation: Some(&layer.lut),
+        activation: Some(&layer.lut.table),
     })
 }
 
 /// The hidden layers, or `None` if the generated offsets do not fit the weight blob.
-pub fn hidden_layers() -> Option<[Int8Layer<'static>; MLP_HIDDEN.len()]> {
+pub fn hidden_layers() -> Option<[RequantizedLinear<'static>; MLP_HIDDEN.len()]> {
     Some([
         hidden_layer(&generated::HIDDEN_0)?,
         hidden_layer(&generated::HIDDEN_1)?,
@@ -72,7 +73,7 @@ pub fn hidden_layers() -> Option<[Int8Layer<'static>; MLP_HIDDEN.len()]> {
 }
 
 /// The network over `hidden` (from [`hidden_layers`]).
-pub fn mlp<'a>(hidden: &'a [Int8Layer<'static>]) -> Option<Int8Mlp<'a>> {
+pub fn mlp<'a>(hidden: &'a [RequantizedLinear<'static>]) -> Option<Int8Mlp<'a>> {
     let output = &generated::OUTPUT;
     if output.out_features != MLP_OUTPUT {
         return None;
@@ -80,12 +81,14 @@ pub fn mlp<'a>(hidden: &'a [Int8Layer<'static>]) -> Option<Int8Mlp<'a>> {
     Some(Int8Mlp {
         input: QuantParams { scale: generated::INPUT_SCALE, zero_point: generated::INPUT_ZERO_POINT },
         hidden,
-        output: FullyConnected::new(
-            output.in_features,
-            output.out_features,
-            weights(output.weight_offset, output.in_features, output.out_features)?,
-            output.bias,
-        ),
-        output_scales: output.scales,
+        output: Int8Linear {
+            fc: FullyConnected::new(
+                output.in_features,
+                output.out_features,
+                weights(output.weight_offset, output.in_features, output.out_features)?,
+                output.bias,
+            ),
+            output_scales: output.scales,
+        },
     })
 }

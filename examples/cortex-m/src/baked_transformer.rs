@@ -3,8 +3,9 @@
 
 use frmd_firmware_support::shape::{TRANSFORMER_LINEARS, TRANSFORMER_NORMS, TRANSFORMER_SHAPE};
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
+use frmd_core::model::linear::{Int8Linear, QuantizedLinear, RequantizedLinear};
 use frmd_core::model::transformer::{
-    Int8Block, Int8FeedForward, Int8Linear, Int8Transformer, LayerNormWeights, TokenLinear,
+    Int8Block, Int8FeedForward, Int8Transformer, LayerNormWeights, TokenLinear,
 };
 use frmd_core::policy::AlignedBytes;
 use frmd_core::quant::QuantParams;
@@ -55,9 +56,12 @@ fn fully_connected(layer: &'static Linear) -> Option<FullyConnected<'static>> {
     ))
 }
 
-fn int8_linear(index: usize) -> Option<Int8Linear<'static>> {
+fn quantized(index: usize) -> Option<QuantizedLinear<'static>> {
     let layer = linear_at(index)?;
-    Some(Int8Linear { input: layer.input, fc: fully_connected(layer)?, output_scales: layer.scales })
+    Some(QuantizedLinear {
+        input: layer.input,
+        linear: Int8Linear { fc: fully_connected(layer)?, output_scales: layer.scales },
+    })
 }
 
 fn layer_norm(index: usize) -> Option<LayerNormWeights<'static>> {
@@ -68,25 +72,25 @@ fn layer_norm(index: usize) -> Option<LayerNormWeights<'static>> {
 fn block(layer: usize) -> Option<Int8Block<'static>> {
     let base = 2 + 4 * layer;
     let fc1 = linear_at(base + 2)?;
-    let fc2 = linear_at(base + 3)?;
     Some(Int8Block {
         norm1: layer_norm(2 * layer)?,
-        qkv: int8_linear(base)?,
-        proj: int8_linear(base + 1)?,
+        qkv: quantized(base)?,
+        proj: quantized(base + 1)?,
         norm2: layer_norm(2 * layer + 1)?,
         feed_forward: Int8FeedForward {
             input: fc1.input,
-            fc1: fully_connected(fc1)?,
-            fc1_requant: FcRequant {
-                multipliers: fc1.multipliers,
-                shifts: fc1.shifts,
-                output_zero_point: fc1.output_zero_point,
-                activation_min: i8::MIN,
-                activation_max: i8::MAX,
+            fc1: RequantizedLinear {
+                fc: fully_connected(fc1)?,
+                requant: FcRequant {
+                    multipliers: fc1.multipliers,
+                    shifts: fc1.shifts,
+                    output_zero_point: fc1.output_zero_point,
+                    activation_min: i8::MIN,
+                    activation_max: i8::MAX,
+                },
+                activation: Some(&fc1.lut.as_ref()?.table),
             },
-            gelu: fc1.lut.as_ref()?,
-            fc2: fully_connected(fc2)?,
-            fc2_scales: fc2.scales,
+            fc2: quantized(base + 3)?,
         },
     })
 }
@@ -107,12 +111,12 @@ pub fn blocks() -> Option<[Int8Block<'static>; LAYERS]> {
 pub fn model<'a>(blocks: &'a [Int8Block<'static>]) -> Option<Int8Transformer<'a>> {
     Some(Int8Transformer {
         shape: TRANSFORMER_SHAPE,
-        traj_in: TokenLinear::Int8(int8_linear(0)?),
-        cond_in: TokenLinear::Int8(int8_linear(1)?),
+        traj_in: TokenLinear::Int8(quantized(0)?),
+        cond_in: TokenLinear::Int8(quantized(1)?),
         noise_token: &generated::NOISE_TOKEN,
         positions: &generated::POSITIONS,
         blocks,
         final_norm: layer_norm(TRANSFORMER_NORMS - 1)?,
-        head: int8_linear(TRANSFORMER_LINEARS - 1)?,
+        head: quantized(TRANSFORMER_LINEARS - 1)?,
     })
 }

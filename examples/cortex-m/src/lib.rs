@@ -27,6 +27,7 @@ use defmt_rtt as _;
 pub mod baked_mlp;
 pub mod baked_transformer;
 pub mod bench;
+pub mod images;
 pub mod memory;
 pub mod report;
 pub mod stage_report;
@@ -37,3 +38,20 @@ use frmd_core::prodmp::BakedProDmp;
 /// The ProDMP decoder tables of `shape::config`, baked on the host by build.rs.
 pub static BAKED_PRODMP: frmd_firmware_support::prodmp_workload::Baked =
     include!(concat!(env!("OUT_DIR"), "/baked_prodmp.rs"));
+
+/// The module frmd-export generated from the checked-in student (`policy.rs` + `weights.bin` in
+/// `OUT_DIR/student`) and the MACs of its network (`network_macs.rs`): the `policy` images.
+#[allow(dead_code)]
+pub mod baked_student {
+    include!(concat!(env!("OUT_DIR"), "/student/policy.rs"));
+    include!(concat!(env!("OUT_DIR"), "/student/network_macs.rs"));
+}
+
+/// The module frmd-export generated for the synthetic MLP policy
+/// (`frmd_firmware_support::synthetic::policy`): the `transformer` images use its `config()`
+/// (the MLP weights are not referenced, so the linker drops them).
+#[allow(dead_code)]
+pub mod baked_synthetic_policy {
+    include!(concat!(env!("OUT_DIR"), "/synthetic_policy/policy.rs"));
+}
+

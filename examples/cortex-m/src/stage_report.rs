@@ -11,7 +11,7 @@
 //!   is the rest (checks, history copy, `sigma z`, sampler validation, input assembly with `c_in`);
 //!   the rest of `act` after the network is decode + consistency output stage + denormalization;
 //! - `decode` and `denormalize` are then timed on their own (same inputs, same frmd-core calls:
-//!   `BakedProDmp::decode` on the last parameters, `RangeNormalizer::denormalize{,_rate}` on the
+//!   `ProDmpTables::decode` on the last parameters, `RangeNormalizer::denormalize{,_rate}` on the
 //!   last normalized chunk), and `output_stage` (`c_skip x + c_out decode`, the finiteness check,
 //!   returning the chunk) is the rest of `act` after the network minus those two;
 //! - transformer blocks: `Int8Transformer::forward` of the first 1, 2 and 3 blocks (same weights,
@@ -25,15 +25,14 @@ use cortex_m::peripheral::SYST;
 use frmd_core::model::transformer::{
     Int8Transformer, TokenLinear, TransformerScratch, TransformerShape,
 };
-use frmd_core::policy::{Network, Policy, PolicyError};
+use frmd_core::policy::{Int8TransformerNetwork, Network, Policy, PolicyError};
 use frmd_core::rng::Rng;
 
 use frmd_core::hash::Fnv1a64;
 use frmd_firmware_support::policy_workload::{PolicyWorkload, CASES, NOISE_SEED};
 use crate::report::{self, exit_failure, report};
-use frmd_firmware_support::stages::StagedMlpNetwork;
+use frmd_firmware_support::stages::{MarkedNetwork, StagedMlpNetwork};
 use crate::timer::{Calibration, TickCounter};
-use frmd_firmware_support::transformer_network::TransformerNetwork;
 use frmd_firmware_support::workload::{prodmp_decode_macs, Workload};
 
 /// Calls per case in the breakdown (and standalone repetitions per call).
@@ -119,12 +118,12 @@ fn time_post_stages<
         let mut positions = [[0.0_f32; K]; N];
         let mut velocities = [[0.0_f32; K]; N];
         let start = systick();
-        let result = config.sampler.decoder.decode(
-            core::hint::black_box(policy.last_params()),
+        let result = config.sampler.decoder.decode::<N, K, P>(
+            core::hint::black_box(policy.last_params()).as_flattened(),
             &y0,
             &v0,
-            &mut positions,
-            &mut velocities,
+            positions.as_flattened_mut(),
+            velocities.as_flattened_mut(),
         );
         let end = systick();
         result.map_err(PolicyError::Decode)?;
@@ -280,7 +279,7 @@ fn time_embedding_and_head<const TW: usize, const WIDTH: usize, const OUT: usize
             let codes = codes.get_mut(..input.len()).ok_or(PolicyError::InputWidth)?;
             linear.forward(input, codes, acc, out).map_err(failed)
         }
-        TokenLinear::Float(linear) => linear.forward(input, out, None).map_err(failed),
+        TokenLinear::Float(linear) => linear.forward(input, out).map_err(failed),
     };
     {
         let start = systick();
@@ -309,7 +308,7 @@ fn time_embedding_and_head<const TW: usize, const WIDTH: usize, const OUT: usize
             }
         }
         let acc = accumulators.get_mut(..OUT).ok_or(PolicyError::OutputWidth)?;
-        model.head.forward_quantized(&codes, acc, &mut output).map_err(failed)?;
+        model.head.linear.forward(&codes, acc, &mut output).map_err(failed)?;
         let end = systick();
         head = elapsed(start, end);
         core::hint::black_box(&output);
@@ -335,12 +334,21 @@ pub fn transformer_policy<
     const P: usize,
     const I: usize,
 >(
-    workload: &mut PolicyWorkload<'_, TransformerNetwork<'_, F, B, A>, M, O, K, N, P, I>,
+    workload: &mut PolicyWorkload<
+        '_,
+        MarkedNetwork<Int8TransformerNetwork<'_, &mut TransformerScratch<F, B, A>>>,
+        M,
+        O,
+        K,
+        N,
+        P,
+        I,
+    >,
     scratch: &mut TransformerScratch<F, B, A>,
     calibration: &Calibration,
     expected_digest: u64,
 ) -> Result<(), PolicyError> {
-    let model = *workload.policy().network().model();
+    let model = *workload.policy().network().inner().model();
     let shape = model.shape;
     let (t, w) = (shape.tokens() as u64, shape.width as u64);
     let mut stages = Breakdown::new();

@@ -5,8 +5,8 @@ through `frmd serve`; then `report.py` writes results.md, results.json and the b
 
 Every step writes its output atomically and is skipped when that output exists (resumable).
 Each command's output goes to a log file under OUT/logs; the console gets one progress line per
-step. `--quick` is the CI mode: 2 tasks, few demonstrations and episodes, short training, and a
-validity check of every report (no success threshold).
+step. `--quick` is the CI mode: one task, 5 demonstrations, one episode per method, short
+training, and a validity check of every report (no success threshold).
 """
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ class BenchConfig:
 
     @staticmethod
     def quick_config(**overrides) -> "BenchConfig":
-        cfg = BenchConfig(tasks=["reach-v3", "drawer-close-v3"], multi_seed_tasks=[], demos=5, episodes=2,
+        cfg = BenchConfig(tasks=["reach-v3"], multi_seed_tasks=[], demos=5, episodes=1,
                           train_steps=20, student_steps=10, quick=True)
         for key, value in overrides.items():
             setattr(cfg, key, value)

@@ -1,40 +1,42 @@
-//! Self-describing policy blob (DESIGN.md s.5): update a policy without rebuilding firmware.
+//! Self-describing policy blobs (DESIGN.md s.5): update a policy without rebuilding firmware.
 //!
-//! [`encode`] writes a blob from borrowed [`BlobParts`] into a caller buffer (the exporter wraps
-//! it); [`LoadedPolicy::load`] validates a blob in place and plugs it into the
-//! [`crate::policy::Policy`] API. The layout is documented in [`format`]. Loading is zero-copy for
-//! the weights, biases, requantization parameters and output scales (cast with `bytemuck`, which
-//! also checks alignment); normalization, ProDMP tables, step constants and LUTs (a few KiB) are
-//! copied into the [`LoadedPolicy`] so they can be used as fixed-size arrays. Every check failure is
-//! a named [`BlobError`]; nothing panics on any input.
+//! One container ([`container`]: header, CRC, postcard descriptor, aligned sections) holds one
+//! format per backbone, each with its emit and parse side in one module: [`mlp`] (magic
+//! `b"FRMD"`, [`encode_mlp`], [`LoadedMlp`]) and [`transformer`] (magic `b"FRMT"`,
+//! [`encode_transformer`], [`LoadedTransformer`]); both carry the same policy sections
+//! (normalization, ProDMP tables, steps). Encoding writes borrowed frmd-core views into a caller
+//! buffer (the exporter sizes a `Vec` with the `*_encoded_len` functions). Loading validates a
+//! blob in place and is zero-copy for everything but the step table; the loaded configuration
+//! and MLP network borrow only the blob, so a policy may outlive the loader. Sizes come from the
+//! descriptor at run time; `check_dims` compares them with the sizes a firmware image was built
+//! for. Every check failure is a named [`BlobError`]; nothing panics on any input.
 
+pub mod container;
 pub mod crc32;
-pub mod format;
-mod load;
+pub mod mlp;
+mod policy_tables;
 pub mod transformer;
-mod writer;
 
 #[cfg(test)]
 mod tests;
 
-pub use format::{
-    Descriptor, HiddenLayerDesc, OutputLayerDesc, Section, SectionId, FORMAT_VERSION, HEADER_LEN,
-    INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MAGIC, MIN_FORMAT_VERSION, SECTION_ALIGN,
-    STEP_WORDS,
+pub use container::{
+    Section, SectionId, FORMAT_VERSION, HEADER_LEN, MIN_FORMAT_VERSION, SECTION_ALIGN,
 };
-pub use load::LoadedPolicy;
+pub use mlp::{
+    encode_mlp, mlp_encoded_len, HiddenLayerDesc, LoadedMlp, MlpBlobParts, MlpDescriptor,
+    OutputLayerDesc, INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MLP_MAGIC,
+};
+pub use policy_tables::STEP_WORDS;
 pub use transformer::{
-    encode_transformer, transformer_encoded_len, LoadedTransformer, TransformerDescriptor,
-    TRANSFORMER_MAGIC,
-};
-pub use writer::{
-    encode, encoded_len, BlobParts, HiddenLayerParts, OutputLayerParts, ProDmpTables,
+    encode_transformer, transformer_encoded_len, LoadedTransformer, TransformerBlobParts,
+    TransformerDescriptor, TRANSFORMER_MAGIC,
 };
 
 use crate::model::transformer::TransformerError;
 use crate::policy::PolicyError;
 
-/// Which blob dimension disagrees with the loader's const generics.
+/// Which size of a blob is zero or differs from the expected one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Dimension {
     /// History length `M`.
@@ -55,7 +57,7 @@ pub enum Dimension {
 pub enum BlobError {
     /// The buffer is shorter than the header or than the total length the header states.
     Truncated,
-    /// The first four bytes are not `b"FRMD"` (MLP) or [`TRANSFORMER_MAGIC`] (transformer).
+    /// The first four bytes are not the format's magic ([`MLP_MAGIC`], [`TRANSFORMER_MAGIC`]).
     BadMagic,
     /// The format version is outside [`MIN_FORMAT_VERSION`]`..=`[`FORMAT_VERSION`].
     UnsupportedVersion {
@@ -75,8 +77,10 @@ pub enum BlobError {
     },
     /// The descriptor is not a valid postcard encoding (or has trailing bytes).
     Descriptor,
-    /// A blob dimension differs from the const generic it is loaded into.
+    /// A blob size differs from the expected one (`check_dims`).
     DimensionMismatch(Dimension),
+    /// A blob size is zero.
+    ZeroDimension(Dimension),
     /// A section lies (partly) outside the blob.
     SectionBounds(SectionId),
     /// A section's address is not aligned for its element type (the blob must start 4-aligned),
@@ -102,7 +106,7 @@ pub enum BlobError {
         /// Offending layer.
         index: u8,
     },
-    /// The output layer does not produce `K * P` values.
+    /// The output layer does not produce `k p` values.
     OutputWidth,
     /// A multiplier is negative in hidden layer `layer`.
     NegativeMultiplier {
@@ -120,7 +124,7 @@ pub enum BlobError {
         /// Offending layer.
         layer: u8,
     },
-    /// Hidden layer `layer` refers to a LUT the blob does not have.
+    /// Hidden layer `layer` refers to an activation table the blob does not have.
     LutIndex {
         /// Offending layer.
         layer: u8,
@@ -129,9 +133,10 @@ pub enum BlobError {
     BigEndianTarget,
     /// Writing: the output buffer is too small.
     BufferTooSmall,
-    /// Writing: the descriptor could not be encoded.
+    /// Writing: the descriptor could not be encoded, or the model has a part the format cannot
+    /// hold (an f32 transformer input layer, a feed-forward without its GELU table).
     Encode,
-    /// Writing: more hidden layers than [`crate::policy::MAX_HIDDEN_LAYERS`] or a size beyond u32.
+    /// Writing: more layers or blocks than the format holds, or a size beyond u32.
     TooLarge,
     /// Building the network or policy from a loaded blob failed.
     Policy(PolicyError),
@@ -162,7 +167,8 @@ impl core::fmt::Display for BlobError {
                 )
             }
             Self::Descriptor => f.write_str("descriptor is not valid postcard"),
-            Self::DimensionMismatch(d) => write!(f, "blob dimension {d:?} differs from the build"),
+            Self::DimensionMismatch(d) => write!(f, "blob dimension {d:?} differs from the expected one"),
+            Self::ZeroDimension(d) => write!(f, "blob dimension {d:?} is zero"),
             Self::SectionBounds(s) => write!(f, "section {s:?} lies outside the blob"),
             Self::SectionMisaligned(s) => write!(f, "section {s:?} is misaligned"),
             Self::SectionLength(s) => write!(f, "section {s:?} has the wrong length"),
@@ -175,7 +181,7 @@ impl core::fmt::Display for BlobError {
             Self::Steps => f.write_str("step table invalid"),
             Self::ControlPeriod => f.write_str("control period is not finite and positive"),
             Self::LayerWidth { index } => write!(f, "layer {index} width mismatch"),
-            Self::OutputWidth => f.write_str("output layer width is not K * P"),
+            Self::OutputWidth => f.write_str("output layer width is not k * p"),
             Self::NegativeMultiplier { layer } => {
                 write!(f, "layer {layer} has a negative multiplier")
             }

@@ -12,7 +12,11 @@ use crate::policy::test_model::*;
 use crate::policy::{Noise, PolicyError};
 use crate::rng::Rng;
 
-type Loaded<'a> = LoadedPolicy<'a, M, O, K, N, P>;
+type Loaded<'a> = LoadedMlp<'a>;
+
+fn blob_policy<'a>(loaded: &Loaded<'a>) -> Result<Int8Policy<'a>, PolicyError> {
+    loaded.policy::<M, O, K, N, P, I, WIDTH>()
+}
 
 /// A 16-byte aligned byte buffer.
 struct Aligned {
@@ -39,12 +43,11 @@ impl Aligned {
 }
 
 fn model_blob(model: &TestModel) -> Vec<u8> {
-    let luts = model.luts();
-    let hidden = model.hidden_parts();
-    let parts = model.blob_parts(&luts, &hidden);
-    let len = encoded_len(&parts).unwrap();
+    let hidden = model.int8_layers();
+    let parts = model.blob_parts(&hidden);
+    let len = mlp_encoded_len(&parts).unwrap();
     let mut out = vec![0xAA_u8; len + 7];
-    let written = encode(&parts, &mut out).unwrap();
+    let written = encode_mlp(&parts, &mut out).unwrap();
     assert_eq!(written, len);
     assert!(
         out[len..].iter().all(|b| *b == 0xAA),
@@ -68,20 +71,20 @@ fn fix_crc(blob: &mut [u8]) {
     blob[12..16].copy_from_slice(&crc.to_le_bytes());
 }
 
-fn descriptor_of(blob: &[u8]) -> Descriptor {
+fn descriptor_of(blob: &[u8]) -> MlpDescriptor {
     let len = u32::from_le_bytes(blob[16..20].try_into().unwrap()) as usize;
     postcard::from_bytes(&blob[HEADER_LEN..HEADER_LEN + len]).unwrap()
 }
 
 /// Rewrites the descriptor (the data area moves if the descriptor length changes alignment).
-fn with_descriptor(blob: &[u8], edit: impl FnOnce(&mut Descriptor)) -> Vec<u8> {
+fn with_descriptor(blob: &[u8], edit: impl FnOnce(&mut MlpDescriptor)) -> Vec<u8> {
     let old_len = u32::from_le_bytes(blob[16..20].try_into().unwrap()) as usize;
-    let old_start = writer::data_start(old_len).unwrap();
+    let old_start = container::data_start(old_len).unwrap();
     let mut d = descriptor_of(blob);
     edit(&mut d);
     let mut scratch = [0_u8; 4096];
     let encoded = postcard::to_slice(&d, &mut scratch).unwrap().to_vec();
-    let start = writer::data_start(encoded.len()).unwrap();
+    let start = container::data_start(encoded.len()).unwrap();
     let mut out = vec![0_u8; start];
     out[..HEADER_LEN].copy_from_slice(&blob[..HEADER_LEN]);
     out[HEADER_LEN..HEADER_LEN + encoded.len()].copy_from_slice(&encoded);
@@ -97,7 +100,7 @@ fn with_descriptor(blob: &[u8], edit: impl FnOnce(&mut Descriptor)) -> Vec<u8> {
 fn poke(blob: &[u8], section: Section, at: usize, bytes: &[u8]) -> Vec<u8> {
     let mut out = blob.to_vec();
     let len = u32::from_le_bytes(blob[16..20].try_into().unwrap()) as usize;
-    let start = writer::data_start(len).unwrap() + section.offset as usize + at;
+    let start = container::data_start(len).unwrap() + section.offset as usize + at;
     out[start..start + bytes.len()].copy_from_slice(bytes);
     fix_crc(&mut out);
     out
@@ -111,10 +114,10 @@ fn round_trip_gives_the_same_policy_bit_for_bit() {
         let buffer = Aligned::new(&blob, 0);
         let loaded = load(buffer.bytes()).unwrap();
         assert_eq!(loaded.steps(), &model.steps[..]);
-        assert_eq!(loaded.decoder(), &model.decoder);
+        assert_eq!(loaded.decoder(), crate::policy::ProDmpTables::from_baked(&model.decoder));
         assert_eq!(loaded.layout(), &model.layout);
         assert_eq!(loaded.control_dt(), DT);
-        let mut from_blob = loaded.policy::<I, WIDTH>().unwrap();
+        let mut from_blob = blob_policy(&loaded).unwrap();
         let mut direct = model.int8_policy();
         for policy_seed in 0..3 {
             from_blob.reset(&[0.0, 0.2]).unwrap();
@@ -209,36 +212,39 @@ fn dimension_mismatches_are_named() {
     let blob = model_blob(&model);
     let buffer = Aligned::new(&blob, 0);
     let bytes = buffer.bytes();
+    let expect = |dims: crate::policy::PolicyDims| load(bytes).unwrap().check_dims(&dims).err();
+    assert_eq!(load(bytes).unwrap().dims(), DIMS);
+    assert_eq!(load(bytes).unwrap().check_dims(&DIMS), Ok(()));
     assert_eq!(
-        LoadedPolicy::<M, 4, K, N, P>::load(bytes).err(),
+        expect(crate::policy::PolicyDims { obs_dim: 4, ..DIMS }),
         Some(BlobError::DimensionMismatch(Dimension::ObsDim))
     );
     assert_eq!(
-        LoadedPolicy::<3, O, K, N, P>::load(bytes).err(),
+        expect(crate::policy::PolicyDims { history: 3, ..DIMS }),
         Some(BlobError::DimensionMismatch(Dimension::History))
     );
     assert_eq!(
-        LoadedPolicy::<M, O, 3, N, P>::load(bytes).err(),
+        expect(crate::policy::PolicyDims { action_dim: 3, ..DIMS }),
         Some(BlobError::DimensionMismatch(Dimension::ActionDim))
     );
     assert_eq!(
-        LoadedPolicy::<M, O, K, 5, P>::load(bytes).err(),
+        expect(crate::policy::PolicyDims { horizon: 5, ..DIMS }),
         Some(BlobError::DimensionMismatch(Dimension::Horizon))
     );
     assert_eq!(
-        LoadedPolicy::<M, O, K, N, 5>::load(bytes).err(),
+        expect(crate::policy::PolicyDims { params_per_dof: 5, ..DIMS }),
         Some(BlobError::DimensionMismatch(Dimension::ParamsPerDof))
     );
     // Scratch or input buffer too small for the blob's network: named by the policy.
     let loaded = load(bytes).unwrap();
     assert_eq!(
-        loaded.policy::<I, 16>().err(),
+        loaded.policy::<M, O, K, N, P, I, 16>().err(),
         Some(PolicyError::Model(
             crate::model::mlp::ModelError::ScratchTooSmall
         ))
     );
     assert_eq!(
-        loaded.policy::<8, WIDTH>().err(),
+        loaded.policy::<M, O, K, N, P, 8, WIDTH>().err(),
         Some(PolicyError::InputWidth)
     );
 }
@@ -369,25 +375,24 @@ fn misaligned_buffer_is_rejected() {
 #[test]
 fn writer_checks_part_lengths() {
     let model = TestModel::new(27, &[80.0]);
-    let luts = model.luts();
-    let hidden = model.hidden_parts();
-    let mut parts = model.blob_parts(&luts, &hidden);
+    let hidden = model.int8_layers();
+    let mut parts = model.blob_parts(&hidden);
     let mut out = vec![0_u8; 1 << 16];
-    parts.obs_min = &model.obs_norm.min[..2];
+    parts.config.obs_norm.min = &model.obs_range.0[..2];
     assert_eq!(
-        encode(&parts, &mut out),
+        encode_mlp(&parts, &mut out),
         Err(BlobError::SectionLength(SectionId::ObsNorm))
     );
-    let mut parts = model.blob_parts(&luts, &hidden);
-    parts.output.scales = &model.output_scales[1..];
+    let mut parts = model.blob_parts(&hidden);
+    parts.mlp.output.output_scales = &model.output_scales[1..];
     assert_eq!(
-        encode(&parts, &mut out),
+        encode_mlp(&parts, &mut out),
         Err(BlobError::SectionLength(SectionId::OutputScales))
     );
-    let parts = model.blob_parts(&luts, &hidden);
-    let len = encoded_len(&parts).unwrap();
+    let parts = model.blob_parts(&hidden);
+    let len = mlp_encoded_len(&parts).unwrap();
     assert_eq!(
-        encode(&parts, &mut out[..len - 1]),
+        encode_mlp(&parts, &mut out[..len - 1]),
         Err(BlobError::BufferTooSmall)
     );
 }
@@ -406,7 +411,7 @@ proptest! {
         // With a valid header and CRC the descriptor parser and section checks are reached.
         let mut framed = bytes.clone();
         if framed.len() >= HEADER_LEN {
-            framed[..4].copy_from_slice(&MAGIC);
+            framed[..4].copy_from_slice(&MLP_MAGIC);
             framed[4..6].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
             framed[6..8].fill(0);
             let total = framed.len() as u32;
@@ -433,11 +438,11 @@ proptest! {
             // A blob that still loads must give a policy that runs or fails by name.
             let buffer = Aligned::new(&bytes, 0);
             let loaded = load(buffer.bytes()).unwrap();
-            if let Ok(mut policy) = loaded.policy::<I, WIDTH>() {
+            if let Ok(mut policy) = blob_policy(&loaded) {
                 policy.reset(&[0.0, 0.2]).unwrap();
                 policy.observe(&[0.0, 1.0, 2.0]).unwrap();
                 let _ = policy.act(Noise::Rng(&mut Rng::new(1)));
-            }
+            };
         }
     }
 }

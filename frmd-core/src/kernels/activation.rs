@@ -75,6 +75,8 @@ pub enum Activation {
     Gelu,
     /// [`gelu_tanh`] (tanh approximation).
     GeluTanh,
+    /// [`gelu_sigmoid`] (sigmoid approximation, the transformer's feed-forward).
+    GeluSigmoid,
 }
 
 impl Activation {
@@ -88,6 +90,7 @@ impl Activation {
             Self::Mish => mish(x),
             Self::Gelu => gelu(x),
             Self::GeluTanh => gelu_tanh(x),
+            Self::GeluSigmoid => gelu_sigmoid(x),
         }
     }
 
@@ -163,6 +166,7 @@ mod tests {
             assert_eq!(Activation::Mish.apply(x), mish(x));
             assert_eq!(Activation::Gelu.apply(x), gelu(x));
             assert_eq!(Activation::GeluTanh.apply(x), gelu_tanh(x));
+            assert_eq!(Activation::GeluSigmoid.apply(x), gelu_sigmoid(x));
         }
         let mut v = [-1.0_f32, 2.0];
         Activation::Relu.apply_in_place(&mut v);

@@ -5,13 +5,14 @@
 //! kernel is a plain int8 matrix-vector product. The input is int8, or int16 for a first layer fed
 //! the 16-bit input plane ([`LayerInput::Int16`]). Requantization per output channel uses
 //! [`crate::quant::requantize_to_i8`]; the activation clamp (`activation_min..=activation_max`)
-//! implements ReLU-like activations for free, and an optional [`Lut8`] maps every requantized
+//! implements ReLU-like activations for free, and an optional table ([`LutTable`]) maps every requantized
 //! output in the same pass.
 
 #[cfg(target_arch = "x86_64")]
 use super::dot::dot_i8_prefix;
 use super::rows::{for_each_block, for_each_sum, RowInput};
-use super::{KernelError, Lut8};
+use super::lut::{self, LutTable};
+use super::KernelError;
 #[cfg(target_arch = "x86_64")]
 use crate::quant::requantize_to_i8;
 use crate::quant::{dequantize_accumulator, requantize_valid, SHIFT_MAX, SHIFT_MIN};
@@ -186,7 +187,7 @@ impl<'a> FullyConnected<'a> {
     pub fn forward_activated(
         &self,
         requant: &FcRequant<'_>,
-        activation: Option<&Lut8>,
+        activation: Option<&LutTable>,
         input: LayerInput<'_>,
         output: &mut [i8],
     ) -> Result<(), KernelError> {
@@ -200,7 +201,7 @@ impl<'a> FullyConnected<'a> {
     pub(crate) fn forward_validated(
         &self,
         requant: &FcRequant<'_>,
-        activation: Option<&Lut8>,
+        activation: Option<&LutTable>,
         input: LayerInput<'_>,
         output: &mut [i8],
     ) -> Result<(), KernelError> {
@@ -217,8 +218,8 @@ impl<'a> FullyConnected<'a> {
                 #[cfg(target_arch = "x86_64")]
                 if let Some(avx2) = super::x86::Avx2::get() {
                     self.forward_avx2(avx2, requant, values, output);
-                    if let Some(lut) = activation {
-                        lut.apply_in_place(output);
+                    if let Some(table) = activation {
+                        lut::apply_in_place(table, output);
                     }
                     return Ok(());
                 }
@@ -234,12 +235,12 @@ impl<'a> FullyConnected<'a> {
     fn requantize_activated<T: RowInput>(
         &self,
         requant: &FcRequant<'_>,
-        activation: Option<&Lut8>,
+        activation: Option<&LutTable>,
         input: &[T],
         output: &mut [i8],
     ) {
         match activation {
-            Some(lut) => self.requantize_rows(requant, input, output, |v| lut.lookup(v)),
+            Some(table) => self.requantize_rows(requant, input, output, |v| lut::lookup(table, v)),
             None => self.requantize_rows(requant, input, output, |v| v),
         }
     }

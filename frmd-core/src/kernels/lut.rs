@@ -3,11 +3,30 @@
 
 use crate::quant::{dequantize, quantize, QuantError, QuantParams};
 
-/// An int8 -> int8 function as a table: `table[x + 128]` is the output for input code `x`.
+/// The outputs of an int8 -> int8 function for the input codes -128, -127, ..., 127, in that
+/// order: what a layer borrows (from a baked `static` or, zero-copy, from a blob).
+pub type LutTable = [i8; 256];
+
+/// The output code of `table` for input code `x`.
+#[inline]
+pub fn lookup(table: &LutTable, x: i8) -> i8 {
+    // `x + 128` maps -128..=127 to 0..=255, always in bounds.
+    let index = (i32::from(x) + 128) as usize;
+    table.get(index).copied().unwrap_or(x)
+}
+
+/// Replaces every element of `data` by its entry in `table`.
+pub fn apply_in_place(table: &LutTable, data: &mut [i8]) {
+    for value in data.iter_mut() {
+        *value = lookup(table, *value);
+    }
+}
+
+/// An int8 -> int8 function as an owned table: `table[x + 128]` is the output for input code `x`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Lut8 {
     /// Outputs for the input codes -128, -127, ..., 127, in that order.
-    pub table: [i8; 256],
+    pub table: LutTable,
 }
 
 impl Lut8 {
@@ -42,16 +61,12 @@ impl Lut8 {
     /// The output code for input code `x`.
     #[inline]
     pub fn lookup(&self, x: i8) -> i8 {
-        // `x + 128` maps -128..=127 to 0..=255, always in bounds.
-        let index = (i32::from(x) + 128) as usize;
-        self.table.get(index).copied().unwrap_or(x)
+        lookup(&self.table, x)
     }
 
     /// Replaces every element of `data` by its table entry.
     pub fn apply_in_place(&self, data: &mut [i8]) {
-        for value in data.iter_mut() {
-            *value = self.lookup(*value);
-        }
+        apply_in_place(&self.table, data);
     }
 }
 

@@ -29,7 +29,7 @@ pub mod x86;
 pub use activation::{gelu, gelu_sigmoid, gelu_tanh, mish, silu, softplus, Activation};
 pub use dot::dot_i8;
 pub use fc::{dequantize_accumulators, FcRequant, FullyConnected, LayerInput};
-pub use lut::Lut8;
+pub use lut::{Lut8, LutTable};
 pub use norm::{layer_norm, layer_norm_in_place};
 pub use softmax::softmax_in_place;
 

@@ -6,17 +6,17 @@
 //!
 //! | segment | length | values |
 //! | --- | --- | --- |
-//! | [`InputSegment::ObsHistory`] | `M * O` | observations oldest first, each `O` values |
-//! | [`InputSegment::PrevAction`] | `K` | last commanded action (ProDMP `y0`) |
-//! | [`InputSegment::PrevRate`] | `K` | its rate (per second, ProDMP `v0`) times [`InputLayout::rate_scale`] |
-//! | [`InputSegment::NoisyTrajectory`] | `N * K` | `c_in * x_noisy`, step-major (`x[t][d]`) |
+//! | [`InputSegment::ObsHistory`] | `m o` | observations oldest first, each `o` values |
+//! | [`InputSegment::PrevAction`] | `k` | last commanded action (ProDMP `y0`) |
+//! | [`InputSegment::PrevRate`] | `k` | its rate (per second, ProDMP `v0`) times [`InputLayout::rate_scale`] |
+//! | [`InputSegment::NoisyTrajectory`] | `n k` | `c_in * x_noisy`, step-major (`x[t][d]`) |
 //!
-//! The noise-level embedding is not an input: the exporter folds it into a per-step first-layer
-//! bias (see [`super::StepConstants`]).
+//! The noise-level embedding is not an input: the exporter folds it into the network (one
+//! variant per sampling step, see [`super::StepConstants::noise_variant`]).
 
 use serde::{Deserialize, Serialize};
 
-use super::PolicyError;
+use super::{PolicyDims, PolicyError};
 
 /// Most segments an [`InputLayout`] can list.
 pub const MAX_INPUT_SEGMENTS: usize = 4;
@@ -59,15 +59,15 @@ pub struct InputLayout {
 
 /// The four conditioning values the input is built from, all normalized.
 #[derive(Clone, Copy, Debug)]
-pub struct InputSources<'s, const M: usize, const O: usize, const K: usize, const N: usize> {
-    /// Observation history, oldest first.
-    pub obs_history: &'s [[f32; O]; M],
-    /// Last commanded action.
-    pub prev_action: &'s [f32; K],
-    /// Its rate in normalized units per second.
-    pub prev_rate: &'s [f32; K],
-    /// Unscaled noisy trajectory `x[t][d]`.
-    pub noisy: &'s [[f32; K]; N],
+pub struct InputSources<'s> {
+    /// Observation history, oldest first (`m o` values).
+    pub obs_history: &'s [f32],
+    /// Last commanded action (`k`).
+    pub prev_action: &'s [f32],
+    /// Its rate in normalized units per second (`k`).
+    pub prev_rate: &'s [f32],
+    /// Unscaled noisy trajectory `x[t][d]` (`n k`, step-major).
+    pub noisy: &'s [f32],
     /// The step's input scale `c_in`.
     pub c_in: f32,
 }
@@ -151,31 +151,47 @@ impl InputLayout {
             .try_fold(0_usize, |acc, s| acc.checked_add(s.len(m, o, k, n)?))
     }
 
-    /// Writes the input vector into `out`, which must be exactly [`Self::width`] long.
-    pub fn write<const M: usize, const O: usize, const K: usize, const N: usize>(
+    /// [`Self::width`] of `dims`.
+    pub fn width_of(&self, dims: &PolicyDims) -> Option<usize> {
+        self.width(dims.history, dims.obs_dim, dims.action_dim, dims.horizon)
+    }
+
+    /// Writes the input vector into `out`, which must be exactly [`Self::width_of`] `dims` long;
+    /// every source must hold its segment's length.
+    pub fn write(
         &self,
-        sources: &InputSources<'_, M, O, K, N>,
+        dims: &PolicyDims,
+        sources: &InputSources<'_>,
         out: &mut [f32],
     ) -> Result<(), PolicyError> {
-        if self.width(M, O, K, N) != Some(out.len()) {
+        if self.width_of(dims) != Some(out.len()) {
             return Err(PolicyError::InputWidth);
         }
+        let (m, o, k, n) = (dims.history, dims.obs_dim, dims.action_dim, dims.horizon);
         let mut rest = out;
         for segment in self.segments() {
-            let len = segment.len(M, O, K, N).ok_or(PolicyError::InputWidth)?;
+            let len = segment.len(m, o, k, n).ok_or(PolicyError::InputWidth)?;
             let (head, tail) = core::mem::take(&mut rest)
                 .split_at_mut_checked(len)
                 .ok_or(PolicyError::InputWidth)?;
+            let source = match segment {
+                InputSegment::ObsHistory => sources.obs_history,
+                InputSegment::PrevAction => sources.prev_action,
+                InputSegment::PrevRate => sources.prev_rate,
+                InputSegment::NoisyTrajectory => sources.noisy,
+            };
+            if source.len() != len {
+                return Err(PolicyError::InputWidth);
+            }
             match segment {
-                InputSegment::ObsHistory => copy(head, sources.obs_history.as_flattened()),
-                InputSegment::PrevAction => copy(head, sources.prev_action),
+                InputSegment::ObsHistory | InputSegment::PrevAction => copy(head, source),
                 InputSegment::PrevRate => {
-                    for (o, r) in head.iter_mut().zip(sources.prev_rate) {
+                    for (o, r) in head.iter_mut().zip(source) {
                         *o = r * self.rate_scale;
                     }
                 }
                 InputSegment::NoisyTrajectory => {
-                    for (o, x) in head.iter_mut().zip(sources.noisy.as_flattened()) {
+                    for (o, x) in head.iter_mut().zip(source) {
                         *o = sources.c_in * x;
                     }
                 }

@@ -7,28 +7,32 @@
 //! episode. Internally:
 //!
 //! 1. observations are checked (NaN/Inf is [`PolicyError::NonFiniteObservation`]), normalized to
-//!    `[-1, 1]` ([`RangeNormalizer`]) and pushed into an `M`-deep ring buffer ([`ObsHistory`],
+//!    `[-1, 1]` ([`RangeNormalizer`]) and pushed into an `m`-deep ring buffer ([`ObsHistory`],
 //!    padded with the first observation of an episode);
 //! 2. the model input is assembled by the [`InputLayout`] from the history, the last commanded
 //!    action and its finite-difference rate (normalized units per second) and the `c_in`-scaled
 //!    noisy trajectory;
-//! 3. the [`Sampler`] runs the 1..=4-step consistency sampler through any [`Network`] (int8
-//!    [`Int8Network`] or f32 [`F32Network`]) and decodes ProDMP parameters with the baked decoder;
-//! 4. the chunk is un-normalized to robot units: `N x K` positions and velocities.
+//! 3. the [`Sampler`] runs the 1..=4-step consistency sampler through any [`Network`] (an MLP,
+//!    [`Int8MlpNetwork`] or [`F32MlpNetwork`], or a transformer, [`TransformerNetwork`]) and
+//!    decodes ProDMP parameters with the baked decoder tables ([`ProDmpTables`]);
+//! 4. the chunk is un-normalized to robot units: `n x k` positions and velocities.
 //!
-//! Const generics: `M` history length, `O` observation dim, `K` action dim (DoF), `N` horizon,
-//! `P = num_basis + 1` ProDMP parameters per DoF, `I` capacity of the input buffer (at least the
-//! layout's width).
+//! Sizes ([`PolicyDims`]): `m` history length, `o` observation dim, `k` action dim (DoF), `n`
+//! horizon, `p = num_basis + 1` ProDMP parameters per DoF, known at run time from the
+//! configuration. The [`Policy`]'s const generics `M, O, K, N, P, I` are the capacities of its
+//! buffers (`I` the model input), at least those sizes: a firmware image bakes them exactly, a
+//! host picks capacities large enough for any exported shape.
 
 mod baked;
+mod decoder;
+mod dims;
 mod history;
 mod layout;
-mod network;
+pub mod network;
 mod normalize;
 mod runtime;
 mod sampler;
-mod transformer_network;
-pub(crate) use transformer_network::STANDARD_SEGMENTS;
+mod steps;
 
 #[cfg(test)]
 pub(crate) mod test_model;
@@ -36,19 +40,23 @@ pub(crate) mod test_model;
 mod tests;
 
 pub use baked::{baked_slice, AlignedBytes};
+pub use decoder::ProDmpTables;
+pub use dims::PolicyDims;
 pub use history::ObsHistory;
 pub use layout::{InputLayout, InputSegment, InputSources, MAX_INPUT_SEGMENTS};
-pub(crate) use network::EMPTY_INT8_LAYER;
-pub use network::{F32Network, Int8Network, Network, MAX_HIDDEN_LAYERS};
-pub use normalize::RangeNormalizer;
-pub use runtime::{Policy, PolicyConfig};
-pub use transformer_network::{
+pub(crate) use network::transformer::STANDARD_SEGMENTS;
+pub use network::mlp::{F32MlpNetwork, Int8MlpNetwork, MAX_HIDDEN_LAYERS};
+pub use network::transformer::{
     F32TransformerNetwork, Int8TransformerNetwork, TransformerBackbone, TransformerNetwork,
+    TransformerWork,
 };
+pub use network::{Network, NoiseVariants};
+pub use normalize::{denormalize_value, normalize_value, RangeNormalizer};
+pub use runtime::{Policy, PolicyConfig};
 pub use sampler::{
-    skip_output, validate_steps, Conditioning, Noise, Sampler, SamplerWork, StepConstants, Trajectory,
-    MAX_STEPS,
+    skip_output, Conditioning, Noise, Sampler, SamplerBuffers, SamplerWork, Trajectory,
 };
+pub use steps::{validate_steps, StepConstants, StepTable, MAX_STEPS};
 
 use crate::model::mlp::ModelError;
 use crate::model::transformer::TransformerError;
@@ -77,10 +85,13 @@ pub enum PolicyError {
     /// The input layout repeats a segment, lacks the noisy trajectory, has too many segments or a
     /// non-finite rate scale.
     InvalidLayout,
-    /// The layout's width differs from the network's input width or exceeds the input buffer.
+    /// The layout's width differs from the network's input width, or an argument (observation,
+    /// action, rate) does not have its size.
     InputWidth,
-    /// The network's output width is not `K * P`.
+    /// The network's output width is not `k p`.
     OutputWidth,
+    /// A size exceeds the capacity of the policy's buffers (or is zero).
+    Capacity,
     /// A step constant is not finite, `sigma` or `c_in` is not positive, `renoise_std` is
     /// negative, or the first step re-noises.
     InvalidStepConstants,
@@ -88,13 +99,14 @@ pub enum PolicyError {
     StepCount,
     /// The control period is not finite and positive.
     InvalidControlPeriod,
-    /// A step selects a first-layer bias variant the network does not have.
-    FirstLayerBiasIndex,
-    /// The first-layer bias variants are not a whole number of `out_features` rows.
-    FirstLayerBiasLength,
+    /// A step selects a noise-level variant the network does not have.
+    NoiseVariantIndex,
+    /// The noise-level variants are not a whole number of rows (first-layer `out_features` of
+    /// an MLP, `W` of a transformer).
+    NoiseVariantLength,
     /// The network has more than [`MAX_HIDDEN_LAYERS`] hidden layers.
     TooManyLayers,
-    /// Caller-supplied noise does not hold `steps * N * K` values.
+    /// Caller-supplied noise does not hold `steps n k` values.
     NoiseLength,
     /// Caller-supplied noise contains NaN or infinity.
     NonFiniteNoise,
@@ -127,16 +139,15 @@ impl core::fmt::Display for PolicyError {
             }
             Self::InvalidLayout => f.write_str("invalid model input layout"),
             Self::InputWidth => {
-                f.write_str("input layout width differs from the network or the input buffer")
+                f.write_str("input layout width differs from the network, or an argument's size")
             }
-            Self::OutputWidth => f.write_str("network output width is not K * P"),
+            Self::OutputWidth => f.write_str("network output width is not k * p"),
+            Self::Capacity => f.write_str("a size exceeds the policy's buffers"),
             Self::InvalidStepConstants => f.write_str("invalid sampling step constants"),
             Self::StepCount => f.write_str("step table must have 1..=4 steps"),
             Self::InvalidControlPeriod => f.write_str("control period is not finite and positive"),
-            Self::FirstLayerBiasIndex => f.write_str("first-layer bias variant index out of range"),
-            Self::FirstLayerBiasLength => {
-                f.write_str("first-layer bias variants are not whole rows")
-            }
+            Self::NoiseVariantIndex => f.write_str("noise-level variant index out of range"),
+            Self::NoiseVariantLength => f.write_str("noise-level variants are not whole rows"),
             Self::TooManyLayers => f.write_str("too many hidden layers"),
             Self::NoiseLength => f.write_str("supplied noise has the wrong length"),
             Self::NonFiniteNoise => f.write_str("supplied noise is not finite"),

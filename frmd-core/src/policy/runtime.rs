@@ -4,20 +4,40 @@ use super::history::ObsHistory;
 use super::network::Network;
 use super::normalize::RangeNormalizer;
 use super::sampler::{Conditioning, Noise, Sampler, SamplerWork, Trajectory};
-use super::PolicyError;
+use super::{PolicyDims, PolicyError};
 
 /// Everything baked besides the network.
 #[derive(Clone, Copy, Debug)]
-pub struct PolicyConfig<'a, const O: usize, const K: usize, const N: usize, const P: usize> {
-    /// Observation normalization (raw units).
-    pub obs_norm: RangeNormalizer<O>,
-    /// Action normalization (raw units).
-    pub action_norm: RangeNormalizer<K>,
-    /// Step table, decoder, input layout, control period.
-    pub sampler: Sampler<'a, N, P>,
+pub struct PolicyConfig<'a> {
+    /// Observation history length `m` (the other sizes are those of the tables below).
+    pub history: usize,
+    /// Observation normalization (raw units), `o` dimensions.
+    pub obs_norm: RangeNormalizer<'a>,
+    /// Action normalization (raw units), `k` dimensions.
+    pub action_norm: RangeNormalizer<'a>,
+    /// Step table, decoder (`n` query times, `p` parameters per DoF), input layout, control
+    /// period.
+    pub sampler: Sampler<'a>,
 }
 
-/// A policy over network `Net`; see the [module docs](super) for the call sequence and generics.
+impl PolicyConfig<'_> {
+    /// The policy's sizes.
+    pub fn dims(&self) -> PolicyDims {
+        PolicyDims {
+            history: self.history,
+            obs_dim: self.obs_norm.len(),
+            action_dim: self.action_norm.len(),
+            horizon: self.sampler.decoder.horizon(),
+            params_per_dof: self.sampler.decoder.params_per_dof(),
+        }
+    }
+}
+
+/// A policy over network `Net` with room for a history of `M` observations of `O` values, `K`
+/// DoFs, horizon `N`, `P` ProDMP parameters per DoF and a model input of `I` values (the sizes of
+/// its [`PolicyConfig`] may be smaller, heapless style: a firmware image bakes them exactly, a
+/// host runs any exported shape up to its capacities); see the [module docs](super) for the call
+/// sequence.
 #[derive(Clone, Debug)]
 pub struct Policy<
     'a,
@@ -29,7 +49,8 @@ pub struct Policy<
     const P: usize,
     const I: usize,
 > {
-    config: PolicyConfig<'a, O, K, N, P>,
+    config: PolicyConfig<'a>,
+    dims: PolicyDims,
     network: Net,
     history: ObsHistory<M, O>,
     history_ordered: [[f32; O]; M],
@@ -62,16 +83,27 @@ impl<
         const I: usize,
     > Policy<'a, Net, M, O, K, N, P, I>
 {
-    /// Validates `config` against `network` (normalization, steps, layout widths, output width,
-    /// bias variants) and builds the policy. Call [`Self::reset`] before the first chunk.
-    pub fn new(config: PolicyConfig<'a, O, K, N, P>, network: Net) -> Result<Self, PolicyError> {
+    /// Validates `config` against `network` and the capacities (normalization, steps, decoder,
+    /// layout widths, output width, noise-level variants) and builds the policy. Call
+    /// [`Self::reset`] before the first chunk.
+    pub fn new(config: PolicyConfig<'a>, network: Net) -> Result<Self, PolicyError> {
         config.obs_norm.validate()?;
         config.action_norm.validate()?;
-        config.sampler.validate::<Net, M, O, K, I>(&network)?;
+        let dims = config.dims();
+        config.sampler.decoder.validate()?;
+        config.sampler.validate(&dims, &network)?;
+        if network.input_width() > I {
+            return Err(PolicyError::InputWidth);
+        }
+        if !dims.fits([M, O, K, N, P]) {
+            return Err(PolicyError::Capacity);
+        }
+        let history = ObsHistory::with_sizes(dims.history, dims.obs_dim).ok_or(PolicyError::Capacity)?;
         Ok(Self {
             config,
+            dims,
             network,
-            history: ObsHistory::new(),
+            history,
             history_ordered: [[0.0; O]; M],
             prev_action: None,
             prev_rate: [0.0; K],
@@ -83,16 +115,34 @@ impl<
         })
     }
 
-    /// Starts an episode: forgets the observation history and the current chunk, and sets the
-    /// last commanded action to `initial_action` (raw units, e.g. the robot's current position)
-    /// with rate 0.
-    pub fn reset(&mut self, initial_action: &[f32; K]) -> Result<(), PolicyError> {
-        check_finite(initial_action).map_err(|index| PolicyError::NonFiniteAction { index })?;
+    /// The policy's sizes.
+    pub fn dims(&self) -> PolicyDims {
+        self.dims
+    }
+
+    /// `values` if it holds `len` values, else [`PolicyError::InputWidth`].
+    fn sized(values: &[f32], len: usize) -> Result<&[f32], PolicyError> {
+        if values.len() == len {
+            Ok(values)
+        } else {
+            Err(PolicyError::InputWidth)
+        }
+    }
+
+    /// `raw` (`k` values) normalized with the action normalizer.
+    fn normalized_action(&self, raw: &[f32]) -> Result<[f32; K], PolicyError> {
+        let raw = Self::sized(raw, self.dims.action_dim)?;
+        check_finite(raw).map_err(|index| PolicyError::NonFiniteAction { index })?;
         let mut normalized = [0.0; K];
-        self.config
-            .action_norm
-            .normalize(initial_action, &mut normalized);
-        self.prev_action = Some(normalized);
+        self.config.action_norm.normalize(raw, &mut normalized);
+        Ok(normalized)
+    }
+
+    /// Starts an episode: forgets the observation history and the current chunk, and sets the
+    /// last commanded action to `initial_action` (`k` raw values, e.g. the robot's current
+    /// position) with rate 0.
+    pub fn reset(&mut self, initial_action: &[f32]) -> Result<(), PolicyError> {
+        self.prev_action = Some(self.normalized_action(initial_action)?);
         self.prev_rate = [0.0; K];
         self.history.clear();
         self.chunk_ready = false;
@@ -100,9 +150,10 @@ impl<
         Ok(())
     }
 
-    /// Pushes the newest observation (raw units). NaN or infinite elements are rejected and the
-    /// history is left unchanged.
-    pub fn observe(&mut self, observation: &[f32; O]) -> Result<(), PolicyError> {
+    /// Pushes the newest observation (`o` raw values). NaN or infinite elements are rejected and
+    /// the history is left unchanged.
+    pub fn observe(&mut self, observation: &[f32]) -> Result<(), PolicyError> {
+        let observation = Self::sized(observation, self.dims.obs_dim)?;
         check_finite(observation).map_err(|index| PolicyError::NonFiniteObservation { index })?;
         let mut normalized = [0.0; O];
         self.config.obs_norm.normalize(observation, &mut normalized);
@@ -110,17 +161,12 @@ impl<
         Ok(())
     }
 
-    /// Sets the last commanded action (raw units) and its rate (raw units per second), e.g. when
-    /// the controller commands actions the policy did not emit.
-    pub fn set_previous_action(
-        &mut self,
-        action: &[f32; K],
-        rate: &[f32; K],
-    ) -> Result<(), PolicyError> {
-        check_finite(action).map_err(|index| PolicyError::NonFiniteAction { index })?;
+    /// Sets the last commanded action (raw units) and its rate (raw units per second), `k`
+    /// values each, e.g. when the controller commands actions the policy did not emit.
+    pub fn set_previous_action(&mut self, action: &[f32], rate: &[f32]) -> Result<(), PolicyError> {
+        let normalized = self.normalized_action(action)?;
+        let rate = Self::sized(rate, self.dims.action_dim)?;
         check_finite(rate).map_err(|index| PolicyError::NonFiniteAction { index })?;
-        let mut normalized = [0.0; K];
-        self.config.action_norm.normalize(action, &mut normalized);
         self.config
             .action_norm
             .normalize_rate(rate, &mut self.prev_rate);
@@ -131,10 +177,8 @@ impl<
     /// Records that `action` (raw units) was commanded one control period after the previous
     /// one: the rate becomes `(a_t - a_{t-1}) / control_dt` in normalized units (0 if no action
     /// was known).
-    pub fn record_action(&mut self, action: &[f32; K]) -> Result<(), PolicyError> {
-        check_finite(action).map_err(|index| PolicyError::NonFiniteAction { index })?;
-        let mut normalized = [0.0; K];
-        self.config.action_norm.normalize(action, &mut normalized);
+    pub fn record_action(&mut self, action: &[f32]) -> Result<(), PolicyError> {
+        let normalized = self.normalized_action(action)?;
         let dt = self.config.sampler.control_dt;
         match &self.prev_action {
             Some(previous) => {
@@ -151,62 +195,67 @@ impl<
     }
 
     /// Samples a new chunk from the current history and last commanded action, with noise from
-    /// `noise`. Returns it in robot units (positions, velocities per second) and makes it the
-    /// chunk [`Self::next_action`] reads from.
+    /// `noise`. Returns it in robot units (positions, velocities per second; the first `n k`
+    /// values, step-major) and makes it the chunk [`Self::next_action`] reads from.
     pub fn act(&mut self, noise: Noise<'_>) -> Result<&Trajectory<N, K>, PolicyError> {
         let prev_action = self.prev_action.ok_or(PolicyError::NoPreviousAction)?;
         if !self.history.is_filled() {
             return Err(PolicyError::NoObservation);
         }
         self.chunk_ready = false;
-        for (slot, obs) in self
+        let dims = self.dims;
+        let (m, o, k) = (dims.history, dims.obs_dim, dims.action_dim);
+        let history_len = dims.history_len().ok_or(PolicyError::Capacity)?;
+        let trajectory = dims.trajectory_len().ok_or(PolicyError::Capacity)?;
+        let ordered = self
             .history_ordered
-            .iter_mut()
-            .zip(self.history.iter_oldest_first())
-        {
-            *slot = *obs;
+            .as_flattened_mut()
+            .get_mut(..history_len)
+            .ok_or(PolicyError::Capacity)?;
+        for (slot, obs) in ordered.chunks_exact_mut(o.max(1)).zip(self.history.iter_oldest_first()).take(m) {
+            slot.copy_from_slice(obs);
         }
         let conditioning = Conditioning {
-            obs_history: &self.history_ordered,
-            prev_action: &prev_action,
-            prev_rate: &self.prev_rate,
+            obs_history: ordered,
+            prev_action: prev_action.get(..k).ok_or(PolicyError::Capacity)?,
+            prev_rate: self.prev_rate.get(..k).ok_or(PolicyError::Capacity)?,
         };
-        self.config.sampler.sample(
+        let input = self.network.input_width();
+        let (positions, velocities) = self
+            .normalized
+            .values_mut(trajectory)
+            .ok_or(PolicyError::Capacity)?;
+        self.config.sampler.sample::<N, K, P, Net>(
+            &dims,
             &mut self.network,
             &conditioning,
             noise,
-            &mut self.work,
-            &mut self.normalized,
+            self.work.buffers(&dims, input)?,
+            positions,
+            velocities,
         )?;
         let norm = &self.config.action_norm;
-        let rows = self
-            .normalized
-            .positions
-            .iter()
-            .zip(&self.normalized.velocities)
-            .zip(
-                self.chunk
-                    .positions
-                    .iter_mut()
-                    .zip(self.chunk.velocities.iter_mut()),
-            );
-        for ((pos, vel), (pos_out, vel_out)) in rows {
-            norm.denormalize(pos, pos_out);
-            norm.denormalize_rate(vel, vel_out);
-        }
+        let (out_positions, out_velocities) =
+            self.chunk.values_mut(trajectory).ok_or(PolicyError::Capacity)?;
+        norm.denormalize_trajectory::<N, K>((positions, velocities), (out_positions, out_velocities));
         self.chunk_ready = true;
         self.cursor = 0;
         Ok(&self.chunk)
     }
 
-    /// The next action of the current chunk (raw units), recorded as commanded
-    /// ([`Self::record_action`]); `None` when no chunk is ready or all `N` were emitted.
+    /// The next action of the current chunk (raw units, `k` values; the rest of the array is
+    /// zero), recorded as commanded ([`Self::record_action`]); `None` when no chunk is ready or
+    /// all `n` were emitted.
     pub fn next_action(&mut self) -> Option<[f32; K]> {
-        if !self.chunk_ready {
+        if !self.chunk_ready || self.cursor >= self.dims.horizon {
             return None;
         }
-        let action = *self.chunk.positions.get(self.cursor)?;
-        self.record_action(&action).ok()?;
+        let k = self.dims.action_dim;
+        let start = self.cursor.checked_mul(k)?;
+        let values = self.chunk.positions.as_flattened().get(start..start.checked_add(k)?)?;
+        let mut action = [0.0; K];
+        action.get_mut(..k)?.copy_from_slice(values);
+        self.record_action(action.get(..k)?).ok()?;
         self.cursor += 1;
         Some(action)
     }
@@ -236,13 +285,13 @@ impl<
         &self.network
     }
 
-    /// The ProDMP parameters of the last network evaluation.
+    /// The ProDMP parameters of the last network evaluation (DoF-major; the first `k p` values).
     pub fn last_params(&self) -> &[[f32; P]; K] {
         self.work.params()
     }
 
     /// The baked configuration.
-    pub fn config(&self) -> &PolicyConfig<'a, O, K, N, P> {
+    pub fn config(&self) -> &PolicyConfig<'a> {
         &self.config
     }
 }

@@ -15,75 +15,21 @@
 //! the same combination of the decoded velocities, the initial-condition velocities and the
 //! backward difference of `x` / control_dt (with `x` before the first query time taken as `y0`).
 
-use crate::prodmp::BakedProDmp;
 use crate::rng::Rng;
 
+use super::decoder::ProDmpTables;
 use super::layout::{InputLayout, InputSources};
 use super::network::Network;
-use super::PolicyError;
-
-/// Most sampling steps a table may hold.
-pub const MAX_STEPS: usize = 4;
-
-/// Constants of one sampling step, folded by the exporter from the sigma schedule.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct StepConstants {
-    /// Noise level of this step (normalized action units).
-    pub sigma: f32,
-    /// Standard deviation of the fresh noise added to the previous output:
-    /// `sqrt(sigma^2 - sigma_min^2)`; 0 for the first step (which starts from `sigma * z`).
-    pub renoise_std: f32,
-    /// Input scale `c_in(sigma) = 1 / sqrt(sigma^2 + sigma_data^2)`.
-    pub c_in: f32,
-    /// Skip scale `c_skip(sigma)`.
-    pub c_skip: f32,
-    /// Output scale `c_out(sigma)`.
-    pub c_out: f32,
-    /// Which first-layer bias variant (noise embedding at `sigma` folded in) this step uses.
-    pub first_layer_bias_index: u32,
-}
-
-impl StepConstants {
-    /// Checks one step: all values finite, `sigma > 0`, `c_in > 0`, `renoise_std >= 0`, and
-    /// `renoise_std == 0` for the first step.
-    pub fn validate(&self, first: bool) -> Result<(), PolicyError> {
-        let values = [
-            self.sigma,
-            self.renoise_std,
-            self.c_in,
-            self.c_skip,
-            self.c_out,
-        ];
-        let finite = values.iter().all(|v| v.is_finite());
-        if !finite
-            || self.sigma <= 0.0
-            || self.c_in <= 0.0
-            || self.renoise_std < 0.0
-            || (first && self.renoise_std != 0.0)
-        {
-            return Err(PolicyError::InvalidStepConstants);
-        }
-        Ok(())
-    }
-}
-
-/// Checks a whole table: `1..=MAX_STEPS` steps, each valid.
-pub fn validate_steps(steps: &[StepConstants]) -> Result<(), PolicyError> {
-    if steps.is_empty() || steps.len() > MAX_STEPS {
-        return Err(PolicyError::StepCount);
-    }
-    steps
-        .iter()
-        .enumerate()
-        .try_for_each(|(i, step)| step.validate(i == 0))
-}
+use super::dims::{fixed_row_pairs, fixed_rows};
+use super::steps::{StepConstants, StepTable};
+use super::{PolicyDims, PolicyError};
 
 /// Where the Gaussian noise comes from.
 #[derive(Debug)]
 pub enum Noise<'n> {
-    /// Drawn from a seeded generator, `N * K` values per step in step-major order.
+    /// Drawn from a seeded generator, `n k` values per step in step-major order.
     Rng(&'n mut Rng),
-    /// Supplied by the caller: `steps * N * K` values, step after step, each step-major.
+    /// Supplied by the caller: `steps n k` values, step after step, each step-major.
     Given(&'n [f32]),
 }
 
@@ -111,7 +57,9 @@ impl Noise<'_> {
     }
 }
 
-/// Positions and velocities of a trajectory, `[t][d]` for the query times `dt .. N dt`.
+/// Positions and velocities of a trajectory for the query times `dt .. n dt`, with capacity for
+/// `N` times of `K` DoFs: the `n k` values of a policy with smaller sizes are the first ones of
+/// the flattened arrays, step-major (for `n = N`, `k = K` simply `[t][d]`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Trajectory<const N: usize, const K: usize> {
     /// Positions (normalized or robot units, as stated where used).
@@ -128,6 +76,18 @@ impl<const N: usize, const K: usize> Trajectory<N, K> {
             velocities: [[0.0; K]; N],
         }
     }
+
+    /// The first `len` positions and velocities (flattened), or `None` beyond the capacity.
+    pub fn values(&self, len: usize) -> Option<(&[f32], &[f32])> {
+        let positions = self.positions.as_flattened().get(..len)?;
+        Some((positions, self.velocities.as_flattened().get(..len)?))
+    }
+
+    /// [`Self::values`], mutable.
+    pub fn values_mut(&mut self, len: usize) -> Option<(&mut [f32], &mut [f32])> {
+        let positions = self.positions.as_flattened_mut().get_mut(..len)?;
+        Some((positions, self.velocities.as_flattened_mut().get_mut(..len)?))
+    }
 }
 
 impl<const N: usize, const K: usize> Default for Trajectory<N, K> {
@@ -138,16 +98,36 @@ impl<const N: usize, const K: usize> Default for Trajectory<N, K> {
 
 /// Conditioning of one chunk, normalized units.
 #[derive(Clone, Copy, Debug)]
-pub struct Conditioning<'c, const M: usize, const O: usize, const K: usize> {
-    /// Observation history, oldest first.
-    pub obs_history: &'c [[f32; O]; M],
-    /// Last commanded action (ProDMP `y0`).
-    pub prev_action: &'c [f32; K],
-    /// Its rate, normalized units per second (ProDMP `v0`).
-    pub prev_rate: &'c [f32; K],
+pub struct Conditioning<'c> {
+    /// Observation history, oldest first (`m o` values).
+    pub obs_history: &'c [f32],
+    /// Last commanded action (ProDMP `y0`, `k` values).
+    pub prev_action: &'c [f32],
+    /// Its rate, normalized units per second (ProDMP `v0`, `k` values).
+    pub prev_rate: &'c [f32],
 }
 
-/// Working memory of [`Sampler::sample`]; `I` must be at least the network input width.
+/// Working memory of [`Sampler::sample`], borrowed: `noisy` and `noise` (`n k`), the network
+/// `input` (its width), the ProDMP `params` (`k p`, DoF-major) and the decoded trajectory
+/// (`n k` each).
+#[derive(Debug)]
+pub struct SamplerBuffers<'w> {
+    /// The noisy trajectory `x` of the current step.
+    pub noisy: &'w mut [f32],
+    /// The step's standard-normal noise.
+    pub noise: &'w mut [f32],
+    /// The network input.
+    pub input: &'w mut [f32],
+    /// The network output.
+    pub params: &'w mut [f32],
+    /// Decoded positions.
+    pub decoded_positions: &'w mut [f32],
+    /// Decoded velocities.
+    pub decoded_velocities: &'w mut [f32],
+}
+
+/// [`SamplerBuffers`] as fixed arrays with capacity for `K` DoFs, horizon `N`, `P` parameters per
+/// DoF and an input of `I` values.
 #[derive(Clone, Debug)]
 pub struct SamplerWork<const K: usize, const N: usize, const P: usize, const I: usize> {
     noisy: [[f32; K]; N],
@@ -169,7 +149,30 @@ impl<const K: usize, const N: usize, const P: usize, const I: usize> SamplerWork
         }
     }
 
-    /// The ProDMP parameters of the last network evaluation (`params[d] = [w.., g]`).
+    /// The arrays cut to `dims` and an input of `input` values, or [`PolicyError::Capacity`].
+    pub fn buffers(
+        &mut self,
+        dims: &PolicyDims,
+        input: usize,
+    ) -> Result<SamplerBuffers<'_>, PolicyError> {
+        let trajectory = dims.trajectory_len().ok_or(PolicyError::Capacity)?;
+        let params = dims.params_len().ok_or(PolicyError::Capacity)?;
+        let (decoded_positions, decoded_velocities) = self
+            .decoded
+            .values_mut(trajectory)
+            .ok_or(PolicyError::Capacity)?;
+        Ok(SamplerBuffers {
+            noisy: prefix(self.noisy.as_flattened_mut(), trajectory)?,
+            noise: prefix(self.noise.as_flattened_mut(), trajectory)?,
+            input: prefix(&mut self.input, input)?,
+            params: prefix(self.params.as_flattened_mut(), params)?,
+            decoded_positions,
+            decoded_velocities,
+        })
+    }
+
+    /// The ProDMP parameters of the last network evaluation, DoF-major (the first `k p`
+    /// values; for `k = K`, `p = P` `params[d] = [w.., g]`).
     pub fn params(&self) -> &[[f32; P]; K] {
         &self.params
     }
@@ -183,84 +186,102 @@ impl<const K: usize, const N: usize, const P: usize, const I: usize> Default
     }
 }
 
+/// The first `len` values, or [`PolicyError::Capacity`].
+fn prefix(values: &mut [f32], len: usize) -> Result<&mut [f32], PolicyError> {
+    values.get_mut(..len).ok_or(PolicyError::Capacity)
+}
+
 /// Everything the sampler needs besides the network: step table, decoder, input layout and the
 /// control period (s) between query times.
 #[derive(Clone, Copy, Debug)]
-pub struct Sampler<'s, const N: usize, const P: usize> {
+pub struct Sampler<'s> {
     /// Per-step constants, `1..=MAX_STEPS` entries.
-    pub steps: &'s [StepConstants],
-    /// Baked ProDMP decoder (query times `dt .. N dt`).
-    pub decoder: &'s BakedProDmp<N, P>,
+    pub steps: StepTable,
+    /// Baked ProDMP decoder tables (query times `dt .. n dt`).
+    pub decoder: ProDmpTables<'s>,
     /// Model input layout.
     pub layout: InputLayout,
-    /// Control period in seconds (the decoder's `tau / N`).
+    /// Control period in seconds (the decoder's `tau / n`).
     pub control_dt: f32,
 }
 
-impl<const N: usize, const P: usize> Sampler<'_, N, P> {
-    /// Checks the step table, the layout, the control period, and that `net` takes the layout's
-    /// width (at most `I`), outputs `K * P` values and has every bias variant the steps use.
-    pub fn validate<
-        Net: Network,
-        const M: usize,
-        const O: usize,
-        const K: usize,
-        const I: usize,
-    >(
-        &self,
-        net: &Net,
-    ) -> Result<(), PolicyError> {
-        validate_steps(self.steps)?;
+impl Sampler<'_> {
+    /// Checks the step table, the layout, the control period, that the decoder has `dims`'
+    /// horizon and parameters, and that `net` takes the layout's width, outputs `k p` values and
+    /// has every noise-level variant the steps use (the decoder tables' own consistency and
+    /// values are [`ProDmpTables::validate`]'s, which [`super::Policy::new`] runs once).
+    pub fn validate<Net: Network>(&self, dims: &PolicyDims, net: &Net) -> Result<(), PolicyError> {
+        self.steps.validate()?;
         self.layout.validate()?;
         if !(self.control_dt.is_finite() && self.control_dt > 0.0) {
             return Err(PolicyError::InvalidControlPeriod);
         }
-        let width = self
-            .layout
-            .width(M, O, K, N)
-            .ok_or(PolicyError::InputWidth)?;
-        if width != net.input_width() || width > I {
+        if (self.decoder.horizon(), self.decoder.params_per_dof())
+            != (dims.horizon, dims.params_per_dof)
+        {
+            return Err(PolicyError::Decode(crate::prodmp::ProDmpError::WrongLength));
+        }
+        let width = self.layout.width_of(dims).ok_or(PolicyError::InputWidth)?;
+        if width != net.input_width() {
             return Err(PolicyError::InputWidth);
         }
-        if Some(net.output_width()) != K.checked_mul(P) {
+        if Some(net.output_width()) != dims.params_len() {
             return Err(PolicyError::OutputWidth);
         }
-        let variants = net.num_first_layer_biases().max(1);
+        let variants = net.num_noise_variants().max(1);
         if self
             .steps
+            .as_slice()
             .iter()
-            .any(|s| s.first_layer_bias_index as usize >= variants)
+            .any(|s| s.noise_variant as usize >= variants)
         {
-            return Err(PolicyError::FirstLayerBiasIndex);
+            return Err(PolicyError::NoiseVariantIndex);
         }
         Ok(())
     }
 
-    /// Runs all steps and writes the chunk (normalized units) into `out`.
-    pub fn sample<Net: Network, const M: usize, const O: usize, const K: usize, const I: usize>(
+    /// Runs all steps and writes the chunk (normalized units, `n k` positions and velocities,
+    /// step-major) into `positions` and `velocities`. `N`, `K` and `P` are the caller's
+    /// capacities (see [`ProDmpTables::decode`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn sample<const N: usize, const K: usize, const P: usize, Net: Network>(
         &self,
+        dims: &PolicyDims,
         net: &mut Net,
-        conditioning: &Conditioning<'_, M, O, K>,
+        conditioning: &Conditioning<'_>,
         mut noise: Noise<'_>,
-        work: &mut SamplerWork<K, N, P, I>,
-        out: &mut Trajectory<N, K>,
+        work: SamplerBuffers<'_>,
+        positions: &mut [f32],
+        velocities: &mut [f32],
     ) -> Result<(), PolicyError> {
-        self.validate::<Net, M, O, K, I>(net)?;
+        self.validate(dims, net)?;
+        let k = dims.action_dim;
+        if k == 0 {
+            return Err(PolicyError::Capacity);
+        }
+        let trajectory = dims.trajectory_len().ok_or(PolicyError::Capacity)?;
         let width = net.input_width();
-        for (index, step) in self.steps.iter().enumerate() {
-            noise.fill(index, work.noise.as_flattened_mut())?;
-            let fresh = work
-                .noisy
-                .iter_mut()
-                .flatten()
-                .zip(work.noise.iter().flatten());
+        let SamplerBuffers {
+            noisy,
+            noise: z,
+            input,
+            params,
+            decoded_positions,
+            decoded_velocities,
+        } = work;
+        let input = input.get_mut(..width).ok_or(PolicyError::InputWidth)?;
+        if [noisy.len(), z.len(), positions.len(), velocities.len()] != [trajectory; 4] {
+            return Err(PolicyError::Capacity);
+        }
+        for (index, step) in self.steps.as_slice().iter().enumerate() {
+            noise.fill(index, z)?;
+            let fresh = noisy.iter_mut().zip(z.iter());
             if index == 0 {
                 for (x, z) in fresh {
                     *x = step.sigma * z;
                 }
             } else {
-                let previous = out.positions.iter().flatten();
-                for ((x, z), f) in fresh.zip(previous) {
+                for ((x, z), f) in fresh.zip(positions.iter()) {
                     *x = f + step.renoise_std * z;
                 }
             }
@@ -268,37 +289,38 @@ impl<const N: usize, const P: usize> Sampler<'_, N, P> {
                 obs_history: conditioning.obs_history,
                 prev_action: conditioning.prev_action,
                 prev_rate: conditioning.prev_rate,
-                noisy: &work.noisy,
+                noisy,
                 c_in: step.c_in,
             };
-            let input = work.input.get_mut(..width).ok_or(PolicyError::InputWidth)?;
-            self.layout.write(&sources, input)?;
-            net.forward(
-                step.first_layer_bias_index as usize,
-                input,
-                work.params.as_flattened_mut(),
-            )?;
-            decode(
-                self.decoder,
-                &work.params,
-                conditioning.prev_action,
-                conditioning.prev_rate,
-                &mut work.decoded,
-            )?;
-            self.combine(
-                step,
-                &work.noisy,
-                (conditioning.prev_action, conditioning.prev_rate),
-                &work.decoded,
-                out,
+            self.layout.write(dims, &sources, input)?;
+            net.forward(step.noise_variant as usize, input, params)?;
+            self.decoder
+                .decode::<N, K, P>(
+                    params,
+                    conditioning.prev_action,
+                    conditioning.prev_rate,
+                    decoded_positions,
+                    decoded_velocities,
+                )
+                .map_err(PolicyError::Decode)?;
+            let decoded = (&*decoded_positions, &*decoded_velocities);
+            let fixed = (
+                fixed_rows::<N, K>(noisy),
+                fixed_rows::<N, K>(decoded.0),
+                fixed_rows::<N, K>(decoded.1),
             );
+            if let (Some(noisy), Some(decoded_pos), Some(decoded_vel)) = fixed {
+                if let Some(outputs) = fixed_row_pairs::<N, K>(positions, velocities) {
+                    let decoded = decoded_pos.zip(decoded_vel);
+                    self.combine(step, noisy, conditioning, decoded, outputs);
+                }
+            } else {
+                let outputs = positions.chunks_exact_mut(k).zip(velocities.chunks_exact_mut(k));
+                let decoded = decoded.0.chunks_exact(k).zip(decoded.1.chunks_exact(k));
+                self.combine(step, noisy.chunks_exact(k), conditioning, decoded, outputs);
+            }
         }
-        let finite = out
-            .positions
-            .iter()
-            .chain(out.velocities.iter())
-            .flatten()
-            .all(|v| v.is_finite());
+        let finite = positions.iter().chain(velocities.iter()).all(|v| v.is_finite());
         if finite {
             Ok(())
         } else {
@@ -307,23 +329,22 @@ impl<const N: usize, const P: usize> Sampler<'_, N, P> {
     }
 
     /// `f = b + c_skip (x - b) + c_out (decoded - b)` for positions; velocities as in the module
-    /// docs.
-    fn combine<const K: usize>(
+    /// docs. Every trajectory comes as rows of `k` values, one per query time.
+    #[inline(always)]
+    fn combine<'r, 'o>(
         &self,
         step: &StepConstants,
-        noisy: &[[f32; K]; N],
-        conditioning: (&[f32; K], &[f32; K]),
-        decoded: &Trajectory<N, K>,
-        out: &mut Trajectory<N, K>,
+        noisy: impl Iterator<Item = &'r [f32]>,
+        conditioning: &Conditioning<'_>,
+        decoded: impl Iterator<Item = (&'r [f32], &'r [f32])>,
+        outputs: impl Iterator<Item = (&'o mut [f32], &'o mut [f32])>,
     ) {
-        let (prev_action, prev_rate) = conditioning;
+        let (prev_action, prev_rate) = (conditioning.prev_action, conditioning.prev_rate);
         let mut before = prev_action;
-        let boundary = self.decoder.boundary_rows();
         let rows = noisy
-            .iter()
-            .zip(decoded.positions.iter().zip(decoded.velocities.iter()))
-            .zip(out.positions.iter_mut().zip(out.velocities.iter_mut()))
-            .zip(boundary);
+            .zip(decoded)
+            .zip(outputs)
+            .zip(self.decoder.boundary_rows());
         for (((x_t, (pos_t, vel_t)), (out_pos, out_vel)), b_t) in rows {
             let dofs = x_t
                 .iter()
@@ -354,18 +375,4 @@ impl<const N: usize, const P: usize> Sampler<'_, N, P> {
 pub fn skip_output(c_skip: f32, c_out: f32, noisy: f32, decoded: f32, boundary: f32) -> f32 {
     let rest = 1.0 - c_skip - c_out;
     c_skip * noisy + c_out * decoded + rest * boundary
-}
-
-/// The one place the policy calls the ProDMP decoder: DoF-major parameters, `y0`, `v0`
-/// (normalized units, units/s) to normalized positions and velocities.
-fn decode<const N: usize, const P: usize, const K: usize>(
-    decoder: &BakedProDmp<N, P>,
-    params: &[[f32; P]; K],
-    y0: &[f32; K],
-    v0: &[f32; K],
-    out: &mut Trajectory<N, K>,
-) -> Result<(), PolicyError> {
-    decoder
-        .decode(params, y0, v0, &mut out.positions, &mut out.velocities)
-        .map_err(PolicyError::Decode)
 }

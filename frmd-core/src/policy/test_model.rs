@@ -7,9 +7,10 @@ extern crate std;
 use std::{vec, vec::Vec};
 
 use super::*;
-use crate::blob::{BlobParts, HiddenLayerParts, OutputLayerParts, ProDmpTables};
+use crate::blob::MlpBlobParts;
 use crate::kernels::{Activation, FcRequant, FullyConnected, Lut8};
-use crate::model::mlp::{F32Layer, F32Mlp, F32Scratch, Int8Layer, Probe};
+use crate::model::linear::{F32Linear, Int8Linear, RequantizedLinear};
+use crate::model::mlp::{F32Mlp, F32Scratch, InputPrecision, Int8Mlp, Probe};
 use crate::prodmp::{BakedProDmp, ProDmpConfig};
 use crate::quant::{
     fold_input_zero_point, quantize_bias, quantize_weights_per_channel, requantization_multiplier,
@@ -29,8 +30,17 @@ pub const I: usize = 32;
 pub const WIDTH: usize = 40;
 pub const DT: f32 = 0.05;
 
-pub type F32Policy<'a> = Policy<'a, F32Network<'a, WIDTH>, M, O, K, N, P, I>;
-pub type Int8Policy<'a> = Policy<'a, Int8Network<'a, WIDTH>, M, O, K, N, P, I>;
+pub type F32Policy<'a> = Policy<'a, F32MlpNetwork<'a, WIDTH>, M, O, K, N, P, I>;
+pub type Int8Policy<'a> = Policy<'a, Int8MlpNetwork<'a, WIDTH>, M, O, K, N, P, I>;
+
+/// The test model's sizes.
+pub const DIMS: PolicyDims = PolicyDims {
+    history: M,
+    obs_dim: O,
+    action_dim: K,
+    horizon: N,
+    params_per_dof: P,
+};
 
 pub struct FloatLayer {
     pub in_features: usize,
@@ -54,8 +64,8 @@ impl FloatLayer {
         }
     }
 
-    fn view(&self) -> F32Layer<'_> {
-        F32Layer {
+    fn view(&self) -> F32Linear<'_> {
+        F32Linear {
             in_features: self.in_features,
             out_features: self.out_features,
             weights: &self.weights,
@@ -107,8 +117,10 @@ pub struct TestModel {
     pub int8_bias_variants: Vec<i32>,
     pub decoder: BakedProDmp<N, P>,
     pub steps: Vec<StepConstants>,
-    pub obs_norm: RangeNormalizer<O>,
-    pub action_norm: RangeNormalizer<K>,
+    /// Observation min and max.
+    pub obs_range: ([f32; O], [f32; O]),
+    /// Action min and max.
+    pub action_range: ([f32; K], [f32; K]),
     pub layout: InputLayout,
 }
 
@@ -127,7 +139,7 @@ pub fn step_constants(sigma: f64, first: bool, index: u32) -> StepConstants {
         c_in: (1.0 / norm) as f32,
         c_skip: (sigma_data * sigma_data / (shifted * shifted + sigma_data * sigma_data)) as f32,
         c_out: (shifted * sigma_data / norm) as f32,
-        first_layer_bias_index: index,
+        noise_variant: index,
     }
 }
 
@@ -261,34 +273,43 @@ impl TestModel {
             int8_bias_variants,
             decoder,
             steps,
-            obs_norm: RangeNormalizer::new([-1.0, 0.0, 2.0], [1.0, 4.0, 2.0]),
-            action_norm: RangeNormalizer::new([-0.5, 0.1], [0.5, 0.3]),
+            obs_range: ([-1.0, 0.0, 2.0], [1.0, 4.0, 2.0]),
+            action_range: ([-0.5, 0.1], [0.5, 0.3]),
             layout: InputLayout::standard(DT),
         }
     }
 
-    pub fn config(&self) -> PolicyConfig<'_, O, K, N, P> {
+    pub fn obs_norm(&self) -> RangeNormalizer<'_> {
+        RangeNormalizer::new(&self.obs_range.0, &self.obs_range.1)
+    }
+
+    pub fn action_norm(&self) -> RangeNormalizer<'_> {
+        RangeNormalizer::new(&self.action_range.0, &self.action_range.1)
+    }
+
+    pub fn config(&self) -> PolicyConfig<'_> {
         PolicyConfig {
-            obs_norm: self.obs_norm,
-            action_norm: self.action_norm,
+            history: M,
+            obs_norm: self.obs_norm(),
+            action_norm: self.action_norm(),
             sampler: Sampler {
-                steps: &self.steps,
-                decoder: &self.decoder,
+                steps: StepTable::new(&self.steps),
+                decoder: ProDmpTables::from_baked(&self.decoder),
                 layout: self.layout,
                 control_dt: DT,
             },
         }
     }
 
-    pub fn f32_network(&self) -> F32Network<'_, WIDTH> {
-        let views: Vec<F32Layer<'_>> = self.hidden.iter().map(FloatLayer::view).collect();
-        F32Network::from_parts(&views, self.output.view(), &self.bias_variants).unwrap()
+    pub fn f32_network(&self) -> F32MlpNetwork<'_, WIDTH> {
+        let views: Vec<F32Linear<'_>> = self.hidden.iter().map(FloatLayer::view).collect();
+        F32MlpNetwork::new(&views, self.output.view(), &self.bias_variants).unwrap()
     }
 
-    pub fn int8_layers(&self) -> Vec<Int8Layer<'_>> {
+    pub fn int8_layers(&self) -> Vec<RequantizedLinear<'_>> {
         self.quant_hidden
             .iter()
-            .map(|q| Int8Layer {
+            .map(|q| RequantizedLinear {
                 fc: FullyConnected::new(q.in_features, q.out_features, &q.weights, &q.bias),
                 requant: FcRequant {
                     multipliers: &q.multipliers,
@@ -297,18 +318,25 @@ impl TestModel {
                     activation_min: -128,
                     activation_max: 127,
                 },
-                activation: q.lut.as_ref(),
+                activation: q.lut.as_ref().map(|lut| &lut.table),
             })
             .collect()
     }
 
-    pub fn int8_network(&self) -> Int8Network<'_, WIDTH> {
+    pub fn int8_output(&self) -> Int8Linear<'_> {
         let q = &self.quant_output;
-        Int8Network::from_parts(
+        Int8Linear {
+            fc: FullyConnected::new(q.in_features, q.out_features, &q.weights, &q.bias),
+            output_scales: &self.output_scales,
+        }
+    }
+
+    pub fn int8_network(&self) -> Int8MlpNetwork<'_, WIDTH> {
+        Int8MlpNetwork::new(
             self.input,
+            InputPrecision::Int8,
             &self.int8_layers(),
-            FullyConnected::new(q.in_features, q.out_features, &q.weights, &q.bias),
-            &self.output_scales,
+            self.int8_output(),
             &self.int8_bias_variants,
         )
         .unwrap()
@@ -322,73 +350,18 @@ impl TestModel {
         Policy::new(self.config(), self.int8_network()).unwrap()
     }
 
-    pub fn luts(&self) -> Vec<[i8; 256]> {
-        self.quant_hidden
-            .iter()
-            .filter_map(|q| q.lut.map(|l| l.table))
-            .collect()
-    }
-
-    pub fn hidden_parts(&self) -> Vec<HiddenLayerParts<'_>> {
-        self.quant_hidden
-            .iter()
-            .enumerate()
-            .map(|(l, q)| HiddenLayerParts {
-                in_features: q.in_features,
-                out_features: q.out_features,
-                weights: &q.weights,
-                bias: &q.bias,
-                multipliers: &q.multipliers,
-                shifts: &q.shifts,
-                output_zero_point: q.output.zero_point,
-                activation_min: -128,
-                activation_max: 127,
-                lut: Some(l),
-            })
-            .collect()
-    }
-
-    /// Blob parts borrowing this model (`luts` and `hidden` from [`Self::luts`] and
-    /// [`Self::hidden_parts`]).
-    pub fn blob_parts<'p>(
-        &'p self,
-        luts: &'p [[i8; 256]],
-        hidden: &'p [HiddenLayerParts<'p>],
-    ) -> BlobParts<'p> {
-        let q = &self.quant_output;
-        BlobParts {
-            history: M,
-            obs_dim: O,
-            action_dim: K,
-            horizon: N,
-            params_per_dof: P,
-            control_dt: DT,
-            layout: self.layout,
-            input: self.input,
-            input_precision: crate::model::mlp::InputPrecision::Int8,
-            obs_min: &self.obs_norm.min,
-            obs_max: &self.obs_norm.max,
-            action_min: &self.action_norm.min,
-            action_max: &self.action_norm.max,
-            prodmp: ProDmpTables {
-                pos_params: self.decoder.pos_params.as_flattened(),
-                vel_params: self.decoder.vel_params.as_flattened(),
-                pos_y0: &self.decoder.pos_y0,
-                pos_v0: &self.decoder.pos_v0,
-                vel_y0: &self.decoder.vel_y0,
-                vel_v0: &self.decoder.vel_v0,
+    /// Blob parts borrowing this model, with its hidden layers in `hidden` (from
+    /// [`Self::int8_layers`]).
+    pub fn blob_parts<'p>(&'p self, hidden: &'p [RequantizedLinear<'p>]) -> MlpBlobParts<'p> {
+        MlpBlobParts {
+            config: self.config(),
+            mlp: Int8Mlp {
+                input: self.input,
+                hidden,
+                output: self.int8_output(),
             },
-            steps: &self.steps,
-            first_layer_biases: &self.int8_bias_variants,
-            luts,
-            hidden,
-            output: OutputLayerParts {
-                in_features: q.in_features,
-                out_features: q.out_features,
-                weights: &q.weights,
-                bias: &q.bias,
-                scales: &self.output_scales,
-            },
+            input_precision: InputPrecision::Int8,
+            noise_variants: &self.int8_bias_variants,
         }
     }
 }

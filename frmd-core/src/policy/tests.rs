@@ -31,27 +31,27 @@ fn history_pads_with_first_observation_and_keeps_order() {
     assert!(!history.is_filled());
     assert_eq!(history.newest(), None);
     history.push(&[1.0, 1.5]);
-    let all: Vec<_> = history.iter_oldest_first().copied().collect();
-    assert_eq!(all, [[1.0, 1.5]; 3]);
+    let all: Vec<Vec<f32>> = history.iter_oldest_first().map(<[f32]>::to_vec).collect();
+    assert_eq!(all, [[1.0, 1.5]; 3].map(|r| r.to_vec()));
     history.push(&[2.0, 2.5]);
     history.push(&[3.0, 3.5]);
-    let all: Vec<_> = history.iter_oldest_first().copied().collect();
-    assert_eq!(all, [[1.0, 1.5], [2.0, 2.5], [3.0, 3.5]]);
+    let all: Vec<Vec<f32>> = history.iter_oldest_first().map(<[f32]>::to_vec).collect();
+    assert_eq!(all, [[1.0, 1.5], [2.0, 2.5], [3.0, 3.5]].map(|r| r.to_vec()));
     history.push(&[4.0, 4.5]);
-    let all: Vec<_> = history.iter_oldest_first().copied().collect();
-    assert_eq!(all, [[2.0, 2.5], [3.0, 3.5], [4.0, 4.5]]);
-    assert_eq!(history.newest(), Some(&[4.0, 4.5]));
+    let all: Vec<Vec<f32>> = history.iter_oldest_first().map(<[f32]>::to_vec).collect();
+    assert_eq!(all, [[2.0, 2.5], [3.0, 3.5], [4.0, 4.5]].map(|r| r.to_vec()));
+    assert_eq!(history.newest(), Some(&[4.0, 4.5][..]));
     history.push(&[5.0, 5.5]);
-    assert_eq!(history.newest(), Some(&[5.0, 5.5]));
+    assert_eq!(history.newest(), Some(&[5.0, 5.5][..]));
     history.clear();
     history.push(&[9.0, 9.5]);
-    let all: Vec<_> = history.iter_oldest_first().copied().collect();
-    assert_eq!(all, [[9.0, 9.5]; 3]);
+    let all: Vec<Vec<f32>> = history.iter_oldest_first().map(<[f32]>::to_vec).collect();
+    assert_eq!(all, [[9.0, 9.5]; 3].map(|r| r.to_vec()));
 }
 
 #[test]
 fn normalization_round_trip_and_constant_dims() {
-    let norm = RangeNormalizer::new([-1.0, 0.0, 2.0], [1.0, 4.0, 2.0]);
+    let norm = RangeNormalizer::new(&[-1.0, 0.0, 2.0], &[1.0, 4.0, 2.0]);
     let mut n = [0.0; 3];
     norm.normalize(&[0.5, 4.0, 7.0], &mut n);
     assert_eq!(n, [0.5, 1.0, 0.0]);
@@ -65,11 +65,11 @@ fn normalization_round_trip_and_constant_dims() {
     norm.denormalize_rate(&rate, &mut back);
     assert_eq!(back, [1.0, 2.0, 0.0]);
     assert_eq!(
-        RangeNormalizer::new([1.0], [0.0]).validate(),
+        RangeNormalizer::new(&[1.0], &[0.0]).validate(),
         Err(PolicyError::InvalidNormalization)
     );
     assert_eq!(
-        RangeNormalizer::new([f32::NAN], [0.0]).validate(),
+        RangeNormalizer::new(&[f32::NAN], &[0.0]).validate(),
         Err(PolicyError::InvalidNormalization)
     );
 }
@@ -82,16 +82,16 @@ fn layout_writes_segments_in_order() {
         *row = [t as f32, -(t as f32)];
     }
     let sources = InputSources {
-        obs_history: &history,
+        obs_history: history.as_flattened(),
         prev_action: &[7.0, 8.0],
         prev_rate: &[10.0, 20.0],
-        noisy: &noisy,
+        noisy: noisy.as_flattened(),
         c_in: 0.5,
     };
     let standard = InputLayout::standard(0.1);
     assert_eq!(standard.width(M, O, K, N), Some(IN));
     let mut out = [0.0; IN];
-    standard.write(&sources, &mut out).unwrap();
+    standard.write(&DIMS, &sources, &mut out).unwrap();
     assert_eq!(&out[..6], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
     assert_eq!(&out[6..8], &[7.0, 8.0]);
     assert_eq!(&out[8..10], &[1.0, 2.0]);
@@ -106,11 +106,11 @@ fn layout_writes_segments_in_order() {
     let width = custom.width(M, O, K, N).unwrap();
     assert_eq!(width, N * K + M * O);
     let mut out = [0.0; N * K + M * O];
-    custom.write(&sources, &mut out).unwrap();
+    custom.write(&DIMS, &sources, &mut out).unwrap();
     assert_eq!(&out[..4], &[0.0, 0.0, 0.5, -0.5]);
     assert_eq!(&out[N * K..], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
     assert_eq!(
-        custom.write(&sources, &mut [0.0; 3]),
+        custom.write(&DIMS, &sources, &mut [0.0; 3]),
         Err(PolicyError::InputWidth)
     );
     use InputSegment::*;
@@ -204,10 +204,10 @@ fn policy_observes_normalized_history() {
         policy.observe(obs).unwrap();
     }
     let mut expected = [[0.0; O]; M];
-    model.obs_norm.normalize(&OBS[1], &mut expected[0]);
-    model.obs_norm.normalize(&OBS[2], &mut expected[1]);
-    let got: Vec<_> = policy.history().iter_oldest_first().copied().collect();
-    assert_eq!(got, expected);
+    model.obs_norm().normalize(&OBS[1], &mut expected[0]);
+    model.obs_norm().normalize(&OBS[2], &mut expected[1]);
+    let got: Vec<Vec<f32>> = policy.history().iter_oldest_first().map(<[f32]>::to_vec).collect();
+    assert_eq!(got, expected.map(|row| row.to_vec()));
     assert_eq!(expected[0][2], 0.0, "constant observation dim maps to 0");
 }
 
@@ -276,7 +276,7 @@ fn sampler_matches_hand_computation_for_one_and_three_steps() {
         let history: [[f32; O]; M] = {
             let mut h = [[0.0; O]; M];
             for (slot, obs) in h.iter_mut().zip(policy.history().iter_oldest_first()) {
-                *slot = *obs;
+                slot.copy_from_slice(obs);
             }
             h
         };
@@ -297,7 +297,7 @@ fn sampler_matches_hand_computation_for_one_and_three_steps() {
         let chunk = policy.chunk().unwrap();
         for t in 0..N {
             let mut raw = [0.0; K];
-            model.action_norm.denormalize(&expected[t], &mut raw);
+            model.action_norm().denormalize(&expected[t], &mut raw);
             assert_eq!(chunk.positions[t], raw);
         }
     }
@@ -330,7 +330,7 @@ fn velocities_are_decoded_velocities_in_robot_units() {
     let mut max_vel = 0.0_f32;
     for t in 0..N {
         for d in 0..K {
-            let half_range = 0.5 * (model.action_norm.max[d] - model.action_norm.min[d]);
+            let half_range = 0.5 * (model.action_range.1[d] - model.action_range.0[d]);
             // The skip part's backward difference: x is 0 and x before the first time is y0.
             let skip = if t == 0 {
                 c_skip * (0.0 - y0[d]) / DT
@@ -339,7 +339,7 @@ fn velocities_are_decoded_velocities_in_robot_units() {
             };
             let expected_vel = (skip + c_out * vel[t][d] + rest * b_vel[t][d]) * half_range;
             let expected_pos = (c_out * pos[t][d] + rest * b[t][d] + 1.0) * half_range
-                + model.action_norm.min[d];
+                + model.action_range.0[d];
             assert!(
                 (chunk.velocities[t][d] - expected_vel).abs() <= 1e-5 * expected_vel.abs().max(1.0)
             );
@@ -449,8 +449,8 @@ fn next_action_records_the_commanded_action_and_rate() {
     assert_eq!(second, chunk.positions[1]);
     let (y0, v0) = policy.previous_action_normalized().unwrap();
     let (mut a0, mut a1) = ([0.0; K], [0.0; K]);
-    model.action_norm.normalize(&first, &mut a0);
-    model.action_norm.normalize(&second, &mut a1);
+    model.action_norm().normalize(&first, &mut a0);
+    model.action_norm().normalize(&second, &mut a1);
     assert_eq!(y0, a1);
     for d in 0..K {
         assert_eq!(v0[d], (a1[d] - a0[d]) / DT);
@@ -478,44 +478,44 @@ fn configuration_errors_are_named() {
     .unwrap();
     assert_eq!(policy(config), Some(PolicyError::InputWidth));
     let mut steps = model.steps.clone();
-    steps[1].first_layer_bias_index = 2;
+    steps[1].noise_variant = 2;
     let mut config = model.config();
-    config.sampler.steps = &steps;
-    assert_eq!(policy(config), Some(PolicyError::FirstLayerBiasIndex));
+    config.sampler.steps = StepTable::new(&steps);
+    assert_eq!(policy(config), Some(PolicyError::NoiseVariantIndex));
     let mut steps = model.steps.clone();
     steps[0].renoise_std = 0.1;
-    config.sampler.steps = &steps;
+    config.sampler.steps = StepTable::new(&steps);
     assert_eq!(policy(config), Some(PolicyError::InvalidStepConstants));
     let mut steps2 = model.steps.clone();
     steps2[1].c_in = f32::NAN;
-    config.sampler.steps = &steps2;
+    config.sampler.steps = StepTable::new(&steps2);
     assert_eq!(policy(config), Some(PolicyError::InvalidStepConstants));
-    config.sampler.steps = &[];
+    config.sampler.steps = StepTable::new(&[]);
     assert_eq!(policy(config), Some(PolicyError::StepCount));
     let five = [model.steps[0]; 5];
-    config.sampler.steps = &five;
+    config.sampler.steps = StepTable::new(&five);
     assert_eq!(policy(config), Some(PolicyError::StepCount));
     let mut config = model.config();
     config.sampler.control_dt = 0.0;
     assert_eq!(policy(config), Some(PolicyError::InvalidControlPeriod));
     let mut config = model.config();
-    config.action_norm.min[0] = 9.0;
+    let bad_min = [9.0, model.action_range.0[1]];
+    config.action_norm.min = &bad_min;
     assert_eq!(policy(config), Some(PolicyError::InvalidNormalization));
     // Input buffer too small for the layout.
     let small = Policy::<_, M, O, K, N, P, 8>::new(model.config(), model.int8_network()).err();
     assert_eq!(small, Some(PolicyError::InputWidth));
     // Bias variants that are not whole rows.
     let views = model.int8_layers();
-    let q = &model.quant_output;
-    let partial = Int8Network::<WIDTH>::from_parts(
+    let partial = Int8MlpNetwork::<WIDTH>::new(
         model.input,
+        crate::model::mlp::InputPrecision::Int8,
         &views,
-        crate::kernels::FullyConnected::new(q.in_features, q.out_features, &q.weights, &q.bias),
-        &model.output_scales,
+        model.int8_output(),
         &model.int8_bias_variants[..5],
     )
     .err();
-    assert_eq!(partial, Some(PolicyError::FirstLayerBiasLength));
+    assert_eq!(partial, Some(PolicyError::NoiseVariantLength));
     // Noise of the wrong length.
     let mut policy = model.int8_policy();
     ready(&mut policy);

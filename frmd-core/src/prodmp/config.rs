@@ -20,7 +20,8 @@ pub const MAX_GRID_STEPS_PER_TAU: usize = 1_000_000;
 ///
 /// Units: `tau`, `delay` and `dt` are in seconds. `alpha` (spring constant of the critically
 /// damped system, `beta = alpha / 4`), `alpha_phase` and `bandwidth_factor` are dimensionless.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Serialized as is in a checkpoint's `frmd.json` (`prodmp`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ProDmpConfig {
     /// Number of degrees of freedom (independent output channels). At least 1.
     pub num_dof: usize,

@@ -1,6 +1,7 @@
 //! The pure-data model configuration stored in `frmd.json` (backbone, head, sizes) and the
 //! normalization, shared by the candle models (frmd-host) and the exporter.
 use anyhow::{bail, Context};
+use frmd_core::policy::{denormalize_value, normalize_value};
 use frmd_core::prodmp::ProDmpConfig;
 use serde::{Deserialize, Serialize};
 
@@ -23,35 +24,77 @@ pub enum BackboneConfig {
 }
 
 impl BackboneConfig {
-    /// Parses `mlp` ([256, 256, 256], Mish), `mlp-paper` ([512, 512, 256, 256]),
-    /// `mlp:W1,W2,..[:silu|:mish]`, `transformer-lite` (3 layers, 2 heads, 128) and
-    /// `transformer` (6 layers, 4 heads, 256).
-    pub fn parse(text: &str) -> anyhow::Result<Self> {
+    /// The named backbones: `mlp` ([256, 256, 256], Mish), `mlp-silu`, `mlp-paper`
+    /// ([512, 512, 256, 256], Mish), `transformer-lite` (3 layers, 2 heads, 128 wide) and
+    /// `transformer` (6 layers, 4 heads, 256 wide).
+    pub fn presets() -> [(&'static str, BackboneConfig); 5] {
         let mlp = |hidden: Vec<usize>, activation| BackboneConfig::Mlp { hidden, activation };
-        Ok(match text {
-            "mlp" => mlp(vec![256, 256, 256], Activation::Mish),
-            "mlp-silu" => mlp(vec![256, 256, 256], Activation::Silu),
-            "mlp-paper" => mlp(vec![512, 512, 256, 256], Activation::Mish),
-            "transformer-lite" => BackboneConfig::Transformer { layers: 3, heads: 2, width: 128 },
-            "transformer" => BackboneConfig::Transformer { layers: 6, heads: 4, width: 256 },
-            other => {
-                let Some(rest) = other.strip_prefix("mlp:") else {
-                    bail!("unknown backbone `{other}` (mlp, mlp-silu, mlp-paper, mlp:W1,W2[:silu|:mish], transformer-lite, transformer)");
-                };
-                let (widths, activation) = match rest.split_once(':') {
-                    Some((w, "silu")) => (w, Activation::Silu),
-                    Some((w, "mish")) => (w, Activation::Mish),
-                    Some((_, act)) => bail!("unknown activation `{act}` (silu or mish)"),
-                    None => (rest, Activation::Mish),
-                };
-                let hidden = widths
-                    .split(',')
-                    .map(|w| w.trim().parse::<usize>().ok().filter(|&w| w > 0))
-                    .collect::<Option<Vec<_>>>()
-                    .with_context(|| format!("bad MLP widths `{widths}` (positive integers, comma separated)"))?;
-                mlp(hidden, activation)
-            }
-        })
+        [
+            ("mlp", mlp(vec![256, 256, 256], Activation::Mish)),
+            ("mlp-silu", mlp(vec![256, 256, 256], Activation::Silu)),
+            ("mlp-paper", mlp(vec![512, 512, 256, 256], Activation::Mish)),
+            ("transformer-lite", BackboneConfig::Transformer { layers: 3, heads: 2, width: 128 }),
+            ("transformer", BackboneConfig::Transformer { layers: 6, heads: 4, width: 256 }),
+        ]
+    }
+
+    /// The preset called `name`, if there is one.
+    pub fn preset(name: &str) -> Option<Self> {
+        Self::presets().into_iter().find(|(preset, _)| *preset == name).map(|(_, config)| config)
+    }
+
+    /// Parses a preset name ([`Self::presets`]), `mlp:W1,W2,..[:silu|:mish]` (Mish when not
+    /// given) or `transformer:LAYERS,HEADS,WIDTH`.
+    pub fn parse(text: &str) -> anyhow::Result<Self> {
+        if let Some(preset) = Self::preset(text) {
+            return Ok(preset);
+        }
+        let numbers = |list: &str| {
+            list.split(',')
+                .map(|w| w.trim().parse::<usize>().ok().filter(|&w| w > 0))
+                .collect::<Option<Vec<_>>>()
+                .with_context(|| format!("bad sizes `{list}` (positive integers, comma separated)"))
+        };
+        if let Some(rest) = text.strip_prefix("transformer:") {
+            let &[layers, heads, width] = numbers(rest)?.as_slice() else {
+                bail!("`transformer:` takes LAYERS,HEADS,WIDTH, got `{rest}`");
+            };
+            return Ok(BackboneConfig::Transformer { layers, heads, width });
+        }
+        let Some(rest) = text.strip_prefix("mlp:") else {
+            bail!("unknown backbone `{text}` (mlp, mlp-silu, mlp-paper, mlp:W1,W2[:silu|:mish], transformer-lite, transformer, transformer:L,H,W)");
+        };
+        let (widths, activation) = match rest.split_once(':') {
+            Some((w, "silu")) => (w, Activation::Silu),
+            Some((w, "mish")) => (w, Activation::Mish),
+            Some((_, act)) => bail!("unknown activation `{act}` (silu or mish)"),
+            None => (rest, Activation::Mish),
+        };
+        Ok(BackboneConfig::Mlp { hidden: numbers(widths).context("MLP widths")?, activation })
+    }
+}
+
+impl std::str::FromStr for BackboneConfig {
+    type Err = anyhow::Error;
+
+    fn from_str(text: &str) -> anyhow::Result<Self> {
+        Self::parse(text)
+    }
+}
+
+/// The preset name where there is one, else the `mlp:..`/`transformer:..` form (what
+/// [`BackboneConfig::parse`] reads back).
+impl std::fmt::Display for BackboneConfig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if let Some((name, _)) = Self::presets().into_iter().find(|(_, preset)| preset == self) {
+            return f.write_str(name);
+        }
+        let list = |sizes: &[usize]| sizes.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(",");
+        match self {
+            BackboneConfig::Mlp { hidden, activation: Activation::Silu } => write!(f, "mlp:{}:silu", list(hidden)),
+            BackboneConfig::Mlp { hidden, activation: Activation::Mish } => write!(f, "mlp:{}:mish", list(hidden)),
+            BackboneConfig::Transformer { layers, heads, width } => write!(f, "transformer:{}", list(&[*layers, *heads, *width])),
+        }
     }
 }
 
@@ -79,6 +122,24 @@ impl ProDmpOutput {
             "boundary-skip" => Ok(ProDmpOutput::BoundarySkip),
             other => bail!("unknown ProDMP output parametrization `{other}` (direct, boundary-skip)"),
         }
+    }
+}
+
+impl std::str::FromStr for ProDmpOutput {
+    type Err = anyhow::Error;
+
+    fn from_str(text: &str) -> anyhow::Result<Self> {
+        Self::parse(text)
+    }
+}
+
+/// The name [`ProDmpOutput::parse`] reads.
+impl std::fmt::Display for ProDmpOutput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            ProDmpOutput::Direct => "direct",
+            ProDmpOutput::BoundarySkip => "boundary-skip",
+        })
     }
 }
 
@@ -189,8 +250,9 @@ impl ModelConfig {
     }
 }
 
-/// Per-dimension affine map from raw units to [-1, 1], fitted on training min/max.
-/// Constant dimensions (max == min) map to 0.
+/// Per-dimension affine map from raw units to [-1, 1], fitted on training min/max: the bounds
+/// that the runtime's `frmd_core::policy::RangeNormalizer` bakes, applied with the same formula
+/// (`frmd_core::policy::normalize_value`). Constant dimensions (max == min) map to 0.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Normalizer {
     pub min: Vec<f32>,
@@ -254,7 +316,7 @@ impl Normalizer {
         }
         for row in x.chunks_mut(self.min.len()) {
             for ((v, &lo), &hi) in row.iter_mut().zip(&self.min).zip(&self.max) {
-                *v = if hi > lo { 2.0 * (*v - lo) / (hi - lo) - 1.0 } else { 0.0 };
+                *v = normalize_value(*v, lo, hi);
             }
         }
     }
@@ -267,7 +329,7 @@ impl Normalizer {
         }
         for row in x.chunks_mut(self.min.len()) {
             for ((v, &lo), &hi) in row.iter_mut().zip(&self.min).zip(&self.max) {
-                *v = if hi > lo { (*v + 1.0) * 0.5 * (hi - lo) + lo } else { lo };
+                *v = denormalize_value(*v, lo, hi);
             }
         }
     }

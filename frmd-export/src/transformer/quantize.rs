@@ -15,8 +15,9 @@ use crate::calibrate::{int_bias, quantize_weights, CalibrationSet, RangeMethod, 
 use crate::fold::{sample_chunk, FloatLayer};
 use anyhow::{bail, Context};
 use frmd_core::kernels::{gelu_sigmoid, FcRequant, FullyConnected, Lut8};
+use frmd_core::model::linear::{Int8Linear, QuantizedLinear as LinearView, RequantizedLinear};
 use frmd_core::model::transformer::{
-    Int8Block, Int8FeedForward, Int8Linear, Int8Transformer, TokenLinear, TransformerProbe,
+    Int8Block, Int8FeedForward, Int8Transformer, TokenLinear, TransformerProbe,
 };
 use frmd_core::quant::{requantization_multiplier, QuantParams};
 use std::collections::BTreeMap;
@@ -84,7 +85,7 @@ pub fn calibrate(model: &FoldedTransformer, set: &CalibrationSet, method: RangeM
     Ok(TransformerRanges { params, rows: set.rows() })
 }
 
-/// An owned int8 linear layer with f32 input and output ([`Int8Linear`]).
+/// An owned int8 linear layer with f32 input and output (frmd-core's `QuantizedLinear`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct QuantizedLinear {
     pub input: QuantParams,
@@ -121,8 +122,8 @@ impl QuantizedLinear {
         FullyConnected::new(self.in_features, self.out_features, &self.weights, &self.bias)
     }
 
-    pub fn view(&self) -> Int8Linear<'_> {
-        Int8Linear { input: self.input, fc: self.fc(), output_scales: &self.output_scales }
+    pub fn view(&self) -> LinearView<'_> {
+        LinearView { input: self.input, linear: Int8Linear { fc: self.fc(), output_scales: &self.output_scales } }
     }
 }
 
@@ -210,17 +211,18 @@ impl QuantizedTransformer {
                 norm2: b.norm2.view(),
                 feed_forward: Int8FeedForward {
                     input: b.fc1.input,
-                    fc1: b.fc1.fc(),
-                    fc1_requant: FcRequant {
-                        multipliers: &b.fc1_multipliers,
-                        shifts: &b.fc1_shifts,
-                        output_zero_point: b.fc1_output.zero_point,
-                        activation_min: i8::MIN,
-                        activation_max: i8::MAX,
+                    fc1: RequantizedLinear {
+                        fc: b.fc1.fc(),
+                        requant: FcRequant {
+                            multipliers: &b.fc1_multipliers,
+                            shifts: &b.fc1_shifts,
+                            output_zero_point: b.fc1_output.zero_point,
+                            activation_min: i8::MIN,
+                            activation_max: i8::MAX,
+                        },
+                        activation: Some(&b.gelu.table),
                     },
-                    gelu: &b.gelu,
-                    fc2: b.fc2.fc(),
-                    fc2_scales: &b.fc2.output_scales,
+                    fc2: b.fc2.view(),
                 },
             })
             .collect()

@@ -138,11 +138,11 @@ fn adapters_run_the_exported_model_behind_the_network_trait() {
     let mut f32_scratch = Box::new(HostScratch::new());
     let mut int8_scratch = Box::new(HostScratch::new());
     let mut f32_net =
-        F32TransformerNetwork::new(folded.view(&f32_blocks, 0).unwrap(), &folded.layout, &tokens, &mut f32_scratch).unwrap();
+        F32TransformerNetwork::new(folded.view(&f32_blocks, 0).unwrap(), &folded.layout, &tokens, &mut *f32_scratch).unwrap();
     let mut int8_net =
-        Int8TransformerNetwork::new(quantized.view(&int8_blocks, 0).unwrap(), &folded.layout, &tokens, &mut int8_scratch)
+        Int8TransformerNetwork::new(quantized.view(&int8_blocks, 0).unwrap(), &folded.layout, &tokens, &mut *int8_scratch)
             .unwrap();
-    assert_eq!(f32_net.num_first_layer_biases(), 2);
+    assert_eq!(f32_net.num_noise_variants(), 2);
     assert_eq!(int8_net.input_width(), config.cond_dim() + config.traj_dim());
     let mut rng = Rng::new(4);
     let cond: Vec<f32> = (0..config.cond_dim()).map(|_| 0.3 * rng.gaussian()).collect();
@@ -186,7 +186,7 @@ fn aligned(bytes: &[u8], shift: usize) -> Vec<u32> {
     words
 }
 
-type Lite<'a> = frmd_core::blob::LoadedTransformer<'a, 2, 5, 3, 8, 5>;
+type Lite<'a> = frmd_core::blob::LoadedTransformer<'a>;
 
 fn exported_lite(name: &str, steps: usize) -> (QuantizedTransformer, Normalization, PathBuf) {
     let config = lite_config();
@@ -201,14 +201,13 @@ fn exported_lite(name: &str, steps: usize) -> (QuantizedTransformer, Normalizati
 fn blob_round_trip_is_bit_exact_and_drives_the_core_policy() {
     use frmd_core::policy::{Noise, Policy};
     let (quantized, norm, dir) = exported_lite("blob", 2);
-    let bytes = blob::write(&quantized, &norm).unwrap();
+    let bytes = crate::blob::write_transformer(&quantized, &norm).unwrap();
     let words = aligned(&bytes, 0);
     let loaded = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()]).unwrap();
     assert_eq!(loaded.steps(), &quantized.folded.steps[..]);
-    let blocks = loaded.blocks();
     let mut scratch = Box::new(HostScratch::new());
-    let mut network = loaded.network(&blocks, &mut scratch).unwrap();
-    assert_eq!(network.num_first_layer_biases(), 2);
+    let mut network = loaded.network(&mut *scratch).unwrap();
+    assert_eq!(network.num_noise_variants(), 2);
     // Same int8 outputs as the exporter's in-memory model, per step, bit for bit.
     let config = lite_config();
     let mut rng = Rng::new(8);
@@ -233,12 +232,12 @@ fn blob_round_trip_is_bit_exact_and_drives_the_core_policy() {
 
 #[test]
 fn blob_loader_rejects_damage_by_name() {
-    use frmd_core::blob::format::SectionId;
+    use frmd_core::blob::SectionId;
     use frmd_core::blob::transformer::TensorField;
     use frmd_core::blob::{BlobError, Dimension};
     use frmd_core::model::transformer::{Part, TransformerError};
     let (quantized, norm, dir) = exported_lite("damage", 1);
-    let bytes = blob::write(&quantized, &norm).unwrap();
+    let bytes = crate::blob::write_transformer(&quantized, &norm).unwrap();
     let load = |b: &[u8], shift: usize| {
         let words = aligned(b, shift);
         Lite::load(&bytemuck::cast_slice(&words)[shift..shift + b.len()]).err()
@@ -254,20 +253,21 @@ fn blob_loader_rejects_damage_by_name() {
     assert!(matches!(load(&flipped, 0), Some(BlobError::CrcMismatch { .. })));
     assert!(matches!(load(&bytes, 1), Some(BlobError::SectionMisaligned(_))));
     let words = aligned(&bytes, 0);
-    let wrong_dims = frmd_core::blob::LoadedTransformer::<'_, 2, 5, 4, 8, 5>::load(&bytemuck::cast_slice(&words)[..bytes.len()]);
+    let expected = frmd_core::policy::PolicyDims { history: 2, obs_dim: 5, action_dim: 4, horizon: 8, params_per_dof: 5 };
+    let wrong_dims = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()]).and_then(|loaded| loaded.check_dims(&expected));
     assert_eq!(wrong_dims.err(), Some(BlobError::DimensionMismatch(Dimension::ActionDim)));
     // Mismatched shapes: a head with one weight row missing, NaN in a norm.
     let mut short_head = quantized.clone();
     let row = short_head.head.in_features;
     short_head.head.weights.truncate(short_head.head.weights.len() - row);
-    let err = load(&blob::write(&short_head, &norm).unwrap(), 0);
+    let err = load(&crate::blob::write_transformer(&short_head, &norm).unwrap(), 0);
     assert!(matches!(err, Some(BlobError::Transformer(TransformerError::Weights { part: Part::Head, .. }))), "{err:?}");
     let mut nan_norm = quantized.clone();
     nan_norm.blocks[0].norm2.gamma[3] = f32::NAN;
-    let err = load(&blob::write(&nan_norm, &norm).unwrap(), 0);
+    let err = load(&crate::blob::write_transformer(&nan_norm, &norm).unwrap(), 0);
     assert_eq!(err, Some(BlobError::NonFinite(SectionId::Transformer { part: Part::Norm2 { layer: 0 }, field: TensorField::Gamma })));
     // An MLP loader refuses a transformer blob by magic.
-    let mlp = frmd_core::blob::LoadedPolicy::<'_, 2, 5, 3, 8, 5>::load(&bytemuck::cast_slice(&words)[..bytes.len()]);
+    let mlp = frmd_core::blob::LoadedMlp::load(&bytemuck::cast_slice(&words)[..bytes.len()]);
     assert_eq!(mlp.err(), Some(BlobError::BadMagic));
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -279,17 +279,16 @@ fn blob_loader_rejects_damage_by_name() {
 fn core_policy_int8_blob_chunk_tracks_f32_policy_chunk() {
     use frmd_core::policy::{Noise, Policy};
     let (quantized, norm, dir) = exported_lite("policy", 1);
-    let bytes = blob::write(&quantized, &norm).unwrap();
+    let bytes = crate::blob::write_transformer(&quantized, &norm).unwrap();
     let words = aligned(&bytes, 0);
     let loaded = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()]).unwrap();
-    let blocks = loaded.blocks();
     let mut int8_scratch = Box::new(HostScratch::new());
-    let mut int8 = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), loaded.network(&blocks, &mut int8_scratch).unwrap()).unwrap();
+    let mut int8 = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), loaded.network(&mut *int8_scratch).unwrap()).unwrap();
     let folded = &quantized.folded;
     let tokens = folded.flat_noise_tokens();
     let f32_blocks = folded.f32_blocks();
     let mut f32_scratch = Box::new(HostScratch::new());
-    let f32_net = F32TransformerNetwork::new(folded.view(&f32_blocks, 0).unwrap(), &folded.layout, &tokens, &mut f32_scratch).unwrap();
+    let f32_net = F32TransformerNetwork::new(folded.view(&f32_blocks, 0).unwrap(), &folded.layout, &tokens, &mut *f32_scratch).unwrap();
     let mut float = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), f32_net).unwrap();
     let mut rng = Rng::new(17);
     let (mut max, mut sum, mut count, mut lo, mut hi) = (0f32, 0f64, 0usize, f32::MAX, f32::MIN);

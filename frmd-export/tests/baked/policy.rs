@@ -2,10 +2,11 @@
 // Needs `weights.bin` next to this file; only depends on frmd-core.
 
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
-use frmd_core::model::mlp::{InputPrecision, Int8Layer};
+use frmd_core::model::linear::{Int8Linear, RequantizedLinear};
+use frmd_core::model::mlp::InputPrecision;
 use frmd_core::policy::{
-    baked_slice, AlignedBytes, InputLayout, InputSegment, Int8Network, Policy, PolicyConfig,
-    PolicyError, RangeNormalizer, Sampler, StepConstants,
+    baked_slice, AlignedBytes, InputLayout, InputSegment, Int8MlpNetwork, Policy, PolicyConfig,
+    PolicyError, ProDmpTables, RangeNormalizer, Sampler, StepConstants, StepTable,
 };
 use frmd_core::prodmp::BakedProDmp;
 use frmd_core::quant::QuantParams;
@@ -50,16 +51,16 @@ pub const LAYOUT: InputLayout = InputLayout::from_segments(
     4,
     0.05,
 );
-/// Observation normalization (raw units).
-pub const OBS_NORM: RangeNormalizer<OBS_DIM> = RangeNormalizer::new(
-    [-1.0, 0.0, 0.5, -3.0],
-    [1.0, 2.0, 0.5, 3.0],
-);
-/// Action normalization (raw units).
-pub const ACTION_NORM: RangeNormalizer<ACTION_DIM> = RangeNormalizer::new(
-    [-0.4, -0.4, 0.0],
-    [0.4, 0.4, 0.3],
-);
+/// Observation range (raw units).
+pub static OBS_MIN: [f32; OBS_DIM] = [-1.0, 0.0, 0.5, -3.0];
+pub static OBS_MAX: [f32; OBS_DIM] = [1.0, 2.0, 0.5, 3.0];
+/// Observation normalization.
+pub const OBS_NORM: RangeNormalizer<'static> = RangeNormalizer::new(&OBS_MIN, &OBS_MAX);
+/// Action range (raw units).
+pub static ACTION_MIN: [f32; ACTION_DIM] = [-0.4, -0.4, 0.0];
+pub static ACTION_MAX: [f32; ACTION_DIM] = [0.4, 0.4, 0.3];
+/// Action normalization.
+pub const ACTION_NORM: RangeNormalizer<'static> = RangeNormalizer::new(&ACTION_MIN, &ACTION_MAX);
 /// Baked ProDMP decoder.
 pub static DECODER: BakedProDmp<HORIZON, PARAMS_PER_DOF> = BakedProDmp {
     pos_params: [
@@ -89,9 +90,9 @@ pub static DECODER: BakedProDmp<HORIZON, PARAMS_PER_DOF> = BakedProDmp {
 };
 /// Sampling step constants.
 pub static STEPS: [StepConstants; NUM_STEPS] = [
-    StepConstants { sigma: 80.0, renoise_std: 0.0, c_in: 0.012499756, c_skip: 3.906293e-5, c_out: 0.49997774, first_layer_bias_index: 0 }, 
-    StepConstants { sigma: 1.5, renoise_std: 1.4999987, c_in: 0.6324555, c_skip: 0.10024042, c_out: 0.4737092, first_layer_bias_index: 1 }, 
-    StepConstants { sigma: 0.4, renoise_std: 0.399995, c_in: 1.5617377, c_skip: 0.612139, c_out: 0.3107858, first_layer_bias_index: 2 }];
+    StepConstants { sigma: 80.0, renoise_std: 0.0, c_in: 0.012499756, c_skip: 3.906293e-5, c_out: 0.49997774, noise_variant: 0 }, 
+    StepConstants { sigma: 1.5, renoise_std: 1.4999987, c_in: 0.6324555, c_skip: 0.10024042, c_out: 0.4737092, noise_variant: 1 }, 
+    StepConstants { sigma: 0.4, renoise_std: 0.399995, c_in: 1.5617377, c_skip: 0.612139, c_out: 0.3107858, noise_variant: 2 }];
 /// Activation table 0.
 pub static LUT_0: Lut8 = Lut8::from_table([-100, -100, -100, -100, -100, -100, -100, -100, -100, -100, -100, -100, -100, -100, -100, -100, -100, -100, -100, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -101, -102, -102, -102, -102, -102, -102, -102, -102, -102, -102, -102, -102, -102, -102, -103, -103, -103, -103, -103, -103, -103, -103, -103, -103, -104, -104, -104, -104, -104, -104, -104, -104, -104, -105, -105, -105, -105, -105, -105, -105, -105, -106, -106, -106, -106, -106, -106, -106, -106, -106, -107, -107, -107, -107, -107, -107, -107, -107, -107, -107, -107, -107, -107, -107, -107, -107, -107, -106, -106, -106, -106, -106, -105, -105, -105, -104, -104, -104, -103, -103, -102, -102, -101, -101, -100, -99, -99, -98, -97, -96, -96, -95, -94, -93, -92, -91, -90, -89, -88, -87, -86, -85, -84, -83, -82, -81, -79, -78, -77, -76, -74, -73, -72, -71, -69, -68, -67, -65, -64, -63, -61, -60, -59, -57, -56, -55, -53, -52, -50, -49, -48, -46, -45, -44, -42, -41, -39, -38, -37, -35, -34, -33, -31, -30, -29, -27, -26, -24, -23, -22, -20, -19, -18, -16, -15, -14, -12, -11, -10, -8, -7, -6, -4, -3, -2, 0, 1, 2, 3, 5, 6, 7, 9, 10, 11, 13, 14, 15, 16, 18, 19, 20, 22, 23, 24, 25, 27, 28, 29, 31, 32, 33, 34, 36, 37, 38, 39, 41, 42, 43, 45, 46, 47, 48, 50, 51, 52, 53, 55]);
 /// Hidden layer 0: Q31 multipliers.
@@ -107,11 +108,13 @@ pub static OUTPUT_SCALES: [f32; 15] = [0.00014810734, 0.00010032332, 0.000177054
 /// The weight file (2224 bytes, 16-aligned arrays).
 pub static WEIGHTS: AlignedBytes<WEIGHTS_BYTES> = AlignedBytes(*include_bytes!("weights.bin"));
 
-/// The int8 network over the baked weights (`WIDTH` >= `SCRATCH_WIDTH`).
-pub fn network<const WIDTH: usize>() -> Result<Int8Network<'static, WIDTH>, PolicyError> {
+/// The hidden layers, the output layer and the first-layer bias variants over the baked
+/// weights.
+#[allow(clippy::type_complexity)]
+pub fn mlp_parts() -> Result<([RequantizedLinear<'static>; 2], Int8Linear<'static>, &'static [i32]), PolicyError> {
     let bytes = &WEIGHTS.0;
-    let layers = [
-        Int8Layer {
+    let hidden = [
+        RequantizedLinear {
             fc: FullyConnected::new(
                 38,
                 24,
@@ -125,9 +128,9 @@ pub fn network<const WIDTH: usize>() -> Result<Int8Network<'static, WIDTH>, Poli
                 activation_min: -128,
                 activation_max: 127,
             },
-            activation: Some(&LUT_0),
+            activation: Some(&LUT_0.table),
         },
-        Int8Layer {
+        RequantizedLinear {
             fc: FullyConnected::new(
                 24,
                 20,
@@ -144,31 +147,33 @@ pub fn network<const WIDTH: usize>() -> Result<Int8Network<'static, WIDTH>, Poli
             activation: None,
         },
     ];
-    let output = FullyConnected::new(
-        20,
-        15,
-        baked_slice(bytes, 1856, 300)?,
-        baked_slice(bytes, 2160, 15)?,
-    );
-    let first_layer_biases = baked_slice(bytes, 1568, 72)?;
-    Int8Network::from_parts_with_input(
-        INPUT,
-        INPUT_PRECISION,
-        &layers,
-        output,
-        &OUTPUT_SCALES,
-        first_layer_biases,
-    )
+    let output = Int8Linear {
+        fc: FullyConnected::new(
+            20,
+            15,
+            baked_slice(bytes, 1856, 300)?,
+            baked_slice(bytes, 2160, 15)?,
+        ),
+        output_scales: &OUTPUT_SCALES,
+    };
+    Ok((hidden, output, baked_slice(bytes, 1568, 72)?))
+}
+
+/// The int8 network over the baked weights (`WIDTH` >= `SCRATCH_WIDTH`).
+pub fn network<const WIDTH: usize>() -> Result<Int8MlpNetwork<'static, WIDTH>, PolicyError> {
+    let (hidden, output, first_layer_biases) = mlp_parts()?;
+    Int8MlpNetwork::new(INPUT, INPUT_PRECISION, &hidden, output, first_layer_biases)
 }
 
 /// Normalization and sampler configuration.
-pub fn config() -> PolicyConfig<'static, OBS_DIM, ACTION_DIM, HORIZON, PARAMS_PER_DOF> {
+pub fn config() -> PolicyConfig<'static> {
     PolicyConfig {
+        history: HISTORY,
         obs_norm: OBS_NORM,
         action_norm: ACTION_NORM,
         sampler: Sampler {
-            steps: &STEPS,
-            decoder: &DECODER,
+            steps: StepTable::new(&STEPS),
+            decoder: ProDmpTables::from_baked(&DECODER),
             layout: LAYOUT,
             control_dt: CONTROL_DT,
         },
@@ -178,7 +183,7 @@ pub fn config() -> PolicyConfig<'static, OBS_DIM, ACTION_DIM, HORIZON, PARAMS_PE
 /// The baked policy type.
 pub type BakedPolicy = Policy<
     'static,
-    Int8Network<'static, SCRATCH_WIDTH>,
+    Int8MlpNetwork<'static, SCRATCH_WIDTH>,
     HISTORY,
     OBS_DIM,
     ACTION_DIM,

@@ -1,7 +1,7 @@
 use super::*;
 use frmd_core::sigma::SigmaConfig;
 use crate::models::{HeadConfig, ProDmpOutput, OwnedNetwork};
-use crate::train::toy::toy_config;
+use crate::data::toy::toy_config;
 
 fn temp_dir(tag: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("frmd-ckpt-{tag}-{}", std::process::id()));
@@ -111,5 +111,25 @@ fn expected_tensors_match_the_candle_models() {
             .map(|(name, var)| TensorSpec { name, dtype: "F32".into(), shape: var.dims().to_vec() })
             .collect();
         assert_eq!(expected_tensors(&cfg), candle, "{backbone}");
+    }
+}
+
+/// `prodmp` and `sigma` are frmd-core's configs serialized as they are: a checkpoint written
+/// before that (the firmware's checked-in student) reads, and the two sections re-serialize to
+/// the same bytes.
+#[test]
+fn existing_checkpoints_read_and_keep_their_prodmp_and_sigma_bytes() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/cortex-m/policy/reach");
+    let text = std::fs::read_to_string(dir.join(CONFIG_FILE)).unwrap();
+    let meta = CheckpointMeta::read(&dir).unwrap();
+    assert_eq!(meta.sigma, SigmaConfig::default());
+    let section = |json: &str, key: &str| {
+        let start = json.find(&format!("\n  \"{key}\": {{")).unwrap_or_else(|| panic!("no {key} in {json}"));
+        let end = start + json[start..].find("\n  }").unwrap();
+        json[start..end].to_string()
+    };
+    let written = serde_json::to_string_pretty(&meta).unwrap();
+    for key in ["prodmp", "sigma"] {
+        assert_eq!(section(&written, key), section(&text, key), "{key}");
     }
 }

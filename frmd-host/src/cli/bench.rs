@@ -1,277 +1,43 @@
 //! `frmd bench` (alias `frmd latency`): wall time per action chunk of every policy kind side by
-//! side, in one process, batch 1, after warm-up, median and p99 over >= 200 calls (DESIGN.md
-//! section 6), with the ratio of each row to the first row: the frmd-core int8 one-step policy
-//! (the candle one-step student if the student cannot be exported). On x86-64 CPUs with AVX2 the
-//! int8 policy is timed again with frmd-core's lower kernel levels (`... avx2` without AVX-VNNI,
-//! `... portable`).
-//!
-//! By default it times the checkpoints `frmd quickstart` wrote (`runs/quickstart/{student,
-//! teacher,dp}`): student 1 step, teacher 10 Heun steps, DP 100 (DDPM) and 10 (DDIM) steps, all
-//! with the same backbone. `--policy DIR[:STEPS[:SOLVER]]` times other checkpoints instead, and
-//! `--synthetic` times randomly initialized networks of a given backbone (latency does not
-//! depend on the weights), which needs no checkpoint at all.
-use crate::checkpoint::Role;
-use crate::cli::export::{export, ExportInfo};
-use crate::policy::int8::Int8Policy;
-use crate::data::{Normalization, Normalizer};
-use crate::diffusion::samplers::Solver;
-use crate::eval::metrics::quantile;
-use crate::eval::policy::{Policy, PolicyInput};
-use crate::models::{BackboneConfig, HeadConfig, ProDmpOutput, ModelConfig, OwnedNetwork};
-use crate::policy::float::{FloatPolicy, Sampler};
-use anyhow::Context;
+//! side ([`crate::bench`]).
+use crate::bench::{bench_rows, print_table, write_json, BenchConfig, PolicySpec};
+use crate::models::BackboneConfig;
 use clap::Args;
-use frmd_core::sigma::SigmaConfig;
-use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Instant;
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
     /// Policies as DIR[:STEPS[:SOLVER]], e.g. `runs/quickstart/teacher:10:heun`, `dir/dp:100`.
     /// Default: student:1, teacher:10:heun, dp:100, dp:10 from --dir.
     #[arg(long = "policy")]
-    pub policies: Vec<String>,
+    pub policies: Vec<PolicySpec>,
     /// Directory holding `student/`, `teacher/` and `dp/` checkpoints (as written by quickstart).
-    #[arg(long, default_value = "runs/quickstart")]
+    #[arg(long, default_value_os_t = BenchConfig::default().dir)]
     pub dir: PathBuf,
     /// Time randomly initialized networks of `--backbone` instead of checkpoints.
     #[arg(long)]
     pub synthetic: bool,
     /// Backbone of the synthetic networks (see `frmd train --backbone`).
-    #[arg(long, default_value = "mlp-silu")]
-    pub backbone: String,
+    #[arg(long, default_value_t = BenchConfig::default().backbone)]
+    pub backbone: BackboneConfig,
     /// Timed calls per policy (at least 200 for the DESIGN.md p99).
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = BenchConfig::default().calls)]
     pub calls: usize,
     /// Untimed warm-up calls per policy.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = BenchConfig::default().warmup)]
     pub warmup: usize,
     /// Write the results as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
 }
 
-/// One timed policy.
-#[derive(Clone, Debug, Serialize)]
-pub struct BenchRow {
-    /// What ran, e.g. `candle student-1`.
-    pub label: String,
-    /// Backbone description, e.g. `mlp[256,256,256] silu`.
-    pub backbone: String,
-    /// Wall time per chunk, microseconds.
-    pub median_us: f64,
-    pub p99_us: f64,
-    pub calls: usize,
-}
-
-/// A readable backbone description for tables.
-pub fn backbone_label(backbone: &BackboneConfig) -> String {
-    match backbone {
-        BackboneConfig::Mlp { hidden, activation } => {
-            let widths: Vec<String> = hidden.iter().map(|w| w.to_string()).collect();
-            format!("mlp[{}] {}", widths.join(","), format!("{activation:?}").to_lowercase())
-        }
-        BackboneConfig::Transformer { layers, heads, width } => format!("transformer {layers}x{heads}h {width}"),
-    }
-}
-
-/// A fixed policy input of the right sizes (the values do not change the amount of work).
-pub struct FixedInput {
-    obs: Vec<Vec<f32>>,
-    prev: Vec<f32>,
-    rate: Vec<f32>,
-}
-
-impl FixedInput {
-    pub fn new(obs_dim: usize, action_dim: usize, history: usize) -> Self {
-        FixedInput { obs: vec![vec![0.1; obs_dim]; history], prev: vec![0.0; action_dim], rate: vec![0.0; action_dim] }
-    }
-
-    pub fn input(&self) -> PolicyInput<'_> {
-        PolicyInput { obs_history: &self.obs, prev_action: &self.prev, prev_rate: &self.rate }
-    }
-}
-
-/// Times `calls` chunks of `policy` after `warmup` untimed ones; returns (median, p99) in us.
-pub fn time_policy(policy: &mut dyn Policy, input: &PolicyInput<'_>, warmup: usize, calls: usize) -> anyhow::Result<(f64, f64)> {
-    anyhow::ensure!(calls >= 1, "at least one timed call is needed");
-    policy.reset(0);
-    for _ in 0..warmup {
-        policy.act(input)?;
-    }
-    let mut times = Vec::with_capacity(calls);
-    for _ in 0..calls {
-        let start = Instant::now();
-        policy.act(input)?;
-        times.push(start.elapsed().as_secs_f64() * 1e6);
-    }
-    Ok((quantile(&times, 0.5), quantile(&times, 0.99)))
-}
-
-/// A float policy on a randomly initialized network (for latency only): task-sized inputs
-/// (`obs_dim`, 2-D actions, history 2, horizon 12, 20 ProDMP basis functions), identity-range
-/// normalization. `role` picks the head (ProDMP for teacher/student, raw for DP).
-pub fn synthetic_float_policy(backbone: &str, obs_dim: usize, role: Role, steps: Option<usize>, solver: Option<Solver>) -> anyhow::Result<FloatPolicy> {
-    let action_dim = 2;
-    let head = match role {
-        Role::Dp => HeadConfig::Raw,
-        Role::Teacher | Role::Student => HeadConfig::ProDmp { num_basis: 20, output: ProDmpOutput::Direct, auto_scale_basis: false },
-    };
-    let cfg = ModelConfig { obs_dim, history: 2, action_dim, horizon: 12, control_dt: 0.1, embed_dim: 16, backbone: BackboneConfig::parse(backbone)?, head };
-    let net = OwnedNetwork::new_seeded(&cfg, 7, &candle_core::Device::Cpu)?;
-    let unit = |dim: usize| Normalizer { min: vec![-1.0; dim], max: vec![1.0; dim] };
-    let norm = Normalization { obs: unit(obs_dim), action: unit(action_dim) };
-    FloatPolicy::new(net, norm, SigmaConfig::default(), Sampler::for_role(role, steps, solver)?)
-}
-
-fn parse_spec(spec: &str) -> anyhow::Result<(PathBuf, Option<usize>, Option<Solver>)> {
-    let mut parts = spec.split(':');
-    let dir = PathBuf::from(parts.next().unwrap_or_default());
-    let steps = parts.next().map(|s| s.parse::<usize>().with_context(|| format!("bad step count in `{spec}`"))).transpose()?;
-    let solver = parts.next().map(Solver::parse).transpose()?;
-    Ok((dir, steps, solver))
-}
-
-/// The candle float policies of the default comparison, loaded from `dir` (or synthetic).
-fn default_float_policies(args: &BenchArgs) -> anyhow::Result<Vec<FloatPolicy>> {
-    let kinds = [(Role::Student, "student", 1, None), (Role::Teacher, "teacher", 10, Some(Solver::Heun)), (Role::Dp, "dp", 100, None), (Role::Dp, "dp", 10, None)];
-    let mut out = Vec::new();
-    for (role, name, steps, solver) in kinds {
-        out.push(if args.synthetic {
-            synthetic_float_policy(&args.backbone, 6, role, Some(steps), solver)?
-        } else {
-            let dir = args.dir.join(name);
-            FloatPolicy::load(&dir, Some(steps), solver).with_context(|| format!("loading {} (run `frmd quickstart` first, or pass --synthetic or --policy)", dir.display()))?
-        });
-    }
-    Ok(out)
-}
-
-/// The frmd-core int8 and f32 one-step policies for the comparison: the student in `--dir`
-/// exported as `frmd export` does it (or, with `--synthetic`, a random student of `--backbone`
-/// exported the same way). Returns the policies, or why there are none.
-fn core_policies(args: &BenchArgs) -> Result<Vec<(String, Box<dyn Policy>)>, String> {
-    let build = || -> anyhow::Result<Result<(Int8Policy, Int8Policy), String>> {
-        if args.synthetic {
-            let dir = std::env::temp_dir().join(format!("frmd-bench-{}", std::process::id()));
-            let policies = crate::bench::reach_student(&dir, &args.backbone, 7);
-            let _ = std::fs::remove_dir_all(&dir);
-            return Ok(policies?.core.map(|c| (c.int8, c.core_f32)));
-        }
-        let ckpt = args.dir.join("student");
-        let info = ExportInfo { checkpoint: ckpt.display().to_string(), steps: 1, calibration: "minmax".into(), calibration_data: None, balance_inputs: true, two_plane_input: true, input_headroom: frmd_export::export::DEFAULT_INPUT_HEADROOM };
-        let exported = export(&info).with_context(|| format!("exporting {}", ckpt.display()))?;
-        let blob = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
-        Ok(Ok((Int8Policy::from_blob(&blob, "int8")?, Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?)))
-    };
-    match build() {
-        Ok(Ok((int8, f32_twin))) => Ok(vec![
-            ("frmd-core int8 1-step".to_string(), Box::new(int8) as Box<dyn Policy>),
-            ("frmd-core f32 1-step".to_string(), Box::new(f32_twin)),
-        ]),
-        Ok(Err(reason)) => Err(format!("frmd-core policies unavailable: {reason}")),
-        Err(e) => Err(format!("frmd-core policies unavailable: {e:#}")),
-    }
-}
-
-/// Runs the whole comparison and returns its rows (reference row first when present) plus a
-/// note about what is missing.
-pub fn bench_rows(args: &BenchArgs) -> anyhow::Result<(Vec<BenchRow>, Option<String>)> {
-    let floats = if args.policies.is_empty() {
-        default_float_policies(args)?
-    } else {
-        let mut v = Vec::new();
-        for spec in &args.policies {
-            let (dir, steps, solver) = parse_spec(spec)?;
-            v.push(FloatPolicy::load(&dir, steps, solver).with_context(|| format!("loading {}", dir.display()))?);
-        }
-        v
-    };
-    let (core, note) = match core_policies(args) {
-        Ok(list) => (list, None),
-        Err(reason) => (Vec::new(), Some(reason)),
-    };
-    let mut rows = Vec::new();
-    let first = floats.first().context("no policy to time")?;
-    let (obs_dim, action_dim, history) = first.input_sizes();
-    let fixed = FixedInput::new(obs_dim, action_dim, history);
-    for (label, mut policy) in core {
-        let backbone = backbone_label(&first.config().backbone);
-        let (median_us, p99_us) = time_policy(policy.as_mut(), &fixed.input(), args.warmup, args.calls)?;
-        rows.push(BenchRow { label: label.clone(), backbone: backbone.clone(), median_us, p99_us, calls: args.calls });
-        for (level, median_us, p99_us) in time_kernel_levels(policy.as_mut(), &fixed.input(), args)? {
-            rows.push(BenchRow { label: format!("{label} {level}"), backbone: backbone.clone(), median_us, p99_us, calls: args.calls });
-        }
-    }
-    for mut policy in floats {
-        let (o, a, h) = policy.input_sizes();
-        let fixed = FixedInput::new(o, a, h);
-        let (median_us, p99_us) = time_policy(&mut policy, &fixed.input(), args.warmup, args.calls)?;
-        rows.push(BenchRow { label: format!("candle {}", policy.name()), backbone: backbone_label(&policy.config().backbone), median_us, p99_us, calls: args.calls });
-    }
-    Ok((rows, note))
-}
-
-/// On x86-64 CPUs where frmd-core's int8 kernels use AVX2 (and AVX-VNNI): the same policy timed
-/// again with the lower kernel levels, which give identical outputs (what CPUs without those
-/// instructions run): `avx2` (without AVX-VNNI, if it was active) and `portable` (SSE2).
-#[cfg(target_arch = "x86_64")]
-fn time_kernel_levels(policy: &mut dyn Policy, input: &PolicyInput<'_>, args: &BenchArgs) -> anyhow::Result<Vec<(&'static str, f64, f64)>> {
-    use frmd_core::kernels::x86;
-    let mut rows = Vec::new();
-    if !policy.name().contains("int8") || !x86::avx2_active() {
-        return Ok(rows);
-    }
-    if x86::avx_vnni_active() {
-        x86::set_avx_vnni_enabled(false);
-        let timed = time_policy(policy, input, args.warmup, args.calls);
-        x86::set_avx_vnni_enabled(true);
-        let (median, p99) = timed?;
-        rows.push(("avx2", median, p99));
-    }
-    x86::set_avx2_enabled(false);
-    let timed = time_policy(policy, input, args.warmup, args.calls);
-    x86::set_avx2_enabled(true);
-    let (median, p99) = timed?;
-    rows.push(("portable", median, p99));
-    Ok(rows)
-}
-
-#[cfg(not(target_arch = "x86_64"))]
-fn time_kernel_levels(_: &mut dyn Policy, _: &PolicyInput<'_>, _: &BenchArgs) -> anyhow::Result<Vec<(&'static str, f64, f64)>> {
-    Ok(Vec::new())
-}
-
-/// Prints the rows with ratios to the first row.
-pub fn print_table(rows: &[BenchRow], warmup: usize, note: Option<&str>) {
-    let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into());
-    let Some(reference) = rows.first() else { return };
-    println!("{:<28} {:<22} {:>11} {:>11} {:>6} {:>9}", "policy", "backbone", "median us", "p99 us", "calls", "ratio");
-    for row in rows {
-        println!(
-            "{:<28} {:<22} {:>11.1} {:>11.1} {:>6} {:>8.1}x",
-            row.label, row.backbone, row.median_us, row.p99_us, row.calls, row.median_us / reference.median_us
-        );
-    }
-    println!("batch 1, {warmup} warm-up calls, ratio = median / median of `{}`, RAYON_NUM_THREADS={threads}", reference.label);
-    if let Some(note) = note {
-        println!("note: {note}");
-    }
-}
-
 pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
-    let (rows, note) = bench_rows(&args)?;
-    print_table(&rows, args.warmup, note.as_deref());
+    let cfg = BenchConfig { policies: args.policies, dir: args.dir, synthetic: args.synthetic, backbone: args.backbone, calls: args.calls, warmup: args.warmup };
+    let (rows, note) = bench_rows(&cfg)?;
+    print_table(&rows, cfg.warmup, note.as_deref());
     if let Some(path) = &args.json {
         write_json(path, &rows, note.as_deref())?;
     }
     Ok(ExitCode::SUCCESS)
-}
-
-fn write_json(path: &Path, rows: &[BenchRow], note: Option<&str>) -> anyhow::Result<()> {
-    let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into());
-    let value = serde_json::json!({ "threads": threads, "batch": 1, "results": rows, "note": note });
-    std::fs::write(path, serde_json::to_string_pretty(&value)?).with_context(|| format!("cannot write {}", path.display()))
 }

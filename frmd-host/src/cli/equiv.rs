@@ -14,28 +14,28 @@ pub struct EquivArgs {
     #[arg(long)]
     pub baked: PathBuf,
     /// Closed-loop episodes per method (0 skips the success-rate check).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = EquivConfig::default().episodes)]
     pub episodes: usize,
     /// Open-loop inputs for checks (a), (b), (d).
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = EquivConfig::default().inputs)]
     pub inputs: usize,
     /// Random requantization cases for (d).
-    #[arg(long, default_value_t = 1_000_000)]
+    #[arg(long, default_value_t = EquivConfig::default().random_requant)]
     pub random_requant: u64,
     /// Calibration data override (demonstrations file).
     #[arg(long)]
     pub data: Option<PathBuf>,
     /// Bound of (a), normalized units.
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = EquivConfig::default().max_f32_error)]
     pub max_f32_error: f64,
     /// Bound of (b) max abs error, fraction of the mean action range.
-    #[arg(long, default_value_t = 0.10)]
+    #[arg(long, default_value_t = EquivConfig::default().max_int8_error_frac)]
     pub max_int8_error_frac: f64,
     /// Bound of (b) mean abs error, fraction of the mean action range.
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = EquivConfig::default().mean_int8_error_frac)]
     pub mean_int8_error_frac: f64,
     /// Bound of the success-rate difference, percentage points.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = EquivConfig::default().max_success_diff_points)]
     pub max_success_diff: f64,
     /// Also write the report as JSON.
     #[arg(long)]

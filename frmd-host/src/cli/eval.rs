@@ -1,11 +1,9 @@
 //! `frmd eval`: closed-loop evaluation of a policy on a task, with the metrics of DESIGN.md
 //! section 6.
-use crate::eval::policy::Policy;
-use crate::eval::{
-    expert_policy, plot::plot_paths, run_episodes_with_progress, EvalConfig, EvalReport,
-};
+use crate::eval::plot::{plot_paths, PLOTTED_EPISODES};
+use crate::eval::{evaluate, expert_policy, EvalConfig, EvalReport};
+use crate::tasks::Policy;
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -18,16 +16,16 @@ pub struct EvalArgs {
     #[arg(long, default_value = "expert")]
     pub policy: String,
     /// Number of evaluation episodes.
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, default_value_t = EvalConfig::default().episodes)]
     pub episodes: usize,
     /// Actions executed from each predicted chunk.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = EvalConfig::default().exec_steps)]
     pub exec_steps: usize,
     /// Observation history length handed to the policy.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = EvalConfig::default().history)]
     pub history: usize,
     /// Index of the first seed within the evaluation seed stream.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = EvalConfig::default().first_seed)]
     pub first_seed: u64,
     /// Write the full report (with per-episode records) as JSON to this file.
     #[arg(long)]
@@ -36,7 +34,7 @@ pub struct EvalArgs {
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Number of episodes drawn by --plot.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = PLOTTED_EPISODES)]
     pub plot_episodes: usize,
     /// Float checkpoint (teacher, student or DP) to evaluate; overrides --policy and --history.
     #[arg(long)]
@@ -84,27 +82,9 @@ pub fn print_report(report: &EvalReport) {
     );
 }
 
-/// Closed-loop evaluation with a progress bar over episodes (cleared when done).
-pub fn evaluate_with_bar(
-    task: &str,
-    policy: &mut dyn Policy,
-    cfg: &EvalConfig,
-) -> anyhow::Result<EvalReport> {
-    let bar = ProgressBar::new(cfg.episodes as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} episodes ({elapsed})")?
-            .progress_chars("=> "),
-    );
-    bar.set_message(format!("eval {} on {task}", policy.name()));
-    let report =
-        run_episodes_with_progress(task, policy, cfg, &mut |done| bar.set_position(done as u64))?;
-    bar.finish_and_clear();
-    Ok(report)
-}
-
 pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
-    let blob = args.blob.clone().or_else(|| args.baked.as_ref().map(|d| d.join(crate::cli::export::BAKED_BLOB_FILE)));
-    let (mut policy, history): (Box<dyn crate::eval::policy::Policy>, usize) = match (&blob, &args.ckpt) {
+    let blob = args.blob.clone().or_else(|| args.baked.as_ref().map(|d| d.join(crate::export::BAKED_BLOB_FILE)));
+    let (mut policy, history): (Box<dyn Policy>, usize) = match (&blob, &args.ckpt) {
         (Some(path), _) => {
             let p = crate::policy::int8::Int8Policy::load(path)?;
             let history = p.history();
@@ -128,7 +108,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
         },
         ..EvalConfig::default()
     };
-    let report = evaluate_with_bar(&args.task, policy.as_mut(), &cfg)?;
+    let report = evaluate(&args.task, policy.as_mut(), &cfg)?;
     print_report(&report);
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&report)?)
@@ -136,7 +116,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
         println!("  report         {}", path.display());
     }
     if let Some(path) = &args.plot {
-        plot_paths(path, &report.kept_paths, 800)?;
+        plot_paths(path, &report)?;
         println!("  plot           {}", path.display());
     }
     Ok(ExitCode::SUCCESS)

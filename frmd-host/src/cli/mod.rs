@@ -1,4 +1,6 @@
-//! `frmd` subcommands. Each subcommand owns one file here with its clap `Args` and a `run`.
+//! `frmd` subcommands. Each subcommand owns one file here with its clap `Args`, which map onto a
+//! library config struct (every default is read from the config's `Default`), and a `run` that
+//! calls the library and prints the result. Nothing outside this module calls into it.
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 

@@ -13,10 +13,10 @@ pub enum ProdmpCommand {
         #[arg(long)]
         vectors: PathBuf,
         /// Pass threshold of the f64 path, error |ours - ref| / max(|ref|, 1).
-        #[arg(long, default_value_t = 1e-9)]
+        #[arg(long, default_value_t = Tolerances::default().f64_err)]
         f64_tol: f64,
         /// Pass threshold of the f32 path, same error measure.
-        #[arg(long, default_value_t = 1e-4)]
+        #[arg(long, default_value_t = Tolerances::default().f32_err)]
         f32_tol: f64,
     },
 }

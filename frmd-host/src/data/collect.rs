@@ -1,9 +1,63 @@
 //! Demonstration collection: runs a task's scripted expert and gathers successful episodes.
 use super::perturb::{ActionNoise, PerturbedExpert};
 use super::Dataset;
-use crate::eval::policy::Policy;
+use crate::tasks::Policy;
 use crate::eval::{rollout, EVAL_SEED_OFFSET};
+use crate::progress::Progress;
 use crate::tasks::make_task;
+use std::path::PathBuf;
+
+/// A collection run (`frmd collect`): `episodes` successful expert demonstrations of `task` on
+/// seeds from `seed`, perturbed by `noise` (std 0: plain), written to `out`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CollectConfig {
+    pub task: String,
+    pub episodes: usize,
+    /// First collection seed (below 2^63; evaluation uses seeds from 2^63 on).
+    pub seed: u64,
+    /// Output safetensors file.
+    pub out: PathBuf,
+    pub noise: ActionNoise,
+}
+
+impl Default for CollectConfig {
+    /// 100 plain demonstrations from seed 0; no task or file named.
+    fn default() -> Self {
+        CollectConfig { task: String::new(), episodes: 100, seed: 0, out: PathBuf::new(), noise: ActionNoise::default() }
+    }
+}
+
+/// What a collection run wrote.
+#[derive(Clone, Debug)]
+pub struct Collected {
+    pub episodes: usize,
+    pub steps: usize,
+    pub mean_length: f64,
+    pub obs_dim: usize,
+    pub action_dim: usize,
+    /// Size of the written file.
+    pub bytes: u64,
+    pub stats: CollectStats,
+}
+
+/// Collects the demonstrations of `cfg` (with progress on stderr) and writes them to `cfg.out`.
+pub fn collect_to_file(cfg: &CollectConfig) -> anyhow::Result<Collected> {
+    let mut progress = Progress::new(&format!("collect {}", cfg.task), cfg.episodes as u64, "episode");
+    // `collect_demos` validates the noise and treats std 0 as unperturbed.
+    let (data, stats) = collect_demos(&cfg.task, cfg.episodes, cfg.seed, Some(cfg.noise), &mut |done| progress.update(done as u64, ""))?;
+    progress.finish();
+    data.save(&cfg.out)?;
+    let lengths: Vec<f64> = data.episode_ranges().iter().map(|r| r.len() as f64).collect();
+    Ok(Collected {
+        episodes: data.num_episodes(),
+        steps: data.len(),
+        mean_length: crate::eval::metrics::mean(&lengths),
+        obs_dim: data.obs_dim,
+        action_dim: data.action_dim,
+        bytes: std::fs::metadata(&cfg.out)?.len(),
+        stats,
+    })
+}
 
 /// Counts from a collection run.
 #[derive(Clone, Debug, Default)]

@@ -3,6 +3,7 @@
 pub mod collect;
 pub mod dataset;
 pub mod perturb;
+pub mod toy;
 pub mod windows;
 
 #[cfg(test)]

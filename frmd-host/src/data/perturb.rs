@@ -6,7 +6,7 @@
 //! The noise is an Ornstein-Uhlenbeck process per action dimension, sampled once per control
 //! period: stationary standard deviation `std` (metres, since actions are position targets) and
 //! correlation time `correlation_time` (seconds). Its stream is fixed by the episode seed.
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 use crate::tasks::rng::TaskRng;
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -18,6 +18,13 @@ pub struct ActionNoise {
     pub std: f64,
     /// Time over which the offset's autocorrelation falls to 1/e, seconds.
     pub correlation_time: f64,
+}
+
+impl Default for ActionNoise {
+    /// No perturbation (std 0) with a 0.5 s correlation time.
+    fn default() -> Self {
+        ActionNoise { std: 0.0, correlation_time: 0.5 }
+    }
 }
 
 impl ActionNoise {

@@ -1,6 +1,7 @@
 //! Dataset format, reader validation and training-window tests.
 use super::collect::collect_demos;
 use super::{Dataset, Normalizer};
+use crate::eval::{eval_seed, EVAL_SEED_OFFSET};
 use safetensors::tensor::{Dtype, TensorView};
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -279,7 +280,7 @@ fn normalizer_round_trips_and_maps_constants_to_zero() {
 #[test]
 fn perturbed_demonstrations_record_the_experts_clean_actions() {
     use super::perturb::ActionNoise;
-    use crate::eval::policy::PolicyInput;
+    use crate::tasks::PolicyInput;
     use crate::tasks::make_task;
     let noise = ActionNoise {
         std: 0.02,
@@ -344,4 +345,15 @@ fn nearly_constant_dimensions_get_the_minimum_range_and_constants_stay_constant(
     let mut row = [0.504, 3.0, 1.0];
     norm.normalize(&mut row);
     assert!((row[0] - 0.4).abs() < 1e-4 && row[1] == 0.0 && row[2] == 1.0, "{row:?}");
+}
+
+#[test]
+fn evaluation_seeds_are_disjoint_from_collection_seeds() {
+    for index in [0usize, 1, 1000] {
+        assert!(eval_seed(0, index) >= EVAL_SEED_OFFSET);
+        assert!(eval_seed(12345, index) >= EVAL_SEED_OFFSET);
+    }
+    // Collection refuses seeds that would reach into the evaluation stream.
+    assert!(collect_demos("reach", 1, EVAL_SEED_OFFSET - 3, None, &mut |_| {}).is_err());
+    assert!(collect_demos("reach", 1, 0, None, &mut |_| {}).is_ok());
 }

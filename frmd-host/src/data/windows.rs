@@ -1,6 +1,7 @@
 //! Training windows cut from demonstrations: the contract between datasets and training.
 
 pub use frmd_export::checkpoint::{Normalization, Normalizer};
+use frmd_export::calibrate::CalibrationSet;
 
 /// Smallest normalizer range, raw units. MetaWorld demonstrations have observation dimensions
 /// that barely move (a resting object's quaternion jitters by +-0.002: 12 dimensions of reach-v3
@@ -46,7 +47,26 @@ impl WindowSet {
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
+
+    /// Up to `rows` evenly spaced window conditions `[obs history, y0, v0]` (normalized) as
+    /// calibration rows for the exporter, with a noise seed derived from `seed`. Training
+    /// writes [`CALIBRATION_ROWS`] of them beside a student checkpoint
+    /// (`frmd_export::calibration_file`).
+    pub fn calibration_rows(&self, rows: usize, seed: u64) -> CalibrationSet {
+        let (obs_w, k) = (self.history * self.obs_dim, self.action_dim);
+        let stride = (self.len() / rows.max(1)).max(1);
+        let mut cond = Vec::new();
+        for i in (0..self.len()).step_by(stride).take(rows) {
+            cond.extend_from_slice(&self.obs[i * obs_w..(i + 1) * obs_w]);
+            cond.extend_from_slice(&self.prev_action[i * k..(i + 1) * k]);
+            cond.extend_from_slice(&self.prev_rate[i * k..(i + 1) * k]);
+        }
+        CalibrationSet { cond_dim: obs_w + 2 * k, cond, seed: seed ^ 0xca11_b4a7e }
+    }
 }
+
+/// Calibration rows written beside a student checkpoint.
+pub const CALIBRATION_ROWS: usize = 256;
 
 impl super::Dataset {
     /// Training windows of DESIGN.md section 4 and the normalization fitted on this dataset.

@@ -14,6 +14,10 @@ use anyhow::bail;
 use candle_core::Tensor;
 use frmd_core::sigma::SigmaConfig;
 
+/// Number of DDPM noise levels of the DP baseline: its training schedule, and the step count at
+/// which sampling is full DDPM (fewer steps sample with DDIM).
+pub const DP_TRAIN_STEPS: usize = 100;
+
 /// How the network's output F becomes the noise estimate eps(x_t, o, t).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -31,15 +35,7 @@ pub enum EpsParametrization {
     Preconditioned,
 }
 
-impl EpsParametrization {
-    pub fn parse(text: &str) -> anyhow::Result<Self> {
-        match text {
-            "direct" => Ok(EpsParametrization::Direct),
-            "preconditioned" => Ok(EpsParametrization::Preconditioned),
-            other => bail!("unknown DP parametrization `{other}` (direct, preconditioned)"),
-        }
-    }
-}
+variant_names!(EpsParametrization, "DP parametrization", { Direct = "direct", Preconditioned = "preconditioned" });
 
 /// Discrete DDPM schedule plus the parametrization of the noise network.
 #[derive(Clone, Debug)]
@@ -202,7 +198,7 @@ pub fn sample_dp(net: &Network, sched: &DdpmSchedule, cond: &Condition, x: Tenso
 mod tests {
     use super::*;
     use crate::models::{HeadConfig, OwnedNetwork};
-    use crate::train::toy::toy_config;
+    use crate::data::toy::toy_config;
     use candle_core::Device;
 
     fn zero_network() -> OwnedNetwork {

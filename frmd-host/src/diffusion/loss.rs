@@ -21,16 +21,7 @@ pub enum LossWeight {
     Uniform,
 }
 
-impl LossWeight {
-    pub fn parse(text: &str) -> anyhow::Result<Self> {
-        Ok(match text {
-            "edm" => LossWeight::Edm,
-            "inv-sigma2" => LossWeight::InvSigmaSquared,
-            "uniform" => LossWeight::Uniform,
-            other => anyhow::bail!("unknown loss weight `{other}` (edm, inv-sigma2, uniform)"),
-        })
-    }
-}
+variant_names!(LossWeight, "loss weight", { Edm = "edm", InvSigmaSquared = "inv-sigma2", Uniform = "uniform" });
 
 /// Log-normal noise-level distribution of the teacher loss.
 pub const P_MEAN: f64 = -1.2;

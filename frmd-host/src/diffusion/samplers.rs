@@ -20,16 +20,9 @@ pub enum Solver {
     DpmPp2m,
 }
 
-impl Solver {
-    pub fn parse(text: &str) -> anyhow::Result<Self> {
-        Ok(match text {
-            "euler" => Solver::Euler,
-            "heun" => Solver::Heun,
-            "dpm++2m" | "dpmpp2m" | "dpm-pp-2m" => Solver::DpmPp2m,
-            other => bail!("unknown solver `{other}` (euler, heun, dpm++2m)"),
-        })
-    }
+variant_names!(Solver, "solver", { Euler = "euler", Heun = "heun", DpmPp2m = "dpm++2m" | "dpmpp2m" | "dpm-pp-2m" });
 
+impl Solver {
     /// Network evaluations for `steps` steps ending at sigma = 0.
     pub fn evaluations(self, steps: usize) -> usize {
         match self {
@@ -38,6 +31,7 @@ impl Solver {
         }
     }
 }
+
 
 /// A source of standard-normal f32 samples (the host training generator, or frmd-core's
 /// firmware generator so float and firmware policies can share noise streams).

@@ -4,15 +4,13 @@
 //! Seeds: demonstrations are collected on seeds below [`EVAL_SEED_OFFSET`] (2^63; `frmd collect`
 //! refuses others) and evaluation episode `i` runs on seed `EVAL_SEED_OFFSET + first_seed + i`,
 //! so evaluation layouts never coincide with demonstration layouts by construction.
-use crate::tasks::{make_task, Task};
-use policy::{Policy, PolicyInput};
+use crate::tasks::{make_task, Policy, PolicyInput, Task};
 use serde::Serialize;
 use std::collections::VecDeque;
 use std::time::Instant;
 
 pub mod metrics;
 pub mod plot;
-pub mod policy;
 
 #[cfg(test)]
 mod tests;
@@ -231,6 +229,14 @@ pub fn run_episodes(
     cfg: &EvalConfig,
 ) -> anyhow::Result<EvalReport> {
     run_episodes_with_progress(task, policy, cfg, &mut |_| {})
+}
+
+/// [`run_episodes`] with progress over episodes on stderr (`crate::progress`).
+pub fn evaluate(task: &str, policy: &mut dyn Policy, cfg: &EvalConfig) -> anyhow::Result<EvalReport> {
+    let mut progress = crate::progress::Progress::new(&format!("eval {} on {task}", policy.name()), cfg.episodes as u64, "episode");
+    let report = run_episodes_with_progress(task, policy, cfg, &mut |done| progress.update(done as u64, ""))?;
+    progress.finish();
+    Ok(report)
 }
 
 /// [`run_episodes`] with a callback after each finished episode (for progress bars).

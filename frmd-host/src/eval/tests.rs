@@ -1,7 +1,6 @@
 //! Evaluator tests: chunk execution, seed streams, input conventions, plotting.
-use super::policy::{Policy, PolicyInput};
-use super::{eval_seed, plot::plot_paths, run_episodes, EvalConfig, EVAL_SEED_OFFSET};
-use crate::data::collect::collect_demos;
+use crate::tasks::{Policy, PolicyInput};
+use super::{plot::plot_paths, run_episodes, EvalConfig};
 
 /// Holds the end effector still with 12-action chunks, and checks the input conventions.
 struct Hold {
@@ -87,17 +86,6 @@ fn bad_policy_output_is_an_error_not_a_panic() {
 }
 
 #[test]
-fn evaluation_seeds_are_disjoint_from_collection_seeds() {
-    for index in [0usize, 1, 1000] {
-        assert!(eval_seed(0, index) >= EVAL_SEED_OFFSET);
-        assert!(eval_seed(12345, index) >= EVAL_SEED_OFFSET);
-    }
-    // Collection refuses seeds that would reach into the evaluation stream.
-    assert!(collect_demos("reach", 1, EVAL_SEED_OFFSET - 3, None, &mut |_| {}).is_err());
-    assert!(collect_demos("reach", 1, 0, None, &mut |_| {}).is_ok());
-}
-
-#[test]
 fn plots_expert_paths_as_png() {
     let mut expert = crate::eval::expert_policy("avoid").unwrap();
     let cfg = EvalConfig {
@@ -113,7 +101,7 @@ fn plots_expert_paths_as_png() {
         assert_eq!(kept.seed, record.seed);
     }
     let out = std::env::temp_dir().join(format!("frmd-plot-test-{}.png", std::process::id()));
-    plot_paths(&out, &report.kept_paths, 200).unwrap();
+    plot_paths(&out, &report).unwrap();
     let bytes = std::fs::read(&out).unwrap();
     std::fs::remove_file(&out).ok();
     assert!(bytes.starts_with(b"\x89PNG"), "not a PNG");

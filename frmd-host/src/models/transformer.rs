@@ -211,5 +211,4 @@ impl Transformer {
 }
 
 #[cfg(test)]
-#[path = "transformer_tests.rs"]
 mod tests;

@@ -1,14 +1,13 @@
 //! Float policies from checkpoints: the teacher (ODE solver, S steps), the consistency student
-//! (1..4 steps) and the DP baseline (DDPM 100 / DDIM S), all behind `eval::policy::Policy`.
+//! (1..4 steps) and the DP baseline (DDPM 100 / DDIM S), all behind `tasks::Policy`.
 //! Sampling noise comes from `frmd_core::rng::Rng` seeded by the episode seed, the same
 //! generator the firmware uses.
 use crate::checkpoint::{self, CheckpointMeta, Role};
 use crate::data::Normalization;
-use crate::diffusion::ddpm::{sample_dp, DdpmSchedule, DpSampler, EpsParametrization};
+use crate::diffusion::ddpm::{sample_dp, DdpmSchedule, DpSampler, EpsParametrization, DP_TRAIN_STEPS};
 use crate::diffusion::samplers::{gaussian, sample_consistency, sample_teacher, Solver};
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 use crate::models::{Condition, OwnedNetwork};
-use crate::train::dp::DP_TRAIN_STEPS;
 use anyhow::{bail, Context};
 use candle_core::Device;
 use frmd_core::rng::Rng;
@@ -103,7 +102,7 @@ impl FloatPolicy {
         let norm = meta.normalization.clone().with_context(|| format!("{}: checkpoint has no normalization", dir.display()))?;
         let sampler = Sampler::for_role(meta.role, steps, solver)?;
         let parametrization = dp_parametrization(&meta).with_context(|| format!("{}", dir.display()))?;
-        Ok(FloatPolicy::new(net, norm, meta.sigma.into(), sampler)?.with_dp_parametrization(parametrization))
+        Ok(FloatPolicy::new(net, norm, meta.sigma, sampler)?.with_dp_parametrization(parametrization))
     }
 
     /// (obs_dim, action_dim, history) the policy expects.
@@ -119,6 +118,26 @@ impl FloatPolicy {
 
     pub fn sampler(&self) -> Sampler {
         self.sampler
+    }
+
+    /// The candle network.
+    pub fn network(&self) -> &OwnedNetwork {
+        &self.net
+    }
+
+    /// Observation and action normalization (raw units <-> [-1, 1]).
+    pub fn normalization(&self) -> &Normalization {
+        &self.norm
+    }
+
+    /// Noise levels of teacher and student sampling.
+    pub fn sigma(&self) -> &SigmaConfig {
+        &self.sigma
+    }
+
+    /// The DDPM schedule of DP sampling.
+    pub fn schedule(&self) -> &DdpmSchedule {
+        &self.schedule
     }
 
     /// One chunk in normalized units from normalized inputs: `obs` [m O], `y0`, `v0` [k].
@@ -184,7 +203,7 @@ mod tests {
     use super::*;
     use crate::data::Normalizer;
     use crate::models::{HeadConfig, ProDmpOutput};
-    use crate::train::toy::toy_config;
+    use crate::data::toy::toy_config;
 
     fn toy_policy(head: HeadConfig, sampler: Sampler) -> anyhow::Result<FloatPolicy> {
         let cfg = toy_config(head);
@@ -219,62 +238,3 @@ mod tests {
         assert!(toy_policy(HeadConfig::Raw, Sampler::Student { steps: 1 }).is_err());
     }
 }
-
-#[cfg(test)]
-mod dp_checkpoint_tests {
-    use super::*;
-    use crate::data::Normalizer;
-    use crate::models::HeadConfig;
-    use crate::train::toy::toy_config;
-
-    /// A DP checkpoint records its noise-network parametrization and `load` samples with it:
-    /// the loaded policy reproduces the in-memory preconditioned policy, not the direct one.
-    /// Old checkpoints without the record load as `Direct`; a bad record is an error.
-    #[test]
-    fn dp_parametrization_is_saved_and_loaded() {
-        let cfg = toy_config(HeadConfig::Raw);
-        let net = OwnedNetwork::new_seeded(&cfg, 5, &Device::Cpu).unwrap();
-        let norm = Normalization { obs: Normalizer { min: vec![-2.0], max: vec![2.0] }, action: Normalizer { min: vec![10.0], max: vec![20.0] } };
-        let sampler = Sampler::Dp { sampler: DpSampler::Ddim, steps: 10 };
-        let dir = std::env::temp_dir().join(format!("frmd-dp-param-{}", std::process::id()));
-        let mut meta = CheckpointMeta::describe(Role::Dp, &cfg, SigmaConfig::default());
-        meta.normalization = Some(norm.clone());
-        meta.training = serde_json::json!({ DP_TRAINING_KEY: crate::train::dp::DpConfig { parametrization: EpsParametrization::Preconditioned, eval_ema: 0.0 } });
-        checkpoint::save(&dir, &meta, &net).unwrap();
-        let obs = vec![vec![0.5f32]];
-        let input = PolicyInput { obs_history: &obs, prev_action: &[15.0], prev_rate: &[1.0] };
-        let chunk = |policy: &mut FloatPolicy| {
-            policy.reset(3);
-            policy.act(&input).unwrap()
-        };
-        let loaded = chunk(&mut FloatPolicy::load(&dir, None, None).unwrap());
-        let pre = chunk(&mut FloatPolicy::new(net.duplicate(&Device::Cpu).unwrap(), norm.clone(), SigmaConfig::default(), sampler).unwrap().with_dp_parametrization(EpsParametrization::Preconditioned));
-        let direct = chunk(&mut FloatPolicy::new(net.duplicate(&Device::Cpu).unwrap(), norm.clone(), SigmaConfig::default(), sampler).unwrap());
-        assert_eq!(loaded, pre);
-        assert_ne!(loaded, direct);
-        meta.training = serde_json::json!({ "steps": 1 });
-        assert_eq!(dp_parametrization(&meta).unwrap(), EpsParametrization::Direct);
-        meta.training = serde_json::json!({ DP_TRAINING_KEY: { "parametrization": "sideways" } });
-        assert!(dp_parametrization(&meta).is_err());
-        std::fs::remove_dir_all(&dir).ok();
-    }
-}
-
-/// The checkpoint directory and demonstrations named by FRMD_CKPT and FRMD_DATA, for the manual
-/// diagnostics below; `None` (the diagnostic does nothing) when either variable is unset.
-#[cfg(test)]
-fn diagnostic_inputs() -> Option<(String, crate::data::Dataset)> {
-    let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else {
-        return None;
-    };
-    let dataset = crate::data::Dataset::load(Path::new(&data)).unwrap();
-    Some((ckpt, dataset))
-}
-
-#[cfg(test)]
-#[path = "float_diagnostics.rs"]
-mod diagnostics;
-
-#[cfg(test)]
-#[path = "dp_diagnostics.rs"]
-mod dp_diagnostics;

@@ -1,153 +1,224 @@
-//! The int8 student as a closed-loop policy: frmd-core's [`frmd_core::policy::Policy`] over an
-//! [`frmd_core::blob::LoadedPolicy`] (the firmware's own code path, blob loader included).
+//! The int8 student as a closed-loop policy: frmd-core's [`frmd_core::policy::Policy`] over the
+//! network of an exported blob, MLP ([`LoadedMlp`]) or transformer-lite ([`LoadedTransformer`]),
+//! chosen by the blob's magic: the firmware's own code path, blob loader included.
 //!
-//! frmd-core's policy is generic over its sizes (history M, observation O, action K, horizon N,
-//! ProDMP parameters per DoF P), so the host compiles it for a fixed list of shapes
-//! ([`SHAPES`]: the built-in tasks with the default training config, plus the small shape the
-//! end-to-end test trains) and picks the one the blob's descriptor names. The blob bytes are
-//! leaked once per loaded policy (the loaded policy borrows them for `'static`).
-use crate::eval::policy::{Policy, PolicyInput};
+//! Any exported shape runs: the policy's buffers have the fixed host capacities below (heapless
+//! style) and the blob's descriptor gives the sizes at run time. The blob is owned next to the
+//! policy that borrows it ([`self_cell`]), so nothing is leaked. An MLP policy is built once per
+//! load; a transformer's network and policy are built per chunk from the loaded blob (a few
+//! microseconds against a chunk of about a millisecond), with the scratch kept across chunks.
+use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
-use frmd_core::blob::LoadedPolicy;
-use frmd_core::policy::{F32Network, Network, Noise, Policy as CorePolicy};
-use frmd_export::fold::FoldedMlp;
+use frmd_core::blob::{LoadedMlp, LoadedTransformer, TRANSFORMER_MAGIC};
+use frmd_core::policy::{F32MlpNetwork, F32TransformerNetwork, Int8MlpNetwork, Network, Noise, Policy as CorePolicy, PolicyDims, PolicyError};
+use frmd_core::prodmp::MAX_NUM_BASIS;
 use frmd_core::rng::Rng;
-use frmd_export::fold::MAX_WIDTH;
+use frmd_export::fold::{FoldedMlp, MAX_WIDTH};
+use frmd_export::transformer::{FoldedTransformer, HostScratch};
 use std::path::Path;
 
-/// One chunk from raw inputs with explicit noise; sizes are checked at run time.
-pub trait ChunkRunner {
-    /// (history, obs_dim, action_dim, horizon, params per DoF).
-    fn shape(&self) -> [usize; 5];
-    /// Positions `[n][k]` in raw units for raw `history`, `prev_action`, `prev_rate` (units/s).
-    fn run(&mut self, input: &PolicyInput<'_>, noise: Noise<'_>) -> anyhow::Result<Vec<Vec<f32>>>;
+/// Longest observation history the host runs.
+pub const MAX_HISTORY: usize = 16;
+/// Largest observation dimension the host runs.
+pub const MAX_OBS_DIM: usize = 128;
+/// Largest action dimension (DoF) the host runs.
+pub const MAX_ACTION_DIM: usize = 32;
+/// Longest horizon the host runs.
+pub const MAX_HORIZON: usize = 64;
+/// Most ProDMP parameters per DoF (the decoder's limit).
+pub const MAX_PARAMS_PER_DOF: usize = MAX_NUM_BASIS + 1;
+
+/// frmd-core's policy with the host capacities (the model input up to the exporter's widest
+/// layer).
+type HostPolicy<'a, Net> = CorePolicy<'a, Net, MAX_HISTORY, MAX_OBS_DIM, MAX_ACTION_DIM, MAX_HORIZON, MAX_PARAMS_PER_DOF, MAX_WIDTH>;
+
+/// A blob copied into 4-aligned memory (the loaders read it in place).
+pub struct Blob {
+    words: Vec<u32>,
+    len: usize,
 }
 
-pub(crate) struct Runner<Net, const M: usize, const O: usize, const K: usize, const N: usize, const P: usize> {
-    pub(crate) policy: CorePolicy<'static, Net, M, O, K, N, P, MAX_WIDTH>,
+impl Blob {
+    pub fn new(bytes: &[u8]) -> Self {
+        let mut words = vec![0u32; bytes.len().div_ceil(4)];
+        bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..bytes.len()].copy_from_slice(bytes);
+        Blob { words, len: bytes.len() }
+    }
+
+    pub fn bytes(&self) -> &[u8] {
+        &bytemuck::cast_slice(&self.words)[..self.len]
+    }
+
+    /// Whether this is a transformer blob (magic `FRMT`).
+    pub fn is_transformer(&self) -> bool {
+        self.bytes().get(..4) == Some(&TRANSFORMER_MAGIC[..])
+    }
 }
 
-fn array<const L: usize>(values: &[f32], what: &str) -> anyhow::Result<[f32; L]> {
-    values.try_into().map_err(|_| anyhow::anyhow!("{what} has {} values, the policy expects {L}", values.len()))
+fn policy_error(what: &'static str) -> impl Fn(PolicyError) -> anyhow::Error {
+    move |e| anyhow::anyhow!("{what}: {e}")
 }
 
-impl<Net: Network, const M: usize, const O: usize, const K: usize, const N: usize, const P: usize> ChunkRunner
-    for Runner<Net, M, O, K, N, P>
-{
-    fn shape(&self) -> [usize; 5] {
-        [M, O, K, N, P]
+/// One chunk of `policy` from raw inputs: a fresh episode with the observation history and the
+/// last commanded action and rate of `input`; the positions `[n][k]` in raw units.
+fn run_chunk<Net: Network>(policy: &mut HostPolicy<'_, Net>, input: &PolicyInput<'_>, noise: Noise<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
+    let dims = policy.dims();
+    if input.obs_history.len() != dims.history {
+        bail!("int8 policy expects an observation history of {}, got {}", dims.history, input.obs_history.len());
+    }
+    let err = policy_error("int8 policy");
+    policy.reset(input.prev_action).map_err(&err)?;
+    for obs in input.obs_history {
+        policy.observe(obs).map_err(&err)?;
+    }
+    policy.set_previous_action(input.prev_action, input.prev_rate).map_err(&err)?;
+    let chunk = policy.act(noise).map_err(&err)?;
+    let (positions, _) = chunk.values(dims.horizon * dims.action_dim).context("chunk")?;
+    Ok(positions.chunks(dims.action_dim).map(<[f32]>::to_vec).collect())
+}
+
+type MlpPolicy<'a> = HostPolicy<'a, Int8MlpNetwork<'a, MAX_WIDTH>>;
+type MlpF32Policy<'a> = HostPolicy<'a, F32MlpNetwork<'a, MAX_WIDTH>>;
+
+self_cell::self_cell!(
+    /// An MLP blob and its int8 policy.
+    struct MlpRunner {
+        owner: Blob,
+        #[covariant]
+        dependent: MlpPolicy,
+    }
+);
+
+/// An MLP blob, the folded float model and its first-layer bias variants.
+struct MlpTwin {
+    blob: Blob,
+    folded: FoldedMlp,
+    biases: Vec<f32>,
+}
+
+self_cell::self_cell!(
+    /// The blob's policy over frmd-core's f32 network of the folded model.
+    struct MlpF32Runner {
+        owner: MlpTwin,
+        #[covariant]
+        dependent: MlpF32Policy,
+    }
+);
+
+self_cell::self_cell!(
+    /// A transformer blob, loaded.
+    struct TransformerBlob {
+        owner: Blob,
+        #[covariant]
+        dependent: LoadedTransformer,
+    }
+);
+
+/// The network a policy runs on.
+enum Runner {
+    Mlp(MlpRunner),
+    MlpF32(MlpF32Runner),
+    Transformer { blob: TransformerBlob, scratch: Box<HostScratch>, f32_twin: Option<Box<FoldedTransformer>> },
+}
+
+impl Runner {
+    fn new(bytes: &[u8]) -> anyhow::Result<Self> {
+        let blob = Blob::new(bytes);
+        if blob.is_transformer() {
+            let blob = TransformerBlob::try_new(blob, |b| LoadedTransformer::load(b.bytes())).map_err(|e| anyhow::anyhow!("transformer blob: {e}"))?;
+            return Ok(Runner::Transformer { blob, scratch: Box::new(HostScratch::new()), f32_twin: None });
+        }
+        let runner = MlpRunner::try_new(blob, |b| {
+            let loaded = LoadedMlp::load(b.bytes()).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
+            loaded.policy().map_err(policy_error("blob policy"))
+        })?;
+        Ok(Runner::Mlp(runner))
+    }
+
+    fn dims(&self) -> PolicyDims {
+        match self {
+            Runner::Mlp(runner) => runner.borrow_dependent().dims(),
+            Runner::MlpF32(runner) => runner.borrow_dependent().dims(),
+            Runner::Transformer { blob, .. } => blob.borrow_dependent().dims(),
+        }
     }
 
     fn run(&mut self, input: &PolicyInput<'_>, noise: Noise<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
-        if input.obs_history.len() != M {
-            bail!("int8 policy expects an observation history of {M}, got {}", input.obs_history.len());
+        match self {
+            Runner::Mlp(runner) => runner.with_dependent_mut(|_, policy| run_chunk(policy, input, noise)),
+            Runner::MlpF32(runner) => runner.with_dependent_mut(|_, policy| run_chunk(policy, input, noise)),
+            Runner::Transformer { blob, scratch, f32_twin } => {
+                let loaded = blob.borrow_dependent();
+                let err = policy_error("transformer policy");
+                match f32_twin {
+                    None => {
+                        let network = loaded.network(&mut **scratch).map_err(&err)?;
+                        run_chunk(&mut HostPolicy::new(loaded.config(), network).map_err(&err)?, input, noise)
+                    }
+                    Some(folded) => {
+                        let blocks = folded.f32_blocks();
+                        let tokens = folded.flat_noise_tokens();
+                        let network = F32TransformerNetwork::new(folded.view(&blocks, 0)?, &folded.layout, &tokens, &mut **scratch).map_err(&err)?;
+                        run_chunk(&mut HostPolicy::new(loaded.config(), network).map_err(&err)?, input, noise)
+                    }
+                }
+            }
         }
-        let prev = array::<K>(input.prev_action, "previous action")?;
-        let rate = array::<K>(input.prev_rate, "previous rate")?;
-        let err = |e: frmd_core::policy::PolicyError| anyhow::anyhow!("int8 policy: {e}");
-        self.policy.reset(&prev).map_err(err)?;
-        for obs in input.obs_history {
-            self.policy.observe(&array::<O>(obs, "observation")?).map_err(err)?;
-        }
-        self.policy.set_previous_action(&prev, &rate).map_err(err)?;
-        let chunk = self.policy.act(noise).map_err(err)?;
-        Ok(chunk.positions.iter().map(|a| a.to_vec()).collect())
-    }
-}
-
-pub(crate) fn leak_aligned(bytes: &[u8]) -> &'static [u8] {
-    let mut words = vec![0u32; bytes.len().div_ceil(4)];
-    bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..bytes.len()].copy_from_slice(bytes);
-    let words: &'static [u32] = Box::leak(words.into_boxed_slice());
-    &bytemuck::cast_slice(words)[..bytes.len()]
-}
-
-fn try_shape<const M: usize, const O: usize, const K: usize, const N: usize, const P: usize>(
-    bytes: &'static [u8],
-    f32_twin: Option<&'static FoldedMlp>,
-) -> Option<anyhow::Result<Box<dyn ChunkRunner>>> {
-    let loaded = match LoadedPolicy::<M, O, K, N, P>::load(bytes) {
-        Ok(l) => l,
-        Err(frmd_core::blob::BlobError::DimensionMismatch(_)) => return None,
-        Err(e) => return Some(Err(anyhow::anyhow!("blob: {e}"))),
-    };
-    let loaded: &'static LoadedPolicy<'static, M, O, K, N, P> = Box::leak(Box::new(loaded));
-    Some(match f32_twin {
-        None => loaded
-            .policy::<MAX_WIDTH, MAX_WIDTH>()
-            .map(|policy| Box::new(Runner { policy }) as Box<dyn ChunkRunner>)
-            .map_err(|e| anyhow::anyhow!("blob policy: {e}")),
-        Some(folded) => {
-            let biases: &'static [f32] = Box::leak(folded.flat_first_layer_biases().into_boxed_slice());
-            folded.f32_network::<MAX_WIDTH>(biases).and_then(|net: F32Network<'static, MAX_WIDTH>| {
-                CorePolicy::<'static, _, M, O, K, N, P, MAX_WIDTH>::new(loaded.config(), net)
-                    .map(|policy| Box::new(Runner { policy }) as Box<dyn ChunkRunner>)
-                    .map_err(|e| anyhow::anyhow!("f32 policy: {e}"))
-            })
-        }
-    })
-}
-
-/// Shapes (M, O, K, N, P) the host int8 runner is compiled for.
-pub const SHAPES: &[[usize; 5]] = &[[2, 6, 2, 12, 21], [2, 9, 2, 12, 21], [2, 10, 2, 12, 21], [2, 7, 2, 12, 21], [2, 6, 2, 8, 7], [2, 39, 4, 12, 21]];
-
-/// Loads a blob into a runner of the matching compiled shape.
-/// With `f32_twin`, the policy runs frmd-core's f32 network of the folded model instead of the
-/// blob's int8 network (same blob config: normalization, steps, decoder, layout).
-pub fn load_runner(bytes: &[u8], f32_twin: Option<FoldedMlp>) -> anyhow::Result<Box<dyn ChunkRunner>> {
-    let bytes = leak_aligned(bytes);
-    let twin: Option<&'static FoldedMlp> = f32_twin.map(|f| &*Box::leak(Box::new(f)));
-    let found = try_shape::<2, 6, 2, 12, 21>(bytes, twin)
-        .or_else(|| try_shape::<2, 9, 2, 12, 21>(bytes, twin))
-        .or_else(|| try_shape::<2, 10, 2, 12, 21>(bytes, twin))
-        .or_else(|| try_shape::<2, 7, 2, 12, 21>(bytes, twin))
-        .or_else(|| try_shape::<2, 6, 2, 8, 7>(bytes, twin))
-        // MetaWorld (39 observations, 4 actions) until the any-shape runner lands.
-        .or_else(|| try_shape::<2, 39, 4, 12, 21>(bytes, twin));
-    match found {
-        Some(runner) => runner,
-        None => bail!("the blob's sizes are not among the host's compiled int8 shapes (M, O, K, N, P) {SHAPES:?}"),
     }
 }
 
 /// The int8 student behind the evaluation [`Policy`] trait; noise from `frmd_core::rng::Rng`
 /// seeded by the episode seed, as the float policies.
 pub struct Int8Policy {
-    runner: Box<dyn ChunkRunner>,
+    runner: Runner,
     rng: Rng,
     label: String,
 }
 
 impl Int8Policy {
+    /// The policy of an MLP (`FRMD`) or transformer (`FRMT`) blob, chosen by its magic.
     pub fn from_blob(bytes: &[u8], label: &str) -> anyhow::Result<Self> {
-        Ok(Int8Policy { runner: load_runner(bytes, None)?, rng: Rng::new(0), label: label.into() })
+        Ok(Int8Policy { runner: Runner::new(bytes)?, rng: Rng::new(0), label: label.into() })
     }
 
-    /// The same runtime policy with frmd-core's f32 network of `folded` in place of the int8 one
-    /// (isolates quantization from everything else in closed-loop comparisons).
+    /// The same runtime policy as [`Self::from_blob`] of an MLP blob with frmd-core's f32
+    /// network of `folded` in place of the int8 one (isolates quantization from everything else
+    /// in closed-loop comparisons).
     pub fn f32_twin(bytes: &[u8], folded: FoldedMlp, label: &str) -> anyhow::Result<Self> {
-        Ok(Int8Policy { runner: load_runner(bytes, Some(folded))?, rng: Rng::new(0), label: label.into() })
+        let biases = folded.flat_first_layer_biases();
+        let twin = MlpTwin { blob: Blob::new(bytes), folded, biases };
+        let runner = MlpF32Runner::try_new(twin, |t| {
+            let loaded = LoadedMlp::load(t.blob.bytes()).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
+            let network = t.folded.f32_network::<MAX_WIDTH>(&t.biases)?;
+            HostPolicy::new(loaded.config(), network).map_err(policy_error("f32 policy"))
+        })?;
+        Ok(Int8Policy { runner: Runner::MlpF32(runner), rng: Rng::new(0), label: label.into() })
     }
 
-    /// A policy over any runner (e.g. [`super::transformer::load_runner`]).
-    pub fn from_runner(runner: Box<dyn ChunkRunner>, label: &str) -> Self {
-        Int8Policy { runner, rng: Rng::new(0), label: label.into() }
+    /// [`Self::f32_twin`] of a transformer blob with the f32 reference network of `folded`.
+    pub fn transformer_f32_twin(bytes: &[u8], folded: FoldedTransformer, label: &str) -> anyhow::Result<Self> {
+        let mut policy = Self::from_blob(bytes, label).context("f32 twin")?;
+        match &mut policy.runner {
+            Runner::Transformer { f32_twin, .. } => *f32_twin = Some(Box::new(folded)),
+            _ => bail!("not a transformer blob (magic {:?}, expected FRMT)", bytes.get(..4)),
+        }
+        Ok(policy)
     }
 
-    /// Loads a blob file (MLP `FRMD` or transformer `FRMT`, by its magic).
+    /// Loads a blob file (MLP or transformer, by its magic).
     pub fn load(path: &Path) -> anyhow::Result<Self> {
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-        super::transformer::int8_policy(&bytes, "int8").with_context(|| format!("loading {}", path.display()))
+        Self::from_blob(&bytes, "int8").with_context(|| format!("loading {}", path.display()))
     }
 
-    /// (history, obs_dim, action_dim, horizon, params per DoF) of the loaded blob.
-    pub fn shape(&self) -> [usize; 5] {
-        self.runner.shape()
+    /// The policy's sizes (from the blob).
+    pub fn dims(&self) -> PolicyDims {
+        self.runner.dims()
     }
 
     /// Observation history the policy needs.
     pub fn history(&self) -> usize {
-        self.runner.shape()[0]
+        self.dims().history
     }
 
     /// One chunk with explicit noise (`steps * n * k` standard-normal values).

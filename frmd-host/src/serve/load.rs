@@ -4,16 +4,12 @@
 use super::frame::{FloatType, MAX_NAME, MAX_PAYLOAD};
 use super::reply::ModelInfo;
 use super::session::{ActInput, ServedPolicy, Session};
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
+use crate::export::{ExportConfig, BAKED_BLOB_FILE, EXPORT_INFO_FILE};
 use crate::policy::float::FloatPolicy;
 use crate::policy::int8::Int8Policy;
 use anyhow::{bail, Context};
 use std::path::{Path, PathBuf};
-
-/// File of a baked module directory holding the blob (written by `frmd export --out`).
-const BAKED_BLOB_FILE: &str = "policy.blob";
-/// File of a baked module directory naming the exported checkpoint.
-const EXPORT_INFO_FILE: &str = "export.json";
 
 /// Where the served policy comes from.
 #[derive(Clone, Debug, PartialEq)]
@@ -127,11 +123,11 @@ fn exported_dt(dir: &Path) -> anyhow::Result<Option<f64>> {
         return Ok(None);
     }
     let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let json: serde_json::Value = serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
-    let Some(ckpt) = json.get("checkpoint").and_then(|c| c.as_str()) else {
-        bail!("{}: field `checkpoint` missing or not a string", path.display());
-    };
-    match frmd_export::checkpoint::CheckpointMeta::read(Path::new(ckpt)) {
+    let info: ExportConfig = serde_json::from_str(&text).with_context(|| format!("{}: not the export settings `frmd export` writes", path.display()))?;
+    if info.checkpoint.is_empty() {
+        bail!("{}: field `checkpoint` is missing or empty (expected the exported checkpoint directory)", path.display());
+    }
+    match frmd_export::checkpoint::CheckpointMeta::read(Path::new(&info.checkpoint)) {
         Ok(meta) => Ok(Some(meta.model.control_dt)),
         // The checkpoint may have moved since the export; the blob alone still serves.
         Err(_) => Ok(None),
@@ -155,9 +151,9 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
                 _ => (dir.clone(), dir.parent().map(Path::to_path_buf).unwrap_or_default()),
             };
             let policy = Int8Policy::load(&path)?;
-            let [m, o, k, n, _] = policy.shape();
+            let d = policy.dims();
             let dt = exported_dt(&beside)?.unwrap_or(0.0);
-            (Box::new(policy), m, o, k, n, dt, format!("int8 {}", path.display()))
+            (Box::new(policy), d.history, d.obs_dim, d.action_dim, d.horizon, dt, format!("int8 {}", path.display()))
         }
     };
     let what = match source {

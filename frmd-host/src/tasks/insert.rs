@@ -24,7 +24,7 @@ use super::geom::{Cubic, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass, OMEGA, SUBSTEP};
 use super::rng::TaskRng;
 use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
-use crate::eval::policy::{Policy, PolicyInput};
+use crate::tasks::{Policy, PolicyInput};
 
 const OBS_FIELDS: &[&str] = &[
     "tip_x [m]",

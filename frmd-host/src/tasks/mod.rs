@@ -24,18 +24,16 @@
 //!
 //! Seeds: a task's layout is a pure function of the episode seed (see [`rng::TaskRng`]). The
 //! evaluator uses seeds from a disjoint range (see `eval::EVAL_SEED_OFFSET`).
-use crate::eval::policy::Policy;
-
 pub mod avoid;
 pub mod geom;
 pub mod insert;
 pub mod point_mass;
+mod policy;
 pub mod push;
 pub mod reach;
 pub mod rng;
 
-#[cfg(test)]
-mod tests;
+pub use policy::{Policy, PolicyInput};
 
 /// Names accepted by [`make_task`], easiest first.
 pub const TASK_NAMES: &[&str] = &["reach", "avoid", "push", "insert"];
@@ -128,7 +126,7 @@ pub fn make_task(name: &str) -> anyhow::Result<Box<dyn Task>> {
 
 /// The last observation of a policy input, checked against the task's observation size.
 pub(crate) fn last_obs<'a>(
-    input: &'a crate::eval::policy::PolicyInput<'_>,
+    input: &'a PolicyInput<'_>,
     dim: usize,
     task: &str,
 ) -> anyhow::Result<&'a [f32]> {

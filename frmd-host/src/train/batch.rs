@@ -129,7 +129,7 @@ pub fn sample_augmented(windows: &WindowSet, cfg: &ModelConfig, size: usize, aug
 mod tests {
     use super::*;
     use crate::models::{HeadConfig, ProDmpOutput};
-    use crate::train::toy::{bimodal_windows, toy_config};
+    use crate::data::toy::{bimodal_windows, toy_config};
 
     fn rows(t: &Tensor) -> Vec<f32> {
         t.flatten_all().unwrap().to_vec1::<f32>().unwrap()

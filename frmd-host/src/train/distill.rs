@@ -19,7 +19,7 @@ use frmd_core::sigma::SigmaConfig;
 use serde::{Deserialize, Serialize};
 
 /// Distillation settings (paper: K = 2, target EMA 0.95; N = 40 and eval EMA 0.99 measured best,
-/// see `frmd train student --help`).
+/// see docs/experiments.md).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DistillConfig {
     /// Number N of Karras levels of the consistency discretization.

@@ -4,14 +4,12 @@ use super::batch::{check_windows, sample};
 use super::optim::ScheduledAdamW;
 use super::{run_loop, LoopConfig, ProgressFn, TrainReport};
 use crate::data::windows::WindowSet;
-use crate::diffusion::ddpm::{dp_loss, DdpmSchedule, EpsParametrization};
+use crate::diffusion::ddpm::{dp_loss, DdpmSchedule, EpsParametrization, DP_TRAIN_STEPS};
 use crate::models::init::ema_update;
 use crate::models::{HeadConfig, ModelConfig, OwnedNetwork};
 use crate::rng::HostRng;
 use candle_core::Device;
 
-/// Number of DDPM training steps of the baseline.
-pub const DP_TRAIN_STEPS: usize = 100;
 
 /// DP-specific training settings.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -68,7 +66,7 @@ mod tests {
     use crate::diffusion::ddpm::{sample_dp, DpSampler};
     use crate::diffusion::samplers::gaussian;
     use crate::models::Condition;
-    use crate::train::toy::{bimodal_windows, positive_fraction, toy_config, MODE_GOAL};
+    use crate::data::toy::{bimodal_windows, positive_fraction, toy_config, MODE_GOAL};
     use crate::train::Progress;
     use candle_core::Tensor;
 

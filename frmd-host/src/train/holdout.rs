@@ -160,7 +160,7 @@ pub fn generalization(
 mod tests {
     use super::*;
     use crate::models::{HeadConfig, ProDmpOutput, OwnedNetwork};
-    use crate::train::toy::{bimodal_windows, toy_config};
+    use crate::data::toy::{bimodal_windows, toy_config};
 
     fn dataset(offset: f32) -> Dataset {
         // Two episodes of a 2-D action and 3-D observation; `offset` shifts every value.

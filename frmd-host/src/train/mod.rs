@@ -1,17 +1,22 @@
 //! Training: the EDM teacher, consistency distillation of the student (the paper's Algorithm 1)
 //! and the DP baseline, sharing one loop shape (seeded batches, scheduled AdamW, a progress
-//! callback every `log_every` steps).
+//! callback every `log_every` steps); [`recipe`] holds the settings of a run (their `Default` is
+//! the recipe) and [`run`] turns a demonstration file into a checkpoint directory.
 pub mod batch;
 pub mod curve;
 pub mod distill;
 pub mod dp;
 pub mod holdout;
+mod monitor;
 pub mod optim;
 pub mod padding;
+pub mod recipe;
+pub mod run;
 pub mod teacher;
 #[cfg(test)]
+mod dp_checkpoint_tests;
+#[cfg(test)]
 mod tests;
-pub mod toy;
 
 use crate::models::OwnedNetwork;
 use serde::{Deserialize, Serialize};
@@ -31,6 +36,17 @@ impl LoopConfig {
     /// DESIGN.md defaults (batch 128, AdamW 1e-4, wd 1e-6, 500 warm-up, cosine) for `steps`.
     pub fn paper(steps: usize, seed: u64) -> Self {
         LoopConfig { steps, batch_size: 128, seed, optim: optim::OptimConfig::paper(steps), log_every: 100 }
+    }
+
+    /// A short run for toy data (`data::toy`): batch 64, lr 3e-3, 50 warm-up steps, the loss
+    /// reported every 50 steps.
+    pub fn toy(steps: usize, seed: u64) -> Self {
+        let mut cfg = LoopConfig::paper(steps, seed);
+        cfg.batch_size = 64;
+        cfg.optim.lr = 3e-3;
+        cfg.optim.warmup_steps = 50;
+        cfg.log_every = 50;
+        cfg
     }
 }
 

@@ -21,6 +21,14 @@ pub struct TeacherConfig {
     pub ema: f64,
 }
 
+impl Default for TeacherConfig {
+    /// The recipe: uniform loss weight, a fifth of the noise levels drawn log-uniformly, no
+    /// augmentation, the raw weights (docs/experiments.md has the measurements behind each).
+    fn default() -> Self {
+        TeacherConfig::plain(LossWeight::Uniform, SigmaSampling { uniform_fraction: 0.2 })
+    }
+}
+
 impl TeacherConfig {
     /// Loss weight and sigma sampling as given, no augmentation, no EMA.
     pub fn plain(weight: LossWeight, sampling: SigmaSampling) -> Self {

@@ -1,41 +1,27 @@
 //! Training tests on the toy bimodal set (kept to a few seconds each).
 use super::distill::{distill, DistillConfig};
-use super::toy::{bimodal_windows, positive_fraction, toy_config, MODE_GOAL};
+use crate::data::toy::{bimodal_windows, positive_fraction, toy_condition, toy_config, MODE_GOAL};
 use super::{teacher::{train_teacher, TeacherConfig}, LoopConfig, Progress};
 use crate::diffusion::loss::{LossWeight, SigmaSampling};
 const LOGNORMAL: SigmaSampling = SigmaSampling { uniform_fraction: 0.0 };
 use crate::diffusion::precond::consistency;
 use crate::diffusion::samplers::{gaussian, sample_consistency, sample_teacher, Solver};
-use crate::models::{Condition, HeadConfig, ProDmpOutput, OwnedNetwork};
+use crate::models::{HeadConfig, ProDmpOutput, OwnedNetwork};
 use crate::rng::HostRng;
 use candle_core::{Device, Tensor};
 use frmd_core::sigma::SigmaConfig;
-
-fn quick_loop(steps: usize, seed: u64) -> LoopConfig {
-    let mut cfg = LoopConfig::paper(steps, seed);
-    cfg.batch_size = 64;
-    cfg.optim.lr = 3e-3;
-    cfg.optim.warmup_steps = 50;
-    cfg.log_every = 50;
-    cfg
-}
-
-fn toy_condition(batch: usize) -> Condition {
-    let zeros = Tensor::zeros((batch, 1), candle_core::DType::F32, &Device::Cpu).unwrap();
-    Condition::new(&zeros, zeros.clone(), zeros.clone(), 0.1).unwrap()
-}
 
 #[test]
 fn teacher_loss_decreases_on_fixed_seed() {
     let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
     let windows = bimodal_windows(&cfg, 256, 1).unwrap();
     let sig = SigmaConfig::default();
-    let (_, report) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &quick_loop(300, 3), &mut |_: &Progress| Ok(())).unwrap();
+    let (_, report) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &LoopConfig::toy(300, 3), &mut |_: &Progress| Ok(())).unwrap();
     let first = report.loss_curve.first().unwrap().1;
     let last = report.final_loss().unwrap();
     assert!(last < 0.5 * first, "loss {first} -> {last}");
     // Same seed, same curve.
-    let (_, again) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &quick_loop(300, 3), &mut |_: &Progress| Ok(())).unwrap();
+    let (_, again) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &LoopConfig::toy(300, 3), &mut |_: &Progress| Ok(())).unwrap();
     assert_eq!(report.loss_curve, again.loss_curve);
 }
 
@@ -46,10 +32,10 @@ fn consistency_boundary_is_identity() {
     let sig = SigmaConfig::default();
     let mut rng = HostRng::new(9);
     let x = gaussian(&mut rng, 8, cfg.traj_dim(), &Device::Cpu).unwrap();
-    let out = consistency(&net.net, &sig, &x, &toy_condition(8), &[sig.sigma_min; 8]).unwrap();
+    let out = consistency(&net.net, &sig, &x, &toy_condition(8).unwrap(), &[sig.sigma_min; 8]).unwrap();
     assert_eq!(out.to_vec2::<f32>().unwrap(), x.to_vec2::<f32>().unwrap());
     // Away from sigma_min the network does contribute.
-    let out = consistency(&net.net, &sig, &x, &toy_condition(8), &[1.0; 8]).unwrap();
+    let out = consistency(&net.net, &sig, &x, &toy_condition(8).unwrap(), &[1.0; 8]).unwrap();
     assert_ne!(out.to_vec2::<f32>().unwrap(), x.to_vec2::<f32>().unwrap());
 }
 
@@ -60,16 +46,16 @@ fn one_step_student_matches_teacher_on_bimodal_toy() {
     let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
     let sig = SigmaConfig::default();
-    let (teacher, _) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &quick_loop(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
+    let (teacher, _) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &LoopConfig::toy(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
     let batch = 400;
-    let cond = toy_condition(batch);
+    let cond = toy_condition(batch).unwrap();
     let mut rng = HostRng::new(11);
     let z = gaussian(&mut rng, batch, cfg.traj_dim(), &Device::Cpu).unwrap();
     let teacher_samples = sample_teacher(&teacher.net, &sig, &cond, (&z * sig.sigma_max).unwrap(), 10, Solver::Heun).unwrap();
     let teacher_flat = teacher_samples.flatten_all().unwrap().to_vec1::<f32>().unwrap();
     let teacher_fraction = positive_fraction(&teacher_flat, cfg.horizon);
 
-    let mut dcfg = quick_loop(2000, 6);
+    let mut dcfg = LoopConfig::toy(2000, 6);
     dcfg.optim.lr = 1e-3;
     let distilled = distill(&teacher, &windows, &sig, &DistillConfig { levels: 10, eval_ema: 0.99, ..DistillConfig::default() }, &dcfg, &mut |_: &Progress| Ok(())).unwrap();
     let student_samples = sample_consistency(&distilled.eval_student.net, &sig, &cond, &z, 1, &mut rng).unwrap();
@@ -113,61 +99,6 @@ fn every_parameter_gets_a_gradient() {
     }
 }
 
-#[test]
-#[ignore]
-fn experiment_teacher_weights() {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
-    let windows = bimodal_windows(&cfg, 512, 2).unwrap();
-    let sig = SigmaConfig::default();
-    let goal_end = windows.actions[cfg.horizon - 1].abs() as f64;
-    for weight in [LossWeight::Edm, LossWeight::Uniform, LossWeight::InvSigmaSquared] {
-        for (steps, lr) in [(1500, 3e-3), (1500, 1e-3), (4000, 3e-3)] {
-            let mut lc = quick_loop(steps, 4);
-            lc.optim.lr = lr;
-            let (teacher, rep) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(weight, LOGNORMAL), &lc, &mut |_: &Progress| Ok(())).unwrap();
-            let batch = 400;
-            let cond = toy_condition(batch);
-            let mut rng = HostRng::new(11);
-            let z = gaussian(&mut rng, batch, cfg.traj_dim(), &Device::Cpu).unwrap();
-            for (solver, n) in [(Solver::Heun, 10), (Solver::Euler, 10), (Solver::DpmPp2m, 10), (Solver::Heun, 40)] {
-                let s = sample_teacher(&teacher.net, &sig, &cond, (&z * sig.sigma_max).unwrap(), n, solver).unwrap();
-                let flat = s.flatten_all().unwrap().to_vec1::<f32>().unwrap();
-                let err = flat.chunks_exact(cfg.horizon).map(|r| ((*r.last().unwrap() as f64).abs() - goal_end).abs()).sum::<f64>() / batch as f64;
-                eprintln!("{weight:?} steps {steps} lr {lr}: loss {:.4} {solver:?}x{n}: +frac {:.3} err {err:.4}", rep.final_loss().unwrap(), positive_fraction(&flat, cfg.horizon));
-            }
-        }
-    }
-}
-
-#[test]
-#[ignore]
-fn experiment_distill() {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
-    let windows = bimodal_windows(&cfg, 512, 2).unwrap();
-    let sig = SigmaConfig::default();
-    let goal_end = windows.actions[cfg.horizon - 1].abs() as f64;
-    let (teacher, _) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &quick_loop(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
-    let batch = 400;
-    let cond = toy_condition(batch);
-    for (levels, lr, steps, solver) in [(18, 1e-3, 2000, Solver::Heun), (18, 3e-4, 2000, Solver::Heun), (18, 1e-3, 5000, Solver::Heun), (40, 1e-3, 5000, Solver::Heun), (10, 1e-3, 2000, Solver::Heun), (18, 1e-3, 2000, Solver::Euler)] {
-        let mut dcfg = quick_loop(steps, 6);
-        dcfg.optim.lr = lr;
-        let t0 = std::time::Instant::now();
-        let d = distill(&teacher, &windows, &sig, &DistillConfig { levels, solver, eval_ema: 0.99, ..DistillConfig::default() }, &dcfg, &mut |_: &Progress| Ok(())).unwrap();
-        let secs = t0.elapsed().as_secs_f64();
-        for (name, net) in [("ema", &d.eval_student), ("raw", &d.student)] {
-            for n in 1..=3 {
-                let mut rng = HostRng::new(11);
-                let z = gaussian(&mut rng, batch, cfg.traj_dim(), &Device::Cpu).unwrap();
-                let s = sample_consistency(&net.net, &sig, &cond, &z, n, &mut rng).unwrap();
-                let flat = s.flatten_all().unwrap().to_vec1::<f32>().unwrap();
-                let err = flat.chunks_exact(cfg.horizon).map(|r| ((*r.last().unwrap() as f64).abs() - goal_end).abs()).sum::<f64>() / batch as f64;
-                eprintln!("N {levels} lr {lr} steps {steps} {solver:?} ({secs:.1}s) loss {:.5} {name} x{n}: +frac {:.3} err {err:.4}", d.report.final_loss().unwrap(), positive_fraction(&flat, cfg.horizon));
-            }
-        }
-    }
-}
-
 /// The DP baseline learns the toy bimodal set: DDPM (100 steps) and DDIM (10 steps) both produce
 /// both modes with roughly equal weight.
 #[test]
@@ -175,14 +106,14 @@ fn dp_baseline_learns_bimodal_toy() {
     use crate::diffusion::ddpm::{sample_dp, DdpmSchedule, DpSampler};
     let cfg = toy_config(HeadConfig::Raw);
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
-    let (net, report) = super::dp::train_dp(&windows, &cfg, &quick_loop(2000, 4), &super::dp::DpConfig { eval_ema: 0.0, parametrization: crate::diffusion::ddpm::EpsParametrization::Direct }, &mut |_: &Progress| Ok(())).unwrap();
+    let (net, report) = super::dp::train_dp(&windows, &cfg, &LoopConfig::toy(2000, 4), &super::dp::DpConfig { eval_ema: 0.0, parametrization: crate::diffusion::ddpm::EpsParametrization::Direct }, &mut |_: &Progress| Ok(())).unwrap();
     assert!(report.final_loss().unwrap() < 0.5 * report.loss_curve[0].1, "{:?}", report.loss_curve);
-    let sched = DdpmSchedule::cosine(super::dp::DP_TRAIN_STEPS);
+    let sched = DdpmSchedule::cosine(crate::diffusion::ddpm::DP_TRAIN_STEPS);
     let batch = 300;
     for (sampler, steps) in [(DpSampler::Ddpm, 100), (DpSampler::Ddim, 10)] {
         let mut rng = HostRng::new(5);
         let z = gaussian(&mut rng, batch, cfg.traj_dim(), &Device::Cpu).unwrap();
-        let out = sample_dp(&net.net, &sched, &toy_condition(batch), z, sampler, steps, &mut rng).unwrap();
+        let out = sample_dp(&net.net, &sched, &toy_condition(batch).unwrap(), z, sampler, steps, &mut rng).unwrap();
         let flat = out.flatten_all().unwrap().to_vec1::<f32>().unwrap();
         let fraction = positive_fraction(&flat, cfg.horizon);
         eprintln!("DP {sampler:?} x{steps}: +fraction {fraction:.3}");
@@ -203,6 +134,6 @@ fn transformer_backbones_have_the_documented_sizes() {
     assert!(names.contains(&"transformer.blocks.2.qkv.weight".to_string()) && !names.iter().any(|n| n.contains("blocks.3")));
     let x = Tensor::zeros((3, cfg.traj_dim()), candle_core::DType::F32, &Device::Cpu).unwrap();
     let emb = Tensor::zeros((3, cfg.embed_dim), candle_core::DType::F32, &Device::Cpu).unwrap();
-    assert_eq!(net.net.predict(&x, &toy_condition(3), &emb).unwrap().dims(), &[3, cfg.traj_dim()]);
+    assert_eq!(net.net.predict(&x, &toy_condition(3).unwrap(), &emb).unwrap().dims(), &[3, cfg.traj_dim()]);
     assert!(BackboneConfig::parse("mlp:0,3").is_err() && BackboneConfig::parse("cnn").is_err());
 }

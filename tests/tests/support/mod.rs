@@ -1,9 +1,15 @@
 //! Shared setup of the end-to-end tests: a small `reach` dataset and a briefly trained teacher and
-//! student, both through the `frmd train` code paths (which also write calibration.safetensors).
-use frmd_host::cli::export::ExportArgs;
-use frmd_host::cli::train::{run as train, CommonArgs, StudentArgs, TeacherArgs, TrainCommand};
+//! student, both through the library behind `frmd train` (which also writes
+//! calibration.safetensors), and the export `frmd export` does.
 use frmd_host::data::collect::collect_demos;
+use frmd_host::diffusion::samplers::Solver;
 use frmd_host::equiv::{run as equiv, EquivConfig, EquivReport};
+use frmd_host::export::{export_student, write_export, ExportConfig};
+use frmd_host::models::ProDmpOutput;
+use frmd_host::train::distill::DistillConfig;
+use frmd_host::train::recipe::{StudentRun, TeacherRun, TrainConfig};
+use frmd_host::train::run::{run_student, run_teacher};
+use frmd_host::train::teacher::TeacherConfig;
 use std::path::{Path, PathBuf};
 
 /// What differs between the tiny training runs of the tests.
@@ -28,11 +34,11 @@ pub struct TinyRun {
     pub baked: PathBuf,
 }
 
-fn common(tiny: &Tiny, data: &Path, out: PathBuf, steps: usize) -> CommonArgs {
-    CommonArgs {
+fn common(tiny: &Tiny, data: &Path, out: PathBuf, steps: usize) -> TrainConfig {
+    TrainConfig {
         data: data.to_path_buf(),
         out,
-        backbone: tiny.backbone.into(),
+        backbone: tiny.backbone.parse().unwrap(),
         steps,
         seed: tiny.seed,
         batch: tiny.batch,
@@ -54,27 +60,20 @@ fn common(tiny: &Tiny, data: &Path, out: PathBuf, steps: usize) -> CommonArgs {
     }
 }
 
-/// Collects 12 `reach` demonstrations and trains the teacher and the student of `tiny` in
-/// `<temp>/<name>-<pid>`.
 impl TinyRun {
-    /// `frmd export` arguments writing `ckpt` to `baked` and to `dir/student.blob` (one step,
-    /// min-max calibration, the default 16-bit input).
-    pub fn export_args(&self, ckpt: &Path) -> ExportArgs {
-        ExportArgs {
-            ckpt: ckpt.to_path_buf(),
-            out: Some(self.baked.clone()),
-            blob: Some(self.dir.join("student.blob")),
-            steps: 1,
-            calibration: "minmax".into(),
-            data: None,
-            no_balance_inputs: false,
-            int8_input: false,
-            input_headroom: frmd_export::export::DEFAULT_INPUT_HEADROOM,
-            save_calibration: false,
-        }
+    /// What `frmd export --ckpt CKPT --out BAKED --blob DIR/student.blob` does (one step,
+    /// min-max calibration, the default 16-bit input): exports `ckpt` into `baked` and
+    /// `dir/student.blob`.
+    pub fn export(&self, ckpt: &Path) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        let cfg = ExportConfig::for_checkpoint(ckpt);
+        let student = export_student(&cfg)?;
+        write_export(&cfg, &student, Some(&self.baked), Some(&self.dir.join("student.blob")))?;
+        Ok(())
     }
 }
 
+/// Collects 12 `reach` demonstrations and trains the teacher and the student of `tiny` in
+/// `<temp>/<name>-<pid>`.
 pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
     std::env::set_var("RAYON_NUM_THREADS", "1");
     let dir = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
@@ -85,28 +84,19 @@ pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
     dataset.save(&data).unwrap();
 
     let (teacher, student, baked) = (dir.join("teacher"), dir.join("student"), dir.join("baked"));
-    train(TrainCommand::Teacher(TeacherArgs {
-        common: common(tiny, &data, teacher.clone(), tiny.teacher_steps),
-        loss_weight: tiny.loss_weight.into(),
-        eval_solver: "heun".into(),
-        parametrization: "boundary-skip".into(),
+    run_teacher(&TeacherRun {
+        train: common(tiny, &data, teacher.clone(), tiny.teacher_steps),
+        teacher: TeacherConfig { weight: tiny.loss_weight.parse().unwrap(), ..TeacherConfig::default() },
+        output: ProDmpOutput::BoundarySkip,
         auto_scale_basis: false,
-        sigma_uniform_fraction: 0.2,
-        ema: 0.0,
-        augment: Default::default(),
-    }))
+        eval_solver: Some(Solver::Heun),
+    })
     .unwrap();
-    train(TrainCommand::Student(StudentArgs {
-        common: common(tiny, &data, student.clone(), tiny.student_steps),
+    run_student(&StudentRun {
+        train: common(tiny, &data, student.clone(), tiny.student_steps),
         teacher: teacher.clone(),
-        levels: 18,
-        k: 2,
-        solver: "heun".into(),
-        target_ema: 0.95,
-        eval_ema: 0.9,
-        parametrization: None,
-        augment: Default::default(),
-    }))
+        distill: DistillConfig { levels: 18, teacher_steps: 2, solver: Solver::Heun, target_ema: 0.95, eval_ema: 0.9, ..DistillConfig::default() },
+    })
     .unwrap();
     assert!(student.join("calibration.safetensors").exists());
     TinyRun {

@@ -11,20 +11,12 @@
 use cortex_m_rt::entry;
 use frmd_core::model::mlp::InputPrecision;
 use frmd_core::policy::{Policy, PolicyError};
-use frmd_firmware_support::policy_workload::{policy_act_macs, PolicyWorkload, CASES, STUDENT_NAME};
+use frmd_cortex_m::baked_student as baked;
 use frmd_cortex_m::report::exit_failure;
-use frmd_firmware_support::stages::{mlp_marks, StagedMlpNetwork};
 use frmd_cortex_m::timer::Calibration;
-use frmd_cortex_m::{bench, stage_report};
-
-/// The module frmd-export generated from the student (policy.rs + weights.bin in
-/// OUT_DIR/student), plus build.rs's `mlp_parts()` over the same statics.
-#[allow(dead_code)]
-mod baked {
-    include!(concat!(env!("OUT_DIR"), "/student/policy.rs"));
-    include!(concat!(env!("OUT_DIR"), "/student/network_macs.rs"));
-    include!(concat!(env!("OUT_DIR"), "/student/policy_parts.rs"));
-}
+use frmd_cortex_m::{bench, images, stage_report};
+use frmd_firmware_support::policy_workload::{PolicyWorkload, CASES, STUDENT_NAME};
+use frmd_firmware_support::stages::{mlp_marks, StagedMlpNetwork};
 
 /// Hidden layers of the student's MLP.
 const LAYERS: usize = frmd_firmware_support::shape::MLP_HIDDEN.len();
@@ -32,12 +24,7 @@ const LAYERS: usize = frmd_firmware_support::shape::MLP_HIDDEN.len();
 #[entry]
 fn main() -> ! {
     let stack = bench::start();
-    let policy = match baked::policy() {
-        Ok(policy) => policy,
-        Err(error) => exit_failure(&error),
-    };
-    let macs = policy_act_macs(baked::NETWORK_MACS, baked::HORIZON, baked::ACTION_DIM, baked::PARAMS_PER_DOF);
-    let mut workload = PolicyWorkload::with_name(policy, STUDENT_NAME).with_macs(macs);
+    let mut workload = images::student_workload();
     bench::run_then::<_, { CASES * 5 }>(&mut workload, stack, |_, calibration, digest| {
         if let Err(error) = breakdown(calibration, digest) {
             exit_failure(&error);
@@ -55,12 +42,11 @@ fn breakdown(calibration: &Calibration, digest: u64) -> Result<(), PolicyError> 
         // The first layer's kernel runs on both input planes.
         layer_macs[0] *= 2;
     }
-    let output_macs = (output.in_features * output.out_features) as u64;
+    let output_macs = (output.fc.in_features * output.fc.out_features) as u64;
     let network = StagedMlpNetwork::<LAYERS, { mlp_marks(LAYERS) }, { baked::SCRATCH_WIDTH }>::new(
         baked::INPUT,
         hidden,
         output,
-        &baked::OUTPUT_SCALES,
         variants,
         stage_report::systick,
     )?

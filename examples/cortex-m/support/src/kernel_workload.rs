@@ -155,7 +155,7 @@ impl Workload for KernelWorkload {
             activation_min: self.clamp.0,
             activation_max: self.clamp.1,
         };
-        let table = if self.with_table { Some(&self.table) } else { None };
+        let table = if self.with_table { Some(&self.table.table) } else { None };
         let layer = self.layer();
         let input = if self.wide {
             LayerInput::Int16(&self.input_wide[..self.width])

@@ -5,8 +5,8 @@
 //!   [`workload`] (the [`workload::Workload`] trait and the digest over a workload's cases),
 //!   the workloads [`prodmp_workload`], [`mlp_workload`], [`policy_workload`] and
 //!   [`kernel_workload`] (the fully connected kernels on random shapes),
-//!   [`stages`] (the layer-marking MLP network of the per-stage breakdown) and
-//!   [`transformer_network`] (transformer-lite behind the policy's `Network` trait);
+//!   and [`stages`] (the layer-marking MLP network and the entry/exit-marking wrapper of the
+//!   per-stage breakdown);
 //! - `std` feature (host only): [`synthetic`] (the deterministic synthetic MLP and
 //!   transformer-lite, which build.rs bakes and the tests rebuild in memory) and [`host`] (running
 //!   the images under QEMU from a test);
@@ -24,7 +24,6 @@ pub mod policy_workload;
 pub mod prodmp_workload;
 pub mod shape;
 pub mod stages;
-pub mod transformer_network;
 pub mod workload;
 
 #[cfg(feature = "std")]

@@ -111,7 +111,7 @@ impl Workload for MlpWorkload<'_> {
 
     /// The network's layers (`in_features * out_features` each), then the decode.
     fn macs(&self) -> u64 {
-        let layers = self.mlp.hidden.iter().map(|layer| &layer.fc).chain([&self.mlp.output]);
+        let layers = self.mlp.hidden.iter().map(|layer| &layer.fc).chain([&self.mlp.output.fc]);
         let network: usize = layers.map(|fc| fc.in_features * fc.out_features).sum();
         network as u64 + crate::workload::prodmp_decode_macs(HORIZON, DOF, PARAMS)
     }

@@ -4,7 +4,7 @@
 //! denormalization.
 //!
 //! `core` + frmd-core only and generic over the network, so the host test runs the same code on
-//! the blob form of the same policy (`frmd_core::blob::LoadedPolicy`) and must reproduce the
+//! the blob form of the same policy (`frmd_core::blob::LoadedMlp`) and must reproduce the
 //! firmware's digest.
 //!
 //! Case `c`: `Rng::new(OBS_SEED + c)` draws the initial action (`0.6 u - 0.3` per DoF, passed to

@@ -1,12 +1,12 @@
-//! Per-stage instruction counts: timestamps taken inside a forward pass ([`Marks`]) and an int8
-//! MLP network that marks the boundary of every layer ([`StagedMlpNetwork`]). `core` + frmd-core
-//! only: the host test runs the same code with a clock that always reads 0 and checks that the
-//! staged network computes exactly what frmd-core's `Int8Network` computes.
+//! Per-stage instruction counts: timestamps taken inside a forward pass ([`Marks`]), a wrapper
+//! that marks the entry and exit of any policy network ([`MarkedNetwork`]) and an int8 MLP network
+//! that marks the boundary of every layer ([`StagedMlpNetwork`]). `core` + frmd-core only: the host
+//! test runs the same code with a clock that always reads 0 and checks that the staged network
+//! computes exactly what frmd-core's `Int8MlpNetwork` computes.
 
-use frmd_core::kernels::{dequantize_accumulators, FullyConnected, LayerInput};
-use frmd_core::model::mlp::{
-    quantize_input_i16, quantize_input_two_plane, InputPrecision, Int8Layer, ModelError,
-};
+use frmd_core::kernels::{dequantize_accumulators, LayerInput};
+use frmd_core::model::linear::{Int8Linear, RequantizedLinear};
+use frmd_core::model::mlp::{quantize_input_i16, quantize_input_two_plane, InputPrecision, ModelError};
 use frmd_core::policy::{Network, PolicyError};
 use frmd_core::quant::QuantParams;
 
@@ -47,6 +47,51 @@ impl<const S: usize> Marks<S> {
     }
 }
 
+/// Any policy network with its entry and exit marked (the transformer breakdown).
+pub struct MarkedNetwork<Net> {
+    inner: Net,
+    marks: Marks<2>,
+}
+
+impl<Net: Network> MarkedNetwork<Net> {
+    /// `inner`, reading `clock` at the entry and the exit of every forward pass.
+    pub fn new(inner: Net, clock: Clock) -> Self {
+        Self { inner, marks: Marks::new(clock) }
+    }
+
+    /// The wrapped network.
+    pub fn inner(&self) -> &Net {
+        &self.inner
+    }
+
+    /// Clock readings at the entry and the exit of the last forward pass.
+    pub fn marks(&self) -> &Marks<2> {
+        &self.marks
+    }
+}
+
+impl<Net: Network> Network for MarkedNetwork<Net> {
+    fn input_width(&self) -> usize {
+        self.inner.input_width()
+    }
+
+    fn output_width(&self) -> usize {
+        self.inner.output_width()
+    }
+
+    fn num_noise_variants(&self) -> usize {
+        self.inner.num_noise_variants()
+    }
+
+    fn forward(&mut self, variant: usize, input: &[f32], output: &mut [f32]) -> Result<(), PolicyError> {
+        self.marks.clear();
+        self.marks.mark();
+        let result = self.inner.forward(variant, input, output);
+        self.marks.mark();
+        result
+    }
+}
+
 /// Readings of [`StagedMlpNetwork`]: entry, after input quantization, after each of `L` hidden
 /// layers, after the output layer's accumulators, after dequantization.
 pub const fn mlp_marks(hidden_layers: usize) -> usize {
@@ -54,15 +99,14 @@ pub const fn mlp_marks(hidden_layers: usize) -> usize {
 }
 
 /// An int8 MLP as a policy [`Network`] that marks every stage boundary. It runs the same frmd-core
-/// kernels in the same order as `Int8Network` (input quantization, per hidden layer
-/// `Int8Layer::forward_prevalidated`, output `forward_accumulators` + `dequantize_accumulators`),
-/// with the first-layer bias variant selected as `Int8Network` does; `L` hidden layers, `S`
-/// readings (`mlp_marks(L)`), activations up to `WIDTH` wide.
+/// kernels in the same order as `Int8MlpNetwork` (input quantization, per hidden layer
+/// `RequantizedLinear::forward_prevalidated`, output `forward_accumulators` +
+/// `dequantize_accumulators`), with the first-layer bias variant selected as `Int8MlpNetwork`
+/// does; `L` hidden layers, `S` readings (`mlp_marks(L)`), activations up to `WIDTH` wide.
 pub struct StagedMlpNetwork<'a, const L: usize, const S: usize, const WIDTH: usize> {
     input: QuantParams,
-    hidden: [Int8Layer<'a>; L],
-    output: FullyConnected<'a>,
-    output_scales: &'a [f32],
+    hidden: [RequantizedLinear<'a>; L],
+    output: Int8Linear<'a>,
     first_layer_biases: &'a [i32],
     input_precision: InputPrecision,
     ping: [i8; WIDTH],
@@ -72,25 +116,24 @@ pub struct StagedMlpNetwork<'a, const L: usize, const S: usize, const WIDTH: usi
 }
 
 impl<'a, const L: usize, const S: usize, const WIDTH: usize> StagedMlpNetwork<'a, L, S, WIDTH> {
-    /// The network; `first_layer_biases` as for `Int8Network::new` (back-to-back variants of the
-    /// first hidden layer's bias, or empty). Needs `L >= 1` and every width `<= WIDTH`.
+    /// The network; `first_layer_biases` as for `Int8MlpNetwork::new` (back-to-back variants of
+    /// the first hidden layer's bias, or empty). Needs `L >= 1` and every width `<= WIDTH`.
     pub fn new(
         input: QuantParams,
-        hidden: [Int8Layer<'a>; L],
-        output: FullyConnected<'a>,
-        output_scales: &'a [f32],
+        hidden: [RequantizedLinear<'a>; L],
+        output: Int8Linear<'a>,
         first_layer_biases: &'a [i32],
         clock: Clock,
     ) -> Result<Self, PolicyError> {
         let widths_fit = hidden
             .iter()
             .map(|layer| &layer.fc)
-            .chain([&output])
+            .chain([&output.fc])
             .all(|fc| fc.in_features <= WIDTH && fc.out_features <= WIDTH);
         if L == 0 || S < mlp_marks(L) || !widths_fit {
             return Err(PolicyError::Model(ModelError::ScratchTooSmall));
         }
-        // Once here, as `Int8Network` does, so that `forward` need not repeat it.
+        // Once here, as `Int8MlpNetwork` does, so that `forward` need not repeat it.
         for layer in &hidden {
             layer.requant.validate(layer.fc.out_features).map_err(|e| PolicyError::Model(ModelError::Kernel(e)))?;
         }
@@ -98,7 +141,6 @@ impl<'a, const L: usize, const S: usize, const WIDTH: usize> StagedMlpNetwork<'a
             input,
             hidden,
             output,
-            output_scales,
             first_layer_biases,
             input_precision: InputPrecision::Int8,
             ping: [0; WIDTH],
@@ -108,7 +150,7 @@ impl<'a, const L: usize, const S: usize, const WIDTH: usize> StagedMlpNetwork<'a
         })
     }
 
-    /// The same network quantizing its input as `precision` says (as `Int8Network`'s
+    /// The same network quantizing its input as `precision` says (as `Int8MlpNetwork`'s
     /// `with_input_precision`; the first layer is one stage whatever its input, whose codes are
     /// made in the `quantize` stage).
     pub fn with_input_precision(mut self, precision: InputPrecision) -> Self {
@@ -128,33 +170,28 @@ impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNe
     }
 
     fn output_width(&self) -> usize {
-        self.output.out_features
+        self.output.fc.out_features
     }
 
-    fn num_first_layer_biases(&self) -> usize {
+    fn num_noise_variants(&self) -> usize {
         let width = self.hidden.first().map_or(0, |layer| layer.fc.out_features);
         self.first_layer_biases.len().checked_div(width).unwrap_or(0)
     }
 
-    fn forward(
-        &mut self,
-        first_layer_bias: usize,
-        input: &[f32],
-        output: &mut [f32],
-    ) -> Result<(), PolicyError> {
+    fn forward(&mut self, variant: usize, input: &[f32], output: &mut [f32]) -> Result<(), PolicyError> {
         self.marks.clear();
         self.marks.mark();
         let mut hidden = self.hidden;
         if let Some(first) = hidden.first_mut() {
             if !self.first_layer_biases.is_empty() {
                 let width = first.fc.out_features;
-                let start = first_layer_bias.checked_mul(width).ok_or(PolicyError::FirstLayerBiasIndex)?;
+                let start = variant.checked_mul(width).ok_or(PolicyError::NoiseVariantIndex)?;
                 first.fc.bias = start
                     .checked_add(width)
                     .and_then(|end| self.first_layer_biases.get(start..end))
-                    .ok_or(PolicyError::FirstLayerBiasIndex)?;
-            } else if first_layer_bias != 0 {
-                return Err(PolicyError::FirstLayerBiasIndex);
+                    .ok_or(PolicyError::NoiseVariantIndex)?;
+            } else if variant != 0 {
+                return Err(PolicyError::NoiseVariantIndex);
             }
         }
         let model = |error| PolicyError::Model(ModelError::Kernel(error));
@@ -212,11 +249,11 @@ impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNe
         let last_input = current.get(..width).ok_or(PolicyError::InputWidth)?;
         let accumulators = self
             .accumulators
-            .get_mut(..self.output.out_features)
+            .get_mut(..self.output.fc.out_features)
             .ok_or(PolicyError::OutputWidth)?;
-        self.output.forward_accumulators(last_input, accumulators).map_err(model)?;
+        self.output.fc.forward_accumulators(last_input, accumulators).map_err(model)?;
         self.marks.mark();
-        dequantize_accumulators(accumulators, self.output_scales, output).map_err(model)?;
+        dequantize_accumulators(accumulators, self.output.output_scales, output).map_err(model)?;
         self.marks.mark();
         Ok(())
     }

@@ -1,97 +1,32 @@
-//! The f32 MLP: the same structure as [`super::Int8Mlp`] in f32 (the reference the exporter
-//! calibrates on and the policy's f32 network), with a probe for every intermediate tensor.
+//! The f32 reference MLP: [`F32Linear`] layers, with calibration probes.
 
-use super::ModelError;
-use crate::kernels::{Activation, KernelError};
-
-/// One f32 layer: `y = activation(W x + b)`, weights `[out_features, in_features]` row-major.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct F32Layer<'a> {
-    /// Input width.
-    pub in_features: usize,
-    /// Output width.
-    pub out_features: usize,
-    /// `[out_features, in_features]` row-major weights.
-    pub weights: &'a [f32],
-    /// `[out_features]` bias.
-    pub bias: &'a [f32],
-    /// Pointwise activation applied after the affine map.
-    pub activation: Activation,
-}
-
-impl F32Layer<'_> {
-    /// Checks the weight and bias lengths against the shape.
-    pub fn validate(&self) -> Result<(), KernelError> {
-        let expected = self.out_features.checked_mul(self.in_features);
-        if self.in_features == 0 || self.out_features == 0 || expected != Some(self.weights.len()) {
-            return Err(KernelError::WeightsLength);
-        }
-        if self.bias.len() != self.out_features {
-            return Err(KernelError::BiasLength);
-        }
-        Ok(())
-    }
-
-    /// `output = activation(W input + b)`; `pre_activation` (same length as `output`) receives
-    /// `W input + b` if given.
-    /// Dot products are summed sequentially in f32.
-    pub fn forward(
-        &self,
-        input: &[f32],
-        output: &mut [f32],
-        mut pre_activation: Option<&mut [f32]>,
-    ) -> Result<(), KernelError> {
-        self.validate()?;
-        if input.len() != self.in_features {
-            return Err(KernelError::InputLength);
-        }
-        if output.len() != self.out_features
-            || pre_activation
-                .as_deref()
-                .is_some_and(|p| p.len() != self.out_features)
-        {
-            return Err(KernelError::OutputLength);
-        }
-        let rows = self.weights.chunks_exact(self.in_features).zip(self.bias);
-        for (o, ((row, bias), out)) in rows.zip(output.iter_mut()).enumerate() {
-            let affine = row.iter().zip(input).fold(*bias, |acc, (w, x)| acc + w * x);
-            if let Some(slot) = pre_activation.as_deref_mut().and_then(|p| p.get_mut(o)) {
-                *slot = affine;
-            }
-            *out = self.activation.apply(affine);
-        }
-        Ok(())
-    }
-}
-
-/// Which tensor an [`F32Mlp::forward_observed`] callback sees (for calibration).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Probe {
-    /// The network input.
-    Input,
-    /// Hidden layer `l`'s affine output before its activation.
-    PreActivation(usize),
-    /// Hidden layer `l`'s output after its activation (the next layer's input).
-    Output(usize),
-    /// The output layer's values (before any activation it has).
-    Final,
-}
+use super::{check_widths, ModelError, Probe};
+use crate::model::linear::F32Linear;
 
 /// f32 reference MLP with the same structure as [`super::Int8Mlp`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct F32Mlp<'a> {
     /// Hidden layers in order (may be empty).
-    pub hidden: &'a [F32Layer<'a>],
+    pub hidden: &'a [F32Linear<'a>],
     /// Output layer (normally `Activation::Identity`).
-    pub output: F32Layer<'a>,
+    pub output: F32Linear<'a>,
 }
 
-/// Scratch buffers for [`F32Mlp::forward`], each `WIDTH` long.
+/// Working memory of [`F32Mlp`], borrowed: two activation buffers (ping-pong), each holding the
+/// widest layer it receives.
+#[derive(Debug)]
+pub struct F32Buffers<'s> {
+    /// The input copy, then every other layer's output.
+    pub ping: &'s mut [f32],
+    /// The other layers' outputs.
+    pub pong: &'s mut [f32],
+}
+
+/// [`F32Buffers`] as fixed arrays of `WIDTH` (at least the widest layer).
 #[derive(Clone, Debug, PartialEq)]
 pub struct F32Scratch<const WIDTH: usize> {
     ping: [f32; WIDTH],
     pong: [f32; WIDTH],
-    pre_activation: [f32; WIDTH],
 }
 
 impl<const WIDTH: usize> F32Scratch<WIDTH> {
@@ -100,7 +35,14 @@ impl<const WIDTH: usize> F32Scratch<WIDTH> {
         Self {
             ping: [0.0; WIDTH],
             pong: [0.0; WIDTH],
-            pre_activation: [0.0; WIDTH],
+        }
+    }
+
+    /// The arrays as [`F32Buffers`].
+    pub fn buffers(&mut self) -> F32Buffers<'_> {
+        F32Buffers {
+            ping: &mut self.ping,
+            pong: &mut self.pong,
         }
     }
 }
@@ -124,20 +66,18 @@ impl F32Mlp<'_> {
         self.output.out_features
     }
 
-    /// Checks consecutive widths and that every width fits in `WIDTH`.
-    pub fn validate<const WIDTH: usize>(&self) -> Result<(), ModelError> {
-        let mut width = self.input_width();
-        for (index, layer) in self.hidden.iter().chain([&self.output]).enumerate() {
+    /// Checks every layer's slices, consecutive widths and that every width is at most
+    /// `max_width` (the scratch width).
+    pub fn validate(&self, max_width: usize) -> Result<(), ModelError> {
+        for layer in self.hidden.iter().chain([&self.output]) {
             layer.validate()?;
-            if layer.in_features != width {
-                return Err(ModelError::LayerWidth { index });
-            }
-            if layer.in_features > WIDTH || layer.out_features > WIDTH {
-                return Err(ModelError::ScratchTooSmall);
-            }
-            width = layer.out_features;
         }
-        Ok(())
+        let widths = self
+            .hidden
+            .iter()
+            .chain([&self.output])
+            .map(|layer| (layer.in_features, layer.out_features));
+        check_widths(self.input_width(), widths, max_width)
     }
 
     /// Runs the network.
@@ -157,49 +97,85 @@ impl F32Mlp<'_> {
         input: &[f32],
         output: &mut [f32],
         scratch: &mut F32Scratch<WIDTH>,
+        observe: F,
+    ) -> Result<(), ModelError> {
+        self.forward_in(input, output, scratch.buffers(), observe)
+    }
+
+    /// [`Self::forward_observed`] on borrowed buffers (each checked as it is used).
+    pub fn forward_in<F: FnMut(Probe, &[f32])>(
+        &self,
+        input: &[f32],
+        output: &mut [f32],
+        buffers: F32Buffers<'_>,
         mut observe: F,
     ) -> Result<(), ModelError> {
-        self.validate::<WIDTH>()?;
-        let in_width = self.input_width();
-        if input.len() != in_width {
+        self.check_io(input.len(), output.len())?;
+        observe(Probe::Input, input);
+        let ping = buffers
+            .ping
+            .get_mut(..input.len())
+            .ok_or(ModelError::ScratchTooSmall)?;
+        ping.copy_from_slice(input);
+        self.run(buffers.ping, buffers.pong, output, observe)
+    }
+
+    /// [`Self::forward_in`] that reads its input from `values` and writes its output there
+    /// (input and output width must agree).
+    pub fn forward_in_place<F: FnMut(Probe, &[f32])>(
+        &self,
+        values: &mut [f32],
+        buffers: F32Buffers<'_>,
+        mut observe: F,
+    ) -> Result<(), ModelError> {
+        self.check_io(values.len(), values.len())?;
+        observe(Probe::Input, values);
+        let ping = buffers
+            .ping
+            .get_mut(..values.len())
+            .ok_or(ModelError::ScratchTooSmall)?;
+        ping.copy_from_slice(values);
+        self.run(buffers.ping, buffers.pong, values, observe)
+    }
+
+    fn check_io(&self, input_len: usize, output_len: usize) -> Result<(), ModelError> {
+        self.validate(usize::MAX)?;
+        if input_len != self.input_width() {
             return Err(ModelError::InputLength);
         }
-        if output.len() != self.output_width() {
+        if output_len != self.output_width() {
             return Err(ModelError::OutputLength);
         }
-        observe(Probe::Input, input);
-        let F32Scratch {
-            ping,
-            pong,
-            pre_activation,
-        } = scratch;
+        Ok(())
+    }
+
+    /// The layers on the input in `ping` (shapes checked by the caller).
+    fn run<F: FnMut(Probe, &[f32])>(
+        &self,
+        ping: &mut [f32],
+        pong: &mut [f32],
+        output: &mut [f32],
+        mut observe: F,
+    ) -> Result<(), ModelError> {
         let (mut current, mut next) = (ping, pong);
-        current
-            .get_mut(..in_width)
-            .ok_or(ModelError::ScratchTooSmall)?
-            .copy_from_slice(input);
-        let mut width = in_width;
+        let mut width = self.input_width();
         for (index, layer) in self.hidden.iter().enumerate() {
             let out_width = layer.out_features;
             let layer_input = current.get(..width).ok_or(ModelError::ScratchTooSmall)?;
             let layer_output = next
                 .get_mut(..out_width)
                 .ok_or(ModelError::ScratchTooSmall)?;
-            let pre = pre_activation
-                .get_mut(..out_width)
-                .ok_or(ModelError::ScratchTooSmall)?;
-            layer.forward(layer_input, layer_output, Some(&mut *pre))?;
-            observe(Probe::PreActivation(index), pre);
+            layer.affine(layer_input, layer_output)?;
+            observe(Probe::PreActivation(index), layer_output);
+            layer.activation.apply_in_place(layer_output);
             observe(Probe::Output(index), layer_output);
             core::mem::swap(&mut current, &mut next);
             width = out_width;
         }
         let last_input = current.get(..width).ok_or(ModelError::ScratchTooSmall)?;
-        let pre = pre_activation
-            .get_mut(..self.output.out_features)
-            .ok_or(ModelError::ScratchTooSmall)?;
-        self.output.forward(last_input, output, Some(&mut *pre))?;
-        observe(Probe::Final, pre);
+        self.output.affine(last_input, output)?;
+        observe(Probe::Final, output);
+        self.output.activation.apply_in_place(output);
         Ok(())
     }
 }

@@ -1,41 +1,151 @@
-//! f32 reference forward pass of the transformer backbone, with calibration probes.
+//! The f32 form of the transformer ([`F32Transformer`]): the reference forward pass, with calibration
+//! probes, and the folding of the noise token.
 
+use super::block::{add_assign, attend, embed_tokens, finish, run_blocks, BlockWork, TokenInput};
+use super::block::{FeedForwardSteps, LinearSteps};
+use super::shape::{prefix, take};
 use super::{
-    add_assign, attend, attention_scale, check_common, check_f32_linear, check_io, embed_tokens,
-    f32_rows, take, LayerNormWeights, Part, ScratchBuffer, TokenInput, TransformerError,
-    TransformerScratch, TransformerShape, LAYER_NORM_EPSILON,
+    check_io, BlockLinear, F32Transformer, FeedForward, InputLinear, Part, ScratchBuffer,
+    TransformerBuffers, TransformerError, TransformerScratch, TransformerShape,
 };
-use crate::kernels::{gelu_sigmoid, layer_norm_in_place, KernelError};
-use crate::model::mlp::F32Layer;
+use crate::kernels::{Activation, KernelError};
+use crate::model::linear::F32Linear;
+use crate::model::mlp::{F32Buffers, F32Mlp, Probe};
 
-/// One pre-LayerNorm block with f32 weights. Every linear layer must have
-/// `activation: Identity`; the block applies [`gelu_sigmoid`] after `fc1` itself.
+/// The f32 feed-forward: `fc1` (`W -> 4W`, activation [`Activation::GeluSigmoid`]) and `fc2`
+/// (`4W -> W`, `Identity`), run as a one-hidden-layer [`F32Mlp`].
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct F32Block<'a> {
-    /// LayerNorm before attention.
-    pub norm1: LayerNormWeights<'a>,
-    /// `W -> 3W`, outputs `[q | k | v]`, each `[heads, head_dim]`.
-    pub qkv: F32Layer<'a>,
-    /// `W -> W` attention output projection.
-    pub proj: F32Layer<'a>,
-    /// LayerNorm before the feed-forward.
-    pub norm2: LayerNormWeights<'a>,
-    /// `W -> 4W`.
-    pub fc1: F32Layer<'a>,
+pub struct F32FeedForward<'a> {
+    /// `W -> 4W` with GELU.
+    pub fc1: F32Linear<'a>,
     /// `4W -> W`.
-    pub fc2: F32Layer<'a>,
+    pub fc2: F32Linear<'a>,
 }
 
-impl F32Block<'_> {
-    fn check(&self, shape: &TransformerShape, layer: usize) -> Result<(), TransformerError> {
-        let (width, hidden) = (shape.width, shape.hidden());
-        let qkv_width = width.checked_mul(3).ok_or(TransformerError::SizeOverflow)?;
-        self.norm1.check(width, Part::Norm1 { layer })?;
-        check_f32_linear(&self.qkv, width, qkv_width, Part::Qkv { layer })?;
-        check_f32_linear(&self.proj, width, width, Part::Proj { layer })?;
-        self.norm2.check(width, Part::Norm2 { layer })?;
-        check_f32_linear(&self.fc1, width, hidden, Part::Fc1 { layer })?;
-        check_f32_linear(&self.fc2, hidden, width, Part::Fc2 { layer })
+impl F32FeedForward<'_> {
+    /// The feed-forward as an MLP.
+    pub fn mlp(&self) -> F32Mlp<'_> {
+        F32Mlp {
+            hidden: core::slice::from_ref(&self.fc1),
+            output: self.fc2,
+        }
+    }
+}
+
+/// Checks an f32 linear layer: consistent slices, `in_features -> out_features`, `activation`.
+fn check_linear(
+    layer: &F32Linear<'_>,
+    in_features: usize,
+    out_features: usize,
+    activation: Activation,
+    part: Part,
+) -> Result<(), TransformerError> {
+    layer
+        .validate()
+        .map_err(|error| TransformerError::Weights { part, error })?;
+    if layer.in_features != in_features || layer.out_features != out_features {
+        return Err(TransformerError::Features { part });
+    }
+    if layer.activation != activation {
+        return Err(TransformerError::Activation { part });
+    }
+    Ok(())
+}
+
+impl BlockLinear for F32Linear<'_> {
+    type Code = f32;
+
+    fn check(&self, in_features: usize, out_features: usize, part: Part) -> Result<(), TransformerError> {
+        check_linear(self, in_features, out_features, Activation::Identity, part)
+    }
+}
+
+impl InputLinear for F32Linear<'_> {
+    fn check(&self, in_features: usize, out_features: usize, part: Part) -> Result<(), TransformerError> {
+        check_linear(self, in_features, out_features, Activation::Identity, part)
+    }
+}
+
+impl FeedForward for F32FeedForward<'_> {
+    fn check(&self, width: usize, hidden: usize, layer: usize) -> Result<(), TransformerError> {
+        check_linear(&self.fc1, width, hidden, Activation::GeluSigmoid, Part::Fc1 { layer })?;
+        check_linear(&self.fc2, hidden, width, Activation::Identity, Part::Fc2 { layer })
+    }
+}
+
+impl LinearSteps for F32Linear<'_> {
+    fn rows(&self, start: usize, count: usize) -> Result<Self, KernelError> {
+        F32Linear::rows(self, start, count)
+    }
+
+    fn encode(&self, values: &[f32], codes: &mut [f32]) {
+        for (code, value) in codes.iter_mut().zip(values) {
+            *code = *value;
+        }
+    }
+
+    fn apply(&self, codes: &[f32], _accumulators: &mut [i32], output: &mut [f32]) -> Result<(), KernelError> {
+        self.forward(codes, output)
+    }
+
+    fn attend_head(
+        &self,
+        query: &[f32],
+        keys: &[f32],
+        values: &[f32],
+        scale: f32,
+        scores: &mut [f32],
+        _head_out: &mut [f32],
+        out: &mut [f32],
+    ) -> Result<(), KernelError> {
+        attend(query, keys, values, scale, scores, out)
+    }
+
+    fn observed(codes: &[f32]) -> Option<&[f32]> {
+        Some(codes)
+    }
+}
+
+impl FeedForwardSteps<f32> for F32FeedForward<'_> {
+    fn run<O: FnMut(TransformerProbe, &[f32])>(
+        &self,
+        layer: usize,
+        row: &mut [f32],
+        codes: &mut [f32],
+        hidden: &mut [f32],
+        _accumulators: &mut [i32],
+        observe: &mut O,
+    ) -> Result<(), TransformerError> {
+        let buffers = F32Buffers {
+            ping: codes,
+            pong: hidden,
+        };
+        let probe = |probe| match probe {
+            Probe::Input => Some(TransformerProbe::Norm2 { layer }),
+            Probe::PreActivation(_) => Some(TransformerProbe::Fc1 { layer }),
+            Probe::Output(_) => Some(TransformerProbe::Gelu { layer }),
+            Probe::Final => None,
+        };
+        self.mlp()
+            .forward_in_place(row, buffers, |p, values| {
+                if let Some(probe) = probe(p) {
+                    observe(probe, values);
+                }
+            })
+            .map_err(|error| feed_forward_error(error, layer))
+    }
+}
+
+/// A feed-forward MLP's error as the transformer's (the shapes were checked by `validate`, so
+/// only kernel failures are expected).
+pub(super) fn feed_forward_error(error: crate::model::mlp::ModelError, layer: usize) -> TransformerError {
+    use crate::model::mlp::ModelError;
+    match error {
+        ModelError::Kernel(error) => TransformerError::Kernel(error),
+        ModelError::ScratchTooSmall => TransformerError::Kernel(KernelError::OutputLength),
+        _ => TransformerError::Features {
+            part: Part::Fc1 { layer },
+        },
     }
 }
 
@@ -65,12 +175,12 @@ pub enum TransformerProbe {
         /// Block index.
         layer: usize,
     },
-    /// `fc1` output of one token before GELU (per token, `4W`): the LUT input.
+    /// `fc1` output of one token before GELU (per token, `4W`): the table input.
     Fc1 {
         /// Block index.
         layer: usize,
     },
-    /// GELU output of one token (per token, `4W`): the LUT output and `fc2` input.
+    /// GELU output of one token (per token, `4W`): the table output and `fc2` input.
     Gelu {
         /// Block index.
         layer: usize,
@@ -86,86 +196,48 @@ pub enum TransformerProbe {
     Output,
 }
 
-/// f32 transformer backbone over borrowed weights (see the module docs for the structure).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct F32Transformer<'a> {
-    /// Sizes.
-    pub shape: TransformerShape,
-    /// `k -> W`, applied to each trajectory step.
-    pub traj_in: F32Layer<'a>,
-    /// `cond_dim -> W`.
-    pub cond_in: F32Layer<'a>,
-    /// `[W]` noise token `noise_in(embedding(sigma)) + positions[1]` ([`fold_noise_token`]).
-    pub noise_token: &'a [f32],
-    /// `[T, W]` learned positions; row 1 is not read (it is folded into `noise_token`).
-    pub positions: &'a [f32],
-    /// `shape.layers` blocks.
-    pub blocks: &'a [F32Block<'a>],
-    /// Final LayerNorm.
-    pub final_norm: LayerNormWeights<'a>,
-    /// `T W -> output`.
-    pub head: F32Layer<'a>,
-}
-
 /// `token = noise_in(embedding) + positions[1]` in f32: the constant noise token for a fixed noise
 /// level (exporter) or the per-call token when the noise level varies. `positions` is the full
 /// `[T, W]` table; `token` is `W` long.
 pub fn fold_noise_token(
     shape: &TransformerShape,
-    noise_in: &F32Layer<'_>,
+    noise_in: &F32Linear<'_>,
     embedding: &[f32],
     positions: &[f32],
     token: &mut [f32],
 ) -> Result<(), TransformerError> {
     shape.validate()?;
-    check_f32_linear(noise_in, noise_in.in_features, shape.width, Part::NoiseIn)?;
+    check_linear(
+        noise_in,
+        noise_in.in_features,
+        shape.width,
+        Activation::Identity,
+        Part::NoiseIn,
+    )?;
     if embedding.len() != noise_in.in_features {
         return Err(TransformerError::EmbeddingLength);
     }
     if embedding.iter().any(|v| !v.is_finite()) {
         return Err(TransformerError::NonFiniteInput);
     }
+    let missing = TransformerError::Features {
+        part: Part::Positions,
+    };
     if positions.len() != shape.token_values() {
-        return Err(TransformerError::Features {
-            part: Part::Positions,
-        });
+        return Err(missing);
     }
-    let position =
-        positions
-            .chunks_exact(shape.width)
-            .nth(1)
-            .ok_or(TransformerError::Features {
-                part: Part::Positions,
-            })?;
+    let position = positions.chunks_exact(shape.width).nth(1).ok_or(missing)?;
     if token.len() != shape.width {
         return Err(TransformerError::Features {
             part: Part::NoiseToken,
         });
     }
-    noise_in.forward(embedding, token, None)?;
+    noise_in.forward(embedding, token)?;
     add_assign(token, position);
     Ok(())
 }
 
 impl F32Transformer<'_> {
-    /// Checks every part against the shape.
-    pub fn validate(&self) -> Result<(), TransformerError> {
-        let shape = &self.shape;
-        check_common(
-            shape,
-            self.blocks.len(),
-            self.positions,
-            self.noise_token,
-            &self.final_norm,
-        )?;
-        check_f32_linear(&self.traj_in, shape.action_dim, shape.width, Part::TrajIn)?;
-        check_f32_linear(&self.cond_in, shape.cond_dim, shape.width, Part::CondIn)?;
-        for (layer, block) in self.blocks.iter().enumerate() {
-            block.check(shape, layer)?;
-        }
-        check_f32_linear(&self.head, shape.token_values(), shape.output, Part::Head)
-    }
-
     /// Runs the backbone: `trajectory` is the `c_in`-scaled noisy trajectory (`[n, k]` row-major),
     /// `condition` the `cond_dim` condition vector; writes `shape.output` values to `output`.
     pub fn forward<const F: usize, const B: usize, const A: usize>(
@@ -175,17 +247,33 @@ impl F32Transformer<'_> {
         output: &mut [f32],
         scratch: &mut TransformerScratch<F, B, A>,
     ) -> Result<(), TransformerError> {
-        self.forward_observed(trajectory, condition, output, scratch, |_, _| {})
+        self.forward_in(trajectory, condition, output, scratch.buffers(), |_, _| {})
     }
 
     /// [`F32Transformer::forward`] that shows the tensors of [`TransformerProbe`] to `observe`
-    /// (e.g. to record the calibration ranges of the int8 path's quantization points).
+    /// (e.g. to record the calibration ranges of the int8 form's quantization points).
     pub fn forward_observed<const F: usize, const B: usize, const A: usize, O>(
         &self,
         trajectory: &[f32],
         condition: &[f32],
         output: &mut [f32],
         scratch: &mut TransformerScratch<F, B, A>,
+        observe: O,
+    ) -> Result<(), TransformerError>
+    where
+        O: FnMut(TransformerProbe, &[f32]),
+    {
+        self.forward_in(trajectory, condition, output, scratch.buffers(), observe)
+    }
+
+    /// [`F32Transformer::forward_observed`] on borrowed buffers (at least
+    /// [`TransformerShape::f32_scratch`] floats).
+    pub fn forward_in<O>(
+        &self,
+        trajectory: &[f32],
+        condition: &[f32],
+        output: &mut [f32],
+        buffers: TransformerBuffers<'_>,
         mut observe: O,
     ) -> Result<(), TransformerError>
     where
@@ -194,22 +282,10 @@ impl F32Transformer<'_> {
         self.validate()?;
         let shape = &self.shape;
         check_io(shape, trajectory, condition, output)?;
-        let needed = shape.f32_scratch().floats;
-        let floats = scratch
-            .floats
-            .get_mut(..needed)
-            .ok_or(TransformerError::ScratchTooSmall {
-                buffer: ScratchBuffer::Floats,
-                needed,
-            })?;
-        let (tw, width, head_dim, tokens) = (
-            shape.token_values(),
-            shape.width,
-            shape.head_dim(),
-            shape.tokens(),
-        );
-        let mut rest = floats;
         let buffer = ScratchBuffer::Floats;
+        let floats = prefix(buffers.floats, shape.f32_scratch().floats, buffer)?;
+        let (tw, head_dim, tokens) = (shape.token_values(), shape.head_dim(), shape.tokens());
+        let mut rest = floats;
         let residual = take(&mut rest, tw, buffer)?;
         let normed = take(&mut rest, tw, buffer)?;
         let attention = take(&mut rest, tw, buffer)?;
@@ -218,7 +294,7 @@ impl F32Transformer<'_> {
         let query = take(&mut rest, head_dim, buffer)?;
         let scores = take(&mut rest, tokens, buffer)?;
         let hidden = take(&mut rest, shape.hidden(), buffer)?;
-        let row = take(&mut rest, width, buffer)?;
+        let row = take(&mut rest, shape.width, buffer)?;
 
         observe(TransformerProbe::Trajectory, trajectory);
         observe(TransformerProbe::Condition, condition);
@@ -234,77 +310,24 @@ impl F32Transformer<'_> {
                     TokenInput::Condition => &self.cond_in,
                     TokenInput::Step => &self.traj_in,
                 };
-                Ok(layer.forward(values, token, None)?)
+                Ok(layer.forward(values, token)?)
             },
         )?;
         observe(TransformerProbe::Tokens, residual);
-
-        let scale = attention_scale(head_dim);
-        for (layer, block) in self.blocks.iter().enumerate() {
-            for (x, n) in residual
-                .chunks_exact(width)
-                .zip(normed.chunks_exact_mut(width))
-            {
-                block.norm1.apply(x, n)?;
-            }
-            observe(TransformerProbe::Norm1 { layer }, normed);
-            for head in 0..shape.heads {
-                let start = head * head_dim;
-                let query_layer = f32_rows(&block.qkv, start, head_dim)?;
-                let key_layer = f32_rows(&block.qkv, width + start, head_dim)?;
-                let value_layer = f32_rows(&block.qkv, 2 * width + start, head_dim)?;
-                let rows = normed
-                    .chunks_exact(width)
-                    .zip(keys.chunks_exact_mut(head_dim))
-                    .zip(values.chunks_exact_mut(head_dim));
-                for ((n, key), value) in rows {
-                    key_layer.forward(n, key, None)?;
-                    value_layer.forward(n, value, None)?;
-                }
-                for (n, out) in normed
-                    .chunks_exact(width)
-                    .zip(attention.chunks_exact_mut(width))
-                {
-                    query_layer.forward(n, query, None)?;
-                    let out = out
-                        .get_mut(start..start + head_dim)
-                        .ok_or(TransformerError::Kernel(KernelError::OutputLength))?;
-                    attend(query, keys, values, scale, scores, out)?;
-                }
-            }
-            observe(TransformerProbe::Attention { layer }, attention);
-            for (x, a) in residual
-                .chunks_exact_mut(width)
-                .zip(attention.chunks_exact(width))
-            {
-                block.proj.forward(a, row, None)?;
-                add_assign(x, row);
-            }
-            for x in residual.chunks_exact_mut(width) {
-                block.norm2.apply(x, row)?;
-                observe(TransformerProbe::Norm2 { layer }, row);
-                block.fc1.forward(row, hidden, None)?;
-                observe(TransformerProbe::Fc1 { layer }, hidden);
-                for h in hidden.iter_mut() {
-                    *h = gelu_sigmoid(*h);
-                }
-                observe(TransformerProbe::Gelu { layer }, hidden);
-                block.fc2.forward(hidden, row, None)?;
-                add_assign(x, row);
-            }
-            observe(TransformerProbe::Block { layer }, residual);
-        }
-        for x in residual.chunks_exact_mut(width) {
-            layer_norm_in_place(
-                x,
-                self.final_norm.gamma,
-                self.final_norm.beta,
-                LAYER_NORM_EPSILON,
-            )?;
-        }
-        observe(TransformerProbe::FinalNorm, residual);
-        self.head.forward(residual, output, None)?;
-        observe(TransformerProbe::Output, output);
-        Ok(())
+        let mut work = BlockWork {
+            residual,
+            normed,
+            attention,
+            hidden,
+            keys,
+            values,
+            query,
+            head_out: &mut [],
+            scores,
+            row,
+            accumulators: &mut [],
+        };
+        run_blocks(shape, self.blocks, &mut work, &mut observe)?;
+        finish(shape, &self.final_norm, &self.head, &mut work, output, &mut observe)
     }
 }

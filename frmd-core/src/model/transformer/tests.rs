@@ -231,9 +231,10 @@ fn deterministic_and_independent_of_scratch_contents() {
     let run = |dirty: bool| {
         let mut scratch = big_scratch();
         if dirty {
-            scratch.floats.fill(f32::NAN);
-            scratch.bytes.fill(-77);
-            scratch.accumulators.fill(i32::MIN);
+            let buffers = scratch.buffers();
+            buffers.floats.fill(f32::NAN);
+            buffers.bytes.fill(-77);
+            buffers.accumulators.fill(i32::MIN);
         }
         let mut float_out = [0.0_f32; 8];
         let mut int8_out = [0.0_f32; 8];
@@ -394,13 +395,14 @@ fn int8_linear_rows_match_the_full_layer() {
     let qkv = quant.blocks[0].qkv.view();
     let input: Vec<i8> = (0..16).map(|i| (i * 13 - 100) as i8).collect();
     let mut full = [0.0_f32; 48];
-    qkv.forward_quantized(&input, &mut [0; 48], &mut full)
+    qkv.linear.forward(&input, &mut [0; 48], &mut full)
         .unwrap();
     for start in [0_usize, 8, 16, 40] {
         let mut part = [0.0_f32; 8];
         qkv.rows(start, 8)
             .unwrap()
-            .forward_quantized(&input, &mut [0; 8], &mut part)
+            .linear
+            .forward(&input, &mut [0; 8], &mut part)
             .unwrap();
         assert_eq!(part, full[start..start + 8]);
     }

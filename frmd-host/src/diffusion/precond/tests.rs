@@ -4,7 +4,7 @@ use super::*;
 use crate::models::decoder::ProDmpDecoder;
 use crate::models::{HeadConfig, OwnedNetwork};
 use crate::rng::HostRng;
-use crate::train::toy::toy_config;
+use crate::data::toy::toy_config;
 use candle_core::Device;
 
 const BATCH: usize = 6;

@@ -1,6 +1,7 @@
 //! Real policies behind the server: a small student checkpoint (float) and its int8 export,
 //! served through `serve_stream` on in-memory pipes, with malformed input between valid calls.
 use super::*;
+use crate::export::{BAKED_BLOB_FILE, EXPORT_INFO_FILE};
 use crate::serve::{load, PolicySource, ServeConfig, Served};
 use std::path::{Path, PathBuf};
 
@@ -8,13 +9,13 @@ use std::path::{Path, PathBuf};
 /// beside it as `policy.blob` and an `export.json` naming the checkpoint.
 fn student_and_blob(dir: &Path) -> PathBuf {
     std::fs::create_dir_all(dir).unwrap();
-    crate::bench::reach_student(dir, "mlp", 3).unwrap();
+    crate::bench::fixtures::reach_student(dir, &frmd_export::checkpoint::BackboneConfig::preset("mlp").unwrap(), 3).unwrap();
     let exported = frmd_export::export::export_checkpoint(dir, Default::default(), None).unwrap();
     let blob = frmd_export::blob::write(&exported.policy).unwrap();
     let baked = dir.join("baked");
     std::fs::create_dir_all(&baked).unwrap();
-    std::fs::write(baked.join("policy.blob"), blob).unwrap();
-    std::fs::write(baked.join("export.json"), serde_json::json!({ "checkpoint": dir.display().to_string() }).to_string()).unwrap();
+    std::fs::write(baked.join(BAKED_BLOB_FILE), blob).unwrap();
+    std::fs::write(baked.join(EXPORT_INFO_FILE), serde_json::json!({ "checkpoint": dir.display().to_string() }).to_string()).unwrap();
     baked
 }
 
@@ -77,7 +78,7 @@ fn a_student_checkpoint_and_its_int8_export_serve_and_survive_bad_input() {
     let mut int8 = load(&PolicySource::Baked(baked.clone()), &cfg).unwrap();
     check_session(&mut int8);
     // The bare blob finds the control period in the export.json beside it.
-    let blob = load(&PolicySource::Blob(baked.join("policy.blob")), &cfg).unwrap();
+    let blob = load(&PolicySource::Blob(baked.join(BAKED_BLOB_FILE)), &cfg).unwrap();
     assert_eq!(blob.info.dt, 0.05);
     // float and int8 agree to quantization error on the same chunk.
     let (f, q) = (session_replies(&mut float), session_replies(&mut int8));

@@ -8,7 +8,8 @@
 //! memory and host/firmware bit-equality matter here, not what the network computes.
 
 use frmd_core::kernels::{silu, FcRequant, FullyConnected, Lut8};
-use frmd_core::model::mlp::{Int8Layer, Int8Mlp};
+use frmd_core::model::linear::{Int8Linear, RequantizedLinear};
+use frmd_core::model::mlp::Int8Mlp;
 use frmd_core::quant::{
     fold_input_zero_point, quantize_bias, quantize_weights_per_channel, requantization_multiplier,
     QuantParams,
@@ -41,6 +42,33 @@ pub struct LayerData {
     pub lut: Option<Lut8>,
     /// Output layer only: `input_scale * weight_scale[o]`.
     pub output_scales: Vec<f32>,
+}
+
+impl LayerData {
+    /// The weights and bias as a frmd-core fully connected layer.
+    pub fn fully_connected(&self) -> FullyConnected<'_> {
+        FullyConnected::new(self.in_features, self.out_features, &self.weights, &self.bias)
+    }
+
+    /// A dequantized layer (`output` was `None`) as a frmd-core view.
+    pub fn int8_linear(&self) -> Int8Linear<'_> {
+        Int8Linear { fc: self.fully_connected(), output_scales: &self.output_scales }
+    }
+
+    /// A requantized layer (`output` was `Some`) as a frmd-core view.
+    pub fn requantized(&self) -> RequantizedLinear<'_> {
+        RequantizedLinear {
+            fc: self.fully_connected(),
+            requant: FcRequant {
+                multipliers: &self.multipliers,
+                shifts: &self.shifts,
+                output_zero_point: self.output_zero_point,
+                activation_min: i8::MIN,
+                activation_max: i8::MAX,
+            },
+            activation: self.lut.as_ref().map(|lut| &lut.table),
+        }
+    }
 }
 
 /// The whole network.
@@ -139,41 +167,13 @@ pub fn generate_with(input_width: usize, seed: u64, input_range: (f32, f32)) -> 
 
 impl ModelData {
     /// The hidden layers as frmd-core views over this data.
-    pub fn hidden_layers(&self) -> Vec<Int8Layer<'_>> {
-        self.hidden
-            .iter()
-            .map(|layer| Int8Layer {
-                fc: FullyConnected::new(
-                    layer.in_features,
-                    layer.out_features,
-                    &layer.weights,
-                    &layer.bias,
-                ),
-                requant: FcRequant {
-                    multipliers: &layer.multipliers,
-                    shifts: &layer.shifts,
-                    output_zero_point: layer.output_zero_point,
-                    activation_min: i8::MIN,
-                    activation_max: i8::MAX,
-                },
-                activation: layer.lut.as_ref(),
-            })
-            .collect()
+    pub fn hidden_layers(&self) -> Vec<RequantizedLinear<'_>> {
+        self.hidden.iter().map(LayerData::requantized).collect()
     }
 
     /// The network over `hidden` (from [`Self::hidden_layers`]).
-    pub fn mlp<'a>(&'a self, hidden: &'a [Int8Layer<'a>]) -> Int8Mlp<'a> {
-        Int8Mlp {
-            input: self.input,
-            hidden,
-            output: FullyConnected::new(
-                self.output.in_features,
-                self.output.out_features,
-                &self.output.weights,
-                &self.output.bias,
-            ),
-            output_scales: &self.output.output_scales,
-        }
+    pub fn mlp<'a>(&'a self, hidden: &'a [RequantizedLinear<'a>]) -> Int8Mlp<'a> {
+        Int8Mlp { input: self.input, hidden, output: self.output.int8_linear() }
     }
 
     /// All int8 weights, layer by layer (hidden, then output): the firmware's weight blob.

@@ -1,7 +1,7 @@
 //! A deterministic synthetic one-step policy as a `frmd_export::QuantizedPolicy` (used by
 //! `build.rs`, which bakes it with `frmd_export::bake::write_module` for the `transformer` images,
 //! and by the host test `frmd-export/tests/cortex_m_transformer.rs`, which writes it as a blob and
-//! runs it with `frmd_core::blob::LoadedPolicy`). Only its configuration (normalization, step
+//! runs it with `frmd_core::blob::LoadedMlp`). Only its configuration (normalization, step
 //! constants, decoder, input layout) is used: the transformer replaces its MLP as the network.
 //!
 //! Shape: history 2 x 8 observations, 2 DoF, horizon 12, 20 basis functions, one sampling step at
@@ -35,7 +35,7 @@ fn first_step() -> StepConstants {
         c_in: at_max(sigma.c_in(sigma.sigma_max)),
         c_skip: at_max(sigma.c_skip(sigma.sigma_max)),
         c_out: at_max(sigma.c_out(sigma.sigma_max)),
-        first_layer_bias_index: 0,
+        noise_variant: 0,
     }
 }
 

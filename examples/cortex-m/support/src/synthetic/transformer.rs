@@ -11,9 +11,10 @@
 
 use crate::shape::{TRANSFORMER_LINEARS, TRANSFORMER_NORMS, TRANSFORMER_SHAPE};
 use super::mlp::{layer, params, LayerData};
-use frmd_core::kernels::{gelu_sigmoid, FcRequant, FullyConnected};
+use frmd_core::kernels::gelu_sigmoid;
+use frmd_core::model::linear::QuantizedLinear;
 use frmd_core::model::transformer::{
-    Int8Block, Int8FeedForward, Int8Linear, Int8Transformer, LayerNormWeights, TokenLinear,
+    Int8Block, Int8FeedForward, Int8Transformer, LayerNormWeights, TokenLinear,
 };
 use frmd_core::quant::QuantParams;
 use frmd_core::rng::Rng;
@@ -93,16 +94,8 @@ pub fn generate() -> TransformerData {
     TransformerData { linears, norms, noise_token, positions }
 }
 
-fn fully_connected(layer: &LayerData) -> FullyConnected<'_> {
-    FullyConnected::new(layer.in_features, layer.out_features, &layer.weights, &layer.bias)
-}
-
-fn int8_linear(linear: &LinearData) -> Int8Linear<'_> {
-    Int8Linear {
-        input: linear.input,
-        fc: fully_connected(&linear.layer),
-        output_scales: &linear.layer.output_scales,
-    }
+fn quantized(linear: &LinearData) -> QuantizedLinear<'_> {
+    QuantizedLinear { input: linear.input, linear: linear.layer.int8_linear() }
 }
 
 fn layer_norm(norm: &NormData) -> LayerNormWeights<'_> {
@@ -117,22 +110,13 @@ impl TransformerData {
                 let [qkv, proj, fc1, fc2] = [0, 1, 2, 3].map(|i| &self.linears[2 + 4 * l + i]);
                 Int8Block {
                     norm1: layer_norm(&self.norms[2 * l]),
-                    qkv: int8_linear(qkv),
-                    proj: int8_linear(proj),
+                    qkv: quantized(qkv),
+                    proj: quantized(proj),
                     norm2: layer_norm(&self.norms[2 * l + 1]),
                     feed_forward: Int8FeedForward {
                         input: fc1.input,
-                        fc1: fully_connected(&fc1.layer),
-                        fc1_requant: FcRequant {
-                            multipliers: &fc1.layer.multipliers,
-                            shifts: &fc1.layer.shifts,
-                            output_zero_point: fc1.layer.output_zero_point,
-                            activation_min: i8::MIN,
-                            activation_max: i8::MAX,
-                        },
-                        gelu: fc1.layer.lut.as_ref().expect("fc1 has a GELU table"),
-                        fc2: fully_connected(&fc2.layer),
-                        fc2_scales: &fc2.layer.output_scales,
+                        fc1: fc1.layer.requantized(),
+                        fc2: quantized(fc2),
                     },
                 }
             })
@@ -143,13 +127,13 @@ impl TransformerData {
     pub fn model<'a>(&'a self, blocks: &'a [Int8Block<'a>]) -> Int8Transformer<'a> {
         Int8Transformer {
             shape: TRANSFORMER_SHAPE,
-            traj_in: TokenLinear::Int8(int8_linear(&self.linears[0])),
-            cond_in: TokenLinear::Int8(int8_linear(&self.linears[1])),
+            traj_in: TokenLinear::Int8(quantized(&self.linears[0])),
+            cond_in: TokenLinear::Int8(quantized(&self.linears[1])),
             noise_token: &self.noise_token,
             positions: &self.positions,
             blocks,
             final_norm: layer_norm(&self.norms[TRANSFORMER_NORMS - 1]),
-            head: int8_linear(&self.linears[TRANSFORMER_LINEARS - 1]),
+            head: quantized(&self.linears[TRANSFORMER_LINEARS - 1]),
         }
     }
 

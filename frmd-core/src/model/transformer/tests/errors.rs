@@ -5,6 +5,7 @@ extern crate std;
 use super::fixture::{big_scratch, random_inputs, FloatModel, QuantModel, Ranges};
 use super::SMALL;
 use crate::kernels::{Activation, KernelError};
+use crate::model::linear::QuantizedLinear;
 use crate::model::transformer::*;
 use crate::quant::QuantParams;
 use crate::rng::Rng;
@@ -104,7 +105,7 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
         })
     );
     let mut broken = blocks.clone();
-    broken[0].fc1.activation = Activation::Gelu;
+    broken[0].feed_forward.fc1.activation = Activation::Gelu;
     let fc1 = F32Transformer {
         blocks: &broken,
         ..net
@@ -153,7 +154,7 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
         int8.forward(&nan, &condition, &mut out, &mut *int8_scratch),
         Err(E::NonFiniteInput)
     );
-    let bad_input = Int8Linear {
+    let bad_input = QuantizedLinear {
         input: QuantParams {
             scale: 0.0,
             zero_point: 0,
@@ -166,7 +167,7 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
     };
     assert_eq!(head.validate(), Err(E::InputParams { part: Part::Head }));
     let mut broken = int8_blocks.clone();
-    broken[1].feed_forward.fc1_requant.shifts = &quant.blocks[1].shifts[1..];
+    broken[1].feed_forward.fc1.requant.shifts = &quant.blocks[1].shifts[1..];
     let requant = Int8Transformer {
         blocks: &broken,
         ..int8
@@ -179,7 +180,7 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
         })
     );
     let mut broken = int8_blocks.clone();
-    broken[0].feed_forward.fc2_scales = &quant.blocks[0].fc2.output_scales[1..];
+    broken[0].feed_forward.fc2.linear.output_scales = &quant.blocks[0].fc2.output_scales[1..];
     let scales = Int8Transformer {
         blocks: &broken,
         ..int8
@@ -192,7 +193,7 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
         })
     );
     let mut broken = int8_blocks.clone();
-    broken[0].qkv.output_scales = &quant.blocks[0].qkv.output_scales[..47];
+    broken[0].qkv.linear.output_scales = &quant.blocks[0].qkv.output_scales[..47];
     let qkv = Int8Transformer {
         blocks: &broken,
         ..int8
@@ -251,7 +252,7 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
 /// times; every forward pass must return (most with an error), none may panic.
 #[test]
 fn random_corruptions_return_errors_without_panicking() {
-    use crate::model::mlp::F32Layer;
+    use crate::model::linear::F32Linear;
     let model = FloatModel::random(SMALL, 31);
     let blocks = model.f32_blocks();
     let net = model.f32_view(&blocks);
@@ -281,11 +282,11 @@ fn random_corruptions_return_errors_without_panicking() {
             6 => (f.noise_token, q.noise_token) = (&floats[..size], &floats[..size]),
             7 => {
                 f_blocks[layer].qkv.weights = &floats[..size * 16];
-                q_blocks[layer].qkv.fc.weights = &codes[..size * 16];
+                q_blocks[layer].qkv.linear.fc.weights = &codes[..size * 16];
             }
             8 => {
-                f_blocks[layer].fc1.out_features = size;
-                q_blocks[layer].feed_forward.fc1.out_features = size;
+                f_blocks[layer].feed_forward.fc1.out_features = size;
+                q_blocks[layer].feed_forward.fc1.fc.out_features = size;
             }
             9 => {
                 f_blocks[layer].norm2.gamma = &floats[..size];
@@ -293,11 +294,11 @@ fn random_corruptions_return_errors_without_panicking() {
             }
             10 => {
                 f.head.bias = &floats[..size];
-                q.head.output_scales = &floats[..size];
+                q.head.linear.output_scales = &floats[..size];
             }
-            11 => q_blocks[layer].feed_forward.fc1_requant.shifts = &words[..size * 4],
+            11 => q_blocks[layer].feed_forward.fc1.requant.shifts = &words[..size * 4],
             12 => {
-                let layer = F32Layer {
+                let layer = F32Linear {
                     in_features: size % 4,
                     out_features: 16,
                     weights: &floats[..(size % 4) * 16],

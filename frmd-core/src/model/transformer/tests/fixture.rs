@@ -5,7 +5,7 @@ extern crate std;
 
 use super::super::*;
 use crate::kernels::{gelu_sigmoid, Activation, FcRequant, FullyConnected, Lut8};
-use crate::model::mlp::F32Layer;
+use crate::model::linear::{F32Linear, Int8Linear, QuantizedLinear, RequantizedLinear};
 use crate::quant::{
     fold_input_zero_point, quantize_bias, quantize_weights_per_channel, requantization_multiplier,
     QuantParams,
@@ -41,8 +41,8 @@ impl Lin {
         }
     }
 
-    pub fn view(&self) -> F32Layer<'_> {
-        F32Layer {
+    pub fn view(&self) -> F32Linear<'_> {
+        F32Linear {
             in_features: self.in_features,
             out_features: self.out_features,
             weights: &self.weights,
@@ -174,8 +174,13 @@ impl FloatModel {
                 qkv: b.qkv.view(),
                 proj: b.proj.view(),
                 norm2: b.norm2.view(),
-                fc1: b.fc1.view(),
-                fc2: b.fc2.view(),
+                feed_forward: F32FeedForward {
+                    fc1: F32Linear {
+                        activation: Activation::GeluSigmoid,
+                        ..b.fc1.view()
+                    },
+                    fc2: b.fc2.view(),
+                },
             })
             .collect()
     }
@@ -339,16 +344,18 @@ impl QLin {
         }
     }
 
-    pub fn view(&self) -> Int8Linear<'_> {
-        Int8Linear {
+    pub fn view(&self) -> QuantizedLinear<'_> {
+        QuantizedLinear {
             input: self.input,
-            fc: FullyConnected::new(
-                self.in_features,
-                self.out_features,
-                &self.weights,
-                &self.bias,
-            ),
-            output_scales: &self.output_scales,
+            linear: Int8Linear {
+                fc: FullyConnected::new(
+                    self.in_features,
+                    self.out_features,
+                    &self.weights,
+                    &self.bias,
+                ),
+                output_scales: &self.output_scales,
+            },
         }
     }
 }
@@ -422,17 +429,18 @@ impl QuantModel {
                 norm2: f.norm2.view(),
                 feed_forward: Int8FeedForward {
                     input: q.fc1.input,
-                    fc1: q.fc1.view().fc,
-                    fc1_requant: FcRequant {
-                        multipliers: &q.multipliers,
-                        shifts: &q.shifts,
-                        output_zero_point: q.fc1_output.zero_point,
-                        activation_min: -128,
-                        activation_max: 127,
+                    fc1: RequantizedLinear {
+                        fc: q.fc1.view().linear.fc,
+                        requant: FcRequant {
+                            multipliers: &q.multipliers,
+                            shifts: &q.shifts,
+                            output_zero_point: q.fc1_output.zero_point,
+                            activation_min: -128,
+                            activation_max: 127,
+                        },
+                        activation: Some(&q.gelu.table),
                     },
-                    gelu: &q.gelu,
-                    fc2: q.fc2.view().fc,
-                    fc2_scales: &q.fc2.output_scales,
+                    fc2: q.fc2.view(),
                 },
             })
             .collect()

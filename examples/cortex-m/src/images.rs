@@ -1,0 +1,92 @@
+//! The policies the `policy` and `transformer` images measure, shared by each image and its
+//! `-stages` twin (which measures the same policy first, then breaks it down).
+
+use frmd_core::model::transformer::{Int8Transformer, TransformerScratch};
+use frmd_core::policy::{Int8MlpNetwork, Int8TransformerNetwork, Network, Policy};
+use frmd_firmware_support::policy_workload::{policy_act_macs, PolicyWorkload, STUDENT_NAME};
+use frmd_firmware_support::shape::{
+    DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
+};
+
+use crate::report::exit_failure;
+use crate::{baked_student as student, baked_synthetic_policy, baked_transformer};
+
+/// The baked student's workload (`Policy::act` of the trained one-step MLP).
+pub type StudentWorkload = PolicyWorkload<
+    'static,
+    Int8MlpNetwork<'static, { student::SCRATCH_WIDTH }>,
+    { student::HISTORY },
+    { student::OBS_DIM },
+    { student::ACTION_DIM },
+    { student::HORIZON },
+    { student::PARAMS_PER_DOF },
+    { student::INPUT_WIDTH },
+>;
+
+/// The baked student's policy as a workload that states its multiply-accumulates.
+pub fn student_workload() -> StudentWorkload {
+    let policy = match student::policy() {
+        Ok(policy) => policy,
+        Err(error) => exit_failure(&error),
+    };
+    let macs = policy_act_macs(
+        student::NETWORK_MACS,
+        student::HORIZON,
+        student::ACTION_DIM,
+        student::PARAMS_PER_DOF,
+    );
+    PolicyWorkload::with_name(policy, STUDENT_NAME).with_macs(macs)
+}
+
+/// Printed as the transformer images' `workload:` line.
+pub const TRANSFORMER_NAME: &str = "policy act: one-step int8 transformer-lite (3 blocks, 2 heads, width 128, 14 tokens) + decode (synthetic weights)";
+
+/// Scratch of the synthetic transformer.
+pub type Scratch = TransformerScratch<
+    { TRANSFORMER_SCRATCH.floats },
+    { TRANSFORMER_SCRATCH.bytes },
+    { TRANSFORMER_SCRATCH.accumulators },
+>;
+
+/// The synthetic transformer as a policy network running in `scratch`.
+pub type TransformerNetwork<'a> = Int8TransformerNetwork<'a, &'a mut Scratch>;
+
+/// A policy over `Net` with the synthetic policy's sizes.
+pub type TransformerPolicy<'a, Net> =
+    Policy<'a, Net, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>;
+
+/// The synthetic transformer's blocks (firmware failure if the baked data does not fit).
+pub fn transformer_blocks() -> [frmd_core::model::transformer::Int8Block<'static>; baked_transformer::LAYERS] {
+    match baked_transformer::blocks() {
+        Some(blocks) => blocks,
+        None => exit_failure(&"baked transformer: a block lies outside the generated data"),
+    }
+}
+
+/// The synthetic transformer over `blocks`, running in `scratch`, as a policy network.
+pub fn transformer_network<'a>(
+    blocks: &'a [frmd_core::model::transformer::Int8Block<'static>],
+    scratch: &'a mut Scratch,
+) -> TransformerNetwork<'a> {
+    let Some(model) = baked_transformer::model(blocks) else {
+        exit_failure(&"baked transformer: a layer lies outside the generated data");
+    };
+    network_of(model, scratch)
+}
+
+/// `model` as the synthetic policy's network, running in `scratch`.
+pub fn network_of<'a>(model: Int8Transformer<'a>, scratch: &'a mut Scratch) -> TransformerNetwork<'a> {
+    let layout = baked_synthetic_policy::config().sampler.layout;
+    match Int8TransformerNetwork::new(model, &layout, &[], scratch) {
+        Ok(network) => network,
+        Err(error) => exit_failure(&error),
+    }
+}
+
+/// The synthetic policy's configuration with `network`.
+pub fn transformer_policy<'a, Net: Network>(network: Net) -> TransformerPolicy<'a, Net> {
+    match Policy::new(baked_synthetic_policy::config(), network) {
+        Ok(policy) => policy,
+        Err(error) => exit_failure(&error),
+    }
+}

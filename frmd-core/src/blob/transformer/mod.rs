@@ -1,0 +1,279 @@
+//! Transformer-lite blobs (magic [`TRANSFORMER_MAGIC`], `b"FRMT"`): the
+//! [`TransformerDescriptor`], its emit side ([`encode_transformer`] from borrowed
+//! [`TransformerBlobParts`]) and its parse side ([`LoadedTransformer`]). An MLP loader rejects a
+//! transformer blob (and vice versa) with [`BlobError::BadMagic`].
+//!
+//! Data area, in order: the policy sections ([`super::policy_tables`]), the noise tokens (f32
+//! `[variants][W]`; a step's `noise_variant` selects its token), the positions, `traj_in`,
+//! `cond_in`, per block `norm1`, `qkv`, `proj`, `norm2`, `fc1` (with its multipliers, shifts and
+//! GELU table), `fc2`, then `final_norm` and `head`. Element types: norms, positions, tokens,
+//! scales f32; weights and tables i8; biases, multipliers, shifts i32. The data area ends with its
+//! last section.
+
+use heapless::Vec;
+use serde::{Deserialize, Serialize};
+
+use super::container::{self, Section, SectionWriter};
+use super::policy_tables::{self, PolicySections};
+use super::BlobError;
+use crate::kernels::FullyConnected;
+use crate::model::linear::QuantizedLinear;
+use crate::model::transformer::{Int8Block, Int8Transformer, LayerNormWeights, TokenLinear};
+use crate::policy::{InputLayout, PolicyConfig};
+use crate::quant::QuantParams;
+
+/// First four bytes of a transformer blob.
+pub const TRANSFORMER_MAGIC: [u8; 4] = *b"FRMT";
+/// Most blocks a transformer blob can hold.
+pub const MAX_BLOCKS: usize = 8;
+
+/// Which array of a transformer part a section holds (for [`SectionId::Transformer`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TensorField {
+    /// i8 weights.
+    Weights,
+    /// i32 bias.
+    Bias,
+    /// f32 dequantization scales.
+    Scales,
+    /// i32 Q31 multipliers.
+    Multipliers,
+    /// i32 shifts.
+    Shifts,
+    /// i8 256-entry GELU table.
+    Lut,
+    /// f32 LayerNorm gamma.
+    Gamma,
+    /// f32 LayerNorm beta.
+    Beta,
+    /// f32 values of positions or noise tokens.
+    Values,
+}
+
+/// A linear layer with f32 input and output ([`QuantizedLinear`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LinearDesc {
+    /// Input quantization scale.
+    pub input_scale: f32,
+    /// Input quantization zero point.
+    pub input_zero_point: i32,
+    /// i8 `[out, in]`.
+    pub weights: Section,
+    /// i32 `[out]`.
+    pub bias: Section,
+    /// f32 `[out]`.
+    pub scales: Section,
+}
+
+/// LayerNorm affine parameters, f32 `[W]` each.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct NormDesc {
+    /// Scale.
+    pub gamma: Section,
+    /// Shift.
+    pub beta: Section,
+}
+
+/// One block ([`Int8Block`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BlockDesc {
+    /// LayerNorm before attention.
+    pub norm1: NormDesc,
+    /// `W -> 3W`.
+    pub qkv: LinearDesc,
+    /// `W -> W`.
+    pub proj: LinearDesc,
+    /// LayerNorm before the feed-forward.
+    pub norm2: NormDesc,
+    /// `fc1` input scale and zero point, weights and bias (its `scales` section is empty).
+    pub fc1: LinearDesc,
+    /// i32 `[4W]` Q31 multipliers of `fc1`.
+    pub fc1_multipliers: Section,
+    /// i32 `[4W]` shifts of `fc1`.
+    pub fc1_shifts: Section,
+    /// Zero point of the requantized `fc1` output (GELU table input).
+    pub fc1_output_zero_point: i32,
+    /// i8 `[256]` GELU table.
+    pub gelu: Section,
+    /// `4W -> W`; its input parameters are the GELU output's.
+    pub fc2: LinearDesc,
+}
+
+/// Everything about a transformer blob that is not bulk data.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TransformerDescriptor {
+    /// Observation history length `m`.
+    pub history: u32,
+    /// Observation dimension `o`.
+    pub obs_dim: u32,
+    /// Action dimension `k`.
+    pub action_dim: u32,
+    /// Horizon `n`.
+    pub horizon: u32,
+    /// ProDMP parameters per DoF `p`.
+    pub params_per_dof: u32,
+    /// Control period, seconds.
+    pub control_dt: f32,
+    /// Model input layout (must be the standard order).
+    pub layout: InputLayout,
+    /// Token width `W`.
+    pub width: u32,
+    /// Attention heads.
+    pub heads: u32,
+    /// f32 `[min; o]` then `[max; o]`.
+    pub obs_norm: Section,
+    /// f32 `[min; k]` then `[max; k]`.
+    pub action_norm: Section,
+    /// f32 ProDMP tables (as the MLP blob).
+    pub prodmp: Section,
+    /// u32 `[steps][STEP_WORDS]`.
+    pub steps: Section,
+    /// f32 `[variants][W]` noise tokens.
+    pub noise_tokens: Section,
+    /// f32 `[n + 2][W]` positions.
+    pub positions: Section,
+    /// `k -> W`.
+    pub traj_in: LinearDesc,
+    /// `cond_dim -> W`.
+    pub cond_in: LinearDesc,
+    /// The blocks in order.
+    pub blocks: Vec<BlockDesc, MAX_BLOCKS>,
+    /// Final LayerNorm.
+    pub final_norm: NormDesc,
+    /// `(n + 2) W -> k p`.
+    pub head: LinearDesc,
+}
+
+/// Everything a transformer blob holds, borrowed.
+#[derive(Clone, Copy, Debug)]
+pub struct TransformerBlobParts<'p> {
+    /// Normalization, steps, decoder tables, layout, control period.
+    pub config: PolicyConfig<'p>,
+    /// The int8 backbone (`traj_in` and `cond_in` int8).
+    pub model: Int8Transformer<'p>,
+    /// The per-step noise tokens, `W` values each, back to back.
+    pub noise_tokens: &'p [f32],
+}
+
+fn small(value: usize) -> Result<u32, BlobError> {
+    u32::try_from(value).map_err(|_| BlobError::TooLarge)
+}
+
+fn write_linear(
+    writer: &mut SectionWriter<'_>,
+    input: QuantParams,
+    fc: &FullyConnected<'_>,
+    scales: &[f32],
+) -> Result<LinearDesc, BlobError> {
+    Ok(LinearDesc {
+        input_scale: input.scale,
+        input_zero_point: input.zero_point,
+        weights: writer.i8s(fc.weights.iter())?,
+        bias: writer.i32s(fc.bias)?,
+        scales: writer.f32s(scales.iter())?,
+    })
+}
+
+fn write_quantized(
+    writer: &mut SectionWriter<'_>,
+    layer: &QuantizedLinear<'_>,
+) -> Result<LinearDesc, BlobError> {
+    write_linear(writer, layer.input, &layer.linear.fc, layer.linear.output_scales)
+}
+
+fn write_input(writer: &mut SectionWriter<'_>, layer: &TokenLinear<'_>) -> Result<LinearDesc, BlobError> {
+    match layer {
+        TokenLinear::Int8(layer) => write_quantized(writer, layer),
+        // The format holds int8 input layers only.
+        TokenLinear::Float(_) => Err(BlobError::Encode),
+    }
+}
+
+fn write_norm(writer: &mut SectionWriter<'_>, norm: &LayerNormWeights<'_>) -> Result<NormDesc, BlobError> {
+    Ok(NormDesc {
+        gamma: writer.f32s(norm.gamma.iter())?,
+        beta: writer.f32s(norm.beta.iter())?,
+    })
+}
+
+fn write_block(writer: &mut SectionWriter<'_>, block: &Int8Block<'_>) -> Result<BlockDesc, BlobError> {
+    let ff = &block.feed_forward;
+    let gelu = ff.fc1.activation.ok_or(BlobError::Encode)?;
+    Ok(BlockDesc {
+        norm1: write_norm(writer, &block.norm1)?,
+        qkv: write_quantized(writer, &block.qkv)?,
+        proj: write_quantized(writer, &block.proj)?,
+        norm2: write_norm(writer, &block.norm2)?,
+        fc1: write_linear(writer, ff.input, &ff.fc1.fc, &[])?,
+        fc1_multipliers: writer.i32s(ff.fc1.requant.multipliers)?,
+        fc1_shifts: writer.i32s(ff.fc1.requant.shifts)?,
+        fc1_output_zero_point: ff.fc1.requant.output_zero_point,
+        gelu: writer.i8s(gelu.iter())?,
+        fc2: write_quantized(writer, &ff.fc2)?,
+    })
+}
+
+/// Lays out the sections of `parts` and returns the descriptor.
+fn emit(
+    parts: &TransformerBlobParts<'_>,
+    writer: &mut SectionWriter<'_>,
+) -> Result<TransformerDescriptor, BlobError> {
+    let PolicySections {
+        obs_norm,
+        action_norm,
+        prodmp,
+        steps,
+    } = policy_tables::write(writer, &parts.config)?;
+    let model = &parts.model;
+    let noise_tokens = writer.f32s(parts.noise_tokens.iter())?;
+    let positions = writer.f32s(model.positions.iter())?;
+    let traj_in = write_input(writer, &model.traj_in)?;
+    let cond_in = write_input(writer, &model.cond_in)?;
+    let mut blocks = Vec::new();
+    for block in model.blocks {
+        let desc = write_block(writer, block)?;
+        blocks.push(desc).map_err(|_| BlobError::TooLarge)?;
+    }
+    let final_norm = write_norm(writer, &model.final_norm)?;
+    let head = write_quantized(writer, &model.head)?;
+    let dims = parts.config.dims();
+    Ok(TransformerDescriptor {
+        history: small(dims.history)?,
+        obs_dim: small(dims.obs_dim)?,
+        action_dim: small(dims.action_dim)?,
+        horizon: small(dims.horizon)?,
+        params_per_dof: small(dims.params_per_dof)?,
+        control_dt: parts.config.sampler.control_dt,
+        layout: parts.config.sampler.layout,
+        width: small(model.shape.width)?,
+        heads: small(model.shape.heads)?,
+        obs_norm,
+        action_norm,
+        prodmp,
+        steps,
+        noise_tokens,
+        positions,
+        traj_in,
+        cond_in,
+        blocks,
+        final_norm,
+        head,
+    })
+}
+
+/// Exact length of the blob [`encode_transformer`] writes for `parts`.
+pub fn transformer_encoded_len(parts: &TransformerBlobParts<'_>) -> Result<usize, BlobError> {
+    container::encoded_len(|writer| emit(parts, writer))
+}
+
+/// Writes the transformer blob of `parts` into the front of `out` and returns its length
+/// ([`transformer_encoded_len`]). Fails with a named error if a size does not fit the format
+/// (more than [`MAX_BLOCKS`] blocks, sizes beyond u32, f32 input layers); the loader checks
+/// every shape.
+pub fn encode_transformer(parts: &TransformerBlobParts<'_>, out: &mut [u8]) -> Result<usize, BlobError> {
+    container::encode(TRANSFORMER_MAGIC, out, |writer| emit(parts, writer))
+}
+
+mod load;
+
+pub use load::LoadedTransformer;

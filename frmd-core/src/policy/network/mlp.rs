@@ -1,0 +1,248 @@
+//! MLP policy networks ([`Int8MlpNetwork`] and its f32 reference [`F32MlpNetwork`]): the noise
+//! embedding of each step is folded into the first layer's bias (the first hidden layer, or the
+//! output layer if there is none), one bias row per variant.
+
+use heapless::Vec;
+
+use super::{Network, NoiseVariants};
+use crate::model::linear::{F32Linear, Int8Linear, RequantizedLinear};
+use crate::model::mlp::{F32Mlp, F32Scratch, InputPrecision, Int8Mlp, Int8Scratch, ModelError};
+use crate::policy::PolicyError;
+use crate::quant::QuantParams;
+
+/// Most hidden layers an MLP policy network can hold.
+pub const MAX_HIDDEN_LAYERS: usize = 8;
+
+/// A layer whose bias the network replaces by a noise-level variant.
+trait BiasedLayer<'a> {
+    type Bias: 'a;
+    fn out_features(&self) -> usize;
+    fn set_bias(&mut self, bias: &'a [Self::Bias]);
+}
+
+impl<'a> BiasedLayer<'a> for RequantizedLinear<'a> {
+    type Bias = i32;
+    fn out_features(&self) -> usize {
+        self.fc.out_features
+    }
+    fn set_bias(&mut self, bias: &'a [i32]) {
+        self.fc.bias = bias;
+    }
+}
+
+impl<'a> BiasedLayer<'a> for Int8Linear<'a> {
+    type Bias = i32;
+    fn out_features(&self) -> usize {
+        self.fc.out_features
+    }
+    fn set_bias(&mut self, bias: &'a [i32]) {
+        self.fc.bias = bias;
+    }
+}
+
+impl<'a> BiasedLayer<'a> for F32Linear<'a> {
+    type Bias = f32;
+    fn out_features(&self) -> usize {
+        self.out_features
+    }
+    fn set_bias(&mut self, bias: &'a [f32]) {
+        self.bias = bias;
+    }
+}
+
+/// Hidden layers held by value and the output layer, so that a step's bias can be swapped in.
+#[derive(Clone, Debug)]
+struct Layers<L, O> {
+    hidden: Vec<L, MAX_HIDDEN_LAYERS>,
+    output: O,
+}
+
+impl<'a, L, O> Layers<L, O>
+where
+    L: BiasedLayer<'a> + Clone,
+    O: BiasedLayer<'a, Bias = L::Bias> + Clone,
+{
+    fn new(hidden: &[L], output: O) -> Result<Self, PolicyError> {
+        let hidden = Vec::from_slice(hidden).map_err(|()| PolicyError::TooManyLayers)?;
+        Ok(Self { hidden, output })
+    }
+
+    /// Width of the first layer's output (one variant row).
+    fn first_width(&self) -> usize {
+        self.hidden
+            .first()
+            .map_or(self.output.out_features(), BiasedLayer::out_features)
+    }
+
+    /// The layers with variant `index` of `variants` as the first layer's bias.
+    fn with_variant(
+        &self,
+        variants: &NoiseVariants<'a, L::Bias>,
+        index: usize,
+    ) -> Result<Self, PolicyError> {
+        let mut layers = self.clone();
+        if let Some(bias) = variants.select(index)? {
+            match layers.hidden.first_mut() {
+                Some(first) => first.set_bias(bias),
+                None => layers.output.set_bias(bias),
+            }
+        }
+        Ok(layers)
+    }
+}
+
+/// [`Int8Mlp`] with per-step first-layer biases and its own scratch (`WIDTH` >= every layer
+/// width).
+#[derive(Clone, Debug)]
+pub struct Int8MlpNetwork<'a, const WIDTH: usize> {
+    input: QuantParams,
+    precision: InputPrecision,
+    layers: Layers<RequantizedLinear<'a>, Int8Linear<'a>>,
+    variants: NoiseVariants<'a, i32>,
+    scratch: Int8Scratch<WIDTH>,
+}
+
+impl<'a, const WIDTH: usize> Int8MlpNetwork<'a, WIDTH> {
+    /// The network of the int8 MLP `input`, `hidden` (copied, so their slice may be
+    /// short-lived), `output`, with its input quantized as `precision` says
+    /// ([`InputPrecision::TwoPlane`] and [`InputPrecision::Int16`] need a hidden layer and a
+    /// first layer made for them, see [`crate::model::mlp`]). `noise_variants` holds the first
+    /// layer's bias variants back to back (int32, input zero point folded), `out_features` each,
+    /// or is empty to always use the layer's own bias.
+    pub fn new(
+        input: QuantParams,
+        precision: InputPrecision,
+        hidden: &[RequantizedLinear<'a>],
+        output: Int8Linear<'a>,
+        noise_variants: &'a [i32],
+    ) -> Result<Self, PolicyError> {
+        if precision != InputPrecision::Int8 && hidden.is_empty() {
+            return Err(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer));
+        }
+        let layers = Layers::new(hidden, output)?;
+        let mlp = Int8Mlp {
+            input,
+            hidden,
+            output,
+        };
+        mlp.validate(WIDTH).map_err(PolicyError::Model)?;
+        // Once here, so that `forward` need not repeat the per-channel checks.
+        mlp.validate_requantization().map_err(PolicyError::Model)?;
+        let variants = NoiseVariants::new(noise_variants, layers.first_width())?;
+        Ok(Self {
+            input,
+            precision,
+            layers,
+            variants,
+            scratch: Int8Scratch::new(),
+        })
+    }
+
+    /// How the input is quantized.
+    pub fn input_precision(&self) -> InputPrecision {
+        self.precision
+    }
+
+    /// The output layer's int32 accumulators of the last forward pass (for bit-exactness checks).
+    pub fn accumulators(&self) -> &[i32] {
+        self.scratch
+            .accumulators()
+            .get(..self.layers.output.fc.out_features)
+            .unwrap_or(&[])
+    }
+}
+
+impl<const WIDTH: usize> Network for Int8MlpNetwork<'_, WIDTH> {
+    fn input_width(&self) -> usize {
+        self.layers
+            .hidden
+            .first()
+            .map_or(self.layers.output.fc.in_features, |layer| layer.fc.in_features)
+    }
+
+    fn output_width(&self) -> usize {
+        self.layers.output.fc.out_features
+    }
+
+    fn num_noise_variants(&self) -> usize {
+        self.variants.count()
+    }
+
+    fn forward(
+        &mut self,
+        variant: usize,
+        input: &[f32],
+        output: &mut [f32],
+    ) -> Result<(), PolicyError> {
+        let layers = self.layers.with_variant(&self.variants, variant)?;
+        let mlp = Int8Mlp {
+            input: self.input,
+            hidden: &layers.hidden,
+            output: layers.output,
+        };
+        mlp.forward_prevalidated(self.precision, input, output, self.scratch.buffers())
+            .map_err(PolicyError::Model)
+    }
+}
+
+/// [`F32Mlp`] with per-step first-layer biases and its own scratch (the f32 reference of
+/// [`Int8MlpNetwork`]).
+#[derive(Clone, Debug)]
+pub struct F32MlpNetwork<'a, const WIDTH: usize> {
+    layers: Layers<F32Linear<'a>, F32Linear<'a>>,
+    variants: NoiseVariants<'a, f32>,
+    scratch: F32Scratch<WIDTH>,
+}
+
+impl<'a, const WIDTH: usize> F32MlpNetwork<'a, WIDTH> {
+    /// The network of the f32 MLP `hidden` (copied), `output`; `noise_variants` as in
+    /// [`Int8MlpNetwork::new`], in f32.
+    pub fn new(
+        hidden: &[F32Linear<'a>],
+        output: F32Linear<'a>,
+        noise_variants: &'a [f32],
+    ) -> Result<Self, PolicyError> {
+        let layers = Layers::new(hidden, output)?;
+        F32Mlp { hidden, output }
+            .validate(WIDTH)
+            .map_err(PolicyError::Model)?;
+        let variants = NoiseVariants::new(noise_variants, layers.first_width())?;
+        Ok(Self {
+            layers,
+            variants,
+            scratch: F32Scratch::new(),
+        })
+    }
+}
+
+impl<const WIDTH: usize> Network for F32MlpNetwork<'_, WIDTH> {
+    fn input_width(&self) -> usize {
+        self.layers
+            .hidden
+            .first()
+            .map_or(self.layers.output.in_features, |layer| layer.in_features)
+    }
+
+    fn output_width(&self) -> usize {
+        self.layers.output.out_features
+    }
+
+    fn num_noise_variants(&self) -> usize {
+        self.variants.count()
+    }
+
+    fn forward(
+        &mut self,
+        variant: usize,
+        input: &[f32],
+        output: &mut [f32],
+    ) -> Result<(), PolicyError> {
+        let layers = self.layers.with_variant(&self.variants, variant)?;
+        let mlp = F32Mlp {
+            hidden: &layers.hidden,
+            output: layers.output,
+        };
+        mlp.forward(input, output, &mut self.scratch)
+            .map_err(PolicyError::Model)
+    }
+}

@@ -1,0 +1,266 @@
+//! Latency per action chunk of every policy kind side by side, in one process (what `frmd bench`
+//! does): batch 1, after warm-up, median and p99 over >= 200 calls (DESIGN.md section 6), with
+//! the ratio of each row to the first row: the frmd-core int8 one-step policy (the candle
+//! one-step student if the student cannot be exported). On x86-64 CPUs with AVX2 the int8 policy
+//! is timed again with frmd-core's lower kernel levels (`... avx2` without AVX-VNNI,
+//! `... portable`).
+//!
+//! By default it times the checkpoints `frmd quickstart` wrote (`runs/quickstart/{student,
+//! teacher,dp}`): student 1 step, teacher 10 Heun steps, DP 100 (DDPM) and 10 (DDIM) steps, all
+//! with the same backbone. [`BenchConfig::policies`] times other checkpoints instead, and
+//! [`BenchConfig::synthetic`] times randomly initialized networks of a given backbone (latency
+//! does not depend on the weights), which needs no checkpoint at all. [`fixtures`] builds such
+//! networks for the benchmarks and instruction counts.
+use crate::checkpoint::Role;
+use crate::diffusion::samplers::Solver;
+use crate::eval::metrics::quantile;
+use crate::export::{export_mlp, ExportConfig};
+use crate::models::BackboneConfig;
+use crate::policy::float::FloatPolicy;
+use crate::policy::int8::Int8Policy;
+use crate::quickstart::QuickstartConfig;
+use crate::tasks::{Policy, PolicyInput};
+use anyhow::Context;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+pub mod fixtures;
+
+/// What to time.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BenchConfig {
+    /// Checkpoints to time (empty: student:1, teacher:10:heun, dp:100, dp:10 from `dir`).
+    pub policies: Vec<PolicySpec>,
+    /// Directory holding `student/`, `teacher/` and `dp/` checkpoints (as written by quickstart).
+    pub dir: PathBuf,
+    /// Time randomly initialized networks of `backbone` instead of checkpoints.
+    pub synthetic: bool,
+    /// Backbone of the synthetic networks.
+    pub backbone: BackboneConfig,
+    /// Timed calls per policy (at least 200 for the DESIGN.md p99).
+    pub calls: usize,
+    /// Untimed warm-up calls per policy.
+    pub warmup: usize,
+}
+
+impl Default for BenchConfig {
+    /// The quick start's checkpoints and backbone, 200 timed calls after 20 warm-up calls.
+    fn default() -> Self {
+        let quickstart = QuickstartConfig::default();
+        BenchConfig { policies: Vec::new(), dir: quickstart.out, synthetic: false, backbone: quickstart.backbone, calls: 200, warmup: 20 }
+    }
+}
+
+/// A checkpoint to time with its sampler: `DIR[:STEPS[:SOLVER]]`, e.g.
+/// `runs/quickstart/teacher:10:heun`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PolicySpec {
+    pub dir: PathBuf,
+    pub steps: Option<usize>,
+    pub solver: Option<Solver>,
+}
+
+impl std::str::FromStr for PolicySpec {
+    type Err = anyhow::Error;
+
+    fn from_str(spec: &str) -> anyhow::Result<Self> {
+        let mut parts = spec.split(':');
+        let dir = PathBuf::from(parts.next().unwrap_or_default());
+        let steps = parts.next().map(|s| s.parse::<usize>().with_context(|| format!("bad step count in `{spec}`"))).transpose()?;
+        let solver = parts.next().map(Solver::parse).transpose()?;
+        Ok(PolicySpec { dir, steps, solver })
+    }
+}
+
+/// One timed policy.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchRow {
+    /// What ran, e.g. `candle student-1`.
+    pub label: String,
+    /// Backbone description, e.g. `mlp[256,256,256] silu`.
+    pub backbone: String,
+    /// Wall time per chunk, microseconds.
+    pub median_us: f64,
+    pub p99_us: f64,
+    pub calls: usize,
+}
+
+/// A readable backbone description for tables.
+pub fn backbone_label(backbone: &BackboneConfig) -> String {
+    match backbone {
+        BackboneConfig::Mlp { hidden, activation } => {
+            let widths: Vec<String> = hidden.iter().map(|w| w.to_string()).collect();
+            format!("mlp[{}] {}", widths.join(","), format!("{activation:?}").to_lowercase())
+        }
+        BackboneConfig::Transformer { layers, heads, width } => format!("transformer {layers}x{heads}h {width}"),
+    }
+}
+
+/// A fixed policy input of the right sizes (the values do not change the amount of work).
+pub struct FixedInput {
+    obs: Vec<Vec<f32>>,
+    prev: Vec<f32>,
+    rate: Vec<f32>,
+}
+
+impl FixedInput {
+    pub fn new(obs_dim: usize, action_dim: usize, history: usize) -> Self {
+        FixedInput { obs: vec![vec![0.1; obs_dim]; history], prev: vec![0.0; action_dim], rate: vec![0.0; action_dim] }
+    }
+
+    pub fn input(&self) -> PolicyInput<'_> {
+        PolicyInput { obs_history: &self.obs, prev_action: &self.prev, prev_rate: &self.rate }
+    }
+}
+
+/// Times `calls` chunks of `policy` after `warmup` untimed ones; returns (median, p99) in us.
+pub fn time_policy(policy: &mut dyn Policy, input: &PolicyInput<'_>, warmup: usize, calls: usize) -> anyhow::Result<(f64, f64)> {
+    anyhow::ensure!(calls >= 1, "at least one timed call is needed");
+    policy.reset(0);
+    for _ in 0..warmup {
+        policy.act(input)?;
+    }
+    let mut times = Vec::with_capacity(calls);
+    for _ in 0..calls {
+        let start = Instant::now();
+        policy.act(input)?;
+        times.push(start.elapsed().as_secs_f64() * 1e6);
+    }
+    Ok((quantile(&times, 0.5), quantile(&times, 0.99)))
+}
+
+/// The candle float policies of the default comparison, loaded from `dir` (or synthetic).
+fn default_float_policies(cfg: &BenchConfig) -> anyhow::Result<Vec<FloatPolicy>> {
+    let kinds = [(Role::Student, "student", 1, None), (Role::Teacher, "teacher", 10, Some(Solver::Heun)), (Role::Dp, "dp", 100, None), (Role::Dp, "dp", 10, None)];
+    let mut out = Vec::new();
+    for (role, name, steps, solver) in kinds {
+        out.push(if cfg.synthetic {
+            fixtures::synthetic_float_policy(&cfg.backbone, 6, role, Some(steps), solver)?
+        } else {
+            let dir = cfg.dir.join(name);
+            FloatPolicy::load(&dir, Some(steps), solver).with_context(|| format!("loading {} (run `frmd quickstart` first, or pass --synthetic or --policy)", dir.display()))?
+        });
+    }
+    Ok(out)
+}
+
+/// Policies with their table labels.
+type LabelledPolicies = Vec<(String, Box<dyn Policy>)>;
+
+/// The frmd-core int8 and f32 one-step policies for the comparison: the student in `--dir`
+/// exported as `frmd export` does it (or, with `--synthetic`, a random student of `--backbone`
+/// exported the same way). Returns the policies, or why there are none.
+fn core_policies(cfg: &BenchConfig) -> Result<LabelledPolicies, String> {
+    let build = || -> anyhow::Result<Result<(Int8Policy, Int8Policy), String>> {
+        if cfg.synthetic {
+            let dir = std::env::temp_dir().join(format!("frmd-bench-{}", std::process::id()));
+            let policies = fixtures::reach_student(&dir, &cfg.backbone, 7);
+            let _ = std::fs::remove_dir_all(&dir);
+            return Ok(policies?.core.map(|c| (c.int8, c.core_f32)));
+        }
+        let ckpt = cfg.dir.join("student");
+        let exported = export_mlp(&ExportConfig::for_checkpoint(&ckpt)).with_context(|| format!("exporting {}", ckpt.display()))?;
+        let blob = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
+        Ok(Ok((Int8Policy::from_blob(&blob, "int8")?, Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?)))
+    };
+    match build() {
+        Ok(Ok((int8, f32_twin))) => Ok(vec![
+            ("frmd-core int8 1-step".to_string(), Box::new(int8) as Box<dyn Policy>),
+            ("frmd-core f32 1-step".to_string(), Box::new(f32_twin)),
+        ]),
+        Ok(Err(reason)) => Err(format!("frmd-core policies unavailable: {reason}")),
+        Err(e) => Err(format!("frmd-core policies unavailable: {e:#}")),
+    }
+}
+
+/// Runs the whole comparison and returns its rows (reference row first when present) plus a
+/// note about what is missing.
+pub fn bench_rows(cfg: &BenchConfig) -> anyhow::Result<(Vec<BenchRow>, Option<String>)> {
+    let floats = if cfg.policies.is_empty() {
+        default_float_policies(cfg)?
+    } else {
+        let mut v = Vec::new();
+        for spec in &cfg.policies {
+            v.push(FloatPolicy::load(&spec.dir, spec.steps, spec.solver).with_context(|| format!("loading {}", spec.dir.display()))?);
+        }
+        v
+    };
+    let (core, note) = match core_policies(cfg) {
+        Ok(list) => (list, None),
+        Err(reason) => (Vec::new(), Some(reason)),
+    };
+    let mut rows = Vec::new();
+    let first = floats.first().context("no policy to time")?;
+    let (obs_dim, action_dim, history) = first.input_sizes();
+    let fixed = FixedInput::new(obs_dim, action_dim, history);
+    for (label, mut policy) in core {
+        let backbone = backbone_label(&first.config().backbone);
+        let (median_us, p99_us) = time_policy(policy.as_mut(), &fixed.input(), cfg.warmup, cfg.calls)?;
+        rows.push(BenchRow { label: label.clone(), backbone: backbone.clone(), median_us, p99_us, calls: cfg.calls });
+        for (level, median_us, p99_us) in time_kernel_levels(policy.as_mut(), &fixed.input(), cfg)? {
+            rows.push(BenchRow { label: format!("{label} {level}"), backbone: backbone.clone(), median_us, p99_us, calls: cfg.calls });
+        }
+    }
+    for mut policy in floats {
+        let (o, a, h) = policy.input_sizes();
+        let fixed = FixedInput::new(o, a, h);
+        let (median_us, p99_us) = time_policy(&mut policy, &fixed.input(), cfg.warmup, cfg.calls)?;
+        rows.push(BenchRow { label: format!("candle {}", policy.name()), backbone: backbone_label(&policy.config().backbone), median_us, p99_us, calls: cfg.calls });
+    }
+    Ok((rows, note))
+}
+
+/// On x86-64 CPUs where frmd-core's int8 kernels use AVX2 (and AVX-VNNI): the same policy timed
+/// again with the lower kernel levels, which give identical outputs (what CPUs without those
+/// instructions run): `avx2` (without AVX-VNNI, if it was active) and `portable` (SSE2).
+#[cfg(target_arch = "x86_64")]
+fn time_kernel_levels(policy: &mut dyn Policy, input: &PolicyInput<'_>, cfg: &BenchConfig) -> anyhow::Result<Vec<(&'static str, f64, f64)>> {
+    use frmd_core::kernels::x86;
+    let mut rows = Vec::new();
+    if !policy.name().contains("int8") || !x86::avx2_active() {
+        return Ok(rows);
+    }
+    if x86::avx_vnni_active() {
+        x86::set_avx_vnni_enabled(false);
+        let timed = time_policy(policy, input, cfg.warmup, cfg.calls);
+        x86::set_avx_vnni_enabled(true);
+        let (median, p99) = timed?;
+        rows.push(("avx2", median, p99));
+    }
+    x86::set_avx2_enabled(false);
+    let timed = time_policy(policy, input, cfg.warmup, cfg.calls);
+    x86::set_avx2_enabled(true);
+    let (median, p99) = timed?;
+    rows.push(("portable", median, p99));
+    Ok(rows)
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+fn time_kernel_levels(_: &mut dyn Policy, _: &PolicyInput<'_>, _: &BenchConfig) -> anyhow::Result<Vec<(&'static str, f64, f64)>> {
+    Ok(Vec::new())
+}
+
+/// Prints the rows with ratios to the first row.
+pub fn print_table(rows: &[BenchRow], warmup: usize, note: Option<&str>) {
+    let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into());
+    let Some(reference) = rows.first() else { return };
+    println!("{:<28} {:<22} {:>11} {:>11} {:>6} {:>9}", "policy", "backbone", "median us", "p99 us", "calls", "ratio");
+    for row in rows {
+        println!(
+            "{:<28} {:<22} {:>11.1} {:>11.1} {:>6} {:>8.1}x",
+            row.label, row.backbone, row.median_us, row.p99_us, row.calls, row.median_us / reference.median_us
+        );
+    }
+    println!("batch 1, {warmup} warm-up calls, ratio = median / median of `{}`, RAYON_NUM_THREADS={threads}", reference.label);
+    if let Some(note) = note {
+        println!("note: {note}");
+    }
+}
+
+/// Writes the rows as JSON.
+pub fn write_json(path: &Path, rows: &[BenchRow], note: Option<&str>) -> anyhow::Result<()> {
+    let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into());
+    let value = serde_json::json!({ "threads": threads, "batch": 1, "results": rows, "note": note });
+    std::fs::write(path, serde_json::to_string_pretty(&value)?).with_context(|| format!("cannot write {}", path.display()))
+}

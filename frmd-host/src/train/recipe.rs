@@ -1,0 +1,164 @@
+//! The training recipe: what a run of `frmd train teacher|student|dp` is given, as typed config
+//! structs whose `Default` is the recipe. The command line maps its flags onto these structs
+//! (its defaults are read from here), and the quick start and the tests build them in code. The
+//! algorithm settings inside ([`TeacherConfig`], [`DistillConfig`], [`DpConfig`],
+//! [`LoopConfig::paper`]) keep their own defaults; this module composes them.
+use super::distill::DistillConfig;
+use super::dp::DpConfig;
+use super::optim::OptimConfig;
+use super::teacher::TeacherConfig;
+use super::LoopConfig;
+use crate::diffusion::samplers::Solver;
+use crate::eval::EvalConfig;
+use crate::models::{BackboneConfig, ProDmpOutput};
+use std::path::PathBuf;
+
+/// Gradient steps of a run (the paper's 30k).
+pub const PAPER_STEPS: usize = 30_000;
+
+/// What every training run shares: data, output, model sizes, optimizer and the evaluation
+/// during training.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainConfig {
+    /// Demonstrations (`.safetensors`, DESIGN.md section 4).
+    pub data: PathBuf,
+    /// Output checkpoint directory.
+    pub out: PathBuf,
+    pub backbone: BackboneConfig,
+    /// Gradient steps.
+    pub steps: usize,
+    pub seed: u64,
+    pub batch: usize,
+    /// Peak learning rate (AdamW, linear warm-up, cosine decay to zero).
+    pub lr: f64,
+    pub weight_decay: f64,
+    /// Warm-up steps.
+    pub warmup: usize,
+    /// Teacher and student: repeat each episode's final observation/action this many steps
+    /// (`train::padding`).
+    pub pad_end: usize,
+    /// Learning-rate multiplier of the output (ProDMP parameter) layer
+    /// (`train::optim::ScheduledAdamW::for_network`).
+    pub head_lr_scale: f64,
+    /// Observation history m.
+    pub history: usize,
+    /// Prediction horizon n.
+    pub horizon: usize,
+    /// ProDMP basis functions b.
+    pub num_basis: usize,
+    /// Length of the noise embedding.
+    pub embed_dim: usize,
+    /// The loss is averaged and reported every this many steps.
+    pub log_every: usize,
+    /// Closed-loop evaluation every this many steps (0: only at the end).
+    pub eval_every: usize,
+    /// Episodes per evaluation (0: no evaluation).
+    pub eval_episodes: usize,
+    /// Actions executed per chunk in evaluation.
+    pub exec_steps: usize,
+    /// Sampling steps of the evaluation (`None`: the role's default).
+    pub eval_steps: Option<usize>,
+    /// Held-out demonstrations (teacher and student): the open-loop chunk error on them and on
+    /// training windows is reported at every evaluation.
+    pub holdout: Option<PathBuf>,
+}
+
+impl Default for TrainConfig {
+    /// The paper's optimizer and sizes (batch 128, AdamW lr 1e-4, weight decay 1e-6, 500 warm-up
+    /// steps, 30k steps, m 2, n 12, 20 basis functions) with the MLP [256, 256, 256] backbone;
+    /// data and output paths empty.
+    fn default() -> Self {
+        let paper = LoopConfig::paper(PAPER_STEPS, 0);
+        let OptimConfig { lr, weight_decay, warmup_steps, head_lr_scale, .. } = paper.optim;
+        TrainConfig {
+            data: PathBuf::new(),
+            out: PathBuf::new(),
+            backbone: BackboneConfig::preset("mlp").expect("`mlp` is a preset"),
+            steps: paper.steps,
+            seed: paper.seed,
+            batch: paper.batch_size,
+            lr,
+            weight_decay,
+            warmup: warmup_steps,
+            pad_end: 0,
+            head_lr_scale,
+            history: 2,
+            horizon: 12,
+            num_basis: 20,
+            embed_dim: 16,
+            log_every: paper.log_every,
+            eval_every: 0,
+            eval_episodes: 20,
+            exec_steps: EvalConfig::default().exec_steps,
+            eval_steps: None,
+            holdout: None,
+        }
+    }
+}
+
+impl TrainConfig {
+    /// The optimizer loop these settings describe.
+    pub fn loop_config(&self) -> LoopConfig {
+        LoopConfig {
+            steps: self.steps,
+            batch_size: self.batch,
+            seed: self.seed,
+            optim: OptimConfig { lr: self.lr, weight_decay: self.weight_decay, warmup_steps: self.warmup, total_steps: self.steps, min_lr_ratio: 0.0, head_lr_scale: self.head_lr_scale },
+            log_every: self.log_every,
+        }
+    }
+}
+
+/// A teacher run (`frmd train teacher`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TeacherRun {
+    pub train: TrainConfig,
+    pub teacher: TeacherConfig,
+    /// Output parametrization of the ProDMP head.
+    pub output: ProDmpOutput,
+    /// Scale every ProDMP basis column to a largest value of 1 (mp_pytorch's `auto_scale_basis`;
+    /// `frmd_export::checkpoint::HeadConfig::ProDmp`).
+    pub auto_scale_basis: bool,
+    /// ODE solver of the evaluation during training (`None`: the teacher sampler's default).
+    pub eval_solver: Option<Solver>,
+}
+
+/// A student run (`frmd train student`): consistency distillation of `teacher`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StudentRun {
+    pub train: TrainConfig,
+    /// Teacher checkpoint directory.
+    pub teacher: PathBuf,
+    pub distill: DistillConfig,
+}
+
+/// A DP-baseline run (`frmd train dp`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DpRun {
+    pub train: TrainConfig,
+    pub dp: DpConfig,
+}
+
+/// Open-loop chunk error of a teacher or student checkpoint on its training data and on held-out
+/// demonstrations (`frmd train probe`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProbeConfig {
+    /// Teacher or student checkpoint directory.
+    pub ckpt: PathBuf,
+    /// The demonstrations it was trained on.
+    pub data: PathBuf,
+    /// Held-out demonstrations of the same task.
+    pub holdout: PathBuf,
+    /// Sampling steps (`None`: teacher 10, student 1).
+    pub steps: Option<usize>,
+    /// Teacher solver.
+    pub solver: Solver,
+    /// Windows measured per set (evenly spaced).
+    pub windows: usize,
+}
+
+impl Default for ProbeConfig {
+    fn default() -> Self {
+        ProbeConfig { ckpt: PathBuf::new(), data: PathBuf::new(), holdout: PathBuf::new(), steps: None, solver: Solver::DpmPp2m, windows: 1024 }
+    }
+}
