@@ -38,6 +38,12 @@ pub use policy::{Policy, PolicyInput};
 /// Names accepted by [`make_task`], easiest first.
 pub const TASK_NAMES: &[&str] = &["reach", "avoid", "push", "insert"];
 
+/// Whether frmd-host simulates `task` (a dataset's `task` field), i.e. can evaluate it in closed
+/// loop; datasets of other simulators (e.g. `metaworld/reach-v3`) train but evaluate elsewhere.
+pub fn is_simulated(task: &str) -> bool {
+    TASK_NAMES.contains(&task)
+}
+
 /// Control period of every built-in task, seconds.
 pub const CONTROL_DT: f64 = 0.1;
 
