@@ -145,7 +145,11 @@ impl CheckpointMeta {
         self.model.validate().with_context(|| format!("{CONFIG_FILE}: model"))?;
         self.sigma.validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))?;
         let expected_prodmp = self.model.prodmp();
-        if self.prodmp != expected_prodmp {
+        let same = match (&self.prodmp, &expected_prodmp) {
+            (Some(a), Some(b)) => prodmp_matches(a, b),
+            (a, b) => a == b,
+        };
+        if !same {
             bail!("{CONFIG_FILE}: prodmp config {:?} differs from the policy convention for this model ({:?})", self.prodmp, expected_prodmp);
         }
         match (self.role, self.prodmp.is_some()) {
@@ -168,6 +172,16 @@ impl CheckpointMeta {
         meta.validate()?;
         Ok(meta)
     }
+}
+
+/// Equal up to the last bits of the f64 fields: serde_json's default parser may read a written
+/// f64 back one unit in the last place off (e.g. tau = 12 x 0.0125f32 as f64), so a checkpoint's
+/// recorded ProDMP config is compared with the recomputed one at a relative 1e-12.
+pub fn prodmp_matches(a: &ProDmpConfig, b: &ProDmpConfig) -> bool {
+    let close = |x: f64, y: f64| x == y || (x - y).abs() <= 1e-12 * x.abs().max(y.abs());
+    let floats = |p: &ProDmpConfig| [p.tau, p.delay, p.alpha, p.alpha_phase, p.bandwidth_factor, p.dt, p.weights_scale, p.goal_scale];
+    let exact = |p: &ProDmpConfig| (p.num_dof, p.num_basis, p.num_basis_outside, p.relative_goal, p.auto_scale_basis);
+    exact(a) == exact(b) && floats(a).iter().zip(floats(b)).all(|(&x, y)| close(x, y))
 }
 
 /// One f32 tensor read from the weights file.
