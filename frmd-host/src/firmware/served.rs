@@ -2,7 +2,7 @@
 //! has a command): the served observations and actions arrive as f64 and go to the image as f32,
 //! as the host int8 policy takes them.
 use super::policy::FirmwarePolicy;
-use crate::serve::protocol::{ActInput, ServedPolicy};
+use crate::serve::{ActInput, ServedPolicy};
 
 impl ServedPolicy for FirmwarePolicy {
     fn reset(&mut self, seed: u64) {
