@@ -239,4 +239,8 @@ impl Policy for Int8Policy {
     fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
         self.runner.run(input, Noise::Rng(&mut self.rng))
     }
+
+    fn horizon(&self) -> Option<usize> {
+        Some(self.dims().horizon)
+    }
 }
