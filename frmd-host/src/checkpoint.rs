@@ -30,7 +30,7 @@ pub fn save_meta(dir: &Path, meta: &CheckpointMeta) -> anyhow::Result<()> {
 /// Reads and validates a checkpoint; every tensor is checked against `frmd.json`.
 pub fn load(dir: &Path) -> anyhow::Result<(CheckpointMeta, OwnedNetwork)> {
     let meta = CheckpointMeta::read(dir)?;
-    let tensors = read_weights(dir, &meta)?;
+    let tensors = read_weights(dir, &meta).with_context(|| format!("{}", dir.display()))?;
     let net = OwnedNetwork::new_seeded(&meta.model, 0, &Device::Cpu)?;
     for (name, var) in sorted_vars(&net.varmap) {
         let tensor = tensors.get(&name).with_context(|| format!("{WEIGHTS_FILE}: variable `{name}` of the model is not in {CONFIG_FILE}'s tensor list"))?;
