@@ -26,10 +26,10 @@ pub struct CollectArgs {
     /// Perturb the executed actions with smooth noise of this standard deviation (metres) and
     /// record the expert's clean actions (DART), so the demonstrations contain recoveries.
     /// 0 = unperturbed.
-    #[arg(long, default_value_t = ActionNoise::default().std)]
+    #[arg(long, default_value_t = CollectConfig::default().noise.std)]
     pub perturb_std: f64,
     /// Correlation time of the perturbation, seconds.
-    #[arg(long, default_value_t = ActionNoise::default().correlation_time)]
+    #[arg(long, default_value_t = CollectConfig::default().noise.correlation_time)]
     pub perturb_time: f64,
 }
 

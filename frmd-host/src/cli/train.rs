@@ -65,24 +65,25 @@ pub struct CommonArgs {
     /// transformer:LAYERS,HEADS,WIDTH (default: mlp). A student takes its teacher's.
     #[arg(long)]
     pub backbone: Option<BackboneConfig>,
-    /// Gradient steps.
-    #[arg(long, default_value_t = TrainConfig::default().steps)]
-    pub steps: usize,
+    /// Gradient steps [default: teacher and dp 20000, student 3000].
+    #[arg(long)]
+    pub steps: Option<usize>,
     /// Seed of initialization, batches and noise.
     #[arg(long, default_value_t = TrainConfig::default().seed)]
     pub seed: u64,
     /// Batch size.
     #[arg(long, default_value_t = TrainConfig::default().batch)]
     pub batch: usize,
-    /// Peak learning rate (AdamW, linear warm-up, cosine decay to zero).
-    #[arg(long, default_value_t = TrainConfig::default().lr)]
-    pub lr: f64,
+    /// Peak learning rate (AdamW, linear warm-up, cosine decay to zero) [default: teacher and dp
+    /// 1e-3, student 1e-4].
+    #[arg(long)]
+    pub lr: Option<f64>,
     /// AdamW weight decay.
     #[arg(long, default_value_t = TrainConfig::default().weight_decay)]
     pub weight_decay: f64,
-    /// Warm-up steps of the learning rate.
-    #[arg(long, default_value_t = TrainConfig::default().warmup)]
-    pub warmup: usize,
+    /// Warm-up steps of the learning rate [default: teacher and dp 500, student 100].
+    #[arg(long)]
+    pub warmup: Option<usize>,
     /// Teacher and student: repeat each episode's final observation/action this many steps
     /// (hold-at-goal windows, see `train::padding`). Not used by the DP baseline.
     #[arg(long, default_value_t = TrainConfig::default().pad_end)]
@@ -124,26 +125,27 @@ pub struct CommonArgs {
     pub holdout: Option<PathBuf>,
 }
 
-impl From<CommonArgs> for TrainConfig {
-    fn from(a: CommonArgs) -> Self {
-        let d = TrainConfig::default();
+impl CommonArgs {
+    /// The flags over a role's recipe (`recipe` gives the flags left out).
+    fn over(self, recipe: TrainConfig) -> TrainConfig {
+        let a = self;
         TrainConfig {
             data: a.data,
             out: a.out,
             force: a.force,
-            backbone: a.backbone.unwrap_or(d.backbone),
-            steps: a.steps,
+            backbone: a.backbone.unwrap_or(recipe.backbone),
+            steps: a.steps.unwrap_or(recipe.steps),
             seed: a.seed,
             batch: a.batch,
-            lr: a.lr,
+            lr: a.lr.unwrap_or(recipe.lr),
             weight_decay: a.weight_decay,
-            warmup: a.warmup,
+            warmup: a.warmup.unwrap_or(recipe.warmup),
             pad_end: a.pad_end,
             head_lr_scale: a.head_lr_scale,
-            history: a.history.unwrap_or(d.history),
-            horizon: a.horizon.unwrap_or(d.horizon),
-            num_basis: a.num_basis.unwrap_or(d.num_basis),
-            embed_dim: a.embed_dim.unwrap_or(d.embed_dim),
+            history: a.history.unwrap_or(recipe.history),
+            horizon: a.horizon.unwrap_or(recipe.horizon),
+            num_basis: a.num_basis.unwrap_or(recipe.num_basis),
+            embed_dim: a.embed_dim.unwrap_or(recipe.embed_dim),
             log_every: a.log_every,
             eval_every: a.eval_every,
             eval_episodes: a.eval_episodes,
@@ -169,8 +171,9 @@ pub struct TeacherArgs {
     /// boundary-skip (EDM skip on the free part of the chunk; y0/v0 stay exact).
     #[arg(long, default_value_t = TeacherRun::default().output)]
     pub parametrization: ProDmpOutput,
-    /// Scale every ProDMP basis column to a largest value of 1 (mp_pytorch's auto_scale_basis).
-    #[arg(long)]
+    /// Scale every ProDMP basis column to a largest value of 1 (mp_pytorch's auto_scale_basis):
+    /// true | false.
+    #[arg(long, default_value_t = TeacherRun::default().auto_scale_basis, action = clap::ArgAction::Set)]
     pub auto_scale_basis: bool,
     /// Solver for evaluation: euler | heun | dpm++2m (default: heun).
     #[arg(long)]
@@ -205,7 +208,7 @@ impl From<AugmentArgs> for CondAugment {
 impl From<TeacherArgs> for TeacherRun {
     fn from(a: TeacherArgs) -> Self {
         TeacherRun {
-            train: a.common.into(),
+            train: a.common.over(TrainConfig::teacher_recipe()),
             teacher: TeacherConfig { weight: a.loss_weight, sampling: SigmaSampling { uniform_fraction: a.sigma_uniform_fraction }, augment: a.augment.into(), ema: a.ema },
             output: a.parametrization,
             auto_scale_basis: a.auto_scale_basis,
@@ -250,7 +253,7 @@ impl From<StudentArgs> for StudentRun {
         let shape = StudentShape { history: c.history, horizon: c.horizon, num_basis: c.num_basis, backbone: c.backbone.clone(), embed_dim: c.embed_dim };
         StudentRun {
             shape,
-            train: a.common.into(),
+            train: a.common.over(TrainConfig::student_recipe()),
             teacher: a.teacher,
             distill: DistillConfig { levels: a.levels, teacher_steps: a.k, solver: a.solver, target_ema: a.target_ema, eval_ema: a.eval_ema, augment: a.augment.into(), output: a.parametrization },
         }
@@ -272,7 +275,7 @@ pub struct DpArgs {
 
 impl From<DpArgs> for DpRun {
     fn from(a: DpArgs) -> Self {
-        DpRun { train: a.common.into(), dp: DpConfig { parametrization: a.parametrization, eval_ema: a.ema } }
+        DpRun { train: a.common.over(TrainConfig::dp_recipe()), dp: DpConfig { parametrization: a.parametrization, eval_ema: a.ema } }
     }
 }
 
@@ -291,3 +294,7 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {
     println!("{outcome}");
     Ok(ExitCode::SUCCESS)
 }
+
+#[cfg(test)]
+#[path = "train_tests.rs"]
+mod tests;

@@ -112,8 +112,27 @@ impl TrainConfig {
     }
 }
 
+impl TrainConfig {
+    /// The teacher's schedule: 20k steps, lr 1e-3 (500 warm-up steps, cosine decay). The paper's
+    /// lr 1e-4 left the MLP teachers imprecise at this budget (docs/experiments.md).
+    pub fn teacher_recipe() -> Self {
+        TrainConfig { steps: 20_000, lr: 1e-3, warmup: 500, ..TrainConfig::default() }
+    }
+
+    /// The student's schedule: 3,000 distillation steps, lr 1e-4, 100 warm-up steps (6,000 steps
+    /// or lr 3e-4 measured no better, docs/design.md section 7).
+    pub fn student_recipe() -> Self {
+        TrainConfig { steps: 3_000, lr: 1e-4, warmup: 100, ..TrainConfig::default() }
+    }
+
+    /// The DP baseline's schedule: the teacher's (20k steps, lr 1e-3), so both get the same budget.
+    pub fn dp_recipe() -> Self {
+        Self::teacher_recipe()
+    }
+}
+
 /// A teacher run (`frmd train teacher`).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct TeacherRun {
     pub train: TrainConfig,
     pub teacher: TeacherConfig,
@@ -126,8 +145,22 @@ pub struct TeacherRun {
     pub eval_solver: Option<Solver>,
 }
 
+impl Default for TeacherRun {
+    /// [`TrainConfig::teacher_recipe`], direct output (MPD's), basis scaling on (docs/design.md
+    /// sections 2 and 3 give the measurements).
+    fn default() -> Self {
+        TeacherRun {
+            train: TrainConfig::teacher_recipe(),
+            teacher: TeacherConfig::default(),
+            output: ProDmpOutput::Direct,
+            auto_scale_basis: true,
+            eval_solver: None,
+        }
+    }
+}
+
 /// A student run (`frmd train student`): consistency distillation of `teacher`.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct StudentRun {
     pub train: TrainConfig,
     /// Teacher checkpoint directory.
@@ -150,11 +183,23 @@ pub struct StudentShape {
     pub embed_dim: Option<usize>,
 }
 
+impl Default for StudentRun {
+    fn default() -> Self {
+        StudentRun { train: TrainConfig::student_recipe(), teacher: PathBuf::new(), distill: DistillConfig::default(), shape: StudentShape::default() }
+    }
+}
+
 /// A DP-baseline run (`frmd train dp`).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct DpRun {
     pub train: TrainConfig,
     pub dp: DpConfig,
+}
+
+impl Default for DpRun {
+    fn default() -> Self {
+        DpRun { train: TrainConfig::dp_recipe(), dp: DpConfig::default() }
+    }
 }
 
 /// Open-loop chunk error of a teacher or student checkpoint on its training data and on held-out
