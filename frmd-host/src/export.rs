@@ -107,7 +107,7 @@ fn calibration_set(cfg: &ExportConfig) -> anyhow::Result<Option<CalibrationSet>>
     let ckpt = Path::new(&cfg.checkpoint);
     let meta = CheckpointMeta::read(ckpt)?;
     if meta.role != Role::Student {
-        bail!("{}: only student checkpoints can be exported; this one is a {:?} (its sampler needs many network evaluations)", ckpt.display(), meta.role);
+        bail!("--ckpt {}: this is a {} checkpoint; only students can be exported (its sampler needs many network evaluations)", ckpt.display(), crate::policy::float::role_name(meta.role));
     }
     match &cfg.calibration_data {
         Some(data) => Ok(Some(calibration_from_data(Path::new(data), ckpt)?)),
