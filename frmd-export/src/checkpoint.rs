@@ -172,9 +172,15 @@ impl CheckpointMeta {
     /// Reads and validates `dir/frmd.json`.
     pub fn read(dir: &Path) -> anyhow::Result<Self> {
         let path = dir.join(CONFIG_FILE);
-        let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-        let meta: CheckpointMeta = serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        meta.validate().map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+        let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+        Self::from_json(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))
+    }
+
+    /// Parses and validates the bytes of a `frmd.json` (what [`Self::read`] does after reading
+    /// the file; the entry point of the checkpoint-config fuzz target).
+    pub fn from_json(bytes: &[u8]) -> anyhow::Result<Self> {
+        let meta: CheckpointMeta = serde_json::from_slice(bytes).map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: {e}"))?;
+        meta.validate()?;
         Ok(meta)
     }
 }
