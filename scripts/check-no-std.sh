@@ -19,7 +19,7 @@ set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$repo"
 target=thumbv7em-none-eabihf
-# DESIGN.md s.1: frmd-core's dependencies come only from these crates. `serde` (default features
+# docs/design.md s.1: frmd-core's dependencies come only from these crates. `serde` (default features
 # off) is accepted as postcard's companion: the postcard blob descriptor derives Serialize and
 # Deserialize, which needs serde itself as a direct dependency (postcard depends on it anyway).
 allowed="libm micromath heapless bytemuck postcard serde defmt"

@@ -1,5 +1,5 @@
 //! EDM noise levels (Karras et al. 2022) and the preconditioning of the teacher and the
-//! consistency student (DESIGN.md section 3).
+//! consistency student (docs/design.md section 3).
 //!
 //! All quantities are in normalized action units (data in [-1, 1]); `sigma` is the standard
 //! deviation of the Gaussian noise added to a trajectory in those units. Everything is `f64`;

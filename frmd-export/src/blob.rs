@@ -1,4 +1,4 @@
-//! The self-describing blob forms (DESIGN.md s.5) of both backbones; the formats themselves live
+//! The self-describing blob forms (docs/design.md s.5) of both backbones; the formats themselves live
 //! in [`frmd_core::blob`], which writes them from frmd-core views and loads them.
 
 use frmd_core::blob::{

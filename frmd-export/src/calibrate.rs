@@ -4,7 +4,7 @@
 //! multi-step sampler with re-noising) over calibration conditions with seeded noise, and
 //! records per tensor the input, every pre-activation and every hidden output. Ranges are the
 //! min/max or a symmetric percentile of the recorded values. Quantization then follows
-//! DESIGN.md section 5 with frmd-core's `quant` helpers (per-channel symmetric weights, int32 bias
+//! docs/design.md section 5 with frmd-core's `quant` helpers (per-channel symmetric weights, int32 bias
 //! with the input zero point folded, Q31 requantization to the pre-activation range, a 256-entry
 //! LUT to the output range, a dequantized output layer). With a 16-bit input
 //! (`frmd_core::model::mlp::InputPrecision::Int16`, the default of

@@ -145,7 +145,11 @@ impl CheckpointMeta {
         self.model.validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: model.{e}"))?;
         validate_sigma(&self.sigma)?;
         let expected_prodmp = self.model.prodmp();
-        if self.prodmp != expected_prodmp {
+        let same = match (&self.prodmp, &expected_prodmp) {
+            (Some(a), Some(b)) => prodmp_matches(a, b),
+            (a, b) => a == b,
+        };
+        if !same {
             bail!("{CONFIG_FILE}: {}", first_difference("prodmp", &self.prodmp, &expected_prodmp));
         }
         if let Some(norm) = &self.normalization {
@@ -218,12 +222,23 @@ fn first_difference<T: Serialize>(path: &str, have: &T, want: &T) -> String {
             (Value::Object(a), Value::Object(b)) => {
                 b.iter().find_map(|(k, w)| walk(format!("{path}.{k}"), a.get(k).unwrap_or(&Value::Null), w))
             }
+            (Value::Number(a), Value::Number(b)) if a.as_f64().zip(b.as_f64()).is_some_and(|(x, y)| x == y || (x - y).abs() <= 1e-12 * x.abs().max(y.abs())) => None,
             (a, b) if a != b => Some(format!("{path} is {a}, expected {b} (implied by the model config)")),
             _ => None,
         }
     }
     let (have, want) = (serde_json::to_value(have).unwrap_or_default(), serde_json::to_value(want).unwrap_or_default());
     walk(path.to_string(), &have, &want).unwrap_or_else(|| format!("{path} differs from the config the model implies"))
+}
+
+/// Equal up to the last bits of the f64 fields: serde_json's default parser may read a written
+/// f64 back one unit in the last place off (e.g. tau = 12 x 0.0125f32 as f64), so a checkpoint's
+/// recorded ProDMP config is compared with the recomputed one at a relative 1e-12.
+pub fn prodmp_matches(a: &ProDmpConfig, b: &ProDmpConfig) -> bool {
+    let close = |x: f64, y: f64| x == y || (x - y).abs() <= 1e-12 * x.abs().max(y.abs());
+    let floats = |p: &ProDmpConfig| [p.tau, p.delay, p.alpha, p.alpha_phase, p.bandwidth_factor, p.dt, p.weights_scale, p.goal_scale];
+    let exact = |p: &ProDmpConfig| (p.num_dof, p.num_basis, p.num_basis_outside, p.relative_goal, p.auto_scale_basis);
+    exact(a) == exact(b) && floats(a).iter().zip(floats(b)).all(|(&x, y)| close(x, y))
 }
 
 /// One f32 tensor read from the weights file.

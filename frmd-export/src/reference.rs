@@ -1,4 +1,4 @@
-//! Bit-accuracy check (d) of DESIGN.md section 6: frmd-core's int8 kernels against an independent
+//! Bit-accuracy check (d) of docs/design.md section 6: frmd-core's int8 kernels against an independent
 //! wide-integer model of the same formulas (`frmd_core::quant::reference`, i128 arithmetic with
 //! floor divisions; i64 dot products here), on random and edge inputs.
 use crate::QuantizedPolicy;

@@ -277,3 +277,20 @@ fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
         assert!(check.passed(), "{check:?}");
     }
 }
+
+#[test]
+fn recorded_prodmp_config_is_compared_up_to_the_last_bits() {
+    let mut meta = CheckpointMeta::describe(Role::Student, &model(mlp()), SigmaConfig::default());
+    let exact = meta.prodmp.expect("a ProDMP head");
+    // One unit in the last place off (what serde_json's default parser may give back) passes.
+    let mut read_back = exact;
+    read_back.tau = f64::from_bits(exact.tau.to_bits() + 1);
+    meta.prodmp = Some(read_back);
+    meta.validate().unwrap();
+    // A real difference is still refused, naming the config.
+    read_back.tau = exact.tau * 1.001;
+    meta.prodmp = Some(read_back);
+    assert!(format!("{:#}", meta.validate().unwrap_err()).contains("prodmp config"));
+    meta.prodmp = Some(frmd_core::prodmp::ProDmpConfig { num_basis: exact.num_basis + 1, ..exact });
+    assert!(meta.validate().is_err());
+}

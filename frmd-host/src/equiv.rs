@@ -1,4 +1,4 @@
-//! The bit-accuracy harness of DESIGN.md section 6 (`frmd equiv`):
+//! The bit-accuracy harness of docs/design.md section 6 (`frmd equiv`):
 //! - (a) frmd-core's f32 path (the exporter's folded network on frmd-core's f32 kernels) vs the
 //!   candle float student, same conditions and noise: max abs error, normalized units;
 //! - (b) frmd-core's int8 policy (loaded from the baked blob) vs the candle float student: max and
@@ -53,7 +53,7 @@ pub struct EquivConfig {
 }
 
 impl Default for EquivConfig {
-    /// The bounds of DESIGN.md section 6 and the effort of `frmd equiv`; no paths named.
+    /// The bounds of docs/design.md section 6 and the effort of `frmd equiv`; no paths named.
     fn default() -> Self {
         EquivConfig {
             ckpt: PathBuf::new(),

@@ -9,6 +9,7 @@ process and the server (taskset) to one CPU.
 from __future__ import annotations
 
 import os
+import shlex
 import sys
 import time
 
@@ -19,9 +20,11 @@ from .protocol import Client
 
 
 def protocol_roundtrip(calls: int = 2000, warmup: int = 200, cpu: int | None = None, history: int = 2,
-                       horizon: int = 12) -> dict:
-    command = [sys.executable, "-m", "frmd_metaworld.mock_server", "--policy", "zeros", "--history", str(history),
-               "--horizon", str(horizon), "--exec-steps", str(min(8, horizon))]
+                       horizon: int = 12, server: str | None = None) -> dict:
+    """`server`: a server command (e.g. `frmd serve --ckpt DIR --zeros`) instead of the mock."""
+    command = shlex.split(server) if server else [
+        sys.executable, "-m", "frmd_metaworld.mock_server", "--policy", "zeros", "--history", str(history),
+        "--horizon", str(horizon), "--exec-steps", str(min(8, horizon))]
     previous = os.sched_getaffinity(0)
     if cpu is not None:
         command = ["taskset", "-c", str(cpu)] + command
@@ -43,7 +46,7 @@ def protocol_roundtrip(calls: int = 2000, warmup: int = 200, cpu: int | None = N
     finally:
         os.sched_setaffinity(0, previous)
     overhead = [r - p for r, p in zip(roundtrip, policy)]
-    return {"pinned_cpu": cpu, "calls": calls, "roundtrip_us_median": metrics.quantile(roundtrip, 0.5),
+    return {"server": server or "mock_server --policy zeros", "pinned_cpu": cpu, "calls": calls, "roundtrip_us_median": metrics.quantile(roundtrip, 0.5),
             "roundtrip_us_p99": metrics.quantile(roundtrip, 0.99), "policy_us_median": metrics.quantile(policy, 0.5),
             "overhead_us_median": metrics.quantile(overhead, 0.5), "overhead_us_p99": metrics.quantile(overhead, 0.99),
             "server_exit_status": status}

@@ -1,8 +1,9 @@
-"""Command line: python -m frmd_metaworld {tasks,collect,eval,info,bench} ... (--help on each)."""
+"""Command line: python -m frmd_metaworld {tasks,collect,eval,info,bench,benchmark} ... (--help on each)."""
 from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import os
 import sys
 import time
@@ -104,11 +105,49 @@ def cmd_bench(args) -> int:
     from . import bench
     if args.what == "protocol":
         for cpu in ([None, args.cpu] if args.cpu is not None else [None]):
-            print(json.dumps(bench.protocol_roundtrip(args.calls, cpu=cpu)), flush=True)
+            print(json.dumps(bench.protocol_roundtrip(args.calls, cpu=cpu, server=args.server)), flush=True)
     else:
         for task in args.task:
             print(json.dumps(bench.step_costs(task, args.episodes)), flush=True)
     return 0
+
+
+def cmd_benchmark(args) -> int:
+    from .benchmark import BenchConfig, Runner, StepFailed
+    from . import report
+    overrides = {k: v for k, v in {
+        "tasks": args.task, "demos": args.demos, "episodes": args.episodes, "backbone": args.backbone,
+        "train_steps": args.train_steps, "student_steps": args.student_steps, "data_dir": args.data_dir,
+        "out": args.out, "frmd": args.frmd,
+        "seeds": [int(s) for s in args.seeds.split(",")] if args.seeds else None,
+        "multi_seed_tasks": ([] if args.multi_seed_tasks == "none" else _tasks(args.multi_seed_tasks))
+        if args.multi_seed_tasks else None}.items() if v is not None}
+    cfg = BenchConfig.quick_config(**overrides) if args.quick else BenchConfig(**overrides)
+    md = Path(args.results) if args.results else Path(cfg.out) / "results.md"
+    runner = Runner(cfg)
+    failed = None
+    try:
+        results = runner.all()
+    except StepFailed as e:
+        failed = str(e)
+        print(f"benchmark stopped: {failed}", file=sys.stderr, flush=True)
+        from .benchmark import collect_results
+        results = collect_results(cfg)
+    command = "cd examples/metaworld && .venv/bin/python -m frmd_metaworld " + " ".join(
+        shlex.quote(a) for a in (argv_of(args)))
+    notes = list(args.note or [])
+    if failed:
+        notes.append(f"The run stopped early: {failed}")
+    written = report.write(results, md, command, notes)
+    runner.say(f"wrote {md}, {md.with_suffix('.json')}, {md.with_suffix('.png')} ({len(results['rows'])} reports)")
+    if args.quick and not failed:
+        report.quick_check(written, md)
+        runner.say("quick mode: every report is valid")
+    return 1 if failed else 0
+
+
+def argv_of(args) -> list:
+    return args.argv
 
 
 def main(argv=None) -> int:
@@ -146,9 +185,31 @@ def main(argv=None) -> int:
     b.add_argument("what", choices=["protocol", "step"])
     b.add_argument("--calls", type=int, default=2000)
     b.add_argument("--cpu", type=int, help="also measure with client and server pinned to this CPU")
+    b.add_argument("--server", metavar="CMD", help="protocol: time this server command instead of the mock server")
     b.add_argument("--task", type=_tasks, default=["push-v3"])
     b.add_argument("--episodes", type=int, default=5)
     b.set_defaults(run=cmd_bench)
 
+    m = sub.add_parser("benchmark", help="train, export and evaluate every method on the tasks (resumable); "
+                       "writes results.md/.json/.png")
+    m.add_argument("--quick", action="store_true", help="CI mode: 1 task, 5 demonstrations, 1 episode, 20 "
+                   "training steps; checks that every report is valid (no success threshold)")
+    m.add_argument("--task", type=_tasks, help="tasks (default: all 12; quick: reach-v3)")
+    m.add_argument("--seeds", help="training seeds for every task, comma-separated (default 0)")
+    m.add_argument("--multi-seed-tasks", help="tasks that also train seeds 1 and 2 (default: "
+                   "reach-v3,push-v3,peg-insert-side-v3; 'none' for none)")
+    m.add_argument("--demos", type=int, help="demonstrations per task collected when DATA_DIR lacks the file (default 100)")
+    m.add_argument("--episodes", type=int, help="evaluation episodes per task and method (default 50)")
+    m.add_argument("--backbone", help="backbone of all three models (default mlp-paper)")
+    m.add_argument("--train-steps", type=int, help="gradient steps of teacher and DP (default: frmd train's)")
+    m.add_argument("--student-steps", type=int, help="gradient steps of the student (default: as --train-steps)")
+    m.add_argument("--data-dir", help="demonstration files TASK.safetensors (collected if missing; default ./data)")
+    m.add_argument("--out", help="run directory: checkpoints, reports, logs (default runs/metaworld)")
+    m.add_argument("--frmd", help="the frmd binary (default: frmd on PATH)")
+    m.add_argument("--results", help="results.md path (results.json and .png beside it; default OUT/results.md)")
+    m.add_argument("--note", action="append", help="a line for the results file (repeatable)")
+    m.set_defaults(run=cmd_benchmark)
+
     args = ap.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)
     return args.run(args)

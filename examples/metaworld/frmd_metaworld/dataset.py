@@ -1,4 +1,4 @@
-"""FRMD's demonstration format (DESIGN.md section 4; reader: frmd-host/src/data/dataset.rs).
+"""FRMD's demonstration format (docs/design.md section 4; reader: frmd-host/src/data/dataset.rs).
 
 A safetensors file with `obs` [T, O] float32, `action` [T, A] float32 and `episode_ends` [E]
 int64 (cumulative exclusive end of each episode, strictly increasing, the last equal to T), and

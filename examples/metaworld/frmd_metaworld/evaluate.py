@@ -1,5 +1,5 @@
 """Closed-loop evaluation on MetaWorld with the report fields of `frmd eval --json`
-(frmd-host/src/eval/mod.rs: EvalReport) and the metrics of DESIGN.md section 6.
+(frmd-host/src/eval/mod.rs: EvalReport) and the metrics of docs/design.md section 6.
 
 A policy is either MetaWorld's scripted expert in this process or any policy server speaking
 docs/serve-protocol.md (`frmd serve ...`, the mock server). Per episode: reset the environment

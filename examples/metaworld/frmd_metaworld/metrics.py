@@ -1,4 +1,4 @@
-"""The metrics of DESIGN.md section 6, as frmd-host/src/eval/metrics.rs computes them, for paths
+"""The metrics of docs/design.md section 6, as frmd-host/src/eval/metrics.rs computes them, for paths
 in any dimension (MetaWorld's hand moves in 3-D; frmd's built-in tasks are 2-D, where the
 turning angle below is the same as frmd's)."""
 from __future__ import annotations

@@ -290,7 +290,7 @@ def read_exact(read: Callable[[int], bytes], n: int) -> bytes:
 
 @dataclass
 class Session:
-    """Server-side session rules, as in frmd-host's `serve::protocol::Session`."""
+    """Server-side session rules, as in frmd-host's `serve::Session`."""
     info: ModelInfo
     policy_reset: Callable[[int], None]
     # act(obs [M][O] oldest first, prev_action [K], prev_rate [K]) -> flat [N*K] actions

@@ -1,4 +1,4 @@
-//! Self-describing policy blobs (DESIGN.md s.5): update a policy without rebuilding firmware.
+//! Self-describing policy blobs (docs/design.md s.5): update a policy without rebuilding firmware.
 //!
 //! One container ([`container`]: header, CRC, postcard descriptor, aligned sections) holds one
 //! format per backbone, each with its emit and parse side in one module: [`mlp`] (magic

@@ -1,4 +1,4 @@
-//! The policy API a controller loop calls (DESIGN.md s.1, s.3, s.5).
+//! The policy API a controller loop calls (docs/design.md s.1, s.3, s.5).
 //!
 //! Per control tick the controller calls [`Policy::observe`] with the newest observation (raw
 //! units) and, when it needs a new chunk, [`Policy::act`], then executes actions from the chunk

@@ -1,4 +1,4 @@
-//! Per-dimension min/max normalization to `[-1, 1]` (DESIGN.md s.4). [`normalize_value`] and
+//! Per-dimension min/max normalization to `[-1, 1]` (docs/design.md s.4). [`normalize_value`] and
 //! [`denormalize_value`] are the one definition, also used by the exporter's fitted
 //! `frmd_export::checkpoint::Normalizer` (which training uses), so the firmware sees
 //! bit-identical model inputs:

@@ -1,4 +1,4 @@
-//! Consistency sampler (DESIGN.md s.3) for the baked student, one step or a few (2..=4).
+//! Consistency sampler (docs/design.md s.3) for the baked student, one step or a few (2..=4).
 //!
 //! The exporter folds every sigma-dependent constant into a per-step [`StepConstants`] table, so
 //! the firmware has no sigma schedule. With `x` the unscaled noisy trajectory (`N x K`,

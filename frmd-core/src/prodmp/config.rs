@@ -52,7 +52,7 @@ pub struct ProDmpConfig {
 }
 
 impl ProDmpConfig {
-    /// Policy convention of DESIGN.md s.2: `tau = horizon * control_dt` (query times
+    /// Policy convention of docs/design.md s.2: `tau = horizon * control_dt` (query times
     /// `control_dt, 2 control_dt, .., horizon * control_dt`), relative goal, `alpha = 25`,
     /// `alpha_phase = 2`, `bandwidth_factor = 3`, pre-computation `dt = 0.01` s, unit scales,
     /// no auto scaling, no delay, no outside basis.

@@ -1,4 +1,4 @@
-//! ProDMP decoder compatible with mp_pytorch 0.1.4 (DESIGN.md s.2), no_std and no alloc.
+//! ProDMP decoder compatible with mp_pytorch 0.1.4 (docs/design.md s.2), no_std and no alloc.
 //!
 //! - [`config`]: [`ProDmpConfig`] and its validation.
 //! - `basis`: exponential-decay phase and normalized RBFs (centres, bandwidths, special cases).

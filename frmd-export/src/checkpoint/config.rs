@@ -325,6 +325,20 @@ impl Normalizer {
         Self { min, max }
     }
 
+    /// Widens every dimension whose range is above 0 but below `min_range` to `min_range`,
+    /// centred on its midpoint, so sensor jitter in a nearly constant dimension does not become a
+    /// full-scale input. Exactly constant dimensions stay constant (they map to 0).
+    pub fn with_min_range(mut self, min_range: f32) -> Self {
+        for (lo, hi) in self.min.iter_mut().zip(self.max.iter_mut()) {
+            let range = *hi - *lo;
+            if range > 0.0 && range < min_range {
+                let mid = 0.5 * (*lo + *hi);
+                (*lo, *hi) = (mid - 0.5 * min_range, mid + 0.5 * min_range);
+            }
+        }
+        self
+    }
+
     pub fn dim(&self) -> usize {
         self.min.len()
     }

@@ -1,7 +1,7 @@
 //! Calibration (frmd-core's [`TransformerProbe`]s over the f32 sampler) and quantization of a
 //! [`FoldedTransformer`] into an owned [`QuantizedTransformer`].
 //!
-//! Recipe (DESIGN.md section 5, transformer-lite): every linear layer gets per-channel symmetric
+//! Recipe (docs/design.md section 5, transformer-lite): every linear layer gets per-channel symmetric
 //! int8 weights and an int32 bias at `input_scale * weight_scale` with the input zero point folded
 //! ([`crate::calibrate::quantize_weights`], [`crate::calibrate::int_bias`]); its input is
 //! quantized per tensor with the range of the probe that feeds it (`Trajectory` -> `traj_in`,

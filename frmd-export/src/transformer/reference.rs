@@ -1,4 +1,4 @@
-//! Check (d) of DESIGN.md section 6 for an exported transformer: every int8 linear layer of the
+//! Check (d) of docs/design.md section 6 for an exported transformer: every int8 linear layer of the
 //! model (`traj_in`, `cond_in`, each block's `qkv`, `proj`, `fc1`, `fc2`, and `head`) run by
 //! frmd-core's [`frmd_core::kernels::FullyConnected`] against an independent wide-integer model
 //! with the exported weights: i64 dot products plus the int32 bias; for `fc1` also the Q31

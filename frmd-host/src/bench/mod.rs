@@ -1,5 +1,5 @@
 //! Latency per action chunk of every policy kind side by side, in one process (what `frmd bench`
-//! does): batch 1, after warm-up, median and p99 over >= 200 calls (DESIGN.md section 6), with
+//! does): batch 1, after warm-up, median and p99 over >= 200 calls (docs/design.md section 6), with
 //! the ratio of each row to the first row: the frmd-core int8 one-step policy (the candle
 //! one-step student if the student cannot be exported). On x86-64 CPUs with AVX2 the int8 policy
 //! is timed again with frmd-core's lower kernel levels (`... avx2` without AVX-VNNI,
@@ -38,7 +38,7 @@ pub struct BenchConfig {
     pub synthetic: bool,
     /// Backbone of the synthetic networks.
     pub backbone: BackboneConfig,
-    /// Timed calls per policy (at least 200 for the DESIGN.md p99).
+    /// Timed calls per policy (at least 200 for the docs/design.md p99).
     pub calls: usize,
     /// Untimed warm-up calls per policy.
     pub warmup: usize,

@@ -21,7 +21,7 @@ pub struct BenchArgs {
     /// Backbone of the synthetic networks (see `frmd train --backbone`).
     #[arg(long, default_value_t = BenchConfig::default().backbone)]
     pub backbone: BackboneConfig,
-    /// Timed calls per policy (at least 200 for the DESIGN.md p99).
+    /// Timed calls per policy (at least 200 for the docs/design.md p99).
     #[arg(long, default_value_t = BenchConfig::default().calls)]
     pub calls: usize,
     /// Untimed warm-up calls per policy.

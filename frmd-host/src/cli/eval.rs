@@ -1,4 +1,4 @@
-//! `frmd eval`: closed-loop evaluation of a policy on a task, with the metrics of DESIGN.md
+//! `frmd eval`: closed-loop evaluation of a policy on a task, with the metrics of docs/design.md
 //! section 6.
 use crate::eval::plot::{plot_paths, PLOTTED_EPISODES};
 use crate::eval::{evaluate, expert_policy, EvalConfig, EvalReport};

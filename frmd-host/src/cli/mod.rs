@@ -11,6 +11,7 @@ pub mod eval;
 pub mod export;
 pub mod prodmp;
 pub mod quickstart;
+pub mod serve;
 pub mod train;
 
 /// FRMD: from demonstrations to a one-step diffusion policy in controller firmware.
@@ -40,6 +41,9 @@ pub enum Command {
     Quickstart(quickstart::QuickstartArgs),
     /// Quantize a student checkpoint: baked Rust module and/or blob, with RAM/flash figures.
     Export(export::ExportArgs),
+    /// Serve a policy over the binary protocol of docs/serve-protocol.md (stdin/stdout or a
+    /// Unix socket), for clients with their own simulator or robot.
+    Serve(serve::ServeArgs),
     /// Bit-accuracy harness: core f32 / int8 vs the float student, kernels vs a wide-integer model.
     Equiv(equiv::EquivArgs),
 }
@@ -56,6 +60,7 @@ pub fn main() -> ExitCode {
         Command::Quickstart(args) => quickstart::run(args),
         Command::Export(args) => export::run(args),
         Command::Equiv(args) => equiv::run(args),
+        Command::Serve(args) => serve::run(args),
     };
     match result {
         Ok(code) => code,

@@ -35,7 +35,7 @@ pub struct QuickstartArgs {
     /// Skip the DP baseline (training and evaluation).
     #[arg(long)]
     pub no_baseline: bool,
-    /// Closed-loop evaluation episodes per method (DESIGN.md asks for >= 50).
+    /// Closed-loop evaluation episodes per method (docs/design.md asks for >= 50).
     #[arg(long, default_value_t = QuickstartConfig::default().episodes)]
     pub episodes: usize,
     /// Seed of collection and training.

@@ -52,7 +52,7 @@ pub struct ProbeArgs {
 /// Flags every training run shares ([`TrainConfig`]).
 #[derive(Args, Debug)]
 pub struct CommonArgs {
-    /// Demonstrations (.safetensors, DESIGN.md section 4).
+    /// Demonstrations (.safetensors, docs/design.md section 4).
     #[arg(long)]
     pub data: PathBuf,
     /// Output checkpoint directory (must be missing or empty unless --force).

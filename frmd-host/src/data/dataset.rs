@@ -1,4 +1,4 @@
-//! The demonstration file format of DESIGN.md section 4 and its validating reader.
+//! The demonstration file format of docs/design.md section 4 and its validating reader.
 //!
 //! A dataset is a safetensors file with `obs` [T, O] f32, `action` [T, A] f32 and `episode_ends`
 //! [E] i64 (cumulative exclusive ends, strictly increasing, the last equal to T), plus string

@@ -1,4 +1,4 @@
-//! Demonstration datasets: the safetensors format of DESIGN.md section 4, validation, training
+//! Demonstration datasets: the safetensors format of docs/design.md section 4, validation, training
 //! windows and [-1, 1] normalization.
 pub mod collect;
 pub mod dataset;

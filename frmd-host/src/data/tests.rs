@@ -333,6 +333,21 @@ fn perturbed_demonstrations_record_the_experts_clean_actions() {
 }
 
 #[test]
+fn nearly_constant_dimensions_get_the_minimum_range_and_constants_stay_constant() {
+    use super::windows::MIN_NORM_RANGE;
+    // dim 0: range 0.004 (jitter), dim 1: constant, dim 2: range 2.
+    let data = [0.5, 3.0, -1.0, 0.504, 3.0, 1.0];
+    let norm = Normalizer::fit(&data, 3).with_min_range(MIN_NORM_RANGE);
+    assert!((norm.max[0] - norm.min[0] - MIN_NORM_RANGE).abs() < 1e-6);
+    assert!((0.5 * (norm.max[0] + norm.min[0]) - 0.502).abs() < 1e-6);
+    assert_eq!((norm.min[1], norm.max[1]), (3.0, 3.0));
+    assert_eq!((norm.min[2], norm.max[2]), (-1.0, 1.0));
+    let mut row = [0.504, 3.0, 1.0];
+    norm.normalize(&mut row);
+    assert!((row[0] - 0.4).abs() < 1e-4 && row[1] == 0.0 && row[2] == 1.0, "{row:?}");
+}
+
+#[test]
 fn evaluation_seeds_are_disjoint_from_collection_seeds() {
     for index in [0usize, 1, 1000] {
         assert!(eval_seed(0, index) >= EVAL_SEED_OFFSET);

@@ -3,6 +3,13 @@
 pub use frmd_export::checkpoint::{Normalization, Normalizer};
 use frmd_export::calibrate::CalibrationSet;
 
+/// Smallest normalizer range, raw units. MetaWorld demonstrations have observation dimensions
+/// that barely move (a resting object's quaternion jitters by +-0.002: 12 dimensions of reach-v3
+/// span under 1e-2, 7 of peg-insert-side-v3, 2 of hammer-v3); plain min/max would stretch that
+/// jitter to [-1, 1]. Every dimension of the built-in tasks' demonstrations spans more than 0.09,
+/// so their normalization is unchanged.
+pub const MIN_NORM_RANGE: f32 = 1e-2;
+
 /// A batch-ready set of training windows, all in normalized units, stored row-major.
 ///
 /// Row `i` holds: the observation history (`history` observations, oldest first), the last
@@ -62,13 +69,16 @@ impl WindowSet {
 pub const CALIBRATION_ROWS: usize = 256;
 
 impl super::Dataset {
-    /// Training windows of DESIGN.md section 4 and the normalization fitted on this dataset.
+    /// Training windows of docs/design.md section 4 and the normalization fitted on this dataset.
     ///
     /// One window per step t of every episode: observations t-m+1..=t, the previous action
     /// a_{t-1} with rate (a_{t-1} - a_{t-2}) / dt, and actions a_t..a_{t+n-1}, all normalized.
     /// Episodes are padded by repeating the first observation/action before their start and the
     /// last action after their end, so a_{-1} = a_0 and the rate at the start is 0 (matching the
     /// evaluator, whose experts start their commands at the initial end-effector position).
+    ///
+    /// Normalizer ranges below [`MIN_NORM_RANGE`] are widened to it (exactly constant dimensions
+    /// stay constant).
     pub fn windows(
         &self,
         history: usize,
@@ -81,8 +91,8 @@ impl super::Dataset {
         anyhow::ensure!(horizon >= 1, "horizon must be at least 1, got {horizon}");
         self.validate()?;
         let norm = Normalization {
-            obs: Normalizer::fit(&self.obs, self.obs_dim),
-            action: Normalizer::fit(&self.action, self.action_dim),
+            obs: Normalizer::fit(&self.obs, self.obs_dim).with_min_range(MIN_NORM_RANGE),
+            action: Normalizer::fit(&self.action, self.action_dim).with_min_range(MIN_NORM_RANGE),
         };
         let mut obs = self.obs.clone();
         norm.obs.normalize(&mut obs);

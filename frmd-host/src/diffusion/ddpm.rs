@@ -26,7 +26,7 @@ pub enum EpsParametrization {
     #[default]
     Direct,
     /// EDM-style preconditioning written for the noise (Karras et al. 2022, with sigma_data of
-    /// DESIGN.md section 3): with s2 = (1 - abar) + abar sigma_data^2,
+    /// docs/design.md section 3): with s2 = (1 - abar) + abar sigma_data^2,
     /// eps = sqrt(1 - abar) / s2 * x_t - sigma_data sqrt(abar) / sqrt(s2) * F(x_t / sqrt(s2), o, t).
     /// The skip term is the exact noise estimate for data ~ N(0, sigma_data^2), so F only learns
     /// a unit-scale correction and never has to carry x_t through the network (with `Direct`, an

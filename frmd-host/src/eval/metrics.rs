@@ -1,4 +1,4 @@
-//! Metric definitions of DESIGN.md section 6: curvature-based non-smooth transitions, RMS jerk,
+//! Metric definitions of docs/design.md section 6: curvature-based non-smooth transitions, RMS jerk,
 //! Wilson score intervals and latency percentiles.
 
 /// Curvature above which a transition counts as non-smooth, rad/m.

@@ -1,5 +1,5 @@
 //! Closed-loop evaluation: any policy (expert, float models, the int8 core) against the built-in
-//! tasks, with the metrics of DESIGN.md section 6.
+//! tasks, with the metrics of docs/design.md section 6.
 //!
 //! Seeds: demonstrations are collected on seeds below [`EVAL_SEED_OFFSET`] (2^63; `frmd collect`
 //! refuses others) and evaluation episode `i` runs on seed `EVAL_SEED_OFFSET + first_seed + i`,
@@ -22,7 +22,7 @@ pub const EVAL_SEED_OFFSET: u64 = 1 << 63;
 /// Settings of a closed-loop evaluation.
 #[derive(Clone, Debug)]
 pub struct EvalConfig {
-    /// Number of episodes (DESIGN.md asks for at least 50 per task and method).
+    /// Number of episodes (docs/design.md asks for at least 50 per task and method).
     pub episodes: usize,
     /// Actions executed from each predicted chunk before the policy is queried again.
     pub exec_steps: usize,

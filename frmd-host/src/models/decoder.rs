@@ -1,6 +1,6 @@
 //! The ProDMP decoder inside the candle graph: a fixed linear map of (theta, y0, v0) whose
 //! coefficients come from `frmd_core::prodmp::linear_row` (the one ProDMP implementation), at
-//! query times tau/n, 2 tau/n, .., tau (tau = n dt) with initial time 0 (DESIGN.md section 2, policy case).
+//! query times tau/n, 2 tau/n, .., tau (tau = n dt) with initial time 0 (docs/design.md section 2, policy case).
 use anyhow::{anyhow, Context};
 use candle_core::{Device, Tensor};
 use frmd_core::prodmp::{ProDmp, ProDmpConfig};

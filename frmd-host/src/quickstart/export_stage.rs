@@ -1,6 +1,6 @@
 //! Stage 5 of quickstart: int8 export of the student ([`crate::export`] with its defaults), its
 //! frmd-core `Policy` adapter for closed-loop evaluation, and the int8-vs-float error of
-//! DESIGN.md section 6 (b) from the bit-accuracy harness ([`crate::equiv`], open-loop part).
+//! docs/design.md section 6 (b) from the bit-accuracy harness ([`crate::equiv`], open-loop part).
 use crate::equiv::{run as run_equiv, EquivConfig};
 use crate::export::{export_student, write_export, ExportConfig};
 use crate::policy::int8::Int8Policy;
@@ -13,7 +13,7 @@ pub struct Int8Export {
     pub policy: Box<dyn Policy>,
     /// Observation history the policy expects.
     pub history: usize,
-    /// int8-vs-float error of the exported policy against the float student (DESIGN.md 6b).
+    /// int8-vs-float error of the exported policy against the float student (docs/design.md 6b).
     pub float_error: String,
     /// (what, path) of the exported files.
     pub artifacts: Vec<(String, PathBuf)>,

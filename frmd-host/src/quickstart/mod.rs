@@ -8,7 +8,7 @@
 //!    [`QuickstartConfig::baseline`]),
 //! 5. export the int8 student ([`crate::export`]),
 //! 6. evaluate expert, DP (DDPM 100 / DDIM 10), teacher (Heun 10), student (1 step) and the int8
-//!    student in closed loop with the metrics of DESIGN.md section 6,
+//!    student in closed loop with the metrics of docs/design.md section 6,
 //!
 //! then returns one table ([`render`]) and the paths of plots and artifacts (all under
 //! [`QuickstartConfig::out`]). The step counts of [`QuickstartConfig::default`] follow
@@ -66,7 +66,7 @@ pub struct QuickstartConfig {
     pub batch: usize,
     /// Train and evaluate the DP baseline.
     pub baseline: bool,
-    /// Closed-loop evaluation episodes per method (DESIGN.md asks for >= 50).
+    /// Closed-loop evaluation episodes per method (docs/design.md asks for >= 50).
     pub episodes: usize,
     /// Seed of collection and training.
     pub seed: u64,

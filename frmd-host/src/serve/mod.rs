@@ -1,1 +1,36 @@
-pub mod protocol;
+//! `frmd serve`: the policy-server protocol, version 1 (`docs/serve-protocol.md` is the
+//! specification), and the server around it.
+//!
+//! std only, no dependencies in the protocol part. Nothing here panics on any input: every
+//! malformed frame becomes a [`ProtocolError`] with the code and text the specification lists.
+//!
+//! - [`frame`]: constants, header, frame reader; [`error`]: error codes;
+//! - [`request`], [`reply`]: the messages, each encoded and decoded side by side ([`fields`]
+//!   holds the shared payload helpers);
+//! - [`session`]: order and `executed` rules, timing; [`server`]: the loop over a byte stream,
+//!   stdin/stdout and a Unix socket;
+//! - [`load`]: the policy behind the server (checkpoint, baked module, blob) and its HELLO_OK.
+pub mod error;
+mod fields;
+pub mod frame;
+pub mod load;
+pub mod reply;
+pub mod request;
+pub mod server;
+pub mod session;
+
+pub use error::{ErrorCode, ProtocolError};
+pub use frame::{
+    FloatType, FrameReader, Header, MsgType, ReadOutcome, HEADER_LEN, MAGIC, MAX_NAME, MAX_PAYLOAD,
+    MAX_TEXT, VERSION,
+};
+pub use reply::{decode_reply, Chunk, ErrorReply, ModelInfo, Reply};
+pub use request::{decode_request, Request};
+pub use load::{load, PolicySource, ServeConfig, Served};
+pub use server::{serve_stdio, serve_stream, StreamEnd};
+#[cfg(unix)]
+pub use server::serve_socket;
+pub use session::{ActInput, Next, ServedPolicy, Session};
+
+#[cfg(test)]
+mod tests;

@@ -5,7 +5,7 @@
 //! position targets `[x, y]`, and the ProDMP initial condition of a chunk is the last commanded
 //! action. All tasks use a control period of 0.1 s and live in the square [-2, 2]^2 m, a scale at
 //! which the experts' smooth paths have curvature below the 1 rad/m non-smoothness threshold of
-//! DESIGN.md section 6 almost everywhere, so that kinks stand out.
+//! docs/design.md section 6 almost everywhere, so that kinks stand out.
 //!
 //! | task   | difficulty  | what makes it hard                                               |
 //! |--------|-------------|------------------------------------------------------------------|
@@ -37,6 +37,12 @@ pub use policy::{Policy, PolicyInput};
 
 /// Names accepted by [`make_task`], easiest first.
 pub const TASK_NAMES: &[&str] = &["reach", "avoid", "push", "insert"];
+
+/// Whether frmd-host simulates `task` (a dataset's `task` field), i.e. can evaluate it in closed
+/// loop; datasets of other simulators (e.g. `metaworld/reach-v3`) train but evaluate elsewhere.
+pub fn is_simulated(task: &str) -> bool {
+    TASK_NAMES.contains(&task)
+}
 
 /// Control period of every built-in task, seconds.
 pub const CONTROL_DT: f64 = 0.1;

@@ -122,13 +122,14 @@ impl ProbeConfig {
 }
 
 /// The data fits the task it names when closed-loop evaluation will run on that task (checked
-/// before training, not at the final evaluation): the task exists and its observation and action
-/// sizes and control period are the data's.
+/// before training, not at the final evaluation): its observation and action sizes and control
+/// period are the simulated task's. Data of tasks frmd-host does not simulate (e.g. MetaWorld)
+/// trains without closed-loop evaluation (`train::monitor` says so).
 pub fn check_data_task(data: &Dataset, path: &Path, eval_episodes: usize) -> anyhow::Result<()> {
-    if eval_episodes == 0 {
+    if eval_episodes == 0 || !crate::tasks::is_simulated(&data.task) {
         return Ok(());
     }
-    let task = crate::tasks::make_task(&data.task).with_context(|| format!("{}: metadata `task` (evaluation runs on it; pass --eval-episodes 0 to train without evaluation)", path.display()))?;
+    let task = crate::tasks::make_task(&data.task).with_context(|| format!("{}: metadata `task`", path.display()))?;
     for (field, have, want) in [("obs_dim", data.obs_dim, task.obs_dim()), ("action_dim", data.action_dim, task.action_dim())] {
         anyhow::ensure!(have == want, "{}: {field} is {have}, task `{}` expects {want} (data of another task or version?)", path.display(), data.task);
     }

@@ -34,7 +34,7 @@ pub struct LoopConfig {
 }
 
 impl LoopConfig {
-    /// DESIGN.md defaults (batch 128, AdamW 1e-4, wd 1e-6, 500 warm-up, cosine) for `steps`.
+    /// docs/design.md defaults (batch 128, AdamW 1e-4, wd 1e-6, 500 warm-up, cosine) for `steps`.
     pub fn paper(steps: usize, seed: u64) -> Self {
         LoopConfig { steps, batch_size: 128, seed, optim: optim::OptimConfig::paper(steps), log_every: 100 }
     }

@@ -56,8 +56,16 @@ pub(super) struct Monitor<'a> {
 
 impl<'a> Monitor<'a> {
     pub(super) fn new(cfg: &'a TrainConfig, task: &str, norm: &Normalization, sigma: SigmaConfig, sampler: Sampler, label: &str) -> Self {
+        let progress = Progress::new(label, cfg.steps as u64, "step");
+        if cfg.eval_episodes > 0 && !crate::tasks::is_simulated(task) {
+            progress.println(&format!(
+                "{label}: task {task:?} of {} is not simulated by frmd-host ({}): closed-loop evaluation skipped; evaluate the checkpoint with `frmd serve` and the task's own simulator",
+                cfg.data.display(),
+                crate::tasks::TASK_NAMES.join(", ")
+            ));
+        }
         Monitor {
-            progress: Progress::new(label, cfg.steps as u64, "step"),
+            progress,
             cfg,
             task: task.to_string(),
             norm: norm.clone(),
@@ -78,7 +86,7 @@ impl<'a> Monitor<'a> {
             self.progress.println(&format!("step {step}: {report}"));
             self.generalization.push((step, report));
         }
-        if self.cfg.eval_episodes == 0 {
+        if self.cfg.eval_episodes == 0 || !crate::tasks::is_simulated(&self.task) {
             return Ok(());
         }
         let mut policy = FloatPolicy::new(model.duplicate(&candle_core::Device::Cpu)?, self.norm.clone(), self.sigma, self.sampler)?.with_dp_parametrization(self.dp_parametrization);

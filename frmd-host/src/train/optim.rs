@@ -1,4 +1,4 @@
-//! AdamW with linear warm-up and cosine decay (DESIGN.md: lr 1e-4, weight decay 1e-6,
+//! AdamW with linear warm-up and cosine decay (docs/design.md: lr 1e-4, weight decay 1e-6,
 //! 500 warm-up steps, cosine to zero over the run).
 use candle_core::Var;
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};

@@ -20,7 +20,7 @@ pub const PAPER_STEPS: usize = 30_000;
 /// during training.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrainConfig {
-    /// Demonstrations (`.safetensors`, DESIGN.md section 4).
+    /// Demonstrations (`.safetensors`, docs/design.md section 4).
     pub data: PathBuf,
     /// Output checkpoint directory (must be missing or empty unless `force`).
     pub out: PathBuf,

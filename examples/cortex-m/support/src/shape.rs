@@ -1,7 +1,7 @@
 //! Shape of the policies the firmware runs, shared by `build.rs` (which bakes the ProDMP tables on
 //! the host), the firmware images, the synthetic generators and the host digest tests.
 //! Values follow the built-in tasks: 2 DoF (x, y targets in metres), 0.1 s control period,
-//! horizon 12, 20 basis functions (DESIGN.md s.2 policy convention).
+//! horizon 12, 20 basis functions (docs/design.md s.2 policy convention).
 
 use frmd_core::prodmp::ProDmpConfig;
 

@@ -25,7 +25,7 @@ pub const POLICY_WEIGHT_SEED: u64 = 0x4652_4D44_504F_4C31;
 /// c_in-scaled noisy trajectory mostly within a few units).
 const MODEL_INPUT_RANGE: (f32, f32) = (-4.0, 4.0);
 /// One-step constants at sigma_max from frmd-core's EDM/consistency schedule (defaults of
-/// DESIGN.md s.3: sigma_min 0.002, sigma_max 80, sigma_data 0.5).
+/// docs/design.md s.3: sigma_min 0.002, sigma_max 80, sigma_data 0.5).
 fn first_step() -> StepConstants {
     let sigma = SigmaConfig::default();
     let at_max = |value: Result<f64, _>| value.expect("schedule defined at sigma_max") as f32;

@@ -1,0 +1,219 @@
+"""The benchmark pipeline (issue 13, the paper's Table 3): per task and training seed, train
+teacher, student and DP with `frmd train` (the CLI's recipe, one backbone), export the int8
+student, and evaluate expert, DP DDPM-100 and DDIM-10, teacher, one-step student and int8 student
+through `frmd serve`; then `report.py` writes results.md, results.json and the bar chart.
+
+Every step writes its output atomically and is skipped when that output exists (resumable).
+Each command's output goes to a log file under OUT/logs; the console gets one progress line per
+step. `--quick` is the CI mode: one task, 5 demonstrations, one episode per method, short
+training, and a validity check of every report (no success threshold).
+"""
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field, asdict
+from pathlib import Path
+
+from .tasks import GROUP_OF, TASKS, check_task
+
+# (label, what `frmd serve` gets besides the policy flag); the expert runs in process.
+METHODS = ["expert", "dp-ddpm-100", "dp-ddim-10", "teacher", "student-1", "int8-student"]
+
+
+@dataclass
+class BenchConfig:
+    """What one benchmark run does; `Default` is the full benchmark of issue 13."""
+    tasks: list = field(default_factory=lambda: list(TASKS))
+    seeds: list = field(default_factory=lambda: [0])
+    # Extra training seeds for one task of each group (issue 13: three seeds there).
+    multi_seed_tasks: list = field(default_factory=lambda: ["reach-v3", "push-v3", "peg-insert-side-v3"])
+    multi_seeds: list = field(default_factory=lambda: [1, 2])
+    demos: int = 100
+    episodes: int = 50
+    backbone: str = "mlp-paper"
+    # Gradient steps per model; None = the CLI's default.
+    train_steps: int | None = None
+    student_steps: int | None = None
+    data_dir: str = "data"
+    out: str = "runs/metaworld"
+    frmd: str = "frmd"
+    quick: bool = False
+
+    @staticmethod
+    def quick_config(**overrides) -> "BenchConfig":
+        cfg = BenchConfig(tasks=["reach-v3"], multi_seed_tasks=[], demos=5, episodes=1,
+                          train_steps=20, student_steps=10, quick=True)
+        for key, value in overrides.items():
+            setattr(cfg, key, value)
+        return cfg
+
+    def runs(self):
+        """(task, seed) pairs in run order: every task with the first seed, then the extra seeds."""
+        for task in self.tasks:
+            for seed in self.seeds:
+                yield task, seed
+        for task in self.multi_seed_tasks:
+            if task in self.tasks:
+                for seed in self.multi_seeds:
+                    if seed not in self.seeds:
+                        yield task, seed
+
+
+class StepFailed(Exception):
+    pass
+
+
+class Runner:
+    def __init__(self, cfg: BenchConfig):
+        self.cfg = cfg
+        self.out = Path(cfg.out)
+        self.logs = self.out / "logs"
+        self.logs.mkdir(parents=True, exist_ok=True)
+        self.python = sys.executable
+        self.package_root = str(Path(__file__).resolve().parent.parent)
+        self.started = time.perf_counter()
+
+    def say(self, text: str) -> None:
+        print(f"[{time.perf_counter() - self.started:7.0f} s] {text}", flush=True)
+
+    def run(self, name: str, done: Path, argv: list, env_extra: dict | None = None) -> None:
+        """Runs `argv` unless `done` exists; output to logs/NAME.log; fails on a non-zero status."""
+        if done.exists():
+            self.say(f"{name}: done earlier ({done})")
+            return
+        log = self.logs / f"{name}.log"
+        env = {**os.environ, "RAYON_NUM_THREADS": os.environ.get("RAYON_NUM_THREADS", "1"),
+               "PYTHONPATH": self.package_root, **(env_extra or {})}
+        self.say(f"{name}: running (log {log})")
+        t0 = time.perf_counter()
+        with open(log, "w") as f:
+            f.write("$ " + shlex.join(argv) + "\n")
+            f.flush()
+            status = subprocess.call(argv, stdout=f, stderr=subprocess.STDOUT, env=env)
+        if status != 0:
+            raise StepFailed(f"{name} failed with status {status}; see {log}")
+        if not done.exists():
+            raise StepFailed(f"{name} finished but {done} is missing; see {log}")
+        self.say(f"{name}: finished in {time.perf_counter() - t0:.0f} s")
+
+    def data(self, task: str) -> Path:
+        path = Path(self.cfg.data_dir) / f"{task}.safetensors"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.run(f"{task}-collect", path, [self.python, "-m", "frmd_metaworld", "collect", "--task", task,
+                                           "--episodes", str(self.cfg.demos), "--out", str(path)])
+        return path
+
+    def train(self, task: str, seed: int, data: Path) -> Path:
+        run = self.out / task / f"seed{seed}"
+        common = ["--data", str(data), "--backbone", self.cfg.backbone, "--seed", str(seed)]
+        steps = ["--steps", str(self.cfg.train_steps)] if self.cfg.train_steps else []
+        if self.cfg.quick:
+            steps += ["--warmup", "2", "--log-every", "5"]
+        sstep = ["--steps", str(self.cfg.student_steps)] if self.cfg.student_steps else steps[:2]
+        if self.cfg.quick:
+            sstep += ["--warmup", "2", "--log-every", "5"]
+        f = self.cfg.frmd
+        self.run(f"{task}-s{seed}-teacher", run / "teacher" / "frmd.json",
+                 [f, "train", "teacher", *common, *steps, "--out", str(run / "teacher")])
+        self.run(f"{task}-s{seed}-student", run / "student" / "frmd.json",
+                 [f, "train", "student", "--teacher", str(run / "teacher"), "--data", str(data), "--seed", str(seed),
+                  *sstep, "--out", str(run / "student")])
+        self.run(f"{task}-s{seed}-dp", run / "dp" / "frmd.json",
+                 [f, "train", "dp", *common, *steps, "--out", str(run / "dp")])
+        self.run(f"{task}-s{seed}-export", run / "baked" / "export.json",
+                 [f, "export", "--ckpt", str(run / "student"), "--out", str(run / "baked")])
+        return run
+
+    def server(self, method: str, run: Path) -> str | None:
+        f = self.cfg.frmd
+        return {
+            "expert": None,
+            "dp-ddpm-100": f"{f} serve --ckpt {run / 'dp'} --steps 100",
+            "dp-ddim-10": f"{f} serve --ckpt {run / 'dp'} --steps 10",
+            "teacher": f"{f} serve --ckpt {run / 'teacher'}",
+            "student-1": f"{f} serve --ckpt {run / 'student'} --steps 1",
+            "int8-student": f"{f} serve --baked {run / 'baked'}",
+        }[method]
+
+    def evaluate(self, task: str, seed: int, run: Path) -> None:
+        for method in METHODS:
+            # The expert does not depend on the training seed: evaluated once per task.
+            if method == "expert" and seed != self.cfg.seeds[0]:
+                continue
+            report = (self.out / task / "expert.json") if method == "expert" else run / "eval" / f"{method}.json"
+            report.parent.mkdir(parents=True, exist_ok=True)
+            how = ["--expert"] if method == "expert" else ["--server", self.server(method, run)]
+            self.run(f"{task}-s{seed}-eval-{method}", report,
+                     [self.python, "-m", "frmd_metaworld", "eval", "--task", task, "--episodes",
+                      str(self.cfg.episodes), *how, "--json", str(report)])
+            check_report(report, task, self.cfg.episodes)
+
+    def all(self) -> dict:
+        for task in self.cfg.tasks:
+            check_task(task)
+        (self.out / "config.json").write_text(json.dumps(asdict(self.cfg), indent=1) + "\n")
+        for task, seed in self.cfg.runs():
+            data = self.data(task)
+            run = self.train(task, seed, data)
+            self.evaluate(task, seed, run)
+        return collect_results(self.cfg)
+
+
+def check_report(path: Path, task: str, episodes: int) -> dict:
+    """The fields and ranges `frmd eval --json` promises; raises on anything else."""
+    from .evaluate import EPISODE_FIELDS, FRMD_EVAL_FIELDS
+    report = json.loads(path.read_text())
+    missing = [k for k in FRMD_EVAL_FIELDS if k not in report]
+    problems = []
+    if missing:
+        problems.append(f"missing fields {missing}")
+    if report.get("task") != task:
+        problems.append(f"task {report.get('task')!r}, expected {task!r}")
+    if report.get("episodes") != episodes or len(report.get("per_episode", [])) != episodes:
+        problems.append(f"episodes {report.get('episodes')}, expected {episodes}")
+    rate = report.get("success_rate")
+    if not (isinstance(rate, (int, float)) and 0 <= rate <= 1):
+        problems.append(f"success_rate {rate!r} outside [0, 1]")
+    lo, hi = report.get("success_ci95", [None, None])
+    if not (isinstance(lo, (int, float)) and 0 <= lo <= (rate or 0) <= hi <= 1):
+        problems.append(f"success_ci95 {[lo, hi]} does not bracket {rate}")
+    if not report.get("latency_us_median", -1) >= 0:
+        problems.append("latency_us_median is not a non-negative number")
+    for i, ep in enumerate(report.get("per_episode", [])):
+        if [k for k in EPISODE_FIELDS if k not in ep]:
+            problems.append(f"episode {i} lacks fields")
+            break
+    if problems:
+        raise StepFailed(f"{path}: invalid report: {'; '.join(problems)}")
+    return report
+
+
+def collect_results(cfg: BenchConfig) -> dict:
+    """Every finished report of the run, keyed by task, seed and method."""
+    out = Path(cfg.out)
+    rows = []
+    for task, seed in cfg.runs():
+        for method in METHODS:
+            if method == "expert":
+                if seed != cfg.seeds[0]:
+                    continue
+                path = out / task / "expert.json"
+            else:
+                path = out / task / f"seed{seed}" / "eval" / f"{method}.json"
+            if not path.exists():
+                continue
+            r = json.loads(path.read_text())
+            rows.append({"task": task, "group": GROUP_OF[task], "seed": None if method == "expert" else seed,
+                         "method": method, "episodes": r["episodes"], "successes": r["successes"],
+                         "success_rate": r["success_rate"], "success_ci95": r["success_ci95"],
+                         "latency_us_median": r["latency_us_median"], "latency_us_p99": r["latency_us_p99"],
+                         "roundtrip_us_median": r.get("roundtrip_us_median"),
+                         "non_smooth_ee_mean": r["non_smooth_ee_mean"],
+                         "non_smooth_action_mean": r["non_smooth_action_mean"], "rms_jerk_mean": r["rms_jerk_mean"],
+                         "mean_length": r["mean_length"], "report": str(path)})
+    return {"config": asdict(cfg), "rows": rows}

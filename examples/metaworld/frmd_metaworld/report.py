@@ -1,0 +1,134 @@
+"""results.md, results.json and the bar chart of a benchmark run (benchmark.py): one table per
+difficulty group and overall (success with 95 % Wilson interval over the pooled episodes, median
+latency per chunk, non-smooth transitions per episode), a per-task table, seeds, command,
+commit, and what the run did not cover."""
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+from . import metrics
+from .benchmark import METHODS, BenchConfig
+from .tasks import GROUPS, TASKS
+
+
+def commit() -> str:
+    here = Path(__file__).resolve().parent
+    try:
+        head = subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], cwd=here, text=True).strip()
+        dirty = subprocess.call(["git", "diff", "--quiet", "HEAD", "--", "."], cwd=here.parent.parent.parent)
+        return head + (" (with uncommitted changes)" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def pooled(rows: list) -> dict:
+    n = sum(r["episodes"] for r in rows)
+    s = sum(r["successes"] for r in rows)
+    lo, hi = metrics.wilson_interval(s, n) if n else (0.0, 0.0)
+    return {"tasks": len({r["task"] for r in rows}), "episodes": n, "successes": s, "success_rate": s / n if n else 0.0,
+            "success_ci95": [lo, hi],
+            "latency_us_median": metrics.quantile([r["latency_us_median"] for r in rows], 0.5) if rows else None,
+            "non_smooth_ee_mean": metrics.mean([r["non_smooth_ee_mean"] for r in rows]) if rows else None}
+
+
+def summarize(results: dict) -> dict:
+    """Group and overall tables over the first training seed (and the expert)."""
+    cfg = results["config"]
+    first = cfg["seeds"][0]
+    main = [r for r in results["rows"] if r["seed"] in (None, first)]
+    tables = {}
+    for group, tasks in list(GROUPS.items()) + [("overall", TASKS)]:
+        tables[group] = {m: pooled([r for r in main if r["method"] == m and r["task"] in tasks]) for m in METHODS}
+    return tables
+
+
+def _pct(p: dict) -> str:
+    if not p["episodes"]:
+        return "not run"
+    lo, hi = p["success_ci95"]
+    return f"{100 * p['success_rate']:.1f} [{100 * lo:.1f}, {100 * hi:.1f}]"
+
+
+def _num(v, fmt="{:.1f}") -> str:
+    return "-" if v is None else fmt.format(v)
+
+
+def bar_chart(results: dict, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    first = results["config"]["seeds"][0]
+    rows = [r for r in results["rows"] if r["seed"] in (None, first)]
+    tasks = [t for t in TASKS if any(r["task"] == t for r in rows)]
+    fig, ax = plt.subplots(figsize=(max(6, 1.4 * len(tasks) + 2), 4.5))
+    width = 0.8 / len(METHODS)
+    for i, method in enumerate(METHODS):
+        values = []
+        for t in tasks:
+            hit = [r for r in rows if r["task"] == t and r["method"] == method]
+            values.append(100 * hit[0]["success_rate"] if hit else 0.0)
+        ax.bar([k + (i - (len(METHODS) - 1) / 2) * width for k in range(len(tasks))], values, width, label=method)
+    ax.set_xticks(range(len(tasks)), tasks, rotation=30, ha="right")
+    ax.set_ylabel(f"success, % of {results['config']['episodes']} episodes")
+    ax.set_ylim(0, 105)
+    ax.set_title(f"MetaWorld success per task and method (training seed {first})")
+    ax.legend(fontsize=8, ncol=3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def write(results: dict, md_path: Path, command: str, notes: list) -> dict:
+    """Writes results.md beside results.json and the PNG; returns the JSON written."""
+    cfg = results["config"]
+    tables = summarize(results)
+    out = {**results, "tables": tables, "command": command, "commit": commit(), "notes": notes}
+    json_path, png_path = md_path.with_suffix(".json"), md_path.with_suffix(".png")
+    json_path.write_text(json.dumps(out, indent=1) + "\n")
+    bar_chart(results, png_path)
+    lines = [f"# MetaWorld benchmark results{' (QUICK MODE: pipeline check, not results)' if cfg['quick'] else ''}", ""]
+    lines += ["Produced by:", "", "```sh", command, "```", "",
+              f"Commit {out['commit']}; training seeds {cfg['seeds']} for every task"
+              + (f", plus seeds {cfg['multi_seeds']} for {', '.join(cfg['multi_seed_tasks'])}" if cfg["multi_seed_tasks"] else "")
+              + f"; {cfg['demos']} demonstrations per task; {cfg['episodes']} evaluation episodes per task and method "
+              "(seeds 2^63 + 0 .., disjoint from the demonstrations' seeds 0 ..); backbone "
+              f"`{cfg['backbone']}`; training steps {cfg['train_steps'] or 'CLI default'} (teacher, DP), "
+              f"{cfg['student_steps'] or cfg['train_steps'] or 'CLI default'} (student).", ""]
+    lines += [f"- {n}" for n in notes] + [""]
+    lines += ["Success: % of episodes [95 % Wilson interval] pooled over the group's tasks; latency: median over "
+              "tasks of the median policy time per chunk (`policy_ns` reported by `frmd serve`, the expert's call "
+              "in process), us; non-smooth: mean end-effector non-smooth transitions per episode.", ""]
+    for group, table in tables.items():
+        lines += [f"## {group}", "", "| method | tasks | success % [95 % CI] | latency us/chunk | non-smooth / episode |",
+                  "| --- | ---: | ---: | ---: | ---: |"]
+        for m in METHODS:
+            p = table[m]
+            lines.append(f"| {m} | {p['tasks']} | {_pct(p)} | {_num(p['latency_us_median'])} | {_num(p['non_smooth_ee_mean'])} |")
+        lines.append("")
+    lines += ["## Per task and seed", "", "| task | group | seed | method | success % [95 % CI] | latency us/chunk | "
+              "round trip us | non-smooth / episode | mean length |", "| --- | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: |"]
+    for r in results["rows"]:
+        lo, hi = r["success_ci95"]
+        lines.append(f"| {r['task']} | {r['group']} | {'-' if r['seed'] is None else r['seed']} | {r['method']} | "
+                     f"{100 * r['success_rate']:.1f} [{100 * lo:.1f}, {100 * hi:.1f}] | {r['latency_us_median']:.1f} | "
+                     f"{_num(r['roundtrip_us_median'])} | {r['non_smooth_ee_mean']:.1f} | {r['mean_length']:.1f} |")
+    lines += ["", f"![success per task and method]({png_path.name})", ""]
+    md_path.write_text("\n".join(lines) + "\n")
+    return out
+
+
+def quick_check(written: dict, md_path: Path) -> None:
+    """--quick: every method has a valid report for every task, and the files parse."""
+    cfg = written["config"]
+    expected = {(t, m) for t in cfg["tasks"] for m in METHODS}
+    got = {(r["task"], r["method"]) for r in written["rows"]}
+    if expected - got:
+        raise SystemExit(f"quick mode: missing reports {sorted(expected - got)}")
+    json.loads(md_path.with_suffix(".json").read_text())
+    png = md_path.with_suffix(".png").read_bytes()
+    if not png.startswith(b"\x89PNG"):
+        raise SystemExit("quick mode: the bar chart is not a PNG")
+    if "## overall" not in md_path.read_text():
+        raise SystemExit("quick mode: results.md lacks the overall table")
