@@ -56,7 +56,7 @@ def cell(values):
     m = 100 * statistics.mean(values)
     if len(values) == 1:
         return f"{m:.1f} (1 seed)"
-    return f"{m:.1f} [{100 * min(values):.1f}-{100 * max(values):.1f}]"
+    return f"{m:.1f} [{100 * min(values):.1f}-{100 * max(values):.1f}] ({len(values)} seeds)"
 
 
 def main():
