@@ -10,6 +10,7 @@ pub mod diffusion;
 pub mod equiv;
 pub mod eval;
 pub mod export;
+pub mod limits;
 pub mod models;
 pub mod policy;
 pub mod prodmp_vectors;
