@@ -17,7 +17,7 @@ pub fn write(path: &Path, set: &CalibrationSet) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("calibration tensor: {e}"))?;
     let meta = HashMap::from([("seed".to_string(), set.seed.to_string())]);
     let data = safetensors::serialize([("cond", view)], Some(meta)).map_err(|e| anyhow::anyhow!("serializing calibration: {e}"))?;
-    std::fs::write(path, data).with_context(|| format!("writing {}", path.display()))
+    crate::artifact::write_atomic(path, &data)
 }
 
 /// Reads a calibration file, checking its row width against `cond_dim`.

@@ -142,15 +142,18 @@ impl CheckpointMeta {
         if self.format_version != FORMAT_VERSION {
             bail!("{CONFIG_FILE}: format_version {} is not supported (expected {FORMAT_VERSION})", self.format_version);
         }
-        self.model.validate().with_context(|| format!("{CONFIG_FILE}: model"))?;
-        self.sigma.validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))?;
+        self.model.validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: model.{e}"))?;
+        validate_sigma(&self.sigma)?;
         let expected_prodmp = self.model.prodmp();
         let same = match (&self.prodmp, &expected_prodmp) {
             (Some(a), Some(b)) => prodmp_matches(a, b),
             (a, b) => a == b,
         };
         if !same {
-            bail!("{CONFIG_FILE}: prodmp config {:?} differs from the policy convention for this model ({:?})", self.prodmp, expected_prodmp);
+            bail!("{CONFIG_FILE}: {}", first_difference("prodmp", &self.prodmp, &expected_prodmp));
+        }
+        if let Some(norm) = &self.normalization {
+            norm.validate(self.model.obs_dim, self.model.action_dim).map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: {e}"))?;
         }
         match (self.role, self.prodmp.is_some()) {
             (Role::Dp, true) => bail!("{CONFIG_FILE}: a DP checkpoint must have a raw head"),
@@ -159,7 +162,13 @@ impl CheckpointMeta {
         }
         let expected = expected_tensors(&self.model);
         if self.tensors != expected {
-            bail!("{CONFIG_FILE}: tensor list does not match the model config ({} listed, {} implied)", self.tensors.len(), expected.len());
+            let listed = |t: &TensorSpec| format!("`{}` {} {:?}", t.name, t.dtype, t.shape);
+            let detail = match self.tensors.iter().zip(&expected).enumerate().find(|(_, (a, b))| a != b) {
+                Some((i, (have, want))) => format!("tensors[{i}] is {}, the model config implies {}", listed(have), listed(want)),
+                None if self.tensors.len() > expected.len() => format!("tensors[{}] {} is not implied by the model config", expected.len(), listed(&self.tensors[expected.len()])),
+                None => format!("tensor {} implied by the model config is not listed", listed(&expected[self.tensors.len()])),
+            };
+            bail!("{CONFIG_FILE}: {detail} ({} listed, {} implied)", self.tensors.len(), expected.len());
         }
         Ok(())
     }
@@ -167,11 +176,59 @@ impl CheckpointMeta {
     /// Reads and validates `dir/frmd.json`.
     pub fn read(dir: &Path) -> anyhow::Result<Self> {
         let path = dir.join(CONFIG_FILE);
-        let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-        let meta: CheckpointMeta = serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+        Self::from_json(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))
+    }
+
+    /// Parses and validates the bytes of a `frmd.json` (what [`Self::read`] does after reading
+    /// the file; the entry point of the checkpoint-config fuzz target).
+    pub fn from_json(bytes: &[u8]) -> anyhow::Result<Self> {
+        let meta: CheckpointMeta = serde_json::from_slice(bytes).map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: {e}"))?;
         meta.validate()?;
         Ok(meta)
     }
+}
+
+/// The largest `sigma_max` a checkpoint may declare (EDM uses 80; far larger levels overflow the
+/// samplers' f32 arithmetic).
+pub const MAX_SIGMA: f64 = 1e4;
+
+/// The sigma config field by field: finite, positive, `sigma_min < sigma_max <= MAX_SIGMA`.
+fn validate_sigma(s: &SigmaConfig) -> anyhow::Result<()> {
+    for (field, value) in [("sigma_min", s.sigma_min), ("sigma_max", s.sigma_max), ("rho", s.rho), ("sigma_data", s.sigma_data)] {
+        if !(value.is_finite() && value > 0.0) {
+            bail!("{CONFIG_FILE}: sigma.{field} is {value}, expected a finite number > 0");
+        }
+    }
+    if s.sigma_max > MAX_SIGMA {
+        bail!("{CONFIG_FILE}: sigma.sigma_max is {}, expected at most {MAX_SIGMA}", s.sigma_max);
+    }
+    if s.sigma_min >= s.sigma_max {
+        bail!("{CONFIG_FILE}: sigma.sigma_min {} is not below sigma.sigma_max {}, expected sigma_min < sigma_max", s.sigma_min, s.sigma_max);
+    }
+    for (field, value) in [("rho", s.rho), ("sigma_data", s.sigma_data)] {
+        if value > MAX_SIGMA {
+            bail!("{CONFIG_FILE}: sigma.{field} is {value}, expected at most {MAX_SIGMA}");
+        }
+    }
+    s.validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))
+}
+
+/// The first field in which `have` and `want` differ, as `path.field is X, expected Y`.
+fn first_difference<T: Serialize>(path: &str, have: &T, want: &T) -> String {
+    fn walk(path: String, have: &serde_json::Value, want: &serde_json::Value) -> Option<String> {
+        use serde_json::Value;
+        match (have, want) {
+            (Value::Object(a), Value::Object(b)) => {
+                b.iter().find_map(|(k, w)| walk(format!("{path}.{k}"), a.get(k).unwrap_or(&Value::Null), w))
+            }
+            (Value::Number(a), Value::Number(b)) if a.as_f64().zip(b.as_f64()).is_some_and(|(x, y)| x == y || (x - y).abs() <= 1e-12 * x.abs().max(y.abs())) => None,
+            (a, b) if a != b => Some(format!("{path} is {a}, expected {b} (implied by the model config)")),
+            _ => None,
+        }
+    }
+    let (have, want) = (serde_json::to_value(have).unwrap_or_default(), serde_json::to_value(want).unwrap_or_default());
+    walk(path.to_string(), &have, &want).unwrap_or_else(|| format!("{path} differs from the config the model implies"))
 }
 
 /// Equal up to the last bits of the f64 fields: serde_json's default parser may read a written

@@ -1,5 +1,6 @@
 //! FRMD export: turns a float student checkpoint into a baked int8 model for frmd-core.
 //!
+//! - [`artifact`]: atomic writes and the checks of output paths every command runs first;
 //! - [`checkpoint`]: `frmd.json` schema (shared with frmd-host) and a candle-free reader;
 //! - [`fold`]: the student folded for 1..=4 sampling steps, on frmd-core's f32 path;
 //! - [`calibrate`]: activation ranges from that f32 path, then quantization;
@@ -11,6 +12,7 @@
 //! - [`transformer`]: the same pipeline for transformer-lite students (fold per-step noise
 //!   tokens, calibrate with frmd-core's transformer probes, quantize, write the `FRMT` blob).
 
+pub mod artifact;
 pub mod bake;
 pub mod blob;
 pub mod calibrate;

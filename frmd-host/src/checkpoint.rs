@@ -6,6 +6,7 @@
 use crate::models::init::sorted_vars;
 use crate::models::OwnedNetwork;
 use anyhow::Context;
+use frmd_export::artifact::{write_atomic, write_atomic_with};
 use candle_core::{Device, Tensor};
 use std::path::Path;
 
@@ -17,16 +18,19 @@ pub use frmd_export::checkpoint::{
 /// Writes `model.safetensors` and `frmd.json` into `dir` (created if needed).
 pub fn save(dir: &Path, meta: &CheckpointMeta, net: &OwnedNetwork) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    net.varmap.save(dir.join(WEIGHTS_FILE)).with_context(|| format!("writing {}", dir.join(WEIGHTS_FILE).display()))?;
-    let json = serde_json::to_string_pretty(meta)?;
-    std::fs::write(dir.join(CONFIG_FILE), json).with_context(|| format!("writing {}", dir.join(CONFIG_FILE).display()))?;
-    Ok(())
+    write_atomic_with(&dir.join(WEIGHTS_FILE), |tmp| Ok(net.varmap.save(tmp)?))?;
+    save_meta(dir, meta)
+}
+
+/// Rewrites `frmd.json` of a saved checkpoint (e.g. with the final evaluation added).
+pub fn save_meta(dir: &Path, meta: &CheckpointMeta) -> anyhow::Result<()> {
+    write_atomic(&dir.join(CONFIG_FILE), serde_json::to_string_pretty(meta)?.as_bytes())
 }
 
 /// Reads and validates a checkpoint; every tensor is checked against `frmd.json`.
 pub fn load(dir: &Path) -> anyhow::Result<(CheckpointMeta, OwnedNetwork)> {
     let meta = CheckpointMeta::read(dir)?;
-    let tensors = read_weights(dir, &meta)?;
+    let tensors = read_weights(dir, &meta).with_context(|| format!("{}", dir.display()))?;
     let net = OwnedNetwork::new_seeded(&meta.model, 0, &Device::Cpu)?;
     for (name, var) in sorted_vars(&net.varmap) {
         let tensor = tensors.get(&name).with_context(|| format!("{WEIGHTS_FILE}: variable `{name}` of the model is not in {CONFIG_FILE}'s tensor list"))?;

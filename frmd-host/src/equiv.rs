@@ -18,7 +18,9 @@ use crate::diffusion::samplers::{gaussian, sample_consistency};
 use crate::tasks::{Policy, PolicyInput};
 use crate::eval::{run_episodes, EvalConfig};
 use crate::models::Condition;
-use crate::policy::float::FloatPolicy;
+use crate::checkpoint::Role;
+use crate::limits::{self, OptionError};
+use crate::policy::float::{role_name, FloatPolicy};
 use crate::policy::int8::Int8Policy;
 use anyhow::Context;
 use candle_core::Device;
@@ -73,6 +75,23 @@ impl EquivConfig {
     pub fn new(ckpt: PathBuf, baked: PathBuf) -> Self {
         EquivConfig { ckpt, baked, ..EquivConfig::default() }
     }
+
+    /// Counts and bounds before any work; checks (a) and (b) need at least one input (with none
+    /// they would pass on nothing).
+    pub fn validate(&self) -> Result<(), OptionError> {
+        limits::count("episodes", self.episodes, 0, limits::MAX_EPISODES)?;
+        if self.inputs == 0 {
+            return Err(limits::range("inputs", 0, format!("1 to {} (checks (a) and (b) run on these inputs; 0 would check nothing)", limits::MAX_CHECKS)));
+        }
+        limits::count("inputs", self.inputs, 1, limits::MAX_CHECKS)?;
+        if self.random_requant > 1_000_000_000 {
+            return Err(limits::range("random-requant", self.random_requant, "0 to 1000000000"));
+        }
+        limits::positive("max-f32-error", self.max_f32_error)?;
+        limits::positive("max-int8-error-frac", self.max_int8_error_frac)?;
+        limits::positive("mean-int8-error-frac", self.mean_int8_error_frac)?;
+        limits::non_negative("max-success-diff", self.max_success_diff_points)
+    }
 }
 
 /// One line of the report.
@@ -109,6 +128,11 @@ struct Setup {
 }
 
 fn setup(cfg: &EquivConfig) -> anyhow::Result<Setup> {
+    cfg.validate()?;
+    let role = CheckpointMeta::read(&cfg.ckpt)?.role;
+    if role != Role::Student {
+        anyhow::bail!("--ckpt {}: this is a {}, not a student (equiv checks an exported student against its checkpoint)", cfg.ckpt.display(), role_name(role));
+    }
     let info_path = cfg.baked.join(EXPORT_INFO_FILE);
     let mut info: ExportConfig = serde_json::from_str(&std::fs::read_to_string(&info_path).with_context(|| format!("reading {}", info_path.display()))?)
         .with_context(|| format!("parsing {}", info_path.display()))?;

@@ -6,7 +6,9 @@
 use crate::checkpoint::CALIBRATION_FILE;
 use crate::data::windows::CALIBRATION_ROWS;
 use crate::data::Dataset;
+use crate::limits::{self, OptionError};
 use anyhow::{bail, Context};
+use frmd_export::artifact::write_atomic;
 use frmd_core::model::mlp::InputPrecision;
 use frmd_export::calibrate::{CalibrationSet, RangeMethod};
 use frmd_export::checkpoint::{BackboneConfig, CheckpointMeta, Role};
@@ -65,6 +67,16 @@ impl ExportConfig {
         ExportConfig { checkpoint: dir.display().to_string(), ..ExportConfig::default() }
     }
 
+    /// The settings alone, before any work.
+    pub fn validate(&self) -> Result<(), OptionError> {
+        limits::count("steps", self.steps, 1, 4)?;
+        if !(self.input_headroom.is_finite() && self.input_headroom >= 1.0) {
+            return Err(limits::range("input-headroom", self.input_headroom, "a finite factor >= 1"));
+        }
+        self.calibration.parse::<RangeMethod>().map_err(|e| limits::range("calibration", &self.calibration, format!("minmax or percentile:P ({e})")))?;
+        Ok(())
+    }
+
     fn options(&self) -> anyhow::Result<ExportOptions> {
         let ranges: RangeMethod = self.calibration.parse()?;
         let input_precision = if self.two_plane_input { InputPrecision::Int16 } else { InputPrecision::Int8 };
@@ -95,7 +107,7 @@ fn calibration_set(cfg: &ExportConfig) -> anyhow::Result<Option<CalibrationSet>>
     let ckpt = Path::new(&cfg.checkpoint);
     let meta = CheckpointMeta::read(ckpt)?;
     if meta.role != Role::Student {
-        bail!("{}: only student checkpoints can be exported; this one is a {:?} (its sampler needs many network evaluations)", ckpt.display(), meta.role);
+        bail!("--ckpt {}: this is a {} checkpoint; only students can be exported (its sampler needs many network evaluations)", ckpt.display(), crate::policy::float::role_name(meta.role));
     }
     match &cfg.calibration_data {
         Some(data) => Ok(Some(calibration_from_data(Path::new(data), ckpt)?)),
@@ -143,16 +155,22 @@ impl ExportedStudent {
     }
 }
 
-/// Exports the checkpoint `cfg` names with the exporter of its backbone.
+/// Exports the checkpoint `cfg` names with the exporter of its backbone. The blob is loaded
+/// back with frmd-core's loader (the firmware's) before it is returned: an export the runtime
+/// would refuse is an error here, not a file.
 pub fn export_student(cfg: &ExportConfig) -> anyhow::Result<ExportedStudent> {
-    if is_transformer(cfg)? {
+    cfg.validate()?;
+    let student = if is_transformer(cfg)? {
         let exported = export_transformer(cfg)?;
         let blob = transformer_blob(&exported)?;
-        return Ok(ExportedStudent::Transformer { exported, blob });
-    }
-    let exported = export_mlp(cfg)?;
-    let blob = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
-    Ok(ExportedStudent::Mlp { exported, blob })
+        ExportedStudent::Transformer { exported, blob }
+    } else {
+        let exported = export_mlp(cfg)?;
+        let blob = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
+        ExportedStudent::Mlp { exported, blob }
+    };
+    crate::policy::int8::Int8Policy::from_blob(student.blob(), "int8").with_context(|| format!("{}: the exported blob does not load with the runtime's loader (nothing written)", cfg.checkpoint))?;
+    Ok(student)
 }
 
 /// Writes the module directory `dir` (MLP: `policy.rs` + `weights.bin` + `policy.blob`;
@@ -164,7 +182,7 @@ pub fn write_export(cfg: &ExportConfig, student: &ExportedStudent, dir: Option<&
         match student {
             ExportedStudent::Mlp { exported, blob } => {
                 frmd_export::bake::write_module(&exported.policy, dir).with_context(|| format!("writing {}", dir.display()))?;
-                std::fs::write(dir.join(BAKED_BLOB_FILE), blob)?;
+                write_atomic(&dir.join(BAKED_BLOB_FILE), blob)?;
                 written.extend(["policy.rs", "weights.bin", BAKED_BLOB_FILE].map(|f| dir.join(f)));
             }
             ExportedStudent::Transformer { exported, blob } => {
@@ -172,11 +190,11 @@ pub fn write_export(cfg: &ExportConfig, student: &ExportedStudent, dir: Option<&
                 written.extend([frmd_export::transformer::bake::MODULE_FILE, BAKED_BLOB_FILE].map(|f| dir.join(f)));
             }
         }
-        std::fs::write(dir.join(EXPORT_INFO_FILE), serde_json::to_string_pretty(cfg)?)?;
+        write_atomic(&dir.join(EXPORT_INFO_FILE), serde_json::to_string_pretty(cfg)?.as_bytes())?;
         written.push(dir.join(EXPORT_INFO_FILE));
     }
     if let Some(path) = blob_path {
-        std::fs::write(path, student.blob()).with_context(|| format!("writing {}", path.display()))?;
+        write_atomic(path, student.blob())?;
         written.push(path.to_path_buf());
     }
     Ok(written)

@@ -11,6 +11,7 @@ pub mod equiv;
 pub mod eval;
 pub mod export;
 pub mod firmware;
+pub mod limits;
 pub mod models;
 pub mod policy;
 pub mod prodmp_vectors;

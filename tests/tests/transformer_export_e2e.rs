@@ -36,7 +36,7 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
 
     // The exporter refuses the teacher, naming the reason.
     let err = run.export(teacher).unwrap_err();
-    assert!(format!("{err:#}").contains("Teacher"), "{err:#}");
+    assert!(format!("{err:#}").contains("this is a teacher checkpoint"), "{err:#}");
 
     run.export(student).unwrap();
     let blob = std::fs::read(baked.join(BAKED_BLOB_FILE)).unwrap();

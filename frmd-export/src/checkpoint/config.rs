@@ -220,30 +220,44 @@ impl ModelConfig {
         }
     }
 
+    /// Every field in its range, named when it is not (the sizes bounded so that a hostile
+    /// config cannot ask for unbounded memory).
     pub fn validate(&self) -> anyhow::Result<()> {
-        if self.obs_dim == 0 || self.history == 0 || self.action_dim == 0 || self.horizon == 0 {
-            bail!("model config: obs_dim, history, action_dim and horizon must be positive");
+        let sizes = [("obs_dim", self.obs_dim, 4096), ("history", self.history, 64), ("action_dim", self.action_dim, 256), ("horizon", self.horizon, 1024), ("embed_dim", self.embed_dim, 4096)];
+        for (field, value, max) in sizes {
+            if !(1..=max).contains(&value) {
+                bail!("{field} is {value}, expected 1 to {max}");
+            }
         }
         if !(self.control_dt.is_finite() && self.control_dt > 0.0) {
-            bail!("model config: control_dt must be finite and positive, got {}", self.control_dt);
+            bail!("control_dt is {}, expected a finite number of seconds > 0", self.control_dt);
         }
-        if self.embed_dim == 0 || !self.embed_dim.is_multiple_of(2) {
-            bail!("model config: embed_dim must be even and positive, got {}", self.embed_dim);
+        if !self.embed_dim.is_multiple_of(2) {
+            bail!("embed_dim is {}, expected an even number", self.embed_dim);
         }
         match &self.backbone {
-            BackboneConfig::Mlp { hidden, .. } if hidden.is_empty() || hidden.contains(&0) => {
-                bail!("model config: MLP needs at least one positive hidden width")
+            BackboneConfig::Mlp { hidden, .. } => {
+                if hidden.is_empty() || hidden.len() > 64 {
+                    bail!("backbone.hidden has {} layers, expected 1 to 64", hidden.len());
+                }
+                if let Some((i, w)) = hidden.iter().enumerate().find(|(_, w)| !(1..=65_536).contains(*w)) {
+                    bail!("backbone.hidden[{i}] is {w}, expected 1 to 65536");
+                }
             }
-            BackboneConfig::Transformer { layers, heads, width }
-                if *layers == 0 || *heads == 0 || *width == 0 || width % heads != 0 =>
-            {
-                bail!("model config: transformer needs layers, heads > 0 and width divisible by heads")
+            BackboneConfig::Transformer { layers, heads, width } => {
+                for (field, value, max) in [("layers", *layers, 64), ("heads", *heads, 64), ("width", *width, 65_536)] {
+                    if !(1..=max).contains(&value) {
+                        bail!("backbone.{field} is {value}, expected 1 to {max}");
+                    }
+                }
+                if width % heads != 0 {
+                    bail!("backbone.width is {width}, expected a multiple of backbone.heads {heads}");
+                }
             }
-            _ => {}
         }
         if let HeadConfig::ProDmp { num_basis, .. } = self.head {
-            if num_basis == 0 {
-                bail!("model config: ProDMP needs at least one basis function");
+            if !(1..=256).contains(&num_basis) {
+                bail!("head.num_basis is {num_basis}, expected 1 to 256");
             }
         }
         Ok(())
@@ -264,6 +278,27 @@ pub struct Normalizer {
 pub struct Normalization {
     pub obs: Normalizer,
     pub action: Normalizer,
+}
+
+impl Normalization {
+    /// Sizes `obs_dim`/`action_dim`, finite bounds and `min <= max` in every dimension; the
+    /// first violation is named (`normalization.obs.min[2]`).
+    pub fn validate(&self, obs_dim: usize, action_dim: usize) -> anyhow::Result<()> {
+        for (name, n, dim) in [("obs", &self.obs, obs_dim), ("action", &self.action, action_dim)] {
+            for (bound, values) in [("min", &n.min), ("max", &n.max)] {
+                if values.len() != dim {
+                    bail!("normalization.{name}.{bound} has {} values, expected {dim} (the model's {name} dimension)", values.len());
+                }
+                if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                    bail!("normalization.{name}.{bound}[{i}] is {}, expected a finite number", values[i]);
+                }
+            }
+            if let Some(i) = (0..dim).find(|&i| n.min[i] > n.max[i]) {
+                bail!("normalization.{name}.min[{i}] is {} above max[{i}] {}, expected min <= max", n.min[i], n.max[i]);
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Normalizer {

@@ -104,7 +104,7 @@ pub fn module_source(model: &QuantizedTransformer, blob_len: usize) -> io::Resul
 pub fn write_module(model: &QuantizedTransformer, blob: &[u8], dir: &Path) -> io::Result<()> {
     let source = module_source(model, blob.len())?;
     std::fs::create_dir_all(dir)?;
-    std::fs::write(dir.join(MODULE_FILE), source)?;
-    std::fs::write(dir.join(BLOB_FILE), blob)?;
+    crate::artifact::write_atomic(&dir.join(MODULE_FILE), source.as_bytes()).map_err(|e| io::Error::other(format!("{e:#}")))?;
+    crate::artifact::write_atomic(&dir.join(BLOB_FILE), blob).map_err(|e| io::Error::other(format!("{e:#}")))?;
     Ok(())
 }

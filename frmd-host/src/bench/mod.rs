@@ -148,27 +148,43 @@ fn default_float_policies(cfg: &BenchConfig) -> anyhow::Result<Vec<FloatPolicy>>
 /// Policies with their table labels.
 type LabelledPolicies = Vec<(String, Box<dyn Policy>)>;
 
+/// The frmd-core policies of one exported student, with that student's own backbone label and
+/// input sizes (never those of another policy in the table).
+struct CorePolicySet {
+    backbone: String,
+    input: FixedInput,
+    policies: LabelledPolicies,
+}
+
 /// The frmd-core int8 and f32 one-step policies for the comparison: the student in `--dir`
 /// exported as `frmd export` does it (or, with `--synthetic`, a random student of `--backbone`
 /// exported the same way). Returns the policies, or why there are none.
-fn core_policies(cfg: &BenchConfig) -> Result<LabelledPolicies, String> {
-    let build = || -> anyhow::Result<Result<(Int8Policy, Int8Policy), String>> {
+fn core_policies(cfg: &BenchConfig) -> Result<CorePolicySet, String> {
+    let build = || -> anyhow::Result<Result<(Int8Policy, Int8Policy, BackboneConfig), String>> {
         if cfg.synthetic {
             let dir = std::env::temp_dir().join(format!("frmd-bench-{}", std::process::id()));
             let policies = fixtures::reach_student(&dir, &cfg.backbone, 7);
             let _ = std::fs::remove_dir_all(&dir);
-            return Ok(policies?.core.map(|c| (c.int8, c.core_f32)));
+            return Ok(policies?.core.map(|c| (c.int8, c.core_f32, cfg.backbone.clone())));
         }
         let ckpt = cfg.dir.join("student");
         let exported = export_mlp(&ExportConfig::for_checkpoint(&ckpt)).with_context(|| format!("exporting {}", ckpt.display()))?;
         let blob = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
-        Ok(Ok((Int8Policy::from_blob(&blob, "int8")?, Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?)))
+        let backbone = exported.checkpoint.meta.model.backbone.clone();
+        Ok(Ok((Int8Policy::from_blob(&blob, "int8")?, Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?, backbone)))
     };
     match build() {
-        Ok(Ok((int8, f32_twin))) => Ok(vec![
-            ("frmd-core int8 1-step".to_string(), Box::new(int8) as Box<dyn Policy>),
-            ("frmd-core f32 1-step".to_string(), Box::new(f32_twin)),
-        ]),
+        Ok(Ok((int8, f32_twin, backbone))) => {
+            let dims = int8.dims();
+            Ok(CorePolicySet {
+                backbone: backbone_label(&backbone),
+                input: FixedInput::new(dims.obs_dim, dims.action_dim, dims.history),
+                policies: vec![
+                    ("frmd-core int8 1-step".to_string(), Box::new(int8) as Box<dyn Policy>),
+                    ("frmd-core f32 1-step".to_string(), Box::new(f32_twin)),
+                ],
+            })
+        }
         Ok(Err(reason)) => Err(format!("frmd-core policies unavailable: {reason}")),
         Err(e) => Err(format!("frmd-core policies unavailable: {e:#}")),
     }
@@ -187,15 +203,17 @@ pub fn bench_rows(cfg: &BenchConfig) -> anyhow::Result<(Vec<BenchRow>, Option<St
         v
     };
     let (core, note) = match core_policies(cfg) {
-        Ok(list) => (list, None),
-        Err(reason) => (Vec::new(), Some(reason)),
+        Ok(set) => (Some(set), None),
+        Err(reason) => (None, Some(reason)),
     };
     let mut rows = Vec::new();
-    let first = floats.first().context("no policy to time")?;
-    let (obs_dim, action_dim, history) = first.input_sizes();
-    let fixed = FixedInput::new(obs_dim, action_dim, history);
+    floats.first().context("no policy to time")?;
+    let (backbone, fixed, core) = match core {
+        Some(set) => (set.backbone, set.input, set.policies),
+        None => (String::new(), FixedInput::new(1, 1, 1), Vec::new()),
+    };
     for (label, mut policy) in core {
-        let backbone = backbone_label(&first.config().backbone);
+        let label = if cfg.policies.is_empty() || cfg.synthetic { label } else { format!("{label} ({}/student)", cfg.dir.display()) };
         let (median_us, p99_us) = time_policy(policy.as_mut(), &fixed.input(), cfg.warmup, cfg.calls)?;
         rows.push(BenchRow { label: label.clone(), backbone: backbone.clone(), median_us, p99_us, calls: cfg.calls });
         for (level, median_us, p99_us) in time_kernel_levels(policy.as_mut(), &fixed.input(), cfg)? {
@@ -262,5 +280,5 @@ pub fn print_table(rows: &[BenchRow], warmup: usize, note: Option<&str>) {
 pub fn write_json(path: &Path, rows: &[BenchRow], note: Option<&str>) -> anyhow::Result<()> {
     let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into());
     let value = serde_json::json!({ "threads": threads, "batch": 1, "results": rows, "note": note });
-    std::fs::write(path, serde_json::to_string_pretty(&value)?).with_context(|| format!("cannot write {}", path.display()))
+    frmd_export::artifact::write_atomic(path, serde_json::to_string_pretty(&value)?.as_bytes())
 }

@@ -89,7 +89,7 @@ fn corrupted_or_mismatched_checkpoints_are_rejected_with_a_reason() {
     let mut meta4 = meta.clone();
     meta4.prodmp.as_mut().unwrap().alpha = 10.0;
     std::fs::write(dir.join(CONFIG_FILE), serde_json::to_string(&meta4).unwrap()).unwrap();
-    assert!(load_err(&dir).contains("prodmp config"));
+    assert!(load_err(&dir).contains("prodmp.alpha is 10"));
     // Missing config file.
     std::fs::remove_file(dir.join(CONFIG_FILE)).unwrap();
     assert!(load_err(&dir).contains("frmd.json"));

@@ -27,13 +27,21 @@ pub struct BenchArgs {
     /// Untimed warm-up calls per policy.
     #[arg(long, default_value_t = BenchConfig::default().warmup)]
     pub warmup: usize,
-    /// Write the results as JSON here.
+    /// Write the results as JSON here (must not exist unless --force).
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Replace an existing --json file.
+    #[arg(long)]
+    pub force: bool,
 }
 
 pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
     let cfg = BenchConfig { policies: args.policies, dir: args.dir, synthetic: args.synthetic, backbone: args.backbone, calls: args.calls, warmup: args.warmup };
+    crate::limits::count("calls", cfg.calls, 1, crate::limits::MAX_CHECKS)?;
+    crate::limits::count("warmup", cfg.warmup, 0, crate::limits::MAX_CHECKS)?;
+    if let Some(path) = &args.json {
+        frmd_export::artifact::check_output_file(path, "--json", args.force, &[])?;
+    }
     let (rows, note) = bench_rows(&cfg)?;
     print_table(&rows, cfg.warmup, note.as_deref());
     if let Some(path) = &args.json {

@@ -17,9 +17,12 @@ pub struct CollectArgs {
     /// First collection seed (must be below 2^63; evaluation uses seeds from 2^63 on).
     #[arg(long, default_value_t = CollectConfig::default().seed)]
     pub seed: u64,
-    /// Output safetensors file.
+    /// Output safetensors file (must not exist unless --force).
     #[arg(long)]
     pub out: PathBuf,
+    /// Replace an existing --out file.
+    #[arg(long)]
+    pub force: bool,
     /// Perturb the executed actions with smooth noise of this standard deviation (metres) and
     /// record the expert's clean actions (DART), so the demonstrations contain recoveries.
     /// 0 = unperturbed.
@@ -32,7 +35,7 @@ pub struct CollectArgs {
 
 pub fn run(args: CollectArgs) -> anyhow::Result<ExitCode> {
     let noise = ActionNoise { std: args.perturb_std, correlation_time: args.perturb_time };
-    let cfg = CollectConfig { task: args.task, episodes: args.episodes, seed: args.seed, out: args.out, noise };
+    let cfg = CollectConfig { task: args.task, episodes: args.episodes, seed: args.seed, out: args.out, force: args.force, noise };
     let c = collect_to_file(&cfg)?;
     println!(
         "wrote {}: {} episodes, {} steps (mean length {:.1}), obs_dim {}, action_dim {}, {} bytes; \

@@ -1,6 +1,9 @@
 //! `frmd equiv --ckpt DIR --baked DIR`: the bit-accuracy harness ([`crate::equiv`]); exits
 //! non-zero when a bound is exceeded.
+use crate::checkpoint::{CONFIG_FILE, WEIGHTS_FILE};
 use crate::equiv::{print, run as run_equiv, EquivConfig};
+use crate::export::{BAKED_BLOB_FILE, EXPORT_INFO_FILE};
+use frmd_export::artifact::{check_output_file, write_atomic};
 use clap::Args;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -37,12 +40,19 @@ pub struct EquivArgs {
     /// Bound of the success-rate difference, percentage points.
     #[arg(long, default_value_t = EquivConfig::default().max_success_diff_points)]
     pub max_success_diff: f64,
-    /// Also write the report as JSON.
+    /// Also write the report as JSON (must not exist unless --force).
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Replace an existing --json file (inputs are never overwritten).
+    #[arg(long)]
+    pub force: bool,
 }
 
 pub fn run(args: EquivArgs) -> anyhow::Result<ExitCode> {
+    if let Some(path) = &args.json {
+        let inputs = [args.ckpt.join(CONFIG_FILE), args.ckpt.join(WEIGHTS_FILE), args.baked.join(BAKED_BLOB_FILE), args.baked.join(EXPORT_INFO_FILE)];
+        check_output_file(path, "--json", args.force, &inputs.iter().map(PathBuf::as_path).collect::<Vec<_>>())?;
+    }
     let cfg = EquivConfig {
         episodes: args.episodes,
         inputs: args.inputs,
@@ -57,7 +67,7 @@ pub fn run(args: EquivArgs) -> anyhow::Result<ExitCode> {
     let report = run_equiv(&cfg)?;
     print(&report);
     if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&report)?)?;
+        write_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(if report.passed { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }

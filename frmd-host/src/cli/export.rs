@@ -4,7 +4,9 @@ use crate::export::{export_student, save_calibration, write_export, ExportConfig
 use anyhow::{bail, Context};
 use clap::Args;
 use frmd_export::MemoryFigures;
-use std::path::PathBuf;
+use crate::checkpoint::{CALIBRATION_FILE, CONFIG_FILE, WEIGHTS_FILE};
+use frmd_export::artifact::{check_output_dir, check_output_file};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Args, Debug)]
@@ -39,6 +41,10 @@ pub struct ExportArgs {
     /// With --data: also store the calibration rows as the checkpoint's calibration.safetensors.
     #[arg(long)]
     pub save_calibration: bool,
+    /// Replace an existing --blob file or write into a non-empty --out directory (inputs are
+    /// never overwritten).
+    #[arg(long)]
+    pub force: bool,
 }
 
 impl From<&ExportArgs> for ExportConfig {
@@ -54,6 +60,13 @@ impl From<&ExportArgs> for ExportConfig {
             input_headroom: a.input_headroom,
         }
     }
+}
+
+/// Whether two directory paths name the same directory (existing or not).
+fn same_dir(a: &Path, b: &Path) -> bool {
+    let norm = |p: &Path| p.canonicalize().unwrap_or_else(|_| p.to_path_buf());
+    let a = if a.as_os_str().is_empty() { Path::new(".") } else { a };
+    norm(a) == norm(b)
 }
 
 fn print_memory(m: &MemoryFigures, blob_len: usize) {
@@ -113,6 +126,24 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
         bail!("nothing to write: pass --out DIR and/or --blob FILE");
     }
     let cfg = ExportConfig::from(&args);
+    cfg.validate()?;
+    let mut inputs = vec![args.ckpt.join(CONFIG_FILE), args.ckpt.join(WEIGHTS_FILE), args.ckpt.join(CALIBRATION_FILE)];
+    inputs.extend(args.data.clone());
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    if let Some(dir) = &args.out {
+        check_output_dir(dir, "--out", args.force, &inputs)?;
+    }
+    if let Some(path) = &args.blob {
+        check_output_file(path, "--blob", args.force, &inputs)?;
+        if let Some(dir) = &args.out {
+            if path.parent().zip(path.file_name()).is_some_and(|(p, n)| same_dir(p, dir) && n == BAKED_BLOB_FILE) {
+                bail!("--blob {} is the blob --out writes; drop --blob", path.display());
+            }
+        }
+    }
+    if args.save_calibration && args.data.is_none() {
+        bail!("--save-calibration needs --data");
+    }
     if args.save_calibration {
         let data = args.data.as_ref().context("--save-calibration needs --data")?;
         save_calibration(data, &args.ckpt)?;

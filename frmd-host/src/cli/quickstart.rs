@@ -41,6 +41,9 @@ pub struct QuickstartArgs {
     /// Seed of collection and training.
     #[arg(long, default_value_t = QuickstartConfig::default().seed)]
     pub seed: u64,
+    /// Write into a non-empty --out directory, replacing the run there.
+    #[arg(long)]
+    pub force: bool,
     /// CI smoke-test sizes: a few demos, tens of steps, a few episodes (numbers meaningless).
     #[arg(long, hide = true)]
     pub tiny: bool,
@@ -61,6 +64,7 @@ impl From<QuickstartArgs> for QuickstartConfig {
             baseline: d.baseline && !a.no_baseline,
             episodes: a.episodes,
             seed: a.seed,
+            force: a.force,
         };
         if a.tiny {
             cfg.with_tiny_sizes()

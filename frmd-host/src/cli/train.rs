@@ -7,7 +7,7 @@ use crate::models::{BackboneConfig, ProDmpOutput};
 use crate::train::batch::CondAugment;
 use crate::train::distill::DistillConfig;
 use crate::train::dp::DpConfig;
-use crate::train::recipe::{DpRun, ProbeConfig, StudentRun, TeacherRun, TrainConfig};
+use crate::train::recipe::{DpRun, ProbeConfig, StudentRun, StudentShape, TeacherRun, TrainConfig};
 use crate::train::run::{run_dp, run_probe, run_student, run_teacher};
 use crate::train::teacher::TeacherConfig;
 use clap::{Args, Subcommand};
@@ -55,13 +55,16 @@ pub struct CommonArgs {
     /// Demonstrations (.safetensors, docs/design.md section 4).
     #[arg(long)]
     pub data: PathBuf,
-    /// Output checkpoint directory.
+    /// Output checkpoint directory (must be missing or empty unless --force).
     #[arg(long)]
     pub out: PathBuf,
+    /// Write into a non-empty --out directory, replacing the checkpoint there.
+    #[arg(long)]
+    pub force: bool,
     /// mlp | mlp-silu | mlp-paper | mlp:W1,W2,..[:silu|:mish] | transformer-lite | transformer |
-    /// transformer:LAYERS,HEADS,WIDTH.
-    #[arg(long, default_value_t = TrainConfig::default().backbone)]
-    pub backbone: BackboneConfig,
+    /// transformer:LAYERS,HEADS,WIDTH (default: mlp). A student takes its teacher's.
+    #[arg(long)]
+    pub backbone: Option<BackboneConfig>,
     /// Gradient steps [default: teacher and dp 20000, student 3000].
     #[arg(long)]
     pub steps: Option<usize>,
@@ -89,18 +92,18 @@ pub struct CommonArgs {
     /// (see `train::optim::ScheduledAdamW::for_network`; docs/experiments.md has measurements).
     #[arg(long, default_value_t = TrainConfig::default().head_lr_scale)]
     pub head_lr_scale: f64,
-    /// Observation history m.
-    #[arg(long, default_value_t = TrainConfig::default().history)]
-    pub history: usize,
-    /// Prediction horizon n.
-    #[arg(long, default_value_t = TrainConfig::default().horizon)]
-    pub horizon: usize,
-    /// ProDMP basis functions b.
-    #[arg(long, default_value_t = TrainConfig::default().num_basis)]
-    pub num_basis: usize,
-    /// Noise-embedding length.
-    #[arg(long, default_value_t = TrainConfig::default().embed_dim)]
-    pub embed_dim: usize,
+    /// Observation history m (default 2). A student takes its teacher's.
+    #[arg(long)]
+    pub history: Option<usize>,
+    /// Prediction horizon n (default 12). A student takes its teacher's.
+    #[arg(long)]
+    pub horizon: Option<usize>,
+    /// ProDMP basis functions b (default 20). A student takes its teacher's.
+    #[arg(long)]
+    pub num_basis: Option<usize>,
+    /// Noise-embedding length (default 16). A student takes its teacher's.
+    #[arg(long)]
+    pub embed_dim: Option<usize>,
     /// Loss is averaged and shown every this many steps.
     #[arg(long, default_value_t = TrainConfig::default().log_every)]
     pub log_every: usize,
@@ -123,13 +126,14 @@ pub struct CommonArgs {
 }
 
 impl CommonArgs {
-    /// The flags over a role's recipe (`recipe` gives the schedule flags left out).
+    /// The flags over a role's recipe (`recipe` gives the flags left out).
     fn over(self, recipe: TrainConfig) -> TrainConfig {
         let a = self;
         TrainConfig {
             data: a.data,
             out: a.out,
-            backbone: a.backbone,
+            force: a.force,
+            backbone: a.backbone.unwrap_or(recipe.backbone),
             steps: a.steps.unwrap_or(recipe.steps),
             seed: a.seed,
             batch: a.batch,
@@ -138,10 +142,10 @@ impl CommonArgs {
             warmup: a.warmup.unwrap_or(recipe.warmup),
             pad_end: a.pad_end,
             head_lr_scale: a.head_lr_scale,
-            history: a.history,
-            horizon: a.horizon,
-            num_basis: a.num_basis,
-            embed_dim: a.embed_dim,
+            history: a.history.unwrap_or(recipe.history),
+            horizon: a.horizon.unwrap_or(recipe.horizon),
+            num_basis: a.num_basis.unwrap_or(recipe.num_basis),
+            embed_dim: a.embed_dim.unwrap_or(recipe.embed_dim),
             log_every: a.log_every,
             eval_every: a.eval_every,
             eval_episodes: a.eval_episodes,
@@ -245,7 +249,10 @@ pub struct StudentArgs {
 
 impl From<StudentArgs> for StudentRun {
     fn from(a: StudentArgs) -> Self {
+        let c = &a.common;
+        let shape = StudentShape { history: c.history, horizon: c.horizon, num_basis: c.num_basis, backbone: c.backbone.clone(), embed_dim: c.embed_dim };
         StudentRun {
+            shape,
             train: a.common.over(TrainConfig::student_recipe()),
             teacher: a.teacher,
             distill: DistillConfig { levels: a.levels, teacher_steps: a.k, solver: a.solver, target_ema: a.target_ema, eval_ema: a.eval_ema, augment: a.augment.into(), output: a.parametrization },

@@ -3,6 +3,7 @@ use super::perturb::{ActionNoise, PerturbedExpert};
 use super::Dataset;
 use crate::tasks::Policy;
 use crate::eval::{rollout, EVAL_SEED_OFFSET};
+use crate::limits::{self, OptionError};
 use crate::progress::Progress;
 use crate::tasks::make_task;
 use std::path::PathBuf;
@@ -15,8 +16,10 @@ pub struct CollectConfig {
     pub episodes: usize,
     /// First collection seed (below 2^63; evaluation uses seeds from 2^63 on).
     pub seed: u64,
-    /// Output safetensors file.
+    /// Output safetensors file (must not exist unless `force`).
     pub out: PathBuf,
+    /// Replace an existing `out`.
+    pub force: bool,
     pub noise: ActionNoise,
 }
 
@@ -25,12 +28,26 @@ pub struct CollectConfig {
 /// docs/design.md section 4).
 pub const RECIPE_PERTURB_STD: f64 = 0.02;
 
+impl CollectConfig {
+    /// The counts, the seeds (below the evaluation stream) and the noise, before any work.
+    pub fn validate(&self) -> Result<(), OptionError> {
+        limits::count("episodes", self.episodes, 1, limits::MAX_EPISODES)?;
+        let attempts = 3 * (self.episodes + 10 + self.episodes / 5) as u64;
+        let last = EVAL_SEED_OFFSET - attempts;
+        if self.seed > last {
+            return Err(limits::range("seed", self.seed, format!("at most {last} (collection seeds stay below 2^63, the evaluation stream)")));
+        }
+        limits::non_negative("perturb-std", self.noise.std)?;
+        limits::positive("perturb-time", self.noise.correlation_time)
+    }
+}
+
 impl Default for CollectConfig {
     /// 100 demonstrations from seed 0, executed actions perturbed with std
     /// [`RECIPE_PERTURB_STD`]; no task or file named.
     fn default() -> Self {
         let noise = ActionNoise { std: RECIPE_PERTURB_STD, ..ActionNoise::default() };
-        CollectConfig { task: String::new(), episodes: 100, seed: 0, out: PathBuf::new(), noise }
+        CollectConfig { task: String::new(), episodes: 100, seed: 0, out: PathBuf::new(), force: false, noise }
     }
 }
 
@@ -49,6 +66,9 @@ pub struct Collected {
 
 /// Collects the demonstrations of `cfg` (with progress on stderr) and writes them to `cfg.out`.
 pub fn collect_to_file(cfg: &CollectConfig) -> anyhow::Result<Collected> {
+    cfg.validate()?;
+    make_task(&cfg.task)?;
+    frmd_export::artifact::check_output_file(&cfg.out, "--out", cfg.force, &[])?;
     let mut progress = Progress::new(&format!("collect {}", cfg.task), cfg.episodes as u64, "episode");
     // `collect_demos` validates the noise and treats std 0 as unperturbed.
     let (data, stats) = collect_demos(&cfg.task, cfg.episodes, cfg.seed, Some(cfg.noise), &mut |done| progress.update(done as u64, ""))?;

@@ -238,7 +238,6 @@ impl Dataset {
     /// Validates and writes the dataset to `path`.
     pub fn save(&self, path: &Path) -> anyhow::Result<()> {
         let bytes = self.to_bytes()?;
-        std::fs::write(path, bytes)
-            .map_err(|e| anyhow::anyhow!("cannot write dataset {}: {e}", path.display()))
+        frmd_export::artifact::write_atomic(path, &bytes)
     }
 }

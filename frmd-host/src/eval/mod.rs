@@ -4,6 +4,7 @@
 //! Seeds: demonstrations are collected on seeds below [`EVAL_SEED_OFFSET`] (2^63; `frmd collect`
 //! refuses others) and evaluation episode `i` runs on seed `EVAL_SEED_OFFSET + first_seed + i`,
 //! so evaluation layouts never coincide with demonstration layouts by construction.
+use crate::limits::{self, OptionError};
 use crate::tasks::{make_task, Policy, PolicyInput, Task};
 use serde::Serialize;
 use std::collections::VecDeque;
@@ -44,6 +45,31 @@ impl Default for EvalConfig {
             first_seed: 0,
             warmup_calls: 5,
             keep_paths: 0,
+        }
+    }
+}
+
+impl EvalConfig {
+    /// Checks the counts against [`crate::limits`] and that every seed of the run stays in the
+    /// evaluation stream (`first_seed + episodes <= 2^63`, no wrap into the collection seeds).
+    pub fn validate(&self) -> Result<(), OptionError> {
+        limits::count("episodes", self.episodes, 1, limits::MAX_EPISODES)?;
+        limits::count("exec-steps", self.exec_steps, 1, limits::MAX_HORIZON)?;
+        limits::count("history", self.history, 1, limits::MAX_HISTORY)?;
+        limits::count("plot-episodes", self.keep_paths, 0, limits::MAX_EPISODES)?;
+        let last = EVAL_SEED_OFFSET - self.episodes as u64;
+        if self.first_seed > last {
+            return Err(limits::range("first-seed", self.first_seed, format!("at most {last} (index within the evaluation stream: seed 2^63 + first seed + episode must stay below 2^64 for {} episodes)", self.episodes)));
+        }
+        Ok(())
+    }
+
+    /// [`Self::validate`] plus the policy's own limits: at most its horizon executed per chunk.
+    pub fn validate_for(&self, policy: &dyn Policy) -> Result<(), OptionError> {
+        self.validate()?;
+        match policy.horizon() {
+            Some(horizon) if self.exec_steps > horizon => Err(limits::range("exec-steps", self.exec_steps, format!("at most the policy's horizon {horizon} (actions per chunk)"))),
+            _ => Ok(()),
         }
     }
 }
@@ -246,10 +272,7 @@ pub fn run_episodes_with_progress(
     cfg: &EvalConfig,
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<EvalReport> {
-    anyhow::ensure!(
-        cfg.episodes >= 1,
-        "at least one evaluation episode is needed"
-    );
+    cfg.validate_for(policy)?;
     let mut task = make_task(task_name)?;
     let dt = task.dt();
     if cfg.warmup_calls > 0 {

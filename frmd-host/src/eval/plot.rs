@@ -28,8 +28,9 @@ const FAILURE: RGBColor = RGBColor(240, 120, 0);
 type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// Maps a plotters error to an error naming the plot.
-pub(crate) fn plot_err(e: impl std::fmt::Debug) -> anyhow::Error {
-    anyhow::anyhow!("plot: {e:?}")
+pub(crate) fn plot_err(e: impl std::fmt::Display) -> anyhow::Error {
+    let text = e.to_string();
+    anyhow::anyhow!("plot: {}", text.lines().next().unwrap_or_default())
 }
 
 /// Registers the embedded font with plotters (once per process).
@@ -99,7 +100,12 @@ fn legend_swatch(chart: &mut Chart<'_, '_>, label: &str, color: RGBColor) -> any
 }
 
 /// Draws the kept paths of `report` over their layouts into a PNG at `out`.
+/// The file is written atomically (`frmd_export::artifact`).
 pub fn plot_paths(out: &Path, report: &EvalReport) -> anyhow::Result<()> {
+    frmd_export::artifact::write_atomic_with(out, |tmp| draw_paths(tmp, report))
+}
+
+fn draw_paths(out: &Path, report: &EvalReport) -> anyhow::Result<()> {
     register_font()?;
     let paths: &[KeptPath] = &report.kept_paths;
     let root = BitMapBackend::new(out, SIZE).into_drawing_area();

@@ -6,6 +6,7 @@ use crate::checkpoint::{self, CheckpointMeta, Role};
 use crate::data::Normalization;
 use crate::diffusion::ddpm::{sample_dp, DdpmSchedule, DpSampler, EpsParametrization, DP_TRAIN_STEPS};
 use crate::diffusion::samplers::{gaussian, sample_consistency, sample_teacher, Solver};
+use crate::limits::{self, OptionError};
 use crate::tasks::{Policy, PolicyInput};
 use crate::models::{Condition, OwnedNetwork};
 use anyhow::{bail, Context};
@@ -26,6 +27,15 @@ pub fn dp_parametrization(meta: &CheckpointMeta) -> anyhow::Result<EpsParametriz
     }
 }
 
+/// The role as users write it (teacher, student, dp).
+pub fn role_name(role: Role) -> &'static str {
+    match role {
+        Role::Teacher => "teacher",
+        Role::Student => "student",
+        Role::Dp => "dp",
+    }
+}
+
 /// How a float policy turns noise into a chunk.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Sampler {
@@ -37,17 +47,27 @@ pub enum Sampler {
 impl Sampler {
     /// Default sampler for a role: teacher Heun 10 steps (the solver can be overridden),
     /// student 1 step, DP DDIM 10 steps; `steps` overrides the count (DP: 100 means DDPM).
-    pub fn for_role(role: Role, steps: Option<usize>, solver: Option<Solver>) -> anyhow::Result<Self> {
+    /// Teacher and DP take 1 to [`limits::MAX_SAMPLER_STEPS`] steps; a solver is the teacher's
+    /// alone (an error for the other roles, which have none to set).
+    pub fn for_role(role: Role, steps: Option<usize>, solver: Option<Solver>) -> Result<Self, OptionError> {
+        if let (Some(solver), Role::Student | Role::Dp) = (solver, role) {
+            let sampler = if role == Role::Dp { "DDPM/DDIM (chosen by --steps)" } else { "the consistency sampler" };
+            return Err(limits::conflict("solver", format!("a {} checkpoint", role_name(role)), format!("only a teacher has an ODE solver to choose ({solver} given; this checkpoint uses {sampler})")));
+        }
         Ok(match role {
-            Role::Teacher => Sampler::Teacher { solver: solver.unwrap_or(Solver::Heun), steps: steps.unwrap_or(10) },
+            Role::Teacher => {
+                let steps = steps.unwrap_or(10);
+                limits::count("steps", steps, 1, limits::MAX_SAMPLER_STEPS)?;
+                Sampler::Teacher { solver: solver.unwrap_or(Solver::Heun), steps }
+            }
             Role::Student => {
                 let steps = steps.unwrap_or(1);
-                if !(1..=4).contains(&steps) {
-                    bail!("the student samples with 1..4 steps, not {steps}");
-                }
+                limits::count("steps", steps, 1, 4)?;
                 Sampler::Student { steps }
             }
             Role::Dp => match steps.unwrap_or(10) {
+                0 => return Err(limits::range("steps", 0, format!("1 to {} (DDIM; {DP_TRAIN_STEPS} = DDPM)", limits::MAX_SAMPLER_STEPS))),
+                s if s > limits::MAX_SAMPLER_STEPS => return Err(limits::range("steps", s, format!("1 to {} (DDIM; {DP_TRAIN_STEPS} = DDPM)", limits::MAX_SAMPLER_STEPS))),
                 DP_TRAIN_STEPS => Sampler::Dp { sampler: DpSampler::Ddpm, steps: DP_TRAIN_STEPS },
                 s => Sampler::Dp { sampler: DpSampler::Ddim, steps: s },
             },
@@ -187,6 +207,10 @@ impl Policy for FloatPolicy {
         let mut chunk = self.sample_normalized(&obs, &y0, &v0)?;
         self.norm.action.denormalize(&mut chunk);
         Ok(chunk.chunks_exact(cfg.action_dim).map(|a| a.to_vec()).collect())
+    }
+
+    fn horizon(&self) -> Option<usize> {
+        Some(self.net.net.config().horizon)
     }
 }
 

@@ -55,6 +55,18 @@ impl Blob {
     }
 }
 
+/// A blob whose sizes exceed the host's capacities is refused with its own shape.
+fn check_host_capacity(d: &PolicyDims) -> anyhow::Result<()> {
+    let limits = [("history", d.history, MAX_HISTORY), ("obs_dim", d.obs_dim, MAX_OBS_DIM), ("action_dim", d.action_dim, MAX_ACTION_DIM), ("horizon", d.horizon, MAX_HORIZON), ("params_per_dof", d.params_per_dof, MAX_PARAMS_PER_DOF)];
+    if let Some((field, value, max)) = limits.iter().find(|(_, v, max)| v > max) {
+        bail!(
+            "blob shape history {} obs_dim {} action_dim {} horizon {} params_per_dof {}: the host runs {field} up to {max}, not {value}",
+            d.history, d.obs_dim, d.action_dim, d.horizon, d.params_per_dof
+        );
+    }
+    Ok(())
+}
+
 fn policy_error(what: &'static str) -> impl Fn(PolicyError) -> anyhow::Error {
     move |e| anyhow::anyhow!("{what}: {e}")
 }
@@ -126,10 +138,12 @@ impl Runner {
         let blob = Blob::new(bytes);
         if blob.is_transformer() {
             let blob = TransformerBlob::try_new(blob, |b| LoadedTransformer::load(b.bytes())).map_err(|e| anyhow::anyhow!("transformer blob: {e}"))?;
+            check_host_capacity(&blob.borrow_dependent().dims())?;
             return Ok(Runner::Transformer { blob, scratch: Box::new(HostScratch::new()), f32_twin: None });
         }
         let runner = MlpRunner::try_new(blob, |b| {
             let loaded = LoadedMlp::load(b.bytes()).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
+            check_host_capacity(&loaded.dims())?;
             loaded.policy().map_err(policy_error("blob policy"))
         })?;
         Ok(Runner::Mlp(runner))
@@ -238,5 +252,9 @@ impl Policy for Int8Policy {
 
     fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
         self.runner.run(input, Noise::Rng(&mut self.rng))
+    }
+
+    fn horizon(&self) -> Option<usize> {
+        Some(self.dims().horizon)
     }
 }

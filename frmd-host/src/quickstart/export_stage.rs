@@ -37,7 +37,7 @@ fn export_inner(student_dir: &Path, out: &Path) -> anyhow::Result<Int8Export> {
         (Some(max), Some(mean)) => format!("max {max:.4} / mean {mean:.4} m"),
         _ => "equiv report has no (b) rows".into(),
     };
-    std::fs::write(out.join("eval").join("equiv.json"), serde_json::to_string_pretty(&report)?)?;
+    frmd_export::artifact::write_atomic(&out.join("eval").join("equiv.json"), serde_json::to_string_pretty(&report)?.as_bytes())?;
     Ok(Int8Export {
         policy: Box::new(policy),
         history,

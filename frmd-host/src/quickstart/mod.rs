@@ -17,6 +17,7 @@ use crate::data::collect::{collect_to_file, CollectConfig};
 use crate::diffusion::samplers::Solver;
 use crate::eval::plot::{plot_paths, PLOTTED_EPISODES};
 use crate::eval::{evaluate as evaluate_episodes, expert_policy, EvalConfig, EvalReport};
+use crate::limits::{self, OptionError};
 use crate::models::BackboneConfig;
 use crate::policy::float::FloatPolicy;
 use crate::tasks::Policy;
@@ -69,6 +70,8 @@ pub struct QuickstartConfig {
     pub episodes: usize,
     /// Seed of collection and training.
     pub seed: u64,
+    /// Write into a non-empty `out` (replacing an earlier run there).
+    pub force: bool,
 }
 
 impl Default for QuickstartConfig {
@@ -89,11 +92,25 @@ impl Default for QuickstartConfig {
             baseline: true,
             episodes: EvalConfig::default().episodes,
             seed: train.seed,
+            force: false,
         }
     }
 }
 
 impl QuickstartConfig {
+    /// The sizes of every stage, before any work.
+    pub fn validate(&self) -> Result<(), OptionError> {
+        limits::count("demos", self.demos, 1, limits::MAX_EPISODES)?;
+        limits::count("teacher-steps", self.teacher.steps, 1, limits::MAX_TRAIN_STEPS)?;
+        limits::count("student-steps", self.student.steps, 1, limits::MAX_TRAIN_STEPS)?;
+        if self.baseline {
+            limits::count("dp-steps", self.dp.steps, 1, limits::MAX_TRAIN_STEPS)?;
+        }
+        limits::count("batch", self.batch, 1, limits::MAX_BATCH)?;
+        limits::count("episodes", self.episodes, 1, limits::MAX_EPISODES)?;
+        CollectConfig { task: self.task.clone(), episodes: self.demos, seed: self.seed, ..CollectConfig::default() }.validate()
+    }
+
     /// CI smoke-test sizes: 4 demonstrations, tens of steps, 3 episodes, batch 32 (numbers
     /// meaningless, the plumbing is what is tested).
     pub fn with_tiny_sizes(mut self) -> Self {
@@ -116,6 +133,8 @@ impl QuickstartConfig {
             warmup: stage.warmup.min(stage.steps / 5),
             eval_episodes: 0,
             log_every: (stage.steps / 50).clamp(1, 100),
+            // `run_pipeline` checked `out` as a whole.
+            force: true,
             ..TrainConfig::default()
         }
     }
@@ -184,7 +203,7 @@ fn evaluate(a: &QuickstartConfig, method: &str, policy: &mut dyn Policy, history
     let plot = a.out.join("plots").join(format!("{method}.png"));
     plot_paths(&plot, &report)?;
     let json = a.out.join("eval").join(format!("{method}.json"));
-    std::fs::write(&json, serde_json::to_string_pretty(&report)?).with_context(|| format!("cannot write {}", json.display()))?;
+    frmd_export::artifact::write_atomic(&json, serde_json::to_string_pretty(&report)?.as_bytes())?;
     artifacts.push((format!("{method} paths plot"), plot));
     artifacts.push((format!("{method} report"), json));
     Ok(MethodRow { method: method.to_string(), report: Some(report), missing: None, int8_error: None })
@@ -199,7 +218,9 @@ fn float_row(a: &QuickstartConfig, dir: &Path, steps: usize, solver: Option<Solv
 
 /// Runs every stage and returns the summary (does not print the table).
 pub fn run_pipeline(a: &QuickstartConfig) -> anyhow::Result<QuickstartSummary> {
+    a.validate()?;
     crate::tasks::make_task(&a.task)?;
+    frmd_export::artifact::check_output_dir(&a.out, "--out", a.force, &[])?;
     for dir in ["plots", "eval"] {
         std::fs::create_dir_all(a.out.join(dir)).with_context(|| format!("cannot create {}", a.out.join(dir).display()))?;
     }
@@ -209,7 +230,7 @@ pub fn run_pipeline(a: &QuickstartConfig) -> anyhow::Result<QuickstartSummary> {
     let (teacher, student, dp) = (a.out.join("teacher"), a.out.join("student"), a.out.join("dp"));
 
     stages.begin(&format!("collect {} expert demonstrations of `{}`", a.demos, a.task));
-    collect_to_file(&CollectConfig { task: a.task.clone(), episodes: a.demos, seed: a.seed, out: data.clone(), ..CollectConfig::default() })?;
+    collect_to_file(&CollectConfig { task: a.task.clone(), episodes: a.demos, seed: a.seed, out: data.clone(), force: true, ..CollectConfig::default() })?;
     artifacts.push(("demonstrations".to_string(), data.clone()));
 
     stages.begin(&format!("train teacher: {} steps, {}", a.teacher.steps, a.backbone));
@@ -262,7 +283,7 @@ pub fn run_pipeline(a: &QuickstartConfig) -> anyhow::Result<QuickstartSummary> {
         threads: std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into()),
     };
     let json = a.out.join("summary.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&summary)?).with_context(|| format!("cannot write {}", json.display()))?;
-    std::fs::write(a.out.join("summary.txt"), table::render(&summary)).with_context(|| format!("cannot write summary.txt in {}", a.out.display()))?;
+    frmd_export::artifact::write_atomic(&json, serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    frmd_export::artifact::write_atomic(&a.out.join("summary.txt"), table::render(&summary).as_bytes())?;
     Ok(summary)
 }

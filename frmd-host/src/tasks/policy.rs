@@ -20,4 +20,9 @@ pub trait Policy {
     /// Returns a chunk of actions in raw units, at least one. The evaluator executes up to its
     /// configured number of steps of it and then asks again.
     fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>>;
+    /// Actions per chunk when fixed (learned policies: the model's horizon); `None` for
+    /// policies whose chunks vary (the scripted experts).
+    fn horizon(&self) -> Option<usize> {
+        None
+    }
 }

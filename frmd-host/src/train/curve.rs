@@ -15,6 +15,10 @@ const SIZE: (u32, u32) = (820, 640);
 /// Draws `loss` (step, mean loss) and `success` (step, success rate) of a `role` run on `task`
 /// into the PNG `out`.
 pub fn plot_learning_curve(out: &Path, task: &str, role: Role, loss: &[(usize, f64)], success: &[(usize, f64)]) -> anyhow::Result<()> {
+    frmd_export::artifact::write_atomic_with(out, |tmp| draw_curve(tmp, task, role, loss, success))
+}
+
+fn draw_curve(out: &Path, task: &str, role: Role, loss: &[(usize, f64)], success: &[(usize, f64)]) -> anyhow::Result<()> {
     register_font()?;
     let root = BitMapBackend::new(out, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(plot_err)?;

@@ -3,6 +3,7 @@
 //! callback every `log_every` steps); [`recipe`] holds the settings of a run (their `Default` is
 //! the recipe) and [`run`] turns a demonstration file into a checkpoint directory.
 pub mod batch;
+pub mod checks;
 pub mod curve;
 pub mod distill;
 pub mod dp;

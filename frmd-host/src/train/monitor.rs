@@ -79,7 +79,8 @@ impl<'a> Monitor<'a> {
         }
     }
 
-    fn evaluate(&mut self, step: usize, model: &OwnedNetwork) -> anyhow::Result<()> {
+    /// The held-out probe and the closed-loop evaluation of `model` at `step`.
+    pub(super) fn evaluate(&mut self, step: usize, model: &OwnedNetwork) -> anyhow::Result<()> {
         if let Some(probe) = &self.probe {
             let report = generalization(&model.net, &self.sigma, probe.sampler, &probe.train, &probe.held_out, &probe.action_scale, PROBE_WINDOWS, self.cfg.seed)?;
             self.progress.println(&format!("step {step}: {report}"));
@@ -102,12 +103,13 @@ impl<'a> Monitor<'a> {
         Ok(())
     }
 
-    /// The trainer's callback: shows progress and evaluates when due.
+    /// The trainer's callback: shows progress and evaluates when due (the final evaluation runs
+    /// after the checkpoint is saved, see `train::run`).
     pub(super) fn on_progress(&mut self, p: &StepProgress<'_>) -> anyhow::Result<()> {
         self.progress.update(p.step as u64, &format!("loss {:.5} lr {:.2e}", p.loss, p.lr));
         let every = self.cfg.eval_every;
-        let at_end = p.step == self.cfg.steps;
-        if (every > 0 && p.step % every < self.cfg.log_every.max(1) && p.step >= every) || at_end {
+        let before_end = p.step < self.cfg.steps;
+        if every > 0 && p.step % every < self.cfg.log_every.max(1) && p.step >= every && before_end {
             self.evaluate(p.step, p.model)?;
         }
         Ok(())

@@ -22,8 +22,10 @@ pub const PAPER_STEPS: usize = 30_000;
 pub struct TrainConfig {
     /// Demonstrations (`.safetensors`, docs/design.md section 4).
     pub data: PathBuf,
-    /// Output checkpoint directory.
+    /// Output checkpoint directory (must be missing or empty unless `force`).
     pub out: PathBuf,
+    /// Write into a non-empty `out` (replacing the checkpoint files there).
+    pub force: bool,
     pub backbone: BackboneConfig,
     /// Gradient steps.
     pub steps: usize,
@@ -73,6 +75,7 @@ impl Default for TrainConfig {
         TrainConfig {
             data: PathBuf::new(),
             out: PathBuf::new(),
+            force: false,
             backbone: BackboneConfig::preset("mlp").expect("`mlp` is a preset"),
             steps: paper.steps,
             seed: paper.seed,
@@ -163,11 +166,26 @@ pub struct StudentRun {
     /// Teacher checkpoint directory.
     pub teacher: PathBuf,
     pub distill: DistillConfig,
+    /// Model options given for the student (they must equal the teacher's).
+    pub shape: StudentShape,
+}
+
+/// Model-shape options given for a student run. The student takes its shape from the teacher
+/// (`train.history`, `train.horizon`, ... are not used); a value given here that differs from
+/// the teacher's is an error rather than silently ignored
+/// ([`StudentRun::validate_with_teacher`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StudentShape {
+    pub history: Option<usize>,
+    pub horizon: Option<usize>,
+    pub num_basis: Option<usize>,
+    pub backbone: Option<BackboneConfig>,
+    pub embed_dim: Option<usize>,
 }
 
 impl Default for StudentRun {
     fn default() -> Self {
-        StudentRun { train: TrainConfig::student_recipe(), teacher: PathBuf::new(), distill: DistillConfig::default() }
+        StudentRun { train: TrainConfig::student_recipe(), teacher: PathBuf::new(), distill: DistillConfig::default(), shape: StudentShape::default() }
     }
 }
 

@@ -10,6 +10,7 @@ use super::holdout::{generalization, windows_in, ChunkSampler, GeneralizationRep
 use super::monitor::{HoldoutProbe, Monitor};
 use super::padding::pad_episode_ends;
 use super::recipe::{DpRun, ProbeConfig, StudentRun, TeacherRun, TrainConfig};
+use super::checks::check_data_task;
 use super::teacher::train_teacher;
 use super::{Progress, TrainReport};
 use crate::checkpoint::{self, fnv1a_hex, CheckpointMeta, DatasetInfo, Role, CALIBRATION_FILE};
@@ -18,7 +19,7 @@ use crate::data::{Dataset, Normalization, WindowSet};
 use crate::diffusion::ddpm::DP_TRAIN_STEPS;
 use crate::diffusion::samplers::Solver;
 use crate::models::{HeadConfig, ModelConfig, OwnedNetwork};
-use crate::policy::float::{Sampler, DP_TRAINING_KEY};
+use crate::policy::float::{role_name, Sampler, DP_TRAINING_KEY};
 use anyhow::Context;
 use frmd_core::sigma::SigmaConfig;
 use serde_json::json;
@@ -55,8 +56,9 @@ struct Prepared {
 /// Loads `cfg.data`, pads each episode's end by `pad_end` steps (`train::padding`) and cuts
 /// windows of `history` and `horizon`.
 fn prepare(cfg: &TrainConfig, history: usize, horizon: usize, pad_end: usize) -> anyhow::Result<Prepared> {
-    let dataset = Dataset::load(&cfg.data).with_context(|| format!("loading {}", cfg.data.display()))?;
-    let bytes = std::fs::read(&cfg.data)?;
+    let bytes = std::fs::read(&cfg.data).with_context(|| format!("cannot read dataset {}", cfg.data.display()))?;
+    let dataset = Dataset::from_bytes(&bytes).with_context(|| format!("invalid dataset {}", cfg.data.display()))?;
+    check_data_task(&dataset, &cfg.data, cfg.eval_episodes)?;
     let (windows, norm) = pad_episode_ends(&dataset, pad_end)?.windows(history, horizon)?;
     let info = DatasetInfo { task: dataset.task.clone(), path: cfg.data.display().to_string(), digest: fnv1a_hex(&bytes), windows: windows.len() };
     Ok(Prepared { dataset, windows, norm, info })
@@ -75,9 +77,35 @@ fn model_config(cfg: &TrainConfig, p: &Prepared, head: HeadConfig) -> ModelConfi
     }
 }
 
-/// Writes the checkpoint, the student's calibration rows and the learning curve.
-fn finish(role: Role, net: &OwnedNetwork, prepared: &Prepared, report: &TrainReport, mon: Monitor<'_>, mut extra: serde_json::Value) -> anyhow::Result<RunOutcome> {
+/// Writes the checkpoint and the student's calibration rows, then runs the final evaluation
+/// (so that a failing evaluation never costs the trained model), records it in `frmd.json` and
+/// draws the learning curve.
+fn finish(role: Role, net: &OwnedNetwork, prepared: &Prepared, report: &TrainReport, mut mon: Monitor<'_>, extra: serde_json::Value) -> anyhow::Result<RunOutcome> {
+    let cfg = mon.cfg;
+    let mut meta = training_meta(role, net, prepared, report, &mon, extra.clone());
+    checkpoint::save(&cfg.out, &meta, net)?;
+    if role == Role::Student {
+        let set = prepared.windows.calibration_rows(CALIBRATION_ROWS, cfg.seed);
+        frmd_export::calibration_file::write(&cfg.out.join(CALIBRATION_FILE), &set)?;
+    }
+    let evaluated = mon.evaluate(report.steps, net);
     mon.finish();
+    evaluated.with_context(|| format!("final evaluation (the checkpoint is saved in {})", cfg.out.display()))?;
+    meta.training = training_meta(role, net, prepared, report, &mon, extra).training;
+    checkpoint::save_meta(&cfg.out, &meta)?;
+    plot_learning_curve(&cfg.out.join("learning_curve.png"), &prepared.info.task, role, &report.loss_curve, &mon.success)?;
+    Ok(RunOutcome {
+        role,
+        steps: report.steps,
+        seconds: report.seconds,
+        final_loss: report.final_loss(),
+        success: mon.last_eval.as_ref().and_then(|e| e["success_rate"].as_f64()),
+        out: cfg.out.clone(),
+    })
+}
+
+/// The checkpoint description of a finished run with its training summary so far.
+fn training_meta(role: Role, net: &OwnedNetwork, prepared: &Prepared, report: &TrainReport, mon: &Monitor<'_>, mut extra: serde_json::Value) -> CheckpointMeta {
     let cfg = mon.cfg;
     let mut meta = CheckpointMeta::describe(role, net.net.config(), SigmaConfig::default());
     meta.normalization = Some(prepared.norm.clone());
@@ -94,25 +122,14 @@ fn finish(role: Role, net: &OwnedNetwork, prepared: &Prepared, report: &TrainRep
         }
     }
     meta.training = extra;
-    checkpoint::save(&cfg.out, &meta, net)?;
-    if role == Role::Student {
-        let set = prepared.windows.calibration_rows(CALIBRATION_ROWS, cfg.seed);
-        frmd_export::calibration_file::write(&cfg.out.join(CALIBRATION_FILE), &set)?;
-    }
-    plot_learning_curve(&cfg.out.join("learning_curve.png"), &prepared.info.task, role, &report.loss_curve, &mon.success)?;
-    Ok(RunOutcome {
-        role,
-        steps: report.steps,
-        seconds: report.seconds,
-        final_loss: report.final_loss(),
-        success: mon.last_eval.as_ref().and_then(|e| e["success_rate"].as_f64()),
-        out: cfg.out.clone(),
-    })
+    meta
 }
 
 /// Trains the ProDMP diffusion teacher of `run` and writes its checkpoint.
 pub fn run_teacher(run: &TeacherRun) -> anyhow::Result<RunOutcome> {
+    run.validate()?;
     let c = &run.train;
+    c.check_paths(&[])?;
     let sigma = SigmaConfig::default();
     let prepared = prepare(c, c.history, c.horizon, c.pad_end)?;
     let model = model_config(c, &prepared, HeadConfig::ProDmp { num_basis: c.num_basis, output: run.output, auto_scale_basis: run.auto_scale_basis });
@@ -132,14 +149,21 @@ pub fn run_teacher(run: &TeacherRun) -> anyhow::Result<RunOutcome> {
 /// Distills the one-step consistency student of `run` from its teacher and writes its
 /// checkpoint with the calibration rows.
 pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
+    run.validate()?;
     let c = &run.train;
+    c.check_paths(&[&run.teacher])?;
     let sigma = SigmaConfig::default();
     let (tmeta, teacher) = checkpoint::load(&run.teacher).with_context(|| format!("loading teacher {}", run.teacher.display()))?;
     if tmeta.role != Role::Teacher {
-        anyhow::bail!("{} holds a {:?} checkpoint, not a teacher", run.teacher.display(), tmeta.role);
+        anyhow::bail!("--teacher {}: this is a {} checkpoint, not a teacher", run.teacher.display(), role_name(tmeta.role));
     }
     let tcfg = teacher.net.config().clone();
+    run.validate_with_teacher(&tcfg)?;
     let prepared = prepare(c, tcfg.history, tcfg.horizon, c.pad_end)?;
+    let data = &prepared.dataset;
+    if (data.obs_dim, data.action_dim) != (tcfg.obs_dim, tcfg.action_dim) || data.task != tmeta.dataset.task {
+        anyhow::bail!("{}: task `{}` with obs_dim {} and action_dim {}; the teacher was trained on task `{}` with obs_dim {} and action_dim {}", c.data.display(), data.task, data.obs_dim, data.action_dim, tmeta.dataset.task, tcfg.obs_dim, tcfg.action_dim);
+    }
     if let Some(tnorm) = &tmeta.normalization {
         if tnorm != &prepared.norm {
             anyhow::bail!("the data's normalization differs from the teacher's (different data set?)");
@@ -155,7 +179,9 @@ pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
 
 /// Trains the action-space DP baseline of `run` and writes its checkpoint.
 pub fn run_dp(run: &DpRun) -> anyhow::Result<RunOutcome> {
+    run.validate()?;
     let c = &run.train;
+    c.check_paths(&[])?;
     let prepared = prepare(c, c.history, c.horizon, 0)?;
     let model = model_config(c, &prepared, HeadConfig::Raw);
     let sampler = Sampler::for_role(Role::Dp, c.eval_steps, None)?;
@@ -169,6 +195,7 @@ pub fn run_dp(run: &DpRun) -> anyhow::Result<RunOutcome> {
 /// Open-loop chunk error of a teacher or student checkpoint on its training data and on
 /// held-out demonstrations; returns the sampler used and the report.
 pub fn run_probe(cfg: &ProbeConfig) -> anyhow::Result<(ChunkSampler, GeneralizationReport)> {
+    cfg.validate()?;
     let (meta, net) = checkpoint::load(&cfg.ckpt).with_context(|| format!("loading {}", cfg.ckpt.display()))?;
     let norm = meta.normalization.clone().with_context(|| format!("{}: checkpoint has no normalization", cfg.ckpt.display()))?;
     let model = net.net.config().clone();

@@ -38,6 +38,7 @@ fn common(tiny: &Tiny, data: &Path, out: PathBuf, steps: usize) -> TrainConfig {
     TrainConfig {
         data: data.to_path_buf(),
         out,
+        force: false,
         backbone: tiny.backbone.parse().unwrap(),
         steps,
         seed: tiny.seed,
@@ -96,6 +97,7 @@ pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
         train: common(tiny, &data, student.clone(), tiny.student_steps),
         teacher: teacher.clone(),
         distill: DistillConfig { levels: 18, teacher_steps: 2, solver: Solver::Heun, target_ema: 0.95, eval_ema: 0.9, ..DistillConfig::default() },
+        shape: Default::default(),
     })
     .unwrap();
     assert!(student.join("calibration.safetensors").exists());

@@ -100,7 +100,7 @@ fn bad_sources_and_settings_are_errors_naming_the_problem() {
     let cfg = ServeConfig::default();
     let err = |source: PolicySource, cfg: &ServeConfig| format!("{:#}", load(&source, cfg).err().expect("an error"));
     assert!(err(PolicySource::Checkpoint { dir: dir.join("missing"), steps: None, solver: None }, &cfg).contains("missing"));
-    assert!(err(PolicySource::Checkpoint { dir: dir.clone(), steps: Some(7), solver: None }, &cfg).contains("1..4"));
+    assert!(err(PolicySource::Checkpoint { dir: dir.clone(), steps: Some(7), solver: None }, &cfg).contains("--steps 7: expected 1 to 4"));
     assert!(err(PolicySource::Blob(dir.join("frmd.json")), &cfg).contains("frmd.json"));
     let e = err(PolicySource::Baked(baked.clone()), &ServeConfig { exec_steps: Some(13), ..ServeConfig::default() });
     assert!(e.contains("exec-steps 13"), "{e}");
