@@ -67,7 +67,7 @@ pub fn run(args: &EvalArgs, board: &str) -> anyhow::Result<ExitCode> {
     }
     if let Some(path) = &args.json {
         let full = FirmwareReport { report: &report, firmware: &info, instructions: &stats, host_check: host_check.as_ref() };
-        std::fs::write(path, serde_json::to_string_pretty(&full)?).map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))?;
+        frmd_export::artifact::write_atomic(path, serde_json::to_string_pretty(&full)?.as_bytes())?;
         println!("  report         {}", path.display());
     }
     let identical = host_check.is_none_or(|count| count.differing_chunks == 0);
