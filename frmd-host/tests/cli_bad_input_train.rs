@@ -45,6 +45,8 @@ fn training_counts_and_rates_are_checked() {
     rejects_train("teacher", &["--embed-dim", "3"], &["--embed-dim 3", "even"]);
     rejects_train("teacher", &["--exec-steps", "13"], &["--exec-steps 13", "horizon 12"]);
     rejects_train("dp", &["--exec-steps", "0"], &["--exec-steps 0"]);
+    rejects_train("dp", &["--pad-end", "5"], &["--pad-end", "train dp"]);
+    rejects_train("dp", &["--holdout", "d.safetensors"], &["--holdout", "train dp"]);
     rejects_train("student", &["--exec-steps", "9"], &["--exec-steps 9", "horizon 8"]);
 }
 

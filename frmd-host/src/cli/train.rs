@@ -85,7 +85,7 @@ pub struct CommonArgs {
     #[arg(long)]
     pub warmup: Option<usize>,
     /// Teacher and student: repeat each episode's final observation/action this many steps
-    /// (hold-at-goal windows, see `train::padding`). Not used by the DP baseline.
+    /// (hold-at-goal windows, see `train::padding`). An error with `train dp`.
     #[arg(long, default_value_t = TrainConfig::default().pad_end)]
     pub pad_end: usize,
     /// Learning-rate multiplier of the output (ProDMP parameter) layer, teacher and student

@@ -74,8 +74,15 @@ impl TeacherRun {
 }
 
 impl DpRun {
+    /// Also refuses the teacher/student-only options, which the DP baseline would ignore.
     pub fn validate(&self) -> Result<(), OptionError> {
         self.train.validate()?;
+        if self.train.pad_end != 0 {
+            return Err(conflict("pad-end", "train dp", "end padding applies to the teacher and the student only"));
+        }
+        if self.train.holdout.is_some() {
+            return Err(conflict("holdout", "train dp", "the held-out chunk error is measured for the teacher and the student only"));
+        }
         self.train.validate_exec(self.train.horizon)?;
         decay("ema", self.dp.eval_ema)
     }
