@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Args, Debug)]
-#[command(group = clap::ArgGroup::new("policy").required(true).args(["ckpt", "baked", "blob"]))]
+#[command(group = clap::ArgGroup::new("policy").required(true).multiple(true).args(["ckpt", "baked", "blob", "firmware"]))]
 pub struct ServeArgs {
     /// Float checkpoint directory to serve (teacher, student or DP).
     #[arg(long)]
@@ -23,6 +23,11 @@ pub struct ServeArgs {
     /// int8 blob file (`frmd export --blob`) to serve.
     #[arg(long)]
     pub blob: Option<PathBuf>,
+    /// Serve through the `pil` firmware image under QEMU on this core (m4, m7, m33, m0, m55):
+    /// bakes --baked DIR's module (default: the checked-in reach student) and answers every ACT
+    /// with the emulated MCU's chunk.
+    #[arg(long, value_name = "CORE")]
+    pub firmware: Option<String>,
     /// Listen on this Unix socket path instead of stdin/stdout (one client at a time).
     #[arg(long)]
     pub socket: Option<PathBuf>,
@@ -50,11 +55,12 @@ pub struct ServeArgs {
 }
 
 pub fn run(args: ServeArgs) -> anyhow::Result<ExitCode> {
-    let source = match (&args.ckpt, &args.baked, &args.blob) {
-        (Some(dir), None, None) => PolicySource::Checkpoint { dir: dir.clone(), steps: args.steps, solver: args.solver.clone() },
-        (None, Some(dir), None) => PolicySource::Baked(dir.clone()),
-        (None, None, Some(path)) => PolicySource::Blob(path.clone()),
-        _ => anyhow::bail!("pass exactly one of --ckpt, --baked, --blob"),
+    let source = match (&args.ckpt, &args.baked, &args.blob, &args.firmware) {
+        (Some(dir), None, None, None) => PolicySource::Checkpoint { dir: dir.clone(), steps: args.steps, solver: args.solver.clone() },
+        (None, baked, None, Some(board)) => PolicySource::Firmware { board: board.clone(), baked: baked.clone() },
+        (None, Some(dir), None, None) => PolicySource::Baked(dir.clone()),
+        (None, None, Some(path), None) => PolicySource::Blob(path.clone()),
+        _ => anyhow::bail!("pass exactly one of --ckpt, --baked, --blob (or --firmware CORE, optionally with --baked DIR)"),
     };
     let float_type = match args.float.as_str() {
         "f32" => FloatType::F32,

@@ -21,6 +21,9 @@ pub enum PolicySource {
     Baked(PathBuf),
     /// An int8 blob file (`frmd export --blob`).
     Blob(PathBuf),
+    /// The `pil` firmware image on a QEMU core (`crate::firmware`), baking `baked`'s module (or
+    /// the checked-in reach student): every chunk comes from the emulated MCU.
+    Firmware { board: String, baked: Option<PathBuf> },
 }
 
 /// Server settings beyond the policy; `Default` is what `frmd serve` uses without options.
@@ -155,9 +158,20 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
             let dt = exported_dt(&beside)?.unwrap_or(0.0);
             (Box::new(policy), d.history, d.obs_dim, d.action_dim, d.horizon, dt, format!("int8 {}", path.display()))
         }
+        PolicySource::Firmware { board, baked } => {
+            let image = crate::firmware::build(&crate::firmware::default_repo(), board, baked.as_deref())?;
+            let policy = crate::firmware::policy::FirmwarePolicy::start(&image)?;
+            let i = policy.info().clone();
+            let dt = match baked {
+                Some(dir) => exported_dt(dir)?.unwrap_or(0.0),
+                None => 0.0,
+            };
+            (Box::new(policy), i.history, i.obs_dim, i.action_dim, i.horizon, dt, format!("firmware {} ({})", i.board, i.core))
+        }
     };
     let what = match source {
         PolicySource::Checkpoint { dir, .. } | PolicySource::Baked(dir) | PolicySource::Blob(dir) => dir.display().to_string(),
+        PolicySource::Firmware { board, .. } => format!("firmware {board}"),
     };
     let horizon16 = dim("horizon", horizon, &what)?;
     let exec_steps = match cfg.exec_steps {
