@@ -159,7 +159,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
     let blob = args.blob.clone().or_else(|| args.baked.as_ref().map(|d| d.join(crate::export::BAKED_BLOB_FILE)));
     check_outputs(&args, blob.as_deref())?;
     if let Some(board) = &args.firmware {
-        return super::eval_firmware::run(&args, board);
+        return super::eval_firmware::run(&args, board, blob.as_deref());
     }
     let (mut policy, history): (Box<dyn Policy>, usize) = match (&blob, &args.ckpt) {
         (Some(path), _) => {

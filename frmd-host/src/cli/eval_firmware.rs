@@ -20,9 +20,9 @@ struct FirmwareReport<'a> {
     host_check: Option<&'a LockstepCount>,
 }
 
-pub fn run(args: &EvalArgs, board: &str) -> anyhow::Result<ExitCode> {
+/// `blob`: the host int8 policy's blob (from `--blob`, or beside `--baked`), for `--check-host`.
+pub fn run(args: &EvalArgs, board: &str, blob: Option<&std::path::Path>) -> anyhow::Result<ExitCode> {
     anyhow::ensure!(args.ckpt.is_none(), "--firmware runs a baked int8 policy; --ckpt does not apply (use --baked DIR)");
-    let blob = args.blob.clone().or_else(|| args.baked.as_ref().map(|d| d.join(crate::export::BAKED_BLOB_FILE)));
     eprintln!("building the pil image for {board} (examples/cortex-m/run-qemu.sh) ...");
     let image = crate::firmware::build(&crate::firmware::default_repo(), board, args.baked.as_deref())?;
     let firmware = FirmwarePolicy::start(&image)?;
@@ -35,7 +35,7 @@ pub fn run(args: &EvalArgs, board: &str) -> anyhow::Result<ExitCode> {
         ..EvalConfig::default()
     };
     let (report, stats, host_check) = if args.check_host {
-        let path = blob.as_ref().ok_or_else(|| anyhow::anyhow!("--check-host needs the host policy: pass --baked DIR (with policy.blob) or --blob FILE"))?;
+        let path = blob.ok_or_else(|| anyhow::anyhow!("--check-host needs the host policy: pass --baked DIR (with policy.blob) or --blob FILE"))?;
         let mut lockstep = Lockstep::new(firmware, Int8Policy::load(path)?);
         let report = evaluate(&args.task, &mut lockstep, &cfg)?;
         let stats = lockstep.lead.stats();
