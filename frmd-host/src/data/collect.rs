@@ -32,7 +32,7 @@ impl CollectConfig {
     /// The counts, the seeds (below the evaluation stream) and the noise, before any work.
     pub fn validate(&self) -> Result<(), OptionError> {
         limits::count("episodes", self.episodes, 1, limits::MAX_EPISODES)?;
-        let attempts = 3 * (self.episodes + 10 + self.episodes / 5) as u64;
+        let attempts = max_attempts(self.episodes, self.noise.std > 0.0) as u64;
         let last = EVAL_SEED_OFFSET - attempts;
         if self.seed > last {
             return Err(limits::range("seed", self.seed, format!("at most {last} (collection seeds stay below 2^63, the evaluation stream)")));
@@ -97,6 +97,17 @@ pub struct CollectStats {
     pub sim_step_us: f64,
 }
 
+/// Seeds a collection of `episodes` may use: `episodes + 10 + episodes / 5`, three times as many
+/// when the executed actions are perturbed (more perturbed episodes fail).
+fn max_attempts(episodes: usize, perturbed: bool) -> usize {
+    let base = episodes + 10 + episodes / 5;
+    if perturbed {
+        3 * base
+    } else {
+        base
+    }
+}
+
 /// Collects `episodes` successful expert demonstrations of `task` on seeds `seed`, `seed + 1`, ...
 /// Failed expert episodes are skipped; at most `episodes + 10 + episodes / 5` seeds are tried,
 /// three times as many with `noise` (see [`super::perturb`]: the executed actions are perturbed,
@@ -114,12 +125,7 @@ pub fn collect_demos(
         noise.validate()?;
     }
     let noise = noise.filter(|n| n.std > 0.0);
-    let base_attempts = episodes + 10 + episodes / 5;
-    let max_attempts = if noise.is_some() {
-        3 * base_attempts
-    } else {
-        base_attempts
-    };
+    let max_attempts = max_attempts(episodes, noise.is_some());
     anyhow::ensure!(
         seed.checked_add(max_attempts as u64).is_some_and(|end| end <= EVAL_SEED_OFFSET),
         "collection seeds must stay below 2^63 (the evaluation seed stream); seed {seed} is too large"
