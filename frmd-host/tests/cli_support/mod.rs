@@ -66,13 +66,18 @@ pub fn scratch(name: &str) -> PathBuf {
     dir
 }
 
-/// FNV-1a of every file under `dir` by relative path (what "no file changed" compares).
+/// FNV-1a of every file under `dir` by relative path (what "no file changed" compares). The
+/// write probes of `frmd_export::artifact` (created and removed at once by an `frmd` that another
+/// test runs in the same fixture directory at the same time) are not files of the tree.
 pub fn hash_tree(dir: &Path) -> BTreeMap<PathBuf, u64> {
     let mut out = BTreeMap::new();
     let mut stack = vec![dir.to_path_buf()];
     while let Some(d) = stack.pop() {
         for entry in std::fs::read_dir(&d).unwrap() {
             let path = entry.unwrap().path();
+            if path.file_name().is_some_and(|n| n.to_string_lossy().starts_with(".frmd-write-probe-")) {
+                continue;
+            }
             if path.is_dir() {
                 out.insert(path.strip_prefix(dir).unwrap().to_path_buf(), 0);
                 stack.push(path);
