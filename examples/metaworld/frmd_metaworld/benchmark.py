@@ -35,7 +35,8 @@ class BenchConfig:
     multi_seeds: list = field(default_factory=lambda: [1, 2])
     demos: int = 100
     episodes: int = 50
-    backbone: str = "mlp-paper"
+    # None: `frmd train`'s default backbone (the recipe of issue 13: "the CLI's default").
+    backbone: str | None = None
     # Gradient steps per model; None = the CLI's default.
     train_steps: int | None = None
     student_steps: int | None = None
@@ -110,7 +111,9 @@ class Runner:
 
     def train(self, task: str, seed: int, data: Path) -> Path:
         run = self.out / task / f"seed{seed}"
-        common = ["--data", str(data), "--backbone", self.cfg.backbone, "--seed", str(seed)]
+        common = ["--data", str(data), "--seed", str(seed)]
+        if self.cfg.backbone:
+            common += ["--backbone", self.cfg.backbone]
         steps = ["--steps", str(self.cfg.train_steps)] if self.cfg.train_steps else []
         if self.cfg.quick:
             steps += ["--warmup", "2", "--log-every", "5"]

@@ -200,7 +200,7 @@ def main(argv=None) -> int:
                    "reach-v3,push-v3,peg-insert-side-v3; 'none' for none)")
     m.add_argument("--demos", type=int, help="demonstrations per task collected when DATA_DIR lacks the file (default 100)")
     m.add_argument("--episodes", type=int, help="evaluation episodes per task and method (default 50)")
-    m.add_argument("--backbone", help="backbone of all three models (default mlp-paper)")
+    m.add_argument("--backbone", help="backbone of all three models (default: frmd train's default)")
     m.add_argument("--train-steps", type=int, help="gradient steps of teacher and DP (default: frmd train's)")
     m.add_argument("--student-steps", type=int, help="gradient steps of the student (default: as --train-steps)")
     m.add_argument("--data-dir", help="demonstration files TASK.safetensors (collected if missing; default ./data)")

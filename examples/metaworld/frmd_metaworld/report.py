@@ -94,7 +94,7 @@ def write(results: dict, md_path: Path, command: str, notes: list) -> dict:
               + (f", plus seeds {cfg['multi_seeds']} for {', '.join(cfg['multi_seed_tasks'])}" if cfg["multi_seed_tasks"] else "")
               + f"; {cfg['demos']} demonstrations per task; {cfg['episodes']} evaluation episodes per task and method "
               "(seeds 2^63 + 0 .., disjoint from the demonstrations' seeds 0 ..); backbone "
-              f"`{cfg['backbone']}`; training steps {cfg['train_steps'] or 'CLI default'} (teacher, DP), "
+              f"`{cfg['backbone'] or 'mlp (frmd train default)'}`; training steps {cfg['train_steps'] or 'CLI default'} (teacher, DP), "
               f"{cfg['student_steps'] or cfg['train_steps'] or 'CLI default'} (student).", ""]
     lines += [f"- {n}" for n in notes] + [""]
     lines += ["Success: % of episodes [95 % Wilson interval] pooled over the group's tasks; latency: median over "
