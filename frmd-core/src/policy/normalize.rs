@@ -81,6 +81,7 @@ impl<'a> RangeNormalizer<'a> {
     }
 
     /// Normalized to raw, element-wise (constant dimensions give their constant).
+    #[inline]
     pub fn denormalize(&self, normalized: &[f32], out: &mut [f32]) {
         for (((o, v), lo), hi) in out.iter_mut().zip(normalized).zip(self.min).zip(self.max) {
             *o = denormalize_value(*v, *lo, *hi);
@@ -95,6 +96,7 @@ impl<'a> RangeNormalizer<'a> {
     }
 
     /// Normalized rate to raw rate: `rate * 0.5 (max - min)` (0 for constant dimensions).
+    #[inline]
     pub fn denormalize_rate(&self, normalized: &[f32], out: &mut [f32]) {
         for (((o, v), lo), hi) in out.iter_mut().zip(normalized).zip(self.min).zip(self.max) {
             *o = if hi > lo { *v * 0.5 * (hi - lo) } else { 0.0 };
