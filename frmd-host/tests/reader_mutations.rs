@@ -5,7 +5,7 @@
 //! must not imply more than bounded sizes.
 use frmd_core::rng::Rng;
 use frmd_export::checkpoint::{expected_tensors, CheckpointMeta, Role};
-use frmd_host::data::{Dataset, Normalization, Normalizer};
+use frmd_host::data::{ActionBeforeStart, Dataset, Normalization, Normalizer};
 use frmd_host::models::{BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput};
 use frmd_core::sigma::SigmaConfig;
 use serde_json::{json, Value};
@@ -138,6 +138,7 @@ fn dataset_reader_mutations_never_panic() {
         task: "reach".into(),
         dt: 0.1,
         source: "test".into(),
+        action_before_start: ActionBeforeStart::Zero,
     };
     let bytes = data.to_bytes().unwrap();
     assert_eq!(Dataset::from_bytes(&bytes).unwrap(), data);

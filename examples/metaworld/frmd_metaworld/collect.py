@@ -70,6 +70,9 @@ def collect(task: str, episodes: int, seed: int = 0, max_attempts: int | None = 
         source=(f"frmd_metaworld collect: MetaWorld {task} scripted expert (metaworld.policies), seeds "
                 f"{seed}..{seed + attempt} ({len(failed)} failed episodes skipped)"),
         extra={
+            # MetaWorld actions are end-effector displacements: before an episode the arm is at
+            # rest, i.e. the zero action, which is also what `frmd serve` resets a policy with.
+            "action_before_start": "zero",
             "metaworld_task": task,
             "episode_seeds": json.dumps(seeds),
             "failed_seeds": json.dumps(failed),

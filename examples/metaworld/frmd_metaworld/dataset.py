@@ -2,9 +2,11 @@
 
 A safetensors file with `obs` [T, O] float32, `action` [T, A] float32 and `episode_ends` [E]
 int64 (cumulative exclusive end of each episode, strictly increasing, the last equal to T), and
-string metadata `task`, `dt` (control period, seconds, parsed as a number) and `source`. Any
-other metadata key is kept and ignored by frmd; this package adds the episode seeds, the package
-versions and notes on how the data was made.
+string metadata `task`, `dt` (control period, seconds, parsed as a number) and `source`, and
+`action_before_start` (`first` or `zero`: the command before an episode's first step, which
+training uses as the previous action there; this package writes `zero`). Any other metadata key
+is kept and ignored by frmd; this package adds the episode seeds, the package versions and notes
+on how the data was made.
 """
 from __future__ import annotations
 

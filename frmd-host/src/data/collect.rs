@@ -1,6 +1,6 @@
 //! Demonstration collection: runs a task's scripted expert and gathers successful episodes.
 use super::perturb::{ActionNoise, PerturbedExpert};
-use super::Dataset;
+use super::{ActionBeforeStart, Dataset};
 use crate::tasks::Policy;
 use crate::eval::{rollout, EVAL_SEED_OFFSET};
 use crate::limits::{self, OptionError};
@@ -148,6 +148,7 @@ pub fn collect_demos(
         task: task_name.to_string(),
         dt: task.dt() as f32,
         source: format!("frmd collect: scripted expert, seeds from {seed}"),
+        action_before_start: ActionBeforeStart::First,
     };
     let mut stats = CollectStats::default();
     let (mut step_time, mut steps) = (0.0, 0usize);

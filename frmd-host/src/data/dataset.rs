@@ -2,7 +2,8 @@
 //!
 //! A dataset is a safetensors file with `obs` [T, O] f32, `action` [T, A] f32 and `episode_ends`
 //! [E] i64 (cumulative exclusive ends, strictly increasing, the last equal to T), plus string
-//! metadata `task`, `dt` (control period, seconds) and `source` (who produced it).
+//! metadata `task`, `dt` (control period, seconds) and `source` (who produced it), and optionally
+//! `action_before_start` ([`ActionBeforeStart`]).
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 use std::collections::HashMap;
 use std::path::Path;
@@ -22,6 +23,40 @@ pub struct Dataset {
     /// Control period, seconds.
     pub dt: f32,
     pub source: String,
+    /// The command in force before each episode's first step (the training windows' a_{-1}).
+    pub action_before_start: ActionBeforeStart,
+}
+
+/// What was commanded before an episode began: what the training windows use as a_{-1} and
+/// a_{-2}, and what a deployed policy is reset with. Metadata `action_before_start`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ActionBeforeStart {
+    /// The episode's first action, rate 0 (`first`, the default): position commands, where a
+    /// robot at rest holds its current position (the built-in tasks).
+    #[default]
+    First,
+    /// The zero action, rate 0 (`zero`): displacement or velocity commands, where rest is zero
+    /// (MetaWorld). `frmd serve` resets with zeros unless told otherwise, which matches.
+    Zero,
+}
+
+impl ActionBeforeStart {
+    /// The metadata value.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ActionBeforeStart::First => "first",
+            ActionBeforeStart::Zero => "zero",
+        }
+    }
+
+    /// Parses the metadata value (`first` or `zero`).
+    pub fn parse(text: &str) -> anyhow::Result<Self> {
+        match text {
+            "first" => Ok(ActionBeforeStart::First),
+            "zero" => Ok(ActionBeforeStart::Zero),
+            other => anyhow::bail!("metadata `action_before_start` is {other:?}, expected \"first\" or \"zero\""),
+        }
+    }
 }
 
 fn f32_bytes(values: &[f32]) -> Vec<u8> {
@@ -174,11 +209,15 @@ impl Dataset {
                 TensorView::new(Dtype::I64, vec![self.episode_ends.len()], &ends)?,
             ),
         ];
-        let meta = HashMap::from([
+        let mut meta = HashMap::from([
             ("task".to_string(), self.task.clone()),
             ("dt".to_string(), self.dt.to_string()),
             ("source".to_string(), self.source.clone()),
         ]);
+        // Written only when it is not the default, so files of the built-in tasks stay as they were.
+        if self.action_before_start != ActionBeforeStart::default() {
+            meta.insert("action_before_start".to_string(), self.action_before_start.as_str().to_string());
+        }
         Ok(safetensors::serialize(tensors, Some(meta))?)
     }
 
@@ -222,6 +261,10 @@ impl Dataset {
             task: metadata(meta, "task")?.to_string(),
             dt,
             source: metadata(meta, "source")?.to_string(),
+            action_before_start: match meta.as_ref().and_then(|m| m.get("action_before_start")) {
+                Some(text) => ActionBeforeStart::parse(text)?,
+                None => ActionBeforeStart::First,
+            },
         };
         dataset.validate()?;
         Ok(dataset)

@@ -9,5 +9,5 @@ pub mod windows;
 #[cfg(test)]
 mod tests;
 
-pub use dataset::Dataset;
+pub use dataset::{ActionBeforeStart, Dataset};
 pub use windows::{Normalization, Normalizer, WindowSet};

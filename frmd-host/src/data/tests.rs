@@ -1,6 +1,6 @@
 //! Dataset format, reader validation and training-window tests.
 use super::collect::collect_demos;
-use super::{Dataset, Normalizer};
+use super::{ActionBeforeStart, Dataset, Normalizer};
 use crate::eval::{eval_seed, EVAL_SEED_OFFSET};
 use safetensors::tensor::{Dtype, TensorView};
 use std::collections::HashMap;
@@ -23,6 +23,7 @@ fn small() -> Dataset {
         task: "handmade".into(),
         dt: 0.5,
         source: "test".into(),
+        action_before_start: Default::default(),
     }
 }
 
@@ -196,6 +197,8 @@ fn reader_rejects_corrupt_files_with_the_reason() {
     };
     let message = error_of(&raw(full(), &[("task", "t"), ("source", "s")]));
     assert!(message.contains("missing metadata `dt`"), "{message}");
+    let message = error_of(&raw(full(), &[META, &[("action_before_start", "last")]].concat()));
+    assert!(message.contains("action_before_start") && message.contains("\"zero\""), "{message}");
     let message = error_of(&raw(
         full(),
         &[("task", "t"), ("dt", "fast"), ("source", "s")],
@@ -241,6 +244,22 @@ fn windows_follow_the_padding_and_rate_conventions() {
     );
     assert!(small().windows(0, 3).is_err());
     assert!(small().windows(2, 0).is_err());
+}
+
+#[test]
+fn zero_action_before_start_pads_with_the_normalized_zero_action() {
+    let data = Dataset { action_before_start: ActionBeforeStart::Zero, ..small() };
+    let (set, _) = data.windows(2, 3).unwrap();
+    let (first, _) = small().windows(2, 3).unwrap();
+    // Raw 0 is (0 - 30) / 20 = -1.5 normalized; the first episode's actions are -1, -0.5, 0 and
+    // the second's 0.5, 1.
+    assert_eq!(set.prev_action, vec![-1.5, -1.0, -0.5, -1.5, 0.5]);
+    assert_eq!(set.prev_rate, vec![0.0, 1.0, 1.0, 0.0, 4.0]);
+    // Only what comes before the start changes.
+    assert_eq!((&set.obs, &set.actions), (&first.obs, &first.actions));
+    let back = Dataset::from_bytes(&data.to_bytes().unwrap()).unwrap();
+    assert_eq!(back.action_before_start, ActionBeforeStart::Zero);
+    assert_eq!(Dataset::from_bytes(&small().to_bytes().unwrap()).unwrap().action_before_start, ActionBeforeStart::First);
 }
 
 #[test]

@@ -73,9 +73,14 @@ impl super::Dataset {
     ///
     /// One window per step t of every episode: observations t-m+1..=t, the previous action
     /// a_{t-1} with rate (a_{t-1} - a_{t-2}) / dt, and actions a_t..a_{t+n-1}, all normalized.
-    /// Episodes are padded by repeating the first observation/action before their start and the
-    /// last action after their end, so a_{-1} = a_0 and the rate at the start is 0 (matching the
-    /// evaluator, whose experts start their commands at the initial end-effector position).
+    /// Episodes are padded by repeating the first observation before their start and the last
+    /// action after their end. Before the start, the action is the dataset's
+    /// [`ActionBeforeStart`](super::ActionBeforeStart): a_{-1} = a_{-2} = a_0 (`First`, matching the
+    /// evaluator, whose experts start their commands at the initial end-effector position) or the
+    /// zero action (`Zero`, displacement commands: what `frmd serve` resets with), rate 0 either
+    /// way. Measured on MetaWorld reach-v3 (displacement actions, trained with `First`): served
+    /// from a zero initial action the teacher succeeded on 0 of 50 episodes, from the expert's
+    /// first action on 10 of 10 (docs/design.md, section 7).
     ///
     /// Normalizer ranges below [`MIN_NORM_RANGE`] are widened to it (exactly constant dimensions
     /// stay constant).
@@ -113,6 +118,8 @@ impl super::Dataset {
         };
         let obs_row = |r: usize| &obs[r * o..(r + 1) * o];
         let action_row = |r: usize| &action[r * a..(r + 1) * a];
+        let mut rest = vec![0.0; a];
+        norm.action.normalize(&mut rest);
         for range in self.episode_ranges() {
             let (first, last) = (range.start, range.end - 1);
             // Row of in-episode index t (may be negative or past the end), padded.
@@ -123,7 +130,11 @@ impl super::Dataset {
                     set.obs
                         .extend_from_slice(obs_row(row(t + k + 1 - history as isize)));
                 }
-                let (prev, prev2) = (action_row(row(t - 1)), action_row(row(t - 2)));
+                let before = |t: isize| match self.action_before_start {
+                    super::ActionBeforeStart::Zero if t < 0 => rest.as_slice(),
+                    _ => action_row(row(t)),
+                };
+                let (prev, prev2) = (before(t - 1), before(t - 2));
                 set.prev_action.extend_from_slice(prev);
                 set.prev_rate
                     .extend(prev.iter().zip(prev2).map(|(p, q)| (p - q) / self.dt));

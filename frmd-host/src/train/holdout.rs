@@ -167,7 +167,7 @@ mod tests {
         let steps = 9;
         let obs: Vec<f32> = (0..steps * 3).map(|i| offset + (i as f32 * 0.37).sin() * (1 + i % 3) as f32).collect();
         let action: Vec<f32> = (0..steps * 2).map(|i| offset + (i as f32 * 0.21).cos() * (2 + i % 2) as f32).collect();
-        Dataset { obs, action, episode_ends: vec![4, 9], obs_dim: 3, action_dim: 2, task: "toy".into(), dt: 0.1, source: "test".into() }
+        Dataset { obs, action, episode_ends: vec![4, 9], obs_dim: 3, action_dim: 2, task: "toy".into(), dt: 0.1, source: "test".into(), action_before_start: Default::default() }
     }
 
     #[test]
