@@ -124,20 +124,30 @@ def cmd_benchmark(args) -> int:
         if args.multi_seed_tasks else None}.items() if v is not None}
     cfg = BenchConfig.quick_config(**overrides) if args.quick else BenchConfig(**overrides)
     md = Path(args.results) if args.results else Path(cfg.out) / "results.md"
+    md.parent.mkdir(parents=True, exist_ok=True)
     runner = Runner(cfg)
     failed = None
-    try:
-        results = runner.all()
-    except StepFailed as e:
-        failed = str(e)
-        print(f"benchmark stopped: {failed}", file=sys.stderr, flush=True)
-        from .benchmark import collect_results
+    from .benchmark import collect_results
+    if args.report_only:
         results = collect_results(cfg)
+    else:
+        try:
+            results = runner.all()
+        except StepFailed as e:
+            failed = str(e)
+            print(f"benchmark stopped: {failed}", file=sys.stderr, flush=True)
+            results = collect_results(cfg)
     command = "cd examples/metaworld && .venv/bin/python -m frmd_metaworld " + " ".join(
-        shlex.quote(a) for a in (argv_of(args)))
+        shlex.quote(a) for a in argv_of(args) if a != "--report-only")
     notes = list(args.note or [])
     if failed:
         notes.append(f"The run stopped early: {failed}")
+    missing = sorted({(task, seed) for task, seed in cfg.runs()}
+                     - {(r["task"], r["seed"]) for r in results["rows"] if r["seed"] is not None})
+    if missing:
+        notes.append("INCOMPLETE: no trained-model reports for " + ", ".join(f"{t} seed {s}" for t, s in missing)
+                     + "; the group and overall rows cover only the tasks that have them. The same "
+                     "command without --report-only resumes the run.")
     written = report.write(results, md, command, notes)
     runner.say(f"wrote {md}, {md.with_suffix('.json')}, {md.with_suffix('.png')} ({len(results['rows'])} reports)")
     if args.quick and not failed:
@@ -208,6 +218,8 @@ def main(argv=None) -> int:
     m.add_argument("--frmd", help="the frmd binary (default: frmd on PATH)")
     m.add_argument("--results", help="results.md path (results.json and .png beside it; default OUT/results.md)")
     m.add_argument("--note", action="append", help="a line for the results file (repeatable)")
+    m.add_argument("--report-only", action="store_true", help="run nothing: write the results files from the "
+                   "reports OUT already holds (e.g. while parts of a run are still going)")
     m.set_defaults(run=cmd_benchmark)
 
     args = ap.parse_args(argv)
