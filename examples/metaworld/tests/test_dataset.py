@@ -31,6 +31,8 @@ def test_written_file_is_what_frmd_reads(reach):
     meta = header["__metadata__"]
     assert meta["task"] == "metaworld/reach-v3" and float(meta["dt"]) == 0.0125 and "expert" in meta["source"]
     assert json.loads(meta["episode_seeds"]) == [10, 11] and json.loads(meta["failed_seeds"]) == []
+    # Displacement actions: before an episode the arm rests (the zero action), as `frmd serve` resets.
+    assert meta["action_before_start"] == "zero"
     versions = json.loads(meta["versions"])
     assert versions["metaworld"] == "3.1.1" and versions["mujoco"].startswith("3.3.")
     loaded = Dataset.load(path)
