@@ -384,7 +384,7 @@ fn writer_checks_part_lengths() {
         Err(BlobError::SectionLength(SectionId::ObsNorm))
     );
     let mut parts = model.blob_parts(&hidden);
-    parts.mlp.output.output_scales = &model.output_scales[1..];
+    parts.mlp.output.output_scales = &model.quant.output_scales[1..];
     assert_eq!(
         encode_mlp(&parts, &mut out),
         Err(BlobError::SectionLength(SectionId::OutputScales))
