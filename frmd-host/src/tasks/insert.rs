@@ -20,10 +20,10 @@
 //! the slot centre, the expert commands no lower than 3 cm above the wall, so it realigns (and
 //! lifts a jammed peg) instead of pressing down beside the slot. On its own path the rule never
 //! fires; it matters for perturbed demonstrations (`frmd collect --perturb-std`).
-use super::geom::{Cubic, SmoothPath, TimedPath, V2};
+use super::geom::{Cubic, PathFollower, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass, OMEGA, SUBSTEP};
 use super::rng::TaskRng;
-use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
+use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, TaskSpec, CONTROL_DT};
 use crate::tasks::{Policy, PolicyInput};
 
 const OBS_FIELDS: &[&str] = &[
@@ -35,6 +35,11 @@ const OBS_FIELDS: &[&str] = &[
     "wall_y - tip_y [m]",
     "contact [0/1]",
 ];
+const SPEC: TaskSpec = TaskSpec {
+    name: "insert",
+    obs_fields: OBS_FIELDS,
+    max_steps: 150,
+};
 /// Peg width, metres.
 pub const PEG_WIDTH: f64 = 0.10;
 /// Lateral clearance on each side of the peg in the slot, metres.
@@ -119,16 +124,8 @@ impl Default for Insert {
 }
 
 impl Task for Insert {
-    fn name(&self) -> &'static str {
-        "insert"
-    }
-
-    fn obs_fields(&self) -> &'static [&'static str] {
-        OBS_FIELDS
-    }
-
-    fn max_steps(&self) -> usize {
-        150
+    fn spec(&self) -> &'static TaskSpec {
+        &SPEC
     }
 
     fn reset(&mut self, seed: u64) {
@@ -220,8 +217,7 @@ impl Task for Insert {
 /// Scripted expert for [`Insert`].
 #[derive(Default)]
 pub struct InsertExpert {
-    plan: Option<TimedPath>,
-    step: usize,
+    path: PathFollower,
 }
 
 /// Height above the wall top where the approach arc ends and the straight descent begins, metres.
@@ -261,17 +257,15 @@ impl Policy for InsertExpert {
     }
 
     fn reset(&mut self, _seed: u64) {
-        self.plan = None;
-        self.step = 0;
+        self.path.reset();
     }
 
     fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
-        let obs = last_obs(input, OBS_FIELDS.len(), "insert")?;
+        let obs = last_obs(input, &SPEC)?;
         let tip = v2_at(obs, 0);
         let (slot_x, wall_y) = (tip.x + f64::from(obs[4]), tip.y + f64::from(obs[5]));
-        let plan = self.plan.get_or_insert_with(|| plan(tip, slot_x, wall_y));
-        let command = guard_descent(plan.at(self.step as f64 * CONTROL_DT), tip, slot_x, wall_y);
-        self.step += 1;
+        let command = self.path.next(CONTROL_DT, || plan(tip, slot_x, wall_y));
+        let command = guard_descent(command, tip, slot_x, wall_y);
         Ok(vec![command.to_f32().to_vec()])
     }
 }

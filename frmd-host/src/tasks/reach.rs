@@ -6,10 +6,10 @@
 //! Expert: a gently bent path (a parabola whose apex is offset sideways by up to 8 % of the
 //! distance, side and amount from the expert's seeded stream, so curvature stays below
 //! 0.64 rad/m) traversed with minimum-jerk timing at 0.5 m/s on average.
-use super::geom::{Cubic, SmoothPath, TimedPath, V2};
+use super::geom::{Cubic, PathFollower, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass};
 use super::rng::TaskRng;
-use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
+use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, TaskSpec, CONTROL_DT};
 use crate::tasks::{Policy, PolicyInput};
 
 const OBS_FIELDS: &[&str] = &[
@@ -20,6 +20,11 @@ const OBS_FIELDS: &[&str] = &[
     "goal_x - ee_x [m]",
     "goal_y - ee_y [m]",
 ];
+const SPEC: TaskSpec = TaskSpec {
+    name: "reach",
+    obs_fields: OBS_FIELDS,
+    max_steps: 100,
+};
 const GOAL_TOLERANCE: f64 = 0.03;
 const SPEED_TOLERANCE: f64 = 0.1;
 const HALF_EXTENT: f64 = 1.6;
@@ -48,16 +53,8 @@ impl Default for Reach {
 }
 
 impl Task for Reach {
-    fn name(&self) -> &'static str {
-        "reach"
-    }
-
-    fn obs_fields(&self) -> &'static [&'static str] {
-        OBS_FIELDS
-    }
-
-    fn max_steps(&self) -> usize {
-        100
+    fn spec(&self) -> &'static TaskSpec {
+        &SPEC
     }
 
     fn reset(&mut self, seed: u64) {
@@ -120,8 +117,7 @@ impl Task for Reach {
 #[derive(Default)]
 pub struct ReachExpert {
     seed: u64,
-    plan: Option<TimedPath>,
-    step: usize,
+    path: PathFollower,
 }
 
 impl Policy for ReachExpert {
@@ -131,30 +127,23 @@ impl Policy for ReachExpert {
 
     fn reset(&mut self, seed: u64) {
         self.seed = seed;
-        self.plan = None;
-        self.step = 0;
+        self.path.reset();
     }
 
     fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
-        let obs = last_obs(input, OBS_FIELDS.len(), "reach")?;
-        let plan = match self.plan.take() {
-            Some(plan) => plan,
-            None => {
-                let start = v2_at(obs, 0);
-                let goal = start + v2_at(obs, 4);
-                let mut rng = TaskRng::new(self.seed, b"reach/expert");
-                let bend = rng.uniform(-0.08, 0.08) * (goal - start).norm();
-                let control = start.lerp(goal, 0.5) + (goal - start).unit().perp() * (2.0 * bend);
-                TimedPath::with_speed(
-                    SmoothPath::new(vec![Cubic::quadratic(start, control, goal)]),
-                    0.5,
-                    2.0,
-                )
-            }
-        };
-        let target = plan.at(self.step as f64 * CONTROL_DT);
-        self.plan = Some(plan);
-        self.step += 1;
+        let obs = last_obs(input, &SPEC)?;
+        let target = self.path.next(CONTROL_DT, || {
+            let start = v2_at(obs, 0);
+            let goal = start + v2_at(obs, 4);
+            let mut rng = TaskRng::new(self.seed, b"reach/expert");
+            let bend = rng.uniform(-0.08, 0.08) * (goal - start).norm();
+            let control = start.lerp(goal, 0.5) + (goal - start).unit().perp() * (2.0 * bend);
+            TimedPath::with_speed(
+                SmoothPath::new(vec![Cubic::quadratic(start, control, goal)]),
+                0.5,
+                2.0,
+            )
+        });
         Ok(vec![target.to_f32().to_vec()])
     }
 }
