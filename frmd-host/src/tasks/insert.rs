@@ -20,11 +20,12 @@
 //! the slot centre, the expert commands no lower than 3 cm above the wall, so it realigns (and
 //! lifts a jammed peg) instead of pressing down beside the slot. On its own path the rule never
 //! fires; it matters for perturbed demonstrations (`frmd collect --perturb-std`).
-use super::geom::{Cubic, PathFollower, SmoothPath, TimedPath, V2};
+use super::expert::{PathExpert, PathPlanner};
+use super::geom::{Cubic, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass, OMEGA, SUBSTEP};
 use super::rng::TaskRng;
-use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, TaskSpec, CONTROL_DT};
-use crate::tasks::{Policy, PolicyInput};
+use super::{v2_at, LayoutItem, Role, Shape, Task, TaskSpec, CONTROL_DT};
+use crate::tasks::Policy;
 
 const OBS_FIELDS: &[&str] = &[
     "tip_x [m]",
@@ -215,10 +216,11 @@ impl Task for Insert {
 }
 
 /// Scripted expert for [`Insert`].
-#[derive(Default)]
-pub struct InsertExpert {
-    path: PathFollower,
-}
+pub type InsertExpert = PathExpert<InsertPlanner>;
+
+/// [`InsertExpert`]'s plan (arc, then straight down) and its descent guard.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct InsertPlanner;
 
 /// Height above the wall top where the approach arc ends and the straight descent begins, metres.
 const PRE_INSERT_HEIGHT: f64 = 0.15;
@@ -251,22 +253,23 @@ fn plan(start: V2, slot_x: f64, wall_y: f64) -> TimedPath {
     TimedPath::with_speed(path, 0.5, 2.0)
 }
 
-impl Policy for InsertExpert {
-    fn name(&self) -> String {
-        "expert".into()
+/// The tip and the slot (its centre x and the wall top y) in an observation.
+fn tip_and_slot(obs: &[f32]) -> (V2, f64, f64) {
+    let tip = v2_at(obs, 0);
+    (tip, tip.x + f64::from(obs[4]), tip.y + f64::from(obs[5]))
+}
+
+impl PathPlanner for InsertPlanner {
+    const SPEC: &'static TaskSpec = &SPEC;
+
+    fn plan(&self, _seed: u64, obs: &[f32]) -> TimedPath {
+        let (tip, slot_x, wall_y) = tip_and_slot(obs);
+        plan(tip, slot_x, wall_y)
     }
 
-    fn reset(&mut self, _seed: u64) {
-        self.path.reset();
-    }
-
-    fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
-        let obs = last_obs(input, &SPEC)?;
-        let tip = v2_at(obs, 0);
-        let (slot_x, wall_y) = (tip.x + f64::from(obs[4]), tip.y + f64::from(obs[5]));
-        let command = self.path.next(CONTROL_DT, || plan(tip, slot_x, wall_y));
-        let command = guard_descent(command, tip, slot_x, wall_y);
-        Ok(vec![command.to_f32().to_vec()])
+    fn command(&self, target: V2, obs: &[f32]) -> V2 {
+        let (tip, slot_x, wall_y) = tip_and_slot(obs);
+        guard_descent(target, tip, slot_x, wall_y)
     }
 }
 

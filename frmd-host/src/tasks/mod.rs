@@ -25,6 +25,7 @@
 //! Seeds: a task's layout is a pure function of the episode seed (see [`rng::TaskRng`]). The
 //! evaluator uses seeds from a disjoint range (see `eval::EVAL_SEED_OFFSET`).
 pub mod avoid;
+pub mod expert;
 pub mod geom;
 pub mod insert;
 pub mod point_mass;
