@@ -14,6 +14,7 @@ use crate::model::linear::{F32Linear, Int8Linear, RequantizedLinear};
 use crate::model::mlp::{F32Mlp, F32Scratch, InputPrecision, Int8Mlp};
 use crate::prodmp::{BakedProDmp, ProDmpConfig};
 use crate::rng::Rng;
+use crate::sigma::SigmaConfig;
 
 pub const M: usize = 2;
 pub const O: usize = 3;
@@ -55,25 +56,6 @@ pub struct TestModel {
     pub layout: InputLayout,
 }
 
-/// EDM consistency constants for `sigma` (sigma_min 0.002, sigma_data 0.5), computed in f64.
-pub fn step_constants(sigma: f64, first: bool, index: u32) -> StepConstants {
-    let (sigma_min, sigma_data) = (0.002_f64, 0.5_f64);
-    let norm = (sigma * sigma + sigma_data * sigma_data).sqrt();
-    let shifted = sigma - sigma_min;
-    StepConstants {
-        sigma: sigma as f32,
-        renoise_std: if first {
-            0.0
-        } else {
-            (sigma * sigma - sigma_min * sigma_min).sqrt() as f32
-        },
-        c_in: (1.0 / norm) as f32,
-        c_skip: (sigma_data * sigma_data / (shifted * shifted + sigma_data * sigma_data)) as f32,
-        c_out: (shifted * sigma_data / norm) as f32,
-        noise_variant: index,
-    }
-}
-
 impl TestModel {
     /// A random model with `sigmas.len()` steps (first step at `sigmas[0]`).
     pub fn new(seed: u64, sigmas: &[f64]) -> Self {
@@ -91,7 +73,7 @@ impl TestModel {
         let steps: Vec<StepConstants> = sigmas
             .iter()
             .enumerate()
-            .map(|(i, s)| step_constants(*s, i == 0, i as u32))
+            .map(|(i, s)| StepConstants::consistency(&SigmaConfig::default(), *s, i as u32).unwrap())
             .collect();
         // Calibration over random inputs shaped like the policy's (trajectory part ~ c_in x).
         let mut ranges = MlpRanges::new(hidden.len());
