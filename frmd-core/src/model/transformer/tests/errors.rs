@@ -2,7 +2,7 @@
 
 extern crate std;
 
-use super::fixture::{big_scratch, random_inputs, FloatModel, QuantModel, Ranges};
+use super::fixture::{big_scratch, calibrated, random_inputs};
 use super::SMALL;
 use crate::kernels::{Activation, KernelError};
 use crate::model::linear::QuantizedLinear;
@@ -12,11 +12,10 @@ use crate::rng::Rng;
 
 #[test]
 fn named_errors_for_bad_shapes_weights_and_arguments() {
-    let model = FloatModel::random(SMALL, 21);
+    let mut rng = Rng::new(22);
+    let (model, quant) = calibrated(SMALL, 21, &mut rng, 10);
     let blocks = model.f32_blocks();
     let net = model.f32_view(&blocks);
-    let mut rng = Rng::new(22);
-    let quant = QuantModel::new(&model, &Ranges::calibrate(&net, &mut rng, 10));
     let int8_blocks = quant.blocks(&model);
     let int8 = quant.view(&model, &int8_blocks, false);
     let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
@@ -253,11 +252,10 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
 #[test]
 fn random_corruptions_return_errors_without_panicking() {
     use crate::model::linear::F32Linear;
-    let model = FloatModel::random(SMALL, 31);
+    let mut rng = Rng::new(32);
+    let (model, quant) = calibrated(SMALL, 31, &mut rng, 10);
     let blocks = model.f32_blocks();
     let net = model.f32_view(&blocks);
-    let mut rng = Rng::new(32);
-    let quant = QuantModel::new(&model, &Ranges::calibrate(&net, &mut rng, 10));
     let int8_blocks = quant.blocks(&model);
     let int8 = quant.view(&model, &int8_blocks, false);
     let floats = std::vec![0.25_f32; 4096];

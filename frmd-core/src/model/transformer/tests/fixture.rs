@@ -250,6 +250,21 @@ impl Ranges {
     }
 }
 
+/// A random f32 model of `shape` (weights from `seed`) and its int8 form, calibrated on `runs`
+/// random inputs drawn from `rng`.
+pub fn calibrated(
+    shape: TransformerShape,
+    seed: u64,
+    rng: &mut Rng,
+    runs: usize,
+) -> (FloatModel, QuantModel) {
+    let model = FloatModel::random(shape, seed);
+    let blocks = model.f32_blocks();
+    let ranges = Ranges::calibrate(&model.f32_view(&blocks), rng, runs);
+    let quant = QuantModel::new(&model, &ranges);
+    (model, quant)
+}
+
 /// A linear layer quantized for input parameters `input` (exporter recipe).
 pub struct QLin {
     pub input: QuantParams,
