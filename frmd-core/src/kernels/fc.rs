@@ -97,25 +97,6 @@ pub struct FcRequant<'a> {
     pub activation_max: i8,
 }
 
-/// The shape check of a dense layer with weights of any element type: both dimensions non-zero,
-/// `weights_len == out_features * in_features`, `bias_len == out_features`.
-#[inline]
-pub(crate) fn check_dense(
-    in_features: usize,
-    out_features: usize,
-    weights_len: usize,
-    bias_len: usize,
-) -> Result<(), KernelError> {
-    let expected = out_features.checked_mul(in_features);
-    if in_features == 0 || out_features == 0 || expected != Some(weights_len) {
-        return Err(KernelError::WeightsLength);
-    }
-    if bias_len != out_features {
-        return Err(KernelError::BiasLength);
-    }
-    Ok(())
-}
-
 impl<'a> FullyConnected<'a> {
     /// Unchecked constructor usable in `const` items; every forward call validates the shapes.
     pub const fn new(
@@ -134,7 +115,14 @@ impl<'a> FullyConnected<'a> {
 
     /// Checks `weights` and `bias` lengths against the shape (both dimensions non-zero).
     pub fn validate(&self) -> Result<(), KernelError> {
-        check_dense(self.in_features, self.out_features, self.weights.len(), self.bias.len())
+        let expected = self.out_features.checked_mul(self.in_features);
+        if self.in_features == 0 || self.out_features == 0 || expected != Some(self.weights.len()) {
+            return Err(KernelError::WeightsLength);
+        }
+        if self.bias.len() != self.out_features {
+            return Err(KernelError::BiasLength);
+        }
+        Ok(())
     }
 
     fn check_input(&self, input_len: usize) -> Result<(), KernelError> {

@@ -14,7 +14,7 @@
 //! Weights are row-major `[out_features, in_features]` (candle `Linear` layout) in every form.
 
 use crate::kernels::{
-    dequantize_accumulators, fc, lut, Activation, FcRequant, FullyConnected, KernelError, LayerInput,
+    dequantize_accumulators, lut, Activation, FcRequant, FullyConnected, KernelError, LayerInput,
     LutTable,
 };
 use crate::quant::{combine_plane_accumulators, requantize_to_i8, QuantParams};
@@ -55,7 +55,14 @@ fn row_range<'a, W, B>(
 impl<'a> F32Linear<'a> {
     /// Checks the weight and bias lengths against the shape.
     pub fn validate(&self) -> Result<(), KernelError> {
-        fc::check_dense(self.in_features, self.out_features, self.weights.len(), self.bias.len())
+        let expected = self.out_features.checked_mul(self.in_features);
+        if self.in_features == 0 || self.out_features == 0 || expected != Some(self.weights.len()) {
+            return Err(KernelError::WeightsLength);
+        }
+        if self.bias.len() != self.out_features {
+            return Err(KernelError::BiasLength);
+        }
+        Ok(())
     }
 
     /// `output = activation(W input + b)`. Dot products are summed sequentially in f32.
