@@ -47,17 +47,27 @@ pub struct Exported {
     pub policy: QuantizedPolicy,
 }
 
+fn read_checkpoint(dir: &Path) -> anyhow::Result<Checkpoint> {
+    Checkpoint::read(dir).with_context(|| format!("checkpoint {}", dir.display()))
+}
+
+/// The calibration rows of an export: `calibration`, else the checkpoint's own
+/// `dir/calibration.safetensors`.
+fn calibration_rows(dir: &Path, checkpoint: &Checkpoint, calibration: Option<CalibrationSet>) -> anyhow::Result<CalibrationSet> {
+    match calibration {
+        Some(set) => Ok(set),
+        None => crate::calibration_file::read(&dir.join(CALIBRATION_FILE), checkpoint.meta.model.cond_dim())
+            .context("no calibration data given and the checkpoint's calibration file is unusable (pass --data)"),
+    }
+}
+
 /// Reads `dir`, folds, calibrates on `calibration` (or `dir/calibration.safetensors` when
 /// `None`) and quantizes.
 pub fn export_checkpoint(dir: &Path, options: ExportOptions, calibration: Option<CalibrationSet>) -> anyhow::Result<Exported> {
-    let checkpoint = Checkpoint::read(dir).with_context(|| format!("checkpoint {}", dir.display()))?;
+    let checkpoint = read_checkpoint(dir)?;
     let folded = FoldedMlp::new(&checkpoint, options.steps).with_context(|| format!("cannot export {}", dir.display()))?;
     let norm = checkpoint.meta.normalization.clone().with_context(|| format!("{}: checkpoint has no normalization", dir.display()))?;
-    let set = match calibration {
-        Some(set) => set,
-        None => crate::calibration_file::read(&dir.join(CALIBRATION_FILE), checkpoint.meta.model.cond_dim())
-            .context("no calibration data given and the checkpoint's calibration file is unusable (pass --data)")?,
-    };
+    let set = calibration_rows(dir, &checkpoint, calibration)?;
     let folded = if options.balance_inputs { folded.with_input_gains(input_gains(&folded, &set)?)? } else { folded };
     let mut ranges = calibrate(&folded, &set, options.ranges)?;
     if options.input_precision != InputPrecision::Int8 {
@@ -81,13 +91,9 @@ pub struct ExportedTransformer {
 /// and quantizes. `options.balance_inputs` and `options.input_precision` do not apply (each input
 /// layer has its own scale).
 pub fn export_transformer_checkpoint(dir: &Path, options: ExportOptions, calibration: Option<CalibrationSet>) -> anyhow::Result<ExportedTransformer> {
-    let checkpoint = Checkpoint::read(dir).with_context(|| format!("checkpoint {}", dir.display()))?;
+    let checkpoint = read_checkpoint(dir)?;
     let folded = FoldedTransformer::new(&checkpoint, options.steps).with_context(|| format!("cannot export {}", dir.display()))?;
-    let set = match calibration {
-        Some(set) => set,
-        None => crate::calibration_file::read(&dir.join(CALIBRATION_FILE), checkpoint.meta.model.cond_dim())
-            .context("no calibration data given and the checkpoint's calibration file is unusable (pass --data)")?,
-    };
+    let set = calibration_rows(dir, &checkpoint, calibration)?;
     let ranges = crate::transformer::calibrate(&folded, &set, options.ranges)?;
     let model = crate::transformer::quantize(&folded, &ranges)?;
     Ok(ExportedTransformer { checkpoint, ranges, model })

@@ -102,18 +102,10 @@ pub fn step_constants(sigma: &SigmaConfig, output: ProDmpOutput, steps: usize) -
     (0..steps)
         .map(|i| {
             let level = sigma.consistency_sampling_sigma(i, steps).map_err(err("sampling level"))?;
-            let renoise = if i == 0 { 0.0 } else { (level * level - sigma.sigma_min * sigma.sigma_min).max(0.0).sqrt() };
-            let (c_skip, c_out) = match output {
-                ProDmpOutput::Direct => (0.0, 1.0),
-                ProDmpOutput::BoundarySkip => (sigma.c_skip(level).map_err(err("c_skip"))?, sigma.c_out(level).map_err(err("c_out"))?),
-            };
-            Ok(StepConstants {
-                sigma: level as f32,
-                renoise_std: renoise as f32,
-                c_in: sigma.c_in(level).map_err(err("c_in"))? as f32,
-                c_skip: c_skip as f32,
-                c_out: c_out as f32,
-                noise_variant: i as u32,
+            let step = StepConstants::consistency(sigma, level, i as u32).map_err(err("step constants"))?;
+            Ok(match output {
+                ProDmpOutput::Direct => StepConstants { c_skip: 0.0, c_out: 1.0, ..step },
+                ProDmpOutput::BoundarySkip => step,
             })
         })
         .collect()

@@ -2,8 +2,6 @@
 //! wide-integer model of the same formulas (`frmd_core::quant::reference`, i128 arithmetic with
 //! floor divisions; i64 dot products here), on random and edge inputs.
 use crate::QuantizedPolicy;
-use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
-use frmd_core::model::linear::RequantizedLinear;
 use frmd_core::model::mlp::InputPrecision;
 use frmd_core::policy::{Int8MlpNetwork, Network};
 use frmd_core::quant::{multiply_by_quantized_multiplier, reference, requantize_to_i8, QuantParams, FINE_INPUT_BITS, Q31_MANTISSA_MIN, SHIFT_MAX, SHIFT_MIN};
@@ -94,28 +92,9 @@ pub fn check_requantization(random: u64, seed: u64) -> KernelCheck {
     check
 }
 
-/// Owned LUTs so an [`Int8MlpNetwork`] can borrow them.
-pub fn luts(policy: &QuantizedPolicy) -> Vec<Lut8> {
-    policy.luts.iter().map(|t| Lut8::from_table(*t)).collect()
-}
-
-/// frmd-core's [`Int8MlpNetwork`] over `policy`'s tensors and the tables `luts` (scratch `WIDTH`).
-pub fn int8_network<'a, const WIDTH: usize>(policy: &'a QuantizedPolicy, luts: &'a [Lut8]) -> anyhow::Result<Int8MlpNetwork<'a, WIDTH>> {
-    let layers: Vec<RequantizedLinear<'a>> = policy
-        .hidden
-        .iter()
-        .map(|l| RequantizedLinear {
-            fc: FullyConnected::new(l.in_features, l.out_features, &l.weights, &l.bias),
-            requant: FcRequant {
-                multipliers: &l.multipliers,
-                shifts: &l.shifts,
-                output_zero_point: l.output_zero_point,
-                activation_min: l.activation_min,
-                activation_max: l.activation_max,
-            },
-            activation: l.lut.and_then(|i| luts.get(i)).map(|lut| &lut.table),
-        })
-        .collect();
+/// frmd-core's [`Int8MlpNetwork`] over `policy`'s tensors (scratch `WIDTH`).
+pub fn int8_network<const WIDTH: usize>(policy: &QuantizedPolicy) -> anyhow::Result<Int8MlpNetwork<'_, WIDTH>> {
+    let layers = policy.hidden_layers();
     Int8MlpNetwork::new(policy.input, policy.input_precision, &layers, policy.output_layer(), &policy.first_layer_biases)
     .map_err(|e| anyhow::anyhow!("int8 network: {e}"))
 }
@@ -186,8 +165,7 @@ pub fn wide_network(policy: &QuantizedPolicy, step: usize, input: &[f32]) -> any
 /// (saturation), all at the zero point, and alternating ends.
 pub fn check_network<const WIDTH: usize>(policy: &QuantizedPolicy, inputs: &[Vec<f32>]) -> anyhow::Result<KernelCheck> {
     let mut check = KernelCheck::new("int8 network accumulators vs i64/i128 model");
-    let luts = luts(policy);
-    let mut net = int8_network::<WIDTH>(policy, &luts)?;
+    let mut net = int8_network::<WIDTH>(policy)?;
     let width = net.input_width();
     let lo = policy.input.dequantize(i8::MIN);
     let hi = policy.input.dequantize(i8::MAX);

@@ -241,8 +241,7 @@ fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
     let mut loaded_nets: Vec<_> = loaded.iter().map(|policy| policy.network::<64>().unwrap()).collect();
     assert_eq!(loaded_nets[0].input_precision(), InputPrecision::Int16);
     assert_eq!(loaded_nets[1].input_precision(), InputPrecision::TwoPlane);
-    let luts: Vec<_> = policies.iter().map(|policy| frmd_export::reference::luts(policy)).collect();
-    let mut nets: Vec<_> = policies.iter().zip(&luts).map(|(policy, luts)| frmd_export::reference::int8_network::<64>(policy, luts).unwrap()).collect();
+    let mut nets: Vec<_> = policies.iter().map(|policy| frmd_export::reference::int8_network::<64>(policy).unwrap()).collect();
     let mut errors = [0f64; 3];
     for row in 0..set.rows() {
         let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];

@@ -50,10 +50,9 @@ fn student_sixteen_bit_input_is_as_accurate_as_two_planes() {
     let export = |input_precision| export_checkpoint(&dir, ExportOptions { input_precision, ..Default::default() }, None).expect("export the student");
     let (wide, two) = (export(InputPrecision::Int16), export(InputPrecision::TwoPlane));
     let set = frmd_export::calibration_file::read(&dir.join("calibration.safetensors"), wide.checkpoint.meta.model.cond_dim()).expect("calibration rows");
-    let luts = [frmd_export::reference::luts(&wide.policy), frmd_export::reference::luts(&two.policy)];
     let mut nets = [
-        frmd_export::reference::int8_network::<MLP_WIDTH>(&wide.policy, &luts[0]).unwrap(),
-        frmd_export::reference::int8_network::<MLP_WIDTH>(&two.policy, &luts[1]).unwrap(),
+        frmd_export::reference::int8_network::<MLP_WIDTH>(&wide.policy).unwrap(),
+        frmd_export::reference::int8_network::<MLP_WIDTH>(&two.policy).unwrap(),
     ];
     let traj = wide.policy.horizon * wide.policy.action_dim;
     let mut errors = [[0_f64; 2]; 2];

@@ -10,8 +10,7 @@ fn input_quantization_share_of_the_error() {
     let exported = export_checkpoint(std::path::Path::new(&dir), ExportOptions::default(), None).unwrap();
     let set = frmd_export::calibration_file::read(&std::path::Path::new(&dir).join("calibration.safetensors"), exported.folded.config.cond_dim()).unwrap();
     let policy = &exported.policy;
-    let luts = frmd_export::reference::luts(policy);
-    let mut net = frmd_export::reference::int8_network::<1024>(policy, &luts).unwrap();
+    let mut net = frmd_export::reference::int8_network::<1024>(policy).unwrap();
     use frmd_core::policy::Network;
     let (mut err_int8, mut err_input_only, mut n) = (0f64, 0f64, 0usize);
     for row in 0..set.rows() {

@@ -236,8 +236,7 @@ fn main() -> anyhow::Result<()> {
         let sim = Sim::new(folded, &exported.ranges, src);
         run(label, Box::new(move |i, input| Ok(sim.forward(i, input))))?;
     }
-    let luts = frmd_export::reference::luts(&exported.policy);
-    let mut net = Box::new(frmd_export::reference::int8_network::<MAX_WIDTH>(&exported.policy, &luts)?);
+    let mut net = Box::new(frmd_export::reference::int8_network::<MAX_WIDTH>(&exported.policy)?);
     run(
         "real int8 (frmd-core)",
         Box::new(move |i, input| {

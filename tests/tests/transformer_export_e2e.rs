@@ -2,15 +2,10 @@
 //! transformer-lite teacher and student through the `frmd train` code paths, export the student
 //! with `frmd export` (the backbone picks the transformer exporter: `FRMT` blob plus generated
 //! loader module), load the blob with frmd-core and run the bit-accuracy harness.
-use frmd_core::policy::PolicyDims;
-use frmd_host::export::BAKED_BLOB_FILE;
 use frmd_test_support::AlignedBlob;
 
 mod support;
-use support::{equiv_within_bounds, row, train_tiny, Tiny, TinyRun};
-
-/// The sizes of the tiny runs (see `export_e2e.rs`).
-const TINY_DIMS: PolicyDims = PolicyDims { history: 2, obs_dim: 6, action_dim: 2, horizon: 8, params_per_dof: 7 };
+use support::{assert_tiny_dims, equiv_within_bounds, row, train_tiny, Tiny};
 
 #[test]
 fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
@@ -27,20 +22,13 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
             student_steps: 20,
         },
     );
-    let TinyRun {
-        dir,
-        teacher,
-        student,
-        baked,
-    } = &run;
+    let (baked, student) = (&run.baked, &run.student);
 
     // The exporter refuses the teacher, naming the reason.
-    let err = run.export(teacher).unwrap_err();
+    let err = run.export(&run.teacher).unwrap_err();
     assert!(format!("{err:#}").contains("this is a teacher checkpoint"), "{err:#}");
 
-    run.export(student).unwrap();
-    let blob = std::fs::read(baked.join(BAKED_BLOB_FILE)).unwrap();
-    assert_eq!(std::fs::read(dir.join("student.blob")).unwrap(), blob);
+    let blob = run.export_student();
     assert_eq!(&blob[..4], b"FRMT");
     for file in ["policy.rs", "export.json"] {
         assert!(baked.join(file).exists(), "{file}");
@@ -80,7 +68,7 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
     let aligned = AlignedBlob::new(&blob);
     let bytes = aligned.bytes();
     let loaded = frmd_core::blob::LoadedTransformer::load(bytes).unwrap();
-    assert_eq!(loaded.check_dims(&TINY_DIMS), Ok(()));
+    assert_tiny_dims(|dims| loaded.check_dims(dims));
     assert_eq!(loaded.steps().len(), 1);
     assert_eq!(
         (
@@ -90,10 +78,6 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
         ),
         (3, 2, 128)
     );
-    assert!(matches!(
-        loaded.check_dims(&PolicyDims { horizon: 12, params_per_dof: 21, ..TINY_DIMS }),
-        Err(frmd_core::blob::BlobError::DimensionMismatch(_))
-    ));
     assert_eq!(
         frmd_core::blob::LoadedMlp::load(bytes).err(),
         Some(frmd_core::blob::BlobError::BadMagic)
@@ -101,5 +85,5 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
 
     let report = equiv_within_bounds(student, baked, 5, 32);
     assert_eq!(row(&report, "int8 transformer layer mismatches"), 0.0);
-    let _ = std::fs::remove_dir_all(dir);
+    let _ = std::fs::remove_dir_all(&run.dir);
 }

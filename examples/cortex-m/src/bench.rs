@@ -5,20 +5,8 @@ use frmd_core::hash::Fnv1a64;
 use crate::memory::{ImageSizes, StackProbe};
 use crate::report::{self, exit_failure, exit_success, report};
 use crate::timer::{calibrate, Calibration, CycleCounter, TickCounter};
+use frmd_firmware_support::cpuid::core_name;
 use frmd_firmware_support::workload::Workload;
-
-/// Core name from the CPUID part number.
-fn core_name(cpuid: u32) -> &'static str {
-    match (cpuid >> 4) & 0xFFF {
-        0xC20 => "cortex-m0",
-        0xC60 => "cortex-m0+",
-        0xC24 => "cortex-m4",
-        0xC27 => "cortex-m7",
-        0xD21 => "cortex-m33",
-        0xD22 => "cortex-m55",
-        _ => "unknown",
-    }
-}
 
 /// Entered right before each measured call, outside the timed interval. The two markers are
 /// separate functions (one `nop` and two, so that they are neither removed nor merged) whose

@@ -48,6 +48,17 @@ fn elapsed(start: u32, end: u32) -> u64 {
     u64::from(TickCounter::elapsed(start, end))
 }
 
+/// The stages of every policy breakdown outside its network: `noise` and `input` before it,
+/// `decode`, `output_stage` and `denormalize` after it.
+#[derive(Clone, Copy)]
+struct PolicyStages {
+    noise: usize,
+    input: usize,
+    decode: usize,
+    output_stage: usize,
+    denormalize: usize,
+}
+
 /// Stage names, MAC counts and summed ticks.
 struct Breakdown {
     names: [&'static str; MAX_STAGES],
@@ -82,6 +93,28 @@ impl Breakdown {
         if let Some(total) = self.ticks.get_mut(index) {
             *total = total.saturating_sub(ticks);
         }
+    }
+
+    /// Declares the stages after the network (`decode`, `output_stage`, `denormalize`) for a
+    /// horizon `n`, `k` DoFs and `p` parameters per DoF; `noise` and `input` are the first two.
+    fn close_policy(&mut self, noise: usize, input: usize, (n, k, p): (usize, usize, usize)) -> PolicyStages {
+        PolicyStages {
+            noise,
+            input,
+            decode: self.stage("decode", prodmp_decode_macs(n, k, p)),
+            output_stage: self.stage("output_stage", (2 * n * k) as u64),
+            denormalize: self.stage("denormalize", (2 * n * k) as u64),
+        }
+    }
+
+    /// Moves the standalone timings out of the stages they were measured in: `noise_ticks` out of
+    /// `input`, the decode and denormalize ticks out of `output_stage`.
+    fn split_standalone(&mut self, s: PolicyStages, noise_ticks: u64, (decode, denormalize): (u64, u64)) {
+        self.add(s.noise, noise_ticks);
+        self.sub(s.input, noise_ticks);
+        self.add(s.decode, decode);
+        self.add(s.denormalize, denormalize);
+        self.sub(s.output_stage, decode + denormalize);
     }
 
     fn print(&self, calibration: &Calibration, calls: u64) {
@@ -201,9 +234,7 @@ pub fn mlp_policy<
     }
     let output_layer = stages.stage("output_layer", output_macs);
     let dequantize = stages.stage("dequantize", 0);
-    let decode = stages.stage("decode", prodmp_decode_macs(N, K, P));
-    let output_stage = stages.stage("output_stage", (2 * N * K) as u64);
-    let denormalize = stages.stage("denormalize", (2 * N * K) as u64);
+    let outer = stages.close_policy(noise, input, (N, K, P));
     let mut digest = Fnv1a64::new();
     for case in 0..CASES {
         workload.prepare(case)?;
@@ -215,22 +246,16 @@ pub fn mlp_policy<
             let (Some(entry), Some(exit)) = (marks.first(), marks.last()) else {
                 return Err(PolicyError::OutputWidth);
             };
-            stages.add(input, elapsed(start, *entry));
+            stages.add(outer.input, elapsed(start, *entry));
             for (index, pair) in marks.windows(2).enumerate() {
                 if let [from, to] = pair {
                     stages.add(quantize + index, elapsed(*from, *to));
                 }
             }
-            stages.add(output_stage, elapsed(*exit, end));
+            stages.add(outer.output_stage, elapsed(*exit, end));
         }
         workload.digest_outputs(&mut digest);
-        let noise_ticks = time_noise::<N, K>(case);
-        stages.add(noise, noise_ticks);
-        stages.sub(input, noise_ticks);
-        let (decode_ticks, denormalize_ticks) = time_post_stages(workload.policy())?;
-        stages.add(decode, decode_ticks);
-        stages.add(denormalize, denormalize_ticks);
-        stages.sub(output_stage, decode_ticks + denormalize_ticks);
+        stages.split_standalone(outer, time_noise::<N, K>(case), time_post_stages(workload.policy())?);
     }
     debug_assert!(first_layer == quantize + 1 && output_layer + 1 == dequantize);
     check_digest(digest, expected_digest);
@@ -364,9 +389,7 @@ pub fn transformer_policy<
     }
     let head = stages.stage("head", t * w * shape.output as u64);
     let network_rest = stages.stage("network_rest", 0);
-    let decode = stages.stage("decode", prodmp_decode_macs(N, K, P));
-    let output_stage = stages.stage("output_stage", (2 * N * K) as u64);
-    let denormalize = stages.stage("denormalize", (2 * N * K) as u64);
+    let outer = stages.close_policy(noise, input, (N, K, P));
     let mut digest = Fnv1a64::new();
     let mut network_ticks = 0;
     for case in 0..CASES {
@@ -378,17 +401,11 @@ pub fn transformer_policy<
         let (Some(entry), Some(exit)) = (marks.first(), marks.last()) else {
             return Err(PolicyError::OutputWidth);
         };
-        stages.add(input, elapsed(start, *entry) * REPEATS as u64);
+        stages.add(outer.input, elapsed(start, *entry) * REPEATS as u64);
         network_ticks += elapsed(*entry, *exit) * REPEATS as u64;
-        stages.add(output_stage, elapsed(*exit, end) * REPEATS as u64);
+        stages.add(outer.output_stage, elapsed(*exit, end) * REPEATS as u64);
         workload.digest_outputs(&mut digest);
-        let noise_ticks = time_noise::<N, K>(case);
-        stages.add(noise, noise_ticks);
-        stages.sub(input, noise_ticks);
-        let (decode_ticks, denormalize_ticks) = time_post_stages(workload.policy())?;
-        stages.add(decode, decode_ticks);
-        stages.add(denormalize, denormalize_ticks);
-        stages.sub(output_stage, decode_ticks + denormalize_ticks);
+        stages.split_standalone(outer, time_noise::<N, K>(case), time_post_stages(workload.policy())?);
     }
     check_digest(digest, expected_digest);
     // The network's parts on a fixed input, REPEATS runs per case.

@@ -27,7 +27,7 @@ pub use mlp::{
     encode_mlp, mlp_encoded_len, HiddenLayerDesc, LoadedMlp, MlpBlobParts, MlpDescriptor,
     OutputLayerDesc, INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MLP_MAGIC,
 };
-pub use policy_tables::STEP_WORDS;
+pub use policy_tables::{PolicyHeader, PolicySections, STEP_WORDS};
 pub use transformer::{
     encode_transformer, transformer_encoded_len, LoadedTransformer, TransformerBlobParts,
     TransformerDescriptor, TRANSFORMER_MAGIC,

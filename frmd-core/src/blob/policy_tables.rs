@@ -6,6 +6,7 @@
 
 use super::container::{Data, Section, SectionId, SectionWriter};
 use super::{BlobError, Dimension};
+use serde::{Deserialize, Serialize};
 use crate::policy::{
     InputLayout, PolicyConfig, PolicyDims, ProDmpTables, RangeNormalizer, Sampler, StepConstants,
     StepTable, MAX_STEPS,
@@ -15,13 +16,54 @@ use crate::policy::{
 /// f32 bit patterns, then `noise_variant`.
 pub const STEP_WORDS: usize = 6;
 
-/// The policy sections of a descriptor.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct PolicySections {
-    pub(crate) obs_norm: Section,
-    pub(crate) action_norm: Section,
-    pub(crate) prodmp: Section,
-    pub(crate) steps: Section,
+/// The sizes, control period and input layout every policy blob's descriptor starts with.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PolicyHeader {
+    /// Observation history length `m`.
+    pub history: u32,
+    /// Observation dimension `o`.
+    pub obs_dim: u32,
+    /// Action dimension `k`.
+    pub action_dim: u32,
+    /// Horizon `n`.
+    pub horizon: u32,
+    /// ProDMP parameters per DoF `p`.
+    pub params_per_dof: u32,
+    /// Control period, seconds.
+    pub control_dt: f32,
+    /// Model input layout.
+    pub layout: InputLayout,
+}
+
+impl PolicyHeader {
+    /// The header of `config` (every size must fit a `u32`).
+    pub(crate) fn of(config: &PolicyConfig<'_>) -> Result<Self, BlobError> {
+        let small = |value: usize| u32::try_from(value).map_err(|_| BlobError::TooLarge);
+        let dims = config.dims();
+        Ok(Self {
+            history: small(dims.history)?,
+            obs_dim: small(dims.obs_dim)?,
+            action_dim: small(dims.action_dim)?,
+            horizon: small(dims.horizon)?,
+            params_per_dof: small(dims.params_per_dof)?,
+            control_dt: config.sampler.control_dt,
+            layout: config.sampler.layout,
+        })
+    }
+}
+
+/// The sections every policy blob's descriptor names (after its format's own fields).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PolicySections {
+    /// f32 `[min; o]` then `[max; o]`.
+    pub obs_norm: Section,
+    /// f32 `[min; k]` then `[max; k]`.
+    pub action_norm: Section,
+    /// f32 `pos_params [n][p]`, `vel_params [n][p]`, `pos_y0 [n]`, `pos_v0 [n]`, `vel_y0 [n]`,
+    /// `vel_v0 [n]`.
+    pub prodmp: Section,
+    /// u32 `[steps][STEP_WORDS]`.
+    pub steps: Section,
 }
 
 fn step_words(step: &StepConstants) -> [u32; STEP_WORDS] {
@@ -76,15 +118,6 @@ pub(crate) fn write(
     })
 }
 
-/// The descriptor fields every policy blob has, copied out of the format's own descriptor.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct PolicyFields {
-    pub(crate) dims: [u32; 5],
-    /// Control period in seconds (must be finite and positive).
-    pub(crate) control_dt: f32,
-    pub(crate) sections: PolicySections,
-}
-
 /// The validated policy tables of a blob (normalization and decoder borrowed from it, the steps
 /// copied).
 #[derive(Clone, Copy, Debug)]
@@ -130,9 +163,15 @@ impl<'a> PolicyTables<'a> {
     }
 }
 
-/// Validates the sizes, control period, normalization ranges, ProDMP tables and steps named by
-/// `fields` (in that order, so the first failing check names the error).
-pub(crate) fn read<'a>(data: &Data<'a>, fields: PolicyFields) -> Result<PolicyTables<'a>, BlobError> {
+/// Validates the sizes and control period of `header`, then the normalization ranges, ProDMP
+/// tables and steps of `sections` (in that order, so the first failing check names the error).
+pub(crate) fn read<'a>(
+    data: &Data<'a>,
+    header: &PolicyHeader,
+    sections: &PolicySections,
+) -> Result<PolicyTables<'a>, BlobError> {
+    let h = header;
+    let sizes = [h.history, h.obs_dim, h.action_dim, h.horizon, h.params_per_dof];
     let which = [
         Dimension::History,
         Dimension::ObsDim,
@@ -140,10 +179,10 @@ pub(crate) fn read<'a>(data: &Data<'a>, fields: PolicyFields) -> Result<PolicyTa
         Dimension::Horizon,
         Dimension::ParamsPerDof,
     ];
-    if let Some((_, zero)) = fields.dims.iter().zip(which).find(|(size, _)| **size == 0) {
+    if let Some((_, zero)) = sizes.iter().zip(which).find(|(size, _)| **size == 0) {
         return Err(BlobError::ZeroDimension(zero));
     }
-    let [history, obs_dim, action_dim, horizon, params_per_dof] = fields.dims.map(|d| d as usize);
+    let [history, obs_dim, action_dim, horizon, params_per_dof] = sizes.map(|d| d as usize);
     let dims = PolicyDims {
         history,
         obs_dim,
@@ -151,10 +190,10 @@ pub(crate) fn read<'a>(data: &Data<'a>, fields: PolicyFields) -> Result<PolicyTa
         horizon,
         params_per_dof,
     };
-    if !(fields.control_dt.is_finite() && fields.control_dt > 0.0) {
+    if !(h.control_dt.is_finite() && h.control_dt > 0.0) {
         return Err(BlobError::ControlPeriod);
     }
-    let s = &fields.sections;
+    let s = sections;
     let normalizer = |section, dim: usize, id| -> Result<RangeNormalizer<'a>, BlobError> {
         let values = data.finite(section, dim.checked_mul(2), id)?;
         let (min, max) = values
@@ -174,7 +213,7 @@ pub(crate) fn read<'a>(data: &Data<'a>, fields: PolicyFields) -> Result<PolicyTa
     let steps = read_steps(data, s.steps)?;
     Ok(PolicyTables {
         dims,
-        control_dt: fields.control_dt,
+        control_dt: h.control_dt,
         obs_norm,
         action_norm,
         decoder,

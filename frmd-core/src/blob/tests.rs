@@ -278,7 +278,7 @@ fn shape_and_value_damage_is_named() {
         BlobError::SectionBounds(SectionId::HiddenWeights(0)),
     );
     check(
-        with_descriptor(&blob, |d| d.obs_norm.offset += 4),
+        with_descriptor(&blob, |d| d.tables.obs_norm.offset += 4),
         BlobError::SectionMisaligned(SectionId::ObsNorm),
     );
     check(
@@ -306,12 +306,12 @@ fn shape_and_value_damage_is_named() {
         BlobError::InputQuantization,
     );
     check(
-        with_descriptor(&blob, |d| d.control_dt = f32::NAN),
+        with_descriptor(&blob, |d| d.header.control_dt = f32::NAN),
         BlobError::ControlPeriod,
     );
     check(
         with_descriptor(&blob, |d| {
-            d.layout = crate::policy::InputLayout::new(
+            d.header.layout = crate::policy::InputLayout::new(
                 &[crate::policy::InputSegment::NoisyTrajectory],
                 1.0,
             )
@@ -320,19 +320,19 @@ fn shape_and_value_damage_is_named() {
         BlobError::InputLayout,
     );
     check(
-        with_descriptor(&blob, |d| d.steps.len = 0),
+        with_descriptor(&blob, |d| d.tables.steps.len = 0),
         BlobError::Steps,
     );
     check(
-        poke(&blob, d.obs_norm, 4, &f32::NAN.to_le_bytes()),
+        poke(&blob, d.tables.obs_norm, 4, &f32::NAN.to_le_bytes()),
         BlobError::NonFinite(SectionId::ObsNorm),
     );
     check(
-        poke(&blob, d.prodmp, 8, &f32::INFINITY.to_le_bytes()),
+        poke(&blob, d.tables.prodmp, 8, &f32::INFINITY.to_le_bytes()),
         BlobError::NonFinite(SectionId::ProDmp),
     );
     check(
-        poke(&blob, d.action_norm, 0, &9.0_f32.to_le_bytes()),
+        poke(&blob, d.tables.action_norm, 0, &9.0_f32.to_le_bytes()),
         BlobError::Normalization,
     );
     check(
@@ -345,12 +345,12 @@ fn shape_and_value_damage_is_named() {
     );
     // Second step's bias variant index beyond the two variants.
     check(
-        poke(&blob, d.steps, 4 * (STEP_WORDS + 5), &2_u32.to_le_bytes()),
+        poke(&blob, d.tables.steps, 4 * (STEP_WORDS + 5), &2_u32.to_le_bytes()),
         BlobError::Steps,
     );
     // First step re-noising is invalid.
     check(
-        poke(&blob, d.steps, 4, &0.5_f32.to_le_bytes()),
+        poke(&blob, d.tables.steps, 4, &0.5_f32.to_le_bytes()),
         BlobError::Steps,
     );
 }
@@ -384,7 +384,7 @@ fn writer_checks_part_lengths() {
         Err(BlobError::SectionLength(SectionId::ObsNorm))
     );
     let mut parts = model.blob_parts(&hidden);
-    parts.mlp.output.output_scales = &model.output_scales[1..];
+    parts.mlp.output.output_scales = &model.quant.output_scales[1..];
     assert_eq!(
         encode_mlp(&parts, &mut out),
         Err(BlobError::SectionLength(SectionId::OutputScales))

@@ -2,6 +2,7 @@
 //! schedule (see [`super::Sampler`]).
 
 use super::PolicyError;
+use crate::sigma::{SigmaConfig, SigmaError};
 
 /// Most sampling steps a table may hold.
 pub const MAX_STEPS: usize = 4;
@@ -35,6 +36,25 @@ impl StepConstants {
         c_out: 0.0,
         noise_variant: 0,
     };
+
+    /// The constants of consistency-sampling step `index` at noise level `sigma` under `config`
+    /// (computed in f64): `c_in`, `c_skip`, `c_out` of [`SigmaConfig`], and for every step but the
+    /// first (`index == 0`) `renoise_std = sqrt(sigma^2 - sigma_min^2)` (0 below `sigma_min`).
+    pub fn consistency(config: &SigmaConfig, sigma: f64, index: u32) -> Result<Self, SigmaError> {
+        let renoise = if index == 0 {
+            0.0
+        } else {
+            libm::sqrt((sigma * sigma - config.sigma_min * config.sigma_min).max(0.0))
+        };
+        Ok(Self {
+            sigma: sigma as f32,
+            renoise_std: renoise as f32,
+            c_in: config.c_in(sigma)? as f32,
+            c_skip: config.c_skip(sigma)? as f32,
+            c_out: config.c_out(sigma)? as f32,
+            noise_variant: index,
+        })
+    }
 
     /// Checks one step: all values finite, `sigma > 0`, `c_in > 0`, `renoise_std >= 0`, and
     /// `renoise_std == 0` for the first step.

@@ -8,15 +8,13 @@ use std::{vec, vec::Vec};
 
 use super::*;
 use crate::blob::MlpBlobParts;
-use crate::kernels::{Activation, FcRequant, FullyConnected, Lut8};
+use crate::kernels::Activation;
+use crate::model::fixture::{quantize_layer, FloatLayer, MlpRanges, QuantMlp};
 use crate::model::linear::{F32Linear, Int8Linear, RequantizedLinear};
-use crate::model::mlp::{F32Mlp, F32Scratch, InputPrecision, Int8Mlp, Probe};
+use crate::model::mlp::{F32Mlp, F32Scratch, InputPrecision, Int8Mlp};
 use crate::prodmp::{BakedProDmp, ProDmpConfig};
-use crate::quant::{
-    fold_input_zero_point, quantize_bias, quantize_weights_per_channel, requantization_multiplier,
-    QuantParams,
-};
 use crate::rng::Rng;
+use crate::sigma::SigmaConfig;
 
 pub const M: usize = 2;
 pub const O: usize = 3;
@@ -42,78 +40,12 @@ pub const DIMS: PolicyDims = PolicyDims {
     params_per_dof: P,
 };
 
-pub struct FloatLayer {
-    pub in_features: usize,
-    pub out_features: usize,
-    pub weights: Vec<f32>,
-    pub bias: Vec<f32>,
-    pub activation: Activation,
-}
-
-impl FloatLayer {
-    fn random(rng: &mut Rng, inputs: usize, outputs: usize, activation: Activation) -> Self {
-        let gain = 1.2 / (inputs as f32).sqrt();
-        Self {
-            in_features: inputs,
-            out_features: outputs,
-            weights: (0..inputs * outputs)
-                .map(|_| rng.gaussian() * gain)
-                .collect(),
-            bias: (0..outputs).map(|_| 0.1 * rng.gaussian()).collect(),
-            activation,
-        }
-    }
-
-    fn view(&self) -> F32Linear<'_> {
-        F32Linear {
-            in_features: self.in_features,
-            out_features: self.out_features,
-            weights: &self.weights,
-            bias: &self.bias,
-            activation: self.activation,
-        }
-    }
-}
-
-pub struct QuantLayer {
-    pub in_features: usize,
-    pub out_features: usize,
-    pub weights: Vec<i8>,
-    pub bias: Vec<i32>,
-    pub multipliers: Vec<i32>,
-    pub shifts: Vec<i32>,
-    pub weight_scales: Vec<f32>,
-    pub output: QuantParams,
-    pub lut: Option<Lut8>,
-}
-
-#[derive(Clone, Copy)]
-struct Range(f32, f32);
-
-impl Range {
-    fn new() -> Self {
-        Self(f32::MAX, f32::MIN)
-    }
-    fn add(&mut self, values: &[f32]) {
-        for v in values {
-            self.0 = self.0.min(*v);
-            self.1 = self.1.max(*v);
-        }
-    }
-    fn params(self) -> QuantParams {
-        QuantParams::from_range(self.0, self.1).unwrap()
-    }
-}
-
 pub struct TestModel {
     pub hidden: Vec<FloatLayer>,
     pub output: FloatLayer,
     /// Per-step first-layer bias variants (f32), `hidden[0].out_features` each.
     pub bias_variants: Vec<f32>,
-    pub input: QuantParams,
-    pub quant_hidden: Vec<QuantLayer>,
-    pub quant_output: QuantLayer,
-    pub output_scales: Vec<f32>,
+    pub quant: QuantMlp,
     pub int8_bias_variants: Vec<i32>,
     pub decoder: BakedProDmp<N, P>,
     pub steps: Vec<StepConstants>,
@@ -124,75 +56,15 @@ pub struct TestModel {
     pub layout: InputLayout,
 }
 
-/// EDM consistency constants for `sigma` (sigma_min 0.002, sigma_data 0.5), computed in f64.
-pub fn step_constants(sigma: f64, first: bool, index: u32) -> StepConstants {
-    let (sigma_min, sigma_data) = (0.002_f64, 0.5_f64);
-    let norm = (sigma * sigma + sigma_data * sigma_data).sqrt();
-    let shifted = sigma - sigma_min;
-    StepConstants {
-        sigma: sigma as f32,
-        renoise_std: if first {
-            0.0
-        } else {
-            (sigma * sigma - sigma_min * sigma_min).sqrt() as f32
-        },
-        c_in: (1.0 / norm) as f32,
-        c_skip: (sigma_data * sigma_data / (shifted * shifted + sigma_data * sigma_data)) as f32,
-        c_out: (shifted * sigma_data / norm) as f32,
-        noise_variant: index,
-    }
-}
-
-fn quantize_layer(
-    layer: &FloatLayer,
-    bias: &[f32],
-    input: QuantParams,
-    output: Option<QuantParams>,
-) -> QuantLayer {
-    let mut weights = vec![0_i8; layer.weights.len()];
-    let mut weight_scales = vec![0.0_f32; layer.out_features];
-    quantize_weights_per_channel(
-        &layer.weights,
-        layer.in_features,
-        &mut weights,
-        &mut weight_scales,
-    )
-    .unwrap();
-    let mut q_bias = Vec::new();
-    let (mut multipliers, mut shifts) = (Vec::new(), Vec::new());
-    for o in 0..layer.out_features {
-        let row = &weights[o * layer.in_features..(o + 1) * layer.in_features];
-        let b = quantize_bias(bias[o], input.scale, weight_scales[o]).unwrap();
-        q_bias.push(fold_input_zero_point(b, row, input.zero_point).unwrap());
-        if let Some(out) = output {
-            let (m, s) =
-                requantization_multiplier(input.scale, weight_scales[o], out.scale).unwrap();
-            multipliers.push(m);
-            shifts.push(s);
-        }
-    }
-    QuantLayer {
-        in_features: layer.in_features,
-        out_features: layer.out_features,
-        weights,
-        bias: q_bias,
-        multipliers,
-        shifts,
-        weight_scales,
-        output: output.unwrap_or(input),
-        lut: None,
-    }
-}
-
 impl TestModel {
     /// A random model with `sigmas.len()` steps (first step at `sigmas[0]`).
     pub fn new(seed: u64, sigmas: &[f64]) -> Self {
         let mut rng = Rng::new(seed);
         let hidden = vec![
-            FloatLayer::random(&mut rng, IN, 40, Activation::Silu),
-            FloatLayer::random(&mut rng, 40, 32, Activation::Mish),
+            FloatLayer::random(&mut rng, IN, 40, 1.2, Activation::Silu),
+            FloatLayer::random(&mut rng, 40, 32, 1.2, Activation::Mish),
         ];
-        let output = FloatLayer::random(&mut rng, 32, K * P, Activation::Identity);
+        let output = FloatLayer::random(&mut rng, 32, K * P, 1.2, Activation::Identity);
         let first_out = hidden[0].out_features;
         let mut bias_variants = Vec::new();
         for _ in sigmas {
@@ -201,12 +73,10 @@ impl TestModel {
         let steps: Vec<StepConstants> = sigmas
             .iter()
             .enumerate()
-            .map(|(i, s)| step_constants(*s, i == 0, i as u32))
+            .map(|(i, s)| StepConstants::consistency(&SigmaConfig::default(), *s, i as u32).unwrap())
             .collect();
         // Calibration over random inputs shaped like the policy's (trajectory part ~ c_in x).
-        let mut input_range = Range::new();
-        let mut pre = vec![Range::new(); hidden.len()];
-        let mut post = vec![Range::new(); hidden.len()];
+        let mut ranges = MlpRanges::new(hidden.len());
         let mut scratch = F32Scratch::<WIDTH>::new();
         let mut out = [0.0_f32; K * P];
         for sample in 0..400 {
@@ -227,37 +97,15 @@ impl TestModel {
                     }
                 })
                 .collect();
-            net.forward_observed(&x, &mut out, &mut scratch, |probe, values| match probe {
-                Probe::Input => input_range.add(values),
-                Probe::PreActivation(l) => pre[l].add(values),
-                Probe::Output(l) => post[l].add(values),
-                Probe::Final => {}
+            net.forward_observed(&x, &mut out, &mut scratch, |probe, values| {
+                ranges.observe(probe, values)
             })
             .unwrap();
         }
-        let input = input_range.params();
-        let mut current = input;
-        let mut quant_hidden = Vec::new();
-        let mut int8_bias_variants = Vec::new();
-        for (l, layer) in hidden.iter().enumerate() {
-            let pre_params = pre[l].params();
-            let post_params = post[l].params();
-            let mut q = quantize_layer(layer, &layer.bias, current, Some(pre_params));
-            q.lut =
-                Some(Lut8::build(|v| layer.activation.apply(v), pre_params, post_params).unwrap());
-            if l == 0 {
-                for variant in bias_variants.chunks(first_out) {
-                    int8_bias_variants.extend(quantize_layer(layer, variant, current, None).bias);
-                }
-            }
-            quant_hidden.push(q);
-            current = post_params;
-        }
-        let quant_output = quantize_layer(&output, &output.bias, current, None);
-        let output_scales = quant_output
-            .weight_scales
-            .iter()
-            .map(|w| (f64::from(current.scale) * f64::from(*w)) as f32)
+        let quant = ranges.quantize(&hidden, &output);
+        let int8_bias_variants = bias_variants
+            .chunks(first_out)
+            .flat_map(|variant| quantize_layer(&hidden[0], variant, quant.input, None).bias)
             .collect();
         let decoder =
             BakedProDmp::from_config(&ProDmpConfig::policy(K, NUM_BASIS, N, f64::from(DT)))
@@ -266,10 +114,7 @@ impl TestModel {
             hidden,
             output,
             bias_variants,
-            input,
-            quant_hidden,
-            quant_output,
-            output_scales,
+            quant,
             int8_bias_variants,
             decoder,
             steps,
@@ -307,33 +152,16 @@ impl TestModel {
     }
 
     pub fn int8_layers(&self) -> Vec<RequantizedLinear<'_>> {
-        self.quant_hidden
-            .iter()
-            .map(|q| RequantizedLinear {
-                fc: FullyConnected::new(q.in_features, q.out_features, &q.weights, &q.bias),
-                requant: FcRequant {
-                    multipliers: &q.multipliers,
-                    shifts: &q.shifts,
-                    output_zero_point: q.output.zero_point,
-                    activation_min: -128,
-                    activation_max: 127,
-                },
-                activation: q.lut.as_ref().map(|lut| &lut.table),
-            })
-            .collect()
+        self.quant.hidden_layers()
     }
 
     pub fn int8_output(&self) -> Int8Linear<'_> {
-        let q = &self.quant_output;
-        Int8Linear {
-            fc: FullyConnected::new(q.in_features, q.out_features, &q.weights, &q.bias),
-            output_scales: &self.output_scales,
-        }
+        self.quant.output_layer()
     }
 
     pub fn int8_network(&self) -> Int8MlpNetwork<'_, WIDTH> {
         Int8MlpNetwork::new(
-            self.input,
+            self.quant.input,
             InputPrecision::Int8,
             &self.int8_layers(),
             self.int8_output(),
@@ -356,7 +184,7 @@ impl TestModel {
         MlpBlobParts {
             config: self.config(),
             mlp: Int8Mlp {
-                input: self.input,
+                input: self.quant.input,
                 hidden,
                 output: self.int8_output(),
             },

@@ -508,7 +508,7 @@ fn configuration_errors_are_named() {
     // Bias variants that are not whole rows.
     let views = model.int8_layers();
     let partial = Int8MlpNetwork::<WIDTH>::new(
-        model.input,
+        model.quant.input,
         crate::model::mlp::InputPrecision::Int8,
         &views,
         model.int8_output(),

@@ -93,15 +93,3 @@ fn tail(text: &str, lines: usize) -> String {
     all[all.len().saturating_sub(lines)..].join("\n")
 }
 
-/// The core a CPUID register names.
-pub fn core_name(cpuid: u32) -> &'static str {
-    match (cpuid >> 4) & 0xFFF {
-        0xC20 => "cortex-m0",
-        0xC60 => "cortex-m0+",
-        0xC24 => "cortex-m4",
-        0xC27 => "cortex-m7",
-        0xD21 => "cortex-m33",
-        0xD22 => "cortex-m55",
-        _ => "unknown",
-    }
-}

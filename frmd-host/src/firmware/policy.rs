@@ -5,7 +5,8 @@
 //! history, the last commanded action and its rate (`ACT`), and the image runs frmd-core's
 //! `Policy::reset`, `observe`, `set_previous_action` and `act` on them, so both give the same bits.
 use super::link::{QemuLink, Reply};
-use super::{core_name, FirmwareImage};
+use super::FirmwareImage;
+use frmd_firmware_support::cpuid::core_name;
 use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
 use frmd_firmware_support::pil::{self, MsgType, CHUNK_PREFIX, INFO_LEN};

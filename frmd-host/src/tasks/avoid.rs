@@ -11,11 +11,12 @@
 //! detour whose apex clears the obstacle by 25 cm, with minimum-jerk timing at 0.6 m/s on
 //! average. Demonstrations are therefore bimodal: averaging the two modes drives straight into
 //! the obstacle.
+use super::expert::{PathExpert, PathPlanner};
 use super::geom::{Cubic, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass};
 use super::rng::TaskRng;
-use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
-use crate::tasks::{Policy, PolicyInput};
+use super::{v2_at, LayoutItem, Role, Shape, Task, TaskSpec, CONTROL_DT};
+use crate::tasks::Policy;
 
 const OBS_FIELDS: &[&str] = &[
     "ee_x [m]",
@@ -28,6 +29,11 @@ const OBS_FIELDS: &[&str] = &[
     "obstacle_y - ee_y [m]",
     "obstacle_radius [m]",
 ];
+const SPEC: TaskSpec = TaskSpec {
+    name: "avoid",
+    obs_fields: OBS_FIELDS,
+    max_steps: 120,
+};
 const GOAL_TOLERANCE: f64 = 0.03;
 const SPEED_TOLERANCE: f64 = 0.1;
 /// Radius of the end effector disc, metres.
@@ -64,16 +70,8 @@ impl Default for Avoid {
 }
 
 impl Task for Avoid {
-    fn name(&self) -> &'static str {
-        "avoid"
-    }
-
-    fn obs_fields(&self) -> &'static [&'static str] {
-        OBS_FIELDS
-    }
-
-    fn max_steps(&self) -> usize {
-        120
+    fn spec(&self) -> &'static TaskSpec {
+        &SPEC
     }
 
     fn reset(&mut self, seed: u64) {
@@ -148,11 +146,11 @@ impl Task for Avoid {
 }
 
 /// Scripted expert for [`Avoid`]; which side it passes is a seeded coin flip.
-#[derive(Default)]
-pub struct AvoidExpert {
-    seed: u64,
-    plan: Option<TimedPath>,
-    step: usize,
+pub type AvoidExpert = PathExpert<AvoidPlanner>;
+
+/// [`AvoidExpert`]'s plan: the half-sine detour on the coin's (or the forced) side.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct AvoidPlanner {
     forced_side: Option<f64>,
 }
 
@@ -164,10 +162,9 @@ impl AvoidExpert {
 
     /// An expert that always passes on `side` (+1 or -1) instead of flipping a coin.
     pub fn with_side(side: f64) -> Self {
-        Self {
+        Self::new(AvoidPlanner {
             forced_side: Some(side.signum()),
-            ..Self::default()
-        }
+        })
     }
 }
 
@@ -195,36 +192,18 @@ fn detour(start: V2, goal: V2, normal: V2, amplitude: f64) -> SmoothPath {
     ])
 }
 
-impl Policy for AvoidExpert {
-    fn name(&self) -> String {
-        "expert".into()
-    }
+impl PathPlanner for AvoidPlanner {
+    const SPEC: &'static TaskSpec = &SPEC;
 
-    fn reset(&mut self, seed: u64) {
-        self.seed = seed;
-        self.plan = None;
-        self.step = 0;
-    }
-
-    fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
-        let obs = last_obs(input, OBS_FIELDS.len(), "avoid")?;
-        let plan = match self.plan.take() {
-            Some(plan) => plan,
-            None => {
-                let start = v2_at(obs, 0);
-                let (goal, obstacle) = (start + v2_at(obs, 4), start + v2_at(obs, 6));
-                let radius = f64::from(obs[8]);
-                let normal = (goal - start).unit().perp();
-                let side = self.forced_side.unwrap_or_else(|| Self::side(self.seed));
-                // Signed offset of the obstacle from the chord midpoint, along the normal.
-                let offset = (obstacle - start.lerp(goal, 0.5)).dot(normal);
-                let amplitude = radius + EE_RADIUS + EXPERT_MARGIN + side * offset;
-                TimedPath::with_speed(detour(start, goal, normal * side, amplitude), 0.6, 2.0)
-            }
-        };
-        let target = plan.at(self.step as f64 * CONTROL_DT);
-        self.plan = Some(plan);
-        self.step += 1;
-        Ok(vec![target.to_f32().to_vec()])
+    fn plan(&self, seed: u64, obs: &[f32]) -> TimedPath {
+        let start = v2_at(obs, 0);
+        let (goal, obstacle) = (start + v2_at(obs, 4), start + v2_at(obs, 6));
+        let radius = f64::from(obs[8]);
+        let normal = (goal - start).unit().perp();
+        let side = self.forced_side.unwrap_or_else(|| AvoidExpert::side(seed));
+        // Signed offset of the obstacle from the chord midpoint, along the normal.
+        let offset = (obstacle - start.lerp(goal, 0.5)).dot(normal);
+        let amplitude = radius + EE_RADIUS + EXPERT_MARGIN + side * offset;
+        TimedPath::with_speed(detour(start, goal, normal * side, amplitude), 0.6, 2.0)
     }
 }

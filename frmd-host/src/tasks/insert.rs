@@ -20,11 +20,12 @@
 //! the slot centre, the expert commands no lower than 3 cm above the wall, so it realigns (and
 //! lifts a jammed peg) instead of pressing down beside the slot. On its own path the rule never
 //! fires; it matters for perturbed demonstrations (`frmd collect --perturb-std`).
+use super::expert::{PathExpert, PathPlanner};
 use super::geom::{Cubic, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass, OMEGA, SUBSTEP};
 use super::rng::TaskRng;
-use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
-use crate::tasks::{Policy, PolicyInput};
+use super::{v2_at, LayoutItem, Role, Shape, Task, TaskSpec, CONTROL_DT};
+use crate::tasks::Policy;
 
 const OBS_FIELDS: &[&str] = &[
     "tip_x [m]",
@@ -35,6 +36,11 @@ const OBS_FIELDS: &[&str] = &[
     "wall_y - tip_y [m]",
     "contact [0/1]",
 ];
+const SPEC: TaskSpec = TaskSpec {
+    name: "insert",
+    obs_fields: OBS_FIELDS,
+    max_steps: 150,
+};
 /// Peg width, metres.
 pub const PEG_WIDTH: f64 = 0.10;
 /// Lateral clearance on each side of the peg in the slot, metres.
@@ -119,16 +125,8 @@ impl Default for Insert {
 }
 
 impl Task for Insert {
-    fn name(&self) -> &'static str {
-        "insert"
-    }
-
-    fn obs_fields(&self) -> &'static [&'static str] {
-        OBS_FIELDS
-    }
-
-    fn max_steps(&self) -> usize {
-        150
+    fn spec(&self) -> &'static TaskSpec {
+        &SPEC
     }
 
     fn reset(&mut self, seed: u64) {
@@ -218,11 +216,11 @@ impl Task for Insert {
 }
 
 /// Scripted expert for [`Insert`].
-#[derive(Default)]
-pub struct InsertExpert {
-    plan: Option<TimedPath>,
-    step: usize,
-}
+pub type InsertExpert = PathExpert<InsertPlanner>;
+
+/// [`InsertExpert`]'s plan (arc, then straight down) and its descent guard.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct InsertPlanner;
 
 /// Height above the wall top where the approach arc ends and the straight descent begins, metres.
 const PRE_INSERT_HEIGHT: f64 = 0.15;
@@ -255,24 +253,23 @@ fn plan(start: V2, slot_x: f64, wall_y: f64) -> TimedPath {
     TimedPath::with_speed(path, 0.5, 2.0)
 }
 
-impl Policy for InsertExpert {
-    fn name(&self) -> String {
-        "expert".into()
+/// The tip and the slot (its centre x and the wall top y) in an observation.
+fn tip_and_slot(obs: &[f32]) -> (V2, f64, f64) {
+    let tip = v2_at(obs, 0);
+    (tip, tip.x + f64::from(obs[4]), tip.y + f64::from(obs[5]))
+}
+
+impl PathPlanner for InsertPlanner {
+    const SPEC: &'static TaskSpec = &SPEC;
+
+    fn plan(&self, _seed: u64, obs: &[f32]) -> TimedPath {
+        let (tip, slot_x, wall_y) = tip_and_slot(obs);
+        plan(tip, slot_x, wall_y)
     }
 
-    fn reset(&mut self, _seed: u64) {
-        self.plan = None;
-        self.step = 0;
-    }
-
-    fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
-        let obs = last_obs(input, OBS_FIELDS.len(), "insert")?;
-        let tip = v2_at(obs, 0);
-        let (slot_x, wall_y) = (tip.x + f64::from(obs[4]), tip.y + f64::from(obs[5]));
-        let plan = self.plan.get_or_insert_with(|| plan(tip, slot_x, wall_y));
-        let command = guard_descent(plan.at(self.step as f64 * CONTROL_DT), tip, slot_x, wall_y);
-        self.step += 1;
-        Ok(vec![command.to_f32().to_vec()])
+    fn command(&self, target: V2, obs: &[f32]) -> V2 {
+        let (tip, slot_x, wall_y) = tip_and_slot(obs);
+        guard_descent(target, tip, slot_x, wall_y)
     }
 }
 

@@ -25,6 +25,7 @@
 //! Seeds: a task's layout is a pure function of the episode seed (see [`rng::TaskRng`]). The
 //! evaluator uses seeds from a disjoint range (see `eval::EVAL_SEED_OFFSET`).
 pub mod avoid;
+pub mod expert;
 pub mod geom;
 pub mod insert;
 pub mod point_mass;
@@ -70,12 +71,29 @@ pub struct LayoutItem {
     pub shape: Shape,
 }
 
+/// What identifies a task apart from its state: name, observation fields, episode length.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TaskSpec {
+    /// Task name as in [`TASK_NAMES`].
+    pub name: &'static str,
+    /// Names (with units) of the observation fields, in order.
+    pub obs_fields: &'static [&'static str],
+    /// Episode length limit in control steps.
+    pub max_steps: usize,
+}
+
 /// A closed-loop task: reset with a seed, observe, step with a position-target action.
 pub trait Task {
+    /// The task's name, observation fields and episode length.
+    fn spec(&self) -> &'static TaskSpec;
     /// Task name as in [`TASK_NAMES`].
-    fn name(&self) -> &'static str;
+    fn name(&self) -> &'static str {
+        self.spec().name
+    }
     /// Names (with units) of the observation fields, in order; `obs_dim` is their count.
-    fn obs_fields(&self) -> &'static [&'static str];
+    fn obs_fields(&self) -> &'static [&'static str] {
+        self.spec().obs_fields
+    }
     fn obs_dim(&self) -> usize {
         self.obs_fields().len()
     }
@@ -88,7 +106,9 @@ pub trait Task {
         CONTROL_DT
     }
     /// Episode length limit in control steps.
-    fn max_steps(&self) -> usize;
+    fn max_steps(&self) -> usize {
+        self.spec().max_steps
+    }
     /// Starts a new episode whose layout is determined by `seed`.
     fn reset(&mut self, seed: u64);
     /// The current observation (`obs_dim` values, fields as in [`Task::obs_fields`]).
@@ -125,11 +145,8 @@ pub fn make_task(name: &str) -> anyhow::Result<Box<dyn Task>> {
 }
 
 /// The last observation of a policy input, checked against the task's observation size.
-pub(crate) fn last_obs<'a>(
-    input: &'a PolicyInput<'_>,
-    dim: usize,
-    task: &str,
-) -> anyhow::Result<&'a [f32]> {
+pub(crate) fn last_obs<'a>(input: &'a PolicyInput<'_>, spec: &TaskSpec) -> anyhow::Result<&'a [f32]> {
+    let (task, dim) = (spec.name, spec.obs_fields.len());
     let obs = input
         .obs_history
         .last()

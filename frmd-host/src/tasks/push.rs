@@ -22,7 +22,7 @@
 use super::geom::{Cubic, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass};
 use super::rng::TaskRng;
-use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
+use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, TaskSpec, CONTROL_DT};
 use crate::tasks::{Policy, PolicyInput};
 use rapier2d::prelude::*;
 
@@ -38,6 +38,11 @@ const OBS_FIELDS: &[&str] = &[
     "target_x - puck_x [m]",
     "target_y - puck_y [m]",
 ];
+const SPEC: TaskSpec = TaskSpec {
+    name: "push",
+    obs_fields: OBS_FIELDS,
+    max_steps: 150,
+};
 /// End-effector (pusher) radius, metres.
 pub const PUSHER_RADIUS: f64 = 0.08;
 /// Puck radius, metres.
@@ -99,16 +104,8 @@ fn inside(p: V2, half_extent: f64) -> bool {
 }
 
 impl Task for Push {
-    fn name(&self) -> &'static str {
-        "push"
-    }
-
-    fn obs_fields(&self) -> &'static [&'static str] {
-        OBS_FIELDS
-    }
-
-    fn max_steps(&self) -> usize {
-        150
+    fn spec(&self) -> &'static TaskSpec {
+        &SPEC
     }
 
     fn reset(&mut self, seed: u64) {
@@ -261,7 +258,7 @@ impl Policy for PushExpert {
     }
 
     fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
-        let obs = last_obs(input, OBS_FIELDS.len(), "push")?;
+        let obs = last_obs(input, &SPEC)?;
         let ee = v2_at(obs, 0);
         let puck = ee + v2_at(obs, 4);
         let target = puck + v2_at(obs, 8);

@@ -6,11 +6,12 @@
 //! Expert: a gently bent path (a parabola whose apex is offset sideways by up to 8 % of the
 //! distance, side and amount from the expert's seeded stream, so curvature stays below
 //! 0.64 rad/m) traversed with minimum-jerk timing at 0.5 m/s on average.
+use super::expert::{PathExpert, PathPlanner};
 use super::geom::{Cubic, SmoothPath, TimedPath, V2};
 use super::point_mass::{parse_target, PointMass};
 use super::rng::TaskRng;
-use super::{last_obs, v2_at, LayoutItem, Role, Shape, Task, CONTROL_DT};
-use crate::tasks::{Policy, PolicyInput};
+use super::{v2_at, LayoutItem, Role, Shape, Task, TaskSpec, CONTROL_DT};
+use crate::tasks::Policy;
 
 const OBS_FIELDS: &[&str] = &[
     "ee_x [m]",
@@ -20,6 +21,11 @@ const OBS_FIELDS: &[&str] = &[
     "goal_x - ee_x [m]",
     "goal_y - ee_y [m]",
 ];
+const SPEC: TaskSpec = TaskSpec {
+    name: "reach",
+    obs_fields: OBS_FIELDS,
+    max_steps: 100,
+};
 const GOAL_TOLERANCE: f64 = 0.03;
 const SPEED_TOLERANCE: f64 = 0.1;
 const HALF_EXTENT: f64 = 1.6;
@@ -48,16 +54,8 @@ impl Default for Reach {
 }
 
 impl Task for Reach {
-    fn name(&self) -> &'static str {
-        "reach"
-    }
-
-    fn obs_fields(&self) -> &'static [&'static str] {
-        OBS_FIELDS
-    }
-
-    fn max_steps(&self) -> usize {
-        100
+    fn spec(&self) -> &'static TaskSpec {
+        &SPEC
     }
 
     fn reset(&mut self, seed: u64) {
@@ -117,44 +115,25 @@ impl Task for Reach {
 }
 
 /// Scripted expert for [`Reach`].
-#[derive(Default)]
-pub struct ReachExpert {
-    seed: u64,
-    plan: Option<TimedPath>,
-    step: usize,
-}
+pub type ReachExpert = PathExpert<ReachPlanner>;
 
-impl Policy for ReachExpert {
-    fn name(&self) -> String {
-        "expert".into()
-    }
+/// [`ReachExpert`]'s plan: the gently bent path of the module docs.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ReachPlanner;
 
-    fn reset(&mut self, seed: u64) {
-        self.seed = seed;
-        self.plan = None;
-        self.step = 0;
-    }
+impl PathPlanner for ReachPlanner {
+    const SPEC: &'static TaskSpec = &SPEC;
 
-    fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
-        let obs = last_obs(input, OBS_FIELDS.len(), "reach")?;
-        let plan = match self.plan.take() {
-            Some(plan) => plan,
-            None => {
-                let start = v2_at(obs, 0);
-                let goal = start + v2_at(obs, 4);
-                let mut rng = TaskRng::new(self.seed, b"reach/expert");
-                let bend = rng.uniform(-0.08, 0.08) * (goal - start).norm();
-                let control = start.lerp(goal, 0.5) + (goal - start).unit().perp() * (2.0 * bend);
-                TimedPath::with_speed(
-                    SmoothPath::new(vec![Cubic::quadratic(start, control, goal)]),
-                    0.5,
-                    2.0,
-                )
-            }
-        };
-        let target = plan.at(self.step as f64 * CONTROL_DT);
-        self.plan = Some(plan);
-        self.step += 1;
-        Ok(vec![target.to_f32().to_vec()])
+    fn plan(&self, seed: u64, obs: &[f32]) -> TimedPath {
+        let start = v2_at(obs, 0);
+        let goal = start + v2_at(obs, 4);
+        let mut rng = TaskRng::new(seed, b"reach/expert");
+        let bend = rng.uniform(-0.08, 0.08) * (goal - start).norm();
+        let control = start.lerp(goal, 0.5) + (goal - start).unit().perp() * (2.0 * bend);
+        TimedPath::with_speed(
+            SmoothPath::new(vec![Cubic::quadratic(start, control, goal)]),
+            0.5,
+            2.0,
+        )
     }
 }

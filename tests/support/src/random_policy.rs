@@ -7,6 +7,7 @@ use frmd_core::policy::{InputLayout, StepConstants};
 use frmd_core::prodmp::ProDmpConfig;
 use frmd_core::quant::{quantize_multiplier, QuantParams};
 use frmd_core::rng::Rng;
+use frmd_core::sigma::SigmaConfig;
 use frmd_export::{ProDmpTablesOwned, QuantizedLayer, QuantizedOutput, QuantizedPolicy};
 
 pub const M: usize = 2;
@@ -42,24 +43,6 @@ fn layer(rng: &mut Rng, inputs: usize, outputs: usize, lut: Option<usize>) -> Qu
         activation_min: -128,
         activation_max: 127,
         lut,
-    }
-}
-
-fn step(sigma: f64, first: bool, index: u32) -> StepConstants {
-    let (sigma_min, sigma_data) = (0.002_f64, 0.5_f64);
-    let norm = (sigma * sigma + sigma_data * sigma_data).sqrt();
-    let shifted = sigma - sigma_min;
-    StepConstants {
-        sigma: sigma as f32,
-        renoise_std: if first {
-            0.0
-        } else {
-            (sigma * sigma - sigma_min * sigma_min).sqrt() as f32
-        },
-        c_in: (1.0 / norm) as f32,
-        c_skip: (sigma_data * sigma_data / (shifted * shifted + sigma_data * sigma_data)) as f32,
-        c_out: (shifted * sigma_data / norm) as f32,
-        noise_variant: index,
     }
 }
 
@@ -142,7 +125,7 @@ pub fn random_policy(seed: u64, steps: usize, dims: &Dims) -> QuantizedPolicy {
         action_max: vec![0.5; k],
         prodmp,
         steps: (0..steps)
-            .map(|i| step(sigmas[i], i == 0, i as u32))
+            .map(|i| StepConstants::consistency(&SigmaConfig::default(), sigmas[i], i as u32).unwrap())
             .collect(),
         first_layer_biases,
         luts: vec![lut.table],

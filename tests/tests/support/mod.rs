@@ -10,7 +10,23 @@ use frmd_host::train::distill::DistillConfig;
 use frmd_host::train::recipe::{StudentRun, TeacherRun, TrainConfig};
 use frmd_host::train::run::{run_student, run_teacher};
 use frmd_host::train::teacher::TeacherConfig;
+use frmd_core::blob::BlobError;
+use frmd_core::policy::PolicyDims;
+use frmd_host::export::BAKED_BLOB_FILE;
 use std::path::{Path, PathBuf};
+
+/// The sizes of the tiny runs: history 2, `reach` (6 observations, 2 DoF), horizon 8, 6 basis
+/// functions plus the goal.
+pub const TINY_DIMS: PolicyDims = PolicyDims { history: 2, obs_dim: 6, action_dim: 2, horizon: 8, params_per_dof: 7 };
+
+/// A loaded blob's `check_dims` accepts [`TINY_DIMS`] and refuses another horizon and basis.
+pub fn assert_tiny_dims(check_dims: impl Fn(&PolicyDims) -> Result<(), BlobError>) {
+    assert_eq!(check_dims(&TINY_DIMS), Ok(()));
+    assert!(matches!(
+        check_dims(&PolicyDims { horizon: 12, params_per_dof: 21, ..TINY_DIMS }),
+        Err(BlobError::DimensionMismatch(_))
+    ));
+}
 
 /// What differs between the tiny training runs of the tests.
 pub struct Tiny {
@@ -70,6 +86,15 @@ impl TinyRun {
         let student = export_student(&cfg)?;
         write_export(&cfg, &student, Some(&self.baked), Some(&self.dir.join("student.blob")))?;
         Ok(())
+    }
+
+    /// [`Self::export`] of the student, which must succeed; the blob written next to the run
+    /// equals the baked one, which is returned.
+    pub fn export_student(&self) -> Vec<u8> {
+        self.export(&self.student).unwrap();
+        let blob = std::fs::read(self.baked.join(BAKED_BLOB_FILE)).unwrap();
+        assert_eq!(std::fs::read(self.dir.join("student.blob")).unwrap(), blob);
+        blob
     }
 }
 

@@ -7,7 +7,7 @@
 //!   [`kernel_workload`] (the fully connected kernels on random shapes),
 //!   and [`stages`] (the layer-marking MLP network and the entry/exit-marking wrapper of the
 //!   per-stage breakdown), [`pil`] (the processor-in-the-loop frame format, used by the `pil`
-//!   image and the host driver in frmd-host);
+//!   image and the host driver in frmd-host), [`cpuid`] (the core a CPUID value names);
 //! - `std` feature (host only): [`synthetic`] (the deterministic synthetic MLP and
 //!   transformer-lite, which build.rs bakes and the tests rebuild in memory) and [`host`] (running
 //!   the images under QEMU from a test);
@@ -19,6 +19,7 @@
 //! code and require equality.
 #![cfg_attr(not(feature = "std"), no_std)]
 
+pub mod cpuid;
 pub mod kernel_workload;
 pub mod mlp_workload;
 pub mod pil;

@@ -4,7 +4,7 @@ use heapless::Vec;
 
 use super::{HiddenLayerDesc, MlpDescriptor, INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MLP_MAGIC};
 use crate::blob::container::{self, Data, SectionId};
-use crate::blob::policy_tables::{self, PolicyFields, PolicySections, PolicyTables};
+use crate::blob::policy_tables::{self, PolicyTables};
 use crate::blob::BlobError;
 use crate::kernels::{FcRequant, FullyConnected, LutTable};
 use crate::model::linear::{Int8Linear, RequantizedLinear};
@@ -59,17 +59,7 @@ impl<'a> LoadedMlp<'a> {
     }
 
     fn view(d: &MlpDescriptor, data: &Data<'a>) -> Result<Self, BlobError> {
-        let fields = PolicyFields {
-            dims: [d.history, d.obs_dim, d.action_dim, d.horizon, d.params_per_dof],
-            control_dt: d.control_dt,
-            sections: PolicySections {
-                obs_norm: d.obs_norm,
-                action_norm: d.action_norm,
-                prodmp: d.prodmp,
-                steps: d.steps,
-            },
-        };
-        let tables = policy_tables::read(data, fields)?;
+        let tables = policy_tables::read(data, &d.header, &d.tables)?;
         let input = QuantParams::new(d.input_scale, d.input_zero_point)
             .map_err(|_| BlobError::InputQuantization)?;
         let input_precision = match (d.input_precision, d.hidden.is_empty()) {
@@ -78,8 +68,9 @@ impl<'a> LoadedMlp<'a> {
             (INPUT_INT16, false) => InputPrecision::Int16,
             _ => return Err(BlobError::InputQuantization),
         };
-        d.layout.validate().map_err(|_| BlobError::InputLayout)?;
+        d.header.layout.validate().map_err(|_| BlobError::InputLayout)?;
         let input_width = d
+            .header
             .layout
             .width_of(&tables.dims)
             .ok_or(BlobError::InputLayout)?;
@@ -109,7 +100,7 @@ impl<'a> LoadedMlp<'a> {
         policy_tables::check_variants(&tables.steps, variants)?;
         Ok(Self {
             tables,
-            layout: d.layout,
+            layout: d.header.layout,
             input,
             input_precision,
             hidden,

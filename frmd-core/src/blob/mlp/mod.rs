@@ -11,11 +11,11 @@ use heapless::Vec;
 use serde::{Deserialize, Serialize};
 
 use super::container::{self, Section, SectionId, SectionWriter};
-use super::policy_tables::{self, PolicySections};
+use super::policy_tables::{self, PolicyHeader, PolicySections};
 use super::BlobError;
 use crate::model::mlp::{InputPrecision, Int8Mlp};
 use crate::policy::{
-    InputLayout, PolicyConfig,
+    PolicyConfig,
     MAX_HIDDEN_LAYERS,
 };
 
@@ -74,20 +74,8 @@ pub struct OutputLayerDesc {
 /// Everything about an MLP blob that is not bulk data.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MlpDescriptor {
-    /// Observation history length `m`.
-    pub history: u32,
-    /// Observation dimension `o`.
-    pub obs_dim: u32,
-    /// Action dimension `k`.
-    pub action_dim: u32,
-    /// Horizon `n`.
-    pub horizon: u32,
-    /// ProDMP parameters per DoF `p`.
-    pub params_per_dof: u32,
-    /// Control period, seconds.
-    pub control_dt: f32,
-    /// Model input layout.
-    pub layout: InputLayout,
+    /// Sizes, control period and input layout.
+    pub header: PolicyHeader,
     /// Input quantization scale.
     pub input_scale: f32,
     /// Input quantization zero point.
@@ -95,15 +83,8 @@ pub struct MlpDescriptor {
     /// How the first layer takes the input ([`INPUT_INT8`], [`INPUT_TWO_PLANE`] or
     /// [`INPUT_INT16`]); a `bool` "two-plane" flag in format version 2.
     pub input_precision: u8,
-    /// f32 `[min; o]` then `[max; o]`.
-    pub obs_norm: Section,
-    /// f32 `[min; k]` then `[max; k]`.
-    pub action_norm: Section,
-    /// f32 `pos_params [n][p]`, `vel_params [n][p]`, `pos_y0 [n]`, `pos_v0 [n]`, `vel_y0 [n]`,
-    /// `vel_v0 [n]`.
-    pub prodmp: Section,
-    /// u32 `[steps][STEP_WORDS]`.
-    pub steps: Section,
+    /// Normalization, ProDMP tables and steps.
+    pub tables: PolicySections,
     /// i32 first-layer bias variants, `out_features` of the first layer each (may be empty).
     pub first_layer_biases: Section,
     /// i8 `[tables][LUT_LEN]`.
@@ -150,15 +131,10 @@ fn expect_len(actual: usize, expected: Option<usize>, id: SectionId) -> Result<(
 /// Lays out the sections of `parts` (every length checked against the stated shapes) and
 /// returns the descriptor.
 fn emit(parts: &MlpBlobParts<'_>, writer: &mut SectionWriter<'_>) -> Result<MlpDescriptor, BlobError> {
-    let PolicySections {
-        obs_norm,
-        action_norm,
-        prodmp,
-        steps,
-    } = policy_tables::write(writer, &parts.config)?;
+    let tables = policy_tables::write(writer, &parts.config)?;
     let first_layer_biases = writer.i32s(parts.noise_variants)?;
-    let tables = parts.mlp.hidden.iter().filter_map(|layer| layer.activation);
-    let luts = writer.i8s(tables.flatten())?;
+    let activations = parts.mlp.hidden.iter().filter_map(|layer| layer.activation);
+    let luts = writer.i8s(activations.flatten())?;
     let mut hidden = Vec::new();
     let mut next_lut = 0_u32;
     for (index, layer) in parts.mlp.hidden.iter().enumerate() {
@@ -201,22 +177,12 @@ fn emit(parts: &MlpBlobParts<'_>, writer: &mut SectionWriter<'_>) -> Result<MlpD
         scales: writer.f32s(scales.iter())?,
     };
     writer.pad_end();
-    let dims = parts.config.dims();
     Ok(MlpDescriptor {
-        history: small(dims.history)?,
-        obs_dim: small(dims.obs_dim)?,
-        action_dim: small(dims.action_dim)?,
-        horizon: small(dims.horizon)?,
-        params_per_dof: small(dims.params_per_dof)?,
-        control_dt: parts.config.sampler.control_dt,
-        layout: parts.config.sampler.layout,
+        header: PolicyHeader::of(&parts.config)?,
         input_scale: parts.mlp.input.scale,
         input_zero_point: parts.mlp.input.zero_point,
         input_precision: precision_code(parts.input_precision),
-        obs_norm,
-        action_norm,
-        prodmp,
-        steps,
+        tables,
         first_layer_biases,
         luts,
         hidden,

@@ -5,7 +5,7 @@ use heapless::Vec;
 use super::{BlockDesc, LinearDesc, NormDesc, TensorField, TransformerDescriptor, MAX_BLOCKS, TRANSFORMER_MAGIC};
 use crate::blob::container::{self, Data, SectionId};
 use crate::blob::mlp::LUT_LEN;
-use crate::blob::policy_tables::{self, PolicyFields, PolicySections, PolicyTables};
+use crate::blob::policy_tables::{self, PolicyTables};
 use crate::blob::BlobError;
 use crate::kernels::{FcRequant, FullyConnected};
 use crate::model::linear::{Int8Linear, QuantizedLinear, RequantizedLinear};
@@ -138,19 +138,9 @@ impl<'a> LoadedTransformer<'a> {
     }
 
     fn view(d: &TransformerDescriptor, data: &Data<'a>) -> Result<Self, BlobError> {
-        let fields = PolicyFields {
-            dims: [d.history, d.obs_dim, d.action_dim, d.horizon, d.params_per_dof],
-            control_dt: d.control_dt,
-            sections: PolicySections {
-                obs_norm: d.obs_norm,
-                action_norm: d.action_norm,
-                prodmp: d.prodmp,
-                steps: d.steps,
-            },
-        };
-        let tables = policy_tables::read(data, fields)?;
-        d.layout.validate().map_err(|_| BlobError::InputLayout)?;
-        if d.layout.segments() != STANDARD_SEGMENTS {
+        let tables = policy_tables::read(data, &d.header, &d.tables)?;
+        d.header.layout.validate().map_err(|_| BlobError::InputLayout)?;
+        if d.header.layout.segments() != STANDARD_SEGMENTS {
             return Err(BlobError::InputLayout);
         }
         let dims = &tables.dims;
@@ -168,7 +158,7 @@ impl<'a> LoadedTransformer<'a> {
             output: dims.params_len().ok_or(BlobError::TooLarge)?,
         };
         shape.validate().map_err(BlobError::Transformer)?;
-        if d.layout.width_of(dims) != shape.cond_dim.checked_add(shape.trajectory_len()) {
+        if d.header.layout.width_of(dims) != shape.cond_dim.checked_add(shape.trajectory_len()) {
             return Err(BlobError::InputLayout);
         }
         let width = shape.width;
@@ -192,7 +182,7 @@ impl<'a> LoadedTransformer<'a> {
         }
         let loaded = Self {
             tables,
-            layout: d.layout,
+            layout: d.header.layout,
             shape,
             noise_tokens,
             positions,

@@ -14,12 +14,12 @@ use heapless::Vec;
 use serde::{Deserialize, Serialize};
 
 use super::container::{self, Section, SectionWriter};
-use super::policy_tables::{self, PolicySections};
+use super::policy_tables::{self, PolicyHeader, PolicySections};
 use super::BlobError;
 use crate::kernels::FullyConnected;
 use crate::model::linear::QuantizedLinear;
 use crate::model::transformer::{Int8Block, Int8Transformer, LayerNormWeights, TokenLinear};
-use crate::policy::{InputLayout, PolicyConfig};
+use crate::policy::PolicyConfig;
 use crate::quant::QuantParams;
 
 /// First four bytes of a transformer blob.
@@ -102,32 +102,14 @@ pub struct BlockDesc {
 /// Everything about a transformer blob that is not bulk data.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TransformerDescriptor {
-    /// Observation history length `m`.
-    pub history: u32,
-    /// Observation dimension `o`.
-    pub obs_dim: u32,
-    /// Action dimension `k`.
-    pub action_dim: u32,
-    /// Horizon `n`.
-    pub horizon: u32,
-    /// ProDMP parameters per DoF `p`.
-    pub params_per_dof: u32,
-    /// Control period, seconds.
-    pub control_dt: f32,
-    /// Model input layout (must be the standard order).
-    pub layout: InputLayout,
+    /// Sizes, control period and input layout (which must be the standard order).
+    pub header: PolicyHeader,
     /// Token width `W`.
     pub width: u32,
     /// Attention heads.
     pub heads: u32,
-    /// f32 `[min; o]` then `[max; o]`.
-    pub obs_norm: Section,
-    /// f32 `[min; k]` then `[max; k]`.
-    pub action_norm: Section,
-    /// f32 ProDMP tables (as the MLP blob).
-    pub prodmp: Section,
-    /// u32 `[steps][STEP_WORDS]`.
-    pub steps: Section,
+    /// Normalization, ProDMP tables and steps (as the MLP blob).
+    pub tables: PolicySections,
     /// f32 `[variants][W]` noise tokens.
     pub noise_tokens: Section,
     /// f32 `[n + 2][W]` positions.
@@ -218,12 +200,7 @@ fn emit(
     parts: &TransformerBlobParts<'_>,
     writer: &mut SectionWriter<'_>,
 ) -> Result<TransformerDescriptor, BlobError> {
-    let PolicySections {
-        obs_norm,
-        action_norm,
-        prodmp,
-        steps,
-    } = policy_tables::write(writer, &parts.config)?;
+    let tables = policy_tables::write(writer, &parts.config)?;
     let model = &parts.model;
     let noise_tokens = writer.f32s(parts.noise_tokens.iter())?;
     let positions = writer.f32s(model.positions.iter())?;
@@ -236,21 +213,11 @@ fn emit(
     }
     let final_norm = write_norm(writer, &model.final_norm)?;
     let head = write_quantized(writer, &model.head)?;
-    let dims = parts.config.dims();
     Ok(TransformerDescriptor {
-        history: small(dims.history)?,
-        obs_dim: small(dims.obs_dim)?,
-        action_dim: small(dims.action_dim)?,
-        horizon: small(dims.horizon)?,
-        params_per_dof: small(dims.params_per_dof)?,
-        control_dt: parts.config.sampler.control_dt,
-        layout: parts.config.sampler.layout,
+        header: PolicyHeader::of(&parts.config)?,
         width: small(model.shape.width)?,
         heads: small(model.shape.heads)?,
-        obs_norm,
-        action_norm,
-        prodmp,
-        steps,
+        tables,
         noise_tokens,
         positions,
         traj_in,

@@ -1,6 +1,6 @@
 //! The f32 reference MLP: [`F32Linear`] layers, with calibration probes.
 
-use super::{check_widths, ModelError, Probe};
+use super::{check_lengths, check_widths, ModelError, Probe};
 use crate::model::linear::F32Linear;
 
 /// f32 reference MLP with the same structure as [`super::Int8Mlp`].
@@ -140,13 +140,7 @@ impl F32Mlp<'_> {
 
     fn check_io(&self, input_len: usize, output_len: usize) -> Result<(), ModelError> {
         self.validate(usize::MAX)?;
-        if input_len != self.input_width() {
-            return Err(ModelError::InputLength);
-        }
-        if output_len != self.output_width() {
-            return Err(ModelError::OutputLength);
-        }
-        Ok(())
+        check_lengths((input_len, output_len), (self.input_width(), self.output_width()))
     }
 
     /// The layers on the input in `ping` (shapes checked by the caller).

@@ -138,6 +138,21 @@ pub enum Probe {
     Final,
 }
 
+/// Checks a forward pass's input and output lengths against the network's widths.
+#[inline]
+fn check_lengths(
+    (input_len, output_len): (usize, usize),
+    (input_width, output_width): (usize, usize),
+) -> Result<(), ModelError> {
+    if input_len != input_width {
+        return Err(ModelError::InputLength);
+    }
+    if output_len != output_width {
+        return Err(ModelError::OutputLength);
+    }
+    Ok(())
+}
+
 /// Checks that consecutive widths agree (`widths` yields `(in, out)` per layer, output last),
 /// starting from `input_width`, and that every width is at most `max_width`.
 fn check_widths(

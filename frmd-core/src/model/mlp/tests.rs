@@ -5,12 +5,10 @@
 extern crate std;
 
 use super::*;
+use crate::model::fixture::{quantize_layer, FloatLayer, MlpRanges, QuantLayer, QuantMlp};
 use crate::model::linear::{F32Linear, Int8Linear, RequantizedLinear};
-use crate::kernels::{Activation, FcRequant, FullyConnected, KernelError, Lut8};
-use crate::quant::{
-    fold_input_zero_point, quantize_bias, quantize_weights_per_channel, reference,
-    requantization_multiplier, QuantParams, FINE_INPUT_BITS,
-};
+use crate::kernels::{Activation, FullyConnected, KernelError};
+use crate::quant::{reference, requantization_multiplier, QuantParams, FINE_INPUT_BITS};
 use crate::rng::Rng;
 use std::{vec, vec::Vec};
 
@@ -18,136 +16,21 @@ mod wide_input;
 
 const WIDTH: usize = 48;
 
-struct FloatLayer {
-    in_features: usize,
-    out_features: usize,
-    weights: Vec<f32>,
-    bias: Vec<f32>,
-    activation: Activation,
-}
-
-impl FloatLayer {
-    fn random(
-        rng: &mut Rng,
-        in_features: usize,
-        out_features: usize,
-        activation: Activation,
-    ) -> Self {
-        let gain = 1.5 / (in_features as f32).sqrt();
-        Self {
-            in_features,
-            out_features,
-            weights: (0..in_features * out_features)
-                .map(|_| rng.gaussian() * gain)
-                .collect(),
-            bias: (0..out_features).map(|_| 0.1 * rng.gaussian()).collect(),
-            activation,
-        }
-    }
-
-    fn view(&self) -> F32Linear<'_> {
-        F32Linear {
-            in_features: self.in_features,
-            out_features: self.out_features,
-            weights: &self.weights,
-            bias: &self.bias,
-            activation: self.activation,
-        }
-    }
-}
-
-#[derive(Clone, Copy)]
-struct Range {
-    min: f32,
-    max: f32,
-}
-
-impl Range {
-    fn new() -> Self {
-        Self {
-            min: f32::MAX,
-            max: f32::MIN,
-        }
-    }
-    fn add(&mut self, values: &[f32]) {
-        for v in values {
-            self.min = self.min.min(*v);
-            self.max = self.max.max(*v);
-        }
-    }
-    fn params(&self) -> QuantParams {
-        QuantParams::from_range(self.min, self.max).unwrap()
-    }
-}
-
-struct QuantLayer {
-    fc_weights: Vec<i8>,
-    bias: Vec<i32>,
-    multipliers: Vec<i32>,
-    shifts: Vec<i32>,
-    weight_scales: Vec<f32>,
-    pre: QuantParams,
-    lut: Option<Lut8>,
-    in_features: usize,
-    out_features: usize,
-}
-
-/// Quantizes weights and bias of `layer` for int8 input `input`; requantizes to `pre` if given.
-fn quantize_layer(
-    layer: &FloatLayer,
-    input: QuantParams,
-    pre: Option<QuantParams>,
-    out: Option<QuantParams>,
-) -> QuantLayer {
-    let mut fc_weights = vec![0_i8; layer.weights.len()];
-    let mut weight_scales = vec![0.0_f32; layer.out_features];
-    quantize_weights_per_channel(
-        &layer.weights,
-        layer.in_features,
-        &mut fc_weights,
-        &mut weight_scales,
-    )
-    .unwrap();
-    let mut bias = Vec::new();
-    let mut multipliers = Vec::new();
-    let mut shifts = Vec::new();
-    for o in 0..layer.out_features {
-        let row = &fc_weights[o * layer.in_features..(o + 1) * layer.in_features];
-        let b = quantize_bias(layer.bias[o], input.scale, weight_scales[o]).unwrap();
-        bias.push(fold_input_zero_point(b, row, input.zero_point).unwrap());
-        if let Some(pre) = pre {
-            let (m, s) =
-                requantization_multiplier(input.scale, weight_scales[o], pre.scale).unwrap();
-            multipliers.push(m);
-            shifts.push(s);
-        }
-    }
-    let lut = match (pre, out) {
-        (Some(pre), Some(out)) => {
-            Some(Lut8::build(|x| layer.activation.apply(x), pre, out).unwrap())
-        }
-        _ => None,
-    };
-    QuantLayer {
-        fc_weights,
-        bias,
-        multipliers,
-        shifts,
-        weight_scales,
-        pre: pre.unwrap_or(input),
-        lut,
-        in_features: layer.in_features,
-        out_features: layer.out_features,
-    }
-}
-
 struct Fixture {
     float_hidden: Vec<FloatLayer>,
     float_output: FloatLayer,
-    input_params: QuantParams,
-    quant_hidden: Vec<QuantLayer>,
-    quant_output: QuantLayer,
-    output_scales: Vec<f32>,
+    quant: QuantMlp,
+}
+
+impl Fixture {
+    /// The int8 network with `hidden` as its hidden layers.
+    fn int8_mlp<'a>(&'a self, hidden: &'a [RequantizedLinear<'a>]) -> Int8Mlp<'a> {
+        Int8Mlp {
+            input: self.quant.input,
+            hidden,
+            output: self.quant.output_layer(),
+        }
+    }
 }
 
 fn random_input(rng: &mut Rng, width: usize) -> Vec<f32> {
@@ -159,85 +42,49 @@ fn random_input(rng: &mut Rng, width: usize) -> Vec<f32> {
 fn fixture(seed: u64) -> Fixture {
     let mut rng = Rng::new(seed);
     let float_hidden = vec![
-        FloatLayer::random(&mut rng, 20, 40, Activation::Mish),
-        FloatLayer::random(&mut rng, 40, 48, Activation::Silu),
-        FloatLayer::random(&mut rng, 48, 32, Activation::Gelu),
+        FloatLayer::random(&mut rng, 20, 40, 1.5, Activation::Mish),
+        FloatLayer::random(&mut rng, 40, 48, 1.5, Activation::Silu),
+        FloatLayer::random(&mut rng, 48, 32, 1.5, Activation::Gelu),
     ];
-    let float_output = FloatLayer::random(&mut rng, 32, 12, Activation::Identity);
+    let float_output = FloatLayer::random(&mut rng, 32, 12, 1.5, Activation::Identity);
     // Calibration: ranges of the input, every pre-activation and every hidden output.
     let views: Vec<F32Linear<'_>> = float_hidden.iter().map(FloatLayer::view).collect();
     let net = F32Mlp {
         hidden: &views,
         output: float_output.view(),
     };
-    let mut input_range = Range::new();
-    let mut pre_ranges = vec![Range::new(); float_hidden.len()];
-    let mut out_ranges = vec![Range::new(); float_hidden.len()];
+    let mut ranges = MlpRanges::new(float_hidden.len());
     let mut scratch = F32Scratch::<WIDTH>::new();
     let mut output = [0.0_f32; 12];
     for _ in 0..500 {
         let x = random_input(&mut rng, 20);
-        net.forward_observed(&x, &mut output, &mut scratch, |probe, values| match probe {
-            Probe::Input => input_range.add(values),
-            Probe::PreActivation(l) => pre_ranges[l].add(values),
-            Probe::Output(l) => out_ranges[l].add(values),
-            Probe::Final => {}
+        net.forward_observed(&x, &mut output, &mut scratch, |probe, values| {
+            ranges.observe(probe, values)
         })
         .unwrap();
     }
-    let input_params = input_range.params();
-    let mut current = input_params;
-    let mut quant_hidden = Vec::new();
-    for (l, layer) in float_hidden.iter().enumerate() {
-        let out = out_ranges[l].params();
-        quant_hidden.push(quantize_layer(
-            layer,
-            current,
-            Some(pre_ranges[l].params()),
-            Some(out),
-        ));
-        current = out;
-    }
-    let quant_output = quantize_layer(&float_output, current, None, None);
-    let output_scales = quant_output
-        .weight_scales
-        .iter()
-        .map(|w| (f64::from(current.scale) * f64::from(*w)) as f32)
-        .collect();
+    let quant = ranges.quantize(&float_hidden, &float_output);
     Fixture {
         float_hidden,
         float_output,
-        input_params,
-        quant_hidden,
-        quant_output,
-        output_scales,
+        quant,
     }
 }
 
-fn int8_layers(quant: &[QuantLayer]) -> Vec<RequantizedLinear<'_>> {
-    quant
-        .iter()
-        .map(|q| RequantizedLinear {
-            fc: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
-            requant: FcRequant {
-                multipliers: &q.multipliers,
-                shifts: &q.shifts,
-                output_zero_point: q.pre.zero_point,
-                activation_min: -128,
-                activation_max: 127,
-            },
-            activation: q.lut.as_ref().map(|lut| &lut.table),
-        })
-        .collect()
+/// The fixture's hidden layers with `first` in place of the first one.
+fn hidden_with<'a>(fix: &'a Fixture, first: &'a QuantLayer) -> Vec<RequantizedLinear<'a>> {
+    let mut hidden = vec![first.requantized()];
+    hidden.extend_from_slice(&fix.quant.hidden_layers()[1..]);
+    hidden
 }
 
 /// Naive int8 forward: i64 dot products, the wide requantization model, table lookups by index.
 fn naive_int8_forward(fix: &Fixture, input: &[f32]) -> Vec<f32> {
     let x: Vec<i8> = input
         .iter()
-        .map(|v| fix.input_params.quantize(*v))
+        .map(|v| fix.quant.input.quantize(*v))
         .collect();
-    naive_int8_tail(fix, &fix.quant_hidden, x)
+    naive_int8_tail(fix, &fix.quant.hidden, x)
 }
 
 /// [`naive_int8_forward`] from int8 codes `x` through `layers`, then the output layer.
@@ -245,18 +92,11 @@ fn naive_int8_tail(fix: &Fixture, layers: &[QuantLayer], mut x: Vec<i8>) -> Vec<
     for q in layers {
         let mut y = Vec::new();
         for o in 0..q.out_features {
-            let row = &q.fc_weights[o * q.in_features..(o + 1) * q.in_features];
-            let acc: i64 = i64::from(q.bias[o])
-                + row
-                    .iter()
-                    .zip(&x)
-                    .map(|(w, v)| i64::from(*w) * i64::from(*v))
-                    .sum::<i64>();
             let pre = reference::requantize(
-                acc as i32,
+                q.naive_accumulator(o, &x) as i32,
                 q.multipliers[o],
                 q.shifts[o],
-                q.pre.zero_point,
+                q.output.zero_point,
                 -128,
                 127,
             );
@@ -265,34 +105,17 @@ fn naive_int8_tail(fix: &Fixture, layers: &[QuantLayer], mut x: Vec<i8>) -> Vec<
         }
         x = y;
     }
-    let q = &fix.quant_output;
+    let q = &fix.quant.output;
     (0..q.out_features)
-        .map(|o| {
-            let row = &q.fc_weights[o * q.in_features..(o + 1) * q.in_features];
-            let acc: i64 = i64::from(q.bias[o])
-                + row
-                    .iter()
-                    .zip(&x)
-                    .map(|(w, v)| i64::from(*w) * i64::from(*v))
-                    .sum::<i64>();
-            acc as i32 as f32 * fix.output_scales[o]
-        })
+        .map(|o| q.naive_accumulator(o, &x) as i32 as f32 * fix.quant.output_scales[o])
         .collect()
 }
 
 #[test]
 fn int8_forward_is_bit_exact_with_naive_model_and_close_to_f32() {
     let fix = fixture(1234);
-    let hidden = int8_layers(&fix.quant_hidden);
-    let q = &fix.quant_output;
-    let net = Int8Mlp {
-        input: fix.input_params,
-        hidden: &hidden,
-        output: Int8Linear {
-            fc: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
-            output_scales: &fix.output_scales,
-        },
-    };
+    let hidden = fix.quant.hidden_layers();
+    let net = fix.int8_mlp(&hidden);
     let float_views: Vec<F32Linear<'_>> = fix.float_hidden.iter().map(FloatLayer::view).collect();
     let float_net = F32Mlp {
         hidden: &float_views,
@@ -342,17 +165,10 @@ fn f32_forward_matches_direct_computation() {
         .unwrap();
     let mut h: Vec<f64> = x.iter().map(|v| f64::from(*v)).collect();
     for layer in fix.float_hidden.iter().chain([&fix.float_output]) {
-        h = (0..layer.out_features)
-            .map(|o| {
-                let row = &layer.weights[o * layer.in_features..(o + 1) * layer.in_features];
-                let affine: f64 = f64::from(layer.bias[o])
-                    + row
-                        .iter()
-                        .zip(&h)
-                        .map(|(w, v)| f64::from(*w) * v)
-                        .sum::<f64>();
-                f64::from(layer.activation.apply(affine as f32))
-            })
+        h = layer
+            .affine64(&h)
+            .iter()
+            .map(|affine| f64::from(layer.activation.apply(*affine as f32)))
             .collect();
     }
     for (got, want) in out.iter().zip(&h) {
@@ -363,16 +179,8 @@ fn f32_forward_matches_direct_computation() {
 #[test]
 fn shape_errors() {
     let fix = fixture(77);
-    let hidden = int8_layers(&fix.quant_hidden);
-    let q = &fix.quant_output;
-    let net = Int8Mlp {
-        input: fix.input_params,
-        hidden: &hidden,
-        output: Int8Linear {
-            fc: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
-            output_scales: &fix.output_scales,
-        },
-    };
+    let hidden = fix.quant.hidden_layers();
+    let net = fix.int8_mlp(&hidden);
     let x = [0.0_f32; 20];
     let mut out = [0.0_f32; 12];
     assert_eq!(
@@ -405,7 +213,7 @@ fn shape_errors() {
     );
     let scales = Int8Mlp {
         output: Int8Linear {
-            output_scales: &fix.output_scales[..3],
+            output_scales: &fix.quant.output_scales[..3],
             ..net.output
         },
         ..net
@@ -454,21 +262,21 @@ fn shape_errors() {
 /// The fixture's first hidden layer re-quantized for a two-plane input: same weights and bias,
 /// multipliers for the input scale `input_scale / 2^FINE_INPUT_BITS`.
 fn two_plane_first_layer(fix: &Fixture) -> QuantLayer {
-    let first = &fix.quant_hidden[0];
+    let first = &fix.quant.hidden[0];
     let mut layer = QuantLayer {
-        fc_weights: first.fc_weights.clone(),
+        weights: first.weights.clone(),
         bias: first.bias.clone(),
         multipliers: Vec::new(),
         shifts: Vec::new(),
         weight_scales: first.weight_scales.clone(),
-        pre: first.pre,
+        output: first.output,
         lut: first.lut,
         in_features: first.in_features,
         out_features: first.out_features,
     };
-    let fine_scale = fix.input_params.scale / (1_u32 << FINE_INPUT_BITS) as f32;
+    let fine_scale = fix.quant.input.scale / (1_u32 << FINE_INPUT_BITS) as f32;
     for w in &first.weight_scales {
-        let (m, s) = requantization_multiplier(fine_scale, *w, first.pre.scale).unwrap();
+        let (m, s) = requantization_multiplier(fine_scale, *w, first.output.scale).unwrap();
         layer.multipliers.push(m);
         layer.shifts.push(s);
     }
@@ -479,23 +287,12 @@ fn two_plane_first_layer(fix: &Fixture) -> QuantLayer {
 fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
     let fix = fixture(4321);
     let first = two_plane_first_layer(&fix);
-    let first_layer = int8_layers(core::slice::from_ref(&first));
-    let int8_hidden = int8_layers(&fix.quant_hidden);
-    let mut hidden = first_layer.clone();
-    hidden.extend_from_slice(&int8_hidden[1..]);
-    let q = &fix.quant_output;
-    let net = Int8Mlp {
-        input: fix.input_params,
-        hidden: &hidden,
-        output: Int8Linear {
-            fc: FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias),
-            output_scales: &fix.output_scales,
-        },
-    };
+    let hidden = hidden_with(&fix, &first);
+    let net = fix.int8_mlp(&hidden);
     // Naive first layer: both planes from their definition, i64 dot products, the wide
     // combination and requantization models, the LUT by index.
     let fine_params = QuantParams {
-        scale: fix.input_params.scale / 256.0,
+        scale: fix.quant.input.scale / 256.0,
         zero_point: 0,
     };
     // Returns the codes and, per channel, the real pre-activation of both planes and of the coarse
@@ -504,17 +301,17 @@ fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
         let planes: Vec<(i8, i8)> = x
             .iter()
             .map(|v| {
-                let coarse = fix.input_params.quantize(*v);
+                let coarse = fix.quant.input.quantize(*v);
                 (
                     coarse,
-                    fine_params.quantize(v - fix.input_params.dequantize(coarse)),
+                    fine_params.quantize(v - fix.quant.input.dequantize(coarse)),
                 )
             })
             .collect();
         let mut pre_real = Vec::new();
         let codes = (0..first.out_features)
             .map(|o| {
-                let row = &first.fc_weights[o * first.in_features..(o + 1) * first.in_features];
+                let row = first.row(o);
                 let dot = |plane: fn(&(i8, i8)) -> i8| -> i64 {
                     row.iter()
                         .zip(&planes)
@@ -523,10 +320,10 @@ fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
                 };
                 let coarse = (i64::from(first.bias[o]) + dot(|p| p.0)) as i32;
                 let acc = reference::combine_planes(coarse, dot(|p| p.1) as i32);
-                let unit = f64::from(fix.input_params.scale) * f64::from(first.weight_scales[o]);
+                let unit = f64::from(fix.quant.input.scale) * f64::from(first.weight_scales[o]);
                 pre_real.push((f64::from(acc) * unit / 256.0, f64::from(coarse) * unit));
                 let m = (first.multipliers[o], first.shifts[o]);
-                let pre = reference::requantize(acc, m.0, m.1, first.pre.zero_point, -128, 127);
+                let pre = reference::requantize(acc, m.0, m.1, first.output.zero_point, -128, 127);
                 first.lut.as_ref().unwrap().table[(i32::from(pre) + 128) as usize]
             })
             .collect();
@@ -541,14 +338,14 @@ fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
         net.forward_with_input(InputPrecision::TwoPlane, &x, &mut got, &mut scratch)
             .unwrap();
         let (codes, pre_real) = naive_first(&x);
-        let want = naive_int8_tail(&fix, &fix.quant_hidden[1..], codes);
+        let want = naive_int8_tail(&fix, &fix.quant.hidden[1..], codes);
         for (g, w) in got.iter().zip(&want) {
             assert_eq!(g.to_bits(), w.to_bits());
         }
         // First-layer pre-activations against the exact affine map of the quantized weights
         // (so only the input and bias rounding remain).
         for (o, (two, one)) in pre_real.iter().enumerate() {
-            let row = &first.fc_weights[o * first.in_features..(o + 1) * first.in_features];
+            let row = first.row(o);
             let scale = f64::from(first.weight_scales[o]);
             let exact = f64::from(fix.float_hidden[0].bias[o])
                 + row
@@ -565,11 +362,12 @@ fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
     );
     assert!(error_two_plane < 0.05 * error_int8);
     // Without a hidden layer no layer takes the fine plane.
+    let q = &fix.quant.output;
     let no_hidden = Int8Mlp {
         hidden: &[],
         output: Int8Linear {
-            fc: FullyConnected::new(20, 12, &q.fc_weights[..240], &q.bias),
-            output_scales: &fix.output_scales,
+            fc: FullyConnected::new(20, 12, &q.weights[..240], &q.bias),
+            output_scales: &fix.quant.output_scales,
         },
         ..net
     };
@@ -584,7 +382,7 @@ fn two_plane_input_is_bit_exact_with_naive_model_and_more_accurate() {
         Err(ModelError::TwoPlaneWithoutHiddenLayer)
     );
     let network = crate::policy::Int8MlpNetwork::<WIDTH>::new(
-        fix.input_params,
+        fix.quant.input,
         InputPrecision::TwoPlane,
         &[],
         no_hidden.output,

@@ -9,7 +9,7 @@ mod fixture;
 use super::*;
 use crate::kernels::KernelError;
 use crate::rng::Rng;
-use fixture::{big_scratch, random_inputs, FloatModel, QuantModel, Ranges};
+use fixture::{big_scratch, calibrated, random_inputs, FloatModel};
 use std::{vec, vec::Vec};
 
 const SMALL: TransformerShape = TransformerShape {
@@ -121,12 +121,10 @@ fn int8_error(
     float_inputs: bool,
     runs: (usize, usize),
 ) -> Comparison {
-    let model = FloatModel::random(shape, seed);
+    let mut rng = Rng::new(seed ^ 0xCA11);
+    let (model, quant) = calibrated(shape, seed, &mut rng, runs.0);
     let f32_blocks = model.f32_blocks();
     let float_net = model.f32_view(&f32_blocks);
-    let mut rng = Rng::new(seed ^ 0xCA11);
-    let ranges = Ranges::calibrate(&float_net, &mut rng, runs.0);
-    let quant = QuantModel::new(&model, &ranges);
     let int8_blocks = quant.blocks(&model);
     let net = quant.view(&model, &int8_blocks, float_inputs);
     let mut scratch = big_scratch();
@@ -184,11 +182,8 @@ fn int8_transformer_lite_close_to_f32() {
 #[test]
 fn int8_path_is_bit_exact_with_naive_integer_model() {
     for (index, shape) in shapes().into_iter().enumerate() {
-        let model = FloatModel::random(shape, 400 + index as u64);
-        let f32_blocks = model.f32_blocks();
-        let float_net = model.f32_view(&f32_blocks);
         let mut rng = Rng::new(401 + index as u64);
-        let quant = QuantModel::new(&model, &Ranges::calibrate(&float_net, &mut rng, 30));
+        let (model, quant) = calibrated(shape, 400 + index as u64, &mut rng, 30);
         let int8_blocks = quant.blocks(&model);
         let net = quant.view(&model, &int8_blocks, false);
         let mut scratch = big_scratch();
@@ -219,12 +214,10 @@ fn float_input_layers_are_supported_in_the_int8_path() {
 
 #[test]
 fn deterministic_and_independent_of_scratch_contents() {
-    let model = FloatModel::random(SMALL, 5);
+    let mut rng = Rng::new(6);
+    let (model, quant) = calibrated(SMALL, 5, &mut rng, 50);
     let f32_blocks = model.f32_blocks();
     let float_net = model.f32_view(&f32_blocks);
-    let mut rng = Rng::new(6);
-    let ranges = Ranges::calibrate(&float_net, &mut rng, 50);
-    let quant = QuantModel::new(&model, &ranges);
     let int8_blocks = quant.blocks(&model);
     let net = quant.view(&model, &int8_blocks, false);
     let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
@@ -261,11 +254,10 @@ fn deterministic_and_independent_of_scratch_contents() {
 fn exact_scratch_sizes_suffice_and_one_less_fails() {
     const F: ScratchLens = SMALL.f32_scratch();
     const Q: ScratchLens = SMALL.int8_scratch();
-    let model = FloatModel::random(SMALL, 8);
+    let mut rng = Rng::new(9);
+    let (model, quant) = calibrated(SMALL, 8, &mut rng, 20);
     let f32_blocks = model.f32_blocks();
     let float_net = model.f32_view(&f32_blocks);
-    let mut rng = Rng::new(9);
-    let quant = QuantModel::new(&model, &Ranges::calibrate(&float_net, &mut rng, 20));
     let int8_blocks = quant.blocks(&model);
     let net = quant.view(&model, &int8_blocks, false);
     let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
@@ -387,11 +379,8 @@ fn attend_averages_values_for_equal_scores() {
 
 #[test]
 fn int8_linear_rows_match_the_full_layer() {
-    let model = FloatModel::random(SMALL, 13);
-    let blocks = model.f32_blocks();
-    let net = model.f32_view(&blocks);
     let mut rng = Rng::new(14);
-    let quant = QuantModel::new(&model, &Ranges::calibrate(&net, &mut rng, 10));
+    let (_, quant) = calibrated(SMALL, 13, &mut rng, 10);
     let qkv = quant.blocks[0].qkv.view();
     let input: Vec<i8> = (0..16).map(|i| (i * 13 - 100) as i8).collect();
     let mut full = [0.0_f32; 48];

@@ -28,15 +28,7 @@ const MODEL_INPUT_RANGE: (f32, f32) = (-4.0, 4.0);
 /// docs/design.md s.3: sigma_min 0.002, sigma_max 80, sigma_data 0.5).
 fn first_step() -> StepConstants {
     let sigma = SigmaConfig::default();
-    let at_max = |value: Result<f64, _>| value.expect("schedule defined at sigma_max") as f32;
-    StepConstants {
-        sigma: sigma.sigma_max as f32,
-        renoise_std: 0.0,
-        c_in: at_max(sigma.c_in(sigma.sigma_max)),
-        c_skip: at_max(sigma.c_skip(sigma.sigma_max)),
-        c_out: at_max(sigma.c_out(sigma.sigma_max)),
-        noise_variant: 0,
-    }
+    StepConstants::consistency(&sigma, sigma.sigma_max, 0).expect("schedule defined at sigma_max")
 }
 
 fn hidden_layer(layer: &LayerData) -> QuantizedLayer {

@@ -7,22 +7,15 @@ use crate::quant::{wide_scale, wide_zero_point};
 /// The fixture's first hidden layer quantized for the 16-bit input: same weights, bias at the
 /// fine scale with the fine zero point folded, multipliers for the fine scale, same table.
 fn wide_first_layer(fix: &Fixture) -> QuantLayer {
-    let first = &fix.quant_hidden[0];
+    let first = &fix.quant.hidden[0];
     let fine = QuantParams {
-        scale: wide_scale(fix.input_params),
-        zero_point: wide_zero_point(fix.input_params),
+        scale: wide_scale(fix.quant.input),
+        zero_point: wide_zero_point(fix.quant.input),
     };
-    let mut layer = quantize_layer(&fix.float_hidden[0], fine, Some(first.pre), None);
-    assert_eq!(layer.fc_weights, first.fc_weights);
+    let mut layer = quantize_layer(&fix.float_hidden[0], &fix.float_hidden[0].bias, fine, Some(first.output));
+    assert_eq!(layer.weights, first.weights);
     layer.lut = first.lut;
     layer
-}
-
-/// The fixture's hidden layers with `first` in place of the first one.
-fn hidden_with<'a>(fix: &'a Fixture, first: &'a QuantLayer) -> Vec<RequantizedLinear<'a>> {
-    let mut hidden = int8_layers(core::slice::from_ref(first));
-    hidden.extend_from_slice(&int8_layers(&fix.quant_hidden)[1..]);
-    hidden
 }
 
 #[test]
@@ -31,13 +24,9 @@ fn sixteen_bit_input_is_bit_exact_with_naive_model_and_as_accurate_as_two_planes
     let wide = wide_first_layer(&fix);
     let two = super::two_plane_first_layer(&fix);
     let (wide_hidden, two_hidden) = (hidden_with(&fix, &wide), hidden_with(&fix, &two));
-    let q = &fix.quant_output;
-    let output = FullyConnected::new(q.in_features, q.out_features, &q.fc_weights, &q.bias);
-    let output = Int8Linear { fc: output, output_scales: &fix.output_scales };
-    let net = |hidden| Int8Mlp { input: fix.input_params, hidden, output };
-    let (wide_net, two_net) = (net(&wide_hidden), net(&two_hidden));
-    let fine_scale = fix.input_params.scale / 256.0;
-    let zero = i64::from(fix.input_params.zero_point) * 256 + 128;
+    let (wide_net, two_net) = (fix.int8_mlp(&wide_hidden), fix.int8_mlp(&two_hidden));
+    let fine_scale = fix.quant.input.scale / 256.0;
+    let zero = i64::from(fix.quant.input.zero_point) * 256 + 128;
     // Codes and, per channel, the real pre-activation of the first layer.
     let naive_first = |x: &[f32]| -> (Vec<i8>, Vec<f64>) {
         let codes: Vec<i64> = x
@@ -47,12 +36,12 @@ fn sixteen_bit_input_is_bit_exact_with_naive_model_and_as_accurate_as_two_planes
         let mut pre_real = Vec::new();
         let out = (0..wide.out_features)
             .map(|o| {
-                let row = &wide.fc_weights[o * wide.in_features..(o + 1) * wide.in_features];
+                let row = wide.row(o);
                 let dot: i64 = row.iter().zip(&codes).map(|(w, c)| i64::from(*w) * c).sum();
                 let acc = (i64::from(wide.bias[o]) + dot) as i32;
                 let unit = f64::from(fine_scale) * f64::from(wide.weight_scales[o]);
                 pre_real.push(f64::from(acc) * unit);
-                let pre = reference::requantize(acc, wide.multipliers[o], wide.shifts[o], wide.pre.zero_point, -128, 127);
+                let pre = reference::requantize(acc, wide.multipliers[o], wide.shifts[o], wide.output.zero_point, -128, 127);
                 wide.lut.as_ref().unwrap().table[(i32::from(pre) + 128) as usize]
             })
             .collect();
@@ -70,7 +59,7 @@ fn sixteen_bit_input_is_bit_exact_with_naive_model_and_as_accurate_as_two_planes
         let mut got = [0.0_f32; 12];
         wide_net.forward_with_input(InputPrecision::Int16, &x, &mut got, &mut scratch).unwrap();
         let (codes, pre_real) = naive_first(&x);
-        let want = naive_int8_tail(&fix, &fix.quant_hidden[1..], codes);
+        let want = naive_int8_tail(&fix, &fix.quant.hidden[1..], codes);
         for (g, w) in got.iter().zip(&want) {
             assert_eq!(g.to_bits(), w.to_bits());
         }
@@ -81,7 +70,7 @@ fn sixteen_bit_input_is_bit_exact_with_naive_model_and_as_accurate_as_two_planes
             continue;
         }
         for (o, pre) in pre_real.iter().enumerate() {
-            let row = &wide.fc_weights[o * wide.in_features..(o + 1) * wide.in_features];
+            let row = wide.row(o);
             let scale = f64::from(wide.weight_scales[o]);
             let exact = f64::from(fix.float_hidden[0].bias[o])
                 + row.iter().zip(&x).map(|(w, v)| f64::from(*w) * scale * f64::from(*v)).sum::<f64>();
@@ -90,15 +79,15 @@ fn sixteen_bit_input_is_bit_exact_with_naive_model_and_as_accurate_as_two_planes
         // The two-plane accumulator of the same input, from the two-plane test's model.
         let fine = QuantParams { scale: fine_scale, zero_point: 0 };
         for o in 0..two.out_features {
-            let row = &two.fc_weights[o * two.in_features..(o + 1) * two.in_features];
+            let row = two.row(o);
             let (mut coarse_dot, mut fine_dot) = (0_i64, 0_i64);
             for (w, v) in row.iter().zip(&x) {
-                let c = fix.input_params.quantize(*v);
+                let c = fix.quant.input.quantize(*v);
                 coarse_dot += i64::from(*w) * i64::from(c);
-                fine_dot += i64::from(*w) * i64::from(fine.quantize(v - fix.input_params.dequantize(c)));
+                fine_dot += i64::from(*w) * i64::from(fine.quantize(v - fix.quant.input.dequantize(c)));
             }
             let acc = reference::combine_planes((i64::from(two.bias[o]) + coarse_dot) as i32, fine_dot as i32);
-            let unit = f64::from(fix.input_params.scale) * f64::from(two.weight_scales[o]) / 256.0;
+            let unit = f64::from(fix.quant.input.scale) * f64::from(two.weight_scales[o]) / 256.0;
             let scale = f64::from(two.weight_scales[o]);
             let exact = f64::from(fix.float_hidden[0].bias[o])
                 + row.iter().zip(&x).map(|(w, v)| f64::from(*w) * scale * f64::from(*v)).sum::<f64>();
@@ -110,9 +99,10 @@ fn sixteen_bit_input_is_bit_exact_with_naive_model_and_as_accurate_as_two_planes
     assert!(error_wide <= error_two, "16-bit {error_wide} vs two-plane {error_two}");
     // The two paths are different computations (bias rounding, saturation), not one in disguise.
     assert!(differ > 0);
+    let q = &fix.quant.output;
     let no_hidden = Int8Mlp {
         hidden: &[],
-        output: Int8Linear { fc: FullyConnected::new(20, 12, &q.fc_weights[..240], &q.bias), ..output },
+        output: Int8Linear { fc: FullyConnected::new(20, 12, &q.weights[..240], &q.bias), ..wide_net.output },
         ..wide_net
     };
     let mut out = [0.0_f32; 12];

@@ -2,7 +2,7 @@
 
 extern crate std;
 
-use super::fixture::{big_scratch, random_inputs, FloatModel, QuantModel, Ranges};
+use super::fixture::{big_scratch, calibrated, random_inputs};
 use super::SMALL;
 use crate::kernels::{Activation, KernelError};
 use crate::model::linear::QuantizedLinear;
@@ -10,13 +10,31 @@ use crate::model::transformer::*;
 use crate::quant::QuantParams;
 use crate::rng::Rng;
 
+/// `net` with a copy of its blocks changed by `edit`, validated.
+fn validate_edited<'a, I, L, FF>(
+    net: &Transformer<'a, I, L, FF>,
+    edit: impl FnOnce(&mut [Block<'a, L, FF>]),
+) -> Result<(), TransformerError>
+where
+    I: InputLinear,
+    L: BlockLinear,
+    FF: FeedForward,
+{
+    let mut blocks = net.blocks.to_vec();
+    edit(&mut blocks);
+    Transformer {
+        blocks: &blocks,
+        ..*net
+    }
+    .validate()
+}
+
 #[test]
 fn named_errors_for_bad_shapes_weights_and_arguments() {
-    let model = FloatModel::random(SMALL, 21);
+    let mut rng = Rng::new(22);
+    let (model, quant) = calibrated(SMALL, 21, &mut rng, 10);
     let blocks = model.f32_blocks();
     let net = model.f32_view(&blocks);
-    let mut rng = Rng::new(22);
-    let quant = QuantModel::new(&model, &Ranges::calibrate(&net, &mut rng, 10));
     let int8_blocks = quant.blocks(&model);
     let int8 = quant.view(&model, &int8_blocks, false);
     let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
@@ -77,53 +95,37 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
             part: Part::NoiseToken
         })
     );
-    let mut broken = blocks.clone();
-    broken[1].qkv.out_features = 47;
-    broken[1].qkv.weights = &model.blocks[1].qkv.weights[..47 * 16];
-    broken[1].qkv.bias = &model.blocks[1].qkv.bias[..47];
-    let qkv = F32Transformer {
-        blocks: &broken,
-        ..net
-    };
     assert_eq!(
-        qkv.validate(),
+        validate_edited(&net, |b| {
+            b[1].qkv.out_features = 47;
+            b[1].qkv.weights = &model.blocks[1].qkv.weights[..47 * 16];
+            b[1].qkv.bias = &model.blocks[1].qkv.bias[..47];
+        }),
         Err(E::Features {
             part: Part::Qkv { layer: 1 }
         })
     );
-    let mut broken = blocks.clone();
-    broken[0].proj.weights = &model.blocks[0].proj.weights[1..];
-    let proj = F32Transformer {
-        blocks: &broken,
-        ..net
-    };
     assert_eq!(
-        proj.validate(),
+        validate_edited(&net, |b| {
+            b[0].proj.weights = &model.blocks[0].proj.weights[1..];
+        }),
         Err(E::Weights {
             part: Part::Proj { layer: 0 },
             error: KernelError::WeightsLength
         })
     );
-    let mut broken = blocks.clone();
-    broken[0].feed_forward.fc1.activation = Activation::Gelu;
-    let fc1 = F32Transformer {
-        blocks: &broken,
-        ..net
-    };
     assert_eq!(
-        fc1.validate(),
+        validate_edited(&net, |b| {
+            b[0].feed_forward.fc1.activation = Activation::Gelu;
+        }),
         Err(E::Activation {
             part: Part::Fc1 { layer: 0 }
         })
     );
-    let mut broken = blocks.clone();
-    broken[1].norm2.beta = &model.blocks[1].norm2.beta[..15];
-    let norm = F32Transformer {
-        blocks: &broken,
-        ..net
-    };
     assert_eq!(
-        norm.validate(),
+        validate_edited(&net, |b| {
+            b[1].norm2.beta = &model.blocks[1].norm2.beta[..15];
+        }),
         Err(E::Features {
             part: Part::Norm2 { layer: 1 }
         })
@@ -166,40 +168,28 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
         ..int8
     };
     assert_eq!(head.validate(), Err(E::InputParams { part: Part::Head }));
-    let mut broken = int8_blocks.clone();
-    broken[1].feed_forward.fc1.requant.shifts = &quant.blocks[1].shifts[1..];
-    let requant = Int8Transformer {
-        blocks: &broken,
-        ..int8
-    };
     assert_eq!(
-        requant.validate(),
+        validate_edited(&int8, |b| {
+            b[1].feed_forward.fc1.requant.shifts = &quant.blocks[1].shifts[1..];
+        }),
         Err(E::Weights {
             part: Part::Fc1 { layer: 1 },
             error: KernelError::RequantLength
         })
     );
-    let mut broken = int8_blocks.clone();
-    broken[0].feed_forward.fc2.linear.output_scales = &quant.blocks[0].fc2.output_scales[1..];
-    let scales = Int8Transformer {
-        blocks: &broken,
-        ..int8
-    };
     assert_eq!(
-        scales.validate(),
+        validate_edited(&int8, |b| {
+            b[0].feed_forward.fc2.linear.output_scales = &quant.blocks[0].fc2.output_scales[1..];
+        }),
         Err(E::Weights {
             part: Part::Fc2 { layer: 0 },
             error: KernelError::ScaleLength
         })
     );
-    let mut broken = int8_blocks.clone();
-    broken[0].qkv.linear.output_scales = &quant.blocks[0].qkv.output_scales[..47];
-    let qkv = Int8Transformer {
-        blocks: &broken,
-        ..int8
-    };
     assert_eq!(
-        qkv.validate(),
+        validate_edited(&int8, |b| {
+            b[0].qkv.linear.output_scales = &quant.blocks[0].qkv.output_scales[..47];
+        }),
         Err(E::Weights {
             part: Part::Qkv { layer: 0 },
             error: KernelError::ScaleLength
@@ -253,11 +243,10 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
 #[test]
 fn random_corruptions_return_errors_without_panicking() {
     use crate::model::linear::F32Linear;
-    let model = FloatModel::random(SMALL, 31);
+    let mut rng = Rng::new(32);
+    let (model, quant) = calibrated(SMALL, 31, &mut rng, 10);
     let blocks = model.f32_blocks();
     let net = model.f32_view(&blocks);
-    let mut rng = Rng::new(32);
-    let quant = QuantModel::new(&model, &Ranges::calibrate(&net, &mut rng, 10));
     let int8_blocks = quant.blocks(&model);
     let int8 = quant.view(&model, &int8_blocks, false);
     let floats = std::vec![0.25_f32; 4096];

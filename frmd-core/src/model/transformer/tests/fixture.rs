@@ -4,12 +4,10 @@
 extern crate std;
 
 use super::super::*;
-use crate::kernels::{gelu_sigmoid, Activation, FcRequant, FullyConnected, Lut8};
+use crate::kernels::{gelu_sigmoid, Activation, FcRequant, Lut8};
 use crate::model::linear::{F32Linear, Int8Linear, QuantizedLinear, RequantizedLinear};
-use crate::quant::{
-    fold_input_zero_point, quantize_bias, quantize_weights_per_channel, requantization_multiplier,
-    QuantParams,
-};
+use crate::model::fixture::{quantize_layer, FloatLayer, QuantLayer, Range};
+use crate::quant::{requantization_multiplier, QuantParams};
 use crate::rng::Rng;
 use std::collections::HashMap;
 use std::{vec, vec::Vec};
@@ -21,50 +19,9 @@ pub fn big_scratch() -> std::boxed::Box<BigScratch> {
     std::boxed::Box::new(BigScratch::new())
 }
 
-pub struct Lin {
-    pub in_features: usize,
-    pub out_features: usize,
-    pub weights: Vec<f32>,
-    pub bias: Vec<f32>,
-}
-
-impl Lin {
-    pub fn random(rng: &mut Rng, in_features: usize, out_features: usize) -> Self {
-        let gain = 1.0 / (in_features as f32).sqrt();
-        Self {
-            in_features,
-            out_features,
-            weights: (0..in_features * out_features)
-                .map(|_| rng.gaussian() * gain)
-                .collect(),
-            bias: (0..out_features).map(|_| 0.1 * rng.gaussian()).collect(),
-        }
-    }
-
-    pub fn view(&self) -> F32Linear<'_> {
-        F32Linear {
-            in_features: self.in_features,
-            out_features: self.out_features,
-            weights: &self.weights,
-            bias: &self.bias,
-            activation: Activation::Identity,
-        }
-    }
-
-    fn apply64(&self, x: &[f64]) -> Vec<f64> {
-        assert_eq!(x.len(), self.in_features);
-        (0..self.out_features)
-            .map(|o| {
-                let row = &self.weights[o * self.in_features..(o + 1) * self.in_features];
-                f64::from(self.bias[o])
-                    + row
-                        .iter()
-                        .zip(x)
-                        .map(|(w, v)| f64::from(*w) * v)
-                        .sum::<f64>()
-            })
-            .collect()
-    }
+/// A random f32 linear layer without activation (gain 1).
+fn lin(rng: &mut Rng, in_features: usize, out_features: usize) -> FloatLayer {
+    FloatLayer::random(rng, in_features, out_features, 1.0, Activation::Identity)
 }
 
 pub struct Norm {
@@ -102,23 +59,23 @@ impl Norm {
 
 pub struct BlockWeights {
     pub norm1: Norm,
-    pub qkv: Lin,
-    pub proj: Lin,
+    pub qkv: FloatLayer,
+    pub proj: FloatLayer,
     pub norm2: Norm,
-    pub fc1: Lin,
-    pub fc2: Lin,
+    pub fc1: FloatLayer,
+    pub fc2: FloatLayer,
 }
 
 pub struct FloatModel {
     pub shape: TransformerShape,
-    pub traj_in: Lin,
-    pub cond_in: Lin,
-    pub noise_in: Lin,
+    pub traj_in: FloatLayer,
+    pub cond_in: FloatLayer,
+    pub noise_in: FloatLayer,
     pub embedding: Vec<f32>,
     pub positions: Vec<f32>,
     pub blocks: Vec<BlockWeights>,
     pub final_norm: Norm,
-    pub head: Lin,
+    pub head: FloatLayer,
     pub noise_token: Vec<f32>,
 }
 
@@ -134,25 +91,25 @@ impl FloatModel {
         let blocks = (0..shape.layers)
             .map(|_| BlockWeights {
                 norm1: Norm::random(&mut rng, w),
-                qkv: Lin::random(&mut rng, w, 3 * w),
-                proj: Lin::random(&mut rng, w, w),
+                qkv: lin(&mut rng, w, 3 * w),
+                proj: lin(&mut rng, w, w),
                 norm2: Norm::random(&mut rng, w),
-                fc1: Lin::random(&mut rng, w, 4 * w),
-                fc2: Lin::random(&mut rng, 4 * w, w),
+                fc1: lin(&mut rng, w, 4 * w),
+                fc2: lin(&mut rng, 4 * w, w),
             })
             .collect();
         let mut model = Self {
             shape,
-            traj_in: Lin::random(&mut rng, shape.action_dim, w),
-            cond_in: Lin::random(&mut rng, shape.cond_dim, w),
-            noise_in: Lin::random(&mut rng, embed_dim, w),
+            traj_in: lin(&mut rng, shape.action_dim, w),
+            cond_in: lin(&mut rng, shape.cond_dim, w),
+            noise_in: lin(&mut rng, embed_dim, w),
             embedding: (0..embed_dim).map(|_| rng.gaussian()).collect(),
             positions: (0..shape.token_values())
                 .map(|_| 0.5 * rng.gaussian())
                 .collect(),
             blocks,
             final_norm: Norm::random(&mut rng, w),
-            head: Lin::random(&mut rng, shape.token_values(), shape.output),
+            head: lin(&mut rng, shape.token_values(), shape.output),
             noise_token: vec![0.0; w],
         };
         fold_noise_token(
@@ -206,17 +163,17 @@ impl FloatModel {
         let pos = |i: usize| to64(&self.positions[i * w..(i + 1) * w]);
         let add = |a: Vec<f64>, b: Vec<f64>| a.iter().zip(&b).map(|(x, y)| x + y).collect();
         let mut h: Vec<Vec<f64>> = vec![
-            add(self.cond_in.apply64(&to64(condition)), pos(0)),
-            add(self.noise_in.apply64(&to64(&self.embedding)), pos(1)),
+            add(self.cond_in.affine64(&to64(condition)), pos(0)),
+            add(self.noise_in.affine64(&to64(&self.embedding)), pos(1)),
         ];
         for i in 0..s.horizon {
             let step = to64(&trajectory[i * s.action_dim..(i + 1) * s.action_dim]);
-            h.push(add(self.traj_in.apply64(&step), pos(2 + i)));
+            h.push(add(self.traj_in.affine64(&step), pos(2 + i)));
         }
         for b in &self.blocks {
             let qkv: Vec<Vec<f64>> = h
                 .iter()
-                .map(|x| b.qkv.apply64(&b.norm1.apply64(x)))
+                .map(|x| b.qkv.affine64(&b.norm1.apply64(x)))
                 .collect();
             let mut attn = vec![vec![0.0_f64; w]; t];
             for head in 0..s.heads {
@@ -239,18 +196,18 @@ impl FloatModel {
                 }
             }
             for i in 0..t {
-                h[i] = add(h[i].clone(), b.proj.apply64(&attn[i]));
+                h[i] = add(h[i].clone(), b.proj.affine64(&attn[i]));
                 let hidden: Vec<f64> = b
                     .fc1
-                    .apply64(&b.norm2.apply64(&h[i]))
+                    .affine64(&b.norm2.apply64(&h[i]))
                     .into_iter()
                     .map(gelu64)
                     .collect();
-                h[i] = add(h[i].clone(), b.fc2.apply64(&hidden));
+                h[i] = add(h[i].clone(), b.fc2.affine64(&hidden));
             }
         }
         let flat: Vec<f64> = h.iter().flat_map(|x| self.final_norm.apply64(x)).collect();
-        self.head.apply64(&flat)
+        self.head.affine64(&flat)
     }
 }
 
@@ -266,11 +223,11 @@ pub fn random_inputs(rng: &mut Rng, shape: &TransformerShape) -> (Vec<f32>, Vec<
 }
 
 /// Min/max per probe over calibration runs of the f32 model.
-pub struct Ranges(HashMap<TransformerProbe, (f32, f32)>);
+pub struct Ranges(HashMap<TransformerProbe, Range>);
 
 impl Ranges {
     pub fn calibrate(model: &F32Transformer<'_>, rng: &mut Rng, runs: usize) -> Self {
-        let mut map: HashMap<TransformerProbe, (f32, f32)> = HashMap::new();
+        let mut map: HashMap<TransformerProbe, Range> = HashMap::new();
         let mut scratch = big_scratch();
         let mut output = vec![0.0_f32; model.shape.output];
         for _ in 0..runs {
@@ -281,13 +238,7 @@ impl Ranges {
                     &condition,
                     &mut output,
                     &mut *scratch,
-                    |probe, values| {
-                        let entry = map.entry(probe).or_insert((f32::MAX, f32::MIN));
-                        for v in values {
-                            entry.0 = entry.0.min(*v);
-                            entry.1 = entry.1.max(*v);
-                        }
-                    },
+                    |probe, values| map.entry(probe).or_insert_with(Range::new).add(values),
                 )
                 .unwrap();
         }
@@ -295,52 +246,39 @@ impl Ranges {
     }
 
     pub fn params(&self, probe: TransformerProbe) -> QuantParams {
-        let (lo, hi) = self.0[&probe];
-        QuantParams::from_range(lo, hi).unwrap()
+        self.0[&probe].params()
     }
+}
+
+/// A random f32 model of `shape` (weights from `seed`) and its int8 form, calibrated on `runs`
+/// random inputs drawn from `rng`.
+pub fn calibrated(
+    shape: TransformerShape,
+    seed: u64,
+    rng: &mut Rng,
+    runs: usize,
+) -> (FloatModel, QuantModel) {
+    let model = FloatModel::random(shape, seed);
+    let blocks = model.f32_blocks();
+    let ranges = Ranges::calibrate(&model.f32_view(&blocks), rng, runs);
+    let quant = QuantModel::new(&model, &ranges);
+    (model, quant)
 }
 
 /// A linear layer quantized for input parameters `input` (exporter recipe).
 pub struct QLin {
     pub input: QuantParams,
-    pub in_features: usize,
-    pub out_features: usize,
-    pub weights: Vec<i8>,
-    pub weight_scales: Vec<f32>,
-    pub bias: Vec<i32>,
+    pub layer: QuantLayer,
     pub output_scales: Vec<f32>,
 }
 
 impl QLin {
-    pub fn new(lin: &Lin, input: QuantParams) -> Self {
-        let mut weights = vec![0_i8; lin.weights.len()];
-        let mut weight_scales = vec![0.0_f32; lin.out_features];
-        quantize_weights_per_channel(
-            &lin.weights,
-            lin.in_features,
-            &mut weights,
-            &mut weight_scales,
-        )
-        .unwrap();
-        let bias = (0..lin.out_features)
-            .map(|o| {
-                let row = &weights[o * lin.in_features..(o + 1) * lin.in_features];
-                let b = quantize_bias(lin.bias[o], input.scale, weight_scales[o]).unwrap();
-                fold_input_zero_point(b, row, input.zero_point).unwrap()
-            })
-            .collect();
-        let output_scales = weight_scales
-            .iter()
-            .map(|w| (f64::from(input.scale) * f64::from(*w)) as f32)
-            .collect();
+    pub fn new(lin: &FloatLayer, input: QuantParams) -> Self {
+        let layer = quantize_layer(lin, &lin.bias, input, None);
         Self {
             input,
-            in_features: lin.in_features,
-            out_features: lin.out_features,
-            weights,
-            weight_scales,
-            bias,
-            output_scales,
+            output_scales: layer.output_scales(input),
+            layer,
         }
     }
 
@@ -348,12 +286,7 @@ impl QLin {
         QuantizedLinear {
             input: self.input,
             linear: Int8Linear {
-                fc: FullyConnected::new(
-                    self.in_features,
-                    self.out_features,
-                    &self.weights,
-                    &self.bias,
-                ),
+                fc: self.layer.fully_connected(),
                 output_scales: &self.output_scales,
             },
         }
@@ -389,6 +322,7 @@ impl QuantModel {
                 let fc1_output = ranges.params(TransformerProbe::Fc1 { layer });
                 let gelu_output = ranges.params(TransformerProbe::Gelu { layer });
                 let (multipliers, shifts) = fc1
+                    .layer
                     .weight_scales
                     .iter()
                     .map(|w| {
@@ -478,20 +412,13 @@ impl QuantModel {
 }
 
 fn naive_accumulator(q: &QLin, o: usize, codes: &[i8]) -> i32 {
-    let row = &q.weights[o * q.in_features..(o + 1) * q.in_features];
-    let wide: i64 = i64::from(q.bias[o])
-        + row
-            .iter()
-            .zip(codes)
-            .map(|(w, x)| i64::from(*w) * i64::from(*x))
-            .sum::<i64>();
-    i32::try_from(wide).expect("test accumulators fit i32")
+    i32::try_from(q.layer.naive_accumulator(o, codes)).expect("test accumulators fit i32")
 }
 
 /// Quantize, i64 dot products, dequantize (f32 in, f32 out).
 fn naive_linear(q: &QLin, input: &[f32]) -> Vec<f32> {
     let codes: Vec<i8> = input.iter().map(|v| q.input.quantize(*v)).collect();
-    (0..q.out_features)
+    (0..q.layer.out_features)
         .map(|o| naive_accumulator(q, o, &codes) as f32 * q.output_scales[o])
         .collect()
 }
