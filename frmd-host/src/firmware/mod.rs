@@ -15,7 +15,6 @@ use std::process::Command;
 pub mod link;
 pub mod lockstep;
 pub mod policy;
-pub mod served;
 
 /// The cores `run-qemu.sh` boots (which of them build depends on the installed targets).
 pub const BOARDS: [&str; 5] = ["m4", "m7", "m33", "m0", "m55"];

@@ -12,6 +12,7 @@
 //! - [`load`]: the policy behind the server (checkpoint, baked module, blob) and its HELLO_OK.
 pub mod error;
 mod fields;
+mod firmware;
 pub mod frame;
 pub mod load;
 pub mod reply;

@@ -1,8 +1,8 @@
-//! The `pil` image behind the server's policy interface (`frmd serve --firmware`, once the server
-//! has a command): the served observations and actions arrive as f64 and go to the image as f32,
-//! as the host int8 policy takes them.
-use super::policy::FirmwarePolicy;
-use crate::serve::{ActInput, ServedPolicy};
+//! The `pil` image behind the server's policy interface (`frmd serve --firmware`): the served
+//! observations and actions arrive as f64 and go to the image as f32, as the host int8 policy
+//! takes them.
+use super::{ActInput, ServedPolicy};
+use crate::firmware::policy::FirmwarePolicy;
 
 impl ServedPolicy for FirmwarePolicy {
     fn reset(&mut self, seed: u64) {
