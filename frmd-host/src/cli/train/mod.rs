@@ -296,5 +296,4 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {
 }
 
 #[cfg(test)]
-#[path = "train_tests.rs"]
 mod tests;
