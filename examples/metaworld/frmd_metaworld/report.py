@@ -1,7 +1,7 @@
 """results.md, results.json and the bar chart of a benchmark run (benchmark.py): one table per
 difficulty group and overall (success with 95 % Wilson interval over the pooled episodes, median
 latency per chunk, non-smooth transitions per episode), a per-task table, seeds, command,
-commit, and what the run did not cover."""
+commit, the spread over training seeds, and issue 13's targets checked against the numbers."""
 from __future__ import annotations
 
 import json
@@ -44,6 +44,49 @@ def summarize(results: dict) -> dict:
     return tables
 
 
+def seed_spread(results: dict) -> list:
+    """Per task trained with several seeds and per learned method: mean, min and max success."""
+    out = []
+    for task in TASKS:
+        for method in METHODS[1:]:
+            rates = [r["success_rate"] for r in results["rows"] if r["task"] == task and r["method"] == method]
+            if len(rates) > 1:
+                out.append({"task": task, "method": method, "seeds": len(rates),
+                            "mean": sum(rates) / len(rates), "min": min(rates), "max": max(rates)})
+    return out
+
+
+def targets(tables: dict, results: dict) -> list:
+    """Issue 13's targets on the overall table (first seed): (what, measured, met)."""
+    overall = {m: p for m, p in tables["overall"].items() if p["episodes"]}
+    pts = {m: 100 * p["success_rate"] for m, p in overall.items()}
+    checks = []
+    if {"student-1", "teacher"} <= pts.keys():
+        d = pts["student-1"] - pts["teacher"]
+        checks.append(("one-step student >= teacher - 2 points", f"{d:+.1f} points", d >= -2.0))
+    for dp in ("dp-ddpm-100", "dp-ddim-10"):
+        if {"student-1", dp} <= pts.keys():
+            d = pts["student-1"] - pts[dp]
+            checks.append((f"one-step student >= DP ({dp})", f"{d:+.1f} points", d >= 0.0))
+    if {"student-1", "int8-student"} <= pts.keys():
+        d = pts["int8-student"] - pts["student-1"]
+        checks.append(("int8 student within 1 point of the float student", f"{d:+.1f} points", abs(d) <= 1.0))
+    # Latency: per task and seed, the int8 student against DDPM-100 of the same run.
+    ratios = []
+    for r in results["rows"]:
+        if r["method"] != "int8-student":
+            continue
+        dp = [d for d in results["rows"] if d["task"] == r["task"] and d["seed"] == r["seed"] and d["method"] == "dp-ddpm-100"]
+        if dp and r["latency_us_median"] > 0:
+            ratios.append(dp[0]["latency_us_median"] / r["latency_us_median"])
+    if ratios:
+        worst = min(ratios)
+        checks.append(("int8 student latency <= 1/100 of DP DDPM-100 (every task-seed)",
+                       f"DDPM-100 / int8 = {worst:.0f}x at worst, {metrics.quantile(ratios, 0.5):.0f}x median "
+                       f"({len(ratios)} task-seeds)", worst >= 100.0))
+    return checks
+
+
 def _pct(p: dict) -> str:
     if not p["episodes"]:
         return "not run"
@@ -84,7 +127,10 @@ def write(results: dict, md_path: Path, command: str, notes: list) -> dict:
     """Writes results.md beside results.json and the PNG; returns the JSON written."""
     cfg = results["config"]
     tables = summarize(results)
-    out = {**results, "tables": tables, "command": command, "commit": commit(), "notes": notes}
+    spread, checks = seed_spread(results), targets(tables, results)
+    out = {**results, "tables": tables, "seed_spread": spread,
+           "targets": [{"target": t, "measured": v, "met": ok} for t, v, ok in checks],
+           "command": command, "commit": commit(), "notes": notes}
     json_path, png_path = md_path.with_suffix(".json"), md_path.with_suffix(".png")
     json_path.write_text(json.dumps(out, indent=1) + "\n")
     bar_chart(results, png_path)
@@ -100,6 +146,9 @@ def write(results: dict, md_path: Path, command: str, notes: list) -> dict:
     lines += ["Success: % of episodes [95 % Wilson interval] pooled over the group's tasks; latency: median over "
               "tasks of the median policy time per chunk (`policy_ns` reported by `frmd serve`, the expert's call "
               "in process), us; non-smooth: mean end-effector non-smooth transitions per episode.", ""]
+    if checks:
+        lines += ["## Targets (issue 13, overall table)", "", "| target | measured | met |", "| --- | --- | --- |"]
+        lines += [f"| {t} | {v} | {'yes' if ok else 'NO'} |" for t, v, ok in checks] + [""]
     for group, table in tables.items():
         lines += [f"## {group}", "", "| method | tasks | success % [95 % CI] | latency us/chunk | non-smooth / episode |",
                   "| --- | ---: | ---: | ---: | ---: |"]
@@ -107,6 +156,11 @@ def write(results: dict, md_path: Path, command: str, notes: list) -> dict:
             p = table[m]
             lines.append(f"| {m} | {p['tasks']} | {_pct(p)} | {_num(p['latency_us_median'])} | {_num(p['non_smooth_ee_mean'])} |")
         lines.append("")
+    if spread:
+        lines += ["## Spread over training seeds", "", "| task | method | seeds | mean success % | min | max |",
+                  "| --- | --- | ---: | ---: | ---: | ---: |"]
+        lines += [f"| {x['task']} | {x['method']} | {x['seeds']} | {100 * x['mean']:.1f} | {100 * x['min']:.1f} | "
+                  f"{100 * x['max']:.1f} |" for x in spread] + [""]
     lines += ["## Per task and seed", "", "| task | group | seed | method | success % [95 % CI] | latency us/chunk | "
               "round trip us | non-smooth / episode | mean length |", "| --- | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: |"]
     for r in results["rows"]:
