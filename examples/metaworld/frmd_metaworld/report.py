@@ -116,8 +116,9 @@ def bar_chart(results: dict, path: Path) -> None:
     ax.set_xticks(range(len(tasks)), tasks, rotation=30, ha="right")
     ax.set_ylabel(f"success, % of {results['config']['episodes']} episodes")
     ax.set_ylim(0, 105)
-    ax.set_title(f"MetaWorld success per task and method (training seed {first})")
-    ax.legend(fontsize=8, ncol=3)
+    ax.set_title(f"MetaWorld success per task and method (training seed {first})", pad=28)
+    # Above the axes, so no bar is hidden behind it.
+    ax.legend(fontsize=8, ncol=len(METHODS), loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
