@@ -19,8 +19,8 @@ pub fn dot_i8(a: &[i8], b: &[i8]) -> Result<i32, KernelError> {
 /// the DSP extension (Cortex-M4 `MLA`/`SMLABB` without register spills), sixteen on hosts so they
 /// vectorize the loop (SSE2 `pmaddwd`). Arm cores without it (Cortex-M0: eight low registers, no
 /// multiply pipeline) take one: four spilled accumulators cost 34-38 instructions per four
-/// products there, one costs 6 per product (policy call 1.87 M -> 1.43 M instructions). Wrapping int32 addition is associative and commutative, so the result is identical
-/// to a sequential sum either way.
+/// products there, one costs 6 per product. Wrapping int32 addition is associative and
+/// commutative, so the result is identical to a sequential sum either way.
 #[inline]
 pub(crate) fn dot_i8_prefix(a: &[i8], b: &[i8]) -> i32 {
     #[cfg(all(target_arch = "arm", frmd_arm_dsp))]

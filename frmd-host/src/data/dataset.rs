@@ -263,7 +263,7 @@ impl Dataset {
             source: metadata(meta, "source")?.to_string(),
             action_before_start: match meta.as_ref().and_then(|m| m.get("action_before_start")) {
                 Some(text) => ActionBeforeStart::parse(text)?,
-                None => ActionBeforeStart::First,
+                None => ActionBeforeStart::default(),
             },
         };
         dataset.validate()?;

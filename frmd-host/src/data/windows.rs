@@ -78,9 +78,7 @@ impl super::Dataset {
     /// [`ActionBeforeStart`](super::ActionBeforeStart): a_{-1} = a_{-2} = a_0 (`First`, matching the
     /// evaluator, whose experts start their commands at the initial end-effector position) or the
     /// zero action (`Zero`, displacement commands: what `frmd serve` resets with), rate 0 either
-    /// way. Measured on MetaWorld reach-v3 (displacement actions, trained with `First`): served
-    /// from a zero initial action the teacher succeeded on 0 of 50 episodes, from the expert's
-    /// first action on 10 of 10 (docs/design.md, section 7).
+    /// way; why it matters is measured in docs/design.md, section 4.
     ///
     /// Normalizer ranges below [`MIN_NORM_RANGE`] are widened to it (exactly constant dimensions
     /// stay constant).
