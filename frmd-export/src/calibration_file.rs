@@ -3,7 +3,7 @@
 //! [`crate::calibrate::CalibrationSet`]), so that exporting needs only the checkpoint directory.
 use crate::calibrate::CalibrationSet;
 use anyhow::{bail, Context};
-use std::collections::HashMap;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Writes `set` to `path`.
@@ -15,8 +15,8 @@ pub fn write(path: &Path, set: &CalibrationSet) -> anyhow::Result<()> {
     let bytes: Vec<u8> = set.cond.iter().flat_map(|v| v.to_le_bytes()).collect();
     let view = safetensors::tensor::TensorView::new(safetensors::Dtype::F32, vec![rows, set.cond_dim], &bytes)
         .map_err(|e| anyhow::anyhow!("calibration tensor: {e}"))?;
-    let meta = HashMap::from([("seed".to_string(), set.seed.to_string())]);
-    let data = safetensors::serialize([("cond", view)], Some(meta)).map_err(|e| anyhow::anyhow!("serializing calibration: {e}"))?;
+    let meta = BTreeMap::from([("seed".to_string(), set.seed.to_string())]);
+    let data = crate::safetensors_bytes::serialize([("cond", view)], &meta).context("serializing calibration")?;
     crate::artifact::write_atomic(path, &data)
 }
 

@@ -8,6 +8,7 @@
 //! - [`QuantizedPolicy`]: the owned result of quantization;
 //! - [`blob::write`]: the self-describing blob (format in [`frmd_core::blob`]);
 //! - [`bake::write_module`]: a generated Rust module plus an aligned `weights.bin`;
+//! - [`safetensors_bytes`]: safetensors files whose bytes do not depend on a `HashMap`'s order;
 //! - [`reference`]: independent wide-integer checks of the int8 kernels;
 //! - [`transformer`]: the same pipeline for transformer-lite students (fold per-step noise
 //!   tokens, calibrate with frmd-core's transformer probes, quantize, write the `FRMT` blob).
@@ -22,6 +23,7 @@ pub mod export;
 pub mod fold;
 pub mod quantized;
 pub mod reference;
+pub mod safetensors_bytes;
 pub mod transformer;
 
 pub use quantized::{

@@ -5,7 +5,7 @@
 //! metadata `task`, `dt` (control period, seconds) and `source` (who produced it), and optionally
 //! `action_before_start` ([`ActionBeforeStart`]).
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 /// Demonstrations: per-step observations and commanded actions, concatenated over episodes.
@@ -209,7 +209,7 @@ impl Dataset {
                 TensorView::new(Dtype::I64, vec![self.episode_ends.len()], &ends)?,
             ),
         ];
-        let mut meta = HashMap::from([
+        let mut meta = BTreeMap::from([
             ("task".to_string(), self.task.clone()),
             ("dt".to_string(), self.dt.to_string()),
             ("source".to_string(), self.source.clone()),
@@ -218,7 +218,7 @@ impl Dataset {
         if self.action_before_start != ActionBeforeStart::default() {
             meta.insert("action_before_start".to_string(), self.action_before_start.as_str().to_string());
         }
-        Ok(safetensors::serialize(tensors, Some(meta))?)
+        frmd_export::safetensors_bytes::serialize(tensors, &meta)
     }
 
     /// Parses and validates safetensors bytes.
