@@ -21,7 +21,9 @@ step() { # step NAME DONE_FILE CMD...
     local name=$1 done=$2; shift 2
     if [ -e "$done" ]; then echo "skip  $name"; return; fi
     echo "$(date +%H:%M:%S) start $name"
-    "$@" > "$OUT/logs/$name.log" 2>&1 || { echo "FAILED $name (see $OUT/logs/$name.log)"; exit 1; }
+    # `frmd equiv` exits 1 when a check fails (e.g. int8 more than 5 points under float): that is
+    # a result, recorded in its report, so only a missing report stops the script.
+    "$@" > "$OUT/logs/$name.log" 2>&1 || [ -e "$done" ] || { echo "FAILED $name (see $OUT/logs/$name.log)"; exit 1; }
 }
 
 for t in $TASKS; do

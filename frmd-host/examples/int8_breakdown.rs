@@ -32,6 +32,9 @@ struct Sources {
     clip: f32,
     /// Activation resolution multiplier (1 = int8; 256 = int16-like).
     fine: f32,
+    /// Pre-activation resolution multiplier when it differs from `fine` (0: use `fine`): a wider
+    /// activation-table index with int8 table outputs, e.g. 4 = a 10-bit pre-activation code.
+    pre_fine: f32,
     /// Input treatment when `input` is off: 0 exact, 1 clamp to the int8 range only, 2 round
     /// only (no clamp), 3 two-plane-like (clamp, 1/256 steps).
     input_mode: u8,
@@ -118,7 +121,7 @@ impl<'a> Sim<'a> {
                     let row = &self.hidden_w[l][o * layer.in_features..(o + 1) * layer.in_features];
                     let mut pre = row.iter().zip(&x).fold(bias[o], |a, (w, v)| a + w * v);
                     if self.src.pre_activation {
-                        pre = fake_fine(pre, pre_q, self.src.fine);
+                        pre = fake_fine(pre, pre_q, if self.src.pre_fine > 0.0 { self.src.pre_fine } else { self.src.fine });
                     }
                     let y = layer.activation.apply(pre);
                     if self.src.post_activation { fake_fine(y, out_q, self.src.fine) } else { y }
@@ -190,8 +193,8 @@ fn main() -> anyhow::Result<()> {
         println!("{label:<28} chunk max {max_e:.5} mean {:.6} signed {:+.6} (action units) | params max {max_p:.5} mean {:.6}", sum_e / n as f64, signed / n as f64, sum_p / np);
         Ok(())
     };
-    let all = Sources { input: true, hidden_weights: true, output_weights: true, pre_activation: true, post_activation: true, clip: 0.0, fine: 1.0, input_mode: 0 };
-    let variants: [(&str, Sources); 23] = [
+    let all = Sources { input: true, hidden_weights: true, output_weights: true, pre_activation: true, post_activation: true, clip: 0.0, fine: 1.0, pre_fine: 0.0, input_mode: 0 };
+    let variants: [(&str, Sources); 27] = [
         ("activations only, int16-like", Sources { pre_activation: true, post_activation: true, fine: 256.0, ..Default::default() }),
         ("activations only, 2^-16 of int16", Sources { pre_activation: true, post_activation: true, fine: 16_777_216.0, ..Default::default() }),
         ("all, two-plane input", Sources { input: false, input_mode: 3, ..all }),
@@ -215,6 +218,10 @@ fn main() -> anyhow::Result<()> {
         ("all but pre (wide LUT)", Sources { pre_activation: false, ..all }),
         ("all, int16-like activations", Sources { fine: 256.0, ..all }),
         ("int16 act + exact input", Sources { fine: 256.0, input: false, ..all }),
+        ("all, 10-bit pre-activation", Sources { pre_fine: 4.0, ..all }),
+        ("all, 12-bit pre-activation", Sources { pre_fine: 16.0, ..all }),
+        ("all, 16-bit pre-activation", Sources { pre_fine: 256.0, ..all }),
+        ("two-plane input, int16 act", Sources { input: false, input_mode: 3, fine: 256.0, ..all }),
     ];
     let closed_loop = std::env::var("EPISODES").ok().map(|e| e.parse::<usize>()).transpose()?.unwrap_or(0);
     if closed_loop > 0 {
