@@ -36,6 +36,7 @@ for s in $SEEDS; do
         step "$t-s$s-eval-teacher" "$r/teacher/eval-dpm10.json" "$FRMD" eval --task "$t" --ckpt "$r/teacher" --steps 10 --solver dpm++2m --episodes 200 --json "$r/teacher/eval-dpm10.json"
         step "$t-s$s-student" "$r/student/frmd.json" "$FRMD" train student --teacher "$r/teacher" --data "$d" --out "$r/student" --seed "$s" --eval-episodes 0
         step "$t-s$s-eval-student" "$r/student/eval-1.json" "$FRMD" eval --task "$t" --ckpt "$r/student" --steps 1 --episodes 200 --json "$r/student/eval-1.json"
+        step "$t-s$s-eval-student2" "$r/student/eval-2.json" "$FRMD" eval --task "$t" --ckpt "$r/student" --steps 2 --episodes 200 --json "$r/student/eval-2.json"
         step "$t-s$s-export" "$r/int8/export.json" "$FRMD" export --ckpt "$r/student" --out "$r/int8"
         step "$t-s$s-equiv" "$r/int8/equiv2000.json" "$FRMD" equiv --ckpt "$r/student" --baked "$r/int8" --episodes 2000 --json "$r/int8/equiv2000.json"
         step "$t-s$s-dp" "$r/dp/frmd.json" "$FRMD" train dp --data "$d" --out "$r/dp" --backbone mlp-paper --seed "$s" --eval-episodes 0

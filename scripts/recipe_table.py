@@ -2,16 +2,19 @@
 """Summarize a run tree written by scripts/recipe-table.sh into README's Status table.
 
 usage: recipe_table.py RUNS_DIR [--json OUT]
+       recipe_table.py RUNS_DIR --copy-reports DEST   (the reports behind the table, as committed
+                                                       in docs/results/recipe; existing files kept)
 
 RUNS_DIR/<task>/s<seed>/{teacher,student,dp,int8}/ hold the evaluation reports of `frmd eval
 --json` and `frmd equiv --json`. Prints a Markdown table: per task and method the mean success
 over the training seeds that finished, the spread (min-max), the seed count, and the non-smooth
 transitions per successful episode; then the int8-vs-float rows."""
-import json, os, re, statistics, sys
+import json, os, re, shutil, statistics, sys
 
 METHODS = [  # (column, relative path of the report)
     ("teacher DPM++(2M)-10", "teacher/eval-dpm10.json"),
     ("student 1 step", "student/eval-1.json"),
+    ("student 2 steps", "student/eval-2.json"),
     ("DP DDPM-100", "dp/eval-ddpm100.json"),
     ("DP DDIM-10", "dp/eval-ddim10.json"),
 ]
@@ -59,8 +62,41 @@ def cell(values):
     return f"{m:.1f} [{100 * min(values):.1f}-{100 * max(values):.1f}] ({len(values)} seeds)"
 
 
+REPORTS = [rel for _, rel in METHODS] + ["int8/equiv2000.json", "int8/export.json"]
+
+
+def copy_reports(root, dest):
+    """Copies every report of RUNS_DIR into DEST/<task>/s<seed>/, plus each checkpoint's frmd.json
+    without tensors and loss curve as training.json. Files already in DEST are left alone."""
+    for task in TASKS:
+        for s in seeds_of(root, task):
+            files = {}  # relative path -> (source file to copy, or JSON to write)
+            for rel in REPORTS:
+                if os.path.exists(os.path.join(root, task, s, rel)):
+                    files[rel] = (os.path.join(root, task, s, rel), None)
+            for role in ("teacher", "student", "dp"):
+                meta = load(os.path.join(root, task, s, role, "frmd.json"))
+                if meta:
+                    meta["training"].pop("loss_curve", None)
+                    files[f"{role}/training.json"] = (None, {k: meta[k] for k in ("role", "model", "dataset", "training")})
+            for rel, (src, data) in files.items():
+                out = os.path.join(dest, task, s, rel)
+                if os.path.exists(out):
+                    continue
+                os.makedirs(os.path.dirname(out), exist_ok=True)
+                if src:
+                    shutil.copyfile(src, out)
+                else:
+                    with open(out, "w") as f:
+                        json.dump(data, f, indent=1)
+                print("wrote", out)
+
+
 def main():
     root = sys.argv[1]
+    if "--copy-reports" in sys.argv:
+        copy_reports(root, sys.argv[sys.argv.index("--copy-reports") + 1])
+        return
     summary = {}
     print("| task | " + " | ".join(c for c, _ in METHODS) + " |")
     print("| --- |" + " ---: |" * len(METHODS))
