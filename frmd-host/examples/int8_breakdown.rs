@@ -102,6 +102,7 @@ impl<'a> Sim<'a> {
                 _ => v,
             })
             .collect();
+        let pre_fine = if self.src.pre_fine > 0.0 { self.src.pre_fine } else { self.src.fine };
         for (l, layer) in self.folded.hidden.iter().enumerate() {
             let bias = if l == 0 { &self.folded.first_layer_biases[step] } else { &layer.bias };
             let (mut pre_q, mut out_q) = self.ranges.hidden[l];
@@ -121,7 +122,7 @@ impl<'a> Sim<'a> {
                     let row = &self.hidden_w[l][o * layer.in_features..(o + 1) * layer.in_features];
                     let mut pre = row.iter().zip(&x).fold(bias[o], |a, (w, v)| a + w * v);
                     if self.src.pre_activation {
-                        pre = fake_fine(pre, pre_q, if self.src.pre_fine > 0.0 { self.src.pre_fine } else { self.src.fine });
+                        pre = fake_fine(pre, pre_q, pre_fine);
                     }
                     let y = layer.activation.apply(pre);
                     if self.src.post_activation { fake_fine(y, out_q, self.src.fine) } else { y }
