@@ -16,13 +16,16 @@
 //!    (normalization, step constants, decoder, 44-input layout), not its MLP.
 //! 5. Generates the synthetic transformer-lite (`synthetic::transformer`): weights as
 //!    `synthetic_transformer.bin`, everything else as `synthetic_transformer.rs`.
-use std::{env, fs, path::{Path, PathBuf}};
+use std::{
+    env, fs,
+    path::{Path, PathBuf},
+};
 
 use frmd_core::prodmp::BakedProDmp;
+use frmd_export::ProDmpTablesOwned;
 use frmd_firmware_support::host::student::student;
 use frmd_firmware_support::shape;
 use frmd_firmware_support::synthetic;
-use frmd_export::ProDmpTablesOwned;
 
 /// The decoder of `shape::config()`, written by frmd-export's table generator (the one that also
 /// writes a baked policy's `DECODER`).
@@ -44,7 +47,10 @@ fn bake_student(out: &Path) {
     let policy = &student();
     frmd_export::bake::write_module(policy, &out.join("student"))
         .unwrap_or_else(|error| panic!("baking the student failed: {error:#}"));
-    let layers = policy.hidden.iter().map(|layer| (layer.in_features, layer.out_features));
+    let layers = policy
+        .hidden
+        .iter()
+        .map(|layer| (layer.in_features, layer.out_features));
     let network_macs: usize = layers
         .chain([(policy.output.in_features, policy.output.out_features)])
         .map(|(inputs, outputs)| inputs * outputs)
@@ -62,7 +68,9 @@ fn bake_student(out: &Path) {
 /// The second (fine-plane) product of a two-plane first layer.
 fn two_plane_macs(policy: &frmd_export::QuantizedPolicy) -> usize {
     match (policy.input_precision, policy.hidden.first()) {
-        (frmd_core::model::mlp::InputPrecision::TwoPlane, Some(first)) => first.in_features * first.out_features,
+        (frmd_core::model::mlp::InputPrecision::TwoPlane, Some(first)) => {
+            first.in_features * first.out_features
+        }
         _ => 0,
     }
 }
@@ -92,7 +100,8 @@ fn main() {
     let target = env::var("TARGET").unwrap_or_default();
     println!("cargo:rerun-if-env-changed=FRMD_CM_MEMORY_MAP");
     let board = frmd_firmware_support::host::board_memory_map(&target);
-    fs::copy(board, out.join("memory.x")).expect("copy the board's memory map into OUT_DIR as memory.x");
+    fs::copy(board, out.join("memory.x"))
+        .expect("copy the board's memory map into OUT_DIR as memory.x");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed=memory");
     println!("cargo:rustc-check-cfg=cfg(frmd_armv6m)");
@@ -107,15 +116,25 @@ fn main() {
     }
     bake_prodmp(&out);
     let model = synthetic::mlp::generate();
-    fs::write(out.join("synthetic_mlp.bin"), model.weight_bytes()).expect("write synthetic_mlp.bin");
+    fs::write(out.join("synthetic_mlp.bin"), model.weight_bytes())
+        .expect("write synthetic_mlp.bin");
     fs::write(out.join("synthetic_mlp.rs"), model.rust_source()).expect("write synthetic_mlp.rs");
     bake_student(&out);
     bake_pil(&out);
-    frmd_export::bake::write_module(&synthetic::policy::generate(), &out.join("synthetic_policy"))
-        .expect("bake the synthetic policy with frmd-export");
+    frmd_export::bake::write_module(
+        &synthetic::policy::generate(),
+        &out.join("synthetic_policy"),
+    )
+    .expect("bake the synthetic policy with frmd-export");
     let transformer = synthetic::transformer::generate();
-    fs::write(out.join("synthetic_transformer.bin"), transformer.weight_bytes())
-        .expect("write synthetic_transformer.bin");
-    fs::write(out.join("synthetic_transformer.rs"), transformer.rust_source())
-        .expect("write synthetic_transformer.rs");
+    fs::write(
+        out.join("synthetic_transformer.bin"),
+        transformer.weight_bytes(),
+    )
+    .expect("write synthetic_transformer.bin");
+    fs::write(
+        out.join("synthetic_transformer.rs"),
+        transformer.rust_source(),
+    )
+    .expect("write synthetic_transformer.rs");
 }

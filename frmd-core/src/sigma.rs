@@ -57,7 +57,12 @@ pub struct SigmaConfig {
 
 impl Default for SigmaConfig {
     fn default() -> Self {
-        SigmaConfig { sigma_min: 0.002, sigma_max: 80.0, rho: 7.0, sigma_data: 0.5 }
+        SigmaConfig {
+            sigma_min: 0.002,
+            sigma_max: 80.0,
+            rho: 7.0,
+            sigma_data: 0.5,
+        }
     }
 }
 
@@ -299,9 +304,15 @@ mod tests {
 
     #[test]
     fn invalid_config_rejected() {
-        let cfg = SigmaConfig { sigma_min: 100.0, ..SigmaConfig::default() };
+        let cfg = SigmaConfig {
+            sigma_min: 100.0,
+            ..SigmaConfig::default()
+        };
         assert_eq!(cfg.validate(), Err(SigmaError::InvalidConfig));
-        let cfg = SigmaConfig { rho: f64::NAN, ..SigmaConfig::default() };
+        let cfg = SigmaConfig {
+            rho: f64::NAN,
+            ..SigmaConfig::default()
+        };
         assert_eq!(cfg.c_in(1.0), Err(SigmaError::InvalidConfig));
     }
 
@@ -313,7 +324,13 @@ mod tests {
         assert!((out[1] - libm::cos(0.5)).abs() < 1e-15);
         assert!((out[2] - libm::sin(16.0)).abs() < 1e-12);
         let mut odd = [0.0; 3];
-        assert_eq!(noise_embedding(0.5, &mut odd), Err(SigmaError::InvalidEmbeddingLength));
-        assert_eq!(noise_embedding(f64::NAN, &mut out), Err(SigmaError::InvalidSigma));
+        assert_eq!(
+            noise_embedding(0.5, &mut odd),
+            Err(SigmaError::InvalidEmbeddingLength)
+        );
+        assert_eq!(
+            noise_embedding(f64::NAN, &mut out),
+            Err(SigmaError::InvalidSigma)
+        );
     }
 }

@@ -61,10 +61,16 @@ fn kernel_cases_agree_on_the_host_paths() {
     }
     assert!(widths.iter().any(|(w, _)| *w > 256));
     for remainder in 0..8 {
-        assert!(widths.iter().any(|(w, _)| w % 8 == remainder), "no width = {remainder} mod 8");
+        assert!(
+            widths.iter().any(|(w, _)| w % 8 == remainder),
+            "no width = {remainder} mod 8"
+        );
     }
     for steps in 0..4 {
-        assert!(widths.iter().any(|(w, _)| (w / 8) % 4 == steps && *w >= 8), "no width with {steps} steps mod 4");
+        assert!(
+            widths.iter().any(|(w, _)| (w / 8) % 4 == steps && *w >= 8),
+            "no width with {steps} steps mod 4"
+        );
     }
     assert!(widths.iter().any(|(_, r)| r % 2 == 1) && widths.iter().any(|(_, r)| r % 2 == 0));
 }
@@ -76,7 +82,11 @@ fn firmware_inputs_are_distinct_and_in_range() {
     assert_eq!(first, prodmp_workload::Inputs::fixed(0));
     for case in 0..prodmp_workload::CASES {
         let inputs = prodmp_workload::Inputs::fixed(case);
-        assert!(inputs.params.iter().flatten().all(|v| (-1.0..1.0).contains(v)));
+        assert!(inputs
+            .params
+            .iter()
+            .flatten()
+            .all(|v| (-1.0..1.0).contains(v)));
         assert!(inputs.y0.iter().all(|v| (-0.5..0.5).contains(v)));
         assert!(inputs.v0.iter().all(|v| (-0.25..0.25).contains(v)));
     }
@@ -88,16 +98,22 @@ fn synthetic_mlp_is_deterministic_and_valid() {
     let model = synthetic_mlp::generate();
     let hidden = model.hidden_layers();
     let mlp = model.mlp(&hidden);
-    mlp.validate(shape::MLP_WIDTH).expect("valid synthetic network");
+    mlp.validate(shape::MLP_WIDTH)
+        .expect("valid synthetic network");
     assert_eq!(mlp.input_width(), shape::MLP_INPUT);
     assert_eq!(mlp.output_width(), shape::MLP_OUTPUT);
-    assert_eq!(model.weight_bytes(), synthetic_mlp::generate().weight_bytes());
+    assert_eq!(
+        model.weight_bytes(),
+        synthetic_mlp::generate().weight_bytes()
+    );
     // The network is not degenerate: its outputs vary with the observation.
     let mut out_a = [0.0_f32; shape::MLP_OUTPUT];
     let mut out_b = [0.0_f32; shape::MLP_OUTPUT];
     let mut scratch = frmd_core::model::mlp::Int8Scratch::<{ shape::MLP_WIDTH }>::new();
-    mlp.forward(&[0.5; shape::MLP_INPUT], &mut out_a, &mut scratch).expect("forward");
-    mlp.forward(&[-0.5; shape::MLP_INPUT], &mut out_b, &mut scratch).expect("forward");
+    mlp.forward(&[0.5; shape::MLP_INPUT], &mut out_a, &mut scratch)
+        .expect("forward");
+    mlp.forward(&[-0.5; shape::MLP_INPUT], &mut out_b, &mut scratch)
+        .expect("forward");
     assert_ne!(out_a, out_b);
     assert!(out_a.iter().chain(&out_b).all(|v| v.is_finite()));
     assert_eq!(mlp_digest(), mlp_digest());
@@ -109,7 +125,11 @@ fn qemu_digests_match_host() {
     if !qemu::available("qemu_digests_match_host", &root) {
         return;
     }
-    let images = [("prodmp", prodmp_digest()), ("mlp", mlp_digest()), ("kernels", kernels_digest())];
+    let images = [
+        ("prodmp", prodmp_digest()),
+        ("mlp", mlp_digest()),
+        ("kernels", kernels_digest()),
+    ];
     for (firmware, host_digest) in images {
         let expected = format!("digest: {host_digest:016x}");
         for board in qemu::BOARDS {

@@ -12,7 +12,9 @@ use std::path::{Path, PathBuf};
 /// The temporary sibling a write of `path` goes through: hidden, with the same extension (some
 /// writers pick the format from it).
 fn temp_path(path: &Path) -> anyhow::Result<PathBuf> {
-    let stem = path.file_stem().with_context(|| format!("{}: not a file path", path.display()))?;
+    let stem = path
+        .file_stem()
+        .with_context(|| format!("{}: not a file path", path.display()))?;
     let mut tmp = std::ffi::OsString::from(".");
     tmp.push(stem);
     tmp.push(format!(".tmp-{}", std::process::id()));
@@ -26,14 +28,21 @@ fn temp_path(path: &Path) -> anyhow::Result<PathBuf> {
 /// Writes `path` atomically: `write(tmp)` fills a temporary file beside it, which is synced
 /// and renamed over `path`; on any error the temporary file is removed and `path` is untouched.
 /// A missing parent directory is created first.
-pub fn write_atomic_with(path: &Path, write: impl FnOnce(&Path) -> anyhow::Result<()>) -> anyhow::Result<()> {
+pub fn write_atomic_with(
+    path: &Path,
+    write: impl FnOnce(&Path) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
     let tmp = temp_path(path)?;
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("cannot create {}", parent.display()))?;
     }
     let result = write(&tmp).and_then(|()| {
-        File::open(&tmp).and_then(|f| f.sync_all()).with_context(|| format!("syncing {}", tmp.display()))?;
-        std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
+        File::open(&tmp)
+            .and_then(|f| f.sync_all())
+            .with_context(|| format!("syncing {}", tmp.display()))?;
+        std::fs::rename(&tmp, path)
+            .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
     });
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
@@ -72,12 +81,26 @@ fn probe_writable(dir: &Path) -> anyhow::Result<()> {
 fn check_parent(path: &Path, option: &str) -> anyhow::Result<()> {
     let mut ancestor = path.parent();
     while let Some(dir) = ancestor {
-        let dir = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
+        let dir = if dir.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            dir
+        };
         if dir.exists() {
             if !dir.is_dir() {
-                bail!("{option} {}: {} is not a directory", path.display(), dir.display());
+                bail!(
+                    "{option} {}: {} is not a directory",
+                    path.display(),
+                    dir.display()
+                );
             }
-            return probe_writable(dir).with_context(|| format!("{option} {}: directory {} is not writable", path.display(), dir.display()));
+            return probe_writable(dir).with_context(|| {
+                format!(
+                    "{option} {}: directory {} is not writable",
+                    path.display(),
+                    dir.display()
+                )
+            });
         }
         ancestor = dir.parent();
     }
@@ -87,34 +110,66 @@ fn check_parent(path: &Path, option: &str) -> anyhow::Result<()> {
 /// Checks an output file before any work: not one of `inputs` (never, even with `force`), not
 /// an existing file unless `force`, not a directory, and in a directory that exists or can be
 /// created. `option` names the flag in the error (e.g. `--json`).
-pub fn check_output_file(path: &Path, option: &str, force: bool, inputs: &[&Path]) -> anyhow::Result<()> {
+pub fn check_output_file(
+    path: &Path,
+    option: &str,
+    force: bool,
+    inputs: &[&Path],
+) -> anyhow::Result<()> {
     if let Some(input) = inputs.iter().find(|i| same_file(path, i)) {
         bail!("{option} {}: this is the input {}; refusing to overwrite an input (choose another path)", path.display(), input.display());
     }
     if path.is_dir() {
-        bail!("{option} {}: is a directory, expected a file path", path.display());
+        bail!(
+            "{option} {}: is a directory, expected a file path",
+            path.display()
+        );
     }
     if path.exists() && !force {
-        bail!("{option} {}: the file exists; pass --force to replace it", path.display());
+        bail!(
+            "{option} {}: the file exists; pass --force to replace it",
+            path.display()
+        );
     }
     check_parent(path, option)
 }
 
 /// Checks an output directory before any work: not one of `inputs` and not containing one, not
 /// a file, empty or missing unless `force`, and creatable.
-pub fn check_output_dir(dir: &Path, option: &str, force: bool, inputs: &[&Path]) -> anyhow::Result<()> {
-    if let Some(input) = inputs.iter().find(|i| same_file(dir, i) || i.canonicalize().ok().zip(dir.canonicalize().ok()).is_some_and(|(i, d)| i.starts_with(d))) {
+pub fn check_output_dir(
+    dir: &Path,
+    option: &str,
+    force: bool,
+    inputs: &[&Path],
+) -> anyhow::Result<()> {
+    if let Some(input) = inputs.iter().find(|i| {
+        same_file(dir, i)
+            || i.canonicalize()
+                .ok()
+                .zip(dir.canonicalize().ok())
+                .is_some_and(|(i, d)| i.starts_with(d))
+    }) {
         bail!("{option} {}: holds the input {}; refusing to write over an input (choose another directory)", dir.display(), input.display());
     }
     if dir.exists() {
         if !dir.is_dir() {
-            bail!("{option} {}: is a file, expected a directory", dir.display());
+            bail!(
+                "{option} {}: is a file, expected a directory",
+                dir.display()
+            );
         }
-        let non_empty = std::fs::read_dir(dir).with_context(|| format!("{option} {}: cannot list it", dir.display()))?.next().is_some();
+        let non_empty = std::fs::read_dir(dir)
+            .with_context(|| format!("{option} {}: cannot list it", dir.display()))?
+            .next()
+            .is_some();
         if non_empty && !force {
-            bail!("{option} {}: the directory is not empty; pass --force to write into it", dir.display());
+            bail!(
+                "{option} {}: the directory is not empty; pass --force to write into it",
+                dir.display()
+            );
         }
-        return probe_writable(dir).with_context(|| format!("{option} {}: the directory is not writable", dir.display()));
+        return probe_writable(dir)
+            .with_context(|| format!("{option} {}: the directory is not writable", dir.display()));
     }
     check_parent(dir, option)
 }
@@ -135,7 +190,11 @@ mod tests {
         });
         assert!(err.is_err());
         assert_eq!(std::fs::read(&path).unwrap(), b"old");
-        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1, "temporary file left behind");
+        assert_eq!(
+            std::fs::read_dir(&dir).unwrap().count(),
+            1,
+            "temporary file left behind"
+        );
         assert!(check_output_file(&path, "--out", false, &[]).is_err());
         assert!(check_output_file(&path, "--out", true, &[]).is_ok());
         assert!(check_output_file(&path, "--out", true, &[&path]).is_err());

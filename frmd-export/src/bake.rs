@@ -411,7 +411,9 @@ pub fn module_source(policy: &QuantizedPolicy) -> io::Result<String> {
 pub fn write_module(policy: &QuantizedPolicy, dir: &Path) -> io::Result<()> {
     let source = module_source(policy)?;
     std::fs::create_dir_all(dir)?;
-    crate::artifact::write_atomic(&dir.join(MODULE_FILE), source.as_bytes()).map_err(|e| io::Error::other(format!("{e:#}")))?;
-    crate::artifact::write_atomic(&dir.join(WEIGHTS_FILE), &weight_file(policy)).map_err(|e| io::Error::other(format!("{e:#}")))?;
+    crate::artifact::write_atomic(&dir.join(MODULE_FILE), source.as_bytes())
+        .map_err(|e| io::Error::other(format!("{e:#}")))?;
+    crate::artifact::write_atomic(&dir.join(WEIGHTS_FILE), &weight_file(policy))
+        .map_err(|e| io::Error::other(format!("{e:#}")))?;
     Ok(())
 }

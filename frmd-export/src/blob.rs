@@ -24,7 +24,10 @@ pub fn write(policy: &QuantizedPolicy) -> Result<Vec<u8>, BlobError> {
 /// Writes `model` with normalization `norm` as a transformer blob. Fails with a named error if
 /// a size does not fit the format (more than [`frmd_core::blob::transformer::MAX_BLOCKS`]
 /// blocks, sizes beyond u32); the loader checks every shape.
-pub fn write_transformer(model: &QuantizedTransformer, norm: &Normalization) -> Result<Vec<u8>, BlobError> {
+pub fn write_transformer(
+    model: &QuantizedTransformer,
+    norm: &Normalization,
+) -> Result<Vec<u8>, BlobError> {
     let blocks = model.int8_blocks();
     let noise_tokens = model.folded.flat_noise_tokens();
     let parts = TransformerBlobParts {

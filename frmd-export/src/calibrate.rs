@@ -17,9 +17,12 @@ use crate::{QuantizedLayer, QuantizedOutput, QuantizedPolicy};
 use anyhow::{bail, Context};
 use frmd_core::blob::LUT_LEN;
 use frmd_core::kernels::Lut8;
-use frmd_core::model::mlp::Probe;
 use frmd_core::model::mlp::InputPrecision;
-use frmd_core::quant::{fold_input_zero_point, quantize_bias, quantize_weights_per_channel, requantization_multiplier, wide_scale, wide_zero_point, QuantParams, FINE_INPUT_BITS};
+use frmd_core::model::mlp::Probe;
+use frmd_core::quant::{
+    fold_input_zero_point, quantize_bias, quantize_weights_per_channel, requantization_multiplier,
+    wide_scale, wide_zero_point, QuantParams, FINE_INPUT_BITS,
+};
 use frmd_core::rng::Rng;
 
 /// How activation ranges are chosen from the calibration values.
@@ -40,7 +43,11 @@ impl std::str::FromStr for RangeMethod {
         let p: f64 = text
             .strip_prefix("percentile:")
             .and_then(|p| p.parse().ok())
-            .with_context(|| format!("calibration `{text}`: expected minmax or percentile:P (e.g. percentile:99.9)"))?;
+            .with_context(|| {
+                format!(
+                    "calibration `{text}`: expected minmax or percentile:P (e.g. percentile:99.9)"
+                )
+            })?;
         if !(p > 50.0 && p <= 100.0) {
             bail!("calibration percentile {p} must lie in (50, 100]");
         }
@@ -90,12 +97,19 @@ pub(crate) struct Recorder {
 }
 
 impl Recorder {
-    pub(crate) fn params(&mut self, method: RangeMethod, what: &str) -> anyhow::Result<QuantParams> {
+    pub(crate) fn params(
+        &mut self,
+        method: RangeMethod,
+        what: &str,
+    ) -> anyhow::Result<QuantParams> {
         if self.values.is_empty() {
             bail!("calibration recorded no values for {what}");
         }
         let (lo, hi) = match method {
-            RangeMethod::MinMax => self.values.iter().fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v))),
+            RangeMethod::MinMax => self
+                .values
+                .iter()
+                .fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v))),
             RangeMethod::Percentile(p) => {
                 self.values.sort_by(f32::total_cmp);
                 let last = self.values.len() - 1;
@@ -103,7 +117,8 @@ impl Recorder {
                 (at(100.0 - p), at(p))
             }
         };
-        QuantParams::from_range(lo, hi).map_err(|e| anyhow::anyhow!("{what}: range [{lo}, {hi}]: {e:?}"))
+        QuantParams::from_range(lo, hi)
+            .map_err(|e| anyhow::anyhow!("{what}: range [{lo}, {hi}]: {e:?}"))
     }
 }
 
@@ -123,16 +138,26 @@ pub fn widen(params: QuantParams, factor: f32) -> anyhow::Result<QuantParams> {
     if !(factor.is_finite() && factor >= 1.0) {
         bail!("range widening factor {factor} must be finite and at least 1");
     }
-    let (lo, hi) = (params.dequantize(i8::MIN) * factor, params.dequantize(i8::MAX) * factor);
+    let (lo, hi) = (
+        params.dequantize(i8::MIN) * factor,
+        params.dequantize(i8::MAX) * factor,
+    );
     QuantParams::from_range(lo, hi).map_err(|e| anyhow::anyhow!("range [{lo}, {hi}]: {e:?}"))
 }
 
 /// Runs the f32 sampler over `set` and derives the activation parameters.
-pub fn calibrate(model: &FoldedMlp, set: &CalibrationSet, method: RangeMethod) -> anyhow::Result<Ranges> {
+pub fn calibrate(
+    model: &FoldedMlp,
+    set: &CalibrationSet,
+    method: RangeMethod,
+) -> anyhow::Result<Ranges> {
     let c = &model.config;
     let cond_dim = c.cond_dim();
     if set.cond_dim != cond_dim {
-        bail!("calibration rows have {} values, the model's condition has {cond_dim}", set.cond_dim);
+        bail!(
+            "calibration rows have {} values, the model's condition has {cond_dim}",
+            set.cond_dim
+        );
     }
     if set.rows() == 0 {
         bail!("the calibration set is empty");
@@ -156,9 +181,18 @@ pub fn calibrate(model: &FoldedMlp, set: &CalibrationSet, method: RangeMethod) -
         .iter_mut()
         .zip(out.iter_mut())
         .enumerate()
-        .map(|(l, (p, o))| Ok((p.params(method, &format!("layer {l} pre-activation"))?, o.params(method, &format!("layer {l} output"))?)))
+        .map(|(l, (p, o))| {
+            Ok((
+                p.params(method, &format!("layer {l} pre-activation"))?,
+                o.params(method, &format!("layer {l} output"))?,
+            ))
+        })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    Ok(Ranges { input, hidden, rows: set.rows() })
+    Ok(Ranges {
+        input,
+        hidden,
+        rows: set.rows(),
+    })
 }
 
 /// Gains that bring the trajectory and rate input segments to the absolute range of the
@@ -169,7 +203,10 @@ pub fn input_gains(model: &FoldedMlp, set: &CalibrationSet) -> anyhow::Result<In
     let (obs_len, k) = (c.history * c.obs_dim, c.action_dim);
     let (mut fixed, mut rate, mut traj) = (1f32, 0f32, 0f32);
     for row in 0..set.rows() {
-        let cond = set.cond.get(row * set.cond_dim..(row + 1) * set.cond_dim).context("calibration row")?;
+        let cond = set
+            .cond
+            .get(row * set.cond_dim..(row + 1) * set.cond_dim)
+            .context("calibration row")?;
         let noise = set.noise(row, model.steps.len(), c.traj_dim());
         model.sample(cond, &noise, |_, probe, values| {
             if probe == Probe::Input {
@@ -187,7 +224,10 @@ pub fn input_gains(model: &FoldedMlp, set: &CalibrationSet) -> anyhow::Result<In
         })?;
     }
     let gain = |range: f32| if range > 0.0 { fixed / range } else { 1.0 };
-    Ok(InputGains { traj_gain: gain(traj), rate_gain: gain(rate) })
+    Ok(InputGains {
+        traj_gain: gain(traj),
+        rate_gain: gain(rate),
+    })
 }
 
 pub(crate) struct QuantizedWeights {
@@ -199,17 +239,33 @@ pub(crate) fn quantize_weights(layer: &FloatLayer) -> anyhow::Result<QuantizedWe
     let mut weights = vec![0i8; layer.weights.len()];
     let mut scales = vec![0f32; layer.out_features];
     quantize_weights_per_channel(&layer.weights, layer.in_features, &mut weights, &mut scales)
-        .map_err(|e| anyhow::anyhow!("weights [{} x {}]: {e:?}", layer.out_features, layer.in_features))?;
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "weights [{} x {}]: {e:?}",
+                layer.out_features,
+                layer.in_features
+            )
+        })?;
     Ok(QuantizedWeights { weights, scales })
 }
 
-pub(crate) fn int_bias(bias: &[f32], q: &QuantizedWeights, input: QuantParams, in_features: usize) -> anyhow::Result<Vec<i32>> {
+pub(crate) fn int_bias(
+    bias: &[f32],
+    q: &QuantizedWeights,
+    input: QuantParams,
+    in_features: usize,
+) -> anyhow::Result<Vec<i32>> {
     bias.iter()
         .enumerate()
         .map(|(o, &b)| {
-            let b = quantize_bias(b, input.scale, q.scales[o]).map_err(|e| anyhow::anyhow!("bias {o}: {e:?}"))?;
-            fold_input_zero_point(b, &q.weights[o * in_features..(o + 1) * in_features], input.zero_point)
-                .map_err(|e| anyhow::anyhow!("bias {o} with zero point: {e:?}"))
+            let b = quantize_bias(b, input.scale, q.scales[o])
+                .map_err(|e| anyhow::anyhow!("bias {o}: {e:?}"))?;
+            fold_input_zero_point(
+                b,
+                &q.weights[o * in_features..(o + 1) * in_features],
+                input.zero_point,
+            )
+            .map_err(|e| anyhow::anyhow!("bias {o} with zero point: {e:?}"))
         })
         .collect()
 }
@@ -220,7 +276,13 @@ pub(crate) fn int_bias(bias: &[f32], q: &QuantizedWeights, input: QuantParams, i
 fn check_two_plane_range(weights: &[i8], in_features: usize, biases: &[i32]) -> anyhow::Result<()> {
     for (o, row) in weights.chunks_exact(in_features).enumerate() {
         let weight_sum: i64 = row.iter().map(|w| i64::from(*w).abs()).sum();
-        let bias = biases.iter().skip(o).step_by(weights.len() / in_features).map(|b| i64::from(*b).abs()).max().unwrap_or(0);
+        let bias = biases
+            .iter()
+            .skip(o)
+            .step_by(weights.len() / in_features)
+            .map(|b| i64::from(*b).abs())
+            .max()
+            .unwrap_or(0);
         let bound = ((bias + 128 * weight_sum) << FINE_INPUT_BITS) + 128 * weight_sum;
         if bound > i64::from(i32::MAX) {
             bail!("first layer channel {o}: two-plane input accumulators could reach {bound} and saturate i32 (export with plain int8 input)");
@@ -234,7 +296,13 @@ fn check_two_plane_range(weights: &[i8], in_features: usize, biases: &[i32]) -> 
 fn check_int16_range(weights: &[i8], in_features: usize, biases: &[i32]) -> anyhow::Result<()> {
     for (o, row) in weights.chunks_exact(in_features).enumerate() {
         let weight_sum: i64 = row.iter().map(|w| i64::from(*w).abs()).sum();
-        let bias = biases.iter().skip(o).step_by(weights.len() / in_features).map(|b| i64::from(*b).abs()).max().unwrap_or(0);
+        let bias = biases
+            .iter()
+            .skip(o)
+            .step_by(weights.len() / in_features)
+            .map(|b| i64::from(*b).abs())
+            .max()
+            .unwrap_or(0);
         let bound = bias + (weight_sum << 15);
         if bound > i64::from(i32::MAX) {
             bail!("first layer channel {o}: 16-bit input accumulators could reach {bound} and wrap i32 (export with int8 input)");
@@ -245,7 +313,12 @@ fn check_int16_range(weights: &[i8], in_features: usize, biases: &[i32]) -> anyh
 
 /// Quantizes `model` with the calibrated `ranges`, normalization and ProDMP tables into a
 /// [`QuantizedPolicy`] whose first layer takes its input as `input_precision` says.
-pub fn quantize(model: &FoldedMlp, ranges: &Ranges, norm: &crate::checkpoint::Normalization, input_precision: InputPrecision) -> anyhow::Result<QuantizedPolicy> {
+pub fn quantize(
+    model: &FoldedMlp,
+    ranges: &Ranges,
+    norm: &crate::checkpoint::Normalization,
+    input_precision: InputPrecision,
+) -> anyhow::Result<QuantizedPolicy> {
     let c = &model.config;
     let mut current = ranges.input;
     let mut hidden = Vec::new();
@@ -255,15 +328,22 @@ pub fn quantize(model: &FoldedMlp, ranges: &Ranges, norm: &crate::checkpoint::No
         let q = quantize_weights(layer).with_context(|| format!("hidden layer {l}"))?;
         // The 16-bit input's codes are on the fine grid: so are the first layer's biases.
         let bias_input = match (l, input_precision) {
-            (0, InputPrecision::Int16) => QuantParams { scale: wide_scale(current), zero_point: wide_zero_point(current) },
+            (0, InputPrecision::Int16) => QuantParams {
+                scale: wide_scale(current),
+                zero_point: wide_zero_point(current),
+            },
             _ => current,
         };
-        let bias = int_bias(&layer.bias, &q, bias_input, layer.in_features).with_context(|| format!("hidden layer {l}"))?;
+        let bias = int_bias(&layer.bias, &q, bias_input, layer.in_features)
+            .with_context(|| format!("hidden layer {l}"))?;
         // The scale of the accumulators this layer requantizes.
         let mut accumulator_input_scale = bias_input.scale;
         if l == 0 {
             for variant in &model.first_layer_biases {
-                first_layer_biases.extend(int_bias(variant, &q, bias_input, layer.in_features).context("first-layer bias variant")?);
+                first_layer_biases.extend(
+                    int_bias(variant, &q, bias_input, layer.in_features)
+                        .context("first-layer bias variant")?,
+                );
             }
             if input_precision == InputPrecision::Int16 {
                 check_int16_range(&q.weights, layer.in_features, &first_layer_biases)?;
@@ -278,12 +358,17 @@ pub fn quantize(model: &FoldedMlp, ranges: &Ranges, norm: &crate::checkpoint::No
         let (mut multipliers, mut shifts) = (Vec::new(), Vec::new());
         for (o, scale) in q.scales.iter().enumerate() {
             let (m, s) = requantization_multiplier(accumulator_input_scale, *scale, pre.scale)
-                .map_err(|e| anyhow::anyhow!("hidden layer {l} channel {o}: requantization multiplier: {e:?}"))?;
+                .map_err(|e| {
+                    anyhow::anyhow!(
+                        "hidden layer {l} channel {o}: requantization multiplier: {e:?}"
+                    )
+                })?;
             multipliers.push(m);
             shifts.push(s);
         }
         let activation = layer.activation;
-        let lut = Lut8::build(|x| activation.apply(x), pre, out).map_err(|e| anyhow::anyhow!("hidden layer {l}: activation table: {e:?}"))?;
+        let lut = Lut8::build(|x| activation.apply(x), pre, out)
+            .map_err(|e| anyhow::anyhow!("hidden layer {l}: activation table: {e:?}"))?;
         let mut table = [0i8; LUT_LEN];
         for (i, slot) in table.iter_mut().enumerate() {
             *slot = lut.lookup((i as i32 - 128) as i8);
@@ -304,7 +389,8 @@ pub fn quantize(model: &FoldedMlp, ranges: &Ranges, norm: &crate::checkpoint::No
         current = out;
     }
     let q = quantize_weights(&model.output).context("output layer")?;
-    let bias = int_bias(&model.output.bias, &q, current, model.output.in_features).context("output layer")?;
+    let bias = int_bias(&model.output.bias, &q, current, model.output.in_features)
+        .context("output layer")?;
     let output = QuantizedOutput {
         in_features: model.output.in_features,
         out_features: model.output.out_features,
@@ -321,7 +407,11 @@ pub fn quantize(model: &FoldedMlp, ranges: &Ranges, norm: &crate::checkpoint::No
         control_dt: c.control_dt as f32,
         layout: model.layout,
         input: ranges.input,
-        input_precision: if model.hidden.is_empty() { InputPrecision::Int8 } else { input_precision },
+        input_precision: if model.hidden.is_empty() {
+            InputPrecision::Int8
+        } else {
+            input_precision
+        },
         obs_min: norm.obs.min.clone(),
         obs_max: norm.obs.max.clone(),
         action_min: norm.action.min.clone(),

@@ -10,34 +10,63 @@ use std::path::Path;
 pub fn write(path: &Path, set: &CalibrationSet) -> anyhow::Result<()> {
     let rows = set.rows();
     if rows * set.cond_dim != set.cond.len() || rows == 0 {
-        bail!("calibration set: {} values are not whole rows of {}", set.cond.len(), set.cond_dim);
+        bail!(
+            "calibration set: {} values are not whole rows of {}",
+            set.cond.len(),
+            set.cond_dim
+        );
     }
     let bytes: Vec<u8> = set.cond.iter().flat_map(|v| v.to_le_bytes()).collect();
-    let view = safetensors::tensor::TensorView::new(safetensors::Dtype::F32, vec![rows, set.cond_dim], &bytes)
-        .map_err(|e| anyhow::anyhow!("calibration tensor: {e}"))?;
+    let view = safetensors::tensor::TensorView::new(
+        safetensors::Dtype::F32,
+        vec![rows, set.cond_dim],
+        &bytes,
+    )
+    .map_err(|e| anyhow::anyhow!("calibration tensor: {e}"))?;
     let meta = BTreeMap::from([("seed".to_string(), set.seed.to_string())]);
-    let data = crate::safetensors_bytes::serialize([("cond", view)], &meta).context("serializing calibration")?;
+    let data = crate::safetensors_bytes::serialize([("cond", view)], &meta)
+        .context("serializing calibration")?;
     crate::artifact::write_atomic(path, &data)
 }
 
 /// Reads a calibration file, checking its row width against `cond_dim`.
 pub fn read(path: &Path, cond_dim: usize) -> anyhow::Result<CalibrationSet> {
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     let seed = meta
         .metadata()
         .as_ref()
         .and_then(|m| m.get("seed"))
         .and_then(|s| s.parse().ok())
         .with_context(|| format!("{}: missing or bad metadata `seed`", path.display()))?;
-    let file = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-    let view = file.tensor("cond").map_err(|e| anyhow::anyhow!("{}: tensor `cond`: {e}", path.display()))?;
-    if view.dtype() != safetensors::Dtype::F32 || view.shape().len() != 2 || view.shape()[1] != cond_dim {
-        bail!("{}: tensor `cond` is {:?} {:?}, expected F32 [rows, {cond_dim}]", path.display(), view.dtype(), view.shape());
+    let file = safetensors::SafeTensors::deserialize(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let view = file
+        .tensor("cond")
+        .map_err(|e| anyhow::anyhow!("{}: tensor `cond`: {e}", path.display()))?;
+    if view.dtype() != safetensors::Dtype::F32
+        || view.shape().len() != 2
+        || view.shape()[1] != cond_dim
+    {
+        bail!(
+            "{}: tensor `cond` is {:?} {:?}, expected F32 [rows, {cond_dim}]",
+            path.display(),
+            view.dtype(),
+            view.shape()
+        );
     }
-    let cond: Vec<f32> = view.data().chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+    let cond: Vec<f32> = view
+        .data()
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
     if cond.iter().any(|v| !v.is_finite()) {
         bail!("{}: non-finite calibration value", path.display());
     }
-    Ok(CalibrationSet { cond_dim, cond, seed })
+    Ok(CalibrationSet {
+        cond_dim,
+        cond,
+        seed,
+    })
 }

@@ -9,7 +9,9 @@
 //!   block `transformer.blocks.{i}.{norm1,qkv,proj,norm2,fc1,fc2}.{weight,bias}`.
 mod config;
 
-pub use config::{Activation, BackboneConfig, HeadConfig, ModelConfig, Normalization, Normalizer, ProDmpOutput};
+pub use config::{
+    Activation, BackboneConfig, HeadConfig, ModelConfig, Normalization, Normalizer, ProDmpOutput,
+};
 
 use anyhow::{bail, Context};
 use frmd_core::prodmp::ProDmpConfig;
@@ -81,11 +83,18 @@ pub fn fnv1a_hex(bytes: &[u8]) -> String {
 /// frmd-host's candle models; a frmd-host test checks it against their `VarMap`).
 pub fn expected_tensors(model: &ModelConfig) -> Vec<TensorSpec> {
     let mut specs = Vec::new();
-    let mut push = |name: String, shape: Vec<usize>| specs.push(TensorSpec { name, dtype: "F32".into(), shape });
-    let linear = |push: &mut dyn FnMut(String, Vec<usize>), prefix: &str, input: usize, output: usize| {
-        push(format!("{prefix}.weight"), vec![output, input]);
-        push(format!("{prefix}.bias"), vec![output]);
+    let mut push = |name: String, shape: Vec<usize>| {
+        specs.push(TensorSpec {
+            name,
+            dtype: "F32".into(),
+            shape,
+        })
     };
+    let linear =
+        |push: &mut dyn FnMut(String, Vec<usize>), prefix: &str, input: usize, output: usize| {
+            push(format!("{prefix}.weight"), vec![output, input]);
+            push(format!("{prefix}.bias"), vec![output]);
+        };
     match &model.backbone {
         BackboneConfig::Mlp { hidden, .. } => {
             let mut width = model.cond_dim() + model.traj_dim() + model.embed_dim;
@@ -100,7 +109,12 @@ pub fn expected_tensors(model: &ModelConfig) -> Vec<TensorSpec> {
             linear(&mut push, "transformer.traj_in", model.action_dim, w);
             linear(&mut push, "transformer.cond_in", model.cond_dim(), w);
             linear(&mut push, "transformer.noise_in", model.embed_dim, w);
-            linear(&mut push, "transformer.head", tokens * w, model.output_dim());
+            linear(
+                &mut push,
+                "transformer.head",
+                tokens * w,
+                model.output_dim(),
+            );
             push("transformer.pos_embedding".into(), vec![tokens, w]);
             push("transformer.final_norm.weight".into(), vec![w]);
             push("transformer.final_norm.bias".into(), vec![w]);
@@ -140,9 +154,14 @@ impl CheckpointMeta {
     /// Checks the config's internal consistency (version, sizes, ProDMP, sigma, tensor list).
     pub fn validate(&self) -> anyhow::Result<()> {
         if self.format_version != FORMAT_VERSION {
-            bail!("{CONFIG_FILE}: format_version {} is not supported (expected {FORMAT_VERSION})", self.format_version);
+            bail!(
+                "{CONFIG_FILE}: format_version {} is not supported (expected {FORMAT_VERSION})",
+                self.format_version
+            );
         }
-        self.model.validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: model.{e}"))?;
+        self.model
+            .validate()
+            .map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: model.{e}"))?;
         validate_sigma(&self.sigma)?;
         let expected_prodmp = self.model.prodmp();
         let same = match (&self.prodmp, &expected_prodmp) {
@@ -150,25 +169,52 @@ impl CheckpointMeta {
             (a, b) => a == b,
         };
         if !same {
-            bail!("{CONFIG_FILE}: {}", first_difference("prodmp", &self.prodmp, &expected_prodmp));
+            bail!(
+                "{CONFIG_FILE}: {}",
+                first_difference("prodmp", &self.prodmp, &expected_prodmp)
+            );
         }
         if let Some(norm) = &self.normalization {
-            norm.validate(self.model.obs_dim, self.model.action_dim).map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: {e}"))?;
+            norm.validate(self.model.obs_dim, self.model.action_dim)
+                .map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: {e}"))?;
         }
         match (self.role, self.prodmp.is_some()) {
             (Role::Dp, true) => bail!("{CONFIG_FILE}: a DP checkpoint must have a raw head"),
-            (Role::Teacher | Role::Student, false) => bail!("{CONFIG_FILE}: teacher and student checkpoints need a ProDMP head"),
+            (Role::Teacher | Role::Student, false) => {
+                bail!("{CONFIG_FILE}: teacher and student checkpoints need a ProDMP head")
+            }
             _ => {}
         }
         let expected = expected_tensors(&self.model);
         if self.tensors != expected {
             let listed = |t: &TensorSpec| format!("`{}` {} {:?}", t.name, t.dtype, t.shape);
-            let detail = match self.tensors.iter().zip(&expected).enumerate().find(|(_, (a, b))| a != b) {
-                Some((i, (have, want))) => format!("tensors[{i}] is {}, the model config implies {}", listed(have), listed(want)),
-                None if self.tensors.len() > expected.len() => format!("tensors[{}] {} is not implied by the model config", expected.len(), listed(&self.tensors[expected.len()])),
-                None => format!("tensor {} implied by the model config is not listed", listed(&expected[self.tensors.len()])),
+            let detail = match self
+                .tensors
+                .iter()
+                .zip(&expected)
+                .enumerate()
+                .find(|(_, (a, b))| a != b)
+            {
+                Some((i, (have, want))) => format!(
+                    "tensors[{i}] is {}, the model config implies {}",
+                    listed(have),
+                    listed(want)
+                ),
+                None if self.tensors.len() > expected.len() => format!(
+                    "tensors[{}] {} is not implied by the model config",
+                    expected.len(),
+                    listed(&self.tensors[expected.len()])
+                ),
+                None => format!(
+                    "tensor {} implied by the model config is not listed",
+                    listed(&expected[self.tensors.len()])
+                ),
             };
-            bail!("{CONFIG_FILE}: {detail} ({} listed, {} implied)", self.tensors.len(), expected.len());
+            bail!(
+                "{CONFIG_FILE}: {detail} ({} listed, {} implied)",
+                self.tensors.len(),
+                expected.len()
+            );
         }
         Ok(())
     }
@@ -183,7 +229,8 @@ impl CheckpointMeta {
     /// Parses and validates the bytes of a `frmd.json` (what [`Self::read`] does after reading
     /// the file; the entry point of the checkpoint-config fuzz target).
     pub fn from_json(bytes: &[u8]) -> anyhow::Result<Self> {
-        let meta: CheckpointMeta = serde_json::from_slice(bytes).map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: {e}"))?;
+        let meta: CheckpointMeta =
+            serde_json::from_slice(bytes).map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: {e}"))?;
         meta.validate()?;
         Ok(meta)
     }
@@ -195,13 +242,21 @@ pub const MAX_SIGMA: f64 = 1e4;
 
 /// The sigma config field by field: finite, positive, `sigma_min < sigma_max <= MAX_SIGMA`.
 fn validate_sigma(s: &SigmaConfig) -> anyhow::Result<()> {
-    for (field, value) in [("sigma_min", s.sigma_min), ("sigma_max", s.sigma_max), ("rho", s.rho), ("sigma_data", s.sigma_data)] {
+    for (field, value) in [
+        ("sigma_min", s.sigma_min),
+        ("sigma_max", s.sigma_max),
+        ("rho", s.rho),
+        ("sigma_data", s.sigma_data),
+    ] {
         if !(value.is_finite() && value > 0.0) {
             bail!("{CONFIG_FILE}: sigma.{field} is {value}, expected a finite number > 0");
         }
     }
     if s.sigma_max > MAX_SIGMA {
-        bail!("{CONFIG_FILE}: sigma.sigma_max is {}, expected at most {MAX_SIGMA}", s.sigma_max);
+        bail!(
+            "{CONFIG_FILE}: sigma.sigma_max is {}, expected at most {MAX_SIGMA}",
+            s.sigma_max
+        );
     }
     if s.sigma_min >= s.sigma_max {
         bail!("{CONFIG_FILE}: sigma.sigma_min {} is not below sigma.sigma_max {}, expected sigma_min < sigma_max", s.sigma_min, s.sigma_max);
@@ -211,7 +266,8 @@ fn validate_sigma(s: &SigmaConfig) -> anyhow::Result<()> {
             bail!("{CONFIG_FILE}: sigma.{field} is {value}, expected at most {MAX_SIGMA}");
         }
     }
-    s.validate().map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))
+    s.validate()
+        .map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))
 }
 
 /// The first field in which `have` and `want` differ, as `path.field is X, expected Y`.
@@ -219,16 +275,28 @@ fn first_difference<T: Serialize>(path: &str, have: &T, want: &T) -> String {
     fn walk(path: String, have: &serde_json::Value, want: &serde_json::Value) -> Option<String> {
         use serde_json::Value;
         match (have, want) {
-            (Value::Object(a), Value::Object(b)) => {
-                b.iter().find_map(|(k, w)| walk(format!("{path}.{k}"), a.get(k).unwrap_or(&Value::Null), w))
+            (Value::Object(a), Value::Object(b)) => b.iter().find_map(|(k, w)| {
+                walk(format!("{path}.{k}"), a.get(k).unwrap_or(&Value::Null), w)
+            }),
+            (Value::Number(a), Value::Number(b))
+                if a.as_f64().zip(b.as_f64()).is_some_and(|(x, y)| {
+                    x == y || (x - y).abs() <= 1e-12 * x.abs().max(y.abs())
+                }) =>
+            {
+                None
             }
-            (Value::Number(a), Value::Number(b)) if a.as_f64().zip(b.as_f64()).is_some_and(|(x, y)| x == y || (x - y).abs() <= 1e-12 * x.abs().max(y.abs())) => None,
-            (a, b) if a != b => Some(format!("{path} is {a}, expected {b} (implied by the model config)")),
+            (a, b) if a != b => Some(format!(
+                "{path} is {a}, expected {b} (implied by the model config)"
+            )),
             _ => None,
         }
     }
-    let (have, want) = (serde_json::to_value(have).unwrap_or_default(), serde_json::to_value(want).unwrap_or_default());
-    walk(path.to_string(), &have, &want).unwrap_or_else(|| format!("{path} differs from the config the model implies"))
+    let (have, want) = (
+        serde_json::to_value(have).unwrap_or_default(),
+        serde_json::to_value(want).unwrap_or_default(),
+    );
+    walk(path.to_string(), &have, &want)
+        .unwrap_or_else(|| format!("{path} differs from the config the model implies"))
 }
 
 /// Equal up to the last bits of the f64 fields: serde_json's default parser may read a written
@@ -236,8 +304,27 @@ fn first_difference<T: Serialize>(path: &str, have: &T, want: &T) -> String {
 /// recorded ProDMP config is compared with the recomputed one at a relative 1e-12.
 pub fn prodmp_matches(a: &ProDmpConfig, b: &ProDmpConfig) -> bool {
     let close = |x: f64, y: f64| x == y || (x - y).abs() <= 1e-12 * x.abs().max(y.abs());
-    let floats = |p: &ProDmpConfig| [p.tau, p.delay, p.alpha, p.alpha_phase, p.bandwidth_factor, p.dt, p.weights_scale, p.goal_scale];
-    let exact = |p: &ProDmpConfig| (p.num_dof, p.num_basis, p.num_basis_outside, p.relative_goal, p.auto_scale_basis);
+    let floats = |p: &ProDmpConfig| {
+        [
+            p.tau,
+            p.delay,
+            p.alpha,
+            p.alpha_phase,
+            p.bandwidth_factor,
+            p.dt,
+            p.weights_scale,
+            p.goal_scale,
+        ]
+    };
+    let exact = |p: &ProDmpConfig| {
+        (
+            p.num_dof,
+            p.num_basis,
+            p.num_basis_outside,
+            p.relative_goal,
+            p.auto_scale_basis,
+        )
+    };
     exact(a) == exact(b) && floats(a).iter().zip(floats(b)).all(|(&x, y)| close(x, y))
 }
 
@@ -251,7 +338,10 @@ pub struct F32Tensor {
 
 /// Reads `dir/model.safetensors`, checking that it holds exactly the tensors `meta` lists, each
 /// F32 with the listed shape and finite values.
-pub fn read_weights(dir: &Path, meta: &CheckpointMeta) -> anyhow::Result<BTreeMap<String, F32Tensor>> {
+pub fn read_weights(
+    dir: &Path,
+    meta: &CheckpointMeta,
+) -> anyhow::Result<BTreeMap<String, F32Tensor>> {
     let path = dir.join(WEIGHTS_FILE);
     let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
     let tensors = safetensors::SafeTensors::deserialize(&bytes)
@@ -259,20 +349,36 @@ pub fn read_weights(dir: &Path, meta: &CheckpointMeta) -> anyhow::Result<BTreeMa
     let mut present: Vec<String> = tensors.names().into_iter().map(|n| n.to_string()).collect();
     present.sort();
     let expected: Vec<&str> = meta.tensors.iter().map(|t| t.name.as_str()).collect();
-    let missing: Vec<&str> = expected.iter().copied().filter(|n| !present.iter().any(|p| p == n)).collect();
-    let unexpected: Vec<&String> = present.iter().filter(|p| !expected.contains(&p.as_str())).collect();
+    let missing: Vec<&str> = expected
+        .iter()
+        .copied()
+        .filter(|n| !present.iter().any(|p| p == n))
+        .collect();
+    let unexpected: Vec<&String> = present
+        .iter()
+        .filter(|p| !expected.contains(&p.as_str()))
+        .collect();
     if !missing.is_empty() || !unexpected.is_empty() {
         bail!("{WEIGHTS_FILE} does not match {CONFIG_FILE}: missing tensors {missing:?}, unexpected tensors {unexpected:?}");
     }
     let mut out = BTreeMap::new();
     for spec in &meta.tensors {
         let name = &spec.name;
-        let view = tensors.tensor(name).map_err(|e| anyhow::anyhow!("tensor `{name}`: {e}"))?;
+        let view = tensors
+            .tensor(name)
+            .map_err(|e| anyhow::anyhow!("tensor `{name}`: {e}"))?;
         if view.dtype() != safetensors::Dtype::F32 {
-            bail!("tensor `{name}`: dtype {:?} in {WEIGHTS_FILE}, F32 expected", view.dtype());
+            bail!(
+                "tensor `{name}`: dtype {:?} in {WEIGHTS_FILE}, F32 expected",
+                view.dtype()
+            );
         }
         if view.shape() != spec.shape.as_slice() {
-            bail!("tensor `{name}`: shape {:?} in {WEIGHTS_FILE}, {:?} expected from {CONFIG_FILE}", view.shape(), spec.shape);
+            bail!(
+                "tensor `{name}`: shape {:?} in {WEIGHTS_FILE}, {:?} expected from {CONFIG_FILE}",
+                view.shape(),
+                spec.shape
+            );
         }
         let values: Vec<f32> = view
             .data()
@@ -280,9 +386,18 @@ pub fn read_weights(dir: &Path, meta: &CheckpointMeta) -> anyhow::Result<BTreeMa
             .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
             .collect();
         if let Some(bad) = values.iter().position(|v| !v.is_finite()) {
-            bail!("tensor `{name}`: non-finite value {} at flat index {bad}", values[bad]);
+            bail!(
+                "tensor `{name}`: non-finite value {} at flat index {bad}",
+                values[bad]
+            );
         }
-        out.insert(name.clone(), F32Tensor { shape: spec.shape.clone(), values });
+        out.insert(
+            name.clone(),
+            F32Tensor {
+                shape: spec.shape.clone(),
+                values,
+            },
+        );
     }
     Ok(out)
 }

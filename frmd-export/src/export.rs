@@ -1,5 +1,7 @@
 //! Checkpoint directory -> [`QuantizedPolicy`] in one call (usable from a firmware build.rs).
-use crate::calibrate::{calibrate, input_gains, quantize, widen, CalibrationSet, RangeMethod, Ranges};
+use crate::calibrate::{
+    calibrate, input_gains, quantize, widen, CalibrationSet, RangeMethod, Ranges,
+};
 use crate::checkpoint::{Checkpoint, CALIBRATION_FILE};
 use crate::fold::FoldedMlp;
 use crate::transformer::{FoldedTransformer, QuantizedTransformer, TransformerRanges};
@@ -34,7 +36,13 @@ pub const DEFAULT_INPUT_HEADROOM: f32 = 8.0;
 
 impl Default for ExportOptions {
     fn default() -> Self {
-        ExportOptions { steps: 1, ranges: RangeMethod::MinMax, balance_inputs: true, input_precision: InputPrecision::Int16, input_headroom: DEFAULT_INPUT_HEADROOM }
+        ExportOptions {
+            steps: 1,
+            ranges: RangeMethod::MinMax,
+            balance_inputs: true,
+            input_precision: InputPrecision::Int16,
+            input_headroom: DEFAULT_INPUT_HEADROOM,
+        }
     }
 }
 
@@ -53,7 +61,11 @@ fn read_checkpoint(dir: &Path) -> anyhow::Result<Checkpoint> {
 
 /// The calibration rows of an export: `calibration`, else the checkpoint's own
 /// `dir/calibration.safetensors`.
-fn calibration_rows(dir: &Path, checkpoint: &Checkpoint, calibration: Option<CalibrationSet>) -> anyhow::Result<CalibrationSet> {
+fn calibration_rows(
+    dir: &Path,
+    checkpoint: &Checkpoint,
+    calibration: Option<CalibrationSet>,
+) -> anyhow::Result<CalibrationSet> {
     match calibration {
         Some(set) => Ok(set),
         None => crate::calibration_file::read(&dir.join(CALIBRATION_FILE), checkpoint.meta.model.cond_dim())
@@ -63,18 +75,36 @@ fn calibration_rows(dir: &Path, checkpoint: &Checkpoint, calibration: Option<Cal
 
 /// Reads `dir`, folds, calibrates on `calibration` (or `dir/calibration.safetensors` when
 /// `None`) and quantizes.
-pub fn export_checkpoint(dir: &Path, options: ExportOptions, calibration: Option<CalibrationSet>) -> anyhow::Result<Exported> {
+pub fn export_checkpoint(
+    dir: &Path,
+    options: ExportOptions,
+    calibration: Option<CalibrationSet>,
+) -> anyhow::Result<Exported> {
     let checkpoint = read_checkpoint(dir)?;
-    let folded = FoldedMlp::new(&checkpoint, options.steps).with_context(|| format!("cannot export {}", dir.display()))?;
-    let norm = checkpoint.meta.normalization.clone().with_context(|| format!("{}: checkpoint has no normalization", dir.display()))?;
+    let folded = FoldedMlp::new(&checkpoint, options.steps)
+        .with_context(|| format!("cannot export {}", dir.display()))?;
+    let norm = checkpoint
+        .meta
+        .normalization
+        .clone()
+        .with_context(|| format!("{}: checkpoint has no normalization", dir.display()))?;
     let set = calibration_rows(dir, &checkpoint, calibration)?;
-    let folded = if options.balance_inputs { folded.with_input_gains(input_gains(&folded, &set)?)? } else { folded };
+    let folded = if options.balance_inputs {
+        folded.with_input_gains(input_gains(&folded, &set)?)?
+    } else {
+        folded
+    };
     let mut ranges = calibrate(&folded, &set, options.ranges)?;
     if options.input_precision != InputPrecision::Int8 {
         ranges.input = widen(ranges.input, options.input_headroom).context("input headroom")?;
     }
     let policy = quantize(&folded, &ranges, &norm, options.input_precision)?;
-    Ok(Exported { checkpoint, folded, ranges, policy })
+    Ok(Exported {
+        checkpoint,
+        folded,
+        ranges,
+        policy,
+    })
 }
 
 /// Everything a transformer export produced.
@@ -90,11 +120,20 @@ pub struct ExportedTransformer {
 /// calibrates with the transformer probes on `calibration` (or `dir/calibration.safetensors`)
 /// and quantizes. `options.balance_inputs` and `options.input_precision` do not apply (each input
 /// layer has its own scale).
-pub fn export_transformer_checkpoint(dir: &Path, options: ExportOptions, calibration: Option<CalibrationSet>) -> anyhow::Result<ExportedTransformer> {
+pub fn export_transformer_checkpoint(
+    dir: &Path,
+    options: ExportOptions,
+    calibration: Option<CalibrationSet>,
+) -> anyhow::Result<ExportedTransformer> {
     let checkpoint = read_checkpoint(dir)?;
-    let folded = FoldedTransformer::new(&checkpoint, options.steps).with_context(|| format!("cannot export {}", dir.display()))?;
+    let folded = FoldedTransformer::new(&checkpoint, options.steps)
+        .with_context(|| format!("cannot export {}", dir.display()))?;
     let set = calibration_rows(dir, &checkpoint, calibration)?;
     let ranges = crate::transformer::calibrate(&folded, &set, options.ranges)?;
     let model = crate::transformer::quantize(&folded, &ranges)?;
-    Ok(ExportedTransformer { checkpoint, ranges, model })
+    Ok(ExportedTransformer {
+        checkpoint,
+        ranges,
+        model,
+    })
 }

@@ -23,7 +23,10 @@ use anyhow::{bail, Context};
 use frmd_core::kernels::Activation as KernelActivation;
 use frmd_core::model::linear::F32Linear;
 use frmd_core::model::mlp::{F32Mlp, F32Scratch, Probe};
-use frmd_core::policy::{skip_output, F32MlpNetwork, InputLayout, InputSegment, StepConstants, MAX_HIDDEN_LAYERS, MAX_STEPS};
+use frmd_core::policy::{
+    skip_output, F32MlpNetwork, InputLayout, InputSegment, StepConstants, MAX_HIDDEN_LAYERS,
+    MAX_STEPS,
+};
 use frmd_core::prodmp::{apply_row_f32, ProDmp, ProDmpConfig};
 use frmd_core::sigma::{noise_embedding, SigmaConfig};
 
@@ -81,7 +84,10 @@ pub struct InputGains {
 
 impl Default for InputGains {
     fn default() -> Self {
-        InputGains { traj_gain: 1.0, rate_gain: 1.0 }
+        InputGains {
+            traj_gain: 1.0,
+            rate_gain: 1.0,
+        }
     }
 }
 
@@ -94,17 +100,28 @@ fn kernel_activation(a: Activation) -> KernelActivation {
 
 /// The step table for `steps` (1..=4) sampling steps of a student with output parametrization
 /// `output`.
-pub fn step_constants(sigma: &SigmaConfig, output: ProDmpOutput, steps: usize) -> anyhow::Result<Vec<StepConstants>> {
+pub fn step_constants(
+    sigma: &SigmaConfig,
+    output: ProDmpOutput,
+    steps: usize,
+) -> anyhow::Result<Vec<StepConstants>> {
     if !(1..=MAX_STEPS).contains(&steps) {
         bail!("the student samples with 1..={MAX_STEPS} steps, not {steps}");
     }
     let err = |what: &'static str| move |e| anyhow::anyhow!("{what}: {e:?}");
     (0..steps)
         .map(|i| {
-            let level = sigma.consistency_sampling_sigma(i, steps).map_err(err("sampling level"))?;
-            let step = StepConstants::consistency(sigma, level, i as u32).map_err(err("step constants"))?;
+            let level = sigma
+                .consistency_sampling_sigma(i, steps)
+                .map_err(err("sampling level"))?;
+            let step = StepConstants::consistency(sigma, level, i as u32)
+                .map_err(err("step constants"))?;
             Ok(match output {
-                ProDmpOutput::Direct => StepConstants { c_skip: 0.0, c_out: 1.0, ..step },
+                ProDmpOutput::Direct => StepConstants {
+                    c_skip: 0.0,
+                    c_out: 1.0,
+                    ..step
+                },
                 ProDmpOutput::BoundarySkip => step,
             })
         })
@@ -115,7 +132,12 @@ pub fn step_constants(sigma: &SigmaConfig, output: ProDmpOutput, steps: usize) -
 /// which follows, is folded into the bias).
 pub fn mlp_layout(config: &ModelConfig) -> anyhow::Result<InputLayout> {
     InputLayout::new(
-        &[InputSegment::ObsHistory, InputSegment::PrevAction, InputSegment::PrevRate, InputSegment::NoisyTrajectory],
+        &[
+            InputSegment::ObsHistory,
+            InputSegment::PrevAction,
+            InputSegment::PrevRate,
+            InputSegment::NoisyTrajectory,
+        ],
         config.control_dt as f32,
     )
     .map_err(|e| anyhow::anyhow!("input layout: {e}"))
@@ -127,11 +149,20 @@ impl ProDmpTablesOwned {
     pub fn from_config(cfg: &ProDmpConfig, horizon: usize) -> anyhow::Result<Self> {
         let decoder = ProDmp::new(cfg).map_err(|e| anyhow::anyhow!("ProDMP config: {e:?}"))?;
         let p = cfg.num_params_per_dof();
-        let mut t = ProDmpTablesOwned { pos_params: vec![], vel_params: vec![], pos_y0: vec![], pos_v0: vec![], vel_y0: vec![], vel_v0: vec![] };
+        let mut t = ProDmpTablesOwned {
+            pos_params: vec![],
+            vel_params: vec![],
+            pos_y0: vec![],
+            pos_v0: vec![],
+            vel_y0: vec![],
+            vel_v0: vec![],
+        };
         for step in 1..=horizon {
             let time = step as f64 * (cfg.tau / horizon as f64);
             let (mut pos, mut vel) = (vec![0.0; p], vec![0.0; p]);
-            let c = decoder.linear_row(0.0, time, &mut pos, &mut vel).map_err(|e| anyhow::anyhow!("ProDMP row {step}: {e:?}"))?;
+            let c = decoder
+                .linear_row(0.0, time, &mut pos, &mut vel)
+                .map_err(|e| anyhow::anyhow!("ProDMP row {step}: {e:?}"))?;
             t.pos_params.extend(pos.iter().map(|&v| v as f32));
             t.vel_params.extend(vel.iter().map(|&v| v as f32));
             t.pos_y0.push(c.pos_y0 as f32);
@@ -146,7 +177,12 @@ impl ProDmpTablesOwned {
     /// rounded as the firmware rounds it ([`frmd_core::prodmp::BoundaryRow::at`]).
     pub fn boundary_positions(&self, y0: &[f32], v0: &[f32]) -> Vec<f32> {
         let rows = self.pos_y0.iter().zip(&self.pos_v0);
-        rows.flat_map(|(&pos_y0, &pos_v0)| y0.iter().zip(v0).map(move |(&y, &v)| apply_row_f32(&[], pos_y0, pos_v0, &[], y, v))).collect()
+        rows.flat_map(|(&pos_y0, &pos_v0)| {
+            y0.iter()
+                .zip(v0)
+                .map(move |(&y, &v)| apply_row_f32(&[], pos_y0, pos_v0, &[], y, v))
+        })
+        .collect()
     }
 
     /// Decoded positions `[n][k]` (step-major) of DoF-major `params`, with
@@ -159,7 +195,14 @@ impl ProDmpTablesOwned {
         for t in 0..n {
             let row = &self.pos_params[t * p..(t + 1) * p];
             for d in 0..k {
-                out.push(apply_row_f32(row, self.pos_y0[t], self.pos_v0[t], &params[d * p..(d + 1) * p], y0[d], v0[d]));
+                out.push(apply_row_f32(
+                    row,
+                    self.pos_y0[t],
+                    self.pos_v0[t],
+                    &params[d * p..(d + 1) * p],
+                    y0[d],
+                    v0[d],
+                ));
             }
         }
         out
@@ -182,49 +225,95 @@ impl FoldedMlp {
             ),
         };
         if hidden_sizes.len() > MAX_HIDDEN_LAYERS {
-            bail!("{} hidden layers exceed the runtime limit of {MAX_HIDDEN_LAYERS}", hidden_sizes.len());
+            bail!(
+                "{} hidden layers exceed the runtime limit of {MAX_HIDDEN_LAYERS}",
+                hidden_sizes.len()
+            );
         }
         let prodmp_cfg = config.prodmp().context("a student needs a ProDMP head")?;
         let layout = mlp_layout(config)?;
         let input_width = layout
-            .width(config.history, config.obs_dim, config.action_dim, config.horizon)
+            .width(
+                config.history,
+                config.obs_dim,
+                config.action_dim,
+                config.horizon,
+            )
             .context("input width overflows")?;
-        let widest = hidden_sizes.iter().copied().chain([input_width, config.output_dim()]).max().unwrap_or(0);
+        let widest = hidden_sizes
+            .iter()
+            .copied()
+            .chain([input_width, config.output_dim()])
+            .max()
+            .unwrap_or(0);
         if widest > MAX_WIDTH {
             bail!("layer width {widest} exceeds the exporter's limit of {MAX_WIDTH}");
         }
         let sigma: SigmaConfig = meta.sigma;
-        let steps = step_constants(&sigma, meta.model.prodmp_output().unwrap_or_default(), steps)?;
+        let steps = step_constants(
+            &sigma,
+            meta.model.prodmp_output().unwrap_or_default(),
+            steps,
+        )?;
         let mut layers = Vec::new();
         let mut width = input_width + config.embed_dim;
-        for (i, &out) in hidden_sizes.iter().chain([&config.output_dim()]).enumerate() {
+        for (i, &out) in hidden_sizes
+            .iter()
+            .chain([&config.output_dim()])
+            .enumerate()
+        {
             let weights = ckpt.tensor(&format!("mlp.layers.{i}.weight"))?.to_vec();
             let bias = ckpt.tensor(&format!("mlp.layers.{i}.bias"))?.to_vec();
-            let act = if i < hidden_sizes.len() { kernel_activation(activation) } else { KernelActivation::Identity };
-            layers.push(FloatLayer { in_features: width, out_features: out, weights, bias, activation: act });
+            let act = if i < hidden_sizes.len() {
+                kernel_activation(activation)
+            } else {
+                KernelActivation::Identity
+            };
+            layers.push(FloatLayer {
+                in_features: width,
+                out_features: out,
+                weights,
+                bias,
+                activation: act,
+            });
             width = out;
         }
         let output = layers.pop().context("internal: no output layer")?;
         let mut hidden = layers;
-        let first = hidden.first_mut().context("a student MLP has at least one hidden layer")?;
+        let first = hidden
+            .first_mut()
+            .context("a student MLP has at least one hidden layer")?;
         // Split the first layer's columns: [input | embedding].
         let full_in = first.in_features;
         let mut embedding = vec![0.0f64; config.embed_dim];
         let mut first_layer_biases = Vec::new();
         for i in 0..steps.len() {
-            let level = sigma.consistency_sampling_sigma(i, steps.len()).map_err(|e| anyhow::anyhow!("sampling level: {e:?}"))?;
-            let c_noise = sigma.c_noise(level).map_err(|e| anyhow::anyhow!("c_noise: {e:?}"))?;
-            noise_embedding(c_noise, &mut embedding).map_err(|e| anyhow::anyhow!("noise embedding: {e:?}"))?;
+            let level = sigma
+                .consistency_sampling_sigma(i, steps.len())
+                .map_err(|e| anyhow::anyhow!("sampling level: {e:?}"))?;
+            let c_noise = sigma
+                .c_noise(level)
+                .map_err(|e| anyhow::anyhow!("c_noise: {e:?}"))?;
+            noise_embedding(c_noise, &mut embedding)
+                .map_err(|e| anyhow::anyhow!("noise embedding: {e:?}"))?;
             let bias: Vec<f32> = (0..first.out_features)
                 .map(|o| {
                     let row = &first.weights[o * full_in + input_width..(o + 1) * full_in];
-                    let folded: f64 = row.iter().zip(&embedding).map(|(w, e)| f64::from(*w) * ((*e as f32) as f64)).sum();
+                    let folded: f64 = row
+                        .iter()
+                        .zip(&embedding)
+                        .map(|(w, e)| f64::from(*w) * ((*e as f32) as f64))
+                        .sum();
                     (f64::from(first.bias[o]) + folded) as f32
                 })
                 .collect();
             first_layer_biases.push(bias);
         }
-        first.weights = first.weights.chunks_exact(full_in).flat_map(|row| row[..input_width].iter().copied()).collect();
+        first.weights = first
+            .weights
+            .chunks_exact(full_in)
+            .flat_map(|row| row[..input_width].iter().copied())
+            .collect();
         first.in_features = input_width;
         first.bias = first_layer_biases[0].clone();
         Ok(FoldedMlp {
@@ -250,7 +339,10 @@ impl FoldedMlp {
         let c = &self.config;
         let (obs_len, k) = (c.history * c.obs_dim, c.action_dim);
         let mut out = self.clone();
-        let first = out.hidden.first_mut().context("a student MLP has at least one hidden layer")?;
+        let first = out
+            .hidden
+            .first_mut()
+            .context("a student MLP has at least one hidden layer")?;
         let width = first.in_features;
         for row in first.weights.chunks_exact_mut(width) {
             for (i, w) in row.iter_mut().enumerate() {
@@ -265,7 +357,10 @@ impl FoldedMlp {
             step.c_in *= traj;
         }
         out.layout.rate_scale *= rate;
-        out.gains = InputGains { traj_gain: self.gains.traj_gain * traj, rate_gain: self.gains.rate_gain * rate };
+        out.gains = InputGains {
+            traj_gain: self.gains.traj_gain * traj,
+            rate_gain: self.gains.rate_gain * rate,
+        };
         Ok(out)
     }
 
@@ -277,30 +372,48 @@ impl FoldedMlp {
     /// frmd-core's [`F32MlpNetwork`] over these weights, with `biases` from
     /// [`Self::flat_first_layer_biases`] (the f32 twin of the int8 network, for the runtime's
     /// own sampler and policy).
-    pub fn f32_network<'a, const WIDTH: usize>(&'a self, biases: &'a [f32]) -> anyhow::Result<F32MlpNetwork<'a, WIDTH>> {
+    pub fn f32_network<'a, const WIDTH: usize>(
+        &'a self,
+        biases: &'a [f32],
+    ) -> anyhow::Result<F32MlpNetwork<'a, WIDTH>> {
         let views: Vec<F32Linear<'a>> = self.hidden.iter().map(|l| l.view(&l.bias)).collect();
-        F32MlpNetwork::new(&views, self.output.view(&self.output.bias), biases).map_err(|e| anyhow::anyhow!("f32 network: {e}"))
+        F32MlpNetwork::new(&views, self.output.view(&self.output.bias), biases)
+            .map_err(|e| anyhow::anyhow!("f32 network: {e}"))
     }
 
     /// Input width of the folded network.
     pub fn input_width(&self) -> usize {
-        self.hidden.first().map_or(self.output.in_features, |l| l.in_features)
+        self.hidden
+            .first()
+            .map_or(self.output.in_features, |l| l.in_features)
     }
 
     /// Runs step `step`'s network on `input` through frmd-core's f32 path, reporting every
     /// probe to `observe`; returns the `K * P` ProDMP parameters.
-    pub fn forward_observed(&self, step: usize, input: &[f32], mut observe: impl FnMut(Probe, &[f32])) -> anyhow::Result<Vec<f32>> {
-        let bias = self.first_layer_biases.get(step).context("step index out of range")?;
+    pub fn forward_observed(
+        &self,
+        step: usize,
+        input: &[f32],
+        mut observe: impl FnMut(Probe, &[f32]),
+    ) -> anyhow::Result<Vec<f32>> {
+        let bias = self
+            .first_layer_biases
+            .get(step)
+            .context("step index out of range")?;
         let views: Vec<F32Linear<'_>> = self
             .hidden
             .iter()
             .enumerate()
             .map(|(i, l)| l.view(if i == 0 { bias } else { &l.bias }))
             .collect();
-        let mlp = F32Mlp { hidden: &views, output: self.output.view(&self.output.bias) };
+        let mlp = F32Mlp {
+            hidden: &views,
+            output: self.output.view(&self.output.bias),
+        };
         let mut scratch = Box::new(F32Scratch::<MAX_WIDTH>::new());
         let mut out = vec![0.0; self.output.out_features];
-        mlp.forward_observed(input, &mut out, &mut scratch, &mut observe).map_err(|e| anyhow::anyhow!("f32 forward: {e}"))?;
+        mlp.forward_observed(input, &mut out, &mut scratch, &mut observe)
+            .map_err(|e| anyhow::anyhow!("f32 forward: {e}"))?;
         Ok(out)
     }
 
@@ -312,26 +425,53 @@ impl FoldedMlp {
     /// The f32 consistency sampler over all steps with the given standard-normal `noise`
     /// (`steps * n * k` values): returns the chunk positions (normalized, `[n][k]`), calling
     /// `observe(step, probe, values)` for every probe of every step.
-    pub fn sample(&self, cond: &[f32], noise: &[f32], mut observe: impl FnMut(usize, Probe, &[f32])) -> anyhow::Result<Vec<f32>> {
-        sample_chunk(&self.config, &self.layout, &self.steps, &self.prodmp, cond, noise, |i, input| {
-            self.forward_observed(i, input, |p, v| observe(i, p, v))
-        })
+    pub fn sample(
+        &self,
+        cond: &[f32],
+        noise: &[f32],
+        mut observe: impl FnMut(usize, Probe, &[f32]),
+    ) -> anyhow::Result<Vec<f32>> {
+        sample_chunk(
+            &self.config,
+            &self.layout,
+            &self.steps,
+            &self.prodmp,
+            cond,
+            noise,
+            |i, input| self.forward_observed(i, input, |p, v| observe(i, p, v)),
+        )
     }
 }
 
 /// Builds the model input of one step in the standard layout: `cond = [obs history, y0, v0]`
 /// (normalized, v0 per second) and the unscaled noisy trajectory `x` (`[n][k]`) become
 /// `[obs history, y0, v0 * rate_scale, c_in x]`.
-pub fn model_input(config: &ModelConfig, layout: &InputLayout, step: &StepConstants, cond: &[f32], x: &[f32]) -> anyhow::Result<Vec<f32>> {
+pub fn model_input(
+    config: &ModelConfig,
+    layout: &InputLayout,
+    step: &StepConstants,
+    cond: &[f32],
+    x: &[f32],
+) -> anyhow::Result<Vec<f32>> {
     let c = config;
     let obs_len = c.history * c.obs_dim;
     let k = c.action_dim;
     if cond.len() != c.cond_dim() || x.len() != c.traj_dim() {
-        bail!("model input: condition has {} values (expected {}), trajectory {} (expected {})", cond.len(), c.cond_dim(), x.len(), c.traj_dim());
+        bail!(
+            "model input: condition has {} values (expected {}), trajectory {} (expected {})",
+            cond.len(),
+            c.cond_dim(),
+            x.len(),
+            c.traj_dim()
+        );
     }
     let mut input = Vec::with_capacity(c.cond_dim() + c.traj_dim());
     input.extend_from_slice(&cond[..obs_len + k]);
-    input.extend(cond[obs_len + k..obs_len + 2 * k].iter().map(|v| v * layout.rate_scale));
+    input.extend(
+        cond[obs_len + k..obs_len + 2 * k]
+            .iter()
+            .map(|v| v * layout.rate_scale),
+    );
     input.extend(x.iter().map(|v| step.c_in * v));
     Ok(input)
 }
@@ -352,7 +492,13 @@ pub fn sample_chunk(
     let (k, traj) = (c.action_dim, c.traj_dim());
     let obs_len = c.history * c.obs_dim;
     if cond.len() != obs_len + 2 * k || noise.len() < steps.len() * traj {
-        bail!("condition has {} values (expected {}), noise {} (expected {})", cond.len(), obs_len + 2 * k, noise.len(), steps.len() * traj);
+        bail!(
+            "condition has {} values (expected {}), noise {} (expected {})",
+            cond.len(),
+            obs_len + 2 * k,
+            noise.len(),
+            steps.len() * traj
+        );
     }
     let (y0, v0) = (&cond[obs_len..obs_len + k], &cond[obs_len + k..]);
     let boundary = prodmp.boundary_positions(y0, v0);
@@ -362,12 +508,20 @@ pub fn sample_chunk(
         let x: Vec<f32> = if i == 0 {
             z.iter().map(|z| step.sigma * z).collect()
         } else {
-            f.iter().zip(z).map(|(f, z)| f + step.renoise_std * z).collect()
+            f.iter()
+                .zip(z)
+                .map(|(f, z)| f + step.renoise_std * z)
+                .collect()
         };
         let input = model_input(config, layout, step, cond, &x)?;
         let params = forward(i, &input)?;
         let decoded = prodmp.decode_positions(&params, y0, v0);
-        f = x.iter().zip(&decoded).zip(&boundary).map(|((&x, &g), &b)| skip_output(step.c_skip, step.c_out, x, g, b)).collect();
+        f = x
+            .iter()
+            .zip(&decoded)
+            .zip(&boundary)
+            .map(|((&x, &g), &b)| skip_output(step.c_skip, step.c_out, x, g, b))
+            .collect();
     }
     Ok(f)
 }

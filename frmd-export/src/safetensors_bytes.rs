@@ -8,7 +8,10 @@ use safetensors::tensor::View;
 use std::collections::{BTreeMap, HashMap};
 
 /// `safetensors::serialize`, with the header's keys (tensor names and metadata) in sorted order.
-pub fn serialize<S, V, I>(tensors: I, metadata: &BTreeMap<String, String>) -> anyhow::Result<Vec<u8>>
+pub fn serialize<S, V, I>(
+    tensors: I,
+    metadata: &BTreeMap<String, String>,
+) -> anyhow::Result<Vec<u8>>
 where
     S: AsRef<str> + Ord + std::fmt::Display,
     V: View,
@@ -21,11 +24,22 @@ where
 
 /// Re-emits the JSON header of safetensors `bytes` with sorted keys; the data is copied as is.
 fn sort_header(bytes: &[u8]) -> anyhow::Result<Vec<u8>> {
-    let Some(head) = bytes.get(..8) else { bail!("safetensors bytes shorter than the 8-byte header length") };
+    let Some(head) = bytes.get(..8) else {
+        bail!("safetensors bytes shorter than the 8-byte header length")
+    };
     let len = u64::from_le_bytes(head.try_into()?);
-    let end = usize::try_from(len).ok().and_then(|n| n.checked_add(8)).filter(|&e| e <= bytes.len());
-    let Some(end) = end else { bail!("safetensors header length {len} exceeds the {} bytes", bytes.len()) };
-    let header: serde_json::Value = serde_json::from_slice(&bytes[8..end]).context("safetensors header")?;
+    let end = usize::try_from(len)
+        .ok()
+        .and_then(|n| n.checked_add(8))
+        .filter(|&e| e <= bytes.len());
+    let Some(end) = end else {
+        bail!(
+            "safetensors header length {len} exceeds the {} bytes",
+            bytes.len()
+        )
+    };
+    let header: serde_json::Value =
+        serde_json::from_slice(&bytes[8..end]).context("safetensors header")?;
     let mut json = serde_json::to_vec(&header)?;
     json.resize(json.len().next_multiple_of(8), b' ');
     let mut out = Vec::with_capacity(8 + json.len() + bytes.len() - end);
@@ -41,7 +55,10 @@ mod tests {
     use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 
     fn write(meta: &BTreeMap<String, String>) -> Vec<u8> {
-        let a: Vec<u8> = [1.0f32, -2.0, 3.5].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let a: Vec<u8> = [1.0f32, -2.0, 3.5]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
         let b: Vec<u8> = [7i64].iter().flat_map(|v| v.to_le_bytes()).collect();
         let views = [
             ("zeta", TensorView::new(Dtype::F32, vec![3], &a).unwrap()),
@@ -52,11 +69,14 @@ mod tests {
 
     #[test]
     fn same_content_gives_the_same_bytes_and_reads_back() {
-        let meta: BTreeMap<String, String> =
-            [("task", "push"), ("dt", "0.1"), ("source", "scripted expert, seeds 0..100")]
-                .into_iter()
-                .map(|(k, v)| (k.to_string(), v.to_string()))
-                .collect();
+        let meta: BTreeMap<String, String> = [
+            ("task", "push"),
+            ("dt", "0.1"),
+            ("source", "scripted expert, seeds 0..100"),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
         // Each call builds a new HashMap with its own random order; the bytes must not depend on it.
         let first = write(&meta);
         for _ in 0..20 {
@@ -65,16 +85,37 @@ mod tests {
         let header_len = u64::from_le_bytes(first[..8].try_into().unwrap()) as usize;
         assert_eq!(header_len % 8, 0);
         let header = std::str::from_utf8(&first[8..8 + header_len]).unwrap();
-        let (dt, source, task) = (header.find("\"dt\"").unwrap(), header.find("\"source\"").unwrap(), header.find("\"task\"").unwrap());
-        assert!(dt < source && source < task, "metadata keys not sorted: {header}");
+        let (dt, source, task) = (
+            header.find("\"dt\"").unwrap(),
+            header.find("\"source\"").unwrap(),
+            header.find("\"task\"").unwrap(),
+        );
+        assert!(
+            dt < source && source < task,
+            "metadata keys not sorted: {header}"
+        );
 
         let (_, read_meta) = SafeTensors::read_metadata(&first).unwrap();
-        assert_eq!(read_meta.metadata().as_ref().unwrap().get("task").map(String::as_str), Some("push"));
+        assert_eq!(
+            read_meta
+                .metadata()
+                .as_ref()
+                .unwrap()
+                .get("task")
+                .map(String::as_str),
+            Some("push")
+        );
         let st = SafeTensors::deserialize(&first).unwrap();
         let zeta = st.tensor("zeta").unwrap();
         assert_eq!(zeta.shape(), &[3]);
-        assert_eq!(f32::from_le_bytes(zeta.data()[4..8].try_into().unwrap()), -2.0);
-        assert_eq!(i64::from_le_bytes(st.tensor("alpha").unwrap().data().try_into().unwrap()), 7);
+        assert_eq!(
+            f32::from_le_bytes(zeta.data()[4..8].try_into().unwrap()),
+            -2.0
+        );
+        assert_eq!(
+            i64::from_le_bytes(st.tensor("alpha").unwrap().data().try_into().unwrap()),
+            7
+        );
     }
 
     #[test]

@@ -28,18 +28,20 @@ mod tests;
 
 pub use quantize::{calibrate, quantize, QuantizedLinear, QuantizedTransformer, TransformerRanges};
 
+use crate::checkpoint::Normalization;
 use crate::checkpoint::{BackboneConfig, Checkpoint, ModelConfig, Role};
 use crate::fold::{mlp_layout, sample_chunk, step_constants, FloatLayer};
 use crate::ProDmpTablesOwned;
 use anyhow::{bail, Context};
-use crate::checkpoint::Normalization;
 use frmd_core::kernels::Activation;
 use frmd_core::model::linear::F32Linear;
 use frmd_core::model::transformer::{
-    fold_noise_token, F32Block, F32FeedForward, F32Transformer, LayerNormWeights,
-    TransformerProbe, TransformerScratch, TransformerShape,
+    fold_noise_token, F32Block, F32FeedForward, F32Transformer, LayerNormWeights, TransformerProbe,
+    TransformerScratch, TransformerShape,
 };
-use frmd_core::policy::{InputLayout, PolicyConfig, RangeNormalizer, Sampler, StepConstants, StepTable};
+use frmd_core::policy::{
+    InputLayout, PolicyConfig, RangeNormalizer, Sampler, StepConstants, StepTable,
+};
 use frmd_core::sigma::{noise_embedding, SigmaConfig};
 
 /// Scratch for the exporter's f32 and int8 transformer passes (enough for `transformer`, 6 x 256
@@ -58,7 +60,10 @@ pub struct FloatNorm {
 
 impl FloatNorm {
     pub fn view(&self) -> LayerNormWeights<'_> {
-        LayerNormWeights { gamma: &self.gamma, beta: &self.beta }
+        LayerNormWeights {
+            gamma: &self.gamma,
+            beta: &self.beta,
+        }
     }
 }
 
@@ -98,20 +103,35 @@ pub(crate) fn f32_view(layer: &FloatLayer) -> F32Linear<'_> {
 }
 
 /// Reads linear layer `transformer.{name}` (`[out, in]` weight, `[out]` bias).
-fn linear(ckpt: &Checkpoint, name: &str, in_features: usize, out_features: usize) -> anyhow::Result<FloatLayer> {
+fn linear(
+    ckpt: &Checkpoint,
+    name: &str,
+    in_features: usize,
+    out_features: usize,
+) -> anyhow::Result<FloatLayer> {
     let weights = ckpt.tensor(&format!("transformer.{name}.weight"))?.to_vec();
     let bias = ckpt.tensor(&format!("transformer.{name}.bias"))?.to_vec();
     if weights.len() != in_features * out_features || bias.len() != out_features {
         bail!("transformer.{name}: {} weights and {} biases, expected [{out_features} x {in_features}]", weights.len(), bias.len());
     }
-    Ok(FloatLayer { in_features, out_features, weights, bias, activation: Activation::Identity })
+    Ok(FloatLayer {
+        in_features,
+        out_features,
+        weights,
+        bias,
+        activation: Activation::Identity,
+    })
 }
 
 fn norm(ckpt: &Checkpoint, name: &str, width: usize) -> anyhow::Result<FloatNorm> {
     let gamma = ckpt.tensor(&format!("transformer.{name}.weight"))?.to_vec();
     let beta = ckpt.tensor(&format!("transformer.{name}.bias"))?.to_vec();
     if gamma.len() != width || beta.len() != width {
-        bail!("transformer.{name}: LayerNorm of {} / {} values, expected {width}", gamma.len(), beta.len());
+        bail!(
+            "transformer.{name}: LayerNorm of {} / {} values, expected {width}",
+            gamma.len(),
+            beta.len()
+        );
     }
     Ok(FloatNorm { gamma, beta })
 }
@@ -125,8 +145,16 @@ impl FoldedTransformer {
         if meta.role != Role::Student {
             bail!("only student checkpoints can be exported; this one is a {:?} (its sampler needs many network evaluations)", meta.role);
         }
-        let BackboneConfig::Transformer { layers, heads, width } = config.backbone else {
-            bail!("not a transformer checkpoint (backbone {:?}); use fold::FoldedMlp", config.backbone);
+        let BackboneConfig::Transformer {
+            layers,
+            heads,
+            width,
+        } = config.backbone
+        else {
+            bail!(
+                "not a transformer checkpoint (backbone {:?}); use fold::FoldedMlp",
+                config.backbone
+            );
         };
         let prodmp_cfg = config.prodmp().context("a student needs a ProDMP head")?;
         let shape = TransformerShape {
@@ -138,7 +166,9 @@ impl FoldedTransformer {
             layers,
             output: config.output_dim(),
         };
-        shape.validate().map_err(|e| anyhow::anyhow!("transformer shape {shape:?}: {e}"))?;
+        shape
+            .validate()
+            .map_err(|e| anyhow::anyhow!("transformer shape {shape:?}: {e}"))?;
         let lens = shape.f32_scratch();
         let int8 = shape.int8_scratch();
         if lens.floats.max(int8.floats) > HOST_FLOATS
@@ -148,23 +178,41 @@ impl FoldedTransformer {
             bail!("transformer shape {shape:?} needs more scratch than the exporter's host scratch holds");
         }
         let sigma: SigmaConfig = meta.sigma;
-        let steps = step_constants(&sigma, meta.model.prodmp_output().unwrap_or_default(), steps)?;
+        let steps = step_constants(
+            &sigma,
+            meta.model.prodmp_output().unwrap_or_default(),
+            steps,
+        )?;
         let (w, tokens) = (width, shape.tokens());
         let positions = ckpt.tensor("transformer.pos_embedding")?.to_vec();
         if positions.len() != tokens * w {
-            bail!("transformer.pos_embedding has {} values, expected [{tokens} x {w}]", positions.len());
+            bail!(
+                "transformer.pos_embedding has {} values, expected [{tokens} x {w}]",
+                positions.len()
+            );
         }
         let noise_in = linear(ckpt, "noise_in", config.embed_dim, w)?;
         let mut embedding = vec![0.0f64; config.embed_dim];
         let mut noise_tokens = Vec::with_capacity(steps.len());
         for i in 0..steps.len() {
-            let level = sigma.consistency_sampling_sigma(i, steps.len()).map_err(|e| anyhow::anyhow!("sampling level: {e:?}"))?;
-            let c_noise = sigma.c_noise(level).map_err(|e| anyhow::anyhow!("c_noise: {e:?}"))?;
-            noise_embedding(c_noise, &mut embedding).map_err(|e| anyhow::anyhow!("noise embedding: {e:?}"))?;
+            let level = sigma
+                .consistency_sampling_sigma(i, steps.len())
+                .map_err(|e| anyhow::anyhow!("sampling level: {e:?}"))?;
+            let c_noise = sigma
+                .c_noise(level)
+                .map_err(|e| anyhow::anyhow!("c_noise: {e:?}"))?;
+            noise_embedding(c_noise, &mut embedding)
+                .map_err(|e| anyhow::anyhow!("noise embedding: {e:?}"))?;
             let embedding32: Vec<f32> = embedding.iter().map(|&e| e as f32).collect();
             let mut token = vec![0.0f32; w];
-            fold_noise_token(&shape, &f32_view(&noise_in), &embedding32, &positions, &mut token)
-                .map_err(|e| anyhow::anyhow!("folding the noise token of step {i}: {e}"))?;
+            fold_noise_token(
+                &shape,
+                &f32_view(&noise_in),
+                &embedding32,
+                &positions,
+                &mut token,
+            )
+            .map_err(|e| anyhow::anyhow!("folding the noise token of step {i}: {e}"))?;
             noise_tokens.push(token);
         }
         let blocks = (0..layers)
@@ -175,7 +223,10 @@ impl FoldedTransformer {
                     qkv: linear(ckpt, &format!("{p}.qkv"), w, 3 * w)?,
                     proj: linear(ckpt, &format!("{p}.proj"), w, w)?,
                     norm2: norm(ckpt, &format!("{p}.norm2"), w)?,
-                    fc1: FloatLayer { activation: Activation::GeluSigmoid, ..linear(ckpt, &format!("{p}.fc1"), w, 4 * w)? },
+                    fc1: FloatLayer {
+                        activation: Activation::GeluSigmoid,
+                        ..linear(ckpt, &format!("{p}.fc1"), w, 4 * w)?
+                    },
                     fc2: linear(ckpt, &format!("{p}.fc2"), 4 * w, w)?,
                 })
             })
@@ -195,7 +246,10 @@ impl FoldedTransformer {
             layout: mlp_layout(config)?,
             prodmp: ProDmpTablesOwned::from_config(&prodmp_cfg, config.horizon)?,
         };
-        folded.view(&folded.f32_blocks(), 0)?.validate().map_err(|e| anyhow::anyhow!("folded transformer: {e}"))?;
+        folded
+            .view(&folded.f32_blocks(), 0)?
+            .validate()
+            .map_err(|e| anyhow::anyhow!("folded transformer: {e}"))?;
         Ok(folded)
     }
 
@@ -208,14 +262,24 @@ impl FoldedTransformer {
                 qkv: f32_view(&b.qkv),
                 proj: f32_view(&b.proj),
                 norm2: b.norm2.view(),
-                feed_forward: F32FeedForward { fc1: f32_view(&b.fc1), fc2: f32_view(&b.fc2) },
+                feed_forward: F32FeedForward {
+                    fc1: f32_view(&b.fc1),
+                    fc2: f32_view(&b.fc2),
+                },
             })
             .collect()
     }
 
     /// frmd-core's f32 transformer with step `step`'s noise token.
-    pub fn view<'a>(&'a self, blocks: &'a [F32Block<'a>], step: usize) -> anyhow::Result<F32Transformer<'a>> {
-        let noise_token = self.noise_tokens.get(step).with_context(|| format!("step index {step} out of range"))?;
+    pub fn view<'a>(
+        &'a self,
+        blocks: &'a [F32Block<'a>],
+        step: usize,
+    ) -> anyhow::Result<F32Transformer<'a>> {
+        let noise_token = self
+            .noise_tokens
+            .get(step)
+            .with_context(|| format!("step index {step} out of range"))?;
         Ok(F32Transformer {
             shape: self.shape,
             traj_in: f32_view(&self.traj_in),
@@ -251,12 +315,23 @@ impl FoldedTransformer {
 
     /// Runs step `step` on the standard-layout model `input` through frmd-core's f32 path,
     /// reporting every probe to `observe`; returns the `K * P` ProDMP parameters.
-    pub fn forward_observed(&self, step: usize, input: &[f32], observe: impl FnMut(TransformerProbe, &[f32])) -> anyhow::Result<Vec<f32>> {
+    pub fn forward_observed(
+        &self,
+        step: usize,
+        input: &[f32],
+        observe: impl FnMut(TransformerProbe, &[f32]),
+    ) -> anyhow::Result<Vec<f32>> {
         let blocks = self.f32_blocks();
         let model = self.view(&blocks, step)?;
-        let (condition, trajectory) = input
-            .split_at_checked(self.shape.cond_dim)
-            .with_context(|| format!("model input of {} values is shorter than the condition", input.len()))?;
+        let (condition, trajectory) =
+            input
+                .split_at_checked(self.shape.cond_dim)
+                .with_context(|| {
+                    format!(
+                        "model input of {} values is shorter than the condition",
+                        input.len()
+                    )
+                })?;
         let mut scratch = Box::new(HostScratch::new());
         let mut out = vec![0.0; self.shape.output];
         model
@@ -267,9 +342,20 @@ impl FoldedTransformer {
 
     /// The f32 consistency sampler (see [`crate::fold::sample_chunk`]), calling
     /// `observe(step, probe, values)` for every probe of every step.
-    pub fn sample(&self, cond: &[f32], noise: &[f32], mut observe: impl FnMut(usize, TransformerProbe, &[f32])) -> anyhow::Result<Vec<f32>> {
-        sample_chunk(&self.config, &self.layout, &self.steps, &self.prodmp, cond, noise, |i, input| {
-            self.forward_observed(i, input, |p, v| observe(i, p, v))
-        })
+    pub fn sample(
+        &self,
+        cond: &[f32],
+        noise: &[f32],
+        mut observe: impl FnMut(usize, TransformerProbe, &[f32]),
+    ) -> anyhow::Result<Vec<f32>> {
+        sample_chunk(
+            &self.config,
+            &self.layout,
+            &self.steps,
+            &self.prodmp,
+            cond,
+            noise,
+            |i, input| self.forward_observed(i, input, |p, v| observe(i, p, v)),
+        )
     }
 }

@@ -2,11 +2,10 @@
 //! what `bake::write_module` produces for the sample policy. Regenerate with
 //! `FRMD_BLESS=1 cargo test -p frmd-export --test bake_golden`.
 
-
 use std::path::PathBuf;
 
-use frmd_test_support::random_policy::{GOLDEN_SEED, GOLDEN_STEPS};
 use frmd_export::bake::{write_module, MODULE_FILE, WEIGHTS_FILE};
+use frmd_test_support::random_policy::{GOLDEN_SEED, GOLDEN_STEPS};
 
 #[test]
 fn committed_baked_module_is_current() {

@@ -1,16 +1,15 @@
 //! Compiles the committed baked module (`tests/baked/`, kept current by `bake_golden.rs`) the way a
 //! firmware crate would (`include!`), and checks it against the blob of the same policy.
 
-
 #[allow(dead_code)]
 mod baked {
     include!("baked/policy.rs");
 }
 
-use frmd_test_support::random_policy::*;
 use frmd_core::blob::LoadedMlp;
 use frmd_core::policy::Noise;
 use frmd_core::rng::Rng;
+use frmd_test_support::random_policy::*;
 
 #[test]
 fn baked_module_runs_bit_identical_to_the_blob() {

@@ -1,10 +1,9 @@
 //! The exporter's blob round-trips through frmd-core's loader into a working policy.
 
-
-use frmd_test_support::random_policy::*;
 use frmd_core::blob::{BlobError, LoadedMlp, SectionId};
 use frmd_core::policy::Noise;
 use frmd_core::rng::Rng;
+use frmd_test_support::random_policy::*;
 
 /// Copies into a 16-aligned buffer (a `Vec<u8>` has no alignment guarantee).
 fn aligned(bytes: &[u8]) -> Vec<u128> {

@@ -5,35 +5,68 @@ use frmd_core::rng::Rng;
 use frmd_core::sigma::SigmaConfig;
 use frmd_export::calibrate::{CalibrationSet, RangeMethod};
 use frmd_export::checkpoint::{
-    Activation, BackboneConfig, CheckpointMeta, HeadConfig, ModelConfig, Normalization, Normalizer, ProDmpOutput, Role, CONFIG_FILE,
-    WEIGHTS_FILE,
+    Activation, BackboneConfig, CheckpointMeta, HeadConfig, ModelConfig, Normalization, Normalizer,
+    ProDmpOutput, Role, CONFIG_FILE, WEIGHTS_FILE,
 };
 use frmd_export::export::{export_checkpoint, ExportOptions};
 use std::path::{Path, PathBuf};
 
 fn model(backbone: BackboneConfig) -> ModelConfig {
-    ModelConfig { obs_dim: 3, history: 2, action_dim: 2, horizon: 5, control_dt: 0.05, embed_dim: 4, backbone, head: HeadConfig::ProDmp { num_basis: 3, output: ProDmpOutput::Direct, auto_scale_basis: false } }
+    ModelConfig {
+        obs_dim: 3,
+        history: 2,
+        action_dim: 2,
+        horizon: 5,
+        control_dt: 0.05,
+        embed_dim: 4,
+        backbone,
+        head: HeadConfig::ProDmp {
+            num_basis: 3,
+            output: ProDmpOutput::Direct,
+            auto_scale_basis: false,
+        },
+    }
 }
 
 fn mlp() -> BackboneConfig {
-    BackboneConfig::Mlp { hidden: vec![16, 12], activation: Activation::Mish }
+    BackboneConfig::Mlp {
+        hidden: vec![16, 12],
+        activation: Activation::Mish,
+    }
 }
 
-fn write_weights(dir: &Path, meta: &CheckpointMeta, seed: u64, tweak: impl Fn(&str, &mut Vec<usize>)) {
+fn write_weights(
+    dir: &Path,
+    meta: &CheckpointMeta,
+    seed: u64,
+    tweak: impl Fn(&str, &mut Vec<usize>),
+) {
     let mut rng = Rng::new(seed);
     let mut owned = Vec::new();
     for spec in &meta.tensors {
         let mut shape = spec.shape.clone();
         tweak(&spec.name, &mut shape);
         let fan_in = *shape.last().unwrap() as f32;
-        let values: Vec<u8> = (0..shape.iter().product::<usize>()).flat_map(|_| (rng.gaussian() / fan_in.sqrt()).to_le_bytes()).collect();
+        let values: Vec<u8> = (0..shape.iter().product::<usize>())
+            .flat_map(|_| (rng.gaussian() / fan_in.sqrt()).to_le_bytes())
+            .collect();
         owned.push((spec.name.clone(), shape, values));
     }
     let views: Vec<(String, safetensors::tensor::TensorView<'_>)> = owned
         .iter()
-        .map(|(n, s, v)| (n.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), v).unwrap()))
+        .map(|(n, s, v)| {
+            (
+                n.clone(),
+                safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), v)
+                    .unwrap(),
+            )
+        })
         .collect();
-    std::fs::write(dir.join(WEIGHTS_FILE), safetensors::serialize(views, None).unwrap()).unwrap();
+    std::fs::write(
+        dir.join(WEIGHTS_FILE),
+        safetensors::serialize(views, None).unwrap(),
+    )
+    .unwrap();
 }
 
 fn checkpoint(tag: &str, role: Role, backbone: BackboneConfig) -> (PathBuf, CheckpointMeta) {
@@ -42,39 +75,84 @@ fn checkpoint(tag: &str, role: Role, backbone: BackboneConfig) -> (PathBuf, Chec
     std::fs::create_dir_all(&dir).unwrap();
     let mut meta = CheckpointMeta::describe(role, &model(backbone), SigmaConfig::default());
     meta.normalization = Some(Normalization {
-        obs: Normalizer { min: vec![-1.0, 0.0, 2.0], max: vec![1.0, 3.0, 2.0] },
-        action: Normalizer { min: vec![-0.5, 0.1], max: vec![0.5, 0.9] },
+        obs: Normalizer {
+            min: vec![-1.0, 0.0, 2.0],
+            max: vec![1.0, 3.0, 2.0],
+        },
+        action: Normalizer {
+            min: vec![-0.5, 0.1],
+            max: vec![0.5, 0.9],
+        },
     });
-    std::fs::write(dir.join(CONFIG_FILE), serde_json::to_string_pretty(&meta).unwrap()).unwrap();
+    std::fs::write(
+        dir.join(CONFIG_FILE),
+        serde_json::to_string_pretty(&meta).unwrap(),
+    )
+    .unwrap();
     write_weights(&dir, &meta, 5, |_, _| {});
     (dir, meta)
 }
 
 fn calibration(cond_dim: usize, rows: usize) -> CalibrationSet {
     let mut rng = Rng::new(9);
-    CalibrationSet { cond_dim, cond: (0..rows * cond_dim).map(|_| (rng.gaussian() * 0.5).clamp(-1.0, 1.0)).collect(), seed: 17 }
+    CalibrationSet {
+        cond_dim,
+        cond: (0..rows * cond_dim)
+            .map(|_| (rng.gaussian() * 0.5).clamp(-1.0, 1.0))
+            .collect(),
+        seed: 17,
+    }
 }
 
 fn export_err(dir: &Path) -> String {
     let set = calibration(model(mlp()).cond_dim(), 8);
-    format!("{:#}", export_checkpoint(dir, ExportOptions::default(), Some(set)).unwrap_err())
+    format!(
+        "{:#}",
+        export_checkpoint(dir, ExportOptions::default(), Some(set)).unwrap_err()
+    )
 }
 
 #[test]
 fn refuses_what_it_cannot_represent_by_name() {
     let (dir, _) = checkpoint("teacher", Role::Teacher, mlp());
     let err = export_err(&dir);
-    assert!(err.contains("only student checkpoints") && err.contains("Teacher"), "{err}");
+    assert!(
+        err.contains("only student checkpoints") && err.contains("Teacher"),
+        "{err}"
+    );
 
-    let (dir, _) = checkpoint("transformer", Role::Student, BackboneConfig::Transformer { layers: 1, heads: 2, width: 8 });
+    let (dir, _) = checkpoint(
+        "transformer",
+        Role::Student,
+        BackboneConfig::Transformer {
+            layers: 1,
+            heads: 2,
+            width: 8,
+        },
+    );
     let err = export_err(&dir);
-    assert!(err.contains("transformer backbones fold with transformer::FoldedTransformer"), "{err}");
+    assert!(
+        err.contains("transformer backbones fold with transformer::FoldedTransformer"),
+        "{err}"
+    );
     let set = calibration(model(mlp()).cond_dim(), 8);
-    let exported = frmd_export::export::export_transformer_checkpoint(&dir, ExportOptions::default(), Some(set)).unwrap();
+    let exported = frmd_export::export::export_transformer_checkpoint(
+        &dir,
+        ExportOptions::default(),
+        Some(set),
+    )
+    .unwrap();
     assert_eq!(exported.model.folded.shape.width, 8);
     assert_eq!(exported.ranges.rows, 8);
 
-    let (dir, _) = checkpoint("wide", Role::Student, BackboneConfig::Mlp { hidden: vec![2048], activation: Activation::Silu });
+    let (dir, _) = checkpoint(
+        "wide",
+        Role::Student,
+        BackboneConfig::Mlp {
+            hidden: vec![2048],
+            activation: Activation::Silu,
+        },
+    );
     let err = export_err(&dir);
     assert!(err.contains("exceeds the exporter's limit"), "{err}");
 
@@ -86,23 +164,35 @@ fn refuses_what_it_cannot_represent_by_name() {
         }
     });
     let err = export_err(&dir);
-    assert!(err.contains("mlp.layers.1.weight") && err.contains("shape [13, 16]"), "{err}");
+    assert!(
+        err.contains("mlp.layers.1.weight") && err.contains("shape [13, 16]"),
+        "{err}"
+    );
 
     // A config whose tensor list disagrees with its model is refused.
     let (dir, mut meta) = checkpoint("list", Role::Student, mlp());
     meta.tensors.pop();
     std::fs::write(dir.join(CONFIG_FILE), serde_json::to_string(&meta).unwrap()).unwrap();
     let err = export_err(&dir);
-    assert!(err.contains("implied by the model config is not listed") && err.contains("mlp.layers."), "{err}");
+    assert!(
+        err.contains("implied by the model config is not listed") && err.contains("mlp.layers."),
+        "{err}"
+    );
 
     // No calibration data at all.
     let (dir, _) = checkpoint("nocal", Role::Student, mlp());
-    let err = format!("{:#}", export_checkpoint(&dir, ExportOptions::default(), None).unwrap_err());
+    let err = format!(
+        "{:#}",
+        export_checkpoint(&dir, ExportOptions::default(), None).unwrap_err()
+    );
     assert!(err.contains("calibration"), "{err}");
 
     assert!("percentile:40".parse::<RangeMethod>().is_err());
     assert!("median".parse::<RangeMethod>().is_err());
-    assert_eq!("percentile:99.9".parse::<RangeMethod>().unwrap(), RangeMethod::Percentile(99.9));
+    assert_eq!(
+        "percentile:99.9".parse::<RangeMethod>().unwrap(),
+        RangeMethod::Percentile(99.9)
+    );
 }
 
 #[test]
@@ -110,12 +200,36 @@ fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
     let (dir, meta) = checkpoint("roundtrip", Role::Student, mlp());
     let set = calibration(meta.model.cond_dim(), 32);
     // Calibration file round trip.
-    frmd_export::calibration_file::write(&dir.join(frmd_export::checkpoint::CALIBRATION_FILE), &set).unwrap();
-    assert_eq!(frmd_export::calibration_file::read(&dir.join(frmd_export::checkpoint::CALIBRATION_FILE), meta.model.cond_dim()).unwrap(), set);
-    assert!(frmd_export::calibration_file::read(&dir.join(frmd_export::checkpoint::CALIBRATION_FILE), 5).is_err());
+    frmd_export::calibration_file::write(
+        &dir.join(frmd_export::checkpoint::CALIBRATION_FILE),
+        &set,
+    )
+    .unwrap();
+    assert_eq!(
+        frmd_export::calibration_file::read(
+            &dir.join(frmd_export::checkpoint::CALIBRATION_FILE),
+            meta.model.cond_dim()
+        )
+        .unwrap(),
+        set
+    );
+    assert!(frmd_export::calibration_file::read(
+        &dir.join(frmd_export::checkpoint::CALIBRATION_FILE),
+        5
+    )
+    .is_err());
 
     for (steps, ranges) in [(1, RangeMethod::MinMax), (3, RangeMethod::MinMax)] {
-        let exported = export_checkpoint(&dir, ExportOptions { steps, ranges, ..Default::default() }, None).unwrap();
+        let exported = export_checkpoint(
+            &dir,
+            ExportOptions {
+                steps,
+                ranges,
+                ..Default::default()
+            },
+            None,
+        )
+        .unwrap();
         let policy = &exported.policy;
         assert_eq!(policy.steps.len(), steps);
         assert_eq!(policy.first_layer_biases.len(), steps * 16);
@@ -124,7 +238,16 @@ fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
         bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
         let bytes = &bytemuck::cast_slice::<u32, u8>(&words)[..blob.len()];
         let loaded = frmd_core::blob::LoadedMlp::load(bytes).unwrap();
-        assert_eq!(loaded.dims(), frmd_core::policy::PolicyDims { history: 2, obs_dim: 3, action_dim: 2, horizon: 5, params_per_dof: 4 });
+        assert_eq!(
+            loaded.dims(),
+            frmd_core::policy::PolicyDims {
+                history: 2,
+                obs_dim: 3,
+                action_dim: 2,
+                horizon: 5,
+                params_per_dof: 4
+            }
+        );
         assert_eq!(loaded.steps(), policy.steps.as_slice());
         // frmd-core's int8 network over the loaded blob vs the wide-integer model of the policy,
         // and vs the f32 path (quantization error only).
@@ -148,10 +271,25 @@ fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
                 let mut out = vec![0f32; 8];
                 net.forward(step, &input, &mut out).unwrap();
                 let wide = frmd_export::reference::wide_network(policy, step, &input).unwrap();
-                assert_eq!(net.accumulators().iter().map(|&a| i64::from(a)).collect::<Vec<_>>(), wide);
-                let float = exported.folded.forward_observed(step, &input, |_, _| {}).unwrap();
+                assert_eq!(
+                    net.accumulators()
+                        .iter()
+                        .map(|&a| i64::from(a))
+                        .collect::<Vec<_>>(),
+                    wide
+                );
+                let float = exported
+                    .folded
+                    .forward_observed(step, &input, |_, _| {})
+                    .unwrap();
                 let scale = float.iter().fold(0f32, |m, v| m.max(v.abs()));
-                worst = worst.max(out.iter().zip(&float).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max) / scale);
+                worst = worst.max(
+                    out.iter()
+                        .zip(&float)
+                        .map(|(a, b)| (a - b).abs())
+                        .fold(0.0, f32::max)
+                        / scale,
+                );
             }
         }
         eprintln!("{steps} step(s), {ranges:?}: worst relative int8 error {worst}");
@@ -169,8 +307,26 @@ fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
 fn percentile_ranges_are_no_wider_than_minmax() {
     let (dir, meta) = checkpoint("percentile", Role::Student, mlp());
     let set = calibration(meta.model.cond_dim(), 32);
-    let minmax = export_checkpoint(&dir, ExportOptions { steps: 2, ranges: RangeMethod::MinMax, ..Default::default() }, Some(set.clone())).unwrap();
-    let pct = export_checkpoint(&dir, ExportOptions { steps: 2, ranges: RangeMethod::Percentile(99.0), ..Default::default() }, Some(set)).unwrap();
+    let minmax = export_checkpoint(
+        &dir,
+        ExportOptions {
+            steps: 2,
+            ranges: RangeMethod::MinMax,
+            ..Default::default()
+        },
+        Some(set.clone()),
+    )
+    .unwrap();
+    let pct = export_checkpoint(
+        &dir,
+        ExportOptions {
+            steps: 2,
+            ranges: RangeMethod::Percentile(99.0),
+            ..Default::default()
+        },
+        Some(set),
+    )
+    .unwrap();
     assert!(pct.ranges.input.scale <= minmax.ranges.input.scale);
     for ((p_pre, p_out), (m_pre, m_out)) in pct.ranges.hidden.iter().zip(&minmax.ranges.hidden) {
         assert!(p_pre.scale <= m_pre.scale && p_out.scale <= m_out.scale);
@@ -182,12 +338,32 @@ fn percentile_ranges_are_no_wider_than_minmax() {
 fn input_gains_keep_the_function_and_narrow_the_input_scale() {
     let (dir, meta) = checkpoint("gains", Role::Student, mlp());
     let set = calibration(meta.model.cond_dim(), 32);
-    let plain = export_checkpoint(&dir, ExportOptions { steps: 2, balance_inputs: false, ..Default::default() }, Some(set.clone())).unwrap();
-    let balanced = export_checkpoint(&dir, ExportOptions { steps: 2, ..Default::default() }, Some(set.clone())).unwrap();
+    let plain = export_checkpoint(
+        &dir,
+        ExportOptions {
+            steps: 2,
+            balance_inputs: false,
+            ..Default::default()
+        },
+        Some(set.clone()),
+    )
+    .unwrap();
+    let balanced = export_checkpoint(
+        &dir,
+        ExportOptions {
+            steps: 2,
+            ..Default::default()
+        },
+        Some(set.clone()),
+    )
+    .unwrap();
     let gains = balanced.folded.gains;
     assert!(gains.traj_gain < 0.5 && gains.traj_gain > 0.05, "{gains:?}");
     assert!(balanced.ranges.input.scale < 0.5 * plain.ranges.input.scale);
-    assert_eq!(balanced.policy.steps[1].c_in, plain.policy.steps[1].c_in * gains.traj_gain);
+    assert_eq!(
+        balanced.policy.steps[1].c_in,
+        plain.policy.steps[1].c_in * gains.traj_gain
+    );
     for row in 0..set.rows() {
         let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
         let noise = set.noise(row, 2, 10);
@@ -216,7 +392,17 @@ fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
     use frmd_core::policy::Network;
     let (dir, meta) = checkpoint("wide-input", Role::Student, mlp());
     let set = calibration(meta.model.cond_dim(), 32);
-    let export = |input_precision| export_checkpoint(&dir, ExportOptions { input_precision, ..Default::default() }, Some(set.clone())).unwrap();
+    let export = |input_precision| {
+        export_checkpoint(
+            &dir,
+            ExportOptions {
+                input_precision,
+                ..Default::default()
+            },
+            Some(set.clone()),
+        )
+        .unwrap()
+    };
     let wide = export_checkpoint(&dir, ExportOptions::default(), Some(set.clone())).unwrap();
     let two = export(InputPrecision::TwoPlane);
     let int8 = export(InputPrecision::Int8);
@@ -237,16 +423,33 @@ fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
             words
         })
         .collect();
-    let loaded: Vec<_> = blobs.iter().map(|words| frmd_core::blob::LoadedMlp::load(bytemuck::cast_slice::<u32, u8>(words)).unwrap()).collect();
-    let mut loaded_nets: Vec<_> = loaded.iter().map(|policy| policy.network::<64>().unwrap()).collect();
+    let loaded: Vec<_> = blobs
+        .iter()
+        .map(|words| {
+            frmd_core::blob::LoadedMlp::load(bytemuck::cast_slice::<u32, u8>(words)).unwrap()
+        })
+        .collect();
+    let mut loaded_nets: Vec<_> = loaded
+        .iter()
+        .map(|policy| policy.network::<64>().unwrap())
+        .collect();
     assert_eq!(loaded_nets[0].input_precision(), InputPrecision::Int16);
     assert_eq!(loaded_nets[1].input_precision(), InputPrecision::TwoPlane);
-    let mut nets: Vec<_> = policies.iter().map(|policy| frmd_export::reference::int8_network::<64>(policy).unwrap()).collect();
+    let mut nets: Vec<_> = policies
+        .iter()
+        .map(|policy| frmd_export::reference::int8_network::<64>(policy).unwrap())
+        .collect();
     let mut errors = [0f64; 3];
     for row in 0..set.rows() {
         let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
         let mut input = Vec::new();
-        two.folded.sample(cond, &set.noise(row, 1, 10), |_, p, v| if p == frmd_core::model::mlp::Probe::Input { input = v.to_vec() }).unwrap();
+        two.folded
+            .sample(cond, &set.noise(row, 1, 10), |_, p, v| {
+                if p == frmd_core::model::mlp::Probe::Input {
+                    input = v.to_vec()
+                }
+            })
+            .unwrap();
         // Observations (the first 6 values) at three times their calibrated magnitude.
         for v in input.iter_mut().take(6) {
             *v *= 3.0;
@@ -261,17 +464,37 @@ fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
             loaded_net.forward(0, &input, &mut loaded_out).unwrap();
             assert_eq!(loaded_out, outs[n]);
             let model = frmd_export::reference::wide_network(policies[n], 0, &input).unwrap();
-            assert_eq!(nets[n].accumulators().iter().map(|&a| i64::from(a)).collect::<Vec<_>>(), model);
+            assert_eq!(
+                nets[n]
+                    .accumulators()
+                    .iter()
+                    .map(|&a| i64::from(a))
+                    .collect::<Vec<_>>(),
+                model
+            );
         }
         for (error, out) in errors.iter_mut().zip(&outs) {
-            *error += out.iter().zip(&float).map(|(a, f)| f64::from((a - f).abs())).sum::<f64>();
+            *error += out
+                .iter()
+                .zip(&float)
+                .map(|(a, f)| f64::from((a - f).abs()))
+                .sum::<f64>();
         }
     }
     let [error_wide, error_two, error_int8] = errors;
     eprintln!("inputs beyond the calibrated range: abs error sum 16-bit {error_wide}, two-plane {error_two}, int8 {error_int8}");
-    assert!(error_two < 0.7 * error_int8, "two-plane {error_two} vs int8 {error_int8}");
-    assert!(error_wide < 0.7 * error_int8, "16-bit {error_wide} vs int8 {error_int8}");
-    assert!(error_wide <= 1.05 * error_two, "16-bit {error_wide} vs two-plane {error_two}");
+    assert!(
+        error_two < 0.7 * error_int8,
+        "two-plane {error_two} vs int8 {error_int8}"
+    );
+    assert!(
+        error_wide < 0.7 * error_int8,
+        "16-bit {error_wide} vs int8 {error_int8}"
+    );
+    assert!(
+        error_wide <= 1.05 * error_two,
+        "16-bit {error_wide} vs two-plane {error_two}"
+    );
     for policy in &policies[..2] {
         let check = frmd_export::reference::check_network::<64>(policy, &[]).unwrap();
         assert!(check.passed(), "{check:?}");
@@ -292,6 +515,9 @@ fn recorded_prodmp_config_is_compared_up_to_the_last_bits() {
     meta.prodmp = Some(read_back);
     let err = format!("{:#}", meta.validate().unwrap_err());
     assert!(err.contains("prodmp.tau is"), "{err}");
-    meta.prodmp = Some(frmd_core::prodmp::ProDmpConfig { num_basis: exact.num_basis + 1, ..exact });
+    meta.prodmp = Some(frmd_core::prodmp::ProDmpConfig {
+        num_basis: exact.num_basis + 1,
+        ..exact
+    });
     assert!(meta.validate().is_err());
 }

@@ -14,15 +14,17 @@ use frmd_core::blob::LoadedMlp;
 use frmd_firmware_support::host::qemu;
 use frmd_firmware_support::host::student::{student, AlignedBlob};
 use frmd_firmware_support::policy_workload::PolicyWorkload;
-use frmd_firmware_support::shape::{DOF, HORIZON, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM};
+use frmd_firmware_support::shape::{
+    DOF, HORIZON, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM,
+};
 use frmd_firmware_support::workload::digest_all;
 
 fn host_digest() -> u64 {
     let blob = AlignedBlob::of(&student());
-    let loaded = LoadedMlp::load(blob.bytes())
-        .expect("load the blob");
+    let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
     let policy = loaded
-        .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>()
+        .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>(
+        )
         .expect("policy from the blob");
     let mut workload = PolicyWorkload::new(policy);
     digest_all(&mut workload).expect("run the fixed cases")
@@ -33,7 +35,10 @@ fn student_export_is_deterministic_and_acts() {
     let policy = student();
     assert_eq!(policy, student());
     assert_eq!(policy.scratch_width(), MLP_WIDTH);
-    assert_eq!((policy.history, policy.obs_dim, policy.action_dim), (STUDENT_HISTORY, STUDENT_OBS_DIM, DOF));
+    assert_eq!(
+        (policy.history, policy.obs_dim, policy.action_dim),
+        (STUDENT_HISTORY, STUDENT_OBS_DIM, DOF)
+    );
     assert_eq!(host_digest(), host_digest());
 }
 
@@ -47,9 +52,26 @@ fn student_sixteen_bit_input_is_as_accurate_as_two_planes() {
     use frmd_core::policy::Network;
     use frmd_export::export::{export_checkpoint, ExportOptions};
     let dir = frmd_firmware_support::host::student::student_dir();
-    let export = |input_precision| export_checkpoint(&dir, ExportOptions { input_precision, ..Default::default() }, None).expect("export the student");
-    let (wide, two) = (export(InputPrecision::Int16), export(InputPrecision::TwoPlane));
-    let set = frmd_export::calibration_file::read(&dir.join("calibration.safetensors"), wide.checkpoint.meta.model.cond_dim()).expect("calibration rows");
+    let export = |input_precision| {
+        export_checkpoint(
+            &dir,
+            ExportOptions {
+                input_precision,
+                ..Default::default()
+            },
+            None,
+        )
+        .expect("export the student")
+    };
+    let (wide, two) = (
+        export(InputPrecision::Int16),
+        export(InputPrecision::TwoPlane),
+    );
+    let set = frmd_export::calibration_file::read(
+        &dir.join("calibration.safetensors"),
+        wide.checkpoint.meta.model.cond_dim(),
+    )
+    .expect("calibration rows");
     let mut nets = [
         frmd_export::reference::int8_network::<MLP_WIDTH>(&wide.policy).unwrap(),
         frmd_export::reference::int8_network::<MLP_WIDTH>(&two.policy).unwrap(),
@@ -59,9 +81,18 @@ fn student_sixteen_bit_input_is_as_accurate_as_two_planes() {
     for row in 0..set.rows() {
         let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
         let mut input = Vec::new();
-        wide.folded.sample(cond, &set.noise(row, 1, traj), |_, probe, values| if probe == Probe::Input { input = values.to_vec() }).unwrap();
+        wide.folded
+            .sample(cond, &set.noise(row, 1, traj), |_, probe, values| {
+                if probe == Probe::Input {
+                    input = values.to_vec()
+                }
+            })
+            .unwrap();
         let mut beyond = input.clone();
-        for v in beyond.iter_mut().take(wide.policy.history * wide.policy.obs_dim) {
+        for v in beyond
+            .iter_mut()
+            .take(wide.policy.history * wide.policy.obs_dim)
+        {
             *v *= 3.0;
         }
         for (case, input) in [input, beyond].iter().enumerate() {
@@ -69,13 +100,23 @@ fn student_sixteen_bit_input_is_as_accurate_as_two_planes() {
             for (error, net) in errors[case].iter_mut().zip(nets.iter_mut()) {
                 let mut out = vec![0_f32; float.len()];
                 net.forward(0, input, &mut out).unwrap();
-                *error += out.iter().zip(&float).map(|(a, f)| f64::from((a - f).abs())).sum::<f64>();
+                *error += out
+                    .iter()
+                    .zip(&float)
+                    .map(|(a, f)| f64::from((a - f).abs()))
+                    .sum::<f64>();
             }
         }
     }
-    eprintln!("int8 vs f32 abs error sums (16-bit, two-plane): in range {:?}, observations x3 {:?}", errors[0], errors[1]);
+    eprintln!(
+        "int8 vs f32 abs error sums (16-bit, two-plane): in range {:?}, observations x3 {:?}",
+        errors[0], errors[1]
+    );
     for [sixteen_bit, two_plane] in errors {
-        assert!(sixteen_bit <= 1.02 * two_plane, "16-bit {sixteen_bit} vs two-plane {two_plane}");
+        assert!(
+            sixteen_bit <= 1.02 * two_plane,
+            "16-bit {sixteen_bit} vs two-plane {two_plane}"
+        );
     }
 }
 
@@ -91,14 +132,24 @@ fn qemu_minimal_example_acts_like_the_host() {
     let blob = AlignedBlob::of(&student());
     let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
     let mut policy = loaded
-        .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>()
+        .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>(
+        )
         .expect("policy from the blob");
     policy.reset(&[0.05; DOF]).unwrap();
     for step in 0..STUDENT_HISTORY {
-        policy.observe(&[0.1 * step as f32; STUDENT_OBS_DIM]).unwrap();
+        policy
+            .observe(&[0.1 * step as f32; STUDENT_OBS_DIM])
+            .unwrap();
     }
-    let chunk = *policy.act(frmd_core::policy::Noise::Rng(&mut frmd_core::rng::Rng::new(2024))).unwrap();
-    let expected: Vec<String> = chunk.positions[0].iter().map(|v| format!("(bits {:08x})", v.to_bits())).collect();
+    let chunk = *policy
+        .act(frmd_core::policy::Noise::Rng(
+            &mut frmd_core::rng::Rng::new(2024),
+        ))
+        .unwrap();
+    let expected: Vec<String> = chunk.positions[0]
+        .iter()
+        .map(|v| format!("(bits {:08x})", v.to_bits()))
+        .collect();
     for board in qemu::BOARDS {
         let stdout = qemu::run(&root, board, "minimal");
         let got: Vec<String> = stdout

@@ -19,7 +19,9 @@ use frmd_export::QuantizedPolicy;
 use frmd_firmware_support::host::qemu::{self, line_value};
 use frmd_firmware_support::host::student::{student, AlignedBlob};
 use frmd_firmware_support::policy_workload::PolicyWorkload;
-use frmd_firmware_support::shape::{DOF, HORIZON, MLP_HIDDEN, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM};
+use frmd_firmware_support::shape::{
+    DOF, HORIZON, MLP_HIDDEN, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM,
+};
 use frmd_firmware_support::stages::{mlp_marks, StagedMlpNetwork};
 use frmd_firmware_support::workload::digest_all;
 
@@ -44,9 +46,11 @@ fn staged_mlp_network_matches_int8_network() {
     assert_eq!(quantized.input_precision, InputPrecision::Int16);
     assert_eq!(quantized.hidden.len(), LAYERS);
     let blob = AlignedBlob::of(&quantized);
-    let loaded = LoadedMlp::load(blob.bytes())
-        .expect("load the blob");
-    let reference = loaded.policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>().expect("policy from the blob");
+    let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
+    let reference = loaded
+        .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>(
+        )
+        .expect("policy from the blob");
     let mut reference = PolicyWorkload::new(reference);
     let expected = digest_all(&mut reference).expect("reference chunks");
 
@@ -59,16 +63,20 @@ fn staged_mlp_network_matches_int8_network() {
     )
     .expect("staged network")
     .with_input_precision(quantized.input_precision);
-    let policy = Policy::<_, STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT>::new(
-        loaded.config(),
-        network,
-    )
-    .expect("staged policy");
+    let policy =
+        Policy::<_, STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT>::new(
+            loaded.config(),
+            network,
+        )
+        .expect("staged policy");
     let mut staged = PolicyWorkload::new(policy);
     assert_eq!(digest_all(&mut staged).expect("staged chunks"), expected);
     let marks = staged.policy().network().marks().ticks();
     assert_eq!(marks.len(), mlp_marks(LAYERS));
-    assert!(marks.windows(2).all(|pair| pair[1] == pair[0] + 1), "{marks:?}");
+    assert!(
+        marks.windows(2).all(|pair| pair[1] == pair[0] + 1),
+        "{marks:?}"
+    );
 }
 
 #[test]
@@ -96,7 +104,11 @@ fn qemu_stage_breakdowns_add_up() {
     }
     for image in ["policy-stages", "transformer-stages"] {
         let stdout = qemu::run(&root, "m4", image);
-        assert_eq!(line_value(&stdout, "stage_digest"), line_value(&stdout, "digest"), "{stdout}");
+        assert_eq!(
+            line_value(&stdout, "stage_digest"),
+            line_value(&stdout, "digest"),
+            "{stdout}"
+        );
         let number = |key: &str| -> f64 {
             line_value(&stdout, key)
                 .and_then(|v| v.parse().ok())
@@ -105,7 +117,12 @@ fn qemu_stage_breakdowns_add_up() {
         let stages: Vec<f64> = stdout
             .lines()
             .filter(|line| line.starts_with("stage ") && !line.starts_with("stage_"))
-            .map(|line| line.rsplit(": ").next().and_then(|v| v.parse().ok()).expect("stage value"))
+            .map(|line| {
+                line.rsplit(": ")
+                    .next()
+                    .and_then(|v| v.parse().ok())
+                    .expect("stage value")
+            })
             .collect();
         assert!(stages.len() >= 8, "{image}: too few stages\n{stdout}");
         let sum: f64 = stages.iter().sum();

@@ -19,7 +19,9 @@ use frmd_firmware_support::policy_workload::PolicyWorkload;
 use frmd_firmware_support::shape::{
     self, DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
 };
-use frmd_firmware_support::synthetic::{policy as synthetic_policy, transformer as synthetic_transformer};
+use frmd_firmware_support::synthetic::{
+    policy as synthetic_policy, transformer as synthetic_transformer,
+};
 use frmd_firmware_support::workload::digest_all;
 
 type Scratch = frmd_core::model::transformer::TransformerScratch<
@@ -38,11 +40,17 @@ fn host_digest() -> Result<u64, PolicyError> {
     let data = synthetic_transformer::generate();
     let blocks = data.blocks();
     let mut scratch = Box::new(Scratch::new());
-    let network = Network::new(data.model(&blocks), &config.sampler.layout, &[], &mut scratch)
-        .expect("the synthetic transformer validates");
-    let policy = Policy::<_, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>::new(
-        config, network,
-    )?;
+    let network = Network::new(
+        data.model(&blocks),
+        &config.sampler.layout,
+        &[],
+        &mut scratch,
+    )
+    .expect("the synthetic transformer validates");
+    let policy =
+        Policy::<_, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>::new(
+            config, network,
+        )?;
     let mut workload = PolicyWorkload::with_name(policy, "transformer");
     digest_all(&mut workload)
 }
@@ -70,7 +78,12 @@ fn transformer_network_rejects_a_non_standard_layout() {
     let data = synthetic_transformer::generate();
     let blocks = data.blocks();
     let layout = InputLayout::new(
-        &[InputSegment::NoisyTrajectory, InputSegment::ObsHistory, InputSegment::PrevAction, InputSegment::PrevRate],
+        &[
+            InputSegment::NoisyTrajectory,
+            InputSegment::ObsHistory,
+            InputSegment::PrevAction,
+            InputSegment::PrevRate,
+        ],
         0.1,
     )
     .expect("a valid layout");

@@ -6,9 +6,16 @@ use frmd_export::export::{export_checkpoint, ExportOptions};
 #[test]
 #[ignore]
 fn input_quantization_share_of_the_error() {
-    let Ok(dir) = std::env::var("FRMD_CKPT") else { return };
-    let exported = export_checkpoint(std::path::Path::new(&dir), ExportOptions::default(), None).unwrap();
-    let set = frmd_export::calibration_file::read(&std::path::Path::new(&dir).join("calibration.safetensors"), exported.folded.config.cond_dim()).unwrap();
+    let Ok(dir) = std::env::var("FRMD_CKPT") else {
+        return;
+    };
+    let exported =
+        export_checkpoint(std::path::Path::new(&dir), ExportOptions::default(), None).unwrap();
+    let set = frmd_export::calibration_file::read(
+        &std::path::Path::new(&dir).join("calibration.safetensors"),
+        exported.folded.config.cond_dim(),
+    )
+    .unwrap();
     let policy = &exported.policy;
     let mut net = frmd_export::reference::int8_network::<1024>(policy).unwrap();
     use frmd_core::policy::Network;
@@ -16,11 +23,28 @@ fn input_quantization_share_of_the_error() {
     for row in 0..set.rows() {
         let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
         let mut input = Vec::new();
-        exported.folded.sample(cond, &set.noise(row, 1, exported.folded.config.traj_dim()), |_, p, v| if p == Probe::Input { input = v.to_vec() }).unwrap();
-        let float = exported.folded.forward_observed(0, &input, |_, _| {}).unwrap();
+        exported
+            .folded
+            .sample(
+                cond,
+                &set.noise(row, 1, exported.folded.config.traj_dim()),
+                |_, p, v| {
+                    if p == Probe::Input {
+                        input = v.to_vec()
+                    }
+                },
+            )
+            .unwrap();
+        let float = exported
+            .folded
+            .forward_observed(0, &input, |_, _| {})
+            .unwrap();
         let mut out = vec![0f32; float.len()];
         net.forward(0, &input, &mut out).unwrap();
-        let fq: Vec<f32> = input.iter().map(|&v| policy.input.dequantize(policy.input.quantize(v))).collect();
+        let fq: Vec<f32> = input
+            .iter()
+            .map(|&v| policy.input.dequantize(policy.input.quantize(v)))
+            .collect();
         let float_fq = exported.folded.forward_observed(0, &fq, |_, _| {}).unwrap();
         for ((f, q), g) in float.iter().zip(&out).zip(&float_fq) {
             err_int8 += f64::from((f - q).abs());
@@ -28,5 +52,11 @@ fn input_quantization_share_of_the_error() {
             n += 1;
         }
     }
-    eprintln!("input scale {} zp {}: mean |param error| int8 {:.5}, input fake-quant only {:.5}", policy.input.scale, policy.input.zero_point, err_int8 / n as f64, err_input_only / n as f64);
+    eprintln!(
+        "input scale {} zp {}: mean |param error| int8 {:.5}, input fake-quant only {:.5}",
+        policy.input.scale,
+        policy.input.zero_point,
+        err_int8 / n as f64,
+        err_input_only / n as f64
+    );
 }

@@ -1,13 +1,12 @@
 //! Host timing of the int8 policy from a blob at firmware-like size (ignored: a measurement, not a
 //! check). `cargo test -p frmd-export --release --test timing -- --ignored --nocapture`.
 
-
 use std::time::Instant;
 
-use frmd_test_support::random_policy::{random_policy, Dims};
 use frmd_core::blob::LoadedMlp;
 use frmd_core::policy::Noise;
 use frmd_core::rng::Rng;
+use frmd_test_support::random_policy::{random_policy, Dims};
 
 const M: usize = 2;
 const O: usize = 10;

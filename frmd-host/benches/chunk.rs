@@ -8,9 +8,14 @@ use frmd_host::tasks::{Policy, PolicyInput};
 fn chunk(c: &mut Criterion) {
     let dir = std::env::temp_dir().join(format!("frmd-bench-chunk-{}", std::process::id()));
     let (history, prev, rate) = reach_input();
-    let input = PolicyInput { obs_history: &history, prev_action: &prev, prev_rate: &rate };
+    let input = PolicyInput {
+        obs_history: &history,
+        prev_action: &prev,
+        prev_rate: &rate,
+    };
     for backbone in ["mlp", "transformer-lite"] {
-        let mut p = reach_student(&dir, &backbone.parse().expect("a backbone"), 1).expect("bench student");
+        let mut p =
+            reach_student(&dir, &backbone.parse().expect("a backbone"), 1).expect("bench student");
         let mut group = c.benchmark_group(format!("one-step chunk, {backbone}, reach shape"));
         let mut policies: Vec<(&str, &mut dyn Policy)> = vec![("candle-f32", &mut p.float)];
         match &mut p.core {
@@ -29,7 +34,9 @@ fn chunk(c: &mut Criterion) {
         if let (Ok(core), true) = (&mut p.core, frmd_core::kernels::x86::avx2_active()) {
             frmd_core::kernels::x86::set_avx2_enabled(false);
             core.int8.reset(7);
-            group.bench_function("core-int8-portable", |b| b.iter(|| core.int8.act(&input).expect("act")));
+            group.bench_function("core-int8-portable", |b| {
+                b.iter(|| core.int8.act(&input).expect("act"))
+            });
             frmd_core::kernels::x86::set_avx2_enabled(true);
         }
         group.finish();

@@ -6,9 +6,9 @@
 //!
 //! Run with `RAYON_NUM_THREADS=1 cargo bench -p frmd-host --bench policies --bench chunk`.
 use criterion::{criterion_group, criterion_main, Criterion};
-use frmd_host::checkpoint::Role;
 use frmd_host::bench::fixtures::synthetic_float_policy;
 use frmd_host::bench::{BenchConfig, FixedInput};
+use frmd_host::checkpoint::Role;
 use frmd_host::diffusion::samplers::Solver;
 use frmd_host::tasks::Policy;
 
@@ -18,7 +18,12 @@ const OBS_DIM: usize = 6;
 fn chunk_latency(c: &mut Criterion) {
     let cases = [
         ("candle student-1", Role::Student, 1, None),
-        ("candle teacher-heun-10", Role::Teacher, 10, Some(Solver::Heun)),
+        (
+            "candle teacher-heun-10",
+            Role::Teacher,
+            10,
+            Some(Solver::Heun),
+        ),
         ("candle dp-ddpm-100", Role::Dp, 100, None),
         ("candle dp-ddim-10", Role::Dp, 10, None),
     ];
@@ -26,7 +31,8 @@ fn chunk_latency(c: &mut Criterion) {
     let backbone = BenchConfig::default().backbone;
     let mut group = c.benchmark_group("chunk");
     for (name, role, steps, solver) in cases {
-        let mut policy = match synthetic_float_policy(&backbone, OBS_DIM, role, Some(steps), solver) {
+        let mut policy = match synthetic_float_policy(&backbone, OBS_DIM, role, Some(steps), solver)
+        {
             Ok(p) => p,
             Err(e) => panic!("building {name}: {e:#}"),
         };
@@ -34,7 +40,12 @@ fn chunk_latency(c: &mut Criterion) {
         let fixed = FixedInput::new(obs_dim, action_dim, history);
         policy.reset(0);
         group.bench_function(name, |b| {
-            b.iter(|| policy.act(&fixed.input()).map(|chunk| chunk.len()).unwrap_or(0))
+            b.iter(|| {
+                policy
+                    .act(&fixed.input())
+                    .map(|chunk| chunk.len())
+                    .unwrap_or(0)
+            })
         });
     }
     group.finish();

@@ -5,8 +5,8 @@
 //! Ir(1 chunk)) / 100. `int8-avx2` / `int8-portable` run the int8 policy with frmd-core's AVX-VNNI
 //! / AVX2 kernels turned off (x86-64; callgrind's virtual CPU reports no AVX-VNNI anyway).
 use frmd_host::bench::fixtures::{reach_input, reach_student};
-use frmd_host::tasks::{Policy, PolicyInput};
 use frmd_host::policy::int8::Int8Policy;
+use frmd_host::tasks::{Policy, PolicyInput};
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -19,11 +19,19 @@ fn main() -> anyhow::Result<()> {
     // with the transformer exporter.
     let mut transformer: Option<(Int8Policy, Int8Policy, usize)> = None;
     if backbone.starts_with("transformer") {
-        let exported = frmd_export::export::export_transformer_checkpoint(&dir, Default::default(), None)?;
-        let norm = exported.checkpoint.meta.normalization.clone().ok_or_else(|| anyhow::anyhow!("no normalization"))?;
-        let blob = frmd_export::blob::write_transformer(&exported.model, &norm).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
+        let exported =
+            frmd_export::export::export_transformer_checkpoint(&dir, Default::default(), None)?;
+        let norm = exported
+            .checkpoint
+            .meta
+            .normalization
+            .clone()
+            .ok_or_else(|| anyhow::anyhow!("no normalization"))?;
+        let blob = frmd_export::blob::write_transformer(&exported.model, &norm)
+            .map_err(|e| anyhow::anyhow!("blob: {e}"))?;
         let int8 = Int8Policy::from_blob(&blob, "int8")?;
-        let twin = Int8Policy::transformer_f32_twin(&blob, exported.model.folded.clone(), "core-f32")?;
+        let twin =
+            Int8Policy::transformer_f32_twin(&blob, exported.model.folded.clone(), "core-f32")?;
         transformer = Some((int8, twin, exported.model.memory().flash_bytes()));
     }
     let flash = match (&transformer, &p.core) {
@@ -37,18 +45,28 @@ fn main() -> anyhow::Result<()> {
         "int8-avx2" => drop(frmd_core::kernels::x86::set_avx_vnni_enabled(false)),
         _ => {}
     }
-    let which_policy = if which.starts_with("int8") { "int8" } else { which };
+    let which_policy = if which.starts_with("int8") {
+        "int8"
+    } else {
+        which
+    };
     let policy: &mut dyn Policy = match (which_policy, &mut transformer, &mut p.core) {
         ("candle-f32", _, _) => &mut p.float,
         ("int8", Some((int8, _, _)), _) => int8,
         ("core-f32", Some((_, twin, _)), _) => twin,
         ("int8", None, Ok(core)) => &mut core.int8,
         ("core-f32", None, Ok(core)) => &mut core.core_f32,
-        ("int8" | "core-f32", None, Err(reason)) => anyhow::bail!("no frmd-core policy for {backbone}: {reason}"),
+        ("int8" | "core-f32", None, Err(reason)) => {
+            anyhow::bail!("no frmd-core policy for {backbone}: {reason}")
+        }
         (other, _, _) => anyhow::bail!("unknown policy {other}"),
     };
     let (history, prev, rate) = reach_input();
-    let input = PolicyInput { obs_history: &history, prev_action: &prev, prev_rate: &rate };
+    let input = PolicyInput {
+        obs_history: &history,
+        prev_action: &prev,
+        prev_rate: &rate,
+    };
     policy.reset(7);
     let mut checksum = 0f32;
     for _ in 0..chunks {

@@ -12,12 +12,12 @@
 //! prints how far closed-loop observations leave the training range; `INT8_INPUT=1` and
 //! `EXPORT_HEADROOM` set the export options of the "real int8" line.
 use anyhow::Context;
-use frmd_export::calibrate::RangeMethod;
-use frmd_export::export::{export_checkpoint, ExportOptions};
-use frmd_export::fold::{sample_chunk, FoldedMlp, MAX_WIDTH};
 use frmd_core::policy::Network;
 use frmd_core::quant::{quantize_weights_per_channel, QuantParams};
 use frmd_core::rng::Rng;
+use frmd_export::calibrate::RangeMethod;
+use frmd_export::export::{export_checkpoint, ExportOptions};
+use frmd_export::fold::{sample_chunk, FoldedMlp, MAX_WIDTH};
 use std::path::Path;
 
 /// Which quantization sources are simulated.
@@ -58,7 +58,10 @@ fn fake_weights(w: &[f32], in_features: usize) -> Vec<f32> {
     let out = w.len() / in_features;
     let (mut q, mut s) = (vec![0i8; w.len()], vec![0f32; out]);
     quantize_weights_per_channel(w, in_features, &mut q, &mut s).expect("weights");
-    q.iter().enumerate().map(|(i, &v)| f32::from(v) * s[i / in_features]).collect()
+    q.iter()
+        .enumerate()
+        .map(|(i, &v)| f32::from(v) * s[i / in_features])
+        .collect()
 }
 
 struct Sim<'a> {
@@ -70,15 +73,35 @@ struct Sim<'a> {
 }
 
 impl<'a> Sim<'a> {
-    fn new(folded: &'a FoldedMlp, ranges: &'a frmd_export::calibrate::Ranges, src: Sources) -> Self {
+    fn new(
+        folded: &'a FoldedMlp,
+        ranges: &'a frmd_export::calibrate::Ranges,
+        src: Sources,
+    ) -> Self {
         let hidden_w = folded
             .hidden
             .iter()
-            .map(|l| if src.hidden_weights { fake_weights(&l.weights, l.in_features) } else { l.weights.clone() })
+            .map(|l| {
+                if src.hidden_weights {
+                    fake_weights(&l.weights, l.in_features)
+                } else {
+                    l.weights.clone()
+                }
+            })
             .collect();
         let o = &folded.output;
-        let output_w = if src.output_weights { fake_weights(&o.weights, o.in_features) } else { o.weights.clone() };
-        Sim { folded, ranges, src, hidden_w, output_w }
+        let output_w = if src.output_weights {
+            fake_weights(&o.weights, o.in_features)
+        } else {
+            o.weights.clone()
+        };
+        Sim {
+            folded,
+            ranges,
+            src,
+            hidden_w,
+            output_w,
+        }
     }
 
     fn forward(&self, step: usize, input: &[f32]) -> Vec<f32> {
@@ -86,7 +109,17 @@ impl<'a> Sim<'a> {
         let (lo, hi) = (q.dequantize(i8::MIN), q.dequantize(i8::MAX));
         let c = &self.folded.config;
         let (obs_len, k) = (c.history * c.obs_dim, c.action_dim);
-        let segment = |i: usize| if i < obs_len { 4 } else if i < obs_len + k { 5 } else if i < obs_len + 2 * k { 6 } else { 7 };
+        let segment = |i: usize| {
+            if i < obs_len {
+                4
+            } else if i < obs_len + k {
+                5
+            } else if i < obs_len + 2 * k {
+                6
+            } else {
+                7
+            }
+        };
         let mut x: Vec<f32> = input
             .iter()
             .enumerate()
@@ -96,19 +129,36 @@ impl<'a> Sim<'a> {
                 (false, m @ 4..=7) if segment(i) == m => v.clamp(lo, hi),
                 (false, 2) => ((v / q.scale).round()) * q.scale,
                 (false, 3) => {
-                    let h: f32 = std::env::var("HEADROOM").ok().and_then(|h| h.parse().ok()).unwrap_or(1.0);
+                    let h: f32 = std::env::var("HEADROOM")
+                        .ok()
+                        .and_then(|h| h.parse().ok())
+                        .unwrap_or(1.0);
                     fake_fine(v, QuantParams::from_range(lo * h, hi * h).unwrap(), 256.0)
                 }
                 _ => v,
             })
             .collect();
-        let pre_fine = if self.src.pre_fine > 0.0 { self.src.pre_fine } else { self.src.fine };
+        let pre_fine = if self.src.pre_fine > 0.0 {
+            self.src.pre_fine
+        } else {
+            self.src.fine
+        };
         for (l, layer) in self.folded.hidden.iter().enumerate() {
-            let bias = if l == 0 { &self.folded.first_layer_biases[step] } else { &layer.bias };
+            let bias = if l == 0 {
+                &self.folded.first_layer_biases[step]
+            } else {
+                &layer.bias
+            };
             let (mut pre_q, mut out_q) = self.ranges.hidden[l];
-            let a: f32 = std::env::var("ACT_HEADROOM").ok().and_then(|h| h.parse().ok()).unwrap_or(1.0);
+            let a: f32 = std::env::var("ACT_HEADROOM")
+                .ok()
+                .and_then(|h| h.parse().ok())
+                .unwrap_or(1.0);
             if a != 1.0 {
-                let widen = |q: QuantParams| QuantParams::from_range(q.dequantize(i8::MIN) * a, q.dequantize(i8::MAX) * a).unwrap();
+                let widen = |q: QuantParams| {
+                    QuantParams::from_range(q.dequantize(i8::MIN) * a, q.dequantize(i8::MAX) * a)
+                        .unwrap()
+                };
                 pre_q = widen(pre_q);
                 out_q = widen(out_q);
             }
@@ -125,13 +175,22 @@ impl<'a> Sim<'a> {
                         pre = fake_fine(pre, pre_q, pre_fine);
                     }
                     let y = layer.activation.apply(pre);
-                    if self.src.post_activation { fake_fine(y, out_q, self.src.fine) } else { y }
+                    if self.src.post_activation {
+                        fake_fine(y, out_q, self.src.fine)
+                    } else {
+                        y
+                    }
                 })
                 .collect();
         }
         let o = &self.folded.output;
         (0..o.out_features)
-            .map(|r| self.output_w[r * o.in_features..(r + 1) * o.in_features].iter().zip(&x).fold(o.bias[r], |a, (w, v)| a + w * v))
+            .map(|r| {
+                self.output_w[r * o.in_features..(r + 1) * o.in_features]
+                    .iter()
+                    .zip(&x)
+                    .fold(o.bias[r], |a, (w, v)| a + w * v)
+            })
             .collect()
     }
 }
@@ -144,12 +203,37 @@ fn main() -> anyhow::Result<()> {
     let ckpt = Path::new(args.get(1).context("CKPT")?);
     let data = Path::new(args.get(2).context("DATA")?);
     let rows: usize = args.get(3).map(|s| s.parse()).transpose()?.unwrap_or(200);
-    let ranges: RangeMethod = args.get(4).map(String::as_str).unwrap_or("minmax").parse()?;
+    let ranges: RangeMethod = args
+        .get(4)
+        .map(String::as_str)
+        .unwrap_or("minmax")
+        .parse()?;
     let set = frmd_host::export::calibration_from_data(data, ckpt)?;
-    let exported = export_checkpoint(ckpt, ExportOptions { ranges, input_precision: if std::env::var_os("INT8_INPUT").is_none() { frmd_core::model::mlp::InputPrecision::Int16 } else { frmd_core::model::mlp::InputPrecision::Int8 }, input_headroom: std::env::var("EXPORT_HEADROOM").ok().and_then(|h| h.parse().ok()).unwrap_or(frmd_export::export::DEFAULT_INPUT_HEADROOM), ..ExportOptions::default() }, Some(set.clone()))?;
+    let exported = export_checkpoint(
+        ckpt,
+        ExportOptions {
+            ranges,
+            input_precision: if std::env::var_os("INT8_INPUT").is_none() {
+                frmd_core::model::mlp::InputPrecision::Int16
+            } else {
+                frmd_core::model::mlp::InputPrecision::Int8
+            },
+            input_headroom: std::env::var("EXPORT_HEADROOM")
+                .ok()
+                .and_then(|h| h.parse().ok())
+                .unwrap_or(frmd_export::export::DEFAULT_INPUT_HEADROOM),
+            ..ExportOptions::default()
+        },
+        Some(set.clone()),
+    )?;
     let folded = &exported.folded;
     let c = &folded.config;
-    let norm = exported.checkpoint.meta.normalization.clone().context("normalization")?;
+    let norm = exported
+        .checkpoint
+        .meta
+        .normalization
+        .clone()
+        .context("normalization")?;
     let traj = c.traj_dim();
     let steps = folded.steps.len();
     let rows = rows.min(set.rows());
@@ -158,23 +242,40 @@ fn main() -> anyhow::Result<()> {
         println!("layer {l}: pre {p:?} out {o:?}");
     }
     let run = |label: &str, mut forward: Forward<'_>| -> anyhow::Result<()> {
-        let (mut max_e, mut sum_e, mut n, mut max_p, mut sum_p, mut signed) = (0f64, 0f64, 0usize, 0f64, 0f64, 0f64);
+        let (mut max_e, mut sum_e, mut n, mut max_p, mut sum_p, mut signed) =
+            (0f64, 0f64, 0usize, 0f64, 0f64, 0f64);
         for r in 0..rows {
             let cond = &set.cond[r * set.cond_dim..(r + 1) * set.cond_dim];
             let mut noise = vec![0f32; steps * traj];
             Rng::new(0xe901_0000 + r as u64).fill_gaussian(&mut noise);
             let mut exact_params = Vec::new();
-            let mut exact = sample_chunk(c, &folded.layout, &folded.steps, &folded.prodmp, cond, &noise, |i, input| {
-                let p = folded.forward_observed(i, input, |_, _| {})?;
-                exact_params = p.clone();
-                Ok(p)
-            })?;
+            let mut exact = sample_chunk(
+                c,
+                &folded.layout,
+                &folded.steps,
+                &folded.prodmp,
+                cond,
+                &noise,
+                |i, input| {
+                    let p = folded.forward_observed(i, input, |_, _| {})?;
+                    exact_params = p.clone();
+                    Ok(p)
+                },
+            )?;
             let mut got_params = Vec::new();
-            let mut got = sample_chunk(c, &folded.layout, &folded.steps, &folded.prodmp, cond, &noise, |i, input| {
-                let p = forward(i, input)?;
-                got_params = p.clone();
-                Ok(p)
-            })?;
+            let mut got = sample_chunk(
+                c,
+                &folded.layout,
+                &folded.steps,
+                &folded.prodmp,
+                cond,
+                &noise,
+                |i, input| {
+                    let p = forward(i, input)?;
+                    got_params = p.clone();
+                    Ok(p)
+                },
+            )?;
             norm.action.denormalize(&mut exact);
             norm.action.denormalize(&mut got);
             for (a, b) in exact.iter().zip(&got) {
@@ -194,46 +295,233 @@ fn main() -> anyhow::Result<()> {
         println!("{label:<28} chunk max {max_e:.5} mean {:.6} signed {:+.6} (action units) | params max {max_p:.5} mean {:.6}", sum_e / n as f64, signed / n as f64, sum_p / np);
         Ok(())
     };
-    let all = Sources { input: true, hidden_weights: true, output_weights: true, pre_activation: true, post_activation: true, clip: 0.0, fine: 1.0, pre_fine: 0.0, input_mode: 0 };
+    let all = Sources {
+        input: true,
+        hidden_weights: true,
+        output_weights: true,
+        pre_activation: true,
+        post_activation: true,
+        clip: 0.0,
+        fine: 1.0,
+        pre_fine: 0.0,
+        input_mode: 0,
+    };
     let variants: [(&str, Sources); 27] = [
-        ("activations only, int16-like", Sources { pre_activation: true, post_activation: true, fine: 256.0, ..Default::default() }),
-        ("activations only, 2^-16 of int16", Sources { pre_activation: true, post_activation: true, fine: 16_777_216.0, ..Default::default() }),
-        ("all, two-plane input", Sources { input: false, input_mode: 3, ..all }),
-        ("clamp obs", Sources { input_mode: 4, ..Default::default() }),
-        ("clamp prev action", Sources { input_mode: 5, ..Default::default() }),
-        ("clamp rate", Sources { input_mode: 6, ..Default::default() }),
-        ("clamp trajectory", Sources { input_mode: 7, ..Default::default() }),
-        ("input clamp only", Sources { input_mode: 1, ..Default::default() }),
-        ("input rounding only", Sources { input_mode: 2, ..Default::default() }),
-        ("input two-plane-like", Sources { input_mode: 3, ..Default::default() }),
+        (
+            "activations only, int16-like",
+            Sources {
+                pre_activation: true,
+                post_activation: true,
+                fine: 256.0,
+                ..Default::default()
+            },
+        ),
+        (
+            "activations only, 2^-16 of int16",
+            Sources {
+                pre_activation: true,
+                post_activation: true,
+                fine: 16_777_216.0,
+                ..Default::default()
+            },
+        ),
+        (
+            "all, two-plane input",
+            Sources {
+                input: false,
+                input_mode: 3,
+                ..all
+            },
+        ),
+        (
+            "clamp obs",
+            Sources {
+                input_mode: 4,
+                ..Default::default()
+            },
+        ),
+        (
+            "clamp prev action",
+            Sources {
+                input_mode: 5,
+                ..Default::default()
+            },
+        ),
+        (
+            "clamp rate",
+            Sources {
+                input_mode: 6,
+                ..Default::default()
+            },
+        ),
+        (
+            "clamp trajectory",
+            Sources {
+                input_mode: 7,
+                ..Default::default()
+            },
+        ),
+        (
+            "input clamp only",
+            Sources {
+                input_mode: 1,
+                ..Default::default()
+            },
+        ),
+        (
+            "input rounding only",
+            Sources {
+                input_mode: 2,
+                ..Default::default()
+            },
+        ),
+        (
+            "input two-plane-like",
+            Sources {
+                input_mode: 3,
+                ..Default::default()
+            },
+        ),
         ("none (sanity)", Sources::default()),
-        ("input", Sources { input: true, ..Default::default() }),
-        ("hidden weights", Sources { hidden_weights: true, ..Default::default() }),
-        ("output weights", Sources { output_weights: true, ..Default::default() }),
-        ("pre-activation (requant)", Sources { pre_activation: true, ..Default::default() }),
-        ("post-activation (LUT out)", Sources { post_activation: true, ..Default::default() }),
-        ("activations (pre+post)", Sources { pre_activation: true, post_activation: true, ..Default::default() }),
+        (
+            "input",
+            Sources {
+                input: true,
+                ..Default::default()
+            },
+        ),
+        (
+            "hidden weights",
+            Sources {
+                hidden_weights: true,
+                ..Default::default()
+            },
+        ),
+        (
+            "output weights",
+            Sources {
+                output_weights: true,
+                ..Default::default()
+            },
+        ),
+        (
+            "pre-activation (requant)",
+            Sources {
+                pre_activation: true,
+                ..Default::default()
+            },
+        ),
+        (
+            "post-activation (LUT out)",
+            Sources {
+                post_activation: true,
+                ..Default::default()
+            },
+        ),
+        (
+            "activations (pre+post)",
+            Sources {
+                pre_activation: true,
+                post_activation: true,
+                ..Default::default()
+            },
+        ),
         ("all", all),
-        ("all but input (int16-like input)", Sources { input: false, ..all }),
-        ("all but input, pre clip 6", Sources { input: false, clip: 6.0, ..all }),
-        ("all but pre (wide LUT)", Sources { pre_activation: false, ..all }),
-        ("all, int16-like activations", Sources { fine: 256.0, ..all }),
-        ("int16 act + exact input", Sources { fine: 256.0, input: false, ..all }),
-        ("all, 10-bit pre-activation", Sources { pre_fine: 4.0, ..all }),
-        ("all, 12-bit pre-activation", Sources { pre_fine: 16.0, ..all }),
-        ("all, 16-bit pre-activation", Sources { pre_fine: 256.0, ..all }),
-        ("two-plane input, int16 act", Sources { input: false, input_mode: 3, fine: 256.0, ..all }),
+        (
+            "all but input (int16-like input)",
+            Sources {
+                input: false,
+                ..all
+            },
+        ),
+        (
+            "all but input, pre clip 6",
+            Sources {
+                input: false,
+                clip: 6.0,
+                ..all
+            },
+        ),
+        (
+            "all but pre (wide LUT)",
+            Sources {
+                pre_activation: false,
+                ..all
+            },
+        ),
+        (
+            "all, int16-like activations",
+            Sources { fine: 256.0, ..all },
+        ),
+        (
+            "int16 act + exact input",
+            Sources {
+                fine: 256.0,
+                input: false,
+                ..all
+            },
+        ),
+        (
+            "all, 10-bit pre-activation",
+            Sources {
+                pre_fine: 4.0,
+                ..all
+            },
+        ),
+        (
+            "all, 12-bit pre-activation",
+            Sources {
+                pre_fine: 16.0,
+                ..all
+            },
+        ),
+        (
+            "all, 16-bit pre-activation",
+            Sources {
+                pre_fine: 256.0,
+                ..all
+            },
+        ),
+        (
+            "two-plane input, int16 act",
+            Sources {
+                input: false,
+                input_mode: 3,
+                fine: 256.0,
+                ..all
+            },
+        ),
     ];
-    let closed_loop = std::env::var("EPISODES").ok().map(|e| e.parse::<usize>()).transpose()?.unwrap_or(0);
+    let closed_loop = std::env::var("EPISODES")
+        .ok()
+        .map(|e| e.parse::<usize>())
+        .transpose()?
+        .unwrap_or(0);
     if closed_loop > 0 {
         let task = exported.checkpoint.meta.dataset.task.clone();
-        let eval = frmd_host::eval::EvalConfig { episodes: closed_loop, history: c.history, ..Default::default() };
-        let only: Option<Vec<String>> = std::env::var("VARIANTS").ok().map(|v| v.split(';').map(String::from).collect());
-        for (label, src) in variants.iter().filter(|(l, _)| only.as_ref().is_none_or(|o| o.iter().any(|x| x == l))) {
+        let eval = frmd_host::eval::EvalConfig {
+            episodes: closed_loop,
+            history: c.history,
+            ..Default::default()
+        };
+        let only: Option<Vec<String>> = std::env::var("VARIANTS")
+            .ok()
+            .map(|v| v.split(';').map(String::from).collect());
+        for (label, src) in variants
+            .iter()
+            .filter(|(l, _)| only.as_ref().is_none_or(|o| o.iter().any(|x| x == l)))
+        {
             let sim = Sim::new(folded, &exported.ranges, *src);
-            let mut policy = SimPolicy { sim: &sim, norm: &norm, rng: Rng::new(0) };
+            let mut policy = SimPolicy {
+                sim: &sim,
+                norm: &norm,
+                rng: Rng::new(0),
+            };
             let report = frmd_host::eval::run_episodes(&task, &mut policy, &eval)?;
-            println!("closed loop {label:<28} {task} {closed_loop} episodes: success {:.1} %", 100.0 * report.success_rate);
+            println!(
+                "closed loop {label:<28} {task} {closed_loop} episodes: success {:.1} %",
+                100.0 * report.success_rate
+            );
             if std::env::var_os("OBS_STATS").is_some() {
                 println!("  observations (normalized, max |.| per observation) above 1, 1.05, 1.25, 1.5, 2, 3, 4; total; max*1000: {:?}", obs_stats());
             }
@@ -244,12 +532,15 @@ fn main() -> anyhow::Result<()> {
         let sim = Sim::new(folded, &exported.ranges, src);
         run(label, Box::new(move |i, input| Ok(sim.forward(i, input))))?;
     }
-    let mut net = Box::new(frmd_export::reference::int8_network::<MAX_WIDTH>(&exported.policy)?);
+    let mut net = Box::new(frmd_export::reference::int8_network::<MAX_WIDTH>(
+        &exported.policy,
+    )?);
     run(
         "real int8 (frmd-core)",
         Box::new(move |i, input| {
             let mut out = vec![0f32; net.output_width()];
-            net.forward(i, input, &mut out).map_err(|e| anyhow::anyhow!("{e}"))?;
+            net.forward(i, input, &mut out)
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
             Ok(out)
         }),
     )?;
@@ -285,7 +576,9 @@ impl frmd_host::tasks::Policy for SimPolicy<'_> {
                 OBS_HIST.with(|h| {
                     let mut h = h.borrow_mut();
                     for (i, t) in [1.0f32, 1.05, 1.25, 1.5, 2.0, 3.0, 4.0].iter().enumerate() {
-                        if m > *t { h[i] += 1; }
+                        if m > *t {
+                            h[i] += 1;
+                        }
                     }
                     h[7] += 1;
                     h[8] = h[8].max((m * 1000.0) as usize);
@@ -296,10 +589,24 @@ impl frmd_host::tasks::Policy for SimPolicy<'_> {
         let mut prev = input.prev_action.to_vec();
         self.norm.action.normalize(&mut prev);
         cond.extend(prev);
-        cond.extend(input.prev_rate.iter().zip(self.norm.action.scale()).map(|(r, s)| r * s));
+        cond.extend(
+            input
+                .prev_rate
+                .iter()
+                .zip(self.norm.action.scale())
+                .map(|(r, s)| r * s),
+        );
         let mut noise = vec![0f32; folded.steps.len() * c.traj_dim()];
         self.rng.fill_gaussian(&mut noise);
-        let mut chunk = sample_chunk(c, &folded.layout, &folded.steps, &folded.prodmp, &cond, &noise, |i, x| Ok(self.sim.forward(i, x)))?;
+        let mut chunk = sample_chunk(
+            c,
+            &folded.layout,
+            &folded.steps,
+            &folded.prodmp,
+            &cond,
+            &noise,
+            |i, x| Ok(self.sim.forward(i, x)),
+        )?;
         self.norm.action.denormalize(&mut chunk);
         Ok(chunk.chunks(c.action_dim).map(|a| a.to_vec()).collect())
     }

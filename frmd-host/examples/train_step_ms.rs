@@ -4,14 +4,14 @@
 //! (defaults: /work/models-runs/reach.safetensors, transformer-lite, 20, 128). Run with
 //! `RAYON_NUM_THREADS=1`. Prints the median and mean ms/step over STEPS steps after 3 warm-up
 //! steps, and the loss after the last step (a seeded run, so two builds can be compared).
+use candle_core::Device;
+use frmd_core::sigma::SigmaConfig;
 use frmd_host::data::Dataset;
 use frmd_host::diffusion::loss::{teacher_loss, LossWeight, SigmaSampling};
-use frmd_host::models::{BackboneConfig, HeadConfig, ProDmpOutput, ModelConfig, OwnedNetwork};
+use frmd_host::models::{BackboneConfig, HeadConfig, ModelConfig, OwnedNetwork, ProDmpOutput};
 use frmd_host::rng::HostRng;
 use frmd_host::train::batch::sample;
 use frmd_host::train::optim::{OptimConfig, ScheduledAdamW};
-use candle_core::Device;
-use frmd_core::sigma::SigmaConfig;
 use mimalloc::MiMalloc;
 use std::time::Instant;
 
@@ -20,8 +20,14 @@ static GLOBAL: MiMalloc = MiMalloc;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let data = args.get(1).map(String::as_str).unwrap_or("/work/models-runs/reach.safetensors");
-    let backbone = args.get(2).map(String::as_str).unwrap_or("transformer-lite");
+    let data = args
+        .get(1)
+        .map(String::as_str)
+        .unwrap_or("/work/models-runs/reach.safetensors");
+    let backbone = args
+        .get(2)
+        .map(String::as_str)
+        .unwrap_or("transformer-lite");
     let steps: usize = args.get(3).map(|s| s.parse()).transpose()?.unwrap_or(20);
     let batch: usize = args.get(4).map(|s| s.parse()).transpose()?.unwrap_or(128);
     let dataset = Dataset::load(std::path::Path::new(data))?;
@@ -34,20 +40,34 @@ fn main() -> anyhow::Result<()> {
         control_dt: f64::from(dataset.dt),
         embed_dim: 16,
         backbone: BackboneConfig::parse(backbone)?,
-        head: HeadConfig::ProDmp { num_basis: 20, output: ProDmpOutput::Direct, auto_scale_basis: false },
+        head: HeadConfig::ProDmp {
+            num_basis: 20,
+            output: ProDmpOutput::Direct,
+            auto_scale_basis: false,
+        },
     };
     let device = Device::Cpu;
     let net = OwnedNetwork::new_seeded(&model, 1, &device)?;
     let mut opt = ScheduledAdamW::new(net.varmap.all_vars(), OptimConfig::paper(1000))?;
     let sig = SigmaConfig::default();
-    let sampling = SigmaSampling { uniform_fraction: 0.2 };
+    let sampling = SigmaSampling {
+        uniform_fraction: 0.2,
+    };
     let mut rng = HostRng::derive(1, "train-step-ms");
     let mut times = Vec::new();
     let mut last = 0f32;
     for i in 0..steps + 3 {
         let b = sample(&windows, &model, batch, &mut rng, &device)?;
         let start = Instant::now();
-        let loss = teacher_loss(&net.net, &sig, &b.x0, &b.cond, LossWeight::Uniform, sampling, &mut rng)?;
+        let loss = teacher_loss(
+            &net.net,
+            &sig,
+            &b.x0,
+            &b.cond,
+            LossWeight::Uniform,
+            sampling,
+            &mut rng,
+        )?;
         opt.backward_step(&loss)?;
         last = loss.to_scalar::<f32>()?;
         if i >= 3 {

@@ -6,8 +6,8 @@
 use crate::models::init::sorted_vars;
 use crate::models::OwnedNetwork;
 use anyhow::Context;
-use frmd_export::artifact::{write_atomic, write_atomic_with};
 use candle_core::{Device, Tensor};
+use frmd_export::artifact::{write_atomic, write_atomic_with};
 use std::path::Path;
 
 pub use frmd_export::checkpoint::{
@@ -24,7 +24,10 @@ pub fn save(dir: &Path, meta: &CheckpointMeta, net: &OwnedNetwork) -> anyhow::Re
 
 /// Rewrites `frmd.json` of a saved checkpoint (e.g. with the final evaluation added).
 pub fn save_meta(dir: &Path, meta: &CheckpointMeta) -> anyhow::Result<()> {
-    write_atomic(&dir.join(CONFIG_FILE), serde_json::to_string_pretty(meta)?.as_bytes())
+    write_atomic(
+        &dir.join(CONFIG_FILE),
+        serde_json::to_string_pretty(meta)?.as_bytes(),
+    )
 }
 
 /// Reads and validates a checkpoint; every tensor is checked against `frmd.json`.
@@ -34,7 +37,11 @@ pub fn load(dir: &Path) -> anyhow::Result<(CheckpointMeta, OwnedNetwork)> {
     let net = OwnedNetwork::new_seeded(&meta.model, 0, &Device::Cpu)?;
     for (name, var) in sorted_vars(&net.varmap) {
         let tensor = tensors.get(&name).with_context(|| format!("{WEIGHTS_FILE}: variable `{name}` of the model is not in {CONFIG_FILE}'s tensor list"))?;
-        var.set(&Tensor::from_vec(tensor.values.clone(), tensor.shape.as_slice(), &Device::Cpu)?)?;
+        var.set(&Tensor::from_vec(
+            tensor.values.clone(),
+            tensor.shape.as_slice(),
+            &Device::Cpu,
+        )?)?;
     }
     Ok((meta, net))
 }

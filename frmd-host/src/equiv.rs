@@ -12,16 +12,19 @@
 //!
 //! Also checked: the baked blob is reproduced bit for bit by re-exporting the checkpoint.
 //! Transformer-lite students (`FRMT` blob) get the same rows; see [`run_transformer`] for (d).
-use crate::checkpoint::{self, CheckpointMeta};
-use crate::export::{calibration_from_data, export_mlp, export_transformer, is_transformer, transformer_blob, ExportConfig, BAKED_BLOB_FILE, EXPORT_INFO_FILE};
-use crate::diffusion::samplers::{gaussian, sample_consistency};
-use crate::tasks::{Policy, PolicyInput};
-use crate::eval::{run_episodes, EvalConfig};
-use crate::models::Condition;
 use crate::checkpoint::Role;
+use crate::checkpoint::{self, CheckpointMeta};
+use crate::diffusion::samplers::{gaussian, sample_consistency};
+use crate::eval::{run_episodes, EvalConfig};
+use crate::export::{
+    calibration_from_data, export_mlp, export_transformer, is_transformer, transformer_blob,
+    ExportConfig, BAKED_BLOB_FILE, EXPORT_INFO_FILE,
+};
 use crate::limits::{self, OptionError};
+use crate::models::Condition;
 use crate::policy::float::{role_name, FloatPolicy};
 use crate::policy::int8::Int8Policy;
+use crate::tasks::{Policy, PolicyInput};
 use anyhow::Context;
 use candle_core::Device;
 use frmd_core::model::mlp::Probe;
@@ -73,7 +76,11 @@ impl Default for EquivConfig {
 impl EquivConfig {
     /// The default checks of the student in `ckpt` against its export in `baked`.
     pub fn new(ckpt: PathBuf, baked: PathBuf) -> Self {
-        EquivConfig { ckpt, baked, ..EquivConfig::default() }
+        EquivConfig {
+            ckpt,
+            baked,
+            ..EquivConfig::default()
+        }
     }
 
     /// Counts and bounds before any work; checks (a) and (b) need at least one input (with none
@@ -81,11 +88,22 @@ impl EquivConfig {
     pub fn validate(&self) -> Result<(), OptionError> {
         limits::count("episodes", self.episodes, 0, limits::MAX_EPISODES)?;
         if self.inputs == 0 {
-            return Err(limits::range("inputs", 0, format!("1 to {} (checks (a) and (b) run on these inputs; 0 would check nothing)", limits::MAX_CHECKS)));
+            return Err(limits::range(
+                "inputs",
+                0,
+                format!(
+                    "1 to {} (checks (a) and (b) run on these inputs; 0 would check nothing)",
+                    limits::MAX_CHECKS
+                ),
+            ));
         }
         limits::count("inputs", self.inputs, 1, limits::MAX_CHECKS)?;
         if self.random_requant > 1_000_000_000 {
-            return Err(limits::range("random-requant", self.random_requant, "0 to 1000000000"));
+            return Err(limits::range(
+                "random-requant",
+                self.random_requant,
+                "0 to 1000000000",
+            ));
         }
         limits::positive("max-f32-error", self.max_f32_error)?;
         limits::positive("max-int8-error-frac", self.max_int8_error_frac)?;
@@ -114,7 +132,14 @@ pub struct EquivReport {
 }
 
 fn row(check: &str, metric: &str, value: f64, bound: Option<f64>, note: String) -> EquivRow {
-    EquivRow { check: check.into(), metric: metric.into(), value, bound, pass: bound.map(|b| value <= b), note }
+    EquivRow {
+        check: check.into(),
+        metric: metric.into(),
+        value,
+        bound,
+        pass: bound.map(|b| value <= b),
+        note,
+    }
 }
 
 /// Everything the checks share: the export settings, the candle student, calibration rows.
@@ -134,34 +159,68 @@ fn setup(cfg: &EquivConfig) -> anyhow::Result<Setup> {
         anyhow::bail!("--ckpt {}: this is a {}, not a student (equiv checks an exported student against its checkpoint)", cfg.ckpt.display(), role_name(role));
     }
     let info_path = cfg.baked.join(EXPORT_INFO_FILE);
-    let mut info: ExportConfig = serde_json::from_str(&std::fs::read_to_string(&info_path).with_context(|| format!("reading {}", info_path.display()))?)
-        .with_context(|| format!("parsing {}", info_path.display()))?;
+    let mut info: ExportConfig = serde_json::from_str(
+        &std::fs::read_to_string(&info_path)
+            .with_context(|| format!("reading {}", info_path.display()))?,
+    )
+    .with_context(|| format!("parsing {}", info_path.display()))?;
     info.checkpoint = cfg.ckpt.display().to_string();
     if let Some(data) = &cfg.data {
         info.calibration_data = Some(data.display().to_string());
     }
     let blob_path = cfg.baked.join(BAKED_BLOB_FILE);
-    let blob = std::fs::read(&blob_path).with_context(|| format!("reading {}", blob_path.display()))?;
+    let blob =
+        std::fs::read(&blob_path).with_context(|| format!("reading {}", blob_path.display()))?;
     let (meta, net): (CheckpointMeta, _) = checkpoint::load(&cfg.ckpt)?;
-    let norm = meta.normalization.clone().context("checkpoint has no normalization")?;
+    let norm = meta
+        .normalization
+        .clone()
+        .context("checkpoint has no normalization")?;
     let set = match &info.calibration_data {
         Some(d) => calibration_from_data(std::path::Path::new(d), &cfg.ckpt)?,
-        None => frmd_export::calibration_file::read(&cfg.ckpt.join(checkpoint::CALIBRATION_FILE), meta.model.cond_dim())?,
+        None => frmd_export::calibration_file::read(
+            &cfg.ckpt.join(checkpoint::CALIBRATION_FILE),
+            meta.model.cond_dim(),
+        )?,
     };
-    Ok(Setup { info, meta, net, norm, set, blob })
+    Ok(Setup {
+        info,
+        meta,
+        net,
+        norm,
+        set,
+        blob,
+    })
 }
 
 /// Checks (a) and (b) open loop: the candle student, frmd-core's f32 path (`core_f32(cond,
 /// noise)`, normalized units) and the int8 policy on the first `cfg.inputs` calibration rows with
 /// fresh noise.
-fn open_loop(cfg: &EquivConfig, s: &Setup, steps: usize, int8: &mut Int8Policy, mut core_f32: impl FnMut(&[f32], &[f32]) -> anyhow::Result<Vec<f32>>) -> anyhow::Result<Vec<EquivRow>> {
+fn open_loop(
+    cfg: &EquivConfig,
+    s: &Setup,
+    steps: usize,
+    int8: &mut Int8Policy,
+    mut core_f32: impl FnMut(&[f32], &[f32]) -> anyhow::Result<Vec<f32>>,
+) -> anyhow::Result<Vec<EquivRow>> {
     let model = &s.meta.model;
     let sigma = s.meta.sigma;
-    let (k, traj, obs_w) = (model.action_dim, model.traj_dim(), model.history * model.obs_dim);
+    let (k, traj, obs_w) = (
+        model.action_dim,
+        model.traj_dim(),
+        model.history * model.obs_dim,
+    );
     let norm = &s.norm;
     let set = &s.set;
     let rate_scale = norm.action.scale();
-    let range: f64 = norm.action.min.iter().zip(&norm.action.max).map(|(lo, hi)| f64::from(hi - lo)).sum::<f64>() / k as f64;
+    let range: f64 = norm
+        .action
+        .min
+        .iter()
+        .zip(&norm.action.max)
+        .map(|(lo, hi)| f64::from(hi - lo))
+        .sum::<f64>()
+        / k as f64;
     let (mut max_a, mut max_b, mut sum_b, mut count_b) = (0f64, 0f64, 0f64, 0usize);
     let rows_used = cfg.inputs.min(set.rows());
     for r in 0..rows_used {
@@ -172,10 +231,23 @@ fn open_loop(cfg: &EquivConfig, s: &Setup, steps: usize, int8: &mut Int8Policy, 
         // Candle float student, noise from the same generator and seed.
         let mut rng = Rng::new(seed);
         let z = gaussian(&mut rng, 1, traj, &Device::Cpu)?;
-        let condition = Condition::from_slices(model, &cond[..obs_w], &cond[obs_w..obs_w + k], &cond[obs_w + k..], &Device::Cpu)?;
-        let float: Vec<f32> = sample_consistency(&s.net.net, &sigma, &condition, &z, steps, &mut rng)?.flatten_all()?.to_vec1()?;
+        let condition = Condition::from_slices(
+            model,
+            &cond[..obs_w],
+            &cond[obs_w..obs_w + k],
+            &cond[obs_w + k..],
+            &Device::Cpu,
+        )?;
+        let float: Vec<f32> =
+            sample_consistency(&s.net.net, &sigma, &condition, &z, steps, &mut rng)?
+                .flatten_all()?
+                .to_vec1()?;
         let core = core_f32(cond, &noise)?;
-        max_a = float.iter().zip(&core).map(|(a, b)| f64::from((a - b).abs())).fold(max_a, f64::max);
+        max_a = float
+            .iter()
+            .zip(&core)
+            .map(|(a, b)| f64::from((a - b).abs()))
+            .fold(max_a, f64::max);
         // frmd-core int8 policy on raw inputs.
         let history: Vec<Vec<f32>> = cond[..obs_w]
             .chunks_exact(model.obs_dim)
@@ -187,8 +259,19 @@ fn open_loop(cfg: &EquivConfig, s: &Setup, steps: usize, int8: &mut Int8Policy, 
             .collect();
         let mut prev = cond[obs_w..obs_w + k].to_vec();
         norm.action.denormalize(&mut prev);
-        let rate: Vec<f32> = cond[obs_w + k..].iter().zip(&rate_scale).map(|(v, s)| if *s > 0.0 { v / s } else { 0.0 }).collect();
-        let chunk = int8.run_with_noise(&PolicyInput { obs_history: &history, prev_action: &prev, prev_rate: &rate }, &noise)?;
+        let rate: Vec<f32> = cond[obs_w + k..]
+            .iter()
+            .zip(&rate_scale)
+            .map(|(v, s)| if *s > 0.0 { v / s } else { 0.0 })
+            .collect();
+        let chunk = int8.run_with_noise(
+            &PolicyInput {
+                obs_history: &history,
+                prev_action: &prev,
+                prev_rate: &rate,
+            },
+            &noise,
+        )?;
         let mut float_raw = float.clone();
         norm.action.denormalize(&mut float_raw);
         for (a, b) in chunk.iter().flatten().zip(&float_raw) {
@@ -200,17 +283,51 @@ fn open_loop(cfg: &EquivConfig, s: &Setup, steps: usize, int8: &mut Int8Policy, 
     }
     let mean_b = sum_b / count_b.max(1) as f64;
     Ok(vec![
-        row("a", "core f32 vs candle float: max abs error (normalized)", max_a, Some(cfg.max_f32_error), format!("{rows_used} inputs, {steps} step(s)")),
-        row("b", "core int8 vs candle float: max abs error (action units)", max_b, Some(cfg.max_int8_error_frac * range), format!("bound {:.0} % of mean action range {range:.4}", 100.0 * cfg.max_int8_error_frac)),
-        row("b", "core int8 vs candle float: mean abs error (action units)", mean_b, Some(cfg.mean_int8_error_frac * range), format!("bound {:.0} % of mean action range", 100.0 * cfg.mean_int8_error_frac)),
+        row(
+            "a",
+            "core f32 vs candle float: max abs error (normalized)",
+            max_a,
+            Some(cfg.max_f32_error),
+            format!("{rows_used} inputs, {steps} step(s)"),
+        ),
+        row(
+            "b",
+            "core int8 vs candle float: max abs error (action units)",
+            max_b,
+            Some(cfg.max_int8_error_frac * range),
+            format!(
+                "bound {:.0} % of mean action range {range:.4}",
+                100.0 * cfg.max_int8_error_frac
+            ),
+        ),
+        row(
+            "b",
+            "core int8 vs candle float: mean abs error (action units)",
+            mean_b,
+            Some(cfg.mean_int8_error_frac * range),
+            format!(
+                "bound {:.0} % of mean action range",
+                100.0 * cfg.mean_int8_error_frac
+            ),
+        ),
     ])
 }
 
 /// Success rates of the candle student, the int8 policy and the runtime policy with frmd-core's
 /// f32 network (`twin`) on the checkpoint's task.
-fn closed_loop(cfg: &EquivConfig, s: &Setup, steps: usize, int8: &mut Int8Policy, twin: &mut Int8Policy) -> anyhow::Result<Vec<EquivRow>> {
+fn closed_loop(
+    cfg: &EquivConfig,
+    s: &Setup,
+    steps: usize,
+    int8: &mut Int8Policy,
+    twin: &mut Int8Policy,
+) -> anyhow::Result<Vec<EquivRow>> {
     let task = s.meta.dataset.task.clone();
-    let eval = EvalConfig { episodes: cfg.episodes, history: s.meta.model.history, ..EvalConfig::default() };
+    let eval = EvalConfig {
+        episodes: cfg.episodes,
+        history: s.meta.model.history,
+        ..EvalConfig::default()
+    };
     let mut float = FloatPolicy::load(&cfg.ckpt, Some(steps), None)?;
     let f = run_episodes(&task, &mut float, &eval)?;
     int8.reset(0);
@@ -230,16 +347,42 @@ fn closed_loop(cfg: &EquivConfig, s: &Setup, steps: usize, int8: &mut Int8Policy
 
 fn blob_row(blob: &[u8], rebuilt: &[u8], cfg: &EquivConfig) -> EquivRow {
     let path = cfg.baked.join(BAKED_BLOB_FILE);
-    row("export", "baked blob differs from a re-export (0 = identical)", f64::from(u8::from(rebuilt != blob)), Some(0.0), path.display().to_string())
+    row(
+        "export",
+        "baked blob differs from a re-export (0 = identical)",
+        f64::from(u8::from(rebuilt != blob)),
+        Some(0.0),
+        path.display().to_string(),
+    )
 }
 
 fn qemu_row() -> EquivRow {
-    EquivRow { check: "c".into(), metric: "x86-64 vs Cortex-M bytes".into(), value: f64::NAN, bound: None, pass: None, note: "not run here: see examples/cortex-m/run-qemu.sh (digest line)".into() }
+    EquivRow {
+        check: "c".into(),
+        metric: "x86-64 vs Cortex-M bytes".into(),
+        value: f64::NAN,
+        bound: None,
+        pass: None,
+        note: "not run here: see examples/cortex-m/run-qemu.sh (digest line)".into(),
+    }
 }
 
 fn requant_row(cfg: &EquivConfig) -> EquivRow {
     let requant = frmd_export::reference::check_requantization(cfg.random_requant, 0x0dd5);
-    row("d", "requantization mismatches vs i128 model", requant.mismatches as f64, Some(0.0), format!("{} cases{}", requant.cases, requant.first_mismatch.map(|m| format!("; first: {m}")).unwrap_or_default()))
+    row(
+        "d",
+        "requantization mismatches vs i128 model",
+        requant.mismatches as f64,
+        Some(0.0),
+        format!(
+            "{} cases{}",
+            requant.cases,
+            requant
+                .first_mismatch
+                .map(|m| format!("; first: {m}"))
+                .unwrap_or_default()
+        ),
+    )
 }
 
 fn report(rows: Vec<EquivRow>) -> EquivReport {
@@ -254,7 +397,8 @@ pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
         return run_transformer(cfg, &s);
     }
     let exported = export_mlp(&s.info)?;
-    let rebuilt = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding: {e}"))?;
+    let rebuilt =
+        frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding: {e}"))?;
     let mut rows = vec![blob_row(&s.blob, &rebuilt, cfg)];
     let folded = &exported.folded;
     let steps = folded.steps.len();
@@ -273,8 +417,22 @@ pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
     }
     rows.push(qemu_row());
     rows.push(requant_row(cfg));
-    let network = frmd_export::reference::check_network::<MAX_WIDTH>(&exported.policy, &network_inputs)?;
-    rows.push(row("d", "int8 network accumulator mismatches vs wide model", network.mismatches as f64, Some(0.0), format!("{} cases{}", network.cases, network.first_mismatch.map(|m| format!("; first: {m}")).unwrap_or_default())));
+    let network =
+        frmd_export::reference::check_network::<MAX_WIDTH>(&exported.policy, &network_inputs)?;
+    rows.push(row(
+        "d",
+        "int8 network accumulator mismatches vs wide model",
+        network.mismatches as f64,
+        Some(0.0),
+        format!(
+            "{} cases{}",
+            network.cases,
+            network
+                .first_mismatch
+                .map(|m| format!("; first: {m}"))
+                .unwrap_or_default()
+        ),
+    ));
     Ok(report(rows))
 }
 
@@ -289,7 +447,9 @@ fn run_transformer(cfg: &EquivConfig, s: &Setup) -> anyhow::Result<EquivReport> 
     let folded = &exported.model.folded;
     let steps = folded.steps.len();
     let mut int8 = Int8Policy::from_blob(&s.blob, "int8")?;
-    rows.extend(open_loop(cfg, s, steps, &mut int8, |cond, noise| folded.sample(cond, noise, |_, _, _| {}))?);
+    rows.extend(open_loop(cfg, s, steps, &mut int8, |cond, noise| {
+        folded.sample(cond, noise, |_, _, _| {})
+    })?);
     if cfg.episodes > 0 {
         let mut twin = Int8Policy::transformer_f32_twin(&s.blob, folded.clone(), "core-f32")?;
         rows.extend(closed_loop(cfg, s, steps, &mut int8, &mut twin)?);
@@ -297,25 +457,43 @@ fn run_transformer(cfg: &EquivConfig, s: &Setup) -> anyhow::Result<EquivReport> 
     rows.push(qemu_row());
     rows.push(requant_row(cfg));
     let layers = frmd_export::transformer::reference::check_layers(&exported.model, 16, 0x7f3e)?;
-    rows.push(row("d", "int8 transformer layer mismatches vs wide model", layers.mismatches as f64, Some(0.0), format!(
-        "{} cases (every int8 linear layer, fc1 requantization + GELU table){}",
-        layers.cases,
-        layers.first_mismatch.map(|m| format!("; first: {m}")).unwrap_or_default()
-    )));
+    rows.push(row(
+        "d",
+        "int8 transformer layer mismatches vs wide model",
+        layers.mismatches as f64,
+        Some(0.0),
+        format!(
+            "{} cases (every int8 linear layer, fc1 requantization + GELU table){}",
+            layers.cases,
+            layers
+                .first_mismatch
+                .map(|m| format!("; first: {m}"))
+                .unwrap_or_default()
+        ),
+    ));
     Ok(report(rows))
 }
 
 /// The report as a table.
 pub fn print(report: &EquivReport) {
-    println!("{:<6} {:<58} {:>12} {:>12} {:<5}  note", "check", "metric", "value", "bound", "");
+    println!(
+        "{:<6} {:<58} {:>12} {:>12} {:<5}  note",
+        "check", "metric", "value", "bound", ""
+    );
     for r in &report.rows {
         let status = match r.pass {
             Some(true) => "PASS",
             Some(false) => "FAIL",
             None => "-",
         };
-        let bound = r.bound.map(|b| format!("{b:.4e}")).unwrap_or_else(|| "-".into());
-        println!("{:<6} {:<58} {:>12.4e} {:>12} {:<5}  {}", r.check, r.metric, r.value, bound, status, r.note);
+        let bound = r
+            .bound
+            .map(|b| format!("{b:.4e}"))
+            .unwrap_or_else(|| "-".into());
+        println!(
+            "{:<6} {:<58} {:>12.4e} {:>12} {:<5}  {}",
+            r.check, r.metric, r.value, bound, status, r.note
+        );
     }
     println!("{}", if report.passed { "ALL PASS" } else { "FAIL" });
 }

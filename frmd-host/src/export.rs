@@ -8,11 +8,13 @@ use crate::data::windows::CALIBRATION_ROWS;
 use crate::data::Dataset;
 use crate::limits::{self, OptionError};
 use anyhow::{bail, Context};
-use frmd_export::artifact::write_atomic;
 use frmd_core::model::mlp::InputPrecision;
+use frmd_export::artifact::write_atomic;
 use frmd_export::calibrate::{CalibrationSet, RangeMethod};
 use frmd_export::checkpoint::{BackboneConfig, CheckpointMeta, Role};
-use frmd_export::export::{export_checkpoint, export_transformer_checkpoint, ExportOptions, Exported, ExportedTransformer};
+use frmd_export::export::{
+    export_checkpoint, export_transformer_checkpoint, ExportOptions, Exported, ExportedTransformer,
+};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -64,23 +66,46 @@ impl Default for ExportConfig {
 impl ExportConfig {
     /// The default export of the checkpoint in `dir`.
     pub fn for_checkpoint(dir: &Path) -> Self {
-        ExportConfig { checkpoint: dir.display().to_string(), ..ExportConfig::default() }
+        ExportConfig {
+            checkpoint: dir.display().to_string(),
+            ..ExportConfig::default()
+        }
     }
 
     /// The settings alone, before any work.
     pub fn validate(&self) -> Result<(), OptionError> {
         limits::count("steps", self.steps, 1, 4)?;
         if !(self.input_headroom.is_finite() && self.input_headroom >= 1.0) {
-            return Err(limits::range("input-headroom", self.input_headroom, "a finite factor >= 1"));
+            return Err(limits::range(
+                "input-headroom",
+                self.input_headroom,
+                "a finite factor >= 1",
+            ));
         }
-        self.calibration.parse::<RangeMethod>().map_err(|e| limits::range("calibration", &self.calibration, format!("minmax or percentile:P ({e})")))?;
+        self.calibration.parse::<RangeMethod>().map_err(|e| {
+            limits::range(
+                "calibration",
+                &self.calibration,
+                format!("minmax or percentile:P ({e})"),
+            )
+        })?;
         Ok(())
     }
 
     fn options(&self) -> anyhow::Result<ExportOptions> {
         let ranges: RangeMethod = self.calibration.parse()?;
-        let input_precision = if self.two_plane_input { InputPrecision::Int16 } else { InputPrecision::Int8 };
-        Ok(ExportOptions { steps: self.steps, ranges, balance_inputs: self.balance_inputs, input_precision, input_headroom: self.input_headroom })
+        let input_precision = if self.two_plane_input {
+            InputPrecision::Int16
+        } else {
+            InputPrecision::Int8
+        };
+        Ok(ExportOptions {
+            steps: self.steps,
+            ranges,
+            balance_inputs: self.balance_inputs,
+            input_precision,
+            input_headroom: self.input_headroom,
+        })
     }
 }
 
@@ -90,7 +115,10 @@ pub fn calibration_from_data(path: &Path, ckpt: &Path) -> anyhow::Result<Calibra
     let dataset = Dataset::load(path)?;
     let (windows, norm) = dataset.windows(meta.model.history, meta.model.horizon)?;
     if Some(&norm) != meta.normalization.as_ref() {
-        bail!("{}: its normalization differs from the checkpoint's (not the training data?)", path.display());
+        bail!(
+            "{}: its normalization differs from the checkpoint's (not the training data?)",
+            path.display()
+        );
     }
     Ok(windows.calibration_rows(CALIBRATION_ROWS, 0x5eed))
 }
@@ -112,7 +140,10 @@ fn calibration_set(cfg: &ExportConfig) -> anyhow::Result<Option<CalibrationSet>>
     match &cfg.calibration_data {
         Some(data) => Ok(Some(calibration_from_data(Path::new(data), ckpt)?)),
         None if !ckpt.join(CALIBRATION_FILE).exists() => {
-            bail!("{} has no {CALIBRATION_FILE}; pass --data with the training demonstrations", ckpt.display())
+            bail!(
+                "{} has no {CALIBRATION_FILE}; pass --data with the training demonstrations",
+                ckpt.display()
+            )
         }
         None => Ok(None),
     }
@@ -121,29 +152,52 @@ fn calibration_set(cfg: &ExportConfig) -> anyhow::Result<Option<CalibrationSet>>
 /// Whether the checkpoint `cfg` names has a transformer backbone (which picks the exporter).
 pub fn is_transformer(cfg: &ExportConfig) -> anyhow::Result<bool> {
     let meta = CheckpointMeta::read(Path::new(&cfg.checkpoint))?;
-    Ok(matches!(meta.model.backbone, BackboneConfig::Transformer { .. }))
+    Ok(matches!(
+        meta.model.backbone,
+        BackboneConfig::Transformer { .. }
+    ))
 }
 
 /// Runs the MLP export of `cfg` (reads the calibration data it names).
 pub fn export_mlp(cfg: &ExportConfig) -> anyhow::Result<Exported> {
-    export_checkpoint(Path::new(&cfg.checkpoint), cfg.options()?, calibration_set(cfg)?)
+    export_checkpoint(
+        Path::new(&cfg.checkpoint),
+        cfg.options()?,
+        calibration_set(cfg)?,
+    )
 }
 
 /// Runs the transformer export of `cfg`.
 pub fn export_transformer(cfg: &ExportConfig) -> anyhow::Result<ExportedTransformer> {
-    export_transformer_checkpoint(Path::new(&cfg.checkpoint), cfg.options()?, calibration_set(cfg)?)
+    export_transformer_checkpoint(
+        Path::new(&cfg.checkpoint),
+        cfg.options()?,
+        calibration_set(cfg)?,
+    )
 }
 
 /// The `FRMT` blob of a transformer export.
 pub fn transformer_blob(exported: &ExportedTransformer) -> anyhow::Result<Vec<u8>> {
-    let norm = exported.checkpoint.meta.normalization.as_ref().context("the checkpoint has no normalization")?;
-    frmd_export::blob::write_transformer(&exported.model, norm).map_err(|e| anyhow::anyhow!("encoding the transformer blob: {e}"))
+    let norm = exported
+        .checkpoint
+        .meta
+        .normalization
+        .as_ref()
+        .context("the checkpoint has no normalization")?;
+    frmd_export::blob::write_transformer(&exported.model, norm)
+        .map_err(|e| anyhow::anyhow!("encoding the transformer blob: {e}"))
 }
 
 /// An exported student: the exporter's result for its backbone and the blob bytes.
 pub enum ExportedStudent {
-    Mlp { exported: Exported, blob: Vec<u8> },
-    Transformer { exported: ExportedTransformer, blob: Vec<u8> },
+    Mlp {
+        exported: Exported,
+        blob: Vec<u8>,
+    },
+    Transformer {
+        exported: ExportedTransformer,
+        blob: Vec<u8>,
+    },
 }
 
 impl ExportedStudent {
@@ -166,31 +220,50 @@ pub fn export_student(cfg: &ExportConfig) -> anyhow::Result<ExportedStudent> {
         ExportedStudent::Transformer { exported, blob }
     } else {
         let exported = export_mlp(cfg)?;
-        let blob = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
+        let blob = frmd_export::blob::write(&exported.policy)
+            .map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
         ExportedStudent::Mlp { exported, blob }
     };
-    crate::policy::int8::Int8Policy::from_blob(student.blob(), "int8").with_context(|| format!("{}: the exported blob does not load with the runtime's loader (nothing written)", cfg.checkpoint))?;
+    crate::policy::int8::Int8Policy::from_blob(student.blob(), "int8").with_context(|| {
+        format!(
+            "{}: the exported blob does not load with the runtime's loader (nothing written)",
+            cfg.checkpoint
+        )
+    })?;
     Ok(student)
 }
 
 /// Writes the module directory `dir` (MLP: `policy.rs` + `weights.bin` + `policy.blob`;
 /// transformer: `policy.rs` embedding the blob + `policy.blob`; both with `export.json`) and/or
 /// the blob alone at `blob_path`; returns the files written.
-pub fn write_export(cfg: &ExportConfig, student: &ExportedStudent, dir: Option<&Path>, blob_path: Option<&Path>) -> anyhow::Result<Vec<PathBuf>> {
+pub fn write_export(
+    cfg: &ExportConfig,
+    student: &ExportedStudent,
+    dir: Option<&Path>,
+    blob_path: Option<&Path>,
+) -> anyhow::Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     if let Some(dir) = dir {
         match student {
             ExportedStudent::Mlp { exported, blob } => {
-                frmd_export::bake::write_module(&exported.policy, dir).with_context(|| format!("writing {}", dir.display()))?;
+                frmd_export::bake::write_module(&exported.policy, dir)
+                    .with_context(|| format!("writing {}", dir.display()))?;
                 write_atomic(&dir.join(BAKED_BLOB_FILE), blob)?;
                 written.extend(["policy.rs", "weights.bin", BAKED_BLOB_FILE].map(|f| dir.join(f)));
             }
             ExportedStudent::Transformer { exported, blob } => {
-                frmd_export::transformer::bake::write_module(&exported.model, blob, dir).with_context(|| format!("writing {}", dir.display()))?;
-                written.extend([frmd_export::transformer::bake::MODULE_FILE, BAKED_BLOB_FILE].map(|f| dir.join(f)));
+                frmd_export::transformer::bake::write_module(&exported.model, blob, dir)
+                    .with_context(|| format!("writing {}", dir.display()))?;
+                written.extend(
+                    [frmd_export::transformer::bake::MODULE_FILE, BAKED_BLOB_FILE]
+                        .map(|f| dir.join(f)),
+                );
             }
         }
-        write_atomic(&dir.join(EXPORT_INFO_FILE), serde_json::to_string_pretty(cfg)?.as_bytes())?;
+        write_atomic(
+            &dir.join(EXPORT_INFO_FILE),
+            serde_json::to_string_pretty(cfg)?.as_bytes(),
+        )?;
         written.push(dir.join(EXPORT_INFO_FILE));
     }
     if let Some(path) = blob_path {

@@ -32,16 +32,32 @@ pub const MAX_CHECKS: usize = 10_000_000;
 #[derive(Clone, Debug, PartialEq)]
 pub enum OptionError {
     /// `--option value`: expected `expected`.
-    Range { option: &'static str, value: String, expected: String },
+    Range {
+        option: &'static str,
+        value: String,
+        expected: String,
+    },
     /// `--option` cannot be used with `with` (`reason`).
-    Conflict { option: &'static str, with: String, reason: String },
+    Conflict {
+        option: &'static str,
+        with: String,
+        reason: String,
+    },
 }
 
 impl std::fmt::Display for OptionError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            OptionError::Range { option, value, expected } => write!(f, "--{option} {value}: expected {expected}"),
-            OptionError::Conflict { option, with, reason } => write!(f, "--{option} cannot be used with {with}: {reason}"),
+            OptionError::Range {
+                option,
+                value,
+                expected,
+            } => write!(f, "--{option} {value}: expected {expected}"),
+            OptionError::Conflict {
+                option,
+                with,
+                reason,
+            } => write!(f, "--{option} cannot be used with {with}: {reason}"),
         }
     }
 }
@@ -49,17 +65,38 @@ impl std::fmt::Display for OptionError {
 impl std::error::Error for OptionError {}
 
 /// Shorthand for an out-of-range option.
-pub fn range(option: &'static str, value: impl std::fmt::Display, expected: impl Into<String>) -> OptionError {
-    OptionError::Range { option, value: value.to_string(), expected: expected.into() }
+pub fn range(
+    option: &'static str,
+    value: impl std::fmt::Display,
+    expected: impl Into<String>,
+) -> OptionError {
+    OptionError::Range {
+        option,
+        value: value.to_string(),
+        expected: expected.into(),
+    }
 }
 
 /// Shorthand for options that conflict.
-pub fn conflict(option: &'static str, with: impl Into<String>, reason: impl Into<String>) -> OptionError {
-    OptionError::Conflict { option, with: with.into(), reason: reason.into() }
+pub fn conflict(
+    option: &'static str,
+    with: impl Into<String>,
+    reason: impl Into<String>,
+) -> OptionError {
+    OptionError::Conflict {
+        option,
+        with: with.into(),
+        reason: reason.into(),
+    }
 }
 
 /// `value` in `min..=max`.
-pub fn count(option: &'static str, value: usize, min: usize, max: usize) -> Result<(), OptionError> {
+pub fn count(
+    option: &'static str,
+    value: usize,
+    min: usize,
+    max: usize,
+) -> Result<(), OptionError> {
     if (min..=max).contains(&value) {
         Ok(())
     } else {
@@ -109,7 +146,10 @@ mod tests {
 
     #[test]
     fn checks_name_the_option_and_the_expected_range() {
-        assert_eq!(count("episodes", 0, 1, 10).unwrap_err().to_string(), "--episodes 0: expected 1 to 10");
+        assert_eq!(
+            count("episodes", 0, 1, 10).unwrap_err().to_string(),
+            "--episodes 0: expected 1 to 10"
+        );
         assert!(probability("aug-prob", f64::NAN).is_err());
         assert!(probability("aug-prob", 2.0).is_err());
         assert!(probability("aug-prob", 1.0).is_ok());

@@ -25,9 +25,19 @@ impl Progress {
     pub fn new(label: &str, total: u64, unit: &'static str) -> Self {
         let bar = ProgressBar::new(total);
         let template = format!("{{prefix}} [{{elapsed_precise}}] {{bar:30}} {{pos}}/{{len}} {unit}s {{msg}} (eta {{eta}})");
-        bar.set_style(ProgressStyle::with_template(&template).unwrap_or_else(|_| ProgressStyle::default_bar()));
+        bar.set_style(
+            ProgressStyle::with_template(&template)
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
         bar.set_prefix(label.to_string());
-        Progress { bar, label: label.to_string(), unit, total, start: Instant::now(), last_line: None }
+        Progress {
+            bar,
+            label: label.to_string(),
+            unit,
+            total,
+            start: Instant::now(),
+            last_line: None,
+        }
     }
 
     /// Reports `position` units done with a short status `message` (e.g. the loss).
@@ -38,10 +48,15 @@ impl Progress {
             return;
         }
         let now = Instant::now();
-        let due = self.last_line.is_none_or(|t| now.duration_since(t) >= Duration::from_secs(PLAIN_LINE_SECONDS));
+        let due = self
+            .last_line
+            .is_none_or(|t| now.duration_since(t) >= Duration::from_secs(PLAIN_LINE_SECONDS));
         if due || position >= self.total {
             self.last_line = Some(now);
-            eprintln!("{}", self.plain_line(position, message, now.duration_since(self.start)));
+            eprintln!(
+                "{}",
+                self.plain_line(position, message, now.duration_since(self.start))
+            );
         }
     }
 
@@ -52,8 +67,18 @@ impl Progress {
             0 => "-".to_string(),
             done => clock(elapsed.mul_f64(self.total.saturating_sub(done) as f64 / done as f64)),
         };
-        let message = if message.is_empty() { String::new() } else { format!(" {message}") };
-        format!("{}: {} {position}/{} ({percent} %){message}, elapsed {}, eta {eta}", self.label, self.unit, self.total, clock(elapsed))
+        let message = if message.is_empty() {
+            String::new()
+        } else {
+            format!(" {message}")
+        };
+        format!(
+            "{}: {} {position}/{} ({percent} %){message}, elapsed {}, eta {eta}",
+            self.label,
+            self.unit,
+            self.total,
+            clock(elapsed)
+        )
     }
 
     /// Prints a line without disturbing the bar.
@@ -89,8 +114,14 @@ mod tests {
     fn plain_lines_show_position_status_elapsed_and_eta() {
         let p = Progress::new("teacher", 15000, "step");
         let line = p.plain_line(1200, "loss 0.01234 lr 9.8e-4", Duration::from_secs(42));
-        assert_eq!(line, "teacher: step 1200/15000 (8 %) loss 0.01234 lr 9.8e-4, elapsed 0:42, eta 8:03");
-        assert_eq!(p.plain_line(0, "", Duration::ZERO), "teacher: step 0/15000 (0 %), elapsed 0:00, eta -");
+        assert_eq!(
+            line,
+            "teacher: step 1200/15000 (8 %) loss 0.01234 lr 9.8e-4, elapsed 0:42, eta 8:03"
+        );
+        assert_eq!(
+            p.plain_line(0, "", Duration::ZERO),
+            "teacher: step 0/15000 (0 %), elapsed 0:00, eta -"
+        );
         assert_eq!(clock(Duration::from_secs(3 * 3600 + 61)), "3:01:01");
     }
 }

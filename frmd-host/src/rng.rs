@@ -21,8 +21,16 @@ fn splitmix64(state: &mut u64) -> u64 {
 impl HostRng {
     pub fn new(seed: u64) -> Self {
         let mut sm = seed;
-        let state = [splitmix64(&mut sm), splitmix64(&mut sm), splitmix64(&mut sm), splitmix64(&mut sm)];
-        HostRng { state, spare_normal: None }
+        let state = [
+            splitmix64(&mut sm),
+            splitmix64(&mut sm),
+            splitmix64(&mut sm),
+            splitmix64(&mut sm),
+        ];
+        HostRng {
+            state,
+            spare_normal: None,
+        }
     }
 
     /// An independent stream derived from this seed and a label (e.g. one per purpose).
@@ -91,7 +99,13 @@ mod tests {
         let xs: Vec<f64> = (0..20000).map(|_| a.normal()).collect();
         let mean = xs.iter().sum::<f64>() / xs.len() as f64;
         let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / xs.len() as f64;
-        assert!(mean.abs() < 0.03 && (var - 1.0).abs() < 0.05, "mean {mean} var {var}");
-        assert_ne!(HostRng::derive(1, "a").next_u64(), HostRng::derive(1, "b").next_u64());
+        assert!(
+            mean.abs() < 0.03 && (var - 1.0).abs() < 0.05,
+            "mean {mean} var {var}"
+        );
+        assert_ne!(
+            HostRng::derive(1, "a").next_u64(),
+            HostRng::derive(1, "b").next_u64()
+        );
     }
 }

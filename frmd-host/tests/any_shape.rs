@@ -6,8 +6,8 @@
 use frmd_core::blob::LoadedMlp;
 use frmd_core::policy::{Noise, PolicyDims};
 use frmd_core::rng::Rng;
-use frmd_host::tasks::{Policy, PolicyInput};
 use frmd_host::policy::int8::Int8Policy;
+use frmd_host::tasks::{Policy, PolicyInput};
 use frmd_test_support::random_policy::{random_policy, Dims};
 use frmd_test_support::AlignedBlob;
 
@@ -15,18 +15,32 @@ fn run_shape(dims: Dims) {
     let policy = random_policy(7, 2, &dims);
     let blob = frmd_export::blob::write(&policy).unwrap();
     let mut host = Int8Policy::from_blob(&blob, "int8").unwrap();
-    let expected = PolicyDims { history: dims.m, obs_dim: dims.o, action_dim: dims.k, horizon: dims.n, params_per_dof: dims.p };
+    let expected = PolicyDims {
+        history: dims.m,
+        obs_dim: dims.o,
+        action_dim: dims.k,
+        horizon: dims.n,
+        params_per_dof: dims.p,
+    };
     assert_eq!(host.dims(), expected);
     assert_eq!(host.history(), dims.m);
     let mut rng = Rng::new(3);
-    let history: Vec<Vec<f32>> = (0..dims.m).map(|_| (0..dims.o).map(|_| rng.uniform() - 0.5).collect()).collect();
+    let history: Vec<Vec<f32>> = (0..dims.m)
+        .map(|_| (0..dims.o).map(|_| rng.uniform() - 0.5).collect())
+        .collect();
     let prev_action: Vec<f32> = (0..dims.k).map(|_| 0.2 * rng.uniform()).collect();
     let prev_rate = vec![0.1; dims.k];
-    let input = PolicyInput { obs_history: &history, prev_action: &prev_action, prev_rate: &prev_rate };
+    let input = PolicyInput {
+        obs_history: &history,
+        prev_action: &prev_action,
+        prev_rate: &prev_rate,
+    };
     let noise: Vec<f32> = (0..2 * dims.n * dims.k).map(|_| rng.gaussian()).collect();
     let chunk = host.run_with_noise(&input, &noise).unwrap();
     assert_eq!(chunk.len(), dims.n);
-    assert!(chunk.iter().all(|row| row.len() == dims.k && row.iter().all(|v| v.is_finite())));
+    assert!(chunk
+        .iter()
+        .all(|row| row.len() == dims.k && row.iter().all(|v| v.is_finite())));
 
     // The same chunk from frmd-core's policy over the loaded blob, with capacities of exactly
     // this shape for the MetaWorld case.
@@ -41,7 +55,10 @@ fn run_shape(dims: Dims) {
         exact.set_previous_action(&prev_action, &prev_rate).unwrap();
         let reference = exact.act(Noise::Given(&noise)).unwrap();
         let rows: Vec<Vec<f32>> = reference.positions.iter().map(|row| row.to_vec()).collect();
-        assert_eq!(chunk, rows, "host capacities give the chunk of the exact-size policy");
+        assert_eq!(
+            chunk, rows,
+            "host capacities give the chunk of the exact-size policy"
+        );
     }
 
     // Closed-loop use through the evaluation interface: seeded noise, repeatable.
@@ -53,11 +70,32 @@ fn run_shape(dims: Dims) {
 
 #[test]
 fn metaworld_shape_loads_and_runs_from_a_blob() {
-    run_shape(Dims { m: 2, o: 39, k: 4, n: 12, p: 21, hidden: vec![64, 64] });
+    run_shape(Dims {
+        m: 2,
+        o: 39,
+        k: 4,
+        n: 12,
+        p: 21,
+        hidden: vec![64, 64],
+    });
 }
 
 #[test]
 fn other_shapes_load_and_run_from_a_blob() {
-    run_shape(Dims { m: 3, o: 5, k: 3, n: 8, p: 5, hidden: vec![24, 20] });
-    run_shape(Dims { m: 1, o: 20, k: 7, n: 16, p: 11, hidden: vec![48] });
+    run_shape(Dims {
+        m: 3,
+        o: 5,
+        k: 3,
+        n: 8,
+        p: 5,
+        hidden: vec![24, 20],
+    });
+    run_shape(Dims {
+        m: 1,
+        o: 20,
+        k: 7,
+        n: 16,
+        p: 11,
+        hidden: vec![48],
+    });
 }

@@ -1,8 +1,8 @@
 //! Task-suite tests: expert success rates, determinism, bimodality of `avoid`, bad actions.
+use frmd_host::eval::{eval_seed, rollout, run_episodes, EvalConfig};
 use frmd_host::tasks::avoid::AvoidExpert;
 use frmd_host::tasks::{make_task, TASK_NAMES};
 use frmd_host::tasks::{Policy, PolicyInput};
-use frmd_host::eval::{eval_seed, rollout, run_episodes, EvalConfig};
 
 #[test]
 fn every_expert_succeeds_on_at_least_95_percent_of_50_seeds() {

@@ -4,10 +4,10 @@
 //! into a random field. Each must give `Ok` or an error, never a panic; a config that validates
 //! must not imply more than bounded sizes.
 use frmd_core::rng::Rng;
+use frmd_core::sigma::SigmaConfig;
 use frmd_export::checkpoint::{expected_tensors, CheckpointMeta, Role};
 use frmd_host::data::{ActionBeforeStart, Dataset, Normalization, Normalizer};
 use frmd_host::models::{BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput};
-use frmd_core::sigma::SigmaConfig;
 use serde_json::{json, Value};
 
 /// Index below `n` (n > 0).
@@ -65,7 +65,11 @@ fn odd_value(rng: &mut Rng) -> Value {
 fn mutate_leaf(rng: &mut Rng, value: &mut Value) {
     match value {
         Value::Object(map) if !map.is_empty() => {
-            let key = map.keys().nth(below(rng, map.len())).cloned().unwrap_or_default();
+            let key = map
+                .keys()
+                .nth(below(rng, map.len()))
+                .cloned()
+                .unwrap_or_default();
             if below(rng, 4) == 0 {
                 map.insert(key, odd_value(rng));
             } else if let Some(child) = map.get_mut(&key) {
@@ -81,7 +85,15 @@ fn mutate_leaf(rng: &mut Rng, value: &mut Value) {
 }
 
 fn valid_meta(transformer: bool) -> CheckpointMeta {
-    let backbone = if transformer { BackboneConfig::Transformer { layers: 1, heads: 2, width: 8 } } else { BackboneConfig::parse("mlp:16").unwrap() };
+    let backbone = if transformer {
+        BackboneConfig::Transformer {
+            layers: 1,
+            heads: 2,
+            width: 8,
+        }
+    } else {
+        BackboneConfig::parse("mlp:16").unwrap()
+    };
     let model = ModelConfig {
         obs_dim: 3,
         history: 2,
@@ -90,10 +102,23 @@ fn valid_meta(transformer: bool) -> CheckpointMeta {
         control_dt: 0.1,
         embed_dim: 4,
         backbone,
-        head: HeadConfig::ProDmp { num_basis: 3, output: ProDmpOutput::Direct, auto_scale_basis: false },
+        head: HeadConfig::ProDmp {
+            num_basis: 3,
+            output: ProDmpOutput::Direct,
+            auto_scale_basis: false,
+        },
     };
     let mut meta = CheckpointMeta::describe(Role::Student, &model, SigmaConfig::default());
-    meta.normalization = Some(Normalization { obs: Normalizer { min: vec![-1.0; 3], max: vec![1.0; 3] }, action: Normalizer { min: vec![0.0; 2], max: vec![2.0; 2] } });
+    meta.normalization = Some(Normalization {
+        obs: Normalizer {
+            min: vec![-1.0; 3],
+            max: vec![1.0; 3],
+        },
+        action: Normalizer {
+            min: vec![0.0; 2],
+            max: vec![2.0; 2],
+        },
+    });
     meta
 }
 

@@ -22,8 +22,8 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
         },
     );
     // The exporter refuses the teacher, naming the reason.
-    let err = frmd_export::export::export_checkpoint(&run.teacher, Default::default(), None)
-        .unwrap_err();
+    let err =
+        frmd_export::export::export_checkpoint(&run.teacher, Default::default(), None).unwrap_err();
     assert!(format!("{err:#}").contains("Teacher"), "{err:#}");
 
     let blob = AlignedBlob::new(&run.export_student());
@@ -38,8 +38,14 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
     // The tiny run trains with the boundary skip: the step carries the consistency c_skip and
     // c_out at sigma_max (a direct-output student would have 0 and 1).
     let sigma = frmd_core::sigma::SigmaConfig::default();
-    assert_eq!(loaded.steps()[0].c_skip, sigma.c_skip(sigma.sigma_max).unwrap() as f32);
-    assert_eq!(loaded.steps()[0].c_out, sigma.c_out(sigma.sigma_max).unwrap() as f32);
+    assert_eq!(
+        loaded.steps()[0].c_skip,
+        sigma.c_skip(sigma.sigma_max).unwrap() as f32
+    );
+    assert_eq!(
+        loaded.steps()[0].c_out,
+        sigma.c_out(sigma.sigma_max).unwrap() as f32
+    );
 
     let report = equiv_within_bounds(&run.student, &run.baked, 10, 64);
     assert_eq!(

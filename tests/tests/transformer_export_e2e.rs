@@ -26,7 +26,10 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
 
     // The exporter refuses the teacher, naming the reason.
     let err = run.export(&run.teacher).unwrap_err();
-    assert!(format!("{err:#}").contains("this is a teacher checkpoint"), "{err:#}");
+    assert!(
+        format!("{err:#}").contains("this is a teacher checkpoint"),
+        "{err:#}"
+    );
 
     let blob = run.export_student();
     assert_eq!(&blob[..4], b"FRMT");

@@ -3,7 +3,10 @@
 //! In your own firmware: point `CHECKPOINT` at your exported student (or call
 //! `frmd_export::bake::write_module` on any `QuantizedPolicy`) and keep your chip's `memory.x`
 //! next to Cargo.toml instead of `board_memory_map`.
-use std::{env, fs, path::{Path, PathBuf}};
+use std::{
+    env, fs,
+    path::{Path, PathBuf},
+};
 
 /// The student checkpoint (`frmd.json`, `model.safetensors`, `calibration.safetensors`).
 const CHECKPOINT: &str = "../policy/reach";

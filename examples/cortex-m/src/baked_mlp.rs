@@ -1,12 +1,12 @@
 //! The synthetic int8 MLP as baked by build.rs: weights in a byte blob (`include_bytes!`), biases,
 //! requantization and LUTs as generated statics. Firmware only.
 
-use frmd_firmware_support::shape::{MLP_HIDDEN, MLP_OUTPUT};
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
 use frmd_core::model::linear::{Int8Linear, RequantizedLinear};
 use frmd_core::model::mlp::Int8Mlp;
 use frmd_core::policy::AlignedBytes;
 use frmd_core::quant::QuantParams;
+use frmd_firmware_support::shape::{MLP_HIDDEN, MLP_OUTPUT};
 
 /// A generated hidden layer; weights are `weight_offset..` in [`WEIGHTS`].
 pub struct HiddenLayer {
@@ -36,11 +36,15 @@ mod generated {
 
 /// All int8 weights, layer by layer.
 /// (16-byte aligned, as the DSP kernels' word loads need for their fast path.)
-static WEIGHTS: AlignedBytes<{ generated::WEIGHT_BYTES }> = AlignedBytes(
-    *include_bytes!(concat!(env!("OUT_DIR"), "/synthetic_mlp.bin")));
+static WEIGHTS: AlignedBytes<{ generated::WEIGHT_BYTES }> = AlignedBytes(*include_bytes!(concat!(
+    env!("OUT_DIR"),
+    "/synthetic_mlp.bin"
+)));
 
 fn weights(offset: usize, in_features: usize, out_features: usize) -> Option<&'static [i8]> {
-    let bytes = WEIGHTS.0.get(offset..offset.checked_add(in_features * out_features)?)?;
+    let bytes = WEIGHTS
+        .0
+        .get(offset..offset.checked_add(in_features * out_features)?)?;
     Some(bytemuck::cast_slice(bytes))
 }
 
@@ -79,13 +83,20 @@ pub fn mlp<'a>(hidden: &'a [RequantizedLinear<'static>]) -> Option<Int8Mlp<'a>> 
         return None;
     }
     Some(Int8Mlp {
-        input: QuantParams { scale: generated::INPUT_SCALE, zero_point: generated::INPUT_ZERO_POINT },
+        input: QuantParams {
+            scale: generated::INPUT_SCALE,
+            zero_point: generated::INPUT_ZERO_POINT,
+        },
         hidden,
         output: Int8Linear {
             fc: FullyConnected::new(
                 output.in_features,
                 output.out_features,
-                weights(output.weight_offset, output.in_features, output.out_features)?,
+                weights(
+                    output.weight_offset,
+                    output.in_features,
+                    output.out_features,
+                )?,
                 output.bias,
             ),
             output_scales: output.scales,

@@ -1,7 +1,6 @@
 //! The synthetic transformer-lite as baked by build.rs (`frmd_firmware_support::synthetic::transformer`): int8
 //! weights in a byte blob (`include_bytes!`), everything else as generated statics. Firmware only.
 
-use frmd_firmware_support::shape::{TRANSFORMER_LINEARS, TRANSFORMER_NORMS, TRANSFORMER_SHAPE};
 use frmd_core::kernels::{FcRequant, FullyConnected, Lut8};
 use frmd_core::model::linear::{Int8Linear, QuantizedLinear, RequantizedLinear};
 use frmd_core::model::transformer::{
@@ -9,6 +8,7 @@ use frmd_core::model::transformer::{
 };
 use frmd_core::policy::AlignedBytes;
 use frmd_core::quant::QuantParams;
+use frmd_firmware_support::shape::{TRANSFORMER_LINEARS, TRANSFORMER_NORMS, TRANSFORMER_SHAPE};
 
 /// A generated linear layer; weights are `weight_offset..` in [`WEIGHTS`]. `scales` for layers
 /// dequantized to f32; `multipliers`, `shifts`, `output_zero_point` and `lut` for `fc1`.
@@ -38,8 +38,10 @@ mod generated {
 
 /// All int8 weights, layer by layer.
 /// (16-byte aligned, as the DSP kernels' word loads need for their fast path.)
-static WEIGHTS: AlignedBytes<{ generated::WEIGHT_BYTES }> = AlignedBytes(
-    *include_bytes!(concat!(env!("OUT_DIR"), "/synthetic_transformer.bin")));
+static WEIGHTS: AlignedBytes<{ generated::WEIGHT_BYTES }> = AlignedBytes(*include_bytes!(concat!(
+    env!("OUT_DIR"),
+    "/synthetic_transformer.bin"
+)));
 
 fn linear_at(index: usize) -> Option<&'static Linear> {
     generated::LINEARS.get(index)
@@ -47,7 +49,9 @@ fn linear_at(index: usize) -> Option<&'static Linear> {
 
 fn fully_connected(layer: &'static Linear) -> Option<FullyConnected<'static>> {
     let count = layer.in_features.checked_mul(layer.out_features)?;
-    let bytes = WEIGHTS.0.get(layer.weight_offset..layer.weight_offset.checked_add(count)?)?;
+    let bytes = WEIGHTS
+        .0
+        .get(layer.weight_offset..layer.weight_offset.checked_add(count)?)?;
     Some(FullyConnected::new(
         layer.in_features,
         layer.out_features,
@@ -60,13 +64,19 @@ fn quantized(index: usize) -> Option<QuantizedLinear<'static>> {
     let layer = linear_at(index)?;
     Some(QuantizedLinear {
         input: layer.input,
-        linear: Int8Linear { fc: fully_connected(layer)?, output_scales: layer.scales },
+        linear: Int8Linear {
+            fc: fully_connected(layer)?,
+            output_scales: layer.scales,
+        },
     })
 }
 
 fn layer_norm(index: usize) -> Option<LayerNormWeights<'static>> {
     let norm = generated::NORMS.get(index)?;
-    Some(LayerNormWeights { gamma: norm.gamma, beta: norm.beta })
+    Some(LayerNormWeights {
+        gamma: norm.gamma,
+        beta: norm.beta,
+    })
 }
 
 fn block(layer: usize) -> Option<Int8Block<'static>> {

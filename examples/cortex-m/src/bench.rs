@@ -1,10 +1,10 @@
 //! The measurement harness shared by the firmware binaries: calibrates SysTick, runs every case of
 //! a [`Workload`] `CALLS / cases` times, timing each call, and prints the report lines.
 
-use frmd_core::hash::Fnv1a64;
 use crate::memory::{ImageSizes, StackProbe};
 use crate::report::{self, exit_failure, exit_success, report};
 use crate::timer::{calibrate, Calibration, CycleCounter, TickCounter};
+use frmd_core::hash::Fnv1a64;
 use frmd_firmware_support::cpuid::core_name;
 use frmd_firmware_support::workload::Workload;
 
@@ -112,7 +112,10 @@ pub fn run_then<W: Workload, const CALLS: usize>(
     report!("core: {}", core_name(peripherals.CPUID.base.read()));
     report!("calls: {}", CALLS);
     report::hex64("digest", digest);
-    report!("instructions: {}", calibration.instructions(u64::from(median_ticks)));
+    report!(
+        "instructions: {}",
+        calibration.instructions(u64::from(median_ticks))
+    );
     report::milli(
         "instructions_mean",
         calibration.instructions(total_ticks * 1000) / CALLS as u64,
@@ -124,7 +127,10 @@ pub fn run_then<W: Workload, const CALLS: usize>(
     if workload.macs() != 0 {
         report!("macs: {}", workload.macs());
     }
-    report::milli("instructions_per_systick", calibration.milli_instructions_per_tick());
+    report::milli(
+        "instructions_per_systick",
+        calibration.milli_instructions_per_tick(),
+    );
     if median_cycles != 0 {
         report!("cycles: {}", median_cycles);
     }

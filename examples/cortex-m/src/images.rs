@@ -56,7 +56,8 @@ pub type TransformerPolicy<'a, Net> =
     Policy<'a, Net, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>;
 
 /// The synthetic transformer's blocks (firmware failure if the baked data does not fit).
-pub fn transformer_blocks() -> [frmd_core::model::transformer::Int8Block<'static>; baked_transformer::LAYERS] {
+pub fn transformer_blocks(
+) -> [frmd_core::model::transformer::Int8Block<'static>; baked_transformer::LAYERS] {
     match baked_transformer::blocks() {
         Some(blocks) => blocks,
         None => exit_failure(&"baked transformer: a block lies outside the generated data"),
@@ -75,7 +76,10 @@ pub fn transformer_network<'a>(
 }
 
 /// `model` as the synthetic policy's network, running in `scratch`.
-pub fn network_of<'a>(model: Int8Transformer<'a>, scratch: &'a mut Scratch) -> TransformerNetwork<'a> {
+pub fn network_of<'a>(
+    model: Int8Transformer<'a>,
+    scratch: &'a mut Scratch,
+) -> TransformerNetwork<'a> {
     let layout = baked_synthetic_policy::config().sampler.layout;
     match Int8TransformerNetwork::new(model, &layout, &[], scratch) {
         Ok(network) => network,

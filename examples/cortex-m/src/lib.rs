@@ -57,4 +57,3 @@ pub mod baked_student {
 pub mod baked_synthetic_policy {
     include!(concat!(env!("OUT_DIR"), "/synthetic_policy/policy.rs"));
 }
-

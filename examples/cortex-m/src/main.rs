@@ -3,8 +3,8 @@
 #![no_main]
 
 use cortex_m_rt::entry;
-use frmd_firmware_support::prodmp_workload::{ProDmpWorkload, CASES};
 use frmd_cortex_m::{bench, BAKED_PRODMP};
+use frmd_firmware_support::prodmp_workload::{ProDmpWorkload, CASES};
 
 #[entry]
 fn main() -> ! {

@@ -34,7 +34,9 @@ impl HostLink {
         let open = |mode: usize| {
             let name = b":tt\0";
             // SAFETY: SYS_OPEN reads `name.len() - 1` bytes of a live, NUL-terminated buffer.
-            let fd = unsafe { cortex_m_semihosting::syscall!(OPEN, name.as_ptr(), mode, name.len() - 1) };
+            let fd = unsafe {
+                cortex_m_semihosting::syscall!(OPEN, name.as_ptr(), mode, name.len() - 1)
+            };
             (fd as isize >= 0).then_some(fd)
         };
         Some(Self {
@@ -49,7 +51,9 @@ impl HostLink {
         while done < buf.len() {
             let rest = &mut buf[done..];
             // SAFETY: SYS_READ writes at most `rest.len()` bytes into the live buffer `rest`.
-            let missing = unsafe { cortex_m_semihosting::syscall!(READ, self.input, rest.as_mut_ptr(), rest.len()) };
+            let missing = unsafe {
+                cortex_m_semihosting::syscall!(READ, self.input, rest.as_mut_ptr(), rest.len())
+            };
             if missing >= rest.len() {
                 return false; // nothing read: end of input (or an error, reported as more than asked)
             }
@@ -62,7 +66,9 @@ impl HostLink {
     pub fn write_all(&mut self, mut bytes: &[u8]) {
         while !bytes.is_empty() {
             // SAFETY: SYS_WRITE reads `bytes.len()` bytes of the live buffer `bytes`.
-            let missing = unsafe { cortex_m_semihosting::syscall!(WRITE, self.output, bytes.as_ptr(), bytes.len()) };
+            let missing = unsafe {
+                cortex_m_semihosting::syscall!(WRITE, self.output, bytes.as_ptr(), bytes.len())
+            };
             if missing >= bytes.len() {
                 exit_failure(&"pil: the host stopped taking output");
             }
@@ -91,7 +97,18 @@ impl core::fmt::Write for Text {
 
 /// The server state: link, policy, noise stream, counters and frame buffers.
 /// `REQ` and `REP` are the payload capacities (at least the `ACT` and `CHUNK` sizes of the policy).
-pub struct Server<'a, Net, const M: usize, const O: usize, const K: usize, const N: usize, const P: usize, const I: usize, const REQ: usize, const REP: usize> {
+pub struct Server<
+    'a,
+    Net,
+    const M: usize,
+    const O: usize,
+    const K: usize,
+    const N: usize,
+    const P: usize,
+    const I: usize,
+    const REQ: usize,
+    const REP: usize,
+> {
     link: HostLink,
     policy: Policy<'a, Net, M, O, K, N, P, I>,
     rng: Rng,
@@ -109,8 +126,18 @@ enum Next {
     Exit,
 }
 
-impl<'a, Net: Network, const M: usize, const O: usize, const K: usize, const N: usize, const P: usize, const I: usize, const REQ: usize, const REP: usize>
-    Server<'a, Net, M, O, K, N, P, I, REQ, REP>
+impl<
+        'a,
+        Net: Network,
+        const M: usize,
+        const O: usize,
+        const K: usize,
+        const N: usize,
+        const P: usize,
+        const I: usize,
+        const REQ: usize,
+        const REP: usize,
+    > Server<'a, Net, M, O, K, N, P, I, REQ, REP>
 {
     /// Takes the core peripherals, starts and calibrates SysTick and opens the link.
     pub fn new(policy: Policy<'a, Net, M, O, K, N, P, I>) -> Self {
@@ -126,11 +153,24 @@ impl<'a, Net: Network, const M: usize, const O: usize, const K: usize, const N: 
         let Some(link) = HostLink::open() else {
             exit_failure(&"pil: semihosting cannot open :tt");
         };
-        let capacity_ok = REQ >= pil::act_len(M, O, K) && REQ >= RESET_LEN && REP >= pil::chunk_len(N, K).max(INFO_LEN).max(2 + MAX_TEXT) + HEADER_LEN + TRAILER_LEN;
+        let capacity_ok = REQ >= pil::act_len(M, O, K)
+            && REQ >= RESET_LEN
+            && REP
+                >= pil::chunk_len(N, K).max(INFO_LEN).max(2 + MAX_TEXT) + HEADER_LEN + TRAILER_LEN;
         if !capacity_ok {
             exit_failure(&"pil: frame buffers smaller than the policy's ACT and CHUNK payloads");
         }
-        Self { link, policy, rng: Rng::new(0), ticks, calibration, cpuid, request: [0; REQ], reply: [0; REP], frame: [0; REP] }
+        Self {
+            link,
+            policy,
+            rng: Rng::new(0),
+            ticks,
+            calibration,
+            cpuid,
+            request: [0; REQ],
+            reply: [0; REP],
+            frame: [0; REP],
+        }
     }
 
     /// Answers requests until `EXIT` or the end of the input, then ends QEMU with status 0.
@@ -151,7 +191,14 @@ impl<'a, Net: Network, const M: usize, const O: usize, const K: usize, const N: 
             let header = match parse_header(&head) {
                 Ok(header) if header.payload_len <= REQ => header,
                 Ok(header) => {
-                    self.error(ErrorCode::TooLong, head[2], format_args!("payload of {} bytes, this image takes at most {REQ}", header.payload_len));
+                    self.error(
+                        ErrorCode::TooLong,
+                        head[2],
+                        format_args!(
+                            "payload of {} bytes, this image takes at most {REQ}",
+                            header.payload_len
+                        ),
+                    );
                     synced = false;
                     continue;
                 }
@@ -168,7 +215,14 @@ impl<'a, Net: Network, const M: usize, const O: usize, const K: usize, const N: 
             }
             let expected = frame_crc(&head, &self.request[..len]);
             if u32::from_le_bytes(crc) != expected {
-                self.error(ErrorCode::BadCrc, head[2], format_args!("CRC {:08x}, computed {expected:08x}", u32::from_le_bytes(crc)));
+                self.error(
+                    ErrorCode::BadCrc,
+                    head[2],
+                    format_args!(
+                        "CRC {:08x}, computed {expected:08x}",
+                        u32::from_le_bytes(crc)
+                    ),
+                );
                 continue;
             }
             if let Next::Exit = self.handle(header.type_byte, len) {
@@ -200,12 +254,20 @@ impl<'a, Net: Network, const M: usize, const O: usize, const K: usize, const N: 
             Some(MsgType::Reset) => RESET_LEN,
             Some(MsgType::Act) => pil::act_len(M, O, K),
             _ => {
-                self.error(ErrorCode::UnknownType, type_byte, format_args!("type 0x{type_byte:02x} is not a request"));
+                self.error(
+                    ErrorCode::UnknownType,
+                    type_byte,
+                    format_args!("type 0x{type_byte:02x} is not a request"),
+                );
                 return Next::Continue;
             }
         };
         if len != expected {
-            self.error(ErrorCode::BadLength, type_byte, format_args!("payload of {len} bytes, expected {expected}"));
+            self.error(
+                ErrorCode::BadLength,
+                type_byte,
+                format_args!("payload of {len} bytes, expected {expected}"),
+            );
             return Next::Continue;
         }
         match MsgType::from_u8(type_byte) {
@@ -222,7 +284,9 @@ impl<'a, Net: Network, const M: usize, const O: usize, const K: usize, const N: 
             }
             _ => match self.act() {
                 Ok(()) => self.send(MsgType::Chunk as u8, pil::chunk_len(N, K)),
-                Err(error) => self.error(ErrorCode::PolicyFailed, type_byte, format_args!("{error}")),
+                Err(error) => {
+                    self.error(ErrorCode::PolicyFailed, type_byte, format_args!("{error}"))
+                }
             },
         }
         Next::Continue
@@ -235,7 +299,12 @@ impl<'a, Net: Network, const M: usize, const O: usize, const K: usize, const N: 
         for (slot, value) in self.reply.chunks_exact_mut(2).zip(dims) {
             slot.copy_from_slice(&value.to_le_bytes());
         }
-        let words = [self.cpuid, sizes.flash as u32, sizes.ram_static as u32, self.calibration.milli_instructions_per_tick() as u32];
+        let words = [
+            self.cpuid,
+            sizes.flash as u32,
+            sizes.ram_static as u32,
+            self.calibration.milli_instructions_per_tick() as u32,
+        ];
         for (slot, value) in self.reply[8..INFO_LEN].chunks_exact_mut(4).zip(words) {
             slot.copy_from_slice(&value.to_le_bytes());
         }
@@ -261,10 +330,17 @@ impl<'a, Net: Network, const M: usize, const O: usize, const K: usize, const N: 
         let act_start = self.ticks.now();
         let chunk = self.policy.act(Noise::Rng(&mut self.rng))?;
         let act_end = self.ticks.now();
-        pil::write_f32s(chunk.positions.as_flattened(), &mut self.reply[CHUNK_PREFIX..pil::chunk_len(N, K)]);
+        pil::write_f32s(
+            chunk.positions.as_flattened(),
+            &mut self.reply[CHUNK_PREFIX..pil::chunk_len(N, K)],
+        );
         let request_end = self.ticks.now();
-        let act = self.calibration.instructions(u64::from(TickCounter::elapsed(act_start, act_end)));
-        let request = self.calibration.instructions(u64::from(TickCounter::elapsed(request_start, request_end)));
+        let act = self
+            .calibration
+            .instructions(u64::from(TickCounter::elapsed(act_start, act_end)));
+        let request = self
+            .calibration
+            .instructions(u64::from(TickCounter::elapsed(request_start, request_end)));
         self.reply[..4].copy_from_slice(&(act as u32).to_le_bytes());
         self.reply[4..8].copy_from_slice(&(request as u32).to_le_bytes());
         Ok(())
@@ -272,7 +348,10 @@ impl<'a, Net: Network, const M: usize, const O: usize, const K: usize, const N: 
 
     /// `ERROR` with `code`, the request's type byte and a text.
     fn error(&mut self, code: ErrorCode, type_byte: u8, text: core::fmt::Arguments<'_>) {
-        let mut message = Text { bytes: [0; MAX_TEXT], len: 0 };
+        let mut message = Text {
+            bytes: [0; MAX_TEXT],
+            len: 0,
+        };
         let _ = core::fmt::write(&mut message, text);
         self.reply[0] = code as u8;
         self.reply[1] = type_byte;

@@ -28,11 +28,11 @@ use frmd_core::model::transformer::{
 use frmd_core::policy::{Int8TransformerNetwork, Network, Policy, PolicyError};
 use frmd_core::rng::Rng;
 
+use crate::report::{self, exit_failure, report};
+use crate::timer::{Calibration, TickCounter};
 use frmd_core::hash::Fnv1a64;
 use frmd_firmware_support::policy_workload::{PolicyWorkload, CASES, NOISE_SEED};
-use crate::report::{self, exit_failure, report};
 use frmd_firmware_support::stages::{MarkedNetwork, StagedMlpNetwork};
-use crate::timer::{Calibration, TickCounter};
 use frmd_firmware_support::workload::{prodmp_decode_macs, Workload};
 
 /// Calls per case in the breakdown (and standalone repetitions per call).
@@ -69,7 +69,12 @@ struct Breakdown {
 
 impl Breakdown {
     const fn new() -> Self {
-        Self { names: [""; MAX_STAGES], macs: [0; MAX_STAGES], ticks: [0; MAX_STAGES], count: 0 }
+        Self {
+            names: [""; MAX_STAGES],
+            macs: [0; MAX_STAGES],
+            ticks: [0; MAX_STAGES],
+            count: 0,
+        }
     }
 
     /// Declares the next stage; returns its index.
@@ -97,7 +102,12 @@ impl Breakdown {
 
     /// Declares the stages after the network (`decode`, `output_stage`, `denormalize`) for a
     /// horizon `n`, `k` DoFs and `p` parameters per DoF; `noise` and `input` are the first two.
-    fn close_policy(&mut self, noise: usize, input: usize, (n, k, p): (usize, usize, usize)) -> PolicyStages {
+    fn close_policy(
+        &mut self,
+        noise: usize,
+        input: usize,
+        (n, k, p): (usize, usize, usize),
+    ) -> PolicyStages {
         PolicyStages {
             noise,
             input,
@@ -109,7 +119,12 @@ impl Breakdown {
 
     /// Moves the standalone timings out of the stages they were measured in: `noise_ticks` out of
     /// `input`, the decode and denormalize ticks out of `output_stage`.
-    fn split_standalone(&mut self, s: PolicyStages, noise_ticks: u64, (decode, denormalize): (u64, u64)) {
+    fn split_standalone(
+        &mut self,
+        s: PolicyStages,
+        noise_ticks: u64,
+        (decode, denormalize): (u64, u64),
+    ) {
         self.add(s.noise, noise_ticks);
         self.sub(s.input, noise_ticks);
         self.add(s.decode, decode);
@@ -118,7 +133,12 @@ impl Breakdown {
     }
 
     fn print(&self, calibration: &Calibration, calls: u64) {
-        let stages = self.names.iter().zip(&self.macs).zip(&self.ticks).take(self.count);
+        let stages = self
+            .names
+            .iter()
+            .zip(&self.macs)
+            .zip(&self.ticks)
+            .take(self.count);
         let mut total = 0;
         for ((name, macs), ticks) in stages {
             let instructions = (calibration.instructions(*ticks) + calls / 2) / calls.max(1);
@@ -144,7 +164,9 @@ fn time_post_stages<
 >(
     policy: &Policy<'_, Net, M, O, K, N, P, I>,
 ) -> Result<(u64, u64), PolicyError> {
-    let (y0, v0) = policy.previous_action_normalized().ok_or(PolicyError::NoPreviousAction)?;
+    let (y0, v0) = policy
+        .previous_action_normalized()
+        .ok_or(PolicyError::NoPreviousAction)?;
     let config = policy.config();
     let (mut decode_ticks, mut denormalize_ticks) = (0, 0);
     for _ in 0..REPEATS {
@@ -165,7 +187,11 @@ fn time_post_stages<
 
         let chunk = core::hint::black_box(policy.normalized_chunk());
         let start = systick();
-        let rows = chunk.positions.iter().zip(&chunk.velocities).zip(positions.iter_mut().zip(velocities.iter_mut()));
+        let rows = chunk
+            .positions
+            .iter()
+            .zip(&chunk.velocities)
+            .zip(positions.iter_mut().zip(velocities.iter_mut()));
         for ((pos, vel), (pos_out, vel_out)) in rows {
             config.action_norm.denormalize(pos, pos_out);
             config.action_norm.denormalize_rate(vel, vel_out);
@@ -201,7 +227,6 @@ fn check_digest(digest: Fnv1a64, expected: u64) {
     }
 }
 
-
 #[inline(never)]
 /// Breakdown of the MLP policy: `workload` runs a [`StagedMlpNetwork`] whose clock is [`systick`];
 /// its chunks must reproduce `expected_digest` (the main measurement's).
@@ -226,8 +251,9 @@ pub fn mlp_policy<
     let noise = stages.stage("noise", 0);
     let input = stages.stage("input", 0);
     let quantize = stages.stage("quantize", 0);
-    const LAYER_NAMES: [&str; 8] =
-        ["layer1", "layer2", "layer3", "layer4", "layer5", "layer6", "layer7", "layer8"];
+    const LAYER_NAMES: [&str; 8] = [
+        "layer1", "layer2", "layer3", "layer4", "layer5", "layer6", "layer7", "layer8",
+    ];
     let first_layer = stages.count;
     for (name, macs) in LAYER_NAMES.iter().zip(layer_macs) {
         stages.stage(name, *macs);
@@ -255,7 +281,11 @@ pub fn mlp_policy<
             stages.add(outer.output_stage, elapsed(*exit, end));
         }
         workload.digest_outputs(&mut digest);
-        stages.split_standalone(outer, time_noise::<N, K>(case), time_post_stages(workload.policy())?);
+        stages.split_standalone(
+            outer,
+            time_noise::<N, K>(case),
+            time_post_stages(workload.policy())?,
+        );
     }
     debug_assert!(first_layer == quantize + 1 && output_layer + 1 == dequantize);
     check_digest(digest, expected_digest);
@@ -274,8 +304,18 @@ fn time_prefix<const F: usize, const B: usize, const A: usize>(
     scratch: &mut TransformerScratch<F, B, A>,
 ) -> Result<u64, PolicyError> {
     let failed = |_| PolicyError::Model(frmd_core::model::mlp::ModelError::InputLength);
-    let blocks = model.blocks.get(..layers).ok_or(PolicyError::TooManyLayers)?;
-    let prefix = Int8Transformer { shape: TransformerShape { layers, ..model.shape }, blocks, ..*model };
+    let blocks = model
+        .blocks
+        .get(..layers)
+        .ok_or(PolicyError::TooManyLayers)?;
+    let prefix = Int8Transformer {
+        shape: TransformerShape {
+            layers,
+            ..model.shape
+        },
+        blocks,
+        ..*model
+    };
     let start = systick();
     let result = prefix.forward(trajectory, condition, output, scratch);
     let end = systick();
@@ -299,9 +339,15 @@ fn time_embedding_and_head<const TW: usize, const WIDTH: usize, const OUT: usize
     let mut row = [0.0_f32; WIDTH];
     let mut output = [0.0_f32; OUT];
     let (embedding, head);
-    let project = |layer: &TokenLinear<'_>, input: &[f32], codes: &mut [i8], acc: &mut [i32], out: &mut [f32]| match layer {
+    let project = |layer: &TokenLinear<'_>,
+                   input: &[f32],
+                   codes: &mut [i8],
+                   acc: &mut [i32],
+                   out: &mut [f32]| match layer {
         TokenLinear::Int8(linear) => {
-            let codes = codes.get_mut(..input.len()).ok_or(PolicyError::InputWidth)?;
+            let codes = codes
+                .get_mut(..input.len())
+                .ok_or(PolicyError::InputWidth)?;
             linear.forward(input, codes, acc, out).map_err(failed)
         }
         TokenLinear::Float(linear) => linear.forward(input, out).map_err(failed),
@@ -311,13 +357,25 @@ fn time_embedding_and_head<const TW: usize, const WIDTH: usize, const OUT: usize
         let mut rows = residual.chunks_exact_mut(shape.width);
         let mut positions = model.positions.chunks_exact(shape.width);
         if let (Some(token), Some(position)) = (rows.next(), positions.next()) {
-            project(&model.cond_in, condition, &mut codes, &mut accumulators, token)?;
+            project(
+                &model.cond_in,
+                condition,
+                &mut codes,
+                &mut accumulators,
+                token,
+            )?;
             token.iter_mut().zip(position).for_each(|(t, p)| *t += p);
         }
         if let (Some(token), Some(_)) = (rows.next(), positions.next()) {
-            token.iter_mut().zip(model.noise_token).for_each(|(t, n)| *t = *n);
+            token
+                .iter_mut()
+                .zip(model.noise_token)
+                .for_each(|(t, n)| *t = *n);
         }
-        for ((token, position), step) in rows.zip(positions).zip(trajectory.chunks_exact(shape.action_dim)) {
+        for ((token, position), step) in rows
+            .zip(positions)
+            .zip(trajectory.chunks_exact(shape.action_dim))
+        {
             project(&model.traj_in, step, &mut codes, &mut accumulators, token)?;
             token.iter_mut().zip(position).for_each(|(t, p)| *t += p);
         }
@@ -326,14 +384,23 @@ fn time_embedding_and_head<const TW: usize, const WIDTH: usize, const OUT: usize
         core::hint::black_box(&residual);
 
         let start = systick();
-        for (token, token_codes) in residual.chunks_exact(shape.width).zip(codes.chunks_exact_mut(shape.width)) {
+        for (token, token_codes) in residual
+            .chunks_exact(shape.width)
+            .zip(codes.chunks_exact_mut(shape.width))
+        {
             model.final_norm.apply(token, &mut row).map_err(failed)?;
             for (code, value) in token_codes.iter_mut().zip(&row) {
                 *code = model.head.input.quantize(*value);
             }
         }
-        let acc = accumulators.get_mut(..OUT).ok_or(PolicyError::OutputWidth)?;
-        model.head.linear.forward(&codes, acc, &mut output).map_err(failed)?;
+        let acc = accumulators
+            .get_mut(..OUT)
+            .ok_or(PolicyError::OutputWidth)?;
+        model
+            .head
+            .linear
+            .forward(&codes, acc, &mut output)
+            .map_err(failed)?;
         let end = systick();
         head = elapsed(start, end);
         core::hint::black_box(&output);
@@ -379,10 +446,13 @@ pub fn transformer_policy<
     let mut stages = Breakdown::new();
     let noise = stages.stage("noise", 0);
     let input = stages.stage("input", 0);
-    let embedding =
-        stages.stage("embedding", (shape.cond_dim as u64 + shape.trajectory_len() as u64) * w);
-    const BLOCK_NAMES: [&str; 8] =
-        ["block1", "block2", "block3", "block4", "block5", "block6", "block7", "block8"];
+    let embedding = stages.stage(
+        "embedding",
+        (shape.cond_dim as u64 + shape.trajectory_len() as u64) * w,
+    );
+    const BLOCK_NAMES: [&str; 8] = [
+        "block1", "block2", "block3", "block4", "block5", "block6", "block7", "block8",
+    ];
     let first_block = stages.count;
     for name in BLOCK_NAMES.iter().take(shape.layers) {
         stages.stage(name, 12 * t * w * w + 2 * t * t * w);
@@ -405,16 +475,26 @@ pub fn transformer_policy<
         network_ticks += elapsed(*entry, *exit) * REPEATS as u64;
         stages.add(outer.output_stage, elapsed(*exit, end) * REPEATS as u64);
         workload.digest_outputs(&mut digest);
-        stages.split_standalone(outer, time_noise::<N, K>(case), time_post_stages(workload.policy())?);
+        stages.split_standalone(
+            outer,
+            time_noise::<N, K>(case),
+            time_post_stages(workload.policy())?,
+        );
     }
     check_digest(digest, expected_digest);
     // The network's parts on a fixed input, REPEATS runs per case.
     let mut rng = Rng::new(0x4652_4D44_5354_4731);
     let mut condition = [0.0_f32; 64];
     let mut trajectory = [0.0_f32; 64];
-    let condition = condition.get_mut(..shape.cond_dim).ok_or(PolicyError::InputWidth)?;
-    let trajectory = trajectory.get_mut(..shape.trajectory_len()).ok_or(PolicyError::InputWidth)?;
-    condition.iter_mut().for_each(|v| *v = 2.0 * rng.uniform() - 1.0);
+    let condition = condition
+        .get_mut(..shape.cond_dim)
+        .ok_or(PolicyError::InputWidth)?;
+    let trajectory = trajectory
+        .get_mut(..shape.trajectory_len())
+        .ok_or(PolicyError::InputWidth)?;
+    condition
+        .iter_mut()
+        .for_each(|v| *v = 2.0 * rng.uniform() - 1.0);
     rng.fill_gaussian(trajectory);
     let mut output = [0.0_f32; OUT];
     // Their cost hardly depends on the data, so each is timed once (about 70 M instructions for
@@ -441,7 +521,10 @@ pub fn transformer_policy<
     // input split, differences of input data).
     stages.add(network_rest, network_ticks.saturating_sub(prefix_ticks));
     let calls = (CASES * REPEATS) as u64;
-    report!("stage_network_in_act: {}", (calibration.instructions(network_ticks) + calls / 2) / calls);
+    report!(
+        "stage_network_in_act: {}",
+        (calibration.instructions(network_ticks) + calls / 2) / calls
+    );
     stages.print(calibration, (CASES * REPEATS) as u64);
     Ok(())
 }

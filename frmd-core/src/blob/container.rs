@@ -143,7 +143,11 @@ impl<'a> Data<'a> {
     }
 
     /// f32 section of any length, all finite.
-    pub(crate) fn finite_any(&self, section: Section, id: SectionId) -> Result<&'a [f32], BlobError> {
+    pub(crate) fn finite_any(
+        &self,
+        section: Section,
+        id: SectionId,
+    ) -> Result<&'a [f32], BlobError> {
         let values = self.cast::<f32>(section, id)?;
         if values.iter().all(|v| v.is_finite()) {
             Ok(values)

@@ -167,7 +167,9 @@ impl core::fmt::Display for BlobError {
                 )
             }
             Self::Descriptor => f.write_str("descriptor is not valid postcard"),
-            Self::DimensionMismatch(d) => write!(f, "blob dimension {d:?} differs from the expected one"),
+            Self::DimensionMismatch(d) => {
+                write!(f, "blob dimension {d:?} differs from the expected one")
+            }
             Self::ZeroDimension(d) => write!(f, "blob dimension {d:?} is zero"),
             Self::SectionBounds(s) => write!(f, "section {s:?} lies outside the blob"),
             Self::SectionMisaligned(s) => write!(f, "section {s:?} is misaligned"),
@@ -175,9 +177,9 @@ impl core::fmt::Display for BlobError {
             Self::NonFinite(s) => write!(f, "section {s:?} contains NaN or infinity"),
             Self::Normalization => f.write_str("normalization range has min > max"),
             Self::InputLayout => f.write_str("input layout invalid or width mismatch"),
-            Self::InputQuantization => {
-                f.write_str("input quantization parameters invalid (or two-plane without a hidden layer)")
-            }
+            Self::InputQuantization => f.write_str(
+                "input quantization parameters invalid (or two-plane without a hidden layer)",
+            ),
             Self::Steps => f.write_str("step table invalid"),
             Self::ControlPeriod => f.write_str("control period is not finite and positive"),
             Self::LayerWidth { index } => write!(f, "layer {index} width mismatch"),

@@ -6,11 +6,11 @@
 
 use super::container::{Data, Section, SectionId, SectionWriter};
 use super::{BlobError, Dimension};
-use serde::{Deserialize, Serialize};
 use crate::policy::{
     InputLayout, PolicyConfig, PolicyDims, ProDmpTables, RangeNormalizer, Sampler, StepConstants,
     StepTable, MAX_STEPS,
 };
+use serde::{Deserialize, Serialize};
 
 /// Words per step in the step-constants section: `sigma, renoise_std, c_in, c_skip, c_out` as
 /// f32 bit patterns, then `noise_variant`.
@@ -171,7 +171,13 @@ pub(crate) fn read<'a>(
     sections: &PolicySections,
 ) -> Result<PolicyTables<'a>, BlobError> {
     let h = header;
-    let sizes = [h.history, h.obs_dim, h.action_dim, h.horizon, h.params_per_dof];
+    let sizes = [
+        h.history,
+        h.obs_dim,
+        h.action_dim,
+        h.horizon,
+        h.params_per_dof,
+    ];
     let which = [
         Dimension::History,
         Dimension::ObsDim,

@@ -114,7 +114,10 @@ fn round_trip_gives_the_same_policy_bit_for_bit() {
         let buffer = Aligned::new(&blob, 0);
         let loaded = load(buffer.bytes()).unwrap();
         assert_eq!(loaded.steps(), &model.steps[..]);
-        assert_eq!(loaded.decoder(), crate::policy::ProDmpTables::from_baked(&model.decoder));
+        assert_eq!(
+            loaded.decoder(),
+            crate::policy::ProDmpTables::from_baked(&model.decoder)
+        );
         assert_eq!(loaded.layout(), &model.layout);
         assert_eq!(loaded.control_dt(), DT);
         let mut from_blob = blob_policy(&loaded).unwrap();
@@ -224,7 +227,10 @@ fn dimension_mismatches_are_named() {
         Some(BlobError::DimensionMismatch(Dimension::History))
     );
     assert_eq!(
-        expect(crate::policy::PolicyDims { action_dim: 3, ..DIMS }),
+        expect(crate::policy::PolicyDims {
+            action_dim: 3,
+            ..DIMS
+        }),
         Some(BlobError::DimensionMismatch(Dimension::ActionDim))
     );
     assert_eq!(
@@ -232,7 +238,10 @@ fn dimension_mismatches_are_named() {
         Some(BlobError::DimensionMismatch(Dimension::Horizon))
     );
     assert_eq!(
-        expect(crate::policy::PolicyDims { params_per_dof: 5, ..DIMS }),
+        expect(crate::policy::PolicyDims {
+            params_per_dof: 5,
+            ..DIMS
+        }),
         Some(BlobError::DimensionMismatch(Dimension::ParamsPerDof))
     );
     // Scratch or input buffer too small for the blob's network: named by the policy.
@@ -345,7 +354,12 @@ fn shape_and_value_damage_is_named() {
     );
     // Second step's bias variant index beyond the two variants.
     check(
-        poke(&blob, d.tables.steps, 4 * (STEP_WORDS + 5), &2_u32.to_le_bytes()),
+        poke(
+            &blob,
+            d.tables.steps,
+            4 * (STEP_WORDS + 5),
+            &2_u32.to_le_bytes(),
+        ),
         BlobError::Steps,
     );
     // First step re-noising is invalid.

@@ -22,8 +22,8 @@
 //! commutative, so the sums equal the portable kernel's for every input.
 
 use super::dsp_asm::{row_pairs, Input, BLOCK};
-use super::rows::BLOCK_ROWS;
 use super::rows::RowInput;
+use super::rows::BLOCK_ROWS;
 
 /// Widest input that is rewritten to halfword pairs on the stack (2 bytes per column: 512 bytes).
 pub(crate) const EXPANDED_COLUMNS: usize = 256;
@@ -94,7 +94,8 @@ pub(crate) fn block_sums<T: RowInput>(
         (false, Some(bytes)) => Some(Input::Bytes(bytes)),
         (false, None) => None,
     };
-    let paired = source.is_some_and(|source| row_pairs(rows, width, source, blocks, start, sum_pairs));
+    let paired =
+        source.is_some_and(|source| row_pairs(rows, width, source, blocks, start, sum_pairs));
     let done = if paired { 2 * sum_pairs.len() } else { 0 };
     let (paired, rest) = sums.split_at_mut(done);
     if head < width {

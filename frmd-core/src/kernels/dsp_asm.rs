@@ -45,13 +45,29 @@ macro_rules! accumulate {
     ($acc:literal) => {
         concat!(
             "sxtb16 {t}, {wa}\n",
-            "smlad {", $acc, "}, {t}, r0, {", $acc, "}\n",
+            "smlad {",
+            $acc,
+            "}, {t}, r0, {",
+            $acc,
+            "}\n",
             "sxtb16 {wa}, {wa}, ror #8\n",
-            "smlad {", $acc, "}, {wa}, r1, {", $acc, "}\n",
+            "smlad {",
+            $acc,
+            "}, {wa}, r1, {",
+            $acc,
+            "}\n",
             "sxtb16 {t}, {wb}\n",
-            "smlad {", $acc, "}, {t}, r2, {", $acc, "}\n",
+            "smlad {",
+            $acc,
+            "}, {t}, r2, {",
+            $acc,
+            "}\n",
             "sxtb16 {wb}, {wb}, ror #8\n",
-            "smlad {", $acc, "}, {wb}, r3, {", $acc, "}\n",
+            "smlad {",
+            $acc,
+            "}, {wb}, r3, {",
+            $acc,
+            "}\n",
         )
     };
 }
@@ -151,7 +167,10 @@ pub(crate) fn row_pairs(
         && width % 4 == 0
         && (rows.as_ptr() as usize) % 4 == 0
         && start.len() >= out.len()
-        && out.len().checked_mul(2 * width).is_some_and(|len| len <= rows.len());
+        && out
+            .len()
+            .checked_mul(2 * width)
+            .is_some_and(|len| len <= rows.len());
     if !ok {
         return false;
     }

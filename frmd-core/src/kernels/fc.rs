@@ -10,8 +10,8 @@
 
 #[cfg(target_arch = "x86_64")]
 use super::dot::dot_i8_prefix;
-use super::rows::{for_each_block, for_each_sum, RowInput};
 use super::lut::{self, LutTable};
+use super::rows::{for_each_block, for_each_sum, RowInput};
 use super::KernelError;
 #[cfg(target_arch = "x86_64")]
 use crate::quant::requantize_to_i8;
@@ -225,7 +225,9 @@ impl<'a> FullyConnected<'a> {
                 }
                 self.requantize_activated(requant, activation, values, output);
             }
-            LayerInput::Int16(values) => self.requantize_activated(requant, activation, values, output),
+            LayerInput::Int16(values) => {
+                self.requantize_activated(requant, activation, values, output)
+            }
         }
         Ok(())
     }
@@ -260,7 +262,11 @@ impl<'a> FullyConnected<'a> {
         let (multipliers, shifts) = (requant.multipliers, requant.shifts);
         for_each_block(input, weights, bias, |first, sums| {
             let end = first + sums.len();
-            if let (Some(out), Some(m), Some(s)) = (output.get_mut(first..end), multipliers.get(first..end), shifts.get(first..end)) {
+            if let (Some(out), Some(m), Some(s)) = (
+                output.get_mut(first..end),
+                multipliers.get(first..end),
+                shifts.get(first..end),
+            ) {
                 requantize_block(sums, m, s, requant, out, &map);
             }
         });
@@ -361,12 +367,26 @@ fn requantize_block(
     let channels = out.iter_mut().zip(sums).zip(multipliers.iter().zip(shifts));
     if (requant.activation_min, requant.activation_max) == (i8::MIN, i8::MAX) {
         for ((out, sum), (multiplier, shift)) in channels {
-            *out = map(requantize_valid(*sum, *multiplier, *shift, zero_point, i8::MIN, i8::MAX));
+            *out = map(requantize_valid(
+                *sum,
+                *multiplier,
+                *shift,
+                zero_point,
+                i8::MIN,
+                i8::MAX,
+            ));
         }
     } else {
         let (lo, hi) = (requant.activation_min, requant.activation_max);
         for ((out, sum), (multiplier, shift)) in channels {
-            *out = map(requantize_valid(*sum, *multiplier, *shift, zero_point, lo, hi));
+            *out = map(requantize_valid(
+                *sum,
+                *multiplier,
+                *shift,
+                zero_point,
+                lo,
+                hi,
+            ));
         }
     }
 }

@@ -71,7 +71,10 @@ impl<'p> ProDmpTables<'p> {
 
     /// Parameters per DoF `p` (0 for empty tables).
     pub fn params_per_dof(&self) -> usize {
-        self.pos_params.len().checked_div(self.horizon()).unwrap_or(0)
+        self.pos_params
+            .len()
+            .checked_div(self.horizon())
+            .unwrap_or(0)
     }
 
     /// Checks that the tables agree: `n >= 1`, both parameter tables `n p` long, every column
@@ -155,10 +158,16 @@ impl<'p> ProDmpTables<'p> {
             let outputs = positions
                 .chunks_exact_mut(k)
                 .zip(velocities.chunks_exact_mut(k));
-            let (pos_rows, vel_rows) = (self.pos_params.chunks_exact(p), self.vel_params.chunks_exact(p));
+            let (pos_rows, vel_rows) = (
+                self.pos_params.chunks_exact(p),
+                self.vel_params.chunks_exact(p),
+            );
             self.decode_rows(pos_rows, vel_rows, thetas, y0, v0, outputs);
         }
-        let finite = positions.iter().chain(velocities.iter()).all(|v| v.is_finite());
+        let finite = positions
+            .iter()
+            .chain(velocities.iter())
+            .all(|v| v.is_finite());
         if finite {
             Ok(())
         } else {

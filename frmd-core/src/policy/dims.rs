@@ -65,5 +65,9 @@ pub(crate) fn fixed_row_pairs<'a, const N: usize, const L: usize>(
 ) -> Option<impl Iterator<Item = (&'a mut [f32], &'a mut [f32])>> {
     let a: &mut [[f32; L]; N] = a.as_chunks_mut::<L>().0.try_into().ok()?;
     let b: &mut [[f32; L]; N] = b.as_chunks_mut::<L>().0.try_into().ok()?;
-    Some(a.iter_mut().zip(b.iter_mut()).map(|(a, b)| (&mut a[..], &mut b[..])))
+    Some(
+        a.iter_mut()
+            .zip(b.iter_mut())
+            .map(|(a, b)| (&mut a[..], &mut b[..])),
+    )
 }

@@ -118,9 +118,11 @@ impl<'a> RangeNormalizer<'a> {
             fixed_rows::<N, K>(normalized.1),
         );
         if let (Some(mut min), Some(mut max), Some(positions), Some(velocities)) = fixed {
-            if let (Some(min), Some(max), Some(outputs)) =
-                (min.next(), max.next(), fixed_row_pairs::<N, K>(out.0, out.1))
-            {
+            if let (Some(min), Some(max), Some(outputs)) = (
+                min.next(),
+                max.next(),
+                fixed_row_pairs::<N, K>(out.0, out.1),
+            ) {
                 let fixed = Self { min, max };
                 for ((pos, vel), (pos_out, vel_out)) in positions.zip(velocities).zip(outputs) {
                     fixed.denormalize(pos, pos_out);

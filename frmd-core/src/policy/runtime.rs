@@ -98,7 +98,8 @@ impl<
         if !dims.fits([M, O, K, N, P]) {
             return Err(PolicyError::Capacity);
         }
-        let history = ObsHistory::with_sizes(dims.history, dims.obs_dim).ok_or(PolicyError::Capacity)?;
+        let history =
+            ObsHistory::with_sizes(dims.history, dims.obs_dim).ok_or(PolicyError::Capacity)?;
         Ok(Self {
             config,
             dims,
@@ -212,7 +213,11 @@ impl<
             .as_flattened_mut()
             .get_mut(..history_len)
             .ok_or(PolicyError::Capacity)?;
-        for (slot, obs) in ordered.chunks_exact_mut(o.max(1)).zip(self.history.iter_oldest_first()).take(m) {
+        for (slot, obs) in ordered
+            .chunks_exact_mut(o.max(1))
+            .zip(self.history.iter_oldest_first())
+            .take(m)
+        {
             slot.copy_from_slice(obs);
         }
         let conditioning = Conditioning {
@@ -235,9 +240,14 @@ impl<
             velocities,
         )?;
         let norm = &self.config.action_norm;
-        let (out_positions, out_velocities) =
-            self.chunk.values_mut(trajectory).ok_or(PolicyError::Capacity)?;
-        norm.denormalize_trajectory::<N, K>((positions, velocities), (out_positions, out_velocities));
+        let (out_positions, out_velocities) = self
+            .chunk
+            .values_mut(trajectory)
+            .ok_or(PolicyError::Capacity)?;
+        norm.denormalize_trajectory::<N, K>(
+            (positions, velocities),
+            (out_positions, out_velocities),
+        );
         self.chunk_ready = true;
         self.cursor = 0;
         Ok(&self.chunk)
@@ -252,7 +262,11 @@ impl<
         }
         let k = self.dims.action_dim;
         let start = self.cursor.checked_mul(k)?;
-        let values = self.chunk.positions.as_flattened().get(start..start.checked_add(k)?)?;
+        let values = self
+            .chunk
+            .positions
+            .as_flattened()
+            .get(start..start.checked_add(k)?)?;
         let mut action = [0.0; K];
         action.get_mut(..k)?.copy_from_slice(values);
         self.record_action(action.get(..k)?).ok()?;

@@ -18,9 +18,9 @@
 use crate::rng::Rng;
 
 use super::decoder::ProDmpTables;
+use super::dims::{fixed_row_pairs, fixed_rows};
 use super::layout::{InputLayout, InputSources};
 use super::network::Network;
-use super::dims::{fixed_row_pairs, fixed_rows};
 use super::steps::{StepConstants, StepTable};
 use super::{PolicyDims, PolicyError};
 
@@ -86,7 +86,10 @@ impl<const N: usize, const K: usize> Trajectory<N, K> {
     /// [`Self::values`], mutable.
     pub fn values_mut(&mut self, len: usize) -> Option<(&mut [f32], &mut [f32])> {
         let positions = self.positions.as_flattened_mut().get_mut(..len)?;
-        Some((positions, self.velocities.as_flattened_mut().get_mut(..len)?))
+        Some((
+            positions,
+            self.velocities.as_flattened_mut().get_mut(..len)?,
+        ))
     }
 }
 
@@ -315,12 +318,17 @@ impl Sampler<'_> {
                     self.combine(step, noisy, conditioning, decoded, outputs);
                 }
             } else {
-                let outputs = positions.chunks_exact_mut(k).zip(velocities.chunks_exact_mut(k));
+                let outputs = positions
+                    .chunks_exact_mut(k)
+                    .zip(velocities.chunks_exact_mut(k));
                 let decoded = decoded.0.chunks_exact(k).zip(decoded.1.chunks_exact(k));
                 self.combine(step, noisy.chunks_exact(k), conditioning, decoded, outputs);
             }
         }
-        let finite = positions.iter().chain(velocities.iter()).all(|v| v.is_finite());
+        let finite = positions
+            .iter()
+            .chain(velocities.iter())
+            .all(|v| v.is_finite());
         if finite {
             Ok(())
         } else {

@@ -73,7 +73,9 @@ impl TestModel {
         let steps: Vec<StepConstants> = sigmas
             .iter()
             .enumerate()
-            .map(|(i, s)| StepConstants::consistency(&SigmaConfig::default(), *s, i as u32).unwrap())
+            .map(|(i, s)| {
+                StepConstants::consistency(&SigmaConfig::default(), *s, i as u32).unwrap()
+            })
             .collect();
         // Calibration over random inputs shaped like the policy's (trajectory part ~ c_in x).
         let mut ranges = MlpRanges::new(hidden.len());

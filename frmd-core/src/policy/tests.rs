@@ -36,10 +36,16 @@ fn history_pads_with_first_observation_and_keeps_order() {
     history.push(&[2.0, 2.5]);
     history.push(&[3.0, 3.5]);
     let all: Vec<Vec<f32>> = history.iter_oldest_first().map(<[f32]>::to_vec).collect();
-    assert_eq!(all, [[1.0, 1.5], [2.0, 2.5], [3.0, 3.5]].map(|r| r.to_vec()));
+    assert_eq!(
+        all,
+        [[1.0, 1.5], [2.0, 2.5], [3.0, 3.5]].map(|r| r.to_vec())
+    );
     history.push(&[4.0, 4.5]);
     let all: Vec<Vec<f32>> = history.iter_oldest_first().map(<[f32]>::to_vec).collect();
-    assert_eq!(all, [[2.0, 2.5], [3.0, 3.5], [4.0, 4.5]].map(|r| r.to_vec()));
+    assert_eq!(
+        all,
+        [[2.0, 2.5], [3.0, 3.5], [4.0, 4.5]].map(|r| r.to_vec())
+    );
     assert_eq!(history.newest(), Some(&[4.0, 4.5][..]));
     history.push(&[5.0, 5.5]);
     assert_eq!(history.newest(), Some(&[5.0, 5.5][..]));
@@ -206,7 +212,11 @@ fn policy_observes_normalized_history() {
     let mut expected = [[0.0; O]; M];
     model.obs_norm().normalize(&OBS[1], &mut expected[0]);
     model.obs_norm().normalize(&OBS[2], &mut expected[1]);
-    let got: Vec<Vec<f32>> = policy.history().iter_oldest_first().map(<[f32]>::to_vec).collect();
+    let got: Vec<Vec<f32>> = policy
+        .history()
+        .iter_oldest_first()
+        .map(<[f32]>::to_vec)
+        .collect();
     assert_eq!(got, expected.map(|row| row.to_vec()));
     assert_eq!(expected[0][2], 0.0, "constant observation dim maps to 0");
 }
@@ -338,8 +348,8 @@ fn velocities_are_decoded_velocities_in_robot_units() {
                 0.0
             };
             let expected_vel = (skip + c_out * vel[t][d] + rest * b_vel[t][d]) * half_range;
-            let expected_pos = (c_out * pos[t][d] + rest * b[t][d] + 1.0) * half_range
-                + model.action_range.0[d];
+            let expected_pos =
+                (c_out * pos[t][d] + rest * b[t][d] + 1.0) * half_range + model.action_range.0[d];
             assert!(
                 (chunk.velocities[t][d] - expected_vel).abs() <= 1e-5 * expected_vel.abs().max(1.0)
             );

@@ -31,14 +31,7 @@ pub fn scale(acc: i32, multiplier: i32, shift: i32) -> i32 {
 }
 
 /// `clamp(scale(acc) + zero_point, lo, hi)` with the sum taken exactly.
-pub fn requantize(
-    acc: i32,
-    multiplier: i32,
-    shift: i32,
-    zero_point: i32,
-    lo: i8,
-    hi: i8,
-) -> i8 {
+pub fn requantize(acc: i32, multiplier: i32, shift: i32, zero_point: i32, lo: i8, hi: i8) -> i8 {
     let sum = i128::from(scale(acc, multiplier, shift)) + i128::from(zero_point);
     sum.clamp(i128::from(lo), i128::from(hi)) as i8
 }

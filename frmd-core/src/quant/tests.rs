@@ -252,7 +252,10 @@ fn requantization_one_million_random_inputs_match_model() {
         };
         let got = requantize_to_i8(acc, multiplier, shift, zero_point, lo, hi);
         let want = reference::requantize(acc, multiplier, shift, zero_point, lo, hi);
-        assert_eq!(requantize_valid(acc, multiplier, shift, zero_point, lo, hi), want);
+        assert_eq!(
+            requantize_valid(acc, multiplier, shift, zero_point, lo, hi),
+            want
+        );
         assert_eq!(
             got, want,
             "acc={acc} m={multiplier} shift={shift} zp={zero_point} {lo}..={hi}"

@@ -73,12 +73,18 @@ fn wide_codes_round_on_the_fine_grid_and_saturate() {
         if want > -32768 && want < 32767 {
             // Inside the range the code represents the value to half a fine step (plus f32 rounding).
             let back = dequantize_i16(code, params);
-            assert!((back - value).abs() <= 0.51 * 0.02 / 256.0, "{value} -> {back}");
+            assert!(
+                (back - value).abs() <= 0.51 * 0.02 / 256.0,
+                "{value} -> {back}"
+            );
             // The two planes describe the same fine grid over the same range, within one fine
             // step (their fine code is rounded from an f32 residual).
             let (coarse, fine) = quantize_two_plane(value, params);
             let planes = i32::from(coarse) * 256 + i32::from(fine) + 128;
-            assert!((planes - i32::from(code)).abs() <= 1, "{value}: {planes} vs {code}");
+            assert!(
+                (planes - i32::from(code)).abs() <= 1,
+                "{value}: {planes} vs {code}"
+            );
         }
     }
 }

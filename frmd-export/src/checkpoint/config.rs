@@ -19,8 +19,15 @@ pub enum Activation {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum BackboneConfig {
-    Mlp { hidden: Vec<usize>, activation: Activation },
-    Transformer { layers: usize, heads: usize, width: usize },
+    Mlp {
+        hidden: Vec<usize>,
+        activation: Activation,
+    },
+    Transformer {
+        layers: usize,
+        heads: usize,
+        width: usize,
+    },
 }
 
 impl BackboneConfig {
@@ -33,14 +40,31 @@ impl BackboneConfig {
             ("mlp", mlp(vec![256, 256, 256], Activation::Mish)),
             ("mlp-silu", mlp(vec![256, 256, 256], Activation::Silu)),
             ("mlp-paper", mlp(vec![512, 512, 256, 256], Activation::Mish)),
-            ("transformer-lite", BackboneConfig::Transformer { layers: 3, heads: 2, width: 128 }),
-            ("transformer", BackboneConfig::Transformer { layers: 6, heads: 4, width: 256 }),
+            (
+                "transformer-lite",
+                BackboneConfig::Transformer {
+                    layers: 3,
+                    heads: 2,
+                    width: 128,
+                },
+            ),
+            (
+                "transformer",
+                BackboneConfig::Transformer {
+                    layers: 6,
+                    heads: 4,
+                    width: 256,
+                },
+            ),
         ]
     }
 
     /// The preset called `name`, if there is one.
     pub fn preset(name: &str) -> Option<Self> {
-        Self::presets().into_iter().find(|(preset, _)| *preset == name).map(|(_, config)| config)
+        Self::presets()
+            .into_iter()
+            .find(|(preset, _)| *preset == name)
+            .map(|(_, config)| config)
     }
 
     /// Parses a preset name ([`Self::presets`]), `mlp:W1,W2,..[:silu|:mish]` (Mish when not
@@ -59,7 +83,11 @@ impl BackboneConfig {
             let &[layers, heads, width] = numbers(rest)?.as_slice() else {
                 bail!("`transformer:` takes LAYERS,HEADS,WIDTH, got `{rest}`");
             };
-            return Ok(BackboneConfig::Transformer { layers, heads, width });
+            return Ok(BackboneConfig::Transformer {
+                layers,
+                heads,
+                width,
+            });
         }
         let Some(rest) = text.strip_prefix("mlp:") else {
             bail!("unknown backbone `{text}` (mlp, mlp-silu, mlp-paper, mlp:W1,W2[:silu|:mish], transformer-lite, transformer, transformer:L,H,W)");
@@ -70,7 +98,10 @@ impl BackboneConfig {
             Some((_, act)) => bail!("unknown activation `{act}` (silu or mish)"),
             None => (rest, Activation::Mish),
         };
-        Ok(BackboneConfig::Mlp { hidden: numbers(widths).context("MLP widths")?, activation })
+        Ok(BackboneConfig::Mlp {
+            hidden: numbers(widths).context("MLP widths")?,
+            activation,
+        })
     }
 }
 
@@ -86,14 +117,33 @@ impl std::str::FromStr for BackboneConfig {
 /// [`BackboneConfig::parse`] reads back).
 impl std::fmt::Display for BackboneConfig {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        if let Some((name, _)) = Self::presets().into_iter().find(|(_, preset)| preset == self) {
+        if let Some((name, _)) = Self::presets()
+            .into_iter()
+            .find(|(_, preset)| preset == self)
+        {
             return f.write_str(name);
         }
-        let list = |sizes: &[usize]| sizes.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(",");
+        let list = |sizes: &[usize]| {
+            sizes
+                .iter()
+                .map(|s| s.to_string())
+                .collect::<Vec<_>>()
+                .join(",")
+        };
         match self {
-            BackboneConfig::Mlp { hidden, activation: Activation::Silu } => write!(f, "mlp:{}:silu", list(hidden)),
-            BackboneConfig::Mlp { hidden, activation: Activation::Mish } => write!(f, "mlp:{}:mish", list(hidden)),
-            BackboneConfig::Transformer { layers, heads, width } => write!(f, "transformer:{}", list(&[*layers, *heads, *width])),
+            BackboneConfig::Mlp {
+                hidden,
+                activation: Activation::Silu,
+            } => write!(f, "mlp:{}:silu", list(hidden)),
+            BackboneConfig::Mlp {
+                hidden,
+                activation: Activation::Mish,
+            } => write!(f, "mlp:{}:mish", list(hidden)),
+            BackboneConfig::Transformer {
+                layers,
+                heads,
+                width,
+            } => write!(f, "transformer:{}", list(&[*layers, *heads, *width])),
         }
     }
 }
@@ -120,7 +170,9 @@ impl ProDmpOutput {
         match text {
             "direct" => Ok(ProDmpOutput::Direct),
             "boundary-skip" => Ok(ProDmpOutput::BoundarySkip),
-            other => bail!("unknown ProDMP output parametrization `{other}` (direct, boundary-skip)"),
+            other => {
+                bail!("unknown ProDMP output parametrization `{other}` (direct, boundary-skip)")
+            }
         }
     }
 }
@@ -196,8 +248,13 @@ impl ModelConfig {
 
     pub fn prodmp(&self) -> Option<ProDmpConfig> {
         match self.head {
-            HeadConfig::ProDmp { num_basis, auto_scale_basis, .. } => {
-                let mut cfg = ProDmpConfig::policy(self.action_dim, num_basis, self.horizon, self.control_dt);
+            HeadConfig::ProDmp {
+                num_basis,
+                auto_scale_basis,
+                ..
+            } => {
+                let mut cfg =
+                    ProDmpConfig::policy(self.action_dim, num_basis, self.horizon, self.control_dt);
                 cfg.auto_scale_basis = auto_scale_basis;
                 Some(cfg)
             }
@@ -223,14 +280,23 @@ impl ModelConfig {
     /// Every field in its range, named when it is not (the sizes bounded so that a hostile
     /// config cannot ask for unbounded memory).
     pub fn validate(&self) -> anyhow::Result<()> {
-        let sizes = [("obs_dim", self.obs_dim, 4096), ("history", self.history, 64), ("action_dim", self.action_dim, 256), ("horizon", self.horizon, 1024), ("embed_dim", self.embed_dim, 4096)];
+        let sizes = [
+            ("obs_dim", self.obs_dim, 4096),
+            ("history", self.history, 64),
+            ("action_dim", self.action_dim, 256),
+            ("horizon", self.horizon, 1024),
+            ("embed_dim", self.embed_dim, 4096),
+        ];
         for (field, value, max) in sizes {
             if !(1..=max).contains(&value) {
                 bail!("{field} is {value}, expected 1 to {max}");
             }
         }
         if !(self.control_dt.is_finite() && self.control_dt > 0.0) {
-            bail!("control_dt is {}, expected a finite number of seconds > 0", self.control_dt);
+            bail!(
+                "control_dt is {}, expected a finite number of seconds > 0",
+                self.control_dt
+            );
         }
         if !self.embed_dim.is_multiple_of(2) {
             bail!("embed_dim is {}, expected an even number", self.embed_dim);
@@ -238,20 +304,37 @@ impl ModelConfig {
         match &self.backbone {
             BackboneConfig::Mlp { hidden, .. } => {
                 if hidden.is_empty() || hidden.len() > 64 {
-                    bail!("backbone.hidden has {} layers, expected 1 to 64", hidden.len());
+                    bail!(
+                        "backbone.hidden has {} layers, expected 1 to 64",
+                        hidden.len()
+                    );
                 }
-                if let Some((i, w)) = hidden.iter().enumerate().find(|(_, w)| !(1..=65_536).contains(*w)) {
+                if let Some((i, w)) = hidden
+                    .iter()
+                    .enumerate()
+                    .find(|(_, w)| !(1..=65_536).contains(*w))
+                {
                     bail!("backbone.hidden[{i}] is {w}, expected 1 to 65536");
                 }
             }
-            BackboneConfig::Transformer { layers, heads, width } => {
-                for (field, value, max) in [("layers", *layers, 64), ("heads", *heads, 64), ("width", *width, 65_536)] {
+            BackboneConfig::Transformer {
+                layers,
+                heads,
+                width,
+            } => {
+                for (field, value, max) in [
+                    ("layers", *layers, 64),
+                    ("heads", *heads, 64),
+                    ("width", *width, 65_536),
+                ] {
                     if !(1..=max).contains(&value) {
                         bail!("backbone.{field} is {value}, expected 1 to {max}");
                     }
                 }
                 if width % heads != 0 {
-                    bail!("backbone.width is {width}, expected a multiple of backbone.heads {heads}");
+                    bail!(
+                        "backbone.width is {width}, expected a multiple of backbone.heads {heads}"
+                    );
                 }
             }
         }
@@ -284,17 +367,27 @@ impl Normalization {
     /// Sizes `obs_dim`/`action_dim`, finite bounds and `min <= max` in every dimension; the
     /// first violation is named (`normalization.obs.min[2]`).
     pub fn validate(&self, obs_dim: usize, action_dim: usize) -> anyhow::Result<()> {
-        for (name, n, dim) in [("obs", &self.obs, obs_dim), ("action", &self.action, action_dim)] {
+        for (name, n, dim) in [
+            ("obs", &self.obs, obs_dim),
+            ("action", &self.action, action_dim),
+        ] {
             for (bound, values) in [("min", &n.min), ("max", &n.max)] {
                 if values.len() != dim {
                     bail!("normalization.{name}.{bound} has {} values, expected {dim} (the model's {name} dimension)", values.len());
                 }
                 if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                    bail!("normalization.{name}.{bound}[{i}] is {}, expected a finite number", values[i]);
+                    bail!(
+                        "normalization.{name}.{bound}[{i}] is {}, expected a finite number",
+                        values[i]
+                    );
                 }
             }
             if let Some(i) = (0..dim).find(|&i| n.min[i] > n.max[i]) {
-                bail!("normalization.{name}.min[{i}] is {} above max[{i}] {}, expected min <= max", n.min[i], n.max[i]);
+                bail!(
+                    "normalization.{name}.min[{i}] is {} above max[{i}] {}, expected min <= max",
+                    n.min[i],
+                    n.max[i]
+                );
             }
         }
         Ok(())

@@ -37,7 +37,9 @@ pub fn module_source(model: &QuantizedTransformer, blob_len: usize) -> io::Resul
     let input_width = f
         .layout
         .width(c.history, c.obs_dim, c.action_dim, c.horizon)
-        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "input layout width overflows"))?;
+        .ok_or_else(|| {
+            io::Error::new(io::ErrorKind::InvalidInput, "input layout width overflows")
+        })?;
     let scratch = f.shape.int8_scratch();
     let memory = model.memory();
     let mut s = String::new();
@@ -104,7 +106,9 @@ pub fn module_source(model: &QuantizedTransformer, blob_len: usize) -> io::Resul
 pub fn write_module(model: &QuantizedTransformer, blob: &[u8], dir: &Path) -> io::Result<()> {
     let source = module_source(model, blob.len())?;
     std::fs::create_dir_all(dir)?;
-    crate::artifact::write_atomic(&dir.join(MODULE_FILE), source.as_bytes()).map_err(|e| io::Error::other(format!("{e:#}")))?;
-    crate::artifact::write_atomic(&dir.join(BLOB_FILE), blob).map_err(|e| io::Error::other(format!("{e:#}")))?;
+    crate::artifact::write_atomic(&dir.join(MODULE_FILE), source.as_bytes())
+        .map_err(|e| io::Error::other(format!("{e:#}")))?;
+    crate::artifact::write_atomic(&dir.join(BLOB_FILE), blob)
+        .map_err(|e| io::Error::other(format!("{e:#}")))?;
     Ok(())
 }

@@ -40,14 +40,30 @@ impl QuantizedTransformer {
         for b in &self.blocks {
             linears.extend([&b.qkv, &b.proj, &b.fc2]);
         }
-        let weights_bytes = linears.iter().copied().chain(self.blocks.iter().map(|b| &b.fc1)).map(linear_weight_bytes).sum();
+        let weights_bytes = linears
+            .iter()
+            .copied()
+            .chain(self.blocks.iter().map(|b| &b.fc1))
+            .map(linear_weight_bytes)
+            .sum();
         let block_tables: usize = self
             .blocks
             .iter()
-            .map(|b| norm_bytes(&b.norm1) + norm_bytes(&b.norm2) + 4 * (b.fc1_multipliers.len() + b.fc1_shifts.len()) + b.gelu.table.len())
+            .map(|b| {
+                norm_bytes(&b.norm1)
+                    + norm_bytes(&b.norm2)
+                    + 4 * (b.fc1_multipliers.len() + b.fc1_shifts.len())
+                    + b.gelu.table.len()
+            })
             .sum();
         let t = &f.prodmp;
-        let prodmp = 4 * (t.pos_params.len() + t.vel_params.len() + t.pos_y0.len() + t.pos_v0.len() + t.vel_y0.len() + t.vel_v0.len());
+        let prodmp = 4
+            * (t.pos_params.len()
+                + t.vel_params.len()
+                + t.pos_y0.len()
+                + t.pos_v0.len()
+                + t.vel_y0.len()
+                + t.vel_v0.len());
         let table_bytes = linears.iter().map(|l| linear_table_bytes(l)).sum::<usize>()
             + block_tables
             + norm_bytes(&f.final_norm)

@@ -10,7 +10,7 @@
 //! range, GELU is a 256-entry table from the `Fc1` to the `Gelu` parameters; the residual stream,
 //! LayerNorms, attention and noise tokens stay f32.
 
-use super::{FoldedTransformer, FloatNorm};
+use super::{FloatNorm, FoldedTransformer};
 use crate::calibrate::{int_bias, quantize_weights, CalibrationSet, RangeMethod, Recorder};
 use crate::fold::{sample_chunk, FloatLayer};
 use anyhow::{bail, Context};
@@ -61,10 +61,18 @@ fn probe_key(probe: TransformerProbe) -> (usize, usize) {
 }
 
 /// Runs the f32 sampler over `set` and derives the parameters of every probe.
-pub fn calibrate(model: &FoldedTransformer, set: &CalibrationSet, method: RangeMethod) -> anyhow::Result<TransformerRanges> {
+pub fn calibrate(
+    model: &FoldedTransformer,
+    set: &CalibrationSet,
+    method: RangeMethod,
+) -> anyhow::Result<TransformerRanges> {
     let c = &model.config;
     if set.cond_dim != c.cond_dim() {
-        bail!("calibration rows have {} values, the model's condition has {}", set.cond_dim, c.cond_dim());
+        bail!(
+            "calibration rows have {} values, the model's condition has {}",
+            set.cond_dim,
+            c.cond_dim()
+        );
     }
     if set.rows() == 0 {
         bail!("the calibration set is empty");
@@ -74,7 +82,9 @@ pub fn calibrate(model: &FoldedTransformer, set: &CalibrationSet, method: RangeM
         let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
         let noise = set.noise(row, model.steps.len(), c.traj_dim());
         model.sample(cond, &noise, |_, probe, values| {
-            let entry = recorders.entry(probe_key(probe)).or_insert_with(|| (probe, Recorder::default()));
+            let entry = recorders
+                .entry(probe_key(probe))
+                .or_insert_with(|| (probe, Recorder::default()));
             entry.1.values.extend_from_slice(values);
         })?;
     }
@@ -82,7 +92,10 @@ pub fn calibrate(model: &FoldedTransformer, set: &CalibrationSet, method: RangeM
         .into_values()
         .map(|(probe, mut recorder)| Ok((probe, recorder.params(method, &format!("{probe:?}"))?)))
         .collect::<anyhow::Result<Vec<_>>>()?;
-    Ok(TransformerRanges { params, rows: set.rows() })
+    Ok(TransformerRanges {
+        params,
+        rows: set.rows(),
+    })
 }
 
 /// An owned int8 linear layer with f32 input and output (frmd-core's `QuantizedLinear`).
@@ -106,7 +119,11 @@ impl QuantizedLinear {
     pub fn new(layer: &FloatLayer, input: QuantParams) -> anyhow::Result<Self> {
         let q = quantize_weights(layer)?;
         let bias = int_bias(&layer.bias, &q, input, layer.in_features)?;
-        let output_scales = q.scales.iter().map(|w| (f64::from(input.scale) * f64::from(*w)) as f32).collect();
+        let output_scales = q
+            .scales
+            .iter()
+            .map(|w| (f64::from(input.scale) * f64::from(*w)) as f32)
+            .collect();
         Ok(Self {
             input,
             in_features: layer.in_features,
@@ -119,11 +136,22 @@ impl QuantizedLinear {
     }
 
     pub fn fc(&self) -> FullyConnected<'_> {
-        FullyConnected::new(self.in_features, self.out_features, &self.weights, &self.bias)
+        FullyConnected::new(
+            self.in_features,
+            self.out_features,
+            &self.weights,
+            &self.bias,
+        )
     }
 
     pub fn view(&self) -> LinearView<'_> {
-        LinearView { input: self.input, linear: Int8Linear { fc: self.fc(), output_scales: &self.output_scales } }
+        LinearView {
+            input: self.input,
+            linear: Int8Linear {
+                fc: self.fc(),
+                output_scales: &self.output_scales,
+            },
+        }
     }
 }
 
@@ -155,7 +183,10 @@ pub struct QuantizedTransformer {
 }
 
 /// Quantizes `model` with the calibrated `ranges`.
-pub fn quantize(model: &FoldedTransformer, ranges: &TransformerRanges) -> anyhow::Result<QuantizedTransformer> {
+pub fn quantize(
+    model: &FoldedTransformer,
+    ranges: &TransformerRanges,
+) -> anyhow::Result<QuantizedTransformer> {
     use TransformerProbe as P;
     let blocks = model
         .blocks
@@ -163,20 +194,27 @@ pub fn quantize(model: &FoldedTransformer, ranges: &TransformerRanges) -> anyhow
         .enumerate()
         .map(|(layer, b)| {
             let context = || format!("block {layer}");
-            let fc1 = QuantizedLinear::new(&b.fc1, ranges.get(P::Norm2 { layer })?).with_context(context)?;
+            let fc1 = QuantizedLinear::new(&b.fc1, ranges.get(P::Norm2 { layer })?)
+                .with_context(context)?;
             let fc1_output = ranges.get(P::Fc1 { layer })?;
             let gelu_output = ranges.get(P::Gelu { layer })?;
             let (mut fc1_multipliers, mut fc1_shifts) = (Vec::new(), Vec::new());
             for (o, w) in fc1.weight_scales.iter().enumerate() {
                 let (m, s) = requantization_multiplier(fc1.input.scale, *w, fc1_output.scale)
-                    .map_err(|e| anyhow::anyhow!("block {layer} fc1 channel {o}: requantization multiplier: {e:?}"))?;
+                    .map_err(|e| {
+                        anyhow::anyhow!(
+                            "block {layer} fc1 channel {o}: requantization multiplier: {e:?}"
+                        )
+                    })?;
                 fc1_multipliers.push(m);
                 fc1_shifts.push(s);
             }
             Ok(QuantizedBlock {
                 norm1: b.norm1.clone(),
-                qkv: QuantizedLinear::new(&b.qkv, ranges.get(P::Norm1 { layer })?).with_context(context)?,
-                proj: QuantizedLinear::new(&b.proj, ranges.get(P::Attention { layer })?).with_context(context)?,
+                qkv: QuantizedLinear::new(&b.qkv, ranges.get(P::Norm1 { layer })?)
+                    .with_context(context)?,
+                proj: QuantizedLinear::new(&b.proj, ranges.get(P::Attention { layer })?)
+                    .with_context(context)?,
                 norm2: b.norm2.clone(),
                 fc1,
                 fc1_output,
@@ -190,12 +228,17 @@ pub fn quantize(model: &FoldedTransformer, ranges: &TransformerRanges) -> anyhow
         .collect::<anyhow::Result<Vec<_>>>()?;
     let quantized = QuantizedTransformer {
         folded: model.clone(),
-        traj_in: QuantizedLinear::new(&model.traj_in, ranges.get(P::Trajectory)?).context("traj_in")?,
-        cond_in: QuantizedLinear::new(&model.cond_in, ranges.get(P::Condition)?).context("cond_in")?,
+        traj_in: QuantizedLinear::new(&model.traj_in, ranges.get(P::Trajectory)?)
+            .context("traj_in")?,
+        cond_in: QuantizedLinear::new(&model.cond_in, ranges.get(P::Condition)?)
+            .context("cond_in")?,
         blocks,
         head: QuantizedLinear::new(&model.head, ranges.get(P::FinalNorm)?).context("head")?,
     };
-    quantized.view(&quantized.int8_blocks(), 0)?.validate().map_err(|e| anyhow::anyhow!("quantized transformer: {e}"))?;
+    quantized
+        .view(&quantized.int8_blocks(), 0)?
+        .validate()
+        .map_err(|e| anyhow::anyhow!("quantized transformer: {e}"))?;
     Ok(quantized)
 }
 
@@ -229,9 +272,16 @@ impl QuantizedTransformer {
     }
 
     /// frmd-core's int8 transformer with step `step`'s noise token.
-    pub fn view<'a>(&'a self, blocks: &'a [Int8Block<'a>], step: usize) -> anyhow::Result<Int8Transformer<'a>> {
+    pub fn view<'a>(
+        &'a self,
+        blocks: &'a [Int8Block<'a>],
+        step: usize,
+    ) -> anyhow::Result<Int8Transformer<'a>> {
         let f = &self.folded;
-        let noise_token = f.noise_tokens.get(step).with_context(|| format!("step index {step} out of range"))?;
+        let noise_token = f
+            .noise_tokens
+            .get(step)
+            .with_context(|| format!("step index {step} out of range"))?;
         Ok(Int8Transformer {
             shape: f.shape,
             traj_in: TokenLinear::Int8(self.traj_in.view()),
@@ -248,9 +298,15 @@ impl QuantizedTransformer {
     pub fn forward(&self, step: usize, input: &[f32]) -> anyhow::Result<Vec<f32>> {
         let blocks = self.int8_blocks();
         let model = self.view(&blocks, step)?;
-        let (condition, trajectory) = input
-            .split_at_checked(model.shape.cond_dim)
-            .with_context(|| format!("model input of {} values is shorter than the condition", input.len()))?;
+        let (condition, trajectory) =
+            input
+                .split_at_checked(model.shape.cond_dim)
+                .with_context(|| {
+                    format!(
+                        "model input of {} values is shorter than the condition",
+                        input.len()
+                    )
+                })?;
         let mut scratch = Box::new(super::HostScratch::new());
         let mut out = vec![0.0; model.shape.output];
         model
@@ -262,6 +318,14 @@ impl QuantizedTransformer {
     /// The int8 consistency sampler (same steps and decode as [`FoldedTransformer::sample`]).
     pub fn sample(&self, cond: &[f32], noise: &[f32]) -> anyhow::Result<Vec<f32>> {
         let f = &self.folded;
-        sample_chunk(&f.config, &f.layout, &f.steps, &f.prodmp, cond, noise, |i, input| self.forward(i, input))
+        sample_chunk(
+            &f.config,
+            &f.layout,
+            &f.steps,
+            &f.prodmp,
+            cond,
+            noise,
+            |i, input| self.forward(i, input),
+        )
     }
 }

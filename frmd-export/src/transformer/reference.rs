@@ -20,16 +20,40 @@ fn wide_accumulators(layer: &QuantizedLinear, input: &[i8]) -> Vec<i64> {
         .weights
         .chunks_exact(layer.in_features)
         .zip(&layer.bias)
-        .map(|(row, bias)| i64::from(*bias) + row.iter().zip(input).map(|(w, x)| i64::from(*w) * i64::from(*x)).sum::<i64>())
+        .map(|(row, bias)| {
+            i64::from(*bias)
+                + row
+                    .iter()
+                    .zip(input)
+                    .map(|(w, x)| i64::from(*w) * i64::from(*x))
+                    .sum::<i64>()
+        })
         .collect()
 }
 
-fn input_rows(in_features: usize, zero_point: i32, random_rows: usize, rng: &mut Rng) -> Vec<Vec<i8>> {
+fn input_rows(
+    in_features: usize,
+    zero_point: i32,
+    random_rows: usize,
+    rng: &mut Rng,
+) -> Vec<Vec<i8>> {
     let zero = zero_point.clamp(-128, 127) as i8;
-    let mut rows = vec![vec![i8::MIN; in_features], vec![i8::MAX; in_features], vec![zero; in_features]];
-    rows.push((0..in_features).map(|i| if i % 2 == 0 { i8::MIN } else { i8::MAX }).collect());
+    let mut rows = vec![
+        vec![i8::MIN; in_features],
+        vec![i8::MAX; in_features],
+        vec![zero; in_features],
+    ];
+    rows.push(
+        (0..in_features)
+            .map(|i| if i % 2 == 0 { i8::MIN } else { i8::MAX })
+            .collect(),
+    );
     for _ in 0..random_rows {
-        rows.push((0..in_features).map(|_| rng.next_u32().to_le_bytes()[0] as i8).collect());
+        rows.push(
+            (0..in_features)
+                .map(|_| rng.next_u32().to_le_bytes()[0] as i8)
+                .collect(),
+        );
     }
     rows
 }
@@ -45,22 +69,53 @@ fn record(check: &mut KernelCheck, equal: bool, describe: impl FnOnce() -> Strin
 }
 
 /// Runs the check with `random_rows` random input rows per layer (plus 4 edge rows).
-pub fn check_layers(model: &QuantizedTransformer, random_rows: usize, seed: u64) -> anyhow::Result<KernelCheck> {
-    let mut check = KernelCheck { name: "int8 transformer linear layers vs i64/i128 model".into(), cases: 0, mismatches: 0, first_mismatch: None };
+pub fn check_layers(
+    model: &QuantizedTransformer,
+    random_rows: usize,
+    seed: u64,
+) -> anyhow::Result<KernelCheck> {
+    let mut check = KernelCheck {
+        name: "int8 transformer linear layers vs i64/i128 model".into(),
+        cases: 0,
+        mismatches: 0,
+        first_mismatch: None,
+    };
     let mut rng = Rng::new(seed);
-    let mut layers: Vec<(String, &QuantizedLinear)> = vec![("traj_in".into(), &model.traj_in), ("cond_in".into(), &model.cond_in)];
+    let mut layers: Vec<(String, &QuantizedLinear)> = vec![
+        ("traj_in".into(), &model.traj_in),
+        ("cond_in".into(), &model.cond_in),
+    ];
     for (i, b) in model.blocks.iter().enumerate() {
-        layers.extend([(format!("block {i} qkv"), &b.qkv), (format!("block {i} proj"), &b.proj), (format!("block {i} fc1"), &b.fc1), (format!("block {i} fc2"), &b.fc2)]);
+        layers.extend([
+            (format!("block {i} qkv"), &b.qkv),
+            (format!("block {i} proj"), &b.proj),
+            (format!("block {i} fc1"), &b.fc1),
+            (format!("block {i} fc2"), &b.fc2),
+        ]);
     }
     layers.push(("head".into(), &model.head));
     for (name, layer) in &layers {
         let fc = layer.fc();
         let mut acc = vec![0i32; layer.out_features];
-        for (r, input) in input_rows(layer.in_features, layer.input.zero_point, random_rows, &mut rng).iter().enumerate() {
-            fc.forward_accumulators(input, &mut acc).map_err(|e| anyhow::anyhow!("{name}: {e:?}"))?;
+        for (r, input) in input_rows(
+            layer.in_features,
+            layer.input.zero_point,
+            random_rows,
+            &mut rng,
+        )
+        .iter()
+        .enumerate()
+        {
+            fc.forward_accumulators(input, &mut acc)
+                .map_err(|e| anyhow::anyhow!("{name}: {e:?}"))?;
             let want = wide_accumulators(layer, input);
             let got: Vec<i64> = acc.iter().map(|&a| i64::from(a)).collect();
-            record(&mut check, got == want, || format!("{name} row {r}: first differing accumulator {:?}", got.iter().zip(&want).position(|(a, b)| a != b)));
+            record(&mut check, got == want, || {
+                format!(
+                    "{name} row {r}: first differing accumulator {:?}",
+                    got.iter().zip(&want).position(|(a, b)| a != b)
+                )
+            });
         }
     }
     // fc1: requantized int8 outputs and the GELU table.
@@ -73,20 +128,43 @@ pub fn check_layers(model: &QuantizedTransformer, random_rows: usize, seed: u64)
             activation_max: i8::MAX,
         };
         let mut out = vec![0i8; b.fc1.out_features];
-        for (r, input) in input_rows(b.fc1.in_features, b.fc1.input.zero_point, random_rows, &mut rng).iter().enumerate() {
-            b.fc1.fc().forward(&requant, input, &mut out).map_err(|e| anyhow::anyhow!("block {i} fc1: {e:?}"))?;
+        for (r, input) in input_rows(
+            b.fc1.in_features,
+            b.fc1.input.zero_point,
+            random_rows,
+            &mut rng,
+        )
+        .iter()
+        .enumerate()
+        {
+            b.fc1
+                .fc()
+                .forward(&requant, input, &mut out)
+                .map_err(|e| anyhow::anyhow!("block {i} fc1: {e:?}"))?;
             let mut gelu = out.clone();
             b.gelu.apply_in_place(&mut gelu);
             let want: Vec<(i8, i8)> = wide_accumulators(&b.fc1, input)
                 .iter()
                 .enumerate()
                 .map(|(o, &acc)| {
-                    let q = reference::requantize(acc as i32, b.fc1_multipliers[o], b.fc1_shifts[o], b.fc1_output.zero_point, i8::MIN, i8::MAX);
+                    let q = reference::requantize(
+                        acc as i32,
+                        b.fc1_multipliers[o],
+                        b.fc1_shifts[o],
+                        b.fc1_output.zero_point,
+                        i8::MIN,
+                        i8::MAX,
+                    );
                     (q, b.gelu.table[(i32::from(q) + 128) as usize])
                 })
                 .collect();
             let got: Vec<(i8, i8)> = out.iter().copied().zip(gelu).collect();
-            record(&mut check, got == want, || format!("block {i} fc1 requantize/GELU row {r}: first differing channel {:?}", got.iter().zip(&want).position(|(a, b)| a != b)));
+            record(&mut check, got == want, || {
+                format!(
+                    "block {i} fc1 requantize/GELU row {r}: first differing channel {:?}",
+                    got.iter().zip(&want).position(|(a, b)| a != b)
+                )
+            });
         }
     }
     Ok(check)

@@ -4,8 +4,8 @@
 use super::*;
 use crate::calibrate::{CalibrationSet, RangeMethod};
 use crate::checkpoint::{
-    expected_tensors, CheckpointMeta, HeadConfig, ProDmpOutput, Normalization, Normalizer, CONFIG_FILE,
-    WEIGHTS_FILE,
+    expected_tensors, CheckpointMeta, HeadConfig, Normalization, Normalizer, ProDmpOutput,
+    CONFIG_FILE, WEIGHTS_FILE,
 };
 use frmd_core::policy::{F32TransformerNetwork, Int8TransformerNetwork, Network};
 use frmd_core::rng::Rng;
@@ -20,7 +20,11 @@ fn lite_config() -> ModelConfig {
         control_dt: 0.05,
         embed_dim: 16,
         backbone: BackboneConfig::parse("transformer-lite").unwrap(),
-        head: HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false },
+        head: HeadConfig::ProDmp {
+            num_basis: 4,
+            output: ProDmpOutput::Direct,
+            auto_scale_basis: false,
+        },
     }
 }
 
@@ -33,10 +37,20 @@ fn write_checkpoint(name: &str, config: &ModelConfig, seed: u64) -> PathBuf {
     std::fs::create_dir_all(&dir).unwrap();
     let mut meta = CheckpointMeta::describe(Role::Student, config, SigmaConfig::default());
     meta.normalization = Some(Normalization {
-        obs: Normalizer { min: vec![-1.0; config.obs_dim], max: vec![1.0; config.obs_dim] },
-        action: Normalizer { min: vec![-1.0; config.action_dim], max: vec![1.0; config.action_dim] },
+        obs: Normalizer {
+            min: vec![-1.0; config.obs_dim],
+            max: vec![1.0; config.obs_dim],
+        },
+        action: Normalizer {
+            min: vec![-1.0; config.action_dim],
+            max: vec![1.0; config.action_dim],
+        },
     });
-    std::fs::write(dir.join(CONFIG_FILE), serde_json::to_string_pretty(&meta).unwrap()).unwrap();
+    std::fs::write(
+        dir.join(CONFIG_FILE),
+        serde_json::to_string_pretty(&meta).unwrap(),
+    )
+    .unwrap();
     let mut rng = Rng::new(seed);
     let data: Vec<(String, Vec<usize>, Vec<u8>)> = expected_tensors(config)
         .into_iter()
@@ -60,23 +74,41 @@ fn write_checkpoint(name: &str, config: &ModelConfig, seed: u64) -> PathBuf {
                     }
                 })
                 .collect();
-            (spec.name, spec.shape, values.iter().flat_map(|v| v.to_le_bytes()).collect())
+            (
+                spec.name,
+                spec.shape,
+                values.iter().flat_map(|v| v.to_le_bytes()).collect(),
+            )
         })
         .collect();
     let views: Vec<(String, safetensors::tensor::TensorView<'_>)> = data
         .iter()
         .map(|(name, shape, bytes)| {
-            (name.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), bytes).unwrap())
+            (
+                name.clone(),
+                safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), bytes)
+                    .unwrap(),
+            )
         })
         .collect();
-    std::fs::write(dir.join(WEIGHTS_FILE), safetensors::serialize(views, None).unwrap()).unwrap();
+    std::fs::write(
+        dir.join(WEIGHTS_FILE),
+        safetensors::serialize(views, None).unwrap(),
+    )
+    .unwrap();
     dir
 }
 
 fn calibration_set(config: &ModelConfig, rows: usize, seed: u64) -> CalibrationSet {
     let mut rng = Rng::new(seed);
-    let cond = (0..rows * config.cond_dim()).map(|_| (0.5 * rng.gaussian()).clamp(-1.0, 1.0)).collect();
-    CalibrationSet { cond_dim: config.cond_dim(), cond, seed }
+    let cond = (0..rows * config.cond_dim())
+        .map(|_| (0.5 * rng.gaussian()).clamp(-1.0, 1.0))
+        .collect();
+    CalibrationSet {
+        cond_dim: config.cond_dim(),
+        cond,
+        seed,
+    }
 }
 
 /// Max and mean absolute int8-vs-f32 chunk error (normalized action units) over the rows of
@@ -118,8 +150,14 @@ fn transformer_lite_checkpoint_exports_and_int8_chunk_tracks_f32() {
         let (max, mean, spread) = chunk_error(&quantized, &held_out);
         println!("transformer-lite, {steps} step(s): int8 vs f32 chunk max {max:.5}, mean {mean:.5}, f32 spread {spread:.3} (normalized units)");
         assert!(spread > 0.1, "f32 chunks are degenerate (spread {spread})");
-        assert!(max <= 0.025 * spread, "max error {max} exceeds 2.5% of the f32 spread {spread}");
-        assert!(mean <= 0.0075 * spread, "mean error {mean} exceeds 0.75% of the f32 spread {spread}");
+        assert!(
+            max <= 0.025 * spread,
+            "max error {max} exceeds 2.5% of the f32 spread {spread}"
+        );
+        assert!(
+            mean <= 0.0075 * spread,
+            "mean error {mean} exceeds 0.75% of the f32 spread {spread}"
+        );
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -130,28 +168,51 @@ fn adapters_run_the_exported_model_behind_the_network_trait() {
     let dir = write_checkpoint("adapter", &config, 12);
     let ckpt = Checkpoint::read(&dir).unwrap();
     let folded = FoldedTransformer::new(&ckpt, 2).unwrap();
-    let ranges = calibrate(&folded, &calibration_set(&config, 8, 3), RangeMethod::MinMax).unwrap();
+    let ranges = calibrate(
+        &folded,
+        &calibration_set(&config, 8, 3),
+        RangeMethod::MinMax,
+    )
+    .unwrap();
     let quantized = quantize(&folded, &ranges).unwrap();
     let tokens = folded.flat_noise_tokens();
     let f32_blocks = folded.f32_blocks();
     let int8_blocks = quantized.int8_blocks();
     let mut f32_scratch = Box::new(HostScratch::new());
     let mut int8_scratch = Box::new(HostScratch::new());
-    let mut f32_net =
-        F32TransformerNetwork::new(folded.view(&f32_blocks, 0).unwrap(), &folded.layout, &tokens, &mut *f32_scratch).unwrap();
-    let mut int8_net =
-        Int8TransformerNetwork::new(quantized.view(&int8_blocks, 0).unwrap(), &folded.layout, &tokens, &mut *int8_scratch)
-            .unwrap();
+    let mut f32_net = F32TransformerNetwork::new(
+        folded.view(&f32_blocks, 0).unwrap(),
+        &folded.layout,
+        &tokens,
+        &mut *f32_scratch,
+    )
+    .unwrap();
+    let mut int8_net = Int8TransformerNetwork::new(
+        quantized.view(&int8_blocks, 0).unwrap(),
+        &folded.layout,
+        &tokens,
+        &mut *int8_scratch,
+    )
+    .unwrap();
     assert_eq!(f32_net.num_noise_variants(), 2);
-    assert_eq!(int8_net.input_width(), config.cond_dim() + config.traj_dim());
+    assert_eq!(
+        int8_net.input_width(),
+        config.cond_dim() + config.traj_dim()
+    );
     let mut rng = Rng::new(4);
-    let cond: Vec<f32> = (0..config.cond_dim()).map(|_| 0.3 * rng.gaussian()).collect();
+    let cond: Vec<f32> = (0..config.cond_dim())
+        .map(|_| 0.3 * rng.gaussian())
+        .collect();
     let x: Vec<f32> = (0..config.traj_dim()).map(|_| rng.gaussian()).collect();
     for (i, step) in folded.steps.iter().enumerate() {
         let input = crate::fold::model_input(&config, &folded.layout, step, &cond, &x).unwrap();
         let mut out = vec![0.0; config.output_dim()];
         f32_net.forward(i, &input, &mut out).unwrap();
-        assert_eq!(out, folded.forward_observed(i, &input, |_, _| {}).unwrap(), "f32 step {i}");
+        assert_eq!(
+            out,
+            folded.forward_observed(i, &input, |_, _| {}).unwrap(),
+            "f32 step {i}"
+        );
         int8_net.forward(i, &input, &mut out).unwrap();
         assert_eq!(out, quantized.forward(i, &input).unwrap(), "int8 step {i}");
     }
@@ -164,7 +225,10 @@ fn refuses_non_transformer_and_non_student_checkpoints() {
     config.backbone = BackboneConfig::parse("mlp:16").unwrap();
     let dir = write_checkpoint("mlp", &config, 1);
     let error = FoldedTransformer::new(&Checkpoint::read(&dir).unwrap(), 1).unwrap_err();
-    assert!(error.to_string().contains("not a transformer checkpoint"), "{error}");
+    assert!(
+        error.to_string().contains("not a transformer checkpoint"),
+        "{error}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 
     let config = lite_config();
@@ -172,7 +236,10 @@ fn refuses_non_transformer_and_non_student_checkpoints() {
     let mut ckpt = Checkpoint::read(&dir).unwrap();
     ckpt.meta.role = Role::Teacher;
     let error = FoldedTransformer::new(&ckpt, 1).unwrap_err();
-    assert!(error.to_string().contains("only student checkpoints"), "{error}");
+    assert!(
+        error.to_string().contains("only student checkpoints"),
+        "{error}"
+    );
     let ckpt = Checkpoint::read(&dir).unwrap();
     let error = FoldedTransformer::new(&ckpt, 5).unwrap_err();
     assert!(error.to_string().contains("1..=4"), "{error}");
@@ -182,7 +249,8 @@ fn refuses_non_transformer_and_non_student_checkpoints() {
 /// `bytes` copied into a 4-aligned buffer (plus `shift` leading bytes to misalign on purpose).
 fn aligned(bytes: &[u8], shift: usize) -> Vec<u32> {
     let mut words = vec![0u32; (bytes.len() + shift).div_ceil(4)];
-    bytemuck::cast_slice_mut::<u32, u8>(&mut words)[shift..shift + bytes.len()].copy_from_slice(bytes);
+    bytemuck::cast_slice_mut::<u32, u8>(&mut words)[shift..shift + bytes.len()]
+        .copy_from_slice(bytes);
     words
 }
 
@@ -193,8 +261,17 @@ fn exported_lite(name: &str, steps: usize) -> (QuantizedTransformer, Normalizati
     let dir = write_checkpoint(name, &config, 21);
     let ckpt = Checkpoint::read(&dir).unwrap();
     let folded = FoldedTransformer::new(&ckpt, steps).unwrap();
-    let ranges = calibrate(&folded, &calibration_set(&config, 16, 7), RangeMethod::MinMax).unwrap();
-    (quantize(&folded, &ranges).unwrap(), ckpt.meta.normalization.clone().unwrap(), dir)
+    let ranges = calibrate(
+        &folded,
+        &calibration_set(&config, 16, 7),
+        RangeMethod::MinMax,
+    )
+    .unwrap();
+    (
+        quantize(&folded, &ranges).unwrap(),
+        ckpt.meta.normalization.clone().unwrap(),
+        dir,
+    )
 }
 
 #[test]
@@ -211,10 +288,13 @@ fn blob_round_trip_is_bit_exact_and_drives_the_core_policy() {
     // Same int8 outputs as the exporter's in-memory model, per step, bit for bit.
     let config = lite_config();
     let mut rng = Rng::new(8);
-    let cond: Vec<f32> = (0..config.cond_dim()).map(|_| 0.3 * rng.gaussian()).collect();
+    let cond: Vec<f32> = (0..config.cond_dim())
+        .map(|_| 0.3 * rng.gaussian())
+        .collect();
     let x: Vec<f32> = (0..config.traj_dim()).map(|_| rng.gaussian()).collect();
     for (i, step) in quantized.folded.steps.iter().enumerate() {
-        let input = crate::fold::model_input(&config, &quantized.folded.layout, step, &cond, &x).unwrap();
+        let input =
+            crate::fold::model_input(&config, &quantized.folded.layout, step, &cond, &x).unwrap();
         let mut out = vec![0.0; config.output_dim()];
         network.forward(i, &input, &mut out).unwrap();
         assert_eq!(out, quantized.forward(i, &input).unwrap(), "step {i}");
@@ -232,8 +312,8 @@ fn blob_round_trip_is_bit_exact_and_drives_the_core_policy() {
 
 #[test]
 fn blob_loader_rejects_damage_by_name() {
-    use frmd_core::blob::SectionId;
     use frmd_core::blob::transformer::TensorField;
+    use frmd_core::blob::SectionId;
     use frmd_core::blob::{BlobError, Dimension};
     use frmd_core::model::transformer::{Part, TransformerError};
     let (quantized, norm, dir) = exported_lite("damage", 1);
@@ -243,29 +323,72 @@ fn blob_loader_rejects_damage_by_name() {
         Lite::load(&bytemuck::cast_slice(&words)[shift..shift + b.len()]).err()
     };
     assert_eq!(load(&bytes, 0).map(|e| e.to_string()), None);
-    assert_eq!(load(&bytes[..bytes.len() - 1], 0), Some(BlobError::Truncated));
+    assert_eq!(
+        load(&bytes[..bytes.len() - 1], 0),
+        Some(BlobError::Truncated)
+    );
     assert_eq!(load(&bytes[..10], 0), Some(BlobError::Truncated));
     let mut bad_magic = bytes.clone();
     bad_magic[3] = b'D';
     assert_eq!(load(&bad_magic, 0), Some(BlobError::BadMagic));
     let mut flipped = bytes.clone();
     *flipped.last_mut().unwrap() ^= 0x40;
-    assert!(matches!(load(&flipped, 0), Some(BlobError::CrcMismatch { .. })));
-    assert!(matches!(load(&bytes, 1), Some(BlobError::SectionMisaligned(_))));
+    assert!(matches!(
+        load(&flipped, 0),
+        Some(BlobError::CrcMismatch { .. })
+    ));
+    assert!(matches!(
+        load(&bytes, 1),
+        Some(BlobError::SectionMisaligned(_))
+    ));
     let words = aligned(&bytes, 0);
-    let expected = frmd_core::policy::PolicyDims { history: 2, obs_dim: 5, action_dim: 4, horizon: 8, params_per_dof: 5 };
-    let wrong_dims = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()]).and_then(|loaded| loaded.check_dims(&expected));
-    assert_eq!(wrong_dims.err(), Some(BlobError::DimensionMismatch(Dimension::ActionDim)));
+    let expected = frmd_core::policy::PolicyDims {
+        history: 2,
+        obs_dim: 5,
+        action_dim: 4,
+        horizon: 8,
+        params_per_dof: 5,
+    };
+    let wrong_dims = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()])
+        .and_then(|loaded| loaded.check_dims(&expected));
+    assert_eq!(
+        wrong_dims.err(),
+        Some(BlobError::DimensionMismatch(Dimension::ActionDim))
+    );
     // Mismatched shapes: a head with one weight row missing, NaN in a norm.
     let mut short_head = quantized.clone();
     let row = short_head.head.in_features;
-    short_head.head.weights.truncate(short_head.head.weights.len() - row);
-    let err = load(&crate::blob::write_transformer(&short_head, &norm).unwrap(), 0);
-    assert!(matches!(err, Some(BlobError::Transformer(TransformerError::Weights { part: Part::Head, .. }))), "{err:?}");
+    short_head
+        .head
+        .weights
+        .truncate(short_head.head.weights.len() - row);
+    let err = load(
+        &crate::blob::write_transformer(&short_head, &norm).unwrap(),
+        0,
+    );
+    assert!(
+        matches!(
+            err,
+            Some(BlobError::Transformer(TransformerError::Weights {
+                part: Part::Head,
+                ..
+            }))
+        ),
+        "{err:?}"
+    );
     let mut nan_norm = quantized.clone();
     nan_norm.blocks[0].norm2.gamma[3] = f32::NAN;
-    let err = load(&crate::blob::write_transformer(&nan_norm, &norm).unwrap(), 0);
-    assert_eq!(err, Some(BlobError::NonFinite(SectionId::Transformer { part: Part::Norm2 { layer: 0 }, field: TensorField::Gamma })));
+    let err = load(
+        &crate::blob::write_transformer(&nan_norm, &norm).unwrap(),
+        0,
+    );
+    assert_eq!(
+        err,
+        Some(BlobError::NonFinite(SectionId::Transformer {
+            part: Part::Norm2 { layer: 0 },
+            field: TensorField::Gamma
+        }))
+    );
     // An MLP loader refuses a transformer blob by magic.
     let mlp = frmd_core::blob::LoadedMlp::load(&bytemuck::cast_slice(&words)[..bytes.len()]);
     assert_eq!(mlp.err(), Some(BlobError::BadMagic));
@@ -283,12 +406,22 @@ fn core_policy_int8_blob_chunk_tracks_f32_policy_chunk() {
     let words = aligned(&bytes, 0);
     let loaded = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()]).unwrap();
     let mut int8_scratch = Box::new(HostScratch::new());
-    let mut int8 = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), loaded.network(&mut *int8_scratch).unwrap()).unwrap();
+    let mut int8 = Policy::<_, 2, 5, 3, 8, 5, 64>::new(
+        loaded.config(),
+        loaded.network(&mut *int8_scratch).unwrap(),
+    )
+    .unwrap();
     let folded = &quantized.folded;
     let tokens = folded.flat_noise_tokens();
     let f32_blocks = folded.f32_blocks();
     let mut f32_scratch = Box::new(HostScratch::new());
-    let f32_net = F32TransformerNetwork::new(folded.view(&f32_blocks, 0).unwrap(), &folded.layout, &tokens, &mut *f32_scratch).unwrap();
+    let f32_net = F32TransformerNetwork::new(
+        folded.view(&f32_blocks, 0).unwrap(),
+        &folded.layout,
+        &tokens,
+        &mut *f32_scratch,
+    )
+    .unwrap();
     let mut float = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), f32_net).unwrap();
     let mut rng = Rng::new(17);
     let (mut max, mut sum, mut count, mut lo, mut hi) = (0f32, 0f64, 0usize, f32::MAX, f32::MIN);
@@ -316,8 +449,14 @@ fn core_policy_int8_blob_chunk_tracks_f32_policy_chunk() {
     let (mean, spread) = ((sum / count as f64) as f32, hi - lo);
     println!("core Policy, blob int8 vs f32 transformer-lite chunk (robot units): max {max:.5}, mean {mean:.5}, f32 spread {spread:.3}");
     assert!(spread > 0.1, "f32 chunks are degenerate (spread {spread})");
-    assert!(max <= 0.025 * spread, "max error {max} exceeds 2.5% of the f32 spread {spread}");
-    assert!(mean <= 0.0075 * spread, "mean error {mean} exceeds 0.75% of the f32 spread {spread}");
+    assert!(
+        max <= 0.025 * spread,
+        "max error {max} exceeds 2.5% of the f32 spread {spread}"
+    );
+    assert!(
+        mean <= 0.0075 * spread,
+        "mean error {mean} exceeds 0.75% of the f32 spread {spread}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

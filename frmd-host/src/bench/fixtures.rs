@@ -23,27 +23,62 @@ const ACTION_DIM: usize = 2;
 
 /// A model of `backbone` for `obs_dim` observations with the recipe's sizes; `role` picks the
 /// head (ProDMP for teacher and student, raw for DP).
-fn task_sized_model(obs_dim: usize, control_dt: f64, backbone: &BackboneConfig, role: Role) -> ModelConfig {
+fn task_sized_model(
+    obs_dim: usize,
+    control_dt: f64,
+    backbone: &BackboneConfig,
+    role: Role,
+) -> ModelConfig {
     let recipe = TrainConfig::default();
     let head = match role {
         Role::Dp => HeadConfig::Raw,
-        Role::Teacher | Role::Student => HeadConfig::ProDmp { num_basis: recipe.num_basis, output: ProDmpOutput::Direct, auto_scale_basis: false },
+        Role::Teacher | Role::Student => HeadConfig::ProDmp {
+            num_basis: recipe.num_basis,
+            output: ProDmpOutput::Direct,
+            auto_scale_basis: false,
+        },
     };
-    ModelConfig { obs_dim, history: recipe.history, action_dim: ACTION_DIM, horizon: recipe.horizon, control_dt, embed_dim: recipe.embed_dim, backbone: backbone.clone(), head }
+    ModelConfig {
+        obs_dim,
+        history: recipe.history,
+        action_dim: ACTION_DIM,
+        horizon: recipe.horizon,
+        control_dt,
+        embed_dim: recipe.embed_dim,
+        backbone: backbone.clone(),
+        head,
+    }
 }
 
 /// Normalization mapping [-1, 1] to itself.
 fn unit_normalization(obs_dim: usize) -> Normalization {
-    let unit = |dim: usize| Normalizer { min: vec![-1.0; dim], max: vec![1.0; dim] };
-    Normalization { obs: unit(obs_dim), action: unit(ACTION_DIM) }
+    let unit = |dim: usize| Normalizer {
+        min: vec![-1.0; dim],
+        max: vec![1.0; dim],
+    };
+    Normalization {
+        obs: unit(obs_dim),
+        action: unit(ACTION_DIM),
+    }
 }
 
 /// A float policy of `role` on a randomly initialized network of `backbone` with `obs_dim`
 /// observations (for latency only).
-pub fn synthetic_float_policy(backbone: &BackboneConfig, obs_dim: usize, role: Role, steps: Option<usize>, solver: Option<Solver>) -> anyhow::Result<FloatPolicy> {
+pub fn synthetic_float_policy(
+    backbone: &BackboneConfig,
+    obs_dim: usize,
+    role: Role,
+    steps: Option<usize>,
+    solver: Option<Solver>,
+) -> anyhow::Result<FloatPolicy> {
     let cfg = task_sized_model(obs_dim, 0.1, backbone, role);
     let net = OwnedNetwork::new_seeded(&cfg, 7, &Device::Cpu)?;
-    FloatPolicy::new(net, unit_normalization(obs_dim), SigmaConfig::default(), Sampler::for_role(role, steps, solver)?)
+    FloatPolicy::new(
+        net,
+        unit_normalization(obs_dim),
+        SigmaConfig::default(),
+        Sampler::for_role(role, steps, solver)?,
+    )
 }
 
 /// The three policies of one model.
@@ -63,7 +98,11 @@ pub struct CorePolicies {
 
 /// Builds a random student of `backbone` at the reach shape (O 6), writes it under `dir`,
 /// exports it and loads all three policies.
-pub fn reach_student(dir: &Path, backbone: &BackboneConfig, seed: u64) -> anyhow::Result<BenchPolicies> {
+pub fn reach_student(
+    dir: &Path,
+    backbone: &BackboneConfig,
+    seed: u64,
+) -> anyhow::Result<BenchPolicies> {
     let model = task_sized_model(6, 0.05, backbone, Role::Student);
     let net = OwnedNetwork::new_seeded(&model, seed, &Device::Cpu)?;
     let sigma = SigmaConfig::default();
@@ -73,11 +112,21 @@ pub fn reach_student(dir: &Path, backbone: &BackboneConfig, seed: u64) -> anyhow
     checkpoint::save(dir, &meta, &net)?;
     let mut rng = Rng::new(seed);
     let cond_dim = model.cond_dim();
-    let cond: Vec<f32> = (0..64 * cond_dim).map(|_| (0.5 * rng.gaussian()).clamp(-1.0, 1.0)).collect();
-    frmd_export::calibration_file::write(&dir.join(CALIBRATION_FILE), &CalibrationSet { cond_dim, cond, seed })?;
+    let cond: Vec<f32> = (0..64 * cond_dim)
+        .map(|_| (0.5 * rng.gaussian()).clamp(-1.0, 1.0))
+        .collect();
+    frmd_export::calibration_file::write(
+        &dir.join(CALIBRATION_FILE),
+        &CalibrationSet {
+            cond_dim,
+            cond,
+            seed,
+        },
+    )?;
     let core = match export_checkpoint(dir, ExportOptions::default(), None) {
         Ok(exported) => {
-            let blob = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
+            let blob = frmd_export::blob::write(&exported.policy)
+                .map_err(|e| anyhow::anyhow!("blob: {e}"))?;
             Ok(CorePolicies {
                 core_f32: Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?,
                 int8: Int8Policy::from_blob(&blob, "int8")?,
@@ -86,10 +135,17 @@ pub fn reach_student(dir: &Path, backbone: &BackboneConfig, seed: u64) -> anyhow
         }
         Err(e) => Err(format!("{e:#}")),
     };
-    Ok(BenchPolicies { float: FloatPolicy::new(net, norm, sigma, Sampler::Student { steps: 1 })?, core })
+    Ok(BenchPolicies {
+        float: FloatPolicy::new(net, norm, sigma, Sampler::Student { steps: 1 })?,
+        core,
+    })
 }
 
 /// A fixed raw input at the reach shape.
 pub fn reach_input() -> (Vec<Vec<f32>>, Vec<f32>, Vec<f32>) {
-    (vec![vec![0.1, -0.2, 0.3, 0.0, 0.5, -0.4]; 2], vec![0.2, -0.1], vec![0.5, 0.3])
+    (
+        vec![vec![0.1, -0.2, 0.3, 0.0, 0.5, -0.4]; 2],
+        vec![0.2, -0.1],
+        vec![0.5, 0.3],
+    )
 }

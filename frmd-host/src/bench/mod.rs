@@ -48,7 +48,14 @@ impl Default for BenchConfig {
     /// The quick start's checkpoints and backbone, 200 timed calls after 20 warm-up calls.
     fn default() -> Self {
         let quickstart = QuickstartConfig::default();
-        BenchConfig { policies: Vec::new(), dir: quickstart.out, synthetic: false, backbone: quickstart.backbone, calls: 200, warmup: 20 }
+        BenchConfig {
+            policies: Vec::new(),
+            dir: quickstart.out,
+            synthetic: false,
+            backbone: quickstart.backbone,
+            calls: 200,
+            warmup: 20,
+        }
     }
 }
 
@@ -67,7 +74,13 @@ impl std::str::FromStr for PolicySpec {
     fn from_str(spec: &str) -> anyhow::Result<Self> {
         let mut parts = spec.split(':');
         let dir = PathBuf::from(parts.next().unwrap_or_default());
-        let steps = parts.next().map(|s| s.parse::<usize>().with_context(|| format!("bad step count in `{spec}`"))).transpose()?;
+        let steps = parts
+            .next()
+            .map(|s| {
+                s.parse::<usize>()
+                    .with_context(|| format!("bad step count in `{spec}`"))
+            })
+            .transpose()?;
         let solver = parts.next().map(Solver::parse).transpose()?;
         Ok(PolicySpec { dir, steps, solver })
     }
@@ -91,9 +104,17 @@ pub fn backbone_label(backbone: &BackboneConfig) -> String {
     match backbone {
         BackboneConfig::Mlp { hidden, activation } => {
             let widths: Vec<String> = hidden.iter().map(|w| w.to_string()).collect();
-            format!("mlp[{}] {}", widths.join(","), format!("{activation:?}").to_lowercase())
+            format!(
+                "mlp[{}] {}",
+                widths.join(","),
+                format!("{activation:?}").to_lowercase()
+            )
         }
-        BackboneConfig::Transformer { layers, heads, width } => format!("transformer {layers}x{heads}h {width}"),
+        BackboneConfig::Transformer {
+            layers,
+            heads,
+            width,
+        } => format!("transformer {layers}x{heads}h {width}"),
     }
 }
 
@@ -106,16 +127,29 @@ pub struct FixedInput {
 
 impl FixedInput {
     pub fn new(obs_dim: usize, action_dim: usize, history: usize) -> Self {
-        FixedInput { obs: vec![vec![0.1; obs_dim]; history], prev: vec![0.0; action_dim], rate: vec![0.0; action_dim] }
+        FixedInput {
+            obs: vec![vec![0.1; obs_dim]; history],
+            prev: vec![0.0; action_dim],
+            rate: vec![0.0; action_dim],
+        }
     }
 
     pub fn input(&self) -> PolicyInput<'_> {
-        PolicyInput { obs_history: &self.obs, prev_action: &self.prev, prev_rate: &self.rate }
+        PolicyInput {
+            obs_history: &self.obs,
+            prev_action: &self.prev,
+            prev_rate: &self.rate,
+        }
     }
 }
 
 /// Times `calls` chunks of `policy` after `warmup` untimed ones; returns (median, p99) in us.
-pub fn time_policy(policy: &mut dyn Policy, input: &PolicyInput<'_>, warmup: usize, calls: usize) -> anyhow::Result<(f64, f64)> {
+pub fn time_policy(
+    policy: &mut dyn Policy,
+    input: &PolicyInput<'_>,
+    warmup: usize,
+    calls: usize,
+) -> anyhow::Result<(f64, f64)> {
     anyhow::ensure!(calls >= 1, "at least one timed call is needed");
     policy.reset(0);
     for _ in 0..warmup {
@@ -132,14 +166,24 @@ pub fn time_policy(policy: &mut dyn Policy, input: &PolicyInput<'_>, warmup: usi
 
 /// The candle float policies of the default comparison, loaded from `dir` (or synthetic).
 fn default_float_policies(cfg: &BenchConfig) -> anyhow::Result<Vec<FloatPolicy>> {
-    let kinds = [(Role::Student, "student", 1, None), (Role::Teacher, "teacher", 10, Some(Solver::Heun)), (Role::Dp, "dp", 100, None), (Role::Dp, "dp", 10, None)];
+    let kinds = [
+        (Role::Student, "student", 1, None),
+        (Role::Teacher, "teacher", 10, Some(Solver::Heun)),
+        (Role::Dp, "dp", 100, None),
+        (Role::Dp, "dp", 10, None),
+    ];
     let mut out = Vec::new();
     for (role, name, steps, solver) in kinds {
         out.push(if cfg.synthetic {
             fixtures::synthetic_float_policy(&cfg.backbone, 6, role, Some(steps), solver)?
         } else {
             let dir = cfg.dir.join(name);
-            FloatPolicy::load(&dir, Some(steps), solver).with_context(|| format!("loading {} (run `frmd quickstart` first, or pass --synthetic or --policy)", dir.display()))?
+            FloatPolicy::load(&dir, Some(steps), solver).with_context(|| {
+                format!(
+                    "loading {} (run `frmd quickstart` first, or pass --synthetic or --policy)",
+                    dir.display()
+                )
+            })?
         });
     }
     Ok(out)
@@ -165,13 +209,21 @@ fn core_policies(cfg: &BenchConfig) -> Result<CorePolicySet, String> {
             let dir = std::env::temp_dir().join(format!("frmd-bench-{}", std::process::id()));
             let policies = fixtures::reach_student(&dir, &cfg.backbone, 7);
             let _ = std::fs::remove_dir_all(&dir);
-            return Ok(policies?.core.map(|c| (c.int8, c.core_f32, cfg.backbone.clone())));
+            return Ok(policies?
+                .core
+                .map(|c| (c.int8, c.core_f32, cfg.backbone.clone())));
         }
         let ckpt = cfg.dir.join("student");
-        let exported = export_mlp(&ExportConfig::for_checkpoint(&ckpt)).with_context(|| format!("exporting {}", ckpt.display()))?;
-        let blob = frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
+        let exported = export_mlp(&ExportConfig::for_checkpoint(&ckpt))
+            .with_context(|| format!("exporting {}", ckpt.display()))?;
+        let blob = frmd_export::blob::write(&exported.policy)
+            .map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
         let backbone = exported.checkpoint.meta.model.backbone.clone();
-        Ok(Ok((Int8Policy::from_blob(&blob, "int8")?, Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?, backbone)))
+        Ok(Ok((
+            Int8Policy::from_blob(&blob, "int8")?,
+            Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?,
+            backbone,
+        )))
     };
     match build() {
         Ok(Ok((int8, f32_twin, backbone))) => {
@@ -180,7 +232,10 @@ fn core_policies(cfg: &BenchConfig) -> Result<CorePolicySet, String> {
                 backbone: backbone_label(&backbone),
                 input: FixedInput::new(dims.obs_dim, dims.action_dim, dims.history),
                 policies: vec![
-                    ("frmd-core int8 1-step".to_string(), Box::new(int8) as Box<dyn Policy>),
+                    (
+                        "frmd-core int8 1-step".to_string(),
+                        Box::new(int8) as Box<dyn Policy>,
+                    ),
                     ("frmd-core f32 1-step".to_string(), Box::new(f32_twin)),
                 ],
             })
@@ -198,7 +253,10 @@ pub fn bench_rows(cfg: &BenchConfig) -> anyhow::Result<(Vec<BenchRow>, Option<St
     } else {
         let mut v = Vec::new();
         for spec in &cfg.policies {
-            v.push(FloatPolicy::load(&spec.dir, spec.steps, spec.solver).with_context(|| format!("loading {}", spec.dir.display()))?);
+            v.push(
+                FloatPolicy::load(&spec.dir, spec.steps, spec.solver)
+                    .with_context(|| format!("loading {}", spec.dir.display()))?,
+            );
         }
         v
     };
@@ -213,18 +271,42 @@ pub fn bench_rows(cfg: &BenchConfig) -> anyhow::Result<(Vec<BenchRow>, Option<St
         None => (String::new(), FixedInput::new(1, 1, 1), Vec::new()),
     };
     for (label, mut policy) in core {
-        let label = if cfg.policies.is_empty() || cfg.synthetic { label } else { format!("{label} ({}/student)", cfg.dir.display()) };
-        let (median_us, p99_us) = time_policy(policy.as_mut(), &fixed.input(), cfg.warmup, cfg.calls)?;
-        rows.push(BenchRow { label: label.clone(), backbone: backbone.clone(), median_us, p99_us, calls: cfg.calls });
-        for (level, median_us, p99_us) in time_kernel_levels(policy.as_mut(), &fixed.input(), cfg)? {
-            rows.push(BenchRow { label: format!("{label} {level}"), backbone: backbone.clone(), median_us, p99_us, calls: cfg.calls });
+        let label = if cfg.policies.is_empty() || cfg.synthetic {
+            label
+        } else {
+            format!("{label} ({}/student)", cfg.dir.display())
+        };
+        let (median_us, p99_us) =
+            time_policy(policy.as_mut(), &fixed.input(), cfg.warmup, cfg.calls)?;
+        rows.push(BenchRow {
+            label: label.clone(),
+            backbone: backbone.clone(),
+            median_us,
+            p99_us,
+            calls: cfg.calls,
+        });
+        for (level, median_us, p99_us) in time_kernel_levels(policy.as_mut(), &fixed.input(), cfg)?
+        {
+            rows.push(BenchRow {
+                label: format!("{label} {level}"),
+                backbone: backbone.clone(),
+                median_us,
+                p99_us,
+                calls: cfg.calls,
+            });
         }
     }
     for mut policy in floats {
         let (o, a, h) = policy.input_sizes();
         let fixed = FixedInput::new(o, a, h);
         let (median_us, p99_us) = time_policy(&mut policy, &fixed.input(), cfg.warmup, cfg.calls)?;
-        rows.push(BenchRow { label: format!("candle {}", policy.name()), backbone: backbone_label(&policy.config().backbone), median_us, p99_us, calls: cfg.calls });
+        rows.push(BenchRow {
+            label: format!("candle {}", policy.name()),
+            backbone: backbone_label(&policy.config().backbone),
+            median_us,
+            p99_us,
+            calls: cfg.calls,
+        });
     }
     Ok((rows, note))
 }
@@ -233,7 +315,11 @@ pub fn bench_rows(cfg: &BenchConfig) -> anyhow::Result<(Vec<BenchRow>, Option<St
 /// again with the lower kernel levels, which give identical outputs (what CPUs without those
 /// instructions run): `avx2` (without AVX-VNNI, if it was active) and `portable` (SSE2).
 #[cfg(target_arch = "x86_64")]
-fn time_kernel_levels(policy: &mut dyn Policy, input: &PolicyInput<'_>, cfg: &BenchConfig) -> anyhow::Result<Vec<(&'static str, f64, f64)>> {
+fn time_kernel_levels(
+    policy: &mut dyn Policy,
+    input: &PolicyInput<'_>,
+    cfg: &BenchConfig,
+) -> anyhow::Result<Vec<(&'static str, f64, f64)>> {
     use frmd_core::kernels::x86;
     let mut rows = Vec::new();
     if !policy.name().contains("int8") || !x86::avx2_active() {
@@ -255,19 +341,33 @@ fn time_kernel_levels(policy: &mut dyn Policy, input: &PolicyInput<'_>, cfg: &Be
 }
 
 #[cfg(not(target_arch = "x86_64"))]
-fn time_kernel_levels(_: &mut dyn Policy, _: &PolicyInput<'_>, _: &BenchConfig) -> anyhow::Result<Vec<(&'static str, f64, f64)>> {
+fn time_kernel_levels(
+    _: &mut dyn Policy,
+    _: &PolicyInput<'_>,
+    _: &BenchConfig,
+) -> anyhow::Result<Vec<(&'static str, f64, f64)>> {
     Ok(Vec::new())
 }
 
 /// Prints the rows with ratios to the first row.
 pub fn print_table(rows: &[BenchRow], warmup: usize, note: Option<&str>) {
     let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into());
-    let Some(reference) = rows.first() else { return };
-    println!("{:<28} {:<22} {:>11} {:>11} {:>6} {:>9}", "policy", "backbone", "median us", "p99 us", "calls", "ratio");
+    let Some(reference) = rows.first() else {
+        return;
+    };
+    println!(
+        "{:<28} {:<22} {:>11} {:>11} {:>6} {:>9}",
+        "policy", "backbone", "median us", "p99 us", "calls", "ratio"
+    );
     for row in rows {
         println!(
             "{:<28} {:<22} {:>11.1} {:>11.1} {:>6} {:>8.1}x",
-            row.label, row.backbone, row.median_us, row.p99_us, row.calls, row.median_us / reference.median_us
+            row.label,
+            row.backbone,
+            row.median_us,
+            row.p99_us,
+            row.calls,
+            row.median_us / reference.median_us
         );
     }
     println!("batch 1, {warmup} warm-up calls, ratio = median / median of `{}`, RAYON_NUM_THREADS={threads}", reference.label);
@@ -279,6 +379,7 @@ pub fn print_table(rows: &[BenchRow], warmup: usize, note: Option<&str>) {
 /// Writes the rows as JSON.
 pub fn write_json(path: &Path, rows: &[BenchRow], note: Option<&str>) -> anyhow::Result<()> {
     let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into());
-    let value = serde_json::json!({ "threads": threads, "batch": 1, "results": rows, "note": note });
+    let value =
+        serde_json::json!({ "threads": threads, "batch": 1, "results": rows, "note": note });
     frmd_export::artifact::write_atomic(path, serde_json::to_string_pretty(&value)?.as_bytes())
 }

@@ -36,7 +36,14 @@ pub struct BenchArgs {
 }
 
 pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
-    let cfg = BenchConfig { policies: args.policies, dir: args.dir, synthetic: args.synthetic, backbone: args.backbone, calls: args.calls, warmup: args.warmup };
+    let cfg = BenchConfig {
+        policies: args.policies,
+        dir: args.dir,
+        synthetic: args.synthetic,
+        backbone: args.backbone,
+        calls: args.calls,
+        warmup: args.warmup,
+    };
     crate::limits::count("calls", cfg.calls, 1, crate::limits::MAX_CHECKS)?;
     crate::limits::count("warmup", cfg.warmup, 0, crate::limits::MAX_CHECKS)?;
     if let Some(path) = &args.json {

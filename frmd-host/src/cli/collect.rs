@@ -34,8 +34,18 @@ pub struct CollectArgs {
 }
 
 pub fn run(args: CollectArgs) -> anyhow::Result<ExitCode> {
-    let noise = ActionNoise { std: args.perturb_std, correlation_time: args.perturb_time };
-    let cfg = CollectConfig { task: args.task, episodes: args.episodes, seed: args.seed, out: args.out, force: args.force, noise };
+    let noise = ActionNoise {
+        std: args.perturb_std,
+        correlation_time: args.perturb_time,
+    };
+    let cfg = CollectConfig {
+        task: args.task,
+        episodes: args.episodes,
+        seed: args.seed,
+        out: args.out,
+        force: args.force,
+        noise,
+    };
     let c = collect_to_file(&cfg)?;
     println!(
         "wrote {}: {} episodes, {} steps (mean length {:.1}), obs_dim {}, action_dim {}, {} bytes; \

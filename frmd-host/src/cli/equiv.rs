@@ -3,8 +3,8 @@
 use crate::checkpoint::{CONFIG_FILE, WEIGHTS_FILE};
 use crate::equiv::{print, run as run_equiv, EquivConfig};
 use crate::export::{BAKED_BLOB_FILE, EXPORT_INFO_FILE};
-use frmd_export::artifact::{check_output_file, write_atomic};
 use clap::Args;
+use frmd_export::artifact::{check_output_file, write_atomic};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -50,8 +50,18 @@ pub struct EquivArgs {
 
 pub fn run(args: EquivArgs) -> anyhow::Result<ExitCode> {
     if let Some(path) = &args.json {
-        let inputs = [args.ckpt.join(CONFIG_FILE), args.ckpt.join(WEIGHTS_FILE), args.baked.join(BAKED_BLOB_FILE), args.baked.join(EXPORT_INFO_FILE)];
-        check_output_file(path, "--json", args.force, &inputs.iter().map(PathBuf::as_path).collect::<Vec<_>>())?;
+        let inputs = [
+            args.ckpt.join(CONFIG_FILE),
+            args.ckpt.join(WEIGHTS_FILE),
+            args.baked.join(BAKED_BLOB_FILE),
+            args.baked.join(EXPORT_INFO_FILE),
+        ];
+        check_output_file(
+            path,
+            "--json",
+            args.force,
+            &inputs.iter().map(PathBuf::as_path).collect::<Vec<_>>(),
+        )?;
     }
     let cfg = EquivConfig {
         episodes: args.episodes,
@@ -69,5 +79,9 @@ pub fn run(args: EquivArgs) -> anyhow::Result<ExitCode> {
     if let Some(path) = &args.json {
         write_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
-    Ok(if report.passed { ExitCode::SUCCESS } else { ExitCode::from(1) })
+    Ok(if report.passed {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
 }

@@ -1,8 +1,8 @@
 //! `frmd eval`: closed-loop evaluation of a policy on a task, with the metrics of docs/design.md
 //! section 6.
+use crate::checkpoint::{CALIBRATION_FILE, CONFIG_FILE, WEIGHTS_FILE};
 use crate::eval::plot::{plot_paths, PLOTTED_EPISODES};
 use crate::eval::{evaluate, expert_policy, EvalConfig, EvalReport};
-use crate::checkpoint::{CALIBRATION_FILE, CONFIG_FILE, WEIGHTS_FILE};
 use crate::limits::{self, OptionError};
 use crate::tasks::Policy;
 use anyhow::bail;
@@ -103,32 +103,72 @@ pub fn print_report(report: &EvalReport) {
 /// Options that do not go together: one policy source, and the sampler options only with a
 /// float checkpoint.
 fn check_sources(args: &EvalArgs) -> Result<(), OptionError> {
-    let sources: Vec<&str> = [("policy", args.policy.is_some()), ("ckpt", args.ckpt.is_some()), ("blob", args.blob.is_some()), ("baked", args.baked.is_some())]
-        .into_iter()
-        .filter_map(|(name, given)| given.then_some(name))
-        .collect();
+    let sources: Vec<&str> = [
+        ("policy", args.policy.is_some()),
+        ("ckpt", args.ckpt.is_some()),
+        ("blob", args.blob.is_some()),
+        ("baked", args.baked.is_some()),
+    ]
+    .into_iter()
+    .filter_map(|(name, given)| given.then_some(name))
+    .collect();
     if let [first, second, ..] = sources.as_slice() {
-        let option = if *first == "policy" { "policy" } else if *first == "ckpt" { "ckpt" } else { "blob" };
-        return Err(limits::conflict(option, format!("--{second}"), "give one policy to evaluate"));
+        let option = if *first == "policy" {
+            "policy"
+        } else if *first == "ckpt" {
+            "ckpt"
+        } else {
+            "blob"
+        };
+        return Err(limits::conflict(
+            option,
+            format!("--{second}"),
+            "give one policy to evaluate",
+        ));
     }
-    let int8 = if args.blob.is_some() { Some("--blob") } else if args.baked.is_some() { Some("--baked") } else { None };
-    let float_only: [(&'static str, bool); 2] = [("steps", args.steps.is_some()), ("solver", args.solver.is_some())];
+    let int8 = if args.blob.is_some() {
+        Some("--blob")
+    } else if args.baked.is_some() {
+        Some("--baked")
+    } else {
+        None
+    };
+    let float_only: [(&'static str, bool); 2] = [
+        ("steps", args.steps.is_some()),
+        ("solver", args.solver.is_some()),
+    ];
     for (option, given) in float_only {
         if !given {
             continue;
         }
         if let Some(source) = int8 {
-            return Err(limits::conflict(option, source, "the int8 blob's sampling steps are fixed at export (`frmd export --steps`)"));
+            return Err(limits::conflict(
+                option,
+                source,
+                "the int8 blob's sampling steps are fixed at export (`frmd export --steps`)",
+            ));
         }
         if args.ckpt.is_none() {
-            return Err(limits::conflict(option, "the scripted expert", "it applies to a float checkpoint (--ckpt) only"));
+            return Err(limits::conflict(
+                option,
+                "the scripted expert",
+                "it applies to a float checkpoint (--ckpt) only",
+            ));
         }
     }
     if args.history.is_some() && (args.ckpt.is_some() || int8.is_some()) {
-        return Err(limits::conflict("history", int8.unwrap_or("--ckpt"), "a learned policy uses the history it was trained with"));
+        return Err(limits::conflict(
+            "history",
+            int8.unwrap_or("--ckpt"),
+            "a learned policy uses the history it was trained with",
+        ));
     }
     if args.plot.is_none() && args.plot_episodes != PLOTTED_EPISODES {
-        return Err(limits::conflict("plot-episodes", "no --plot", "it sets how many episodes --plot draws"));
+        return Err(limits::conflict(
+            "plot-episodes",
+            "no --plot",
+            "it sets how many episodes --plot draws",
+        ));
     }
     Ok(())
 }
@@ -156,7 +196,11 @@ fn check_outputs(args: &EvalArgs, blob: Option<&Path>) -> anyhow::Result<()> {
 
 pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
     check_sources(&args)?;
-    let blob = args.blob.clone().or_else(|| args.baked.as_ref().map(|d| d.join(crate::export::BAKED_BLOB_FILE)));
+    let blob = args.blob.clone().or_else(|| {
+        args.baked
+            .as_ref()
+            .map(|d| d.join(crate::export::BAKED_BLOB_FILE))
+    });
     check_outputs(&args, blob.as_deref())?;
     if let Some(board) = &args.firmware {
         return super::eval_firmware::run(&args, board, blob.as_deref());
@@ -169,7 +213,10 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
         }
         (None, Some(dir)) => crate::policy::float::boxed(dir, args.steps, args.solver.as_deref())?,
         (None, None) => match args.policy.as_deref().unwrap_or("expert") {
-            "expert" => (expert_policy(&args.task)?, args.history.unwrap_or(EvalConfig::default().history)),
+            "expert" => (
+                expert_policy(&args.task)?,
+                args.history.unwrap_or(EvalConfig::default().history),
+            ),
             other => anyhow::bail!("unknown policy {other:?}; available: expert (or --ckpt DIR)"),
         },
     };

@@ -2,10 +2,10 @@
 //! [`crate::firmware`]).
 use super::eval::{print_report, EvalArgs};
 use crate::eval::{evaluate, EvalConfig, EvalReport};
-use crate::tasks::Policy;
 use crate::firmware::lockstep::{Lockstep, LockstepCount};
 use crate::firmware::policy::{FirmwareInfo, FirmwarePolicy, InstructionStats};
 use crate::policy::int8::Int8Policy;
+use crate::tasks::Policy;
 use serde::Serialize;
 use std::process::ExitCode;
 
@@ -21,10 +21,21 @@ struct FirmwareReport<'a> {
 }
 
 /// `blob`: the host int8 policy's blob (from `--blob`, or beside `--baked`), for `--check-host`.
-pub fn run(args: &EvalArgs, board: &str, blob: Option<&std::path::Path>) -> anyhow::Result<ExitCode> {
-    anyhow::ensure!(args.ckpt.is_none(), "--firmware runs a baked int8 policy; --ckpt does not apply (use --baked DIR)");
+pub fn run(
+    args: &EvalArgs,
+    board: &str,
+    blob: Option<&std::path::Path>,
+) -> anyhow::Result<ExitCode> {
+    anyhow::ensure!(
+        args.ckpt.is_none(),
+        "--firmware runs a baked int8 policy; --ckpt does not apply (use --baked DIR)"
+    );
     eprintln!("building the pil image for {board} (examples/cortex-m/run-qemu.sh) ...");
-    let image = crate::firmware::build(&crate::firmware::default_repo(), board, args.baked.as_deref())?;
+    let image = crate::firmware::build(
+        &crate::firmware::default_repo(),
+        board,
+        args.baked.as_deref(),
+    )?;
     let firmware = FirmwarePolicy::start(&image)?;
     let info = firmware.info().clone();
     let cfg = EvalConfig {
@@ -62,14 +73,25 @@ pub fn run(args: &EvalArgs, board: &str, blob: Option<&std::path::Path>) -> anyh
             "  host check     {} of {} chunks bit-identical to the host int8 policy{}",
             count.chunks - count.differing_chunks,
             count.chunks,
-            count.first_difference.map_or(String::new(), |i| format!(" (first difference: chunk {i})"))
+            count
+                .first_difference
+                .map_or(String::new(), |i| format!(" (first difference: chunk {i})"))
         );
     }
     if let Some(path) = &args.json {
-        let full = FirmwareReport { report: &report, firmware: &info, instructions: &stats, host_check: host_check.as_ref() };
+        let full = FirmwareReport {
+            report: &report,
+            firmware: &info,
+            instructions: &stats,
+            host_check: host_check.as_ref(),
+        };
         frmd_export::artifact::write_atomic(path, serde_json::to_string_pretty(&full)?.as_bytes())?;
         println!("  report         {}", path.display());
     }
     let identical = host_check.is_none_or(|count| count.differing_chunks == 0);
-    Ok(if identical { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+    Ok(if identical {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
 }

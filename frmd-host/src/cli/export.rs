@@ -1,11 +1,14 @@
 //! `frmd export`: student checkpoint -> calibrated int8 policy ([`crate::export`]), written as a
 //! baked Rust module directory and/or a blob, with the RAM and flash figures of the policy.
-use crate::export::{export_student, save_calibration, write_export, ExportConfig, ExportedStudent, BAKED_BLOB_FILE, EXPORT_INFO_FILE};
+use crate::checkpoint::{CALIBRATION_FILE, CONFIG_FILE, WEIGHTS_FILE};
+use crate::export::{
+    export_student, save_calibration, write_export, ExportConfig, ExportedStudent, BAKED_BLOB_FILE,
+    EXPORT_INFO_FILE,
+};
 use anyhow::{bail, Context};
 use clap::Args;
-use frmd_export::MemoryFigures;
-use crate::checkpoint::{CALIBRATION_FILE, CONFIG_FILE, WEIGHTS_FILE};
 use frmd_export::artifact::{check_output_dir, check_output_file};
+use frmd_export::MemoryFigures;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -65,13 +68,29 @@ impl From<&ExportArgs> for ExportConfig {
 /// Whether two directory paths name the same directory (existing or not).
 fn same_dir(a: &Path, b: &Path) -> bool {
     let norm = |p: &Path| p.canonicalize().unwrap_or_else(|_| p.to_path_buf());
-    let a = if a.as_os_str().is_empty() { Path::new(".") } else { a };
+    let a = if a.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        a
+    };
     norm(a) == norm(b)
 }
 
 fn print_memory(m: &MemoryFigures, blob_len: usize) {
-    println!("  RAM    scratch {} B (width {}) + state {} B = {} B", m.scratch_bytes, m.scratch_width, m.state_bytes, m.scratch_bytes + m.state_bytes);
-    println!("  flash  weights {} B + tables {} B = {} B (blob {} B)", m.weights_bytes, m.table_bytes, m.flash_bytes(), blob_len);
+    println!(
+        "  RAM    scratch {} B (width {}) + state {} B = {} B",
+        m.scratch_bytes,
+        m.scratch_width,
+        m.state_bytes,
+        m.scratch_bytes + m.state_bytes
+    );
+    println!(
+        "  flash  weights {} B + tables {} B = {} B (blob {} B)",
+        m.weights_bytes,
+        m.table_bytes,
+        m.flash_bytes(),
+        blob_len
+    );
 }
 
 fn print_summary(args: &ExportArgs, cfg: &ExportConfig, student: &ExportedStudent) {
@@ -88,8 +107,15 @@ fn print_summary(args: &ExportArgs, cfg: &ExportConfig, student: &ExportedStuden
             let model = &exported.checkpoint.meta.model;
             println!(
                 "policy: {:?}, m {} O {} K {} n {} P {}, {} step(s), calibration {} on {} rows",
-                model.backbone, policy.history, policy.obs_dim, policy.action_dim, policy.horizon, policy.params_per_dof,
-                policy.steps.len(), cfg.calibration, exported.ranges.rows
+                model.backbone,
+                policy.history,
+                policy.obs_dim,
+                policy.action_dim,
+                policy.horizon,
+                policy.params_per_dof,
+                policy.steps.len(),
+                cfg.calibration,
+                exported.ranges.rows
             );
             let gains = exported.folded.gains;
             println!(
@@ -113,8 +139,15 @@ fn print_summary(args: &ExportArgs, cfg: &ExportConfig, student: &ExportedStuden
             let model = &exported.checkpoint.meta.model;
             println!(
                 "policy: {:?}, m {} O {} K {} n {} P {}, {} step(s), calibration {} on {} rows",
-                model.backbone, model.history, model.obs_dim, model.action_dim, model.horizon, model.output_dim() / model.action_dim.max(1),
-                f.steps.len(), cfg.calibration, exported.ranges.rows
+                model.backbone,
+                model.history,
+                model.obs_dim,
+                model.action_dim,
+                model.horizon,
+                model.output_dim() / model.action_dim.max(1),
+                f.steps.len(),
+                cfg.calibration,
+                exported.ranges.rows
             );
             print_memory(&exported.model.memory(), blob.len());
         }
@@ -127,7 +160,11 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     }
     let cfg = ExportConfig::from(&args);
     cfg.validate()?;
-    let mut inputs = vec![args.ckpt.join(CONFIG_FILE), args.ckpt.join(WEIGHTS_FILE), args.ckpt.join(CALIBRATION_FILE)];
+    let mut inputs = vec![
+        args.ckpt.join(CONFIG_FILE),
+        args.ckpt.join(WEIGHTS_FILE),
+        args.ckpt.join(CALIBRATION_FILE),
+    ];
     inputs.extend(args.data.clone());
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
     if let Some(dir) = &args.out {
@@ -136,8 +173,15 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     if let Some(path) = &args.blob {
         check_output_file(path, "--blob", args.force, &inputs)?;
         if let Some(dir) = &args.out {
-            if path.parent().zip(path.file_name()).is_some_and(|(p, n)| same_dir(p, dir) && n == BAKED_BLOB_FILE) {
-                bail!("--blob {} is the blob --out writes; drop --blob", path.display());
+            if path
+                .parent()
+                .zip(path.file_name())
+                .is_some_and(|(p, n)| same_dir(p, dir) && n == BAKED_BLOB_FILE)
+            {
+                bail!(
+                    "--blob {} is the blob --out writes; drop --blob",
+                    path.display()
+                );
             }
         }
     }
@@ -145,7 +189,10 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
         bail!("--save-calibration needs --data");
     }
     if args.save_calibration {
-        let data = args.data.as_ref().context("--save-calibration needs --data")?;
+        let data = args
+            .data
+            .as_ref()
+            .context("--save-calibration needs --data")?;
         save_calibration(data, &args.ckpt)?;
     }
     let student = export_student(&cfg)?;

@@ -56,9 +56,18 @@ impl From<QuickstartArgs> for QuickstartConfig {
             task: a.task,
             out: a.out,
             demos: a.demos,
-            teacher: crate::quickstart::StageRecipe { steps: a.teacher_steps, ..d.teacher },
-            student: crate::quickstart::StageRecipe { steps: a.student_steps, ..d.student },
-            dp: crate::quickstart::StageRecipe { steps: a.dp_steps, ..d.dp },
+            teacher: crate::quickstart::StageRecipe {
+                steps: a.teacher_steps,
+                ..d.teacher
+            },
+            student: crate::quickstart::StageRecipe {
+                steps: a.student_steps,
+                ..d.student
+            },
+            dp: crate::quickstart::StageRecipe {
+                steps: a.dp_steps,
+                ..d.dp
+            },
             backbone: a.backbone,
             batch: a.batch,
             baseline: d.baseline && !a.no_baseline,

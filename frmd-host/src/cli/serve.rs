@@ -67,12 +67,26 @@ pub fn run(args: ServeArgs) -> anyhow::Result<ExitCode> {
         "f64" => FloatType::F64,
         other => anyhow::bail!("--float {other:?}: expected f32 or f64"),
     };
-    let cfg = ServeConfig { float_type, exec_steps: args.exec_steps, dt: args.dt, init_action: args.init_action.clone(), zeros: args.zeros };
+    let cfg = ServeConfig {
+        float_type,
+        exec_steps: args.exec_steps,
+        dt: args.dt,
+        init_action: args.init_action.clone(),
+        zeros: args.zeros,
+    };
     let mut served = serve::load(&source, &cfg)?;
     let info = &served.info;
     eprintln!(
         "frmd serve: {} (obs {} x {}, action {} x {}, exec {}, dt {} s, {:?}), protocol v{}",
-        info.name, info.obs_history, info.obs_dim, info.horizon, info.action_dim, info.exec_steps, info.dt, info.float_type, serve::VERSION
+        info.name,
+        info.obs_history,
+        info.obs_dim,
+        info.horizon,
+        info.action_dim,
+        info.exec_steps,
+        info.dt,
+        info.float_type,
+        serve::VERSION
     );
     match &args.socket {
         #[cfg(unix)]

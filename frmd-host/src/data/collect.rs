@@ -1,11 +1,11 @@
 //! Demonstration collection: runs a task's scripted expert and gathers successful episodes.
 use super::perturb::{ActionNoise, PerturbedExpert};
 use super::{ActionBeforeStart, Dataset};
-use crate::tasks::Policy;
 use crate::eval::{rollout, EVAL_SEED_OFFSET};
 use crate::limits::{self, OptionError};
 use crate::progress::Progress;
 use crate::tasks::make_task;
+use crate::tasks::Policy;
 use std::path::PathBuf;
 
 /// A collection run (`frmd collect`): `episodes` successful expert demonstrations of `task` on
@@ -35,7 +35,11 @@ impl CollectConfig {
         let attempts = max_attempts(self.episodes, self.noise.std > 0.0) as u64;
         let last = EVAL_SEED_OFFSET - attempts;
         if self.seed > last {
-            return Err(limits::range("seed", self.seed, format!("at most {last} (collection seeds stay below 2^63, the evaluation stream)")));
+            return Err(limits::range(
+                "seed",
+                self.seed,
+                format!("at most {last} (collection seeds stay below 2^63, the evaluation stream)"),
+            ));
         }
         limits::non_negative("perturb-std", self.noise.std)?;
         limits::positive("perturb-time", self.noise.correlation_time)
@@ -46,8 +50,18 @@ impl Default for CollectConfig {
     /// 100 demonstrations from seed 0, executed actions perturbed with std
     /// [`RECIPE_PERTURB_STD`]; no task or file named.
     fn default() -> Self {
-        let noise = ActionNoise { std: RECIPE_PERTURB_STD, ..ActionNoise::default() };
-        CollectConfig { task: String::new(), episodes: 100, seed: 0, out: PathBuf::new(), force: false, noise }
+        let noise = ActionNoise {
+            std: RECIPE_PERTURB_STD,
+            ..ActionNoise::default()
+        };
+        CollectConfig {
+            task: String::new(),
+            episodes: 100,
+            seed: 0,
+            out: PathBuf::new(),
+            force: false,
+            noise,
+        }
     }
 }
 
@@ -69,12 +83,26 @@ pub fn collect_to_file(cfg: &CollectConfig) -> anyhow::Result<Collected> {
     cfg.validate()?;
     make_task(&cfg.task)?;
     frmd_export::artifact::check_output_file(&cfg.out, "--out", cfg.force, &[])?;
-    let mut progress = Progress::new(&format!("collect {}", cfg.task), cfg.episodes as u64, "episode");
+    let mut progress = Progress::new(
+        &format!("collect {}", cfg.task),
+        cfg.episodes as u64,
+        "episode",
+    );
     // `collect_demos` validates the noise and treats std 0 as unperturbed.
-    let (data, stats) = collect_demos(&cfg.task, cfg.episodes, cfg.seed, Some(cfg.noise), &mut |done| progress.update(done as u64, ""))?;
+    let (data, stats) = collect_demos(
+        &cfg.task,
+        cfg.episodes,
+        cfg.seed,
+        Some(cfg.noise),
+        &mut |done| progress.update(done as u64, ""),
+    )?;
     progress.finish();
     data.save(&cfg.out)?;
-    let lengths: Vec<f64> = data.episode_ranges().iter().map(|r| r.len() as f64).collect();
+    let lengths: Vec<f64> = data
+        .episode_ranges()
+        .iter()
+        .map(|r| r.len() as f64)
+        .collect();
     Ok(Collected {
         episodes: data.num_episodes(),
         steps: data.len(),

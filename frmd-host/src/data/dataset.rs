@@ -54,7 +54,9 @@ impl ActionBeforeStart {
         match text {
             "first" => Ok(ActionBeforeStart::First),
             "zero" => Ok(ActionBeforeStart::Zero),
-            other => anyhow::bail!("metadata `action_before_start` is {other:?}, expected \"first\" or \"zero\""),
+            other => anyhow::bail!(
+                "metadata `action_before_start` is {other:?}, expected \"first\" or \"zero\""
+            ),
         }
     }
 }
@@ -216,7 +218,10 @@ impl Dataset {
         ]);
         // Written only when it is not the default, so files of the built-in tasks stay as they were.
         if self.action_before_start != ActionBeforeStart::default() {
-            meta.insert("action_before_start".to_string(), self.action_before_start.as_str().to_string());
+            meta.insert(
+                "action_before_start".to_string(),
+                self.action_before_start.as_str().to_string(),
+            );
         }
         frmd_export::safetensors_bytes::serialize(tensors, &meta)
     }

@@ -6,8 +6,8 @@
 //! The noise is an Ornstein-Uhlenbeck process per action dimension, sampled once per control
 //! period: stationary standard deviation `std` (metres, since actions are position targets) and
 //! correlation time `correlation_time` (seconds). Its stream is fixed by the episode seed.
-use crate::tasks::{Policy, PolicyInput};
 use crate::tasks::rng::TaskRng;
+use crate::tasks::{Policy, PolicyInput};
 use std::cell::RefCell;
 use std::rc::Rc;
 
@@ -23,7 +23,10 @@ pub struct ActionNoise {
 impl Default for ActionNoise {
     /// No perturbation (std 0) with a 0.5 s correlation time.
     fn default() -> Self {
-        ActionNoise { std: 0.0, correlation_time: 0.5 }
+        ActionNoise {
+            std: 0.0,
+            correlation_time: 0.5,
+        }
     }
 }
 

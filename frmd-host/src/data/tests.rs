@@ -197,8 +197,14 @@ fn reader_rejects_corrupt_files_with_the_reason() {
     };
     let message = error_of(&raw(full(), &[("task", "t"), ("source", "s")]));
     assert!(message.contains("missing metadata `dt`"), "{message}");
-    let message = error_of(&raw(full(), &[META, &[("action_before_start", "last")]].concat()));
-    assert!(message.contains("action_before_start") && message.contains("\"zero\""), "{message}");
+    let message = error_of(&raw(
+        full(),
+        &[META, &[("action_before_start", "last")]].concat(),
+    ));
+    assert!(
+        message.contains("action_before_start") && message.contains("\"zero\""),
+        "{message}"
+    );
     let message = error_of(&raw(
         full(),
         &[("task", "t"), ("dt", "fast"), ("source", "s")],
@@ -248,7 +254,10 @@ fn windows_follow_the_padding_and_rate_conventions() {
 
 #[test]
 fn zero_action_before_start_pads_with_the_normalized_zero_action() {
-    let data = Dataset { action_before_start: ActionBeforeStart::Zero, ..small() };
+    let data = Dataset {
+        action_before_start: ActionBeforeStart::Zero,
+        ..small()
+    };
     let (set, _) = data.windows(2, 3).unwrap();
     let (first, _) = small().windows(2, 3).unwrap();
     // Raw 0 is (0 - 30) / 20 = -1.5 normalized; the first episode's actions are -1, -0.5, 0 and
@@ -259,7 +268,12 @@ fn zero_action_before_start_pads_with_the_normalized_zero_action() {
     assert_eq!((&set.obs, &set.actions), (&first.obs, &first.actions));
     let back = Dataset::from_bytes(&data.to_bytes().unwrap()).unwrap();
     assert_eq!(back.action_before_start, ActionBeforeStart::Zero);
-    assert_eq!(Dataset::from_bytes(&small().to_bytes().unwrap()).unwrap().action_before_start, ActionBeforeStart::First);
+    assert_eq!(
+        Dataset::from_bytes(&small().to_bytes().unwrap())
+            .unwrap()
+            .action_before_start,
+        ActionBeforeStart::First
+    );
 }
 
 #[test]
@@ -299,8 +313,8 @@ fn normalizer_round_trips_and_maps_constants_to_zero() {
 #[test]
 fn perturbed_demonstrations_record_the_experts_clean_actions() {
     use super::perturb::ActionNoise;
-    use crate::tasks::PolicyInput;
     use crate::tasks::make_task;
+    use crate::tasks::PolicyInput;
     let noise = ActionNoise {
         std: 0.02,
         correlation_time: 0.5,
@@ -363,7 +377,10 @@ fn nearly_constant_dimensions_get_the_minimum_range_and_constants_stay_constant(
     assert_eq!((norm.min[2], norm.max[2]), (-1.0, 1.0));
     let mut row = [0.504, 3.0, 1.0];
     norm.normalize(&mut row);
-    assert!((row[0] - 0.4).abs() < 1e-4 && row[1] == 0.0 && row[2] == 1.0, "{row:?}");
+    assert!(
+        (row[0] - 0.4).abs() < 1e-4 && row[1] == 0.0 && row[2] == 1.0,
+        "{row:?}"
+    );
 }
 
 #[test]

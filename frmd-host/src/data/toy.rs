@@ -18,7 +18,10 @@ pub fn toy_config(head: HeadConfig) -> ModelConfig {
         horizon: 4,
         control_dt: 0.1,
         embed_dim: 8,
-        backbone: BackboneConfig::Mlp { hidden: vec![64, 64], activation: Activation::Silu },
+        backbone: BackboneConfig::Mlp {
+            hidden: vec![64, 64],
+            activation: Activation::Silu,
+        },
         head,
     }
 }
@@ -32,7 +35,11 @@ pub fn bimodal_windows(cfg: &ModelConfig, count: usize, seed: u64) -> anyhow::Re
     let mut rng = HostRng::new(seed);
     let mut actions = Vec::with_capacity(count * cfg.horizon);
     for _ in 0..count {
-        let goal = if rng.uniform() < 0.5 { MODE_GOAL } else { -MODE_GOAL };
+        let goal = if rng.uniform() < 0.5 {
+            MODE_GOAL
+        } else {
+            -MODE_GOAL
+        };
         for row in rows.pos_params.chunks_exact(rows.num_params) {
             actions.push((row[goal_column] * goal) as f32);
         }
@@ -53,12 +60,24 @@ pub fn bimodal_windows(cfg: &ModelConfig, count: usize, seed: u64) -> anyhow::Re
 /// Fraction of trajectories (rows of `traj`, [B, n]) whose last step is positive.
 pub fn positive_fraction(traj: &[f32], horizon: usize) -> f64 {
     let rows = traj.len() / horizon.max(1);
-    let positive = traj.chunks_exact(horizon).filter(|row| row.last().copied().unwrap_or(0.0) > 0.0).count();
+    let positive = traj
+        .chunks_exact(horizon)
+        .filter(|row| row.last().copied().unwrap_or(0.0) > 0.0)
+        .count();
     positive as f64 / rows.max(1) as f64
 }
 
 /// The condition of `batch` toy samples: zero observation, y0 and v0.
 pub fn toy_condition(batch: usize) -> anyhow::Result<crate::models::Condition> {
-    let zeros = candle_core::Tensor::zeros((batch, 1), candle_core::DType::F32, &candle_core::Device::Cpu)?;
-    Ok(crate::models::Condition::new(&zeros, zeros.clone(), zeros.clone(), 0.1)?)
+    let zeros = candle_core::Tensor::zeros(
+        (batch, 1),
+        candle_core::DType::F32,
+        &candle_core::Device::Cpu,
+    )?;
+    Ok(crate::models::Condition::new(
+        &zeros,
+        zeros.clone(),
+        zeros.clone(),
+        0.1,
+    )?)
 }

@@ -1,7 +1,7 @@
 //! Training windows cut from demonstrations: the contract between datasets and training.
 
-pub use frmd_export::checkpoint::{Normalization, Normalizer};
 use frmd_export::calibrate::CalibrationSet;
+pub use frmd_export::checkpoint::{Normalization, Normalizer};
 
 /// Smallest normalizer range, raw units. MetaWorld demonstrations have observation dimensions
 /// that barely move (a resting object's quaternion jitters by +-0.002: 12 dimensions of reach-v3
@@ -61,7 +61,11 @@ impl WindowSet {
             cond.extend_from_slice(&self.prev_action[i * k..(i + 1) * k]);
             cond.extend_from_slice(&self.prev_rate[i * k..(i + 1) * k]);
         }
-        CalibrationSet { cond_dim: obs_w + 2 * k, cond, seed: seed ^ 0xca11_b4a7e }
+        CalibrationSet {
+            cond_dim: obs_w + 2 * k,
+            cond,
+            seed: seed ^ 0xca11_b4a7e,
+        }
     }
 }
 

@@ -50,15 +50,25 @@ impl DdpmSchedule {
     /// Squared-cosine ("squaredcos_cap_v2") schedule with `steps` training steps and the
     /// `Direct` parametrization.
     pub fn cosine(steps: usize) -> Self {
-        let f = |t: f64| ((t / steps as f64 + 0.008) / 1.008 * std::f64::consts::FRAC_PI_2).cos().powi(2);
-        let betas: Vec<f64> = (0..steps).map(|i| (1.0 - f(i as f64 + 1.0) / f(i as f64)).min(0.999)).collect();
+        let f = |t: f64| {
+            ((t / steps as f64 + 0.008) / 1.008 * std::f64::consts::FRAC_PI_2)
+                .cos()
+                .powi(2)
+        };
+        let betas: Vec<f64> = (0..steps)
+            .map(|i| (1.0 - f(i as f64 + 1.0) / f(i as f64)).min(0.999))
+            .collect();
         let mut alpha_bars = Vec::with_capacity(steps);
         let mut product = 1.0;
         for beta in &betas {
             product *= 1.0 - beta;
             alpha_bars.push(product);
         }
-        DdpmSchedule { betas, alpha_bars, parametrization: EpsParametrization::Direct }
+        DdpmSchedule {
+            betas,
+            alpha_bars,
+            parametrization: EpsParametrization::Direct,
+        }
     }
 
     /// The same schedule with another parametrization.
@@ -73,10 +83,13 @@ impl DdpmSchedule {
 
     /// c_noise = ln(sqrt((1 - abar) / abar)) / 4 for each timestep.
     pub fn c_noise(&self, timesteps: &[usize]) -> Vec<f64> {
-        timesteps.iter().map(|&t| {
-            let abar = self.alpha_bars[t];
-            ((1.0 - abar) / abar).sqrt().ln() / 4.0
-        }).collect()
+        timesteps
+            .iter()
+            .map(|&t| {
+                let abar = self.alpha_bars[t];
+                ((1.0 - abar) / abar).sqrt().ln() / 4.0
+            })
+            .collect()
     }
 
     /// Per-timestep (input scale, skip, output) coefficients: eps = skip x_t + out F(in x_t).
@@ -106,7 +119,13 @@ impl DdpmSchedule {
 }
 
 /// Predicted noise eps(x_t, o, t) [B, n k].
-pub fn predict_noise(net: &Network, sched: &DdpmSchedule, x: &Tensor, cond: &Condition, timesteps: &[usize]) -> anyhow::Result<Tensor> {
+pub fn predict_noise(
+    net: &Network,
+    sched: &DdpmSchedule,
+    x: &Tensor,
+    cond: &Condition,
+    timesteps: &[usize],
+) -> anyhow::Result<Tensor> {
     let device = x.device();
     let emb = embedding(&sched.c_noise(timesteps), net.config().embed_dim, device)?;
     match sched.parametrization {
@@ -114,20 +133,34 @@ pub fn predict_noise(net: &Network, sched: &DdpmSchedule, x: &Tensor, cond: &Con
         EpsParametrization::Preconditioned => {
             let (scale_in, skip, out) = sched.coefficients(timesteps);
             let f = net.predict(&x.broadcast_mul(&column(&scale_in, device)?)?, cond, &emb)?;
-            Ok((x.broadcast_mul(&column(&skip, device)?)? + f.broadcast_mul(&column(&out, device)?)?)?)
+            Ok((x.broadcast_mul(&column(&skip, device)?)?
+                + f.broadcast_mul(&column(&out, device)?)?)?)
         }
     }
 }
 
 /// Training loss: mean squared error of the predicted noise at uniformly drawn timesteps.
-pub fn dp_loss(net: &Network, sched: &DdpmSchedule, x0: &Tensor, cond: &Condition, rng: &mut HostRng) -> anyhow::Result<Tensor> {
+pub fn dp_loss(
+    net: &Network,
+    sched: &DdpmSchedule,
+    x0: &Tensor,
+    cond: &Condition,
+    rng: &mut HostRng,
+) -> anyhow::Result<Tensor> {
     let (batch, dim) = x0.dims2()?;
     let device = x0.device();
     let timesteps: Vec<usize> = (0..batch).map(|_| rng.below(sched.steps())).collect();
-    let signal: Vec<f64> = timesteps.iter().map(|&t| sched.alpha_bars[t].sqrt()).collect();
-    let noise_scale: Vec<f64> = timesteps.iter().map(|&t| (1.0 - sched.alpha_bars[t]).sqrt()).collect();
+    let signal: Vec<f64> = timesteps
+        .iter()
+        .map(|&t| sched.alpha_bars[t].sqrt())
+        .collect();
+    let noise_scale: Vec<f64> = timesteps
+        .iter()
+        .map(|&t| (1.0 - sched.alpha_bars[t]).sqrt())
+        .collect();
     let eps = gaussian(rng, batch, dim, device)?;
-    let noisy = (x0.broadcast_mul(&column(&signal, device)?)? + eps.broadcast_mul(&column(&noise_scale, device)?)?)?;
+    let noisy = (x0.broadcast_mul(&column(&signal, device)?)?
+        + eps.broadcast_mul(&column(&noise_scale, device)?)?)?;
     let predicted = predict_noise(net, sched, &noisy, cond, &timesteps)?;
     Ok((predicted - eps)?.sqr()?.mean_all()?)
 }
@@ -148,7 +181,15 @@ fn clean_estimate(x: &Tensor, eps: &Tensor, abar: f64) -> anyhow::Result<Tensor>
 
 /// Samples the DP baseline from standard-normal `x` [B, n k]. DDPM uses all T steps (`steps`
 /// must be T); DDIM uses `steps` timesteps t = (steps-1) s, .., s, 0 with s = T / steps.
-pub fn sample_dp(net: &Network, sched: &DdpmSchedule, cond: &Condition, x: Tensor, sampler: DpSampler, steps: usize, rng: &mut dyn super::samplers::NoiseSource) -> anyhow::Result<Tensor> {
+pub fn sample_dp(
+    net: &Network,
+    sched: &DdpmSchedule,
+    cond: &Condition,
+    x: Tensor,
+    sampler: DpSampler,
+    steps: usize,
+    rng: &mut dyn super::samplers::NoiseSource,
+) -> anyhow::Result<Tensor> {
     let total = sched.steps();
     let batch = x.dim(0)?;
     let mut x = x;
@@ -183,7 +224,11 @@ pub fn sample_dp(net: &Network, sched: &DdpmSchedule, cond: &Condition, x: Tenso
                 let t = i * stride;
                 let eps = predict_noise(net, sched, &x, cond, &vec![t; batch])?;
                 let abar = sched.alpha_bars[t];
-                let abar_prev = if i > 0 { sched.alpha_bars[t - stride] } else { 1.0 };
+                let abar_prev = if i > 0 {
+                    sched.alpha_bars[t - stride]
+                } else {
+                    1.0
+                };
                 let x0 = clean_estimate(&x, &eps, abar)?;
                 // Direction recomputed from the clipped x0 (as diffusers does after clipping).
                 let eps = ((&x - (&x0 * abar.sqrt())?)? / (1.0 - abar).sqrt())?;
@@ -197,8 +242,8 @@ pub fn sample_dp(net: &Network, sched: &DdpmSchedule, cond: &Condition, x: Tenso
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::models::{HeadConfig, OwnedNetwork};
     use crate::data::toy::toy_config;
+    use crate::models::{HeadConfig, OwnedNetwork};
     use candle_core::Device;
 
     fn zero_network() -> OwnedNetwork {
@@ -221,7 +266,8 @@ mod tests {
     #[test]
     fn preconditioned_skip_is_the_gaussian_posterior_noise() {
         let net = zero_network();
-        let sched = DdpmSchedule::cosine(100).with_parametrization(EpsParametrization::Preconditioned);
+        let sched =
+            DdpmSchedule::cosine(100).with_parametrization(EpsParametrization::Preconditioned);
         let sigma_data = SigmaConfig::default().sigma_data;
         let (batch, dim) = (4000, 4);
         let mut rng = HostRng::new(3);
@@ -230,21 +276,56 @@ mod tests {
             let x0 = (gaussian(&mut rng, batch, dim, &Device::Cpu).unwrap() * sigma_data).unwrap();
             let eps = gaussian(&mut rng, batch, dim, &Device::Cpu).unwrap();
             let x = ((&x0 * abar.sqrt()).unwrap() + (&eps * (1.0 - abar).sqrt()).unwrap()).unwrap();
-            let predicted = predict_noise(&net.net, &sched, &x, &toy_cond(batch), &vec![t; batch]).unwrap();
-            let mse = (&predicted - &eps).unwrap().sqr().unwrap().mean_all().unwrap().to_scalar::<f32>().unwrap() as f64;
+            let predicted =
+                predict_noise(&net.net, &sched, &x, &toy_cond(batch), &vec![t; batch]).unwrap();
+            let mse = (&predicted - &eps)
+                .unwrap()
+                .sqr()
+                .unwrap()
+                .mean_all()
+                .unwrap()
+                .to_scalar::<f32>()
+                .unwrap() as f64;
             let s2 = (1.0 - abar) + abar * sigma_data * sigma_data;
             let expected = 1.0 - (1.0 - abar) / s2;
-            assert!((mse - expected).abs() < 0.03 + 0.05 * expected, "t {t}: mse {mse} vs {expected}");
-            let direct = predict_noise(&net.net, &sched.clone().with_parametrization(EpsParametrization::Direct), &x, &toy_cond(batch), &vec![t; batch]).unwrap();
-            assert_eq!(direct.abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap(), 0.0);
+            assert!(
+                (mse - expected).abs() < 0.03 + 0.05 * expected,
+                "t {t}: mse {mse} vs {expected}"
+            );
+            let direct = predict_noise(
+                &net.net,
+                &sched
+                    .clone()
+                    .with_parametrization(EpsParametrization::Direct),
+                &x,
+                &toy_cond(batch),
+                &vec![t; batch],
+            )
+            .unwrap();
+            assert_eq!(
+                direct
+                    .abs()
+                    .unwrap()
+                    .max_all()
+                    .unwrap()
+                    .to_scalar::<f32>()
+                    .unwrap(),
+                0.0
+            );
         }
     }
 
     #[test]
     fn parametrization_names_round_trip() {
-        for p in [EpsParametrization::Direct, EpsParametrization::Preconditioned] {
+        for p in [
+            EpsParametrization::Direct,
+            EpsParametrization::Preconditioned,
+        ] {
             let name = serde_json::to_value(p).unwrap();
-            assert_eq!(EpsParametrization::parse(name.as_str().unwrap()).unwrap(), p);
+            assert_eq!(
+                EpsParametrization::parse(name.as_str().unwrap()).unwrap(),
+                p
+            );
         }
         assert!(EpsParametrization::parse("x0").is_err());
     }

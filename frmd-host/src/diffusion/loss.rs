@@ -50,7 +50,15 @@ impl SigmaSampling {
 }
 
 /// The weighted teacher loss on one batch (clean trajectories `x0` [B, n k]).
-pub fn teacher_loss(net: &Network, sig: &SigmaConfig, x0: &Tensor, cond: &Condition, weight: LossWeight, sampling: SigmaSampling, rng: &mut HostRng) -> anyhow::Result<Tensor> {
+pub fn teacher_loss(
+    net: &Network,
+    sig: &SigmaConfig,
+    x0: &Tensor,
+    cond: &Condition,
+    weight: LossWeight,
+    sampling: SigmaSampling,
+    rng: &mut HostRng,
+) -> anyhow::Result<Tensor> {
     let (batch, dim) = x0.dims2()?;
     let device = x0.device();
     let sigmas: Vec<f64> = (0..batch).map(|_| sampling.draw(sig, rng)).collect();
@@ -65,6 +73,8 @@ pub fn teacher_loss(net: &Network, sig: &SigmaConfig, x0: &Tensor, cond: &Condit
     let eps = gaussian(rng, batch, dim, device)?;
     let noisy = (x0 + eps.broadcast_mul(&column(&sigmas, device)?)?)?;
     let denoised = teacher_denoise(net, sig, &noisy, cond, &sigmas)?;
-    let per_element = (denoised - x0)?.sqr()?.broadcast_mul(&column(&weights, device)?)?;
+    let per_element = (denoised - x0)?
+        .sqr()?
+        .broadcast_mul(&column(&weights, device)?)?;
     Ok(per_element.mean_all()?)
 }

@@ -32,35 +32,79 @@ pub fn embedding(c_noise: &[f64], embed_dim: usize, device: &Device) -> anyhow::
 }
 
 /// Per-sample network inputs for noise levels `sigmas`: (c_in column, embedding).
-pub fn noise_inputs(sig: &SigmaConfig, sigmas: &[f64], embed_dim: usize, device: &Device) -> anyhow::Result<(Tensor, Tensor)> {
-    let c_in = sigmas.iter().map(|&s| sig.c_in(s)).collect::<Result<Vec<_>, _>>().map_err(sigma_err("c_in"))?;
-    let c_noise = sigmas.iter().map(|&s| sig.c_noise(s)).collect::<Result<Vec<_>, _>>().map_err(sigma_err("c_noise"))?;
-    Ok((column(&c_in, device)?, embedding(&c_noise, embed_dim, device)?))
+pub fn noise_inputs(
+    sig: &SigmaConfig,
+    sigmas: &[f64],
+    embed_dim: usize,
+    device: &Device,
+) -> anyhow::Result<(Tensor, Tensor)> {
+    let c_in = sigmas
+        .iter()
+        .map(|&s| sig.c_in(s))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(sigma_err("c_in"))?;
+    let c_noise = sigmas
+        .iter()
+        .map(|&s| sig.c_noise(s))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(sigma_err("c_noise"))?;
+    Ok((
+        column(&c_in, device)?,
+        embedding(&c_noise, embed_dim, device)?,
+    ))
 }
 
 /// The network's decoded output g = G(E(c_in x, o, c_noise)) [B, n k] at per-row levels `sigmas`.
-fn decoded(net: &Network, sig: &SigmaConfig, x: &Tensor, cond: &Condition, sigmas: &[f64]) -> anyhow::Result<Tensor> {
+fn decoded(
+    net: &Network,
+    sig: &SigmaConfig,
+    x: &Tensor,
+    cond: &Condition,
+    sigmas: &[f64],
+) -> anyhow::Result<Tensor> {
     let (c_in, emb) = noise_inputs(sig, sigmas, net.config().embed_dim, x.device())?;
     net.predict(&x.broadcast_mul(&c_in)?, cond, &emb)
 }
 
 /// `b + c_skip (x - b) + c_out (g - b)` with per-row coefficients, computed as
 /// `c_skip x + c_out g + (1 - c_skip - c_out) b` (the runtime's `frmd_core::policy::skip_output`).
-fn skip_combine(net: &Network, cond: &Condition, x: &Tensor, g: &Tensor, c_skip: &[f64], c_out: &[f64]) -> anyhow::Result<Tensor> {
+fn skip_combine(
+    net: &Network,
+    cond: &Condition,
+    x: &Tensor,
+    g: &Tensor,
+    c_skip: &[f64],
+    c_out: &[f64],
+) -> anyhow::Result<Tensor> {
     let device = x.device();
     let rest: Vec<f64> = c_skip.iter().zip(c_out).map(|(s, o)| 1.0 - s - o).collect();
     let b = net.boundary(cond)?;
-    let out = (x.broadcast_mul(&column(c_skip, device)?)? + g.broadcast_mul(&column(c_out, device)?)?)?;
+    let out =
+        (x.broadcast_mul(&column(c_skip, device)?)? + g.broadcast_mul(&column(c_out, device)?)?)?;
     Ok((out + b.broadcast_mul(&column(&rest, device)?)?)?)
 }
 
 /// The teacher's denoised estimate D(x, o, sigma) [B, n k]; `sigmas` has one level per row.
-pub fn teacher_denoise(net: &Network, sig: &SigmaConfig, x: &Tensor, cond: &Condition, sigmas: &[f64]) -> anyhow::Result<Tensor> {
+pub fn teacher_denoise(
+    net: &Network,
+    sig: &SigmaConfig,
+    x: &Tensor,
+    cond: &Condition,
+    sigmas: &[f64],
+) -> anyhow::Result<Tensor> {
     let g = decoded(net, sig, x, cond, sigmas)?;
     match net.config().prodmp_output() {
         Some(ProDmpOutput::BoundarySkip) => {
-            let c_skip = sigmas.iter().map(|&s| sig.edm_c_skip(s)).collect::<Result<Vec<_>, _>>().map_err(sigma_err("c_skip"))?;
-            let c_out = sigmas.iter().map(|&s| sig.edm_c_out(s)).collect::<Result<Vec<_>, _>>().map_err(sigma_err("c_out"))?;
+            let c_skip = sigmas
+                .iter()
+                .map(|&s| sig.edm_c_skip(s))
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(sigma_err("c_skip"))?;
+            let c_out = sigmas
+                .iter()
+                .map(|&s| sig.edm_c_out(s))
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(sigma_err("c_out"))?;
             skip_combine(net, cond, x, &g, &c_skip, &c_out)
         }
         Some(ProDmpOutput::Direct) | None => Ok(g),
@@ -69,17 +113,37 @@ pub fn teacher_denoise(net: &Network, sig: &SigmaConfig, x: &Tensor, cond: &Cond
 
 /// The consistency function f(x, o, sigma); f(x, o, sigma_min) = x in both output forms. Levels
 /// below sigma_min are an error.
-pub fn consistency(net: &Network, sig: &SigmaConfig, x: &Tensor, cond: &Condition, sigmas: &[f64]) -> anyhow::Result<Tensor> {
+pub fn consistency(
+    net: &Network,
+    sig: &SigmaConfig,
+    x: &Tensor,
+    cond: &Condition,
+    sigmas: &[f64],
+) -> anyhow::Result<Tensor> {
     if let Some(bad) = sigmas.iter().find(|&&s| s.is_nan() || s < sig.sigma_min) {
-        anyhow::bail!("consistency function: noise level {bad} is below sigma_min {}", sig.sigma_min);
+        anyhow::bail!(
+            "consistency function: noise level {bad} is below sigma_min {}",
+            sig.sigma_min
+        );
     }
     if net.config().prodmp_output() == Some(ProDmpOutput::BoundarySkip) {
         let g = decoded(net, sig, x, cond, sigmas)?;
-        let c_skip = sigmas.iter().map(|&s| sig.c_skip(s)).collect::<Result<Vec<_>, _>>().map_err(sigma_err("c_skip"))?;
-        let c_out = sigmas.iter().map(|&s| sig.c_out(s)).collect::<Result<Vec<_>, _>>().map_err(sigma_err("c_out"))?;
+        let c_skip = sigmas
+            .iter()
+            .map(|&s| sig.c_skip(s))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(sigma_err("c_skip"))?;
+        let c_out = sigmas
+            .iter()
+            .map(|&s| sig.c_out(s))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(sigma_err("c_out"))?;
         return skip_combine(net, cond, x, &g, &c_skip, &c_out);
     }
-    let at_boundary: Vec<f64> = sigmas.iter().map(|&s| if s <= sig.sigma_min { 1.0 } else { 0.0 }).collect();
+    let at_boundary: Vec<f64> = sigmas
+        .iter()
+        .map(|&s| if s <= sig.sigma_min { 1.0 } else { 0.0 })
+        .collect();
     if at_boundary.iter().all(|&m| m == 1.0) {
         return Ok(x.clone());
     }
@@ -88,7 +152,10 @@ pub fn consistency(net: &Network, sig: &SigmaConfig, x: &Tensor, cond: &Conditio
         return Ok(inner);
     }
     let keep = column(&at_boundary, x.device())?;
-    let inner_weight = column(&at_boundary.iter().map(|m| 1.0 - m).collect::<Vec<_>>(), x.device())?;
+    let inner_weight = column(
+        &at_boundary.iter().map(|m| 1.0 - m).collect::<Vec<_>>(),
+        x.device(),
+    )?;
     Ok((x.broadcast_mul(&keep)? + inner.broadcast_mul(&inner_weight)?)?)
 }
 

@@ -32,7 +32,6 @@ impl Solver {
     }
 }
 
-
 /// A source of standard-normal f32 samples (the host training generator, or frmd-core's
 /// firmware generator so float and firmware policies can share noise streams).
 pub trait NoiseSource {
@@ -52,7 +51,12 @@ impl NoiseSource for frmd_core::rng::Rng {
 }
 
 /// Standard normal noise [B, dim] from a seeded source.
-pub fn gaussian(rng: &mut dyn NoiseSource, batch: usize, dim: usize, device: &candle_core::Device) -> anyhow::Result<Tensor> {
+pub fn gaussian(
+    rng: &mut dyn NoiseSource,
+    batch: usize,
+    dim: usize,
+    device: &candle_core::Device,
+) -> anyhow::Result<Tensor> {
     let mut data = vec![0f32; batch * dim];
     rng.fill_normal(&mut data);
     Ok(Tensor::from_vec(data, (batch, dim), device)?)
@@ -60,13 +64,24 @@ pub fn gaussian(rng: &mut dyn NoiseSource, batch: usize, dim: usize, device: &ca
 
 /// `steps` Karras levels from sigma_max down to sigma_min, then 0.
 pub fn karras_schedule(sig: &SigmaConfig, steps: usize) -> anyhow::Result<Vec<f64>> {
-    let mut levels = (0..steps).map(|i| sig.karras_sigma(i, steps)).collect::<Result<Vec<_>, _>>().map_err(sigma_err("karras schedule"))?;
+    let mut levels = (0..steps)
+        .map(|i| sig.karras_sigma(i, steps))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(sigma_err("karras schedule"))?;
     levels.push(0.0);
     Ok(levels)
 }
 
 /// One Euler or Heun step of the teacher ODE from per-row levels `from` to `to` (`to` may be 0).
-pub fn ode_step(net: &Network, sig: &SigmaConfig, x: &Tensor, cond: &Condition, from: &[f64], to: &[f64], heun: bool) -> anyhow::Result<Tensor> {
+pub fn ode_step(
+    net: &Network,
+    sig: &SigmaConfig,
+    x: &Tensor,
+    cond: &Condition,
+    from: &[f64],
+    to: &[f64],
+    heun: bool,
+) -> anyhow::Result<Tensor> {
     let device = x.device();
     let denoised = teacher_denoise(net, sig, x, cond, from)?;
     let inv_from: Vec<f64> = from.iter().map(|s| 1.0 / s).collect();
@@ -84,7 +99,14 @@ pub fn ode_step(net: &Network, sig: &SigmaConfig, x: &Tensor, cond: &Condition, 
 }
 
 /// Integrates the teacher ODE from `x` (already scaled to sigma_max) to sigma = 0 in `steps` steps.
-pub fn sample_teacher(net: &Network, sig: &SigmaConfig, cond: &Condition, x: Tensor, steps: usize, solver: Solver) -> anyhow::Result<Tensor> {
+pub fn sample_teacher(
+    net: &Network,
+    sig: &SigmaConfig,
+    cond: &Condition,
+    x: Tensor,
+    steps: usize,
+    solver: Solver,
+) -> anyhow::Result<Tensor> {
     if steps == 0 {
         bail!("teacher sampling needs at least one step");
     }
@@ -96,7 +118,15 @@ pub fn sample_teacher(net: &Network, sig: &SigmaConfig, cond: &Condition, x: Ten
         let (from, to) = (pair[0], pair[1]);
         match solver {
             Solver::Euler | Solver::Heun => {
-                x = ode_step(net, sig, &x, cond, &vec![from; batch], &vec![to; batch], solver == Solver::Heun)?;
+                x = ode_step(
+                    net,
+                    sig,
+                    &x,
+                    cond,
+                    &vec![from; batch],
+                    &vec![to; batch],
+                    solver == Solver::Heun,
+                )?;
             }
             Solver::DpmPp2m => {
                 let denoised = teacher_denoise(net, sig, &x, cond, &vec![from; batch])?;
@@ -135,13 +165,22 @@ pub fn consistency_levels(sig: &SigmaConfig, steps: usize) -> anyhow::Result<Vec
 
 /// Consistency sampling: x0 = f(sigma_max z); for each further level tau,
 /// x0 = f(x0 + sqrt(tau^2 - sigma_min^2) z', tau). `z` is the initial standard-normal noise.
-pub fn sample_consistency(net: &Network, sig: &SigmaConfig, cond: &Condition, z: &Tensor, steps: usize, rng: &mut dyn NoiseSource) -> anyhow::Result<Tensor> {
+pub fn sample_consistency(
+    net: &Network,
+    sig: &SigmaConfig,
+    cond: &Condition,
+    z: &Tensor,
+    steps: usize,
+    rng: &mut dyn NoiseSource,
+) -> anyhow::Result<Tensor> {
     let batch = z.dim(0)?;
     let levels = consistency_levels(sig, steps)?;
     let start = (z * sig.sigma_max)?;
     let mut out = consistency(net, sig, &start, cond, &vec![sig.sigma_max; batch])?;
     for &level in levels.iter().skip(1) {
-        let scale = (level * level - sig.sigma_min * sig.sigma_min).max(0.0).sqrt();
+        let scale = (level * level - sig.sigma_min * sig.sigma_min)
+            .max(0.0)
+            .sqrt();
         let noise = gaussian(rng, batch, z.dim(1)?, z.device())?;
         let noisy = (&out + (noise * scale)?)?;
         out = consistency(net, sig, &noisy, cond, &vec![level; batch])?;

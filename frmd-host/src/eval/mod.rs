@@ -68,7 +68,11 @@ impl EvalConfig {
     pub fn validate_for(&self, policy: &dyn Policy) -> Result<(), OptionError> {
         self.validate()?;
         match policy.horizon() {
-            Some(horizon) if self.exec_steps > horizon => Err(limits::range("exec-steps", self.exec_steps, format!("at most the policy's horizon {horizon} (actions per chunk)"))),
+            Some(horizon) if self.exec_steps > horizon => Err(limits::range(
+                "exec-steps",
+                self.exec_steps,
+                format!("at most the policy's horizon {horizon} (actions per chunk)"),
+            )),
             _ => Ok(()),
         }
     }
@@ -258,9 +262,19 @@ pub fn run_episodes(
 }
 
 /// [`run_episodes`] with progress over episodes on stderr (`crate::progress`).
-pub fn evaluate(task: &str, policy: &mut dyn Policy, cfg: &EvalConfig) -> anyhow::Result<EvalReport> {
-    let mut progress = crate::progress::Progress::new(&format!("eval {} on {task}", policy.name()), cfg.episodes as u64, "episode");
-    let report = run_episodes_with_progress(task, policy, cfg, &mut |done| progress.update(done as u64, ""))?;
+pub fn evaluate(
+    task: &str,
+    policy: &mut dyn Policy,
+    cfg: &EvalConfig,
+) -> anyhow::Result<EvalReport> {
+    let mut progress = crate::progress::Progress::new(
+        &format!("eval {} on {task}", policy.name()),
+        cfg.episodes as u64,
+        "episode",
+    );
+    let report = run_episodes_with_progress(task, policy, cfg, &mut |done| {
+        progress.update(done as u64, "")
+    })?;
     progress.finish();
     Ok(report)
 }

@@ -25,7 +25,8 @@ pub(crate) const FONT: &str = "sans-serif";
 const SUCCESS: RGBColor = RGBColor(30, 100, 220);
 const FAILURE: RGBColor = RGBColor(240, 120, 0);
 
-type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+type Chart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// Maps a plotters error to an error naming the plot.
 pub(crate) fn plot_err(e: impl std::fmt::Display) -> anyhow::Error {
@@ -36,7 +37,9 @@ pub(crate) fn plot_err(e: impl std::fmt::Display) -> anyhow::Error {
 /// Registers the embedded font with plotters (once per process).
 pub(crate) fn register_font() -> anyhow::Result<()> {
     static REGISTERED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    let ok = *REGISTERED.get_or_init(|| plotters::style::register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_ok());
+    let ok = *REGISTERED.get_or_init(|| {
+        plotters::style::register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_ok()
+    });
     anyhow::ensure!(ok, "plot: the embedded DejaVu Sans font did not load");
     Ok(())
 }
@@ -65,7 +68,11 @@ fn role_label(role: Role) -> &'static str {
 
 fn draw_item(chart: &mut Chart<'_, '_>, item: &LayoutItem, filled: bool) -> anyhow::Result<()> {
     let color = role_color(item.role);
-    let style = if filled { color.mix(0.25).filled() } else { color.stroke_width(2) };
+    let style = if filled {
+        color.mix(0.25).filled()
+    } else {
+        color.stroke_width(2)
+    };
     match item.shape {
         Shape::Disc { center, radius } => {
             let points: Vec<(f64, f64)> = (0..48)
@@ -75,15 +82,24 @@ fn draw_item(chart: &mut Chart<'_, '_>, item: &LayoutItem, filled: bool) -> anyh
                 })
                 .collect();
             if filled {
-                chart.draw_series(std::iter::once(Polygon::new(points, style))).map_err(plot_err)?;
+                chart
+                    .draw_series(std::iter::once(Polygon::new(points, style)))
+                    .map_err(plot_err)?;
             } else {
                 let mut closed = points.clone();
                 closed.extend(points.first().copied());
-                chart.draw_series(std::iter::once(PathElement::new(closed, style))).map_err(plot_err)?;
+                chart
+                    .draw_series(std::iter::once(PathElement::new(closed, style)))
+                    .map_err(plot_err)?;
             }
         }
         Shape::Rect { min, max } => {
-            chart.draw_series(std::iter::once(Rectangle::new([clamp(min), clamp(max)], style))).map_err(plot_err)?;
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [clamp(min), clamp(max)],
+                    style,
+                )))
+                .map_err(plot_err)?;
         }
     }
     Ok(())
@@ -95,7 +111,9 @@ fn legend_swatch(chart: &mut Chart<'_, '_>, label: &str, color: RGBColor) -> any
         .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
         .map_err(plot_err)?
         .label(label)
-        .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], color.mix(0.5).filled()));
+        .legend(move |(x, y)| {
+            Rectangle::new([(x, y - 5), (x + 14, y + 5)], color.mix(0.5).filled())
+        });
     Ok(())
 }
 
@@ -154,21 +172,41 @@ fn draw_paths(out: &Path, report: &EvalReport) -> anyhow::Result<()> {
         let mine: Vec<&KeptPath> = paths.iter().filter(|k| k.success == outcome).collect();
         for kept in &mine {
             let points: Vec<(f64, f64)> = kept.ee_path.iter().map(|&p| clamp(p)).collect();
-            chart.draw_series(LineSeries::new(points.iter().copied(), color.stroke_width(2))).map_err(plot_err)?;
+            chart
+                .draw_series(LineSeries::new(
+                    points.iter().copied(),
+                    color.stroke_width(2),
+                ))
+                .map_err(plot_err)?;
             if let Some(&start) = points.first() {
-                chart.draw_series(std::iter::once(Circle::new(start, 4, color.filled()))).map_err(plot_err)?;
+                chart
+                    .draw_series(std::iter::once(Circle::new(start, 4, color.filled())))
+                    .map_err(plot_err)?;
             }
             if let (false, Some(&end)) = (outcome, points.last()) {
-                chart.draw_series(std::iter::once(Cross::new(end, 6, BLACK.stroke_width(2)))).map_err(plot_err)?;
+                chart
+                    .draw_series(std::iter::once(Cross::new(end, 6, BLACK.stroke_width(2))))
+                    .map_err(plot_err)?;
             }
         }
         if !mine.is_empty() {
-            let label = format!("{} ({} of {} shown)", if outcome { "success" } else { "failure, ends at x" }, mine.len(), paths.len());
+            let label = format!(
+                "{} ({} of {} shown)",
+                if outcome {
+                    "success"
+                } else {
+                    "failure, ends at x"
+                },
+                mine.len(),
+                paths.len()
+            );
             chart
                 .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
                 .map_err(plot_err)?
                 .label(label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], color.stroke_width(3)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 14, y)], color.stroke_width(3))
+                });
         }
     }
     chart

@@ -1,6 +1,6 @@
 //! Evaluator tests: chunk execution, seed streams, input conventions, plotting.
-use crate::tasks::{Policy, PolicyInput};
 use super::{plot::plot_paths, run_episodes, EvalConfig};
+use crate::tasks::{Policy, PolicyInput};
 
 /// Holds the end effector still with 12-action chunks, and checks the input conventions.
 struct Hold {

@@ -19,7 +19,10 @@ pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(60);
 
 /// What the reader thread saw on QEMU's standard output.
 enum Incoming {
-    Frame { type_byte: u8, payload: Vec<u8> },
+    Frame {
+        type_byte: u8,
+        payload: Vec<u8>,
+    },
     /// Bytes that are not a frame (e.g. a panic message of the image), up to the end of output.
     Text(String),
     Closed,
@@ -70,15 +73,34 @@ impl QemuLink {
     pub fn start(image: &FirmwareImage) -> anyhow::Result<Self> {
         let mut child = Command::new(&image.qemu)
             .args(["-machine", &image.machine, "-cpu", &image.cpu])
-            .args(["-nodefaults", "-display", "none", "-monitor", "none", "-serial", "null"])
-            .args(["-semihosting-config", "enable=on,target=native", "-icount", "shift=0"])
+            .args([
+                "-nodefaults",
+                "-display",
+                "none",
+                "-monitor",
+                "none",
+                "-serial",
+                "null",
+            ])
+            .args([
+                "-semihosting-config",
+                "enable=on,target=native",
+                "-icount",
+                "shift=0",
+            ])
             .arg("-kernel")
             .arg(&image.elf)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
-            .with_context(|| format!("starting {} for {}", image.qemu.display(), image.elf.display()))?;
+            .with_context(|| {
+                format!(
+                    "starting {} for {}",
+                    image.qemu.display(),
+                    image.elf.display()
+                )
+            })?;
         let stdout = child.stdout.take().context("QEMU standard output")?;
         let mut stderr_pipe = child.stderr.take().context("QEMU standard error")?;
         let (sender, incoming) = mpsc::channel();
@@ -92,7 +114,14 @@ impl QemuLink {
                 all.push_str(&text);
             }
         });
-        Ok(QemuLink { stdin: child.stdin.take(), child, incoming, stderr, timeout: DEFAULT_TIMEOUT, board: image.board.clone() })
+        Ok(QemuLink {
+            stdin: child.stdin.take(),
+            child,
+            incoming,
+            stderr,
+            timeout: DEFAULT_TIMEOUT,
+            board: image.board.clone(),
+        })
     }
 
     /// Sends a request and waits for its reply (an `ERROR` reply is returned, not raised).
@@ -103,8 +132,14 @@ impl QemuLink {
 
     /// Writes raw bytes (well-formed or not) to the image.
     pub fn send_raw(&mut self, bytes: &[u8]) -> anyhow::Result<()> {
-        let stdin = self.stdin.as_mut().context("the link to the firmware is closed")?;
-        stdin.write_all(bytes).and_then(|()| stdin.flush()).map_err(|e| self.failure(&format!("writing to QEMU: {e}")))
+        let stdin = self
+            .stdin
+            .as_mut()
+            .context("the link to the firmware is closed")?;
+        stdin
+            .write_all(bytes)
+            .and_then(|()| stdin.flush())
+            .map_err(|e| self.failure(&format!("writing to QEMU: {e}")))
     }
 
     /// Waits for the next reply frame.
@@ -112,11 +147,19 @@ impl QemuLink {
         match self.incoming.recv_timeout(self.timeout) {
             Ok(Incoming::Frame { type_byte, payload }) => match MsgType::from_u8(type_byte) {
                 Some(msg_type) => Ok(Reply { msg_type, payload }),
-                None => Err(self.failure(&format!("reply to {what} has unknown type 0x{type_byte:02x}"))),
+                None => Err(self.failure(&format!(
+                    "reply to {what} has unknown type 0x{type_byte:02x}"
+                ))),
             },
-            Ok(Incoming::Text(text)) => Err(self.failure(&format!("the firmware wrote text instead of a reply to {what}: {text}"))),
-            Ok(Incoming::Closed) | Err(RecvTimeoutError::Disconnected) => Err(self.failure(&format!("QEMU closed its output before replying to {what}"))),
-            Err(RecvTimeoutError::Timeout) => Err(self.failure(&format!("no reply to {what} within {:?}", self.timeout))),
+            Ok(Incoming::Text(text)) => Err(self.failure(&format!(
+                "the firmware wrote text instead of a reply to {what}: {text}"
+            ))),
+            Ok(Incoming::Closed) | Err(RecvTimeoutError::Disconnected) => {
+                Err(self.failure(&format!("QEMU closed its output before replying to {what}")))
+            }
+            Err(RecvTimeoutError::Timeout) => {
+                Err(self.failure(&format!("no reply to {what} within {:?}", self.timeout)))
+            }
         }
     }
 
@@ -137,9 +180,16 @@ impl QemuLink {
     /// An error with what QEMU wrote to its standard error.
     fn failure(&mut self, what: &str) -> anyhow::Error {
         let status = self.child.try_wait().ok().flatten();
-        let stderr = self.stderr.lock().map(|s| s.trim().to_owned()).unwrap_or_default();
+        let stderr = self
+            .stderr
+            .lock()
+            .map(|s| s.trim().to_owned())
+            .unwrap_or_default();
         let status = status.map_or_else(|| "running".to_owned(), |s| s.to_string());
-        anyhow::anyhow!("firmware on {}: {what} (QEMU {status}; stderr: {stderr:?})", self.board)
+        anyhow::anyhow!(
+            "firmware on {}: {what} (QEMU {status}; stderr: {stderr:?})",
+            self.board
+        )
     }
 }
 
@@ -156,8 +206,13 @@ impl Drop for QemuLink {
 /// A whole frame of `type_byte` around `payload`.
 pub fn frame(type_byte: u8, payload: &[u8]) -> anyhow::Result<Vec<u8>> {
     let mut out = vec![0u8; HEADER_LEN + payload.len() + TRAILER_LEN];
-    let len = pil::encode(type_byte, payload, &mut out)
-        .with_context(|| format!("payload of {} bytes exceeds the frame limit of {}", payload.len(), pil::MAX_PAYLOAD))?;
+    let len = pil::encode(type_byte, payload, &mut out).with_context(|| {
+        format!(
+            "payload of {} bytes exceeds the frame limit of {}",
+            payload.len(),
+            pil::MAX_PAYLOAD
+        )
+    })?;
     out.truncate(len);
     Ok(out)
 }
@@ -184,13 +239,26 @@ fn read_frames(mut stdout: impl Read, sender: mpsc::Sender<Incoming>) {
             let _ = sender.send(Incoming::Text(format!("truncated frame {head:02x?}")));
             return;
         }
-        let crc = u32::from_le_bytes([body[header.payload_len], body[header.payload_len + 1], body[header.payload_len + 2], body[header.payload_len + 3]]);
+        let crc = u32::from_le_bytes([
+            body[header.payload_len],
+            body[header.payload_len + 1],
+            body[header.payload_len + 2],
+            body[header.payload_len + 3],
+        ]);
         body.truncate(header.payload_len);
         if crc != pil::frame_crc(&head, &body) {
-            let _ = sender.send(Incoming::Text(format!("reply with a bad CRC, header {head:02x?}")));
+            let _ = sender.send(Incoming::Text(format!(
+                "reply with a bad CRC, header {head:02x?}"
+            )));
             return;
         }
-        if sender.send(Incoming::Frame { type_byte: header.type_byte, payload: body }).is_err() {
+        if sender
+            .send(Incoming::Frame {
+                type_byte: header.type_byte,
+                payload: body,
+            })
+            .is_err()
+        {
             return;
         }
     }

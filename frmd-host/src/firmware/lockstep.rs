@@ -23,19 +23,29 @@ pub struct Lockstep<A, B> {
 
 impl<A: Policy, B: Policy> Lockstep<A, B> {
     pub fn new(lead: A, shadow: B) -> Self {
-        Lockstep { lead, shadow, count: LockstepCount::default() }
+        Lockstep {
+            lead,
+            shadow,
+            count: LockstepCount::default(),
+        }
     }
 }
 
 /// Whether two chunks hold the same f32 bit patterns.
 pub fn same_bits(a: &[Vec<f32>], b: &[Vec<f32>]) -> bool {
     a.len() == b.len()
-        && a.iter().zip(b).all(|(x, y)| x.len() == y.len() && x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits()))
+        && a.iter().zip(b).all(|(x, y)| {
+            x.len() == y.len() && x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits())
+        })
 }
 
 impl<A: Policy, B: Policy> Policy for Lockstep<A, B> {
     fn name(&self) -> String {
-        format!("{} (checked against {})", self.lead.name(), self.shadow.name())
+        format!(
+            "{} (checked against {})",
+            self.lead.name(),
+            self.shadow.name()
+        )
     }
 
     fn reset(&mut self, seed: u64) {

@@ -40,10 +40,17 @@ pub fn default_repo() -> PathBuf {
 /// MLP students) to bake into the image instead of the checked-in reach student.
 pub fn build(repo: &Path, board: &str, baked: Option<&Path>) -> anyhow::Result<FirmwareImage> {
     if !BOARDS.contains(&board) {
-        bail!("unknown firmware core {board:?}; expected one of {}", BOARDS.join(", "));
+        bail!(
+            "unknown firmware core {board:?}; expected one of {}",
+            BOARDS.join(", ")
+        );
     }
     let script = repo.join("examples/cortex-m/run-qemu.sh");
-    anyhow::ensure!(script.is_file(), "{} not found (the firmware sources are needed to build the pil image)", script.display());
+    anyhow::ensure!(
+        script.is_file(),
+        "{} not found (the firmware sources are needed to build the pil image)",
+        script.display()
+    );
     let mut command = Command::new("bash");
     command
         .arg(&script)
@@ -54,12 +61,20 @@ pub fn build(repo: &Path, board: &str, baked: Option<&Path>) -> anyhow::Result<F
     if let Some(dir) = baked {
         for file in ["policy.rs", "weights.bin"] {
             let path = dir.join(file);
-            anyhow::ensure!(path.is_file(), "baked module {}: {file} missing (expected the output of `frmd export --out DIR`)", dir.display());
+            anyhow::ensure!(
+                path.is_file(),
+                "baked module {}: {file} missing (expected the output of `frmd export --out DIR`)",
+                dir.display()
+            );
         }
-        let dir = dir.canonicalize().with_context(|| format!("baked module {}", dir.display()))?;
+        let dir = dir
+            .canonicalize()
+            .with_context(|| format!("baked module {}", dir.display()))?;
         command.env("FRMD_PIL_BAKED", dir);
     }
-    let output = command.output().with_context(|| format!("running {}", script.display()))?;
+    let output = command
+        .output()
+        .with_context(|| format!("running {}", script.display()))?;
     let stdout = String::from_utf8_lossy(&output.stdout);
     if !output.status.success() {
         bail!(
@@ -75,7 +90,9 @@ pub fn build(repo: &Path, board: &str, baked: Option<&Path>) -> anyhow::Result<F
             .lines()
             .find_map(|line| line.strip_prefix(prefix.as_str()))
             .map(str::to_owned)
-            .with_context(|| format!("run-qemu.sh {board} pil printed no `{key}:` line (output: {stdout})"))
+            .with_context(|| {
+                format!("run-qemu.sh {board} pil printed no `{key}:` line (output: {stdout})")
+            })
     };
     Ok(FirmwareImage {
         board: board.to_owned(),
@@ -91,4 +108,3 @@ fn tail(text: &str, lines: usize) -> String {
     let all: Vec<&str> = text.lines().collect();
     all[all.len().saturating_sub(lines)..].join("\n")
 }
-

@@ -6,9 +6,9 @@
 //! `Policy::reset`, `observe`, `set_previous_action` and `act` on them, so both give the same bits.
 use super::link::{QemuLink, Reply};
 use super::FirmwareImage;
-use frmd_firmware_support::cpuid::core_name;
 use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
+use frmd_firmware_support::cpuid::core_name;
 use frmd_firmware_support::pil::{self, MsgType, CHUNK_PREFIX, INFO_LEN};
 use serde::Serialize;
 
@@ -67,10 +67,20 @@ impl FirmwarePolicy {
         let mut link = QemuLink::start(image)?;
         let reply = expect(link.request(MsgType::Hello, &[])?, MsgType::Info, "HELLO")?;
         if reply.len() != INFO_LEN {
-            bail!("INFO payload has {} bytes, expected {INFO_LEN}", reply.len());
+            bail!(
+                "INFO payload has {} bytes, expected {INFO_LEN}",
+                reply.len()
+            );
         }
         let half = |i: usize| usize::from(u16::from_le_bytes([reply[2 * i], reply[2 * i + 1]]));
-        let word = |i: usize| u32::from_le_bytes([reply[8 + 4 * i], reply[9 + 4 * i], reply[10 + 4 * i], reply[11 + 4 * i]]);
+        let word = |i: usize| {
+            u32::from_le_bytes([
+                reply[8 + 4 * i],
+                reply[9 + 4 * i],
+                reply[10 + 4 * i],
+                reply[11 + 4 * i],
+            ])
+        };
         let info = FirmwareInfo {
             board: image.board.clone(),
             core: core_name(word(0)),
@@ -83,7 +93,14 @@ impl FirmwarePolicy {
             instructions_per_tick: f64::from(word(3)) / 1000.0,
         };
         let label = format!("firmware-{}", image.board);
-        Ok(FirmwarePolicy { link, info, label, act_instructions: Vec::new(), request_instructions: Vec::new(), pending: None })
+        Ok(FirmwarePolicy {
+            link,
+            info,
+            label,
+            act_instructions: Vec::new(),
+            request_instructions: Vec::new(),
+            pending: None,
+        })
     }
 
     pub fn info(&self) -> &FirmwareInfo {
@@ -99,24 +116,45 @@ impl FirmwarePolicy {
     pub fn stats(&self) -> InstructionStats {
         let (act_min, act_max, act_mean) = summary(&self.act_instructions);
         let (request_min, request_max, request_mean) = summary(&self.request_instructions);
-        InstructionStats { chunks: self.act_instructions.len(), act_min, act_max, act_mean, request_min, request_max, request_mean }
+        InstructionStats {
+            chunks: self.act_instructions.len(),
+            act_min,
+            act_max,
+            act_mean,
+            request_min,
+            request_max,
+            request_mean,
+        }
     }
 
     /// Reseeds the image's noise stream.
     pub fn reseed(&mut self, seed: u64) -> anyhow::Result<()> {
-        expect(self.link.request(MsgType::Reset, &seed.to_le_bytes())?, MsgType::ResetOk, "RESET").map(drop)
+        expect(
+            self.link.request(MsgType::Reset, &seed.to_le_bytes())?,
+            MsgType::ResetOk,
+            "RESET",
+        )
+        .map(drop)
     }
 
     /// One chunk: `obs` (`history x obs_dim`, oldest first), the last commanded action and its
     /// rate in; the positions (`horizon x action_dim`, step-major) out.
     /// A `RESET` that failed before (see [`Policy::reset`]) is raised here.
-    pub fn chunk(&mut self, obs: &[f32], prev_action: &[f32], prev_rate: &[f32]) -> anyhow::Result<Vec<f32>> {
+    pub fn chunk(
+        &mut self,
+        obs: &[f32],
+        prev_action: &[f32],
+        prev_rate: &[f32],
+    ) -> anyhow::Result<Vec<f32>> {
         if let Some(error) = self.pending.take() {
             return Err(error.context("RESET of the firmware policy"));
         }
         let info = &self.info;
         let k = info.action_dim;
-        if obs.len() != info.history * info.obs_dim || prev_action.len() != k || prev_rate.len() != k {
+        if obs.len() != info.history * info.obs_dim
+            || prev_action.len() != k
+            || prev_rate.len() != k
+        {
             bail!(
                 "firmware policy expects {} x {} observation values and {k}-value action and rate, got {}, {} and {}",
                 info.history,
@@ -127,15 +165,30 @@ impl FirmwarePolicy {
             );
         }
         let mut payload = vec![0u8; pil::act_len(info.history, info.obs_dim, k)];
-        let values = obs.iter().chain(prev_action).chain(prev_rate).copied().collect::<Vec<f32>>();
+        let values = obs
+            .iter()
+            .chain(prev_action)
+            .chain(prev_rate)
+            .copied()
+            .collect::<Vec<f32>>();
         pil::write_f32s(&values, &mut payload);
-        let reply = expect(self.link.request(MsgType::Act, &payload)?, MsgType::Chunk, "ACT")?;
+        let reply = expect(
+            self.link.request(MsgType::Act, &payload)?,
+            MsgType::Chunk,
+            "ACT",
+        )?;
         let expected = pil::chunk_len(info.horizon, k);
         if reply.len() != expected {
-            bail!("CHUNK payload has {} bytes, expected {expected} (horizon {} x action {k})", reply.len(), info.horizon);
+            bail!(
+                "CHUNK payload has {} bytes, expected {expected} (horizon {} x action {k})",
+                reply.len(),
+                info.horizon
+            );
         }
-        self.act_instructions.push(u32::from_le_bytes([reply[0], reply[1], reply[2], reply[3]]));
-        self.request_instructions.push(u32::from_le_bytes([reply[4], reply[5], reply[6], reply[7]]));
+        self.act_instructions
+            .push(u32::from_le_bytes([reply[0], reply[1], reply[2], reply[3]]));
+        self.request_instructions
+            .push(u32::from_le_bytes([reply[4], reply[5], reply[6], reply[7]]));
         let mut positions = vec![0f32; info.horizon * k];
         pil::read_f32s(&reply[CHUNK_PREFIX..], &mut positions);
         Ok(positions)
@@ -159,7 +212,11 @@ fn expect(reply: Reply, want: MsgType, request: &str) -> anyhow::Result<Vec<u8>>
         bail!("firmware rejected {request}: {code}: {}", error.text);
     }
     if reply.msg_type != want {
-        bail!("firmware answered {request} with {}, expected {}", reply.msg_type.name(), want.name());
+        bail!(
+            "firmware answered {request} with {}, expected {}",
+            reply.msg_type.name(),
+            want.name()
+        );
     }
     Ok(reply.payload)
 }
@@ -177,10 +234,19 @@ impl Policy for FirmwarePolicy {
 
     fn act(&mut self, input: &PolicyInput<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
         if input.obs_history.len() != self.info.history {
-            bail!("firmware policy expects an observation history of {}, got {}", self.info.history, input.obs_history.len());
+            bail!(
+                "firmware policy expects an observation history of {}, got {}",
+                self.info.history,
+                input.obs_history.len()
+            );
         }
         let obs: Vec<f32> = input.obs_history.concat();
-        let positions = self.chunk(&obs, input.prev_action, input.prev_rate).context("firmware chunk")?;
-        Ok(positions.chunks(self.info.action_dim.max(1)).map(<[f32]>::to_vec).collect())
+        let positions = self
+            .chunk(&obs, input.prev_action, input.prev_rate)
+            .context("firmware chunk")?;
+        Ok(positions
+            .chunks(self.info.action_dim.max(1))
+            .map(<[f32]>::to_vec)
+            .collect())
     }
 }

@@ -45,7 +45,10 @@ mod tests {
         let values = ys.to_vec1::<f32>()?;
         for (x, y) in [-30f32, -1.0, 0.0, 1.0, 50.0, 200.0].iter().zip(&values) {
             let reference = (*x as f64) * ((1.0 + (*x as f64).exp()).ln()).tanh();
-            assert!((reference - *y as f64).abs() < 1e-5 * (1.0 + x.abs() as f64), "{x}: {y}");
+            assert!(
+                (reference - *y as f64).abs() < 1e-5 * (1.0 + x.abs() as f64),
+                "{x}: {y}"
+            );
         }
         let grads = ys.sum_all()?.backward()?;
         let g = grads.get(&xs).expect("gradient").to_vec1::<f32>()?;

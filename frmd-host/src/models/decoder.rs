@@ -34,7 +34,13 @@ impl DecoderRows {
             pos_y0.push(coeffs.pos_y0);
             pos_v0.push(coeffs.pos_v0);
         }
-        Ok(DecoderRows { horizon, num_params, pos_params, pos_y0, pos_v0 })
+        Ok(DecoderRows {
+            horizon,
+            num_params,
+            pos_params,
+            pos_y0,
+            pos_v0,
+        })
     }
 }
 
@@ -56,7 +62,9 @@ impl ProDmpDecoder {
     pub fn new(cfg: &ProDmpConfig, horizon: usize, device: &Device) -> anyhow::Result<Self> {
         let rows = DecoderRows::new(cfg, horizon)?;
         let pos: Vec<f32> = rows.pos_params.iter().map(|&v| v as f32).collect();
-        let params_to_pos = Tensor::from_vec(pos, (horizon, rows.num_params), device)?.t()?.contiguous()?;
+        let params_to_pos = Tensor::from_vec(pos, (horizon, rows.num_params), device)?
+            .t()?
+            .contiguous()?;
         let y0: Vec<f32> = rows.pos_y0.iter().map(|&v| v as f32).collect();
         let v0: Vec<f32> = rows.pos_v0.iter().map(|&v| v as f32).collect();
         Ok(ProDmpDecoder {
@@ -123,19 +131,36 @@ mod tests {
         let mut rng = HostRng::new(3);
         for _ in 0..5 {
             let mut params = [[0f32; P]; K];
-            params.iter_mut().flatten().for_each(|v| *v = rng.normal() as f32);
+            params
+                .iter_mut()
+                .flatten()
+                .for_each(|v| *v = rng.normal() as f32);
             let y0 = [rng.normal() as f32, rng.normal() as f32];
             let v0 = [rng.normal() as f32, rng.normal() as f32];
             let (mut pos, mut vel) = ([[0f32; K]; N], [[0f32; K]; N]);
             baked.decode(&params, &y0, &v0, &mut pos, &mut vel).unwrap();
-            let theta = Tensor::from_vec(params.iter().flatten().copied().collect::<Vec<_>>(), (1, K * P), &Device::Cpu).unwrap();
+            let theta = Tensor::from_vec(
+                params.iter().flatten().copied().collect::<Vec<_>>(),
+                (1, K * P),
+                &Device::Cpu,
+            )
+            .unwrap();
             let y0t = Tensor::from_slice(&y0, (1, K), &Device::Cpu).unwrap();
             let v0t = Tensor::from_slice(&v0, (1, K), &Device::Cpu).unwrap();
-            let out = decoder.decode(&theta, &y0t, &v0t).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+            let out = decoder
+                .decode(&theta, &y0t, &v0t)
+                .unwrap()
+                .flatten_all()
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap();
             let reference: Vec<f32> = pos.iter().flatten().copied().collect();
             let scale = reference.iter().fold(0f32, |m, v| m.max(v.abs()));
             for (a, b) in out.iter().zip(&reference) {
-                assert!((a - b).abs() <= 1e-5 * scale.max(1.0), "candle {a} vs frmd-core {b}");
+                assert!(
+                    (a - b).abs() <= 1e-5 * scale.max(1.0),
+                    "candle {a} vs frmd-core {b}"
+                );
             }
         }
     }

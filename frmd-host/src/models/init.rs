@@ -25,7 +25,9 @@ pub fn init_seeded(varmap: &VarMap, seed: u64) -> anyhow::Result<()> {
             (0..count).map(|_| 0.02 * rng.normal() as f32).collect()
         } else if name.ends_with(".weight") && dims.len() == 2 {
             let bound = 1.0 / (dims[1] as f64).sqrt();
-            (0..count).map(|_| ((2.0 * rng.uniform() - 1.0) * bound) as f32).collect()
+            (0..count)
+                .map(|_| ((2.0 * rng.uniform() - 1.0) * bound) as f32)
+                .collect()
         } else if name.ends_with(".bias") && dims.len() == 1 {
             vec![0.0; count]
         } else if name.ends_with(".weight") && dims.len() == 1 {
@@ -34,7 +36,8 @@ pub fn init_seeded(varmap: &VarMap, seed: u64) -> anyhow::Result<()> {
             bail!("no initialization rule for variable `{name}` with shape {dims:?}");
         };
         let tensor = Tensor::from_vec(values, dims.as_slice(), var.device())?;
-        var.set(&tensor).with_context(|| format!("initializing `{name}`"))?;
+        var.set(&tensor)
+            .with_context(|| format!("initializing `{name}`"))?;
     }
     Ok(())
 }
@@ -49,7 +52,11 @@ pub fn ema_update(target: &VarMap, source: &VarMap, mu: f64) -> anyhow::Result<(
     let sources = sorted_vars(source);
     let targets = sorted_vars(target);
     if sources.len() != targets.len() {
-        bail!("EMA: {} source variables vs {} target variables", sources.len(), targets.len());
+        bail!(
+            "EMA: {} source variables vs {} target variables",
+            sources.len(),
+            targets.len()
+        );
     }
     for ((sname, svar), (tname, tvar)) in sources.iter().zip(&targets) {
         if sname != tname {

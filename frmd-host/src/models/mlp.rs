@@ -11,11 +11,21 @@ pub struct Mlp {
 }
 
 impl Mlp {
-    pub fn new(input: usize, hidden: &[usize], output: usize, activation: Activation, vb: VarBuilder) -> Result<Self> {
+    pub fn new(
+        input: usize,
+        hidden: &[usize],
+        output: usize,
+        activation: Activation,
+        vb: VarBuilder,
+    ) -> Result<Self> {
         let mut layers = Vec::with_capacity(hidden.len() + 1);
         let mut width = input;
         for (i, &next) in hidden.iter().chain(std::iter::once(&output)).enumerate() {
-            layers.push(candle_nn::linear(width, next, vb.pp(format!("layers.{i}")))?);
+            layers.push(candle_nn::linear(
+                width,
+                next,
+                vb.pp(format!("layers.{i}")),
+            )?);
             width = next;
         }
         Ok(Mlp { layers, activation })

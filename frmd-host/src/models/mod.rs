@@ -35,7 +35,13 @@ impl Condition {
     }
 
     /// Builds a condition from row-major f32 slices.
-    pub fn from_slices(cfg: &ModelConfig, obs: &[f32], y0: &[f32], v0: &[f32], device: &Device) -> anyhow::Result<Self> {
+    pub fn from_slices(
+        cfg: &ModelConfig,
+        obs: &[f32],
+        y0: &[f32],
+        v0: &[f32],
+        device: &Device,
+    ) -> anyhow::Result<Self> {
         let k = cfg.action_dim;
         let batch = y0.len() / k;
         let obs = Tensor::from_slice(obs, (batch, cfg.history * cfg.obs_dim), device)?;
@@ -70,7 +76,11 @@ impl Network {
                 *activation,
                 vb.pp("mlp"),
             )?),
-            BackboneConfig::Transformer { layers, heads, width } => Backbone::Transformer(transformer::Transformer::new(
+            BackboneConfig::Transformer {
+                layers,
+                heads,
+                width,
+            } => Backbone::Transformer(transformer::Transformer::new(
                 &transformer::TransformerSizes {
                     layers: *layers,
                     heads: *heads,
@@ -88,7 +98,11 @@ impl Network {
             Some(pcfg) => Some(ProDmpDecoder::new(&pcfg, cfg.horizon, vb.device())?),
             None => None,
         };
-        Ok(Network { cfg: cfg.clone(), backbone, decoder })
+        Ok(Network {
+            cfg: cfg.clone(),
+            backbone,
+            decoder,
+        })
     }
 
     pub fn config(&self) -> &ModelConfig {
@@ -105,7 +119,12 @@ impl Network {
     }
 
     /// The backbone's raw output [B, output_dim] (ProDMP parameters or a raw trajectory).
-    pub fn raw_output(&self, x_scaled: &Tensor, cond: &Condition, emb: &Tensor) -> anyhow::Result<Tensor> {
+    pub fn raw_output(
+        &self,
+        x_scaled: &Tensor,
+        cond: &Condition,
+        emb: &Tensor,
+    ) -> anyhow::Result<Tensor> {
         Ok(match &self.backbone {
             Backbone::Mlp(m) => m.forward(x_scaled, &cond.features, emb)?,
             Backbone::Transformer(t) => t.forward(x_scaled, &cond.features, emb)?,
@@ -122,7 +141,12 @@ impl Network {
     }
 
     /// Trajectory-shaped output [B, n k]: the decoded ProDMP trajectory, or the raw output.
-    pub fn predict(&self, x_scaled: &Tensor, cond: &Condition, emb: &Tensor) -> anyhow::Result<Tensor> {
+    pub fn predict(
+        &self,
+        x_scaled: &Tensor,
+        cond: &Condition,
+        emb: &Tensor,
+    ) -> anyhow::Result<Tensor> {
         let raw = self.raw_output(x_scaled, cond, emb)?;
         match &self.decoder {
             Some(dec) => dec.decode(&raw, &cond.y0, &cond.v0),

@@ -77,7 +77,10 @@ struct Linear {
 
 impl Linear {
     fn new(in_features: usize, out_features: usize, vb: VarBuilder) -> Result<Self> {
-        Ok(Linear { weight: vb.get((out_features, in_features), "weight")?, bias: vb.get(out_features, "bias")? })
+        Ok(Linear {
+            weight: vb.get((out_features, in_features), "weight")?,
+            bias: vb.get(out_features, "bias")?,
+        })
     }
 
     /// `xs` `[R, in]` -> `[R, out]`; `rows` sized for R rows.
@@ -94,13 +97,18 @@ struct Norm {
 
 impl Norm {
     fn new(width: usize, vb: VarBuilder) -> Result<Self> {
-        Ok(Norm { weight: vb.get(width, "weight")?, bias: vb.get(width, "bias")? })
+        Ok(Norm {
+            weight: vb.get(width, "weight")?,
+            bias: vb.get(width, "bias")?,
+        })
     }
 
     /// `xs` `[R, W]` -> `(x - mean) / sqrt(var + eps) * weight + bias`, biased variance.
     fn forward(&self, xs: &Tensor, rows: &Rows) -> Result<Tensor> {
         let centred = (xs - rows.spread(&rows.row_mean(xs)?)?)?;
-        let inv_std = (rows.row_mean(&centred.sqr()?)? + NORM_EPS)?.sqrt()?.recip()?;
+        let inv_std = (rows.row_mean(&centred.sqr()?)? + NORM_EPS)?
+            .sqrt()?
+            .recip()?;
         let normed = (centred * rows.spread(&inv_std)?)?;
         (normed * rows.expand(&self.weight)?)? + rows.expand(&self.bias)?
     }
@@ -109,7 +117,9 @@ impl Norm {
 /// Softmax over the last dimension. The row maximum is a constant shift (softmax does not depend
 /// on it), so it is detached: no gradient flows through the max.
 fn softmax_last(xs: &Tensor) -> Result<Tensor> {
-    let shifted = xs.broadcast_sub(&xs.max_keepdim(D::Minus1)?.detach())?.exp()?;
+    let shifted = xs
+        .broadcast_sub(&xs.max_keepdim(D::Minus1)?.detach())?
+        .exp()?;
     shifted.broadcast_div(&shifted.sum_keepdim(D::Minus1)?)
 }
 
@@ -142,7 +152,9 @@ impl Block {
         let tokens = row_count / batch;
         let head_dim = width / self.heads;
         let qkv = self.qkv.forward(&self.norm1.forward(xs, rows)?, rows)?;
-        let qkv = qkv.reshape((batch, tokens, 3, self.heads, head_dim))?.permute((2, 0, 3, 1, 4))?;
+        let qkv = qkv
+            .reshape((batch, tokens, 3, self.heads, head_dim))?
+            .permute((2, 0, 3, 1, 4))?;
         let q = qkv.get(0)?.contiguous()?;
         let k = qkv.get(1)?.contiguous()?;
         let v = qkv.get(2)?.contiguous()?;
@@ -195,18 +207,25 @@ impl Transformer {
         let per_batch = Rows::new(batch, s.width, x_scaled)?;
         let per_step = Rows::new(batch * s.horizon, s.width, x_scaled)?;
         let per_token = Rows::new(batch * tokens, s.width, x_scaled)?;
-        let steps = self.traj_in.forward(&x_scaled.reshape((batch * s.horizon, s.action_dim))?, &per_step)?;
+        let steps = self.traj_in.forward(
+            &x_scaled.reshape((batch * s.horizon, s.action_dim))?,
+            &per_step,
+        )?;
         let cond_token = self.cond_in.forward(cond, &per_batch)?.unsqueeze(1)?;
         let noise_token = self.noise_in.forward(emb, &per_batch)?.unsqueeze(1)?;
         let steps = steps.reshape((batch, s.horizon, s.width))?;
-        let h = Tensor::cat(&[&cond_token, &noise_token, &steps], 1)?.reshape((batch, tokens * s.width))?;
-        let h = (h + per_batch.ones_rows.matmul(&self.pos_embedding.reshape((1, tokens * s.width))?)?)?;
+        let h = Tensor::cat(&[&cond_token, &noise_token, &steps], 1)?
+            .reshape((batch, tokens * s.width))?;
+        let h = (h + per_batch
+            .ones_rows
+            .matmul(&self.pos_embedding.reshape((1, tokens * s.width))?)?)?;
         let mut h = h.reshape((batch * tokens, s.width))?;
         for block in &self.blocks {
             h = block.forward(&h, batch, &per_token)?;
         }
         let h = self.final_norm.forward(&h, &per_token)?;
-        self.head.forward(&h.reshape((batch, tokens * s.width))?, &per_batch)
+        self.head
+            .forward(&h.reshape((batch, tokens * s.width))?, &per_batch)
     }
 }
 

@@ -10,7 +10,10 @@
 use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
 use frmd_core::blob::{LoadedMlp, LoadedTransformer, TRANSFORMER_MAGIC};
-use frmd_core::policy::{F32MlpNetwork, F32TransformerNetwork, Int8MlpNetwork, Network, Noise, Policy as CorePolicy, PolicyDims, PolicyError};
+use frmd_core::policy::{
+    F32MlpNetwork, F32TransformerNetwork, Int8MlpNetwork, Network, Noise, Policy as CorePolicy,
+    PolicyDims, PolicyError,
+};
 use frmd_core::prodmp::MAX_NUM_BASIS;
 use frmd_core::rng::Rng;
 use frmd_export::fold::{FoldedMlp, MAX_WIDTH};
@@ -30,7 +33,16 @@ pub const MAX_PARAMS_PER_DOF: usize = MAX_NUM_BASIS + 1;
 
 /// frmd-core's policy with the host capacities (the model input up to the exporter's widest
 /// layer).
-type HostPolicy<'a, Net> = CorePolicy<'a, Net, MAX_HISTORY, MAX_OBS_DIM, MAX_ACTION_DIM, MAX_HORIZON, MAX_PARAMS_PER_DOF, MAX_WIDTH>;
+type HostPolicy<'a, Net> = CorePolicy<
+    'a,
+    Net,
+    MAX_HISTORY,
+    MAX_OBS_DIM,
+    MAX_ACTION_DIM,
+    MAX_HORIZON,
+    MAX_PARAMS_PER_DOF,
+    MAX_WIDTH,
+>;
 
 /// A blob copied into 4-aligned memory (the loaders read it in place).
 pub struct Blob {
@@ -42,7 +54,10 @@ impl Blob {
     pub fn new(bytes: &[u8]) -> Self {
         let mut words = vec![0u32; bytes.len().div_ceil(4)];
         bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..bytes.len()].copy_from_slice(bytes);
-        Blob { words, len: bytes.len() }
+        Blob {
+            words,
+            len: bytes.len(),
+        }
     }
 
     pub fn bytes(&self) -> &[u8] {
@@ -57,7 +72,13 @@ impl Blob {
 
 /// A blob whose sizes exceed the host's capacities is refused with its own shape.
 fn check_host_capacity(d: &PolicyDims) -> anyhow::Result<()> {
-    let limits = [("history", d.history, MAX_HISTORY), ("obs_dim", d.obs_dim, MAX_OBS_DIM), ("action_dim", d.action_dim, MAX_ACTION_DIM), ("horizon", d.horizon, MAX_HORIZON), ("params_per_dof", d.params_per_dof, MAX_PARAMS_PER_DOF)];
+    let limits = [
+        ("history", d.history, MAX_HISTORY),
+        ("obs_dim", d.obs_dim, MAX_OBS_DIM),
+        ("action_dim", d.action_dim, MAX_ACTION_DIM),
+        ("horizon", d.horizon, MAX_HORIZON),
+        ("params_per_dof", d.params_per_dof, MAX_PARAMS_PER_DOF),
+    ];
     if let Some((field, value, max)) = limits.iter().find(|(_, v, max)| v > max) {
         bail!(
             "blob shape history {} obs_dim {} action_dim {} horizon {} params_per_dof {}: the host runs {field} up to {max}, not {value}",
@@ -73,20 +94,35 @@ fn policy_error(what: &'static str) -> impl Fn(PolicyError) -> anyhow::Error {
 
 /// One chunk of `policy` from raw inputs: a fresh episode with the observation history and the
 /// last commanded action and rate of `input`; the positions `[n][k]` in raw units.
-fn run_chunk<Net: Network>(policy: &mut HostPolicy<'_, Net>, input: &PolicyInput<'_>, noise: Noise<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
+fn run_chunk<Net: Network>(
+    policy: &mut HostPolicy<'_, Net>,
+    input: &PolicyInput<'_>,
+    noise: Noise<'_>,
+) -> anyhow::Result<Vec<Vec<f32>>> {
     let dims = policy.dims();
     if input.obs_history.len() != dims.history {
-        bail!("int8 policy expects an observation history of {}, got {}", dims.history, input.obs_history.len());
+        bail!(
+            "int8 policy expects an observation history of {}, got {}",
+            dims.history,
+            input.obs_history.len()
+        );
     }
     let err = policy_error("int8 policy");
     policy.reset(input.prev_action).map_err(&err)?;
     for obs in input.obs_history {
         policy.observe(obs).map_err(&err)?;
     }
-    policy.set_previous_action(input.prev_action, input.prev_rate).map_err(&err)?;
+    policy
+        .set_previous_action(input.prev_action, input.prev_rate)
+        .map_err(&err)?;
     let chunk = policy.act(noise).map_err(&err)?;
-    let (positions, _) = chunk.values(dims.horizon * dims.action_dim).context("chunk")?;
-    Ok(positions.chunks(dims.action_dim).map(<[f32]>::to_vec).collect())
+    let (positions, _) = chunk
+        .values(dims.horizon * dims.action_dim)
+        .context("chunk")?;
+    Ok(positions
+        .chunks(dims.action_dim)
+        .map(<[f32]>::to_vec)
+        .collect())
 }
 
 type MlpPolicy<'a> = HostPolicy<'a, Int8MlpNetwork<'a, MAX_WIDTH>>;
@@ -130,16 +166,25 @@ self_cell::self_cell!(
 enum Runner {
     Mlp(MlpRunner),
     MlpF32(MlpF32Runner),
-    Transformer { blob: TransformerBlob, scratch: Box<HostScratch>, f32_twin: Option<Box<FoldedTransformer>> },
+    Transformer {
+        blob: TransformerBlob,
+        scratch: Box<HostScratch>,
+        f32_twin: Option<Box<FoldedTransformer>>,
+    },
 }
 
 impl Runner {
     fn new(bytes: &[u8]) -> anyhow::Result<Self> {
         let blob = Blob::new(bytes);
         if blob.is_transformer() {
-            let blob = TransformerBlob::try_new(blob, |b| LoadedTransformer::load(b.bytes())).map_err(|e| anyhow::anyhow!("transformer blob: {e}"))?;
+            let blob = TransformerBlob::try_new(blob, |b| LoadedTransformer::load(b.bytes()))
+                .map_err(|e| anyhow::anyhow!("transformer blob: {e}"))?;
             check_host_capacity(&blob.borrow_dependent().dims())?;
-            return Ok(Runner::Transformer { blob, scratch: Box::new(HostScratch::new()), f32_twin: None });
+            return Ok(Runner::Transformer {
+                blob,
+                scratch: Box::new(HostScratch::new()),
+                f32_twin: None,
+            });
         }
         let runner = MlpRunner::try_new(blob, |b| {
             let loaded = LoadedMlp::load(b.bytes()).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
@@ -159,21 +204,43 @@ impl Runner {
 
     fn run(&mut self, input: &PolicyInput<'_>, noise: Noise<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
         match self {
-            Runner::Mlp(runner) => runner.with_dependent_mut(|_, policy| run_chunk(policy, input, noise)),
-            Runner::MlpF32(runner) => runner.with_dependent_mut(|_, policy| run_chunk(policy, input, noise)),
-            Runner::Transformer { blob, scratch, f32_twin } => {
+            Runner::Mlp(runner) => {
+                runner.with_dependent_mut(|_, policy| run_chunk(policy, input, noise))
+            }
+            Runner::MlpF32(runner) => {
+                runner.with_dependent_mut(|_, policy| run_chunk(policy, input, noise))
+            }
+            Runner::Transformer {
+                blob,
+                scratch,
+                f32_twin,
+            } => {
                 let loaded = blob.borrow_dependent();
                 let err = policy_error("transformer policy");
                 match f32_twin {
                     None => {
                         let network = loaded.network(&mut **scratch).map_err(&err)?;
-                        run_chunk(&mut HostPolicy::new(loaded.config(), network).map_err(&err)?, input, noise)
+                        run_chunk(
+                            &mut HostPolicy::new(loaded.config(), network).map_err(&err)?,
+                            input,
+                            noise,
+                        )
                     }
                     Some(folded) => {
                         let blocks = folded.f32_blocks();
                         let tokens = folded.flat_noise_tokens();
-                        let network = F32TransformerNetwork::new(folded.view(&blocks, 0)?, &folded.layout, &tokens, &mut **scratch).map_err(&err)?;
-                        run_chunk(&mut HostPolicy::new(loaded.config(), network).map_err(&err)?, input, noise)
+                        let network = F32TransformerNetwork::new(
+                            folded.view(&blocks, 0)?,
+                            &folded.layout,
+                            &tokens,
+                            &mut **scratch,
+                        )
+                        .map_err(&err)?;
+                        run_chunk(
+                            &mut HostPolicy::new(loaded.config(), network).map_err(&err)?,
+                            input,
+                            noise,
+                        )
                     }
                 }
             }
@@ -192,7 +259,11 @@ pub struct Int8Policy {
 impl Int8Policy {
     /// The policy of an MLP (`FRMD`) or transformer (`FRMT`) blob, chosen by its magic.
     pub fn from_blob(bytes: &[u8], label: &str) -> anyhow::Result<Self> {
-        Ok(Int8Policy { runner: Runner::new(bytes)?, rng: Rng::new(0), label: label.into() })
+        Ok(Int8Policy {
+            runner: Runner::new(bytes)?,
+            rng: Rng::new(0),
+            label: label.into(),
+        })
     }
 
     /// The same runtime policy as [`Self::from_blob`] of an MLP blob with frmd-core's f32
@@ -200,21 +271,37 @@ impl Int8Policy {
     /// in closed-loop comparisons).
     pub fn f32_twin(bytes: &[u8], folded: FoldedMlp, label: &str) -> anyhow::Result<Self> {
         let biases = folded.flat_first_layer_biases();
-        let twin = MlpTwin { blob: Blob::new(bytes), folded, biases };
+        let twin = MlpTwin {
+            blob: Blob::new(bytes),
+            folded,
+            biases,
+        };
         let runner = MlpF32Runner::try_new(twin, |t| {
-            let loaded = LoadedMlp::load(t.blob.bytes()).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
+            let loaded =
+                LoadedMlp::load(t.blob.bytes()).map_err(|e| anyhow::anyhow!("blob: {e}"))?;
             let network = t.folded.f32_network::<MAX_WIDTH>(&t.biases)?;
             HostPolicy::new(loaded.config(), network).map_err(policy_error("f32 policy"))
         })?;
-        Ok(Int8Policy { runner: Runner::MlpF32(runner), rng: Rng::new(0), label: label.into() })
+        Ok(Int8Policy {
+            runner: Runner::MlpF32(runner),
+            rng: Rng::new(0),
+            label: label.into(),
+        })
     }
 
     /// [`Self::f32_twin`] of a transformer blob with the f32 reference network of `folded`.
-    pub fn transformer_f32_twin(bytes: &[u8], folded: FoldedTransformer, label: &str) -> anyhow::Result<Self> {
+    pub fn transformer_f32_twin(
+        bytes: &[u8],
+        folded: FoldedTransformer,
+        label: &str,
+    ) -> anyhow::Result<Self> {
         let mut policy = Self::from_blob(bytes, label).context("f32 twin")?;
         match &mut policy.runner {
             Runner::Transformer { f32_twin, .. } => *f32_twin = Some(Box::new(folded)),
-            _ => bail!("not a transformer blob (magic {:?}, expected FRMT)", bytes.get(..4)),
+            _ => bail!(
+                "not a transformer blob (magic {:?}, expected FRMT)",
+                bytes.get(..4)
+            ),
         }
         Ok(policy)
     }
@@ -236,7 +323,11 @@ impl Int8Policy {
     }
 
     /// One chunk with explicit noise (`steps * n * k` standard-normal values).
-    pub fn run_with_noise(&mut self, input: &PolicyInput<'_>, noise: &[f32]) -> anyhow::Result<Vec<Vec<f32>>> {
+    pub fn run_with_noise(
+        &mut self,
+        input: &PolicyInput<'_>,
+        noise: &[f32],
+    ) -> anyhow::Result<Vec<Vec<f32>>> {
         self.runner.run(input, Noise::Given(noise))
     }
 }

@@ -30,19 +30,38 @@ fn export_inner(student_dir: &Path, out: &Path) -> anyhow::Result<Int8Export> {
     let history = policy.history();
     // Open-loop error only (the harness's default inputs): the closed-loop rows of the table are
     // the success comparison.
-    let cfg = EquivConfig { episodes: 0, random_requant: 10_000, ..EquivConfig::new(student_dir.to_path_buf(), baked.clone()) };
+    let cfg = EquivConfig {
+        episodes: 0,
+        random_requant: 10_000,
+        ..EquivConfig::new(student_dir.to_path_buf(), baked.clone())
+    };
     let report = run_equiv(&cfg)?;
-    let pick = |metric: &str| report.rows.iter().find(|r| r.check == "b" && r.metric.contains(metric)).map(|r| r.value);
+    let pick = |metric: &str| {
+        report
+            .rows
+            .iter()
+            .find(|r| r.check == "b" && r.metric.contains(metric))
+            .map(|r| r.value)
+    };
     let float_error = match (pick("max abs"), pick("mean abs")) {
         (Some(max), Some(mean)) => format!("max {max:.4} / mean {mean:.4} m"),
         _ => "equiv report has no (b) rows".into(),
     };
-    frmd_export::artifact::write_atomic(&out.join("eval").join("equiv.json"), serde_json::to_string_pretty(&report)?.as_bytes())?;
+    frmd_export::artifact::write_atomic(
+        &out.join("eval").join("equiv.json"),
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+    )?;
     Ok(Int8Export {
         policy: Box::new(policy),
         history,
         float_error,
-        artifacts: vec![("int8 baked module + blob".into(), baked), ("int8 vs float report".into(), out.join("eval").join("equiv.json"))],
+        artifacts: vec![
+            ("int8 baked module + blob".into(), baked),
+            (
+                "int8 vs float report".into(),
+                out.join("eval").join("equiv.json"),
+            ),
+        ],
     })
 }
 

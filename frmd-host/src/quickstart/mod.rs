@@ -84,9 +84,21 @@ impl Default for QuickstartConfig {
             task: "reach".into(),
             out: PathBuf::from("runs/quickstart"),
             demos: CollectConfig::default().episodes,
-            teacher: StageRecipe { steps: 15_000, lr: 1e-3, warmup: 500 },
-            student: StageRecipe { steps: 2_500, lr: 1e-4, warmup: 100 },
-            dp: StageRecipe { steps: 25_000, lr: 1e-3, warmup: 500 },
+            teacher: StageRecipe {
+                steps: 15_000,
+                lr: 1e-3,
+                warmup: 500,
+            },
+            student: StageRecipe {
+                steps: 2_500,
+                lr: 1e-4,
+                warmup: 100,
+            },
+            dp: StageRecipe {
+                steps: 25_000,
+                lr: 1e-3,
+                warmup: 500,
+            },
             backbone: BackboneConfig::preset("mlp-silu").expect("`mlp-silu` is a preset"),
             batch: train.batch,
             baseline: true,
@@ -101,20 +113,43 @@ impl QuickstartConfig {
     /// The sizes of every stage, before any work.
     pub fn validate(&self) -> Result<(), OptionError> {
         limits::count("demos", self.demos, 1, limits::MAX_EPISODES)?;
-        limits::count("teacher-steps", self.teacher.steps, 1, limits::MAX_TRAIN_STEPS)?;
-        limits::count("student-steps", self.student.steps, 1, limits::MAX_TRAIN_STEPS)?;
+        limits::count(
+            "teacher-steps",
+            self.teacher.steps,
+            1,
+            limits::MAX_TRAIN_STEPS,
+        )?;
+        limits::count(
+            "student-steps",
+            self.student.steps,
+            1,
+            limits::MAX_TRAIN_STEPS,
+        )?;
         if self.baseline {
             limits::count("dp-steps", self.dp.steps, 1, limits::MAX_TRAIN_STEPS)?;
         }
         limits::count("batch", self.batch, 1, limits::MAX_BATCH)?;
         limits::count("episodes", self.episodes, 1, limits::MAX_EPISODES)?;
-        CollectConfig { task: self.task.clone(), episodes: self.demos, seed: self.seed, ..CollectConfig::default() }.validate()
+        CollectConfig {
+            task: self.task.clone(),
+            episodes: self.demos,
+            seed: self.seed,
+            ..CollectConfig::default()
+        }
+        .validate()
     }
 
     /// CI smoke-test sizes: 4 demonstrations, tens of steps, 3 episodes, batch 32 (numbers
     /// meaningless, the plumbing is what is tested).
     pub fn with_tiny_sizes(mut self) -> Self {
-        (self.demos, self.teacher.steps, self.student.steps, self.dp.steps, self.episodes, self.batch) = (4, 30, 10, 30, 3, 32);
+        (
+            self.demos,
+            self.teacher.steps,
+            self.student.steps,
+            self.dp.steps,
+            self.episodes,
+            self.batch,
+        ) = (4, 30, 10, 30, 3, 32);
         self
     }
 
@@ -178,14 +213,26 @@ struct Stages {
 
 impl Stages {
     fn new(total: usize) -> Self {
-        Stages { total, done: 0, start: Instant::now(), current: None, seconds: Vec::new() }
+        Stages {
+            total,
+            done: 0,
+            start: Instant::now(),
+            current: None,
+            seconds: Vec::new(),
+        }
     }
 
     fn begin(&mut self, what: &str) {
         self.end();
         self.done += 1;
         let t = self.start.elapsed().as_secs();
-        eprintln!("==> quickstart [{}/{}] {what}   ({}:{:02} elapsed)", self.done, self.total, t / 60, t % 60);
+        eprintln!(
+            "==> quickstart [{}/{}] {what}   ({}:{:02} elapsed)",
+            self.done,
+            self.total,
+            t / 60,
+            t % 60
+        );
         self.current = Some((what.to_string(), Instant::now()));
     }
 
@@ -197,20 +244,44 @@ impl Stages {
 }
 
 /// Evaluates one policy, writes its JSON report and path plot, and returns its table row.
-fn evaluate(a: &QuickstartConfig, method: &str, policy: &mut dyn Policy, history: usize, artifacts: &mut Vec<(String, PathBuf)>) -> anyhow::Result<MethodRow> {
-    let cfg = EvalConfig { episodes: a.episodes, history, keep_paths: PLOTTED_EPISODES.min(a.episodes), ..EvalConfig::default() };
-    let report = evaluate_episodes(&a.task, policy, &cfg).with_context(|| format!("evaluating {method}"))?;
+fn evaluate(
+    a: &QuickstartConfig,
+    method: &str,
+    policy: &mut dyn Policy,
+    history: usize,
+    artifacts: &mut Vec<(String, PathBuf)>,
+) -> anyhow::Result<MethodRow> {
+    let cfg = EvalConfig {
+        episodes: a.episodes,
+        history,
+        keep_paths: PLOTTED_EPISODES.min(a.episodes),
+        ..EvalConfig::default()
+    };
+    let report =
+        evaluate_episodes(&a.task, policy, &cfg).with_context(|| format!("evaluating {method}"))?;
     let plot = a.out.join("plots").join(format!("{method}.png"));
     plot_paths(&plot, &report)?;
     let json = a.out.join("eval").join(format!("{method}.json"));
     frmd_export::artifact::write_atomic(&json, serde_json::to_string_pretty(&report)?.as_bytes())?;
     artifacts.push((format!("{method} paths plot"), plot));
     artifacts.push((format!("{method} report"), json));
-    Ok(MethodRow { method: method.to_string(), report: Some(report), missing: None, int8_error: None })
+    Ok(MethodRow {
+        method: method.to_string(),
+        report: Some(report),
+        missing: None,
+        int8_error: None,
+    })
 }
 
-fn float_row(a: &QuickstartConfig, dir: &Path, steps: usize, solver: Option<Solver>, artifacts: &mut Vec<(String, PathBuf)>) -> anyhow::Result<MethodRow> {
-    let mut policy = FloatPolicy::load(dir, Some(steps), solver).with_context(|| format!("loading {}", dir.display()))?;
+fn float_row(
+    a: &QuickstartConfig,
+    dir: &Path,
+    steps: usize,
+    solver: Option<Solver>,
+    artifacts: &mut Vec<(String, PathBuf)>,
+) -> anyhow::Result<MethodRow> {
+    let mut policy = FloatPolicy::load(dir, Some(steps), solver)
+        .with_context(|| format!("loading {}", dir.display()))?;
     let history = policy.input_sizes().2;
     let name = policy.name();
     evaluate(a, &name, &mut policy, history, artifacts)
@@ -222,26 +293,57 @@ pub fn run_pipeline(a: &QuickstartConfig) -> anyhow::Result<QuickstartSummary> {
     crate::tasks::make_task(&a.task)?;
     frmd_export::artifact::check_output_dir(&a.out, "--out", a.force, &[])?;
     for dir in ["plots", "eval"] {
-        std::fs::create_dir_all(a.out.join(dir)).with_context(|| format!("cannot create {}", a.out.join(dir).display()))?;
+        std::fs::create_dir_all(a.out.join(dir))
+            .with_context(|| format!("cannot create {}", a.out.join(dir).display()))?;
     }
     let mut stages = Stages::new(if a.baseline { 6 } else { 5 });
     let mut artifacts = Vec::new();
     let data = a.out.join(format!("{}-demos.safetensors", a.task));
-    let (teacher, student, dp) = (a.out.join("teacher"), a.out.join("student"), a.out.join("dp"));
+    let (teacher, student, dp) = (
+        a.out.join("teacher"),
+        a.out.join("student"),
+        a.out.join("dp"),
+    );
 
-    stages.begin(&format!("collect {} expert demonstrations of `{}`", a.demos, a.task));
-    collect_to_file(&CollectConfig { task: a.task.clone(), episodes: a.demos, seed: a.seed, out: data.clone(), force: true, ..CollectConfig::default() })?;
+    stages.begin(&format!(
+        "collect {} expert demonstrations of `{}`",
+        a.demos, a.task
+    ));
+    collect_to_file(&CollectConfig {
+        task: a.task.clone(),
+        episodes: a.demos,
+        seed: a.seed,
+        out: data.clone(),
+        force: true,
+        ..CollectConfig::default()
+    })?;
     artifacts.push(("demonstrations".to_string(), data.clone()));
 
-    stages.begin(&format!("train teacher: {} steps, {}", a.teacher.steps, a.backbone));
-    let outcome = run_teacher(&TeacherRun { train: a.train_config(&data, &teacher, a.teacher), ..TeacherRun::default() })?;
+    stages.begin(&format!(
+        "train teacher: {} steps, {}",
+        a.teacher.steps, a.backbone
+    ));
+    let outcome = run_teacher(&TeacherRun {
+        train: a.train_config(&data, &teacher, a.teacher),
+        ..TeacherRun::default()
+    })?;
     eprintln!("{outcome}");
     stages.begin(&format!("distill student: {} steps", a.student.steps));
-    let outcome = run_student(&StudentRun { train: a.train_config(&data, &student, a.student), teacher: teacher.clone(), ..StudentRun::default() })?;
+    let outcome = run_student(&StudentRun {
+        train: a.train_config(&data, &student, a.student),
+        teacher: teacher.clone(),
+        ..StudentRun::default()
+    })?;
     eprintln!("{outcome}");
     if a.baseline {
-        stages.begin(&format!("train DP baseline: {} steps, {}", a.dp.steps, a.backbone));
-        let outcome = run_dp(&DpRun { train: a.train_config(&data, &dp, a.dp), ..DpRun::default() })?;
+        stages.begin(&format!(
+            "train DP baseline: {} steps, {}",
+            a.dp.steps, a.backbone
+        ));
+        let outcome = run_dp(&DpRun {
+            train: a.train_config(&data, &dp, a.dp),
+            ..DpRun::default()
+        })?;
         eprintln!("{outcome}");
     }
     for (what, dir) in [("teacher", &teacher), ("student", &student), ("dp", &dp)] {
@@ -256,21 +358,44 @@ pub fn run_pipeline(a: &QuickstartConfig) -> anyhow::Result<QuickstartSummary> {
     stages.begin(&format!("evaluate every method on {} episodes", a.episodes));
     let mut rows = Vec::new();
     let mut expert = expert_policy(&a.task)?;
-    rows.push(evaluate(a, "expert", expert.as_mut(), EvalConfig::default().history, &mut artifacts)?);
+    rows.push(evaluate(
+        a,
+        "expert",
+        expert.as_mut(),
+        EvalConfig::default().history,
+        &mut artifacts,
+    )?);
     if a.baseline {
         rows.push(float_row(a, &dp, 100, None, &mut artifacts)?);
         rows.push(float_row(a, &dp, 10, None, &mut artifacts)?);
     }
-    rows.push(float_row(a, &teacher, 10, Some(Solver::Heun), &mut artifacts)?);
+    rows.push(float_row(
+        a,
+        &teacher,
+        10,
+        Some(Solver::Heun),
+        &mut artifacts,
+    )?);
     rows.push(float_row(a, &student, 1, None, &mut artifacts)?);
     match int8 {
         Ok(mut export) => {
             artifacts.append(&mut export.artifacts);
-            let mut row = evaluate(a, "int8-student-1", export.policy.as_mut(), export.history, &mut artifacts)?;
+            let mut row = evaluate(
+                a,
+                "int8-student-1",
+                export.policy.as_mut(),
+                export.history,
+                &mut artifacts,
+            )?;
             row.int8_error = Some(export.float_error);
             rows.push(row);
         }
-        Err(reason) => rows.push(MethodRow { method: "int8-student-1".into(), report: None, missing: Some(reason), int8_error: None }),
+        Err(reason) => rows.push(MethodRow {
+            method: "int8-student-1".into(),
+            report: None,
+            missing: Some(reason),
+            int8_error: None,
+        }),
     }
     stages.end();
     let summary = QuickstartSummary {
@@ -284,6 +409,9 @@ pub fn run_pipeline(a: &QuickstartConfig) -> anyhow::Result<QuickstartSummary> {
     };
     let json = a.out.join("summary.json");
     frmd_export::artifact::write_atomic(&json, serde_json::to_string_pretty(&summary)?.as_bytes())?;
-    frmd_export::artifact::write_atomic(&a.out.join("summary.txt"), table::render(&summary).as_bytes())?;
+    frmd_export::artifact::write_atomic(
+        &a.out.join("summary.txt"),
+        table::render(&summary).as_bytes(),
+    )?;
     Ok(summary)
 }

@@ -74,7 +74,12 @@ impl<'a> Fields<'a> {
     }
 }
 
-pub(super) fn expect_len(what: &str, payload: &[u8], expected: u64, formula: impl fmt::Display) -> Result<()> {
+pub(super) fn expect_len(
+    what: &str,
+    payload: &[u8],
+    expected: u64,
+    formula: impl fmt::Display,
+) -> Result<()> {
     if payload.len() as u64 == expected {
         Ok(())
     } else {

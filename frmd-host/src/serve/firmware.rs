@@ -13,6 +13,8 @@ impl ServedPolicy for FirmwarePolicy {
         let narrow = |values: &[f64]| values.iter().map(|&v| v as f32).collect::<Vec<f32>>();
         let obs = narrow(input.obs);
         let chunk = self.chunk(&obs, &narrow(input.prev_action), &narrow(input.prev_rate));
-        chunk.map(|positions| positions.into_iter().map(f64::from).collect()).map_err(|e| format!("{e:#}"))
+        chunk
+            .map(|positions| positions.into_iter().map(f64::from).collect())
+            .map_err(|e| format!("{e:#}"))
     }
 }

@@ -4,10 +4,10 @@
 use super::frame::{FloatType, MAX_NAME, MAX_PAYLOAD};
 use super::reply::ModelInfo;
 use super::session::{ActInput, ServedPolicy, Session};
-use crate::tasks::{Policy, PolicyInput};
 use crate::export::{ExportConfig, BAKED_BLOB_FILE, EXPORT_INFO_FILE};
 use crate::policy::float::FloatPolicy;
 use crate::policy::int8::Int8Policy;
+use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
 use std::path::{Path, PathBuf};
 
@@ -16,14 +16,21 @@ use std::path::{Path, PathBuf};
 pub enum PolicySource {
     /// A float checkpoint directory; `steps` and `solver` override the role's default sampler
     /// (teacher Heun 10, student 1 step, DP DDIM 10; DP with 100 steps is DDPM).
-    Checkpoint { dir: PathBuf, steps: Option<usize>, solver: Option<String> },
+    Checkpoint {
+        dir: PathBuf,
+        steps: Option<usize>,
+        solver: Option<String>,
+    },
     /// A baked module directory (`frmd export --out`): its `policy.blob`.
     Baked(PathBuf),
     /// An int8 blob file (`frmd export --blob`).
     Blob(PathBuf),
     /// The `pil` firmware image on a QEMU core (`crate::firmware`), baking `baked`'s module (or
     /// the checked-in reach student): every chunk comes from the emulated MCU.
-    Firmware { board: String, baked: Option<PathBuf> },
+    Firmware {
+        board: String,
+        baked: Option<PathBuf>,
+    },
 }
 
 /// Server settings beyond the policy; `Default` is what `frmd serve` uses without options.
@@ -46,7 +53,13 @@ pub struct ServeConfig {
 
 impl Default for ServeConfig {
     fn default() -> Self {
-        ServeConfig { float_type: FloatType::F32, exec_steps: None, dt: None, init_action: None, zeros: false }
+        ServeConfig {
+            float_type: FloatType::F32,
+            exec_steps: None,
+            dt: None,
+            init_action: None,
+            zeros: false,
+        }
     }
 }
 
@@ -63,7 +76,8 @@ pub struct Served {
 impl Served {
     /// A fresh session for one connection.
     pub fn session(&self) -> anyhow::Result<Session> {
-        Session::new(self.info.clone(), self.default_init.clone()).map_err(|e| anyhow::anyhow!("server setup: {e}"))
+        Session::new(self.info.clone(), self.default_init.clone())
+            .map_err(|e| anyhow::anyhow!("server setup: {e}"))
     }
 }
 
@@ -77,8 +91,20 @@ pub struct Adapter {
 }
 
 impl Adapter {
-    pub fn new(policy: Box<dyn Policy>, history: usize, obs_dim: usize, chunk_len: usize, zeros: bool) -> Self {
-        Adapter { policy, history, obs_dim, chunk_len, zeros }
+    pub fn new(
+        policy: Box<dyn Policy>,
+        history: usize,
+        obs_dim: usize,
+        chunk_len: usize,
+        zeros: bool,
+    ) -> Self {
+        Adapter {
+            policy,
+            history,
+            obs_dim,
+            chunk_len,
+            zeros,
+        }
     }
 }
 
@@ -92,21 +118,32 @@ impl ServedPolicy for Adapter {
             return Ok(vec![0.0; self.chunk_len]);
         }
         if input.obs.len() != self.history * self.obs_dim {
-            return Err(format!("{} observation values, expected {} x {}", input.obs.len(), self.history, self.obs_dim));
+            return Err(format!(
+                "{} observation values, expected {} x {}",
+                input.obs.len(),
+                self.history,
+                self.obs_dim
+            ));
         }
         let to_f32 = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
         let obs: Vec<Vec<f32>> = input.obs.chunks_exact(self.obs_dim).map(to_f32).collect();
         let (prev, rate) = (to_f32(input.prev_action), to_f32(input.prev_rate));
         let chunk = self
             .policy
-            .act(&PolicyInput { obs_history: &obs, prev_action: &prev, prev_rate: &rate })
+            .act(&PolicyInput {
+                obs_history: &obs,
+                prev_action: &prev,
+                prev_rate: &rate,
+            })
             .map_err(|e| format!("{e:#}"))?;
         Ok(chunk.iter().flatten().map(|&v| f64::from(v)).collect())
     }
 }
 
 fn dim(what: &str, value: usize, source: &str) -> anyhow::Result<u16> {
-    u16::try_from(value).with_context(|| format!("{source}: {what} {value} does not fit the protocol's 16-bit field"))
+    u16::try_from(value).with_context(|| {
+        format!("{source}: {what} {value} does not fit the protocol's 16-bit field")
+    })
 }
 
 /// `name` cut to the protocol's limit at a character boundary.
@@ -125,8 +162,14 @@ fn exported_dt(dir: &Path) -> anyhow::Result<Option<f64>> {
     if !path.exists() {
         return Ok(None);
     }
-    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let info: ExportConfig = serde_json::from_str(&text).with_context(|| format!("{}: not the export settings `frmd export` writes", path.display()))?;
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let info: ExportConfig = serde_json::from_str(&text).with_context(|| {
+        format!(
+            "{}: not the export settings `frmd export` writes",
+            path.display()
+        )
+    })?;
     if info.checkpoint.is_empty() {
         bail!("{}: field `checkpoint` is missing or empty (expected the exported checkpoint directory)", path.display());
     }
@@ -140,49 +183,95 @@ fn exported_dt(dir: &Path) -> anyhow::Result<Option<f64>> {
 /// Loads the policy `source` names with the settings of `cfg`.
 pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> {
     // (policy, history, obs_dim, action_dim, horizon, dt, name)
-    let (policy, history, obs_dim, action_dim, horizon, dt, name): (Box<dyn Policy>, usize, usize, usize, usize, f64, String) = match source {
+    let (policy, history, obs_dim, action_dim, horizon, dt, name): (
+        Box<dyn Policy>,
+        usize,
+        usize,
+        usize,
+        usize,
+        f64,
+        String,
+    ) = match source {
         PolicySource::Checkpoint { dir, steps, solver } => {
-            let solver = solver.as_deref().map(crate::diffusion::samplers::Solver::parse).transpose()?;
+            let solver = solver
+                .as_deref()
+                .map(crate::diffusion::samplers::Solver::parse)
+                .transpose()?;
             let policy = FloatPolicy::load(dir, *steps, solver)?;
             let c = policy.config().clone();
             let name = format!("{} {}", policy.name(), dir.display());
-            (Box::new(policy), c.history, c.obs_dim, c.action_dim, c.horizon, c.control_dt, name)
+            (
+                Box::new(policy),
+                c.history,
+                c.obs_dim,
+                c.action_dim,
+                c.horizon,
+                c.control_dt,
+                name,
+            )
         }
         PolicySource::Baked(dir) | PolicySource::Blob(dir) => {
             let (path, beside) = match source {
                 PolicySource::Baked(_) => (dir.join(BAKED_BLOB_FILE), dir.clone()),
-                _ => (dir.clone(), dir.parent().map(Path::to_path_buf).unwrap_or_default()),
+                _ => (
+                    dir.clone(),
+                    dir.parent().map(Path::to_path_buf).unwrap_or_default(),
+                ),
             };
             let policy = Int8Policy::load(&path)?;
             let d = policy.dims();
             let dt = exported_dt(&beside)?.unwrap_or(0.0);
-            (Box::new(policy), d.history, d.obs_dim, d.action_dim, d.horizon, dt, format!("int8 {}", path.display()))
+            (
+                Box::new(policy),
+                d.history,
+                d.obs_dim,
+                d.action_dim,
+                d.horizon,
+                dt,
+                format!("int8 {}", path.display()),
+            )
         }
         PolicySource::Firmware { board, baked } => {
-            let image = crate::firmware::build(&crate::firmware::default_repo(), board, baked.as_deref())?;
+            let image =
+                crate::firmware::build(&crate::firmware::default_repo(), board, baked.as_deref())?;
             let policy = crate::firmware::policy::FirmwarePolicy::start(&image)?;
             let i = policy.info().clone();
             let dt = match baked {
                 Some(dir) => exported_dt(dir)?.unwrap_or(0.0),
                 None => 0.0,
             };
-            (Box::new(policy), i.history, i.obs_dim, i.action_dim, i.horizon, dt, format!("firmware {} ({})", i.board, i.core))
+            (
+                Box::new(policy),
+                i.history,
+                i.obs_dim,
+                i.action_dim,
+                i.horizon,
+                dt,
+                format!("firmware {} ({})", i.board, i.core),
+            )
         }
     };
     let what = match source {
-        PolicySource::Checkpoint { dir, .. } | PolicySource::Baked(dir) | PolicySource::Blob(dir) => dir.display().to_string(),
+        PolicySource::Checkpoint { dir, .. }
+        | PolicySource::Baked(dir)
+        | PolicySource::Blob(dir) => dir.display().to_string(),
         PolicySource::Firmware { board, .. } => format!("firmware {board}"),
     };
     let horizon16 = dim("horizon", horizon, &what)?;
     let exec_steps = match cfg.exec_steps {
-        Some(e) if e == 0 || e > horizon16 => bail!("--exec-steps {e} is outside 1..={horizon} (the policy's horizon)"),
+        Some(e) if e == 0 || e > horizon16 => {
+            bail!("--exec-steps {e} is outside 1..={horizon} (the policy's horizon)")
+        }
         Some(e) => e,
         None => DEFAULT_EXEC_STEPS.min(horizon16),
     };
     let dt = cfg.dt.unwrap_or(dt);
     let default_init = match &cfg.init_action {
         None => vec![0.0; action_dim],
-        Some(a) if a.len() != action_dim => bail!("--init-action has {} values, the policy's action_dim is {action_dim}", a.len()),
+        Some(a) if a.len() != action_dim => bail!(
+            "--init-action has {} values, the policy's action_dim is {action_dim}",
+            a.len()
+        ),
         Some(a) => a.clone(),
     };
     let info = ModelInfo {
@@ -196,7 +285,12 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
         dt,
         name: short_name(name),
     };
-    info.validate().map_err(|e| anyhow::anyhow!("{what}: cannot be served: {e}"))?;
+    info.validate()
+        .map_err(|e| anyhow::anyhow!("{what}: cannot be served: {e}"))?;
     let policy = Adapter::new(policy, history, obs_dim, horizon * action_dim, cfg.zeros);
-    Ok(Served { info, default_init, policy })
+    Ok(Served {
+        info,
+        default_init,
+        policy,
+    })
 }

@@ -25,12 +25,12 @@ pub use frame::{
     FloatType, FrameReader, Header, MsgType, ReadOutcome, HEADER_LEN, MAGIC, MAX_NAME, MAX_PAYLOAD,
     MAX_TEXT, VERSION,
 };
+pub use load::{load, PolicySource, ServeConfig, Served};
 pub use reply::{decode_reply, Chunk, ErrorReply, ModelInfo, Reply};
 pub use request::{decode_request, Request};
-pub use load::{load, PolicySource, ServeConfig, Served};
-pub use server::{serve_stdio, serve_stream, StreamEnd};
 #[cfg(unix)]
 pub use server::serve_socket;
+pub use server::{serve_stdio, serve_stream, StreamEnd};
 pub use session::{ActInput, Next, ServedPolicy, Session};
 
 #[cfg(test)]

@@ -59,23 +59,33 @@ pub fn serve_stdio(served: &mut Served) -> anyhow::Result<StreamEnd> {
     let stdin = io::stdin().lock();
     let stdout = io::BufWriter::new(io::stdout().lock());
     // An error here is a failed write of a reply (the client closed its end).
-    serve_stream(stdin, stdout, &mut session, &mut served.policy).context("writing a reply to stdout")
+    serve_stream(stdin, stdout, &mut session, &mut served.policy)
+        .context("writing a reply to stdout")
 }
 
 /// Serves clients on a Unix socket at `path`, one connection at a time, each with a fresh session
 /// (the policy's noise stream is reseeded by RESET), until `max_connections` have been served
 /// (`None`: forever). A stale socket file at `path` is replaced; any other file is an error.
 #[cfg(unix)]
-pub fn serve_socket(served: &mut Served, path: &Path, max_connections: Option<usize>) -> anyhow::Result<()> {
+pub fn serve_socket(
+    served: &mut Served,
+    path: &Path,
+    max_connections: Option<usize>,
+) -> anyhow::Result<()> {
     use std::os::unix::fs::FileTypeExt;
     use std::os::unix::net::UnixListener;
     if let Ok(meta) = std::fs::symlink_metadata(path) {
         if !meta.file_type().is_socket() {
-            anyhow::bail!("{}: exists and is not a socket; refusing to replace it", path.display());
+            anyhow::bail!(
+                "{}: exists and is not a socket; refusing to replace it",
+                path.display()
+            );
         }
-        std::fs::remove_file(path).with_context(|| format!("removing the stale socket {}", path.display()))?;
+        std::fs::remove_file(path)
+            .with_context(|| format!("removing the stale socket {}", path.display()))?;
     }
-    let listener = UnixListener::bind(path).with_context(|| format!("binding the Unix socket {}", path.display()))?;
+    let listener = UnixListener::bind(path)
+        .with_context(|| format!("binding the Unix socket {}", path.display()))?;
     eprintln!("frmd serve: listening on {}", path.display());
     let mut served_count = 0;
     for stream in listener.incoming() {
@@ -87,8 +97,15 @@ pub fn serve_socket(served: &mut Served, path: &Path, max_connections: Option<us
             }
         };
         let mut session = served.session()?;
-        let reader = stream.try_clone().with_context(|| format!("{}: cloning the connection", path.display()))?;
-        match serve_stream(io::BufReader::new(reader), io::BufWriter::new(&stream), &mut session, &mut served.policy) {
+        let reader = stream
+            .try_clone()
+            .with_context(|| format!("{}: cloning the connection", path.display()))?;
+        match serve_stream(
+            io::BufReader::new(reader),
+            io::BufWriter::new(&stream),
+            &mut session,
+            &mut served.policy,
+        ) {
             Ok(end) => eprintln!("frmd serve: connection ended ({end:?})"),
             Err(e) => eprintln!("frmd serve: connection lost: {e}"),
         }

@@ -144,10 +144,18 @@ impl Task for Insert {
     fn observe(&self) -> Vec<f32> {
         let (p, v) = (self.tip.pos, self.tip.vel);
         let contact = if self.contact { 1.0 } else { 0.0 };
-        [p.x, p.y, v.x, v.y, self.slot_x - p.x, self.wall_y - p.y, contact]
-            .iter()
-            .map(|&x| x as f32)
-            .collect()
+        [
+            p.x,
+            p.y,
+            v.x,
+            v.y,
+            self.slot_x - p.x,
+            self.wall_y - p.y,
+            contact,
+        ]
+        .iter()
+        .map(|&x| x as f32)
+        .collect()
     }
 
     fn step(&mut self, action: &[f32]) -> anyhow::Result<()> {

@@ -145,7 +145,10 @@ pub fn make_task(name: &str) -> anyhow::Result<Box<dyn Task>> {
 }
 
 /// The last observation of a policy input, checked against the task's observation size.
-pub(crate) fn last_obs<'a>(input: &'a PolicyInput<'_>, spec: &TaskSpec) -> anyhow::Result<&'a [f32]> {
+pub(crate) fn last_obs<'a>(
+    input: &'a PolicyInput<'_>,
+    spec: &TaskSpec,
+) -> anyhow::Result<&'a [f32]> {
     let (task, dim) = (spec.name, spec.obs_fields.len());
     let obs = input
         .obs_history

@@ -155,10 +155,12 @@ impl Task for Push {
         let (p, v, t) = (self.ee.pos, self.ee.vel, self.target);
         let (q, w) = self.puck_state();
         let (puck, target) = (q - p, t - q);
-        [p.x, p.y, v.x, v.y, puck.x, puck.y, w.x, w.y, target.x, target.y]
-            .iter()
-            .map(|&x| x as f32)
-            .collect()
+        [
+            p.x, p.y, v.x, v.y, puck.x, puck.y, w.x, w.y, target.x, target.y,
+        ]
+        .iter()
+        .map(|&x| x as f32)
+        .collect()
     }
 
     fn step(&mut self, action: &[f32]) -> anyhow::Result<()> {

@@ -19,7 +19,11 @@ pub fn check_windows(windows: &WindowSet, cfg: &ModelConfig) -> anyhow::Result<(
     if len == 0 {
         bail!("no training windows");
     }
-    if windows.obs_dim != cfg.obs_dim || windows.action_dim != cfg.action_dim || windows.history != cfg.history || windows.horizon != cfg.horizon {
+    if windows.obs_dim != cfg.obs_dim
+        || windows.action_dim != cfg.action_dim
+        || windows.history != cfg.history
+        || windows.horizon != cfg.horizon
+    {
         bail!(
             "windows (obs {}, action {}, history {}, horizon {}) do not match the model (obs {}, action {}, history {}, horizon {})",
             windows.obs_dim, windows.action_dim, windows.history, windows.horizon, cfg.obs_dim, cfg.action_dim, cfg.history, cfg.horizon
@@ -35,7 +39,12 @@ pub fn check_windows(windows: &WindowSet, cfg: &ModelConfig) -> anyhow::Result<(
 }
 
 /// Gathers the windows at `indices` into a batch.
-pub fn gather(windows: &WindowSet, cfg: &ModelConfig, indices: &[usize], device: &Device) -> anyhow::Result<Batch> {
+pub fn gather(
+    windows: &WindowSet,
+    cfg: &ModelConfig,
+    indices: &[usize],
+    device: &Device,
+) -> anyhow::Result<Batch> {
     let obs_w = cfg.history * cfg.obs_dim;
     let (k, traj) = (cfg.action_dim, cfg.traj_dim());
     let mut obs = Vec::with_capacity(indices.len() * obs_w);
@@ -49,11 +58,20 @@ pub fn gather(windows: &WindowSet, cfg: &ModelConfig, indices: &[usize], device:
         x0.extend_from_slice(&windows.actions[i * traj..(i + 1) * traj]);
     }
     let cond = Condition::from_slices(cfg, &obs, &y0, &v0, device)?;
-    Ok(Batch { x0: Tensor::from_vec(x0, (indices.len(), traj), device)?, cond })
+    Ok(Batch {
+        x0: Tensor::from_vec(x0, (indices.len(), traj), device)?,
+        cond,
+    })
 }
 
 /// A batch of `size` windows drawn uniformly with replacement.
-pub fn sample(windows: &WindowSet, cfg: &ModelConfig, size: usize, rng: &mut HostRng, device: &Device) -> anyhow::Result<Batch> {
+pub fn sample(
+    windows: &WindowSet,
+    cfg: &ModelConfig,
+    size: usize,
+    rng: &mut HostRng,
+    device: &Device,
+) -> anyhow::Result<Batch> {
     let indices: Vec<usize> = (0..size).map(|_| rng.below(windows.len())).collect();
     gather(windows, cfg, &indices, device)
 }
@@ -80,7 +98,11 @@ pub struct CondAugment {
 
 impl CondAugment {
     /// No perturbation.
-    pub const NONE: CondAugment = CondAugment { prob: 0.0, y0_std: 0.0, v0_std: 0.0 };
+    pub const NONE: CondAugment = CondAugment {
+        prob: 0.0,
+        y0_std: 0.0,
+        v0_std: 0.0,
+    };
 
     pub fn is_active(&self) -> bool {
         self.prob > 0.0 && (self.y0_std > 0.0 || self.v0_std > 0.0)
@@ -94,7 +116,14 @@ impl Default for CondAugment {
 }
 
 /// [`sample`] with the initial-condition perturbation `augment` applied.
-pub fn sample_augmented(windows: &WindowSet, cfg: &ModelConfig, size: usize, augment: &CondAugment, rng: &mut HostRng, device: &Device) -> anyhow::Result<Batch> {
+pub fn sample_augmented(
+    windows: &WindowSet,
+    cfg: &ModelConfig,
+    size: usize,
+    augment: &CondAugment,
+    rng: &mut HostRng,
+    device: &Device,
+) -> anyhow::Result<Batch> {
     if !augment.is_active() {
         return sample(windows, cfg, size, rng, device);
     }
@@ -112,13 +141,25 @@ pub fn sample_augmented(windows: &WindowSet, cfg: &ModelConfig, size: usize, aug
     };
     let (obs_w, k, traj) = (cfg.history * cfg.obs_dim, cfg.action_dim, cfg.traj_dim());
     for &i in &indices {
-        perturbed.obs.extend_from_slice(&windows.obs[i * obs_w..(i + 1) * obs_w]);
-        perturbed.actions.extend_from_slice(&windows.actions[i * traj..(i + 1) * traj]);
+        perturbed
+            .obs
+            .extend_from_slice(&windows.obs[i * obs_w..(i + 1) * obs_w]);
+        perturbed
+            .actions
+            .extend_from_slice(&windows.actions[i * traj..(i + 1) * traj]);
         let hit = rng.uniform() < augment.prob;
         for d in 0..k {
-            let (dy, dv) = if hit { (augment.y0_std * rng.normal(), augment.v0_std * rng.normal()) } else { (0.0, 0.0) };
-            perturbed.prev_action.push(windows.prev_action[i * k + d] + dy as f32);
-            perturbed.prev_rate.push(windows.prev_rate[i * k + d] + dv as f32);
+            let (dy, dv) = if hit {
+                (augment.y0_std * rng.normal(), augment.v0_std * rng.normal())
+            } else {
+                (0.0, 0.0)
+            };
+            perturbed
+                .prev_action
+                .push(windows.prev_action[i * k + d] + dy as f32);
+            perturbed
+                .prev_rate
+                .push(windows.prev_rate[i * k + d] + dv as f32);
         }
     }
     let all: Vec<usize> = (0..size).collect();
@@ -128,8 +169,8 @@ pub fn sample_augmented(windows: &WindowSet, cfg: &ModelConfig, size: usize, aug
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::models::{HeadConfig, ProDmpOutput};
     use crate::data::toy::{bimodal_windows, toy_config};
+    use crate::models::{HeadConfig, ProDmpOutput};
 
     fn rows(t: &Tensor) -> Vec<f32> {
         t.flatten_all().unwrap().to_vec1::<f32>().unwrap()
@@ -137,22 +178,53 @@ mod tests {
 
     #[test]
     fn augmentation_perturbs_only_the_initial_condition() {
-        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
+        let cfg = toy_config(HeadConfig::ProDmp {
+            num_basis: 4,
+            output: ProDmpOutput::Direct,
+            auto_scale_basis: false,
+        });
         let windows = bimodal_windows(&cfg, 64, 5).unwrap();
         let device = Device::Cpu;
         // Inactive augmentation draws exactly what `sample` draws.
         let plain = sample(&windows, &cfg, 32, &mut HostRng::new(9), &device).unwrap();
-        let none = sample_augmented(&windows, &cfg, 32, &CondAugment::NONE, &mut HostRng::new(9), &device).unwrap();
+        let none = sample_augmented(
+            &windows,
+            &cfg,
+            32,
+            &CondAugment::NONE,
+            &mut HostRng::new(9),
+            &device,
+        )
+        .unwrap();
         assert_eq!(rows(&plain.x0), rows(&none.x0));
         assert_eq!(rows(&plain.cond.features), rows(&none.cond.features));
         // Always-on augmentation: targets are demonstration chunks, y0/v0 (zero in the toy set)
         // get offsets of about the requested spread, and the features carry the same offsets.
-        let augment = CondAugment { prob: 1.0, y0_std: 0.1, v0_std: 2.0 };
-        let batch = sample_augmented(&windows, &cfg, 2000, &augment, &mut HostRng::new(9), &device).unwrap();
-        let goals: Vec<f32> = rows(&batch.x0).chunks_exact(cfg.horizon).map(|c| c[cfg.horizon - 1]).collect();
+        let augment = CondAugment {
+            prob: 1.0,
+            y0_std: 0.1,
+            v0_std: 2.0,
+        };
+        let batch = sample_augmented(
+            &windows,
+            &cfg,
+            2000,
+            &augment,
+            &mut HostRng::new(9),
+            &device,
+        )
+        .unwrap();
+        let goals: Vec<f32> = rows(&batch.x0)
+            .chunks_exact(cfg.horizon)
+            .map(|c| c[cfg.horizon - 1])
+            .collect();
         let first_goal = windows.actions[cfg.horizon - 1].abs();
-        assert!(goals.iter().all(|g| (g.abs() - first_goal).abs() < 1e-6), "targets must stay demonstration chunks");
-        let std = |v: &[f32]| (v.iter().map(|x| f64::from(x * x)).sum::<f64>() / v.len() as f64).sqrt();
+        assert!(
+            goals.iter().all(|g| (g.abs() - first_goal).abs() < 1e-6),
+            "targets must stay demonstration chunks"
+        );
+        let std =
+            |v: &[f32]| (v.iter().map(|x| f64::from(x * x)).sum::<f64>() / v.len() as f64).sqrt();
         let (y0, v0) = (rows(&batch.cond.y0), rows(&batch.cond.v0));
         assert!((std(&y0) - 0.1).abs() < 0.01, "y0 spread {}", std(&y0));
         assert!((std(&v0) - 2.0).abs() < 0.2, "v0 spread {}", std(&v0));
@@ -163,8 +235,12 @@ mod tests {
             assert!((row[2] - v * cfg.control_dt as f32).abs() < 1e-6);
         }
         // Half the windows perturbed at prob 0.5.
-        let half = CondAugment { prob: 0.5, ..augment };
-        let batch = sample_augmented(&windows, &cfg, 2000, &half, &mut HostRng::new(3), &device).unwrap();
+        let half = CondAugment {
+            prob: 0.5,
+            ..augment
+        };
+        let batch =
+            sample_augmented(&windows, &cfg, 2000, &half, &mut HostRng::new(3), &device).unwrap();
         let moved = rows(&batch.cond.y0).iter().filter(|y| **y != 0.0).count();
         assert!((800..1200).contains(&moved), "{moved} of 2000 perturbed");
     }

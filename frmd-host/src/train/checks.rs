@@ -4,7 +4,9 @@
 use super::batch::CondAugment;
 use super::recipe::{DpRun, ProbeConfig, StudentRun, StudentShape, TeacherRun, TrainConfig};
 use crate::data::Dataset;
-use crate::limits::{self, conflict, count, decay, non_negative, positive, probability, OptionError};
+use crate::limits::{
+    self, conflict, count, decay, non_negative, positive, probability, OptionError,
+};
 use crate::models::ModelConfig;
 use anyhow::Context;
 use std::path::Path;
@@ -23,8 +25,15 @@ impl TrainConfig {
         count("history", self.history, 1, limits::MAX_HISTORY)?;
         count("horizon", self.horizon, 1, limits::MAX_HORIZON)?;
         count("num-basis", self.num_basis, 1, limits::MAX_NUM_BASIS)?;
-        if self.embed_dim == 0 || !self.embed_dim.is_multiple_of(2) || self.embed_dim > limits::MAX_EMBED_DIM {
-            return Err(limits::range("embed-dim", self.embed_dim, format!("an even number from 2 to {}", limits::MAX_EMBED_DIM)));
+        if self.embed_dim == 0
+            || !self.embed_dim.is_multiple_of(2)
+            || self.embed_dim > limits::MAX_EMBED_DIM
+        {
+            return Err(limits::range(
+                "embed-dim",
+                self.embed_dim,
+                format!("an even number from 2 to {}", limits::MAX_EMBED_DIM),
+            ));
         }
         count("log-every", self.log_every, 1, limits::MAX_TRAIN_STEPS)?;
         count("eval-every", self.eval_every, 0, limits::MAX_TRAIN_STEPS)?;
@@ -40,7 +49,11 @@ impl TrainConfig {
         if (1..=horizon).contains(&self.exec_steps) {
             Ok(())
         } else {
-            Err(limits::range("exec-steps", self.exec_steps, format!("1 to the model's horizon {horizon}")))
+            Err(limits::range(
+                "exec-steps",
+                self.exec_steps,
+                format!("1 to the model's horizon {horizon}"),
+            ))
         }
     }
 
@@ -51,7 +64,11 @@ impl TrainConfig {
         inputs.extend(self.holdout.as_deref());
         inputs.extend(extra_inputs);
         for input in &inputs {
-            anyhow::ensure!(input.exists(), "{}: no such file or directory", input.display());
+            anyhow::ensure!(
+                input.exists(),
+                "{}: no such file or directory",
+                input.display()
+            );
         }
         frmd_export::artifact::check_output_dir(&self.out, "--out", self.force, &inputs)
     }
@@ -67,7 +84,10 @@ impl TeacherRun {
     pub fn validate(&self) -> Result<(), OptionError> {
         self.train.validate()?;
         self.train.validate_exec(self.train.horizon)?;
-        probability("sigma-uniform-fraction", self.teacher.sampling.uniform_fraction)?;
+        probability(
+            "sigma-uniform-fraction",
+            self.teacher.sampling.uniform_fraction,
+        )?;
         validate_augment(&self.teacher.augment)?;
         decay("ema", self.teacher.ema)
     }
@@ -78,10 +98,18 @@ impl DpRun {
     pub fn validate(&self) -> Result<(), OptionError> {
         self.train.validate()?;
         if self.train.pad_end != 0 {
-            return Err(conflict("pad-end", "train dp", "end padding applies to the teacher and the student only"));
+            return Err(conflict(
+                "pad-end",
+                "train dp",
+                "end padding applies to the teacher and the student only",
+            ));
         }
         if self.train.holdout.is_some() {
-            return Err(conflict("holdout", "train dp", "the held-out chunk error is measured for the teacher and the student only"));
+            return Err(conflict(
+                "holdout",
+                "train dp",
+                "the held-out chunk error is measured for the teacher and the student only",
+            ));
         }
         self.train.validate_exec(self.train.horizon)?;
         decay("ema", self.dp.eval_ema)
@@ -93,7 +121,12 @@ impl StudentRun {
     pub fn validate(&self) -> Result<(), OptionError> {
         self.train.validate()?;
         count("levels", self.distill.levels, 2, limits::MAX_SAMPLER_STEPS)?;
-        count("k", self.distill.teacher_steps, 1, limits::MAX_SAMPLER_STEPS)?;
+        count(
+            "k",
+            self.distill.teacher_steps,
+            1,
+            limits::MAX_SAMPLER_STEPS,
+        )?;
         decay("target-ema", self.distill.target_ema)?;
         decay("eval-ema", self.distill.eval_ema)?;
         validate_augment(&self.distill.augment)
@@ -102,14 +135,51 @@ impl StudentRun {
     /// The student takes its shape from the teacher: a model option given for it must equal the
     /// teacher's (else it would be ignored).
     pub fn validate_with_teacher(&self, teacher: &ModelConfig) -> Result<(), OptionError> {
-        let StudentShape { history, horizon, num_basis, backbone, embed_dim } = &self.shape;
+        let StudentShape {
+            history,
+            horizon,
+            num_basis,
+            backbone,
+            embed_dim,
+        } = &self.shape;
         let teacher_basis = teacher.prodmp().map(|p| p.num_basis);
         let differs: [(&'static str, Option<String>, String); 5] = [
-            ("history", history.filter(|&h| h != teacher.history).map(|h| h.to_string()), teacher.history.to_string()),
-            ("horizon", horizon.filter(|&h| h != teacher.horizon).map(|h| h.to_string()), teacher.horizon.to_string()),
-            ("num-basis", num_basis.filter(|&b| Some(b) != teacher_basis).map(|b| b.to_string()), teacher_basis.map(|b| b.to_string()).unwrap_or_default()),
-            ("backbone", backbone.as_ref().filter(|b| **b != teacher.backbone).map(|b| b.to_string()), teacher.backbone.to_string()),
-            ("embed-dim", embed_dim.filter(|&e| e != teacher.embed_dim).map(|e| e.to_string()), teacher.embed_dim.to_string()),
+            (
+                "history",
+                history
+                    .filter(|&h| h != teacher.history)
+                    .map(|h| h.to_string()),
+                teacher.history.to_string(),
+            ),
+            (
+                "horizon",
+                horizon
+                    .filter(|&h| h != teacher.horizon)
+                    .map(|h| h.to_string()),
+                teacher.horizon.to_string(),
+            ),
+            (
+                "num-basis",
+                num_basis
+                    .filter(|&b| Some(b) != teacher_basis)
+                    .map(|b| b.to_string()),
+                teacher_basis.map(|b| b.to_string()).unwrap_or_default(),
+            ),
+            (
+                "backbone",
+                backbone
+                    .as_ref()
+                    .filter(|b| **b != teacher.backbone)
+                    .map(|b| b.to_string()),
+                teacher.backbone.to_string(),
+            ),
+            (
+                "embed-dim",
+                embed_dim
+                    .filter(|&e| e != teacher.embed_dim)
+                    .map(|e| e.to_string()),
+                teacher.embed_dim.to_string(),
+            ),
         ];
         if let Some((option, Some(given), theirs)) = differs.into_iter().find(|d| d.1.is_some()) {
             return Err(conflict(option, "--teacher", format!("the student takes the teacher's model shape ({option} {theirs}), {given} would be ignored; drop --{option}")));
@@ -136,11 +206,26 @@ pub fn check_data_task(data: &Dataset, path: &Path, eval_episodes: usize) -> any
     if eval_episodes == 0 || !crate::tasks::is_simulated(&data.task) {
         return Ok(());
     }
-    let task = crate::tasks::make_task(&data.task).with_context(|| format!("{}: metadata `task`", path.display()))?;
-    for (field, have, want) in [("obs_dim", data.obs_dim, task.obs_dim()), ("action_dim", data.action_dim, task.action_dim())] {
-        anyhow::ensure!(have == want, "{}: {field} is {have}, task `{}` expects {want} (data of another task or version?)", path.display(), data.task);
+    let task = crate::tasks::make_task(&data.task)
+        .with_context(|| format!("{}: metadata `task`", path.display()))?;
+    for (field, have, want) in [
+        ("obs_dim", data.obs_dim, task.obs_dim()),
+        ("action_dim", data.action_dim, task.action_dim()),
+    ] {
+        anyhow::ensure!(
+            have == want,
+            "{}: {field} is {have}, task `{}` expects {want} (data of another task or version?)",
+            path.display(),
+            data.task
+        );
     }
     let dt = f64::from(data.dt);
-    anyhow::ensure!((dt - task.dt()).abs() <= 1e-6 * task.dt(), "{}: metadata `dt` is {dt}, task `{}` runs at {}", path.display(), data.task, task.dt());
+    anyhow::ensure!(
+        (dt - task.dt()).abs() <= 1e-6 * task.dt(),
+        "{}: metadata `dt` is {dt}, task `{}` runs at {}",
+        path.display(),
+        data.task,
+        task.dt()
+    );
     Ok(())
 }

@@ -44,7 +44,15 @@ pub struct DistillConfig {
 
 impl Default for DistillConfig {
     fn default() -> Self {
-        DistillConfig { levels: 40, teacher_steps: 2, solver: Solver::Heun, target_ema: 0.95, eval_ema: 0.99, augment: CondAugment::NONE, output: None }
+        DistillConfig {
+            levels: 40,
+            teacher_steps: 2,
+            solver: Solver::Heun,
+            target_ema: 0.95,
+            eval_ema: 0.99,
+            augment: CondAugment::NONE,
+            output: None,
+        }
     }
 }
 
@@ -75,7 +83,11 @@ pub fn distill(
         bail!("distillation steps use Euler or Heun");
     }
     if dcfg.levels < dcfg.teacher_steps + 1 || dcfg.teacher_steps == 0 {
-        bail!("distillation needs 1 <= K < N (got K = {}, N = {})", dcfg.teacher_steps, dcfg.levels);
+        bail!(
+            "distillation needs 1 <= K < N (got K = {}, N = {})",
+            dcfg.teacher_steps,
+            dcfg.levels
+        );
     }
     let device = Device::Cpu;
     let levels = (0..dcfg.levels)
@@ -92,13 +104,21 @@ pub fn distill(
     let report = run_loop(
         cfg,
         |_| {
-            let batch = sample_augmented(windows, &model, cfg.batch_size, &dcfg.augment, &mut rng, &device)?;
+            let batch = sample_augmented(
+                windows,
+                &model,
+                cfg.batch_size,
+                &dcfg.augment,
+                &mut rng,
+                &device,
+            )?;
             let size = cfg.batch_size;
             // Descending index: level j is sigma_{n+K}, level j + K is sigma_n.
             let starts: Vec<usize> = (0..size).map(|_| rng.below(dcfg.levels - k)).collect();
             let high: Vec<f64> = starts.iter().map(|&j| levels[j]).collect();
             let eps = gaussian(&mut rng, size, model.traj_dim(), &device)?;
-            let noisy = (&batch.x0 + eps.broadcast_mul(&crate::diffusion::precond::column(&high, &device)?)?)?;
+            let noisy = (&batch.x0
+                + eps.broadcast_mul(&crate::diffusion::precond::column(&high, &device)?)?)?;
             let mut x = noisy.clone();
             for s in 0..k {
                 let from: Vec<f64> = starts.iter().map(|&j| levels[j + s]).collect();
@@ -118,5 +138,9 @@ pub fn distill(
         &eval_student,
         progress,
     )?;
-    Ok(Distilled { eval_student, student, report })
+    Ok(Distilled {
+        eval_student,
+        student,
+        report,
+    })
 }

@@ -10,7 +10,6 @@ use crate::models::{HeadConfig, ModelConfig, OwnedNetwork};
 use crate::rng::HostRng;
 use candle_core::Device;
 
-
 /// DP-specific training settings.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DpConfig {
@@ -24,12 +23,21 @@ impl Default for DpConfig {
     /// The preconditioned noise network (see [`EpsParametrization`] for why) with a 0.999
     /// weight EMA as in Chi et al.
     fn default() -> Self {
-        DpConfig { parametrization: EpsParametrization::Preconditioned, eval_ema: 0.999 }
+        DpConfig {
+            parametrization: EpsParametrization::Preconditioned,
+            eval_ema: 0.999,
+        }
     }
 }
 
 /// Trains the DP baseline; returns the evaluated network (the weight EMA when `eval_ema` > 0).
-pub fn train_dp(windows: &WindowSet, model: &ModelConfig, cfg: &LoopConfig, dp: &DpConfig, progress: &mut ProgressFn<'_>) -> anyhow::Result<(OwnedNetwork, TrainReport)> {
+pub fn train_dp(
+    windows: &WindowSet,
+    model: &ModelConfig,
+    cfg: &LoopConfig,
+    dp: &DpConfig,
+    progress: &mut ProgressFn<'_>,
+) -> anyhow::Result<(OwnedNetwork, TrainReport)> {
     let eval_ema = dp.eval_ema;
     check_windows(windows, model)?;
     if model.head != HeadConfig::Raw {
@@ -63,10 +71,10 @@ pub fn train_dp(windows: &WindowSet, model: &ModelConfig, cfg: &LoopConfig, dp: 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::toy::{bimodal_windows, positive_fraction, toy_config, MODE_GOAL};
     use crate::diffusion::ddpm::{sample_dp, DpSampler};
     use crate::diffusion::samplers::gaussian;
     use crate::models::Condition;
-    use crate::data::toy::{bimodal_windows, positive_fraction, toy_config, MODE_GOAL};
     use crate::train::Progress;
     use candle_core::Tensor;
 
@@ -81,11 +89,23 @@ mod tests {
         loop_cfg.optim.lr = 3e-3;
         loop_cfg.optim.warmup_steps = 50;
         loop_cfg.log_every = 50;
-        let dp = DpConfig { parametrization: EpsParametrization::Preconditioned, eval_ema: 0.99 };
-        let (net, report) = train_dp(&windows, &cfg, &loop_cfg, &dp, &mut |_: &Progress| Ok(())).unwrap();
-        assert!(report.final_loss().unwrap() < 0.5 * report.loss_curve[0].1, "{:?}", report.loss_curve);
+        let dp = DpConfig {
+            parametrization: EpsParametrization::Preconditioned,
+            eval_ema: 0.99,
+        };
+        let (net, report) =
+            train_dp(&windows, &cfg, &loop_cfg, &dp, &mut |_: &Progress| Ok(())).unwrap();
+        assert!(
+            report.final_loss().unwrap() < 0.5 * report.loss_curve[0].1,
+            "{:?}",
+            report.loss_curve
+        );
         // Endpoints of the two modes in the data.
-        let ends: Vec<f32> = windows.actions.chunks_exact(cfg.horizon).map(|r| r[cfg.horizon - 1].abs()).collect();
+        let ends: Vec<f32> = windows
+            .actions
+            .chunks_exact(cfg.horizon)
+            .map(|r| r[cfg.horizon - 1].abs())
+            .collect();
         let end = ends.iter().sum::<f32>() / ends.len() as f32;
         assert!(end > 0.1 && MODE_GOAL > 0.0);
         let sched = DdpmSchedule::cosine(DP_TRAIN_STEPS).with_parametrization(dp.parametrization);
@@ -95,13 +115,35 @@ mod tests {
         for (sampler, steps) in [(DpSampler::Ddpm, 100), (DpSampler::Ddim, 10)] {
             let mut rng = HostRng::new(5);
             let z = gaussian(&mut rng, batch, cfg.traj_dim(), &Device::Cpu).unwrap();
-            let flat = sample_dp(&net.net, &sched, &cond, z, sampler, steps, &mut rng).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+            let flat = sample_dp(&net.net, &sched, &cond, z, sampler, steps, &mut rng)
+                .unwrap()
+                .flatten_all()
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap();
             let fraction = positive_fraction(&flat, cfg.horizon);
-            let end_error = flat.chunks_exact(cfg.horizon).map(|r| (r[cfg.horizon - 1].abs() - end).abs()).sum::<f32>() / batch as f32;
+            let end_error = flat
+                .chunks_exact(cfg.horizon)
+                .map(|r| (r[cfg.horizon - 1].abs() - end).abs())
+                .sum::<f32>()
+                / batch as f32;
             assert!((fraction - 0.5).abs() <= 0.1, "{sampler:?}: {fraction}");
-            assert!(end_error < 0.1 * end, "{sampler:?}: endpoint error {end_error} (data {end})");
+            assert!(
+                end_error < 0.1 * end,
+                "{sampler:?}: endpoint error {end_error} (data {end})"
+            );
         }
-        assert!(train_dp(&windows, &cfg, &loop_cfg, &DpConfig { eval_ema: 1.0, ..dp }, &mut |_: &Progress| Ok(())).is_err());
+        assert!(train_dp(
+            &windows,
+            &cfg,
+            &loop_cfg,
+            &DpConfig {
+                eval_ema: 1.0,
+                ..dp
+            },
+            &mut |_: &Progress| Ok(())
+        )
+        .is_err());
     }
 
     /// Straight-line chunks whose slope is the observation: (RMS second difference of sampled
@@ -110,15 +152,29 @@ mod tests {
         let mut cfg = toy_config(HeadConfig::Raw);
         cfg.horizon = 12;
         cfg.action_dim = 2;
-        cfg.backbone = crate::models::BackboneConfig::Mlp { hidden: vec![128, 128, 128], activation: crate::models::Activation::Silu };
+        cfg.backbone = crate::models::BackboneConfig::Mlp {
+            hidden: vec![128, 128, 128],
+            activation: crate::models::Activation::Silu,
+        };
         let count = 512;
         let mut rng = HostRng::new(8);
-        let slopes: Vec<f32> = (0..count).map(|_| (2.0 * rng.uniform() - 1.0) as f32).collect();
+        let slopes: Vec<f32> = (0..count)
+            .map(|_| (2.0 * rng.uniform() - 1.0) as f32)
+            .collect();
         // Both DoFs follow the line (the second mirrored), step-major.
-        let line = |s: f32| (0..24).map(move |i| (if i % 2 == 0 { 0.8 } else { -0.8 }) * s * (i / 2 + 1) as f32 / 12.0);
+        let line = |s: f32| {
+            (0..24)
+                .map(move |i| (if i % 2 == 0 { 0.8 } else { -0.8 }) * s * (i / 2 + 1) as f32 / 12.0)
+        };
         let windows = WindowSet {
-            obs_dim: 1, action_dim: 2, history: 1, horizon: 12, dt: 0.1,
-            obs: slopes.clone(), prev_action: vec![0.0; 2 * count], prev_rate: vec![0.0; 2 * count],
+            obs_dim: 1,
+            action_dim: 2,
+            history: 1,
+            horizon: 12,
+            dt: 0.1,
+            obs: slopes.clone(),
+            prev_action: vec![0.0; 2 * count],
+            prev_rate: vec![0.0; 2 * count],
             actions: slopes.iter().flat_map(|&s| line(s)).collect(),
         };
         let mut loop_cfg = LoopConfig::paper(2000, 4);
@@ -134,11 +190,23 @@ mod tests {
         let zeros = Tensor::cat(&[&zeros, &zeros], 1).unwrap();
         let cond = Condition::new(&obs, zeros.clone(), zeros, cfg.control_dt).unwrap();
         let z = gaussian(&mut rng, 64, 24, &Device::Cpu).unwrap();
-        let out = sample_dp(&net.net, &sched, &cond, z, DpSampler::Ddim, 10, &mut rng).unwrap().to_vec2::<f32>().unwrap();
+        let out = sample_dp(&net.net, &sched, &cond, z, DpSampler::Ddim, 10, &mut rng)
+            .unwrap()
+            .to_vec2::<f32>()
+            .unwrap();
         let (mut rough, mut err) = (0.0, 0.0);
         for (row, &s) in out.iter().zip(&test) {
-            rough += row.windows(5).map(|w| f64::from(w[4] - 2.0 * w[2] + w[0]).powi(2)).sum::<f64>() / 20.0;
-            err += row.iter().zip(line(s)).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>() / 24.0;
+            rough += row
+                .windows(5)
+                .map(|w| f64::from(w[4] - 2.0 * w[2] + w[0]).powi(2))
+                .sum::<f64>()
+                / 20.0;
+            err += row
+                .iter()
+                .zip(line(s))
+                .map(|(a, b)| f64::from((a - b).abs()))
+                .sum::<f64>()
+                / 24.0;
         }
         ((rough / 64.0).sqrt(), err / 64.0)
     }
@@ -152,11 +220,23 @@ mod tests {
     #[test]
     fn default_dp_chunks_are_smooth() {
         // No weight EMA: its 1000-step horizon would average in the first weights of this short run.
-        let dp = DpConfig { eval_ema: 0.0, ..DpConfig::default() };
+        let dp = DpConfig {
+            eval_ema: 0.0,
+            ..DpConfig::default()
+        };
         let (rough, err) = line_fit(&dp);
-        let (direct_rough, direct_err) = line_fit(&DpConfig { parametrization: EpsParametrization::Direct, ..dp });
+        let (direct_rough, direct_err) = line_fit(&DpConfig {
+            parametrization: EpsParametrization::Direct,
+            ..dp
+        });
         eprintln!("preconditioned: roughness {rough:.4}, error {err:.4}; direct: roughness {direct_rough:.4}, error {direct_err:.4}");
-        assert!(rough < 0.045 && err < 0.015, "roughness {rough}, error {err}");
-        assert!(rough < 0.8 * direct_rough && err < direct_err, "{rough} vs direct {direct_rough}");
+        assert!(
+            rough < 0.045 && err < 0.015,
+            "roughness {rough}, error {err}"
+        );
+        assert!(
+            rough < 0.8 * direct_rough && err < direct_err,
+            "{rough} vs direct {direct_rough}"
+        );
     }
 }

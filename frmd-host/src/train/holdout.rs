@@ -57,7 +57,11 @@ impl std::fmt::Display for GeneralizationReport {
 
 /// Maps windows normalized with `from` to the normalization `to` (same dimensions): positions
 /// through raw units, rates by the ratio of scales (a constant dimension of `from` maps to 0).
-pub fn renormalize(windows: &mut WindowSet, from: &Normalization, to: &Normalization) -> anyhow::Result<()> {
+pub fn renormalize(
+    windows: &mut WindowSet,
+    from: &Normalization,
+    to: &Normalization,
+) -> anyhow::Result<()> {
     ensure!(
         from.obs.dim() == to.obs.dim() && from.action.dim() == to.action.dim(),
         "normalizations differ in size (obs {} vs {}, action {} vs {})",
@@ -66,14 +70,23 @@ pub fn renormalize(windows: &mut WindowSet, from: &Normalization, to: &Normaliza
         from.action.dim(),
         to.action.dim()
     );
-    ensure!(windows.obs_dim == to.obs.dim() && windows.action_dim == to.action.dim(), "windows do not match the normalization's dimensions");
+    ensure!(
+        windows.obs_dim == to.obs.dim() && windows.action_dim == to.action.dim(),
+        "windows do not match the normalization's dimensions"
+    );
     from.obs.denormalize(&mut windows.obs);
     to.obs.normalize(&mut windows.obs);
     for values in [&mut windows.prev_action, &mut windows.actions] {
         from.action.denormalize(values);
         to.action.normalize(values);
     }
-    let ratio: Vec<f32> = from.action.scale().iter().zip(to.action.scale()).map(|(&f, t)| if f > 0.0 { t / f } else { 0.0 }).collect();
+    let ratio: Vec<f32> = from
+        .action
+        .scale()
+        .iter()
+        .zip(to.action.scale())
+        .map(|(&f, t)| if f > 0.0 { t / f } else { 0.0 })
+        .collect();
     for row in windows.prev_rate.chunks_mut(ratio.len()) {
         row.iter_mut().zip(&ratio).for_each(|(v, r)| *v *= r);
     }
@@ -81,7 +94,12 @@ pub fn renormalize(windows: &mut WindowSet, from: &Normalization, to: &Normaliza
 }
 
 /// Windows of `data` expressed in the normalization `norm` of a trained model.
-pub fn windows_in(data: &Dataset, history: usize, horizon: usize, norm: &Normalization) -> anyhow::Result<WindowSet> {
+pub fn windows_in(
+    data: &Dataset,
+    history: usize,
+    horizon: usize,
+    norm: &Normalization,
+) -> anyhow::Result<WindowSet> {
     let (mut windows, own) = data.windows(history, horizon)?;
     renormalize(&mut windows, &own, norm)?;
     Ok(windows)
@@ -100,7 +118,11 @@ pub fn chunk_error(
 ) -> anyhow::Result<ChunkError> {
     let cfg = net.config();
     let (k, traj) = (cfg.action_dim, cfg.traj_dim());
-    ensure!(action_scale.len() == k, "action scale has {} values, the model has {k} action dimensions", action_scale.len());
+    ensure!(
+        action_scale.len() == k,
+        "action scale has {} values, the model has {k} action dimensions",
+        action_scale.len()
+    );
     let len = windows.len();
     if len == 0 || max_windows == 0 {
         bail!("no windows to measure");
@@ -114,16 +136,31 @@ pub fn chunk_error(
         let batch = gather(windows, cfg, part, &device)?;
         let z = gaussian(&mut rng, part.len(), traj, &device)?;
         let out = match sampler {
-            ChunkSampler::Teacher { solver, steps } => sample_teacher(net, sig, &batch.cond, (z * sig.sigma_max)?, steps, solver)?,
-            ChunkSampler::Student { steps } => sample_consistency(net, sig, &batch.cond, &z, steps, &mut rng)?,
+            ChunkSampler::Teacher { solver, steps } => {
+                sample_teacher(net, sig, &batch.cond, (z * sig.sigma_max)?, steps, solver)?
+            }
+            ChunkSampler::Student { steps } => {
+                sample_consistency(net, sig, &batch.cond, &z, steps, &mut rng)?
+            }
         };
         let out = out.flatten_all()?.to_vec1::<f32>()?;
         for (row, &i) in part.iter().enumerate() {
-            let (sampled, truth) = (&out[row * traj..(row + 1) * traj], &windows.actions[i * traj..(i + 1) * traj]);
+            let (sampled, truth) = (
+                &out[row * traj..(row + 1) * traj],
+                &windows.actions[i * traj..(i + 1) * traj],
+            );
             let prev = &windows.prev_action[i * k..(i + 1) * k];
-            for (step, (s, t)) in sampled.chunks_exact(k).zip(truth.chunks_exact(k)).enumerate() {
+            for (step, (s, t)) in sampled
+                .chunks_exact(k)
+                .zip(truth.chunks_exact(k))
+                .enumerate()
+            {
                 for d in 0..k {
-                    let to_raw = if action_scale[d] > 0.0 { 1.0 / f64::from(action_scale[d]) } else { 0.0 };
+                    let to_raw = if action_scale[d] > 0.0 {
+                        1.0 / f64::from(action_scale[d])
+                    } else {
+                        0.0
+                    };
                     let err = f64::from((s[d] - t[d]).abs()) * to_raw;
                     sum += err;
                     hold += f64::from((prev[d] - t[d]).abs()) * to_raw;
@@ -135,7 +172,12 @@ pub fn chunk_error(
         }
     }
     let count = indices.len() as f64;
-    Ok(ChunkError { windows: indices.len(), mean_abs: sum / (count * traj as f64), last_step_abs: last / (count * k as f64), hold_baseline: hold / (count * traj as f64) })
+    Ok(ChunkError {
+        windows: indices.len(),
+        mean_abs: sum / (count * traj as f64),
+        last_step_abs: last / (count * k as f64),
+        hold_baseline: hold / (count * traj as f64),
+    })
 }
 
 /// [`chunk_error`] on training windows and on held-out windows.
@@ -159,15 +201,29 @@ pub fn generalization(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::models::{HeadConfig, ProDmpOutput, OwnedNetwork};
     use crate::data::toy::{bimodal_windows, toy_config};
+    use crate::models::{HeadConfig, OwnedNetwork, ProDmpOutput};
 
     fn dataset(offset: f32) -> Dataset {
         // Two episodes of a 2-D action and 3-D observation; `offset` shifts every value.
         let steps = 9;
-        let obs: Vec<f32> = (0..steps * 3).map(|i| offset + (i as f32 * 0.37).sin() * (1 + i % 3) as f32).collect();
-        let action: Vec<f32> = (0..steps * 2).map(|i| offset + (i as f32 * 0.21).cos() * (2 + i % 2) as f32).collect();
-        Dataset { obs, action, episode_ends: vec![4, 9], obs_dim: 3, action_dim: 2, task: "toy".into(), dt: 0.1, source: "test".into(), action_before_start: Default::default() }
+        let obs: Vec<f32> = (0..steps * 3)
+            .map(|i| offset + (i as f32 * 0.37).sin() * (1 + i % 3) as f32)
+            .collect();
+        let action: Vec<f32> = (0..steps * 2)
+            .map(|i| offset + (i as f32 * 0.21).cos() * (2 + i % 2) as f32)
+            .collect();
+        Dataset {
+            obs,
+            action,
+            episode_ends: vec![4, 9],
+            obs_dim: 3,
+            action_dim: 2,
+            task: "toy".into(),
+            dt: 0.1,
+            source: "test".into(),
+            action_before_start: Default::default(),
+        }
     }
 
     #[test]
@@ -191,7 +247,11 @@ mod tests {
         let (raw_rates, own_scale) = (own.prev_rate.clone(), own_norm.action.scale());
         for (i, (r, own_r)) in moved.prev_rate.iter().zip(&raw_rates).enumerate() {
             let raw = own_r / own_scale[i % 2];
-            assert!((r - raw * scale[i % 2]).abs() < 1e-4, "rate {r} vs {}", raw * scale[i % 2]);
+            assert!(
+                (r - raw * scale[i % 2]).abs() < 1e-4,
+                "rate {r} vs {}",
+                raw * scale[i % 2]
+            );
         }
         // Renormalizing with the set's own normalization is the identity.
         let same = windows_in(&train, 2, 3, &train_norm).unwrap();
@@ -207,7 +267,11 @@ mod tests {
 
     #[test]
     fn chunk_error_reports_the_hold_baseline_and_rejects_bad_input() {
-        let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
+        let cfg = toy_config(HeadConfig::ProDmp {
+            num_basis: 4,
+            output: ProDmpOutput::Direct,
+            auto_scale_basis: false,
+        });
         let windows = bimodal_windows(&cfg, 40, 2).unwrap();
         let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
         let sig = SigmaConfig::default();
@@ -215,11 +279,25 @@ mod tests {
         // Scale 0.5 normalized per raw unit: raw errors are twice the normalized ones.
         let err = chunk_error(&net.net, &sig, sampler, &windows, &[0.5], 40, 0).unwrap();
         assert_eq!(err.windows, 40);
-        let expected_hold = windows.actions.iter().map(|a| f64::from(a.abs()) * 2.0).sum::<f64>() / windows.actions.len() as f64;
-        assert!((err.hold_baseline - expected_hold).abs() < 1e-6, "{} vs {expected_hold}", err.hold_baseline);
+        let expected_hold = windows
+            .actions
+            .iter()
+            .map(|a| f64::from(a.abs()) * 2.0)
+            .sum::<f64>()
+            / windows.actions.len() as f64;
+        assert!(
+            (err.hold_baseline - expected_hold).abs() < 1e-6,
+            "{} vs {expected_hold}",
+            err.hold_baseline
+        );
         assert!(err.mean_abs.is_finite() && err.mean_abs > 0.0);
         // Every 4th window when capped at 10.
-        assert_eq!(chunk_error(&net.net, &sig, sampler, &windows, &[0.5], 10, 0).unwrap().windows, 10);
+        assert_eq!(
+            chunk_error(&net.net, &sig, sampler, &windows, &[0.5], 10, 0)
+                .unwrap()
+                .windows,
+            10
+        );
         assert!(chunk_error(&net.net, &sig, sampler, &windows, &[0.5, 1.0], 10, 0).is_err());
         assert!(chunk_error(&net.net, &sig, sampler, &windows, &[0.5], 0, 0).is_err());
     }

@@ -7,6 +7,8 @@ pub mod checks;
 pub mod curve;
 pub mod distill;
 pub mod dp;
+#[cfg(test)]
+mod dp_checkpoint_tests;
 pub mod holdout;
 mod monitor;
 pub mod optim;
@@ -14,8 +16,6 @@ pub mod padding;
 pub mod recipe;
 pub mod run;
 pub mod teacher;
-#[cfg(test)]
-mod dp_checkpoint_tests;
 #[cfg(test)]
 mod tests;
 
@@ -36,7 +36,13 @@ pub struct LoopConfig {
 impl LoopConfig {
     /// docs/design.md defaults (batch 128, AdamW 1e-4, wd 1e-6, 500 warm-up, cosine) for `steps`.
     pub fn paper(steps: usize, seed: u64) -> Self {
-        LoopConfig { steps, batch_size: 128, seed, optim: optim::OptimConfig::paper(steps), log_every: 100 }
+        LoopConfig {
+            steps,
+            batch_size: 128,
+            seed,
+            optim: optim::OptimConfig::paper(steps),
+            log_every: 100,
+        }
     }
 
     /// A short run for toy data (`data::toy`): batch 64, lr 3e-3, 50 warm-up steps, the loss
@@ -102,7 +108,12 @@ pub(crate) fn run_loop(
         if done % cfg.log_every.max(1) == 0 || done == cfg.steps {
             let mean = sum / count as f64;
             report.loss_curve.push((done, mean));
-            progress(&Progress { step: done, loss: mean, lr, model: eval_model })?;
+            progress(&Progress {
+                step: done,
+                loss: mean,
+                lr,
+                model: eval_model,
+            })?;
             sum = 0.0;
             count = 0;
         }

@@ -27,14 +27,35 @@ pub(super) struct HoldoutProbe {
 
 impl HoldoutProbe {
     /// The probe of `cfg.holdout` (`None` without held-out data) against the training windows.
-    pub(super) fn new(cfg: &TrainConfig, dataset: &Dataset, windows: &WindowSet, norm: &Normalization, sampler: ChunkSampler) -> anyhow::Result<Option<Self>> {
-        let Some(path) = &cfg.holdout else { return Ok(None) };
-        let data = Dataset::load(path).with_context(|| format!("loading held-out data {}", path.display()))?;
+    pub(super) fn new(
+        cfg: &TrainConfig,
+        dataset: &Dataset,
+        windows: &WindowSet,
+        norm: &Normalization,
+        sampler: ChunkSampler,
+    ) -> anyhow::Result<Option<Self>> {
+        let Some(path) = &cfg.holdout else {
+            return Ok(None);
+        };
+        let data = Dataset::load(path)
+            .with_context(|| format!("loading held-out data {}", path.display()))?;
         if data.obs_dim != dataset.obs_dim || data.action_dim != dataset.action_dim {
-            anyhow::bail!("held-out data {} has obs/action dims {}/{}, training data {}/{}", path.display(), data.obs_dim, data.action_dim, dataset.obs_dim, dataset.action_dim);
+            anyhow::bail!(
+                "held-out data {} has obs/action dims {}/{}, training data {}/{}",
+                path.display(),
+                data.obs_dim,
+                data.action_dim,
+                dataset.obs_dim,
+                dataset.action_dim
+            );
         }
         let held_out = windows_in(&data, windows.history, windows.horizon, norm)?;
-        Ok(Some(HoldoutProbe { train: windows.clone(), held_out, sampler, action_scale: norm.action.scale() }))
+        Ok(Some(HoldoutProbe {
+            train: windows.clone(),
+            held_out,
+            sampler,
+            action_scale: norm.action.scale(),
+        }))
     }
 }
 
@@ -55,7 +76,14 @@ pub(super) struct Monitor<'a> {
 }
 
 impl<'a> Monitor<'a> {
-    pub(super) fn new(cfg: &'a TrainConfig, task: &str, norm: &Normalization, sigma: SigmaConfig, sampler: Sampler, label: &str) -> Self {
+    pub(super) fn new(
+        cfg: &'a TrainConfig,
+        task: &str,
+        norm: &Normalization,
+        sigma: SigmaConfig,
+        sampler: Sampler,
+        label: &str,
+    ) -> Self {
         let progress = Progress::new(label, cfg.steps as u64, "step");
         if cfg.eval_episodes > 0 && !crate::tasks::is_simulated(task) {
             progress.println(&format!(
@@ -82,34 +110,60 @@ impl<'a> Monitor<'a> {
     /// The held-out probe and the closed-loop evaluation of `model` at `step`.
     pub(super) fn evaluate(&mut self, step: usize, model: &OwnedNetwork) -> anyhow::Result<()> {
         if let Some(probe) = &self.probe {
-            let report = generalization(&model.net, &self.sigma, probe.sampler, &probe.train, &probe.held_out, &probe.action_scale, PROBE_WINDOWS, self.cfg.seed)?;
+            let report = generalization(
+                &model.net,
+                &self.sigma,
+                probe.sampler,
+                &probe.train,
+                &probe.held_out,
+                &probe.action_scale,
+                PROBE_WINDOWS,
+                self.cfg.seed,
+            )?;
             self.progress.println(&format!("step {step}: {report}"));
             self.generalization.push((step, report));
         }
         if self.cfg.eval_episodes == 0 || !crate::tasks::is_simulated(&self.task) {
             return Ok(());
         }
-        let mut policy = FloatPolicy::new(model.duplicate(&candle_core::Device::Cpu)?, self.norm.clone(), self.sigma, self.sampler)?.with_dp_parametrization(self.dp_parametrization);
-        let cfg = EvalConfig { episodes: self.cfg.eval_episodes, exec_steps: self.cfg.exec_steps, history: model.net.config().history, ..EvalConfig::default() };
+        let mut policy = FloatPolicy::new(
+            model.duplicate(&candle_core::Device::Cpu)?,
+            self.norm.clone(),
+            self.sigma,
+            self.sampler,
+        )?
+        .with_dp_parametrization(self.dp_parametrization);
+        let cfg = EvalConfig {
+            episodes: self.cfg.eval_episodes,
+            exec_steps: self.cfg.exec_steps,
+            history: model.net.config().history,
+            ..EvalConfig::default()
+        };
         let report = run_episodes(&self.task, &mut policy, &cfg)?;
         self.progress.println(&format!(
             "step {step}: {} success {:.1} % over {} episodes, non-smooth {:.2}/episode, {:.0} us/chunk",
             report.policy, 100.0 * report.success_rate, report.episodes, report.non_smooth_ee_mean, report.latency_us_median
         ));
         self.success.push((step, report.success_rate));
-        self.last_eval = Some(json!({ "step": step, "policy": report.policy, "success_rate": report.success_rate,
+        self.last_eval = Some(
+            json!({ "step": step, "policy": report.policy, "success_rate": report.success_rate,
             "episodes": report.episodes, "non_smooth_ee_mean": report.non_smooth_ee_mean,
-            "non_smooth_action_mean": report.non_smooth_action_mean, "latency_us_median": report.latency_us_median }));
+            "non_smooth_action_mean": report.non_smooth_action_mean, "latency_us_median": report.latency_us_median }),
+        );
         Ok(())
     }
 
     /// The trainer's callback: shows progress and evaluates when due (the final evaluation runs
     /// after the checkpoint is saved, see `train::run`).
     pub(super) fn on_progress(&mut self, p: &StepProgress<'_>) -> anyhow::Result<()> {
-        self.progress.update(p.step as u64, &format!("loss {:.5} lr {:.2e}", p.loss, p.lr));
+        self.progress.update(
+            p.step as u64,
+            &format!("loss {:.5} lr {:.2e}", p.loss, p.lr),
+        );
         let every = self.cfg.eval_every;
         let before_end = p.step < self.cfg.steps;
-        if every > 0 && p.step % every < self.cfg.log_every.max(1) && p.step >= every && before_end {
+        if every > 0 && p.step % every < self.cfg.log_every.max(1) && p.step >= every && before_end
+        {
             self.evaluate(p.step, p.model)?;
         }
         Ok(())

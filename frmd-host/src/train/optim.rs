@@ -1,9 +1,9 @@
 //! AdamW with linear warm-up and cosine decay (docs/design.md: lr 1e-4, weight decay 1e-6,
 //! 500 warm-up steps, cosine to zero over the run).
-use candle_core::Var;
-use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use crate::models::init::sorted_vars;
 use crate::models::OwnedNetwork;
+use candle_core::Var;
+use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use serde::{Deserialize, Serialize};
 
 /// Optimizer settings.
@@ -27,7 +27,14 @@ fn one() -> f64 {
 
 impl OptimConfig {
     pub fn paper(total_steps: usize) -> Self {
-        OptimConfig { lr: 1e-4, weight_decay: 1e-6, warmup_steps: 500, total_steps, min_lr_ratio: 0.0, head_lr_scale: 1.0 }
+        OptimConfig {
+            lr: 1e-4,
+            weight_decay: 1e-6,
+            warmup_steps: 500,
+            total_steps,
+            min_lr_ratio: 0.0,
+            head_lr_scale: 1.0,
+        }
     }
 
     /// Learning rate at (0-based) `step`: linear warm-up from lr / warmup, then cosine decay.
@@ -64,11 +71,22 @@ impl ScheduledAdamW {
             if vars.is_empty() {
                 continue;
             }
-            anyhow::ensure!(scale.is_finite() && scale > 0.0, "learning-rate multiplier must be positive, got {scale}");
-            let params = ParamsAdamW { lr: cfg.lr_at(0) * scale, weight_decay: cfg.weight_decay, ..Default::default() };
+            anyhow::ensure!(
+                scale.is_finite() && scale > 0.0,
+                "learning-rate multiplier must be positive, got {scale}"
+            );
+            let params = ParamsAdamW {
+                lr: cfg.lr_at(0) * scale,
+                weight_decay: cfg.weight_decay,
+                ..Default::default()
+            };
             built.push((AdamW::new(vars, params)?, scale));
         }
-        Ok(ScheduledAdamW { groups: built, cfg, step: 0 })
+        Ok(ScheduledAdamW {
+            groups: built,
+            cfg,
+            step: 0,
+        })
     }
 
     /// The optimizer of a ProDMP-head network: the output layer learns `cfg.head_lr_scale` times
@@ -98,7 +116,10 @@ impl ScheduledAdamW {
                 body.push(var);
             }
         }
-        anyhow::ensure!(!head.is_empty(), "no output-layer variables under `{prefix}`");
+        anyhow::ensure!(
+            !head.is_empty(),
+            "no output-layer variables under `{prefix}`"
+        );
         let scale = cfg.head_lr_scale;
         Self::grouped(vec![(body, 1.0), (head, scale)], cfg)
     }
@@ -126,7 +147,14 @@ mod tests {
 
     #[test]
     fn warmup_then_cosine() {
-        let cfg = OptimConfig { lr: 1e-3, weight_decay: 0.0, warmup_steps: 10, total_steps: 110, min_lr_ratio: 0.0, head_lr_scale: 1.0 };
+        let cfg = OptimConfig {
+            lr: 1e-3,
+            weight_decay: 0.0,
+            warmup_steps: 10,
+            total_steps: 110,
+            min_lr_ratio: 0.0,
+            head_lr_scale: 1.0,
+        };
         assert!((cfg.lr_at(0) - 1e-4).abs() < 1e-12);
         assert!((cfg.lr_at(9) - 1e-3).abs() < 1e-12);
         assert!((cfg.lr_at(10) - 1e-3).abs() < 1e-12);

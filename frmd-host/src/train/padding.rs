@@ -30,12 +30,20 @@ pub fn pad_episode_ends(data: &Dataset, steps: usize) -> anyhow::Result<Dataset>
         ..data.clone()
     };
     for range in data.episode_ranges() {
-        padded.obs.extend_from_slice(&data.obs[range.start * o..range.end * o]);
-        padded.action.extend_from_slice(&data.action[range.start * a..range.end * a]);
+        padded
+            .obs
+            .extend_from_slice(&data.obs[range.start * o..range.end * o]);
+        padded
+            .action
+            .extend_from_slice(&data.action[range.start * a..range.end * a]);
         let last = range.end - 1;
         for _ in 0..steps {
-            padded.obs.extend_from_slice(&data.obs[last * o..(last + 1) * o]);
-            padded.action.extend_from_slice(&data.action[last * a..(last + 1) * a]);
+            padded
+                .obs
+                .extend_from_slice(&data.obs[last * o..(last + 1) * o]);
+            padded
+                .action
+                .extend_from_slice(&data.action[last * a..(last + 1) * a]);
         }
         padded.episode_ends.push((padded.action.len() / a) as i64);
     }
@@ -50,7 +58,17 @@ mod tests {
     fn data() -> Dataset {
         let obs: Vec<f32> = (0..7).map(|i| i as f32).collect();
         let action: Vec<f32> = (0..14).map(|i| 10.0 + i as f32 * 0.5).collect();
-        Dataset { obs, action, episode_ends: vec![3, 7], obs_dim: 1, action_dim: 2, task: "toy".into(), dt: 0.1, source: "test".into(), action_before_start: Default::default() }
+        Dataset {
+            obs,
+            action,
+            episode_ends: vec![3, 7],
+            obs_dim: 1,
+            action_dim: 2,
+            task: "toy".into(),
+            dt: 0.1,
+            source: "test".into(),
+            action_before_start: Default::default(),
+        }
     }
 
     #[test]
@@ -58,7 +76,10 @@ mod tests {
         let d = data();
         let p = pad_episode_ends(&d, 2).unwrap();
         assert_eq!(p.episode_ends, vec![5, 11]);
-        assert_eq!(p.obs, vec![0.0, 1.0, 2.0, 2.0, 2.0, 3.0, 4.0, 5.0, 6.0, 6.0, 6.0]);
+        assert_eq!(
+            p.obs,
+            vec![0.0, 1.0, 2.0, 2.0, 2.0, 3.0, 4.0, 5.0, 6.0, 6.0, 6.0]
+        );
         assert_eq!(&p.action[6..10], &[12.0, 12.5, 12.0, 12.5]);
         let (plain, norm) = d.windows(2, 3).unwrap();
         let (more, padded_norm) = p.windows(2, 3).unwrap();
@@ -70,7 +91,10 @@ mod tests {
         let w = 4;
         assert_eq!(&more.prev_rate[w * 2..w * 2 + 2], &[0.0, 0.0]);
         let last_action = &more.actions[2 * 6 + 4..2 * 6 + 6];
-        assert_eq!(&more.actions[w * 6..w * 6 + 6], &[last_action, last_action, last_action].concat()[..]);
+        assert_eq!(
+            &more.actions[w * 6..w * 6 + 6],
+            &[last_action, last_action, last_action].concat()[..]
+        );
         assert_eq!(pad_episode_ends(&d, 0).unwrap(), d);
     }
 }

@@ -71,7 +71,13 @@ impl Default for TrainConfig {
     /// data and output paths empty.
     fn default() -> Self {
         let paper = LoopConfig::paper(PAPER_STEPS, 0);
-        let OptimConfig { lr, weight_decay, warmup_steps, head_lr_scale, .. } = paper.optim;
+        let OptimConfig {
+            lr,
+            weight_decay,
+            warmup_steps,
+            head_lr_scale,
+            ..
+        } = paper.optim;
         TrainConfig {
             data: PathBuf::new(),
             out: PathBuf::new(),
@@ -106,7 +112,14 @@ impl TrainConfig {
             steps: self.steps,
             batch_size: self.batch,
             seed: self.seed,
-            optim: OptimConfig { lr: self.lr, weight_decay: self.weight_decay, warmup_steps: self.warmup, total_steps: self.steps, min_lr_ratio: 0.0, head_lr_scale: self.head_lr_scale },
+            optim: OptimConfig {
+                lr: self.lr,
+                weight_decay: self.weight_decay,
+                warmup_steps: self.warmup,
+                total_steps: self.steps,
+                min_lr_ratio: 0.0,
+                head_lr_scale: self.head_lr_scale,
+            },
             log_every: self.log_every,
         }
     }
@@ -116,13 +129,23 @@ impl TrainConfig {
     /// The teacher's schedule: 20k steps, lr 1e-3 (500 warm-up steps, cosine decay). The paper's
     /// lr 1e-4 left the MLP teachers imprecise at this budget (docs/experiments.md).
     pub fn teacher_recipe() -> Self {
-        TrainConfig { steps: 20_000, lr: 1e-3, warmup: 500, ..TrainConfig::default() }
+        TrainConfig {
+            steps: 20_000,
+            lr: 1e-3,
+            warmup: 500,
+            ..TrainConfig::default()
+        }
     }
 
     /// The student's schedule: 3,000 distillation steps, lr 1e-4, 100 warm-up steps (6,000 steps
     /// or lr 3e-4 measured no better, docs/design.md section 7).
     pub fn student_recipe() -> Self {
-        TrainConfig { steps: 3_000, lr: 1e-4, warmup: 100, ..TrainConfig::default() }
+        TrainConfig {
+            steps: 3_000,
+            lr: 1e-4,
+            warmup: 100,
+            ..TrainConfig::default()
+        }
     }
 
     /// The DP baseline's schedule: the teacher's (20k steps, lr 1e-3), so both get the same budget.
@@ -185,7 +208,12 @@ pub struct StudentShape {
 
 impl Default for StudentRun {
     fn default() -> Self {
-        StudentRun { train: TrainConfig::student_recipe(), teacher: PathBuf::new(), distill: DistillConfig::default(), shape: StudentShape::default() }
+        StudentRun {
+            train: TrainConfig::student_recipe(),
+            teacher: PathBuf::new(),
+            distill: DistillConfig::default(),
+            shape: StudentShape::default(),
+        }
     }
 }
 
@@ -198,7 +226,10 @@ pub struct DpRun {
 
 impl Default for DpRun {
     fn default() -> Self {
-        DpRun { train: TrainConfig::dp_recipe(), dp: DpConfig::default() }
+        DpRun {
+            train: TrainConfig::dp_recipe(),
+            dp: DpConfig::default(),
+        }
     }
 }
 
@@ -222,6 +253,13 @@ pub struct ProbeConfig {
 
 impl Default for ProbeConfig {
     fn default() -> Self {
-        ProbeConfig { ckpt: PathBuf::new(), data: PathBuf::new(), holdout: PathBuf::new(), steps: None, solver: Solver::DpmPp2m, windows: 1024 }
+        ProbeConfig {
+            ckpt: PathBuf::new(),
+            data: PathBuf::new(),
+            holdout: PathBuf::new(),
+            steps: None,
+            solver: Solver::DpmPp2m,
+            windows: 1024,
+        }
     }
 }

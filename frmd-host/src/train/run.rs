@@ -3,6 +3,7 @@
 //! progress and evaluates, then write the checkpoint (`model.safetensors` + `frmd.json` with the
 //! training summary), the calibration rows beside a student (`calibration.safetensors`, so that
 //! exporting needs only the checkpoint directory) and `learning_curve.png`.
+use super::checks::check_data_task;
 use super::curve::plot_learning_curve;
 use super::distill::distill;
 use super::dp::train_dp;
@@ -10,7 +11,6 @@ use super::holdout::{generalization, windows_in, ChunkSampler, GeneralizationRep
 use super::monitor::{HoldoutProbe, Monitor};
 use super::padding::pad_episode_ends;
 use super::recipe::{DpRun, ProbeConfig, StudentRun, TeacherRun, TrainConfig};
-use super::checks::check_data_task;
 use super::teacher::train_teacher;
 use super::{Progress, TrainReport};
 use crate::checkpoint::{self, fnv1a_hex, CheckpointMeta, DatasetInfo, Role, CALIBRATION_FILE};
@@ -40,8 +40,19 @@ pub struct RunOutcome {
 
 impl std::fmt::Display for RunOutcome {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let success = self.success.map(|r| format!(", success {:.1} %", 100.0 * r)).unwrap_or_default();
-        write!(f, "{:?}: {} steps in {:.1} s, final loss {:.5}{success}; checkpoint in {}", self.role, self.steps, self.seconds, self.final_loss.unwrap_or(f64::NAN), self.out.display())
+        let success = self
+            .success
+            .map(|r| format!(", success {:.1} %", 100.0 * r))
+            .unwrap_or_default();
+        write!(
+            f,
+            "{:?}: {} steps in {:.1} s, final loss {:.5}{success}; checkpoint in {}",
+            self.role,
+            self.steps,
+            self.seconds,
+            self.final_loss.unwrap_or(f64::NAN),
+            self.out.display()
+        )
     }
 }
 
@@ -55,13 +66,30 @@ struct Prepared {
 
 /// Loads `cfg.data`, pads each episode's end by `pad_end` steps (`train::padding`) and cuts
 /// windows of `history` and `horizon`.
-fn prepare(cfg: &TrainConfig, history: usize, horizon: usize, pad_end: usize) -> anyhow::Result<Prepared> {
-    let bytes = std::fs::read(&cfg.data).with_context(|| format!("cannot read dataset {}", cfg.data.display()))?;
-    let dataset = Dataset::from_bytes(&bytes).with_context(|| format!("invalid dataset {}", cfg.data.display()))?;
+fn prepare(
+    cfg: &TrainConfig,
+    history: usize,
+    horizon: usize,
+    pad_end: usize,
+) -> anyhow::Result<Prepared> {
+    let bytes = std::fs::read(&cfg.data)
+        .with_context(|| format!("cannot read dataset {}", cfg.data.display()))?;
+    let dataset = Dataset::from_bytes(&bytes)
+        .with_context(|| format!("invalid dataset {}", cfg.data.display()))?;
     check_data_task(&dataset, &cfg.data, cfg.eval_episodes)?;
     let (windows, norm) = pad_episode_ends(&dataset, pad_end)?.windows(history, horizon)?;
-    let info = DatasetInfo { task: dataset.task.clone(), path: cfg.data.display().to_string(), digest: fnv1a_hex(&bytes), windows: windows.len() };
-    Ok(Prepared { dataset, windows, norm, info })
+    let info = DatasetInfo {
+        task: dataset.task.clone(),
+        path: cfg.data.display().to_string(),
+        digest: fnv1a_hex(&bytes),
+        windows: windows.len(),
+    };
+    Ok(Prepared {
+        dataset,
+        windows,
+        norm,
+        info,
+    })
 }
 
 fn model_config(cfg: &TrainConfig, p: &Prepared, head: HeadConfig) -> ModelConfig {
@@ -80,32 +108,62 @@ fn model_config(cfg: &TrainConfig, p: &Prepared, head: HeadConfig) -> ModelConfi
 /// Writes the checkpoint and the student's calibration rows, then runs the final evaluation
 /// (so that a failing evaluation never costs the trained model), records it in `frmd.json` and
 /// draws the learning curve.
-fn finish(role: Role, net: &OwnedNetwork, prepared: &Prepared, report: &TrainReport, mut mon: Monitor<'_>, extra: serde_json::Value) -> anyhow::Result<RunOutcome> {
+fn finish(
+    role: Role,
+    net: &OwnedNetwork,
+    prepared: &Prepared,
+    report: &TrainReport,
+    mut mon: Monitor<'_>,
+    extra: serde_json::Value,
+) -> anyhow::Result<RunOutcome> {
     let cfg = mon.cfg;
     let mut meta = training_meta(role, net, prepared, report, &mon, extra.clone());
     checkpoint::save(&cfg.out, &meta, net)?;
     if role == Role::Student {
-        let set = prepared.windows.calibration_rows(CALIBRATION_ROWS, cfg.seed);
+        let set = prepared
+            .windows
+            .calibration_rows(CALIBRATION_ROWS, cfg.seed);
         frmd_export::calibration_file::write(&cfg.out.join(CALIBRATION_FILE), &set)?;
     }
     let evaluated = mon.evaluate(report.steps, net);
     mon.finish();
-    evaluated.with_context(|| format!("final evaluation (the checkpoint is saved in {})", cfg.out.display()))?;
+    evaluated.with_context(|| {
+        format!(
+            "final evaluation (the checkpoint is saved in {})",
+            cfg.out.display()
+        )
+    })?;
     meta.training = training_meta(role, net, prepared, report, &mon, extra).training;
     checkpoint::save_meta(&cfg.out, &meta)?;
-    plot_learning_curve(&cfg.out.join("learning_curve.png"), &prepared.info.task, role, &report.loss_curve, &mon.success)?;
+    plot_learning_curve(
+        &cfg.out.join("learning_curve.png"),
+        &prepared.info.task,
+        role,
+        &report.loss_curve,
+        &mon.success,
+    )?;
     Ok(RunOutcome {
         role,
         steps: report.steps,
         seconds: report.seconds,
         final_loss: report.final_loss(),
-        success: mon.last_eval.as_ref().and_then(|e| e["success_rate"].as_f64()),
+        success: mon
+            .last_eval
+            .as_ref()
+            .and_then(|e| e["success_rate"].as_f64()),
         out: cfg.out.clone(),
     })
 }
 
 /// The checkpoint description of a finished run with its training summary so far.
-fn training_meta(role: Role, net: &OwnedNetwork, prepared: &Prepared, report: &TrainReport, mon: &Monitor<'_>, mut extra: serde_json::Value) -> CheckpointMeta {
+fn training_meta(
+    role: Role,
+    net: &OwnedNetwork,
+    prepared: &Prepared,
+    report: &TrainReport,
+    mon: &Monitor<'_>,
+    mut extra: serde_json::Value,
+) -> CheckpointMeta {
     let cfg = mon.cfg;
     let mut meta = CheckpointMeta::describe(role, net.net.config(), SigmaConfig::default());
     meta.normalization = Some(prepared.norm.clone());
@@ -132,16 +190,44 @@ pub fn run_teacher(run: &TeacherRun) -> anyhow::Result<RunOutcome> {
     c.check_paths(&[])?;
     let sigma = SigmaConfig::default();
     let prepared = prepare(c, c.history, c.horizon, c.pad_end)?;
-    let model = model_config(c, &prepared, HeadConfig::ProDmp { num_basis: c.num_basis, output: run.output, auto_scale_basis: run.auto_scale_basis });
+    let model = model_config(
+        c,
+        &prepared,
+        HeadConfig::ProDmp {
+            num_basis: c.num_basis,
+            output: run.output,
+            auto_scale_basis: run.auto_scale_basis,
+        },
+    );
     let sampler = Sampler::for_role(Role::Teacher, c.eval_steps, run.eval_solver)?;
-    let mut mon = Monitor::new(c, &prepared.dataset.task, &prepared.norm, sigma, sampler, "teacher");
+    let mut mon = Monitor::new(
+        c,
+        &prepared.dataset.task,
+        &prepared.norm,
+        sigma,
+        sampler,
+        "teacher",
+    );
     let (solver, steps) = match sampler {
         Sampler::Teacher { solver, steps } => (solver, steps),
         _ => (Solver::Heun, 10),
     };
-    mon.probe = HoldoutProbe::new(c, &prepared.dataset, &prepared.windows, &prepared.norm, ChunkSampler::Teacher { solver, steps })?;
+    mon.probe = HoldoutProbe::new(
+        c,
+        &prepared.dataset,
+        &prepared.windows,
+        &prepared.norm,
+        ChunkSampler::Teacher { solver, steps },
+    )?;
     let tcfg = run.teacher;
-    let (net, report) = train_teacher(&prepared.windows, &model, &sigma, &tcfg, &c.loop_config(), &mut |p: &Progress| mon.on_progress(p))?;
+    let (net, report) = train_teacher(
+        &prepared.windows,
+        &model,
+        &sigma,
+        &tcfg,
+        &c.loop_config(),
+        &mut |p: &Progress| mon.on_progress(p),
+    )?;
     let extra = json!({ "loss_weight": tcfg.weight, "sigma_sampling": tcfg.sampling, "augment": tcfg.augment, "teacher_ema": tcfg.ema });
     finish(Role::Teacher, &net, &prepared, &report, mon, extra)
 }
@@ -153,28 +239,66 @@ pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
     let c = &run.train;
     c.check_paths(&[&run.teacher])?;
     let sigma = SigmaConfig::default();
-    let (tmeta, teacher) = checkpoint::load(&run.teacher).with_context(|| format!("loading teacher {}", run.teacher.display()))?;
+    let (tmeta, teacher) = checkpoint::load(&run.teacher)
+        .with_context(|| format!("loading teacher {}", run.teacher.display()))?;
     if tmeta.role != Role::Teacher {
-        anyhow::bail!("--teacher {}: this is a {} checkpoint, not a teacher", run.teacher.display(), role_name(tmeta.role));
+        anyhow::bail!(
+            "--teacher {}: this is a {} checkpoint, not a teacher",
+            run.teacher.display(),
+            role_name(tmeta.role)
+        );
     }
     let tcfg = teacher.net.config().clone();
     run.validate_with_teacher(&tcfg)?;
     let prepared = prepare(c, tcfg.history, tcfg.horizon, c.pad_end)?;
     let data = &prepared.dataset;
-    if (data.obs_dim, data.action_dim) != (tcfg.obs_dim, tcfg.action_dim) || data.task != tmeta.dataset.task {
+    if (data.obs_dim, data.action_dim) != (tcfg.obs_dim, tcfg.action_dim)
+        || data.task != tmeta.dataset.task
+    {
         anyhow::bail!("{}: task `{}` with obs_dim {} and action_dim {}; the teacher was trained on task `{}` with obs_dim {} and action_dim {}", c.data.display(), data.task, data.obs_dim, data.action_dim, tmeta.dataset.task, tcfg.obs_dim, tcfg.action_dim);
     }
     if let Some(tnorm) = &tmeta.normalization {
         if tnorm != &prepared.norm {
-            anyhow::bail!("the data's normalization differs from the teacher's (different data set?)");
+            anyhow::bail!(
+                "the data's normalization differs from the teacher's (different data set?)"
+            );
         }
     }
     let sampler = Sampler::for_role(Role::Student, c.eval_steps, None)?;
-    let mut mon = Monitor::new(c, &prepared.dataset.task, &prepared.norm, sigma, sampler, "student");
-    mon.probe = HoldoutProbe::new(c, &prepared.dataset, &prepared.windows, &prepared.norm, ChunkSampler::Student { steps: c.eval_steps.unwrap_or(1) })?;
-    let distilled = distill(&teacher, &prepared.windows, &sigma, &run.distill, &c.loop_config(), &mut |p: &Progress| mon.on_progress(p))?;
+    let mut mon = Monitor::new(
+        c,
+        &prepared.dataset.task,
+        &prepared.norm,
+        sigma,
+        sampler,
+        "student",
+    );
+    mon.probe = HoldoutProbe::new(
+        c,
+        &prepared.dataset,
+        &prepared.windows,
+        &prepared.norm,
+        ChunkSampler::Student {
+            steps: c.eval_steps.unwrap_or(1),
+        },
+    )?;
+    let distilled = distill(
+        &teacher,
+        &prepared.windows,
+        &sigma,
+        &run.distill,
+        &c.loop_config(),
+        &mut |p: &Progress| mon.on_progress(p),
+    )?;
     let extra = json!({ "distill": run.distill, "teacher": run.teacher.display().to_string(), "teacher_digest": tmeta.dataset.digest });
-    finish(Role::Student, &distilled.eval_student, &prepared, &distilled.report, mon, extra)
+    finish(
+        Role::Student,
+        &distilled.eval_student,
+        &prepared,
+        &distilled.report,
+        mon,
+        extra,
+    )
 }
 
 /// Trains the action-space DP baseline of `run` and writes its checkpoint.
@@ -185,9 +309,22 @@ pub fn run_dp(run: &DpRun) -> anyhow::Result<RunOutcome> {
     let prepared = prepare(c, c.history, c.horizon, 0)?;
     let model = model_config(c, &prepared, HeadConfig::Raw);
     let sampler = Sampler::for_role(Role::Dp, c.eval_steps, None)?;
-    let mut mon = Monitor::new(c, &prepared.dataset.task, &prepared.norm, SigmaConfig::default(), sampler, "dp");
+    let mut mon = Monitor::new(
+        c,
+        &prepared.dataset.task,
+        &prepared.norm,
+        SigmaConfig::default(),
+        sampler,
+        "dp",
+    );
     mon.dp_parametrization = run.dp.parametrization;
-    let (net, report) = train_dp(&prepared.windows, &model, &c.loop_config(), &run.dp, &mut |p: &Progress| mon.on_progress(p))?;
+    let (net, report) = train_dp(
+        &prepared.windows,
+        &model,
+        &c.loop_config(),
+        &run.dp,
+        &mut |p: &Progress| mon.on_progress(p),
+    )?;
     let extra = json!({ "ddpm_train_steps": DP_TRAIN_STEPS, DP_TRAINING_KEY: run.dp });
     finish(Role::Dp, &net, &prepared, &report, mon, extra)
 }
@@ -196,16 +333,46 @@ pub fn run_dp(run: &DpRun) -> anyhow::Result<RunOutcome> {
 /// held-out demonstrations; returns the sampler used and the report.
 pub fn run_probe(cfg: &ProbeConfig) -> anyhow::Result<(ChunkSampler, GeneralizationReport)> {
     cfg.validate()?;
-    let (meta, net) = checkpoint::load(&cfg.ckpt).with_context(|| format!("loading {}", cfg.ckpt.display()))?;
-    let norm = meta.normalization.clone().with_context(|| format!("{}: checkpoint has no normalization", cfg.ckpt.display()))?;
+    let (meta, net) =
+        checkpoint::load(&cfg.ckpt).with_context(|| format!("loading {}", cfg.ckpt.display()))?;
+    let norm = meta
+        .normalization
+        .clone()
+        .with_context(|| format!("{}: checkpoint has no normalization", cfg.ckpt.display()))?;
     let model = net.net.config().clone();
     let sampler = match meta.role {
-        Role::Teacher => ChunkSampler::Teacher { solver: cfg.solver, steps: cfg.steps.unwrap_or(10) },
-        Role::Student => ChunkSampler::Student { steps: cfg.steps.unwrap_or(1) },
-        Role::Dp => anyhow::bail!("probe measures ProDMP teachers and students, not the DP baseline"),
+        Role::Teacher => ChunkSampler::Teacher {
+            solver: cfg.solver,
+            steps: cfg.steps.unwrap_or(10),
+        },
+        Role::Student => ChunkSampler::Student {
+            steps: cfg.steps.unwrap_or(1),
+        },
+        Role::Dp => {
+            anyhow::bail!("probe measures ProDMP teachers and students, not the DP baseline")
+        }
     };
-    let train = windows_in(&Dataset::load(&cfg.data)?, model.history, model.horizon, &norm)?;
-    let held_out = windows_in(&Dataset::load(&cfg.holdout)?, model.history, model.horizon, &norm)?;
-    let report = generalization(&net.net, &meta.sigma, sampler, &train, &held_out, &norm.action.scale(), cfg.windows, 0)?;
+    let train = windows_in(
+        &Dataset::load(&cfg.data)?,
+        model.history,
+        model.horizon,
+        &norm,
+    )?;
+    let held_out = windows_in(
+        &Dataset::load(&cfg.holdout)?,
+        model.history,
+        model.horizon,
+        &norm,
+    )?;
+    let report = generalization(
+        &net.net,
+        &meta.sigma,
+        sampler,
+        &train,
+        &held_out,
+        &norm.action.scale(),
+        cfg.windows,
+        0,
+    )?;
     Ok((sampler, report))
 }

@@ -6,10 +6,10 @@ use crate::data::windows::WindowSet;
 use crate::diffusion::loss::{teacher_loss, LossWeight, SigmaSampling};
 use crate::models::init::ema_update;
 use crate::models::{ModelConfig, OwnedNetwork};
-use serde::{Deserialize, Serialize};
 use crate::rng::HostRng;
 use candle_core::Device;
 use frmd_core::sigma::SigmaConfig;
+use serde::{Deserialize, Serialize};
 
 /// Teacher-specific settings.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -25,14 +25,24 @@ impl Default for TeacherConfig {
     /// The recipe: uniform loss weight, a fifth of the noise levels drawn log-uniformly, no
     /// augmentation, the raw weights (docs/experiments.md has the measurements behind each).
     fn default() -> Self {
-        TeacherConfig::plain(LossWeight::Uniform, SigmaSampling { uniform_fraction: 0.2 })
+        TeacherConfig::plain(
+            LossWeight::Uniform,
+            SigmaSampling {
+                uniform_fraction: 0.2,
+            },
+        )
     }
 }
 
 impl TeacherConfig {
     /// Loss weight and sigma sampling as given, no augmentation, no EMA.
     pub fn plain(weight: LossWeight, sampling: SigmaSampling) -> Self {
-        TeacherConfig { weight, sampling, augment: CondAugment::NONE, ema: 0.0 }
+        TeacherConfig {
+            weight,
+            sampling,
+            augment: CondAugment::NONE,
+            ema: 0.0,
+        }
     }
 }
 
@@ -54,13 +64,36 @@ pub fn train_teacher(
     let net = OwnedNetwork::new_seeded(model, cfg.seed, &device)?;
     let mut opt = ScheduledAdamW::for_network(&net, cfg.optim.clone())?;
     let mut rng = HostRng::derive(cfg.seed, "teacher-batches");
-    anyhow::ensure!((0.0..1.0).contains(&tcfg.ema), "teacher EMA decay must be in [0, 1), got {}", tcfg.ema);
-    let averaged = if tcfg.ema > 0.0 { Some(net.duplicate(&device)?) } else { None };
+    anyhow::ensure!(
+        (0.0..1.0).contains(&tcfg.ema),
+        "teacher EMA decay must be in [0, 1), got {}",
+        tcfg.ema
+    );
+    let averaged = if tcfg.ema > 0.0 {
+        Some(net.duplicate(&device)?)
+    } else {
+        None
+    };
     let report = run_loop(
         cfg,
         |_| {
-            let batch = sample_augmented(windows, model, cfg.batch_size, &tcfg.augment, &mut rng, &device)?;
-            let loss = teacher_loss(&net.net, sig, &batch.x0, &batch.cond, tcfg.weight, tcfg.sampling, &mut rng)?;
+            let batch = sample_augmented(
+                windows,
+                model,
+                cfg.batch_size,
+                &tcfg.augment,
+                &mut rng,
+                &device,
+            )?;
+            let loss = teacher_loss(
+                &net.net,
+                sig,
+                &batch.x0,
+                &batch.cond,
+                tcfg.weight,
+                tcfg.sampling,
+                &mut rng,
+            )?;
             let lr = opt.current_lr();
             opt.backward_step(&loss)?;
             if let Some(avg) = &averaged {

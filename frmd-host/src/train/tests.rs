@@ -1,38 +1,74 @@
 //! Training tests on the toy bimodal set (kept to a few seconds each).
 use super::distill::{distill, DistillConfig};
+use super::{
+    teacher::{train_teacher, TeacherConfig},
+    LoopConfig, Progress,
+};
 use crate::data::toy::{bimodal_windows, positive_fraction, toy_condition, toy_config, MODE_GOAL};
-use super::{teacher::{train_teacher, TeacherConfig}, LoopConfig, Progress};
 use crate::diffusion::loss::{LossWeight, SigmaSampling};
-const LOGNORMAL: SigmaSampling = SigmaSampling { uniform_fraction: 0.0 };
+const LOGNORMAL: SigmaSampling = SigmaSampling {
+    uniform_fraction: 0.0,
+};
 use crate::diffusion::precond::consistency;
 use crate::diffusion::samplers::{gaussian, sample_consistency, sample_teacher, Solver};
-use crate::models::{HeadConfig, ProDmpOutput, OwnedNetwork};
+use crate::models::{HeadConfig, OwnedNetwork, ProDmpOutput};
 use crate::rng::HostRng;
 use candle_core::{Device, Tensor};
 use frmd_core::sigma::SigmaConfig;
 
 #[test]
 fn teacher_loss_decreases_on_fixed_seed() {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
+    let cfg = toy_config(HeadConfig::ProDmp {
+        num_basis: 4,
+        output: ProDmpOutput::Direct,
+        auto_scale_basis: false,
+    });
     let windows = bimodal_windows(&cfg, 256, 1).unwrap();
     let sig = SigmaConfig::default();
-    let (_, report) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &LoopConfig::toy(300, 3), &mut |_: &Progress| Ok(())).unwrap();
+    let (_, report) = train_teacher(
+        &windows,
+        &cfg,
+        &sig,
+        &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL),
+        &LoopConfig::toy(300, 3),
+        &mut |_: &Progress| Ok(()),
+    )
+    .unwrap();
     let first = report.loss_curve.first().unwrap().1;
     let last = report.final_loss().unwrap();
     assert!(last < 0.5 * first, "loss {first} -> {last}");
     // Same seed, same curve.
-    let (_, again) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &LoopConfig::toy(300, 3), &mut |_: &Progress| Ok(())).unwrap();
+    let (_, again) = train_teacher(
+        &windows,
+        &cfg,
+        &sig,
+        &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL),
+        &LoopConfig::toy(300, 3),
+        &mut |_: &Progress| Ok(()),
+    )
+    .unwrap();
     assert_eq!(report.loss_curve, again.loss_curve);
 }
 
 #[test]
 fn consistency_boundary_is_identity() {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
+    let cfg = toy_config(HeadConfig::ProDmp {
+        num_basis: 4,
+        output: ProDmpOutput::Direct,
+        auto_scale_basis: false,
+    });
     let net = OwnedNetwork::new_seeded(&cfg, 5, &Device::Cpu).unwrap();
     let sig = SigmaConfig::default();
     let mut rng = HostRng::new(9);
     let x = gaussian(&mut rng, 8, cfg.traj_dim(), &Device::Cpu).unwrap();
-    let out = consistency(&net.net, &sig, &x, &toy_condition(8).unwrap(), &[sig.sigma_min; 8]).unwrap();
+    let out = consistency(
+        &net.net,
+        &sig,
+        &x,
+        &toy_condition(8).unwrap(),
+        &[sig.sigma_min; 8],
+    )
+    .unwrap();
     assert_eq!(out.to_vec2::<f32>().unwrap(), x.to_vec2::<f32>().unwrap());
     // Away from sigma_min the network does contribute.
     let out = consistency(&net.net, &sig, &x, &toy_condition(8).unwrap(), &[1.0; 8]).unwrap();
@@ -43,44 +79,108 @@ fn consistency_boundary_is_identity() {
 /// present, mode weights within 10 points of the data's 50 %, samples near the modes.
 #[test]
 fn one_step_student_matches_teacher_on_bimodal_toy() {
-    let cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
+    let cfg = toy_config(HeadConfig::ProDmp {
+        num_basis: 4,
+        output: ProDmpOutput::Direct,
+        auto_scale_basis: false,
+    });
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
     let sig = SigmaConfig::default();
-    let (teacher, _) = train_teacher(&windows, &cfg, &sig, &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL), &LoopConfig::toy(4000, 4), &mut |_: &Progress| Ok(())).unwrap();
+    let (teacher, _) = train_teacher(
+        &windows,
+        &cfg,
+        &sig,
+        &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL),
+        &LoopConfig::toy(4000, 4),
+        &mut |_: &Progress| Ok(()),
+    )
+    .unwrap();
     let batch = 400;
     let cond = toy_condition(batch).unwrap();
     let mut rng = HostRng::new(11);
     let z = gaussian(&mut rng, batch, cfg.traj_dim(), &Device::Cpu).unwrap();
-    let teacher_samples = sample_teacher(&teacher.net, &sig, &cond, (&z * sig.sigma_max).unwrap(), 10, Solver::Heun).unwrap();
-    let teacher_flat = teacher_samples.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    let teacher_samples = sample_teacher(
+        &teacher.net,
+        &sig,
+        &cond,
+        (&z * sig.sigma_max).unwrap(),
+        10,
+        Solver::Heun,
+    )
+    .unwrap();
+    let teacher_flat = teacher_samples
+        .flatten_all()
+        .unwrap()
+        .to_vec1::<f32>()
+        .unwrap();
     let teacher_fraction = positive_fraction(&teacher_flat, cfg.horizon);
 
     let mut dcfg = LoopConfig::toy(2000, 6);
     dcfg.optim.lr = 1e-3;
-    let distilled = distill(&teacher, &windows, &sig, &DistillConfig { levels: 10, eval_ema: 0.99, ..DistillConfig::default() }, &dcfg, &mut |_: &Progress| Ok(())).unwrap();
-    let student_samples = sample_consistency(&distilled.eval_student.net, &sig, &cond, &z, 1, &mut rng).unwrap();
-    let student_flat = student_samples.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    let distilled = distill(
+        &teacher,
+        &windows,
+        &sig,
+        &DistillConfig {
+            levels: 10,
+            eval_ema: 0.99,
+            ..DistillConfig::default()
+        },
+        &dcfg,
+        &mut |_: &Progress| Ok(()),
+    )
+    .unwrap();
+    let student_samples =
+        sample_consistency(&distilled.eval_student.net, &sig, &cond, &z, 1, &mut rng).unwrap();
+    let student_flat = student_samples
+        .flatten_all()
+        .unwrap()
+        .to_vec1::<f32>()
+        .unwrap();
     let student_fraction = positive_fraction(&student_flat, cfg.horizon);
     let last_steps = |flat: &[f32]| -> f64 {
         // mean distance of the final step to the nearest mode's final value
         let goal_end = windows.actions[cfg.horizon - 1].abs() as f64;
-        flat.chunks_exact(cfg.horizon).map(|r| ((*r.last().unwrap() as f64).abs() - goal_end).abs()).sum::<f64>() / batch as f64
+        flat.chunks_exact(cfg.horizon)
+            .map(|r| ((*r.last().unwrap() as f64).abs() - goal_end).abs())
+            .sum::<f64>()
+            / batch as f64
     };
     let (teacher_err, student_err) = (last_steps(&teacher_flat), last_steps(&student_flat));
     eprintln!("teacher +fraction {teacher_fraction:.3} err {teacher_err:.4}; student +fraction {student_fraction:.3} err {student_err:.4} (mode goal {MODE_GOAL})");
-    assert!((teacher_fraction - 0.5).abs() <= 0.10, "teacher mode weight {teacher_fraction}");
-    assert!((student_fraction - 0.5).abs() <= 0.10, "student mode weight {student_fraction}");
+    assert!(
+        (teacher_fraction - 0.5).abs() <= 0.10,
+        "teacher mode weight {teacher_fraction}"
+    );
+    assert!(
+        (student_fraction - 0.5).abs() <= 0.10,
+        "student mode weight {student_fraction}"
+    );
     assert!((student_fraction - teacher_fraction).abs() <= 0.10);
     // Samples concentrate at the modes (0.5 from the origin); one step is blurrier than the
     // teacher's 10 Heun steps (measured: teacher 0.025, student 0.12 on this budget).
-    assert!(teacher_err < 0.06 && student_err < 0.2, "distance to modes: teacher {teacher_err}, student {student_err}");
+    assert!(
+        teacher_err < 0.06 && student_err < 0.2,
+        "distance to modes: teacher {teacher_err}, student {student_err}"
+    );
 }
 
 #[test]
 fn every_parameter_gets_a_gradient() {
     use crate::models::BackboneConfig;
-    for backbone in [BackboneConfig::parse("mlp:16,16:mish").unwrap(), BackboneConfig::Transformer { layers: 1, heads: 2, width: 8 }] {
-        let mut cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
+    for backbone in [
+        BackboneConfig::parse("mlp:16,16:mish").unwrap(),
+        BackboneConfig::Transformer {
+            layers: 1,
+            heads: 2,
+            width: 8,
+        },
+    ] {
+        let mut cfg = toy_config(HeadConfig::ProDmp {
+            num_basis: 4,
+            output: ProDmpOutput::Direct,
+            auto_scale_basis: false,
+        });
         cfg.backbone = backbone.clone();
         let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
         let mut windows = bimodal_windows(&cfg, 16, 1).unwrap();
@@ -88,13 +188,35 @@ fn every_parameter_gets_a_gradient() {
         windows.obs = rng.normal_vec(16);
         windows.prev_action = rng.normal_vec(16);
         windows.prev_rate = rng.normal_vec(16);
-        let batch = super::batch::gather(&windows, &cfg, &(0..16).collect::<Vec<_>>(), &Device::Cpu).unwrap();
-        let loss = crate::diffusion::loss::teacher_loss(&net.net, &SigmaConfig::default(), &batch.x0, &batch.cond, LossWeight::Edm, LOGNORMAL, &mut HostRng::new(1)).unwrap();
+        let batch =
+            super::batch::gather(&windows, &cfg, &(0..16).collect::<Vec<_>>(), &Device::Cpu)
+                .unwrap();
+        let loss = crate::diffusion::loss::teacher_loss(
+            &net.net,
+            &SigmaConfig::default(),
+            &batch.x0,
+            &batch.cond,
+            LossWeight::Edm,
+            LOGNORMAL,
+            &mut HostRng::new(1),
+        )
+        .unwrap();
         let grads = loss.backward().unwrap();
         for (name, var) in crate::models::init::sorted_vars(&net.varmap) {
-            let grad = grads.get(var.as_tensor()).unwrap_or_else(|| panic!("{backbone:?}: no gradient for {name}"));
-            let norm = grad.sqr().unwrap().sum_all().unwrap().to_scalar::<f32>().unwrap();
-            assert!(norm.is_finite() && norm > 0.0, "{backbone:?}: zero gradient for {name}");
+            let grad = grads
+                .get(var.as_tensor())
+                .unwrap_or_else(|| panic!("{backbone:?}: no gradient for {name}"));
+            let norm = grad
+                .sqr()
+                .unwrap()
+                .sum_all()
+                .unwrap()
+                .to_scalar::<f32>()
+                .unwrap();
+            assert!(
+                norm.is_finite() && norm > 0.0,
+                "{backbone:?}: zero gradient for {name}"
+            );
         }
     }
 }
@@ -106,14 +228,37 @@ fn dp_baseline_learns_bimodal_toy() {
     use crate::diffusion::ddpm::{sample_dp, DdpmSchedule, DpSampler};
     let cfg = toy_config(HeadConfig::Raw);
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
-    let (net, report) = super::dp::train_dp(&windows, &cfg, &LoopConfig::toy(2000, 4), &super::dp::DpConfig { eval_ema: 0.0, parametrization: crate::diffusion::ddpm::EpsParametrization::Direct }, &mut |_: &Progress| Ok(())).unwrap();
-    assert!(report.final_loss().unwrap() < 0.5 * report.loss_curve[0].1, "{:?}", report.loss_curve);
+    let (net, report) = super::dp::train_dp(
+        &windows,
+        &cfg,
+        &LoopConfig::toy(2000, 4),
+        &super::dp::DpConfig {
+            eval_ema: 0.0,
+            parametrization: crate::diffusion::ddpm::EpsParametrization::Direct,
+        },
+        &mut |_: &Progress| Ok(()),
+    )
+    .unwrap();
+    assert!(
+        report.final_loss().unwrap() < 0.5 * report.loss_curve[0].1,
+        "{:?}",
+        report.loss_curve
+    );
     let sched = DdpmSchedule::cosine(crate::diffusion::ddpm::DP_TRAIN_STEPS);
     let batch = 300;
     for (sampler, steps) in [(DpSampler::Ddpm, 100), (DpSampler::Ddim, 10)] {
         let mut rng = HostRng::new(5);
         let z = gaussian(&mut rng, batch, cfg.traj_dim(), &Device::Cpu).unwrap();
-        let out = sample_dp(&net.net, &sched, &toy_condition(batch).unwrap(), z, sampler, steps, &mut rng).unwrap();
+        let out = sample_dp(
+            &net.net,
+            &sched,
+            &toy_condition(batch).unwrap(),
+            z,
+            sampler,
+            steps,
+            &mut rng,
+        )
+        .unwrap();
         let flat = out.flatten_all().unwrap().to_vec1::<f32>().unwrap();
         let fraction = positive_fraction(&flat, cfg.horizon);
         eprintln!("DP {sampler:?} x{steps}: +fraction {fraction:.3}");
@@ -125,15 +270,45 @@ fn dp_baseline_learns_bimodal_toy() {
 fn transformer_backbones_have_the_documented_sizes() {
     use crate::models::BackboneConfig;
     let lite = BackboneConfig::parse("transformer-lite").unwrap();
-    assert_eq!(lite, BackboneConfig::Transformer { layers: 3, heads: 2, width: 128 });
-    assert_eq!(BackboneConfig::parse("transformer").unwrap(), BackboneConfig::Transformer { layers: 6, heads: 4, width: 256 });
-    let mut cfg = toy_config(HeadConfig::ProDmp { num_basis: 4, output: ProDmpOutput::Direct, auto_scale_basis: false });
+    assert_eq!(
+        lite,
+        BackboneConfig::Transformer {
+            layers: 3,
+            heads: 2,
+            width: 128
+        }
+    );
+    assert_eq!(
+        BackboneConfig::parse("transformer").unwrap(),
+        BackboneConfig::Transformer {
+            layers: 6,
+            heads: 4,
+            width: 256
+        }
+    );
+    let mut cfg = toy_config(HeadConfig::ProDmp {
+        num_basis: 4,
+        output: ProDmpOutput::Direct,
+        auto_scale_basis: false,
+    });
     cfg.backbone = lite;
     let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
-    let names: Vec<String> = crate::models::init::sorted_vars(&net.varmap).into_iter().map(|(n, _)| n).collect();
-    assert!(names.contains(&"transformer.blocks.2.qkv.weight".to_string()) && !names.iter().any(|n| n.contains("blocks.3")));
+    let names: Vec<String> = crate::models::init::sorted_vars(&net.varmap)
+        .into_iter()
+        .map(|(n, _)| n)
+        .collect();
+    assert!(
+        names.contains(&"transformer.blocks.2.qkv.weight".to_string())
+            && !names.iter().any(|n| n.contains("blocks.3"))
+    );
     let x = Tensor::zeros((3, cfg.traj_dim()), candle_core::DType::F32, &Device::Cpu).unwrap();
     let emb = Tensor::zeros((3, cfg.embed_dim), candle_core::DType::F32, &Device::Cpu).unwrap();
-    assert_eq!(net.net.predict(&x, &toy_condition(3).unwrap(), &emb).unwrap().dims(), &[3, cfg.traj_dim()]);
+    assert_eq!(
+        net.net
+            .predict(&x, &toy_condition(3).unwrap(), &emb)
+            .unwrap()
+            .dims(),
+        &[3, cfg.traj_dim()]
+    );
     assert!(BackboneConfig::parse("mlp:0,3").is_err() && BackboneConfig::parse("cnn").is_err());
 }

@@ -9,17 +9,39 @@ use std::process::{Command, Output};
 use std::sync::OnceLock;
 
 /// Tiny model sizes shared by every fixture model.
-pub const TINY: &[&str] = &["--batch", "8", "--warmup", "1", "--eval-episodes", "0", "--horizon", "8", "--num-basis", "4", "--embed-dim", "4"];
+pub const TINY: &[&str] = &[
+    "--batch",
+    "8",
+    "--warmup",
+    "1",
+    "--eval-episodes",
+    "0",
+    "--horizon",
+    "8",
+    "--num-basis",
+    "4",
+    "--embed-dim",
+    "4",
+];
 
 /// Runs `frmd args` in `cwd` with one candle thread.
 pub fn frmd(cwd: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_frmd")).args(args).current_dir(cwd).env("RAYON_NUM_THREADS", "1").output().expect("the frmd binary runs")
+    Command::new(env!("CARGO_BIN_EXE_frmd"))
+        .args(args)
+        .current_dir(cwd)
+        .env("RAYON_NUM_THREADS", "1")
+        .output()
+        .expect("the frmd binary runs")
 }
 
 /// Runs `frmd args` and asserts success.
 pub fn frmd_ok(cwd: &Path, args: &[&str]) -> String {
     let out = frmd(cwd, args);
-    assert!(out.status.success(), "frmd {args:?} failed: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "frmd {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
@@ -29,17 +51,82 @@ pub fn frmd_ok(cwd: &Path, args: &[&str]) -> String {
 pub fn fixture() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("frmd-cli-bad-{}-{}", std::process::id(), exe_tag()));
+        let dir =
+            std::env::temp_dir().join(format!("frmd-cli-bad-{}-{}", std::process::id(), exe_tag()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        frmd_ok(&dir, &["collect", "--task", "reach", "--episodes", "3", "--out", "d.safetensors"]);
+        frmd_ok(
+            &dir,
+            &[
+                "collect",
+                "--task",
+                "reach",
+                "--episodes",
+                "3",
+                "--out",
+                "d.safetensors",
+            ],
+        );
         fn with_tiny(args: &[&'static str]) -> Vec<&'static str> {
             [args, TINY].concat()
         }
-        frmd_ok(&dir, &with_tiny(&["train", "teacher", "--data", "d.safetensors", "--out", "t", "--steps", "5", "--backbone", "mlp:16"]));
-        frmd_ok(&dir, &["train", "student", "--data", "d.safetensors", "--out", "s", "--teacher", "t", "--steps", "5", "--batch", "8", "--warmup", "1", "--eval-episodes", "0"]);
-        frmd_ok(&dir, &with_tiny(&["train", "dp", "--data", "d.safetensors", "--out", "dp", "--steps", "5", "--backbone", "mlp:8"]));
-        frmd_ok(&dir, &["export", "--ckpt", "s", "--out", "baked", "--blob", "s.blob"]);
+        frmd_ok(
+            &dir,
+            &with_tiny(&[
+                "train",
+                "teacher",
+                "--data",
+                "d.safetensors",
+                "--out",
+                "t",
+                "--steps",
+                "5",
+                "--backbone",
+                "mlp:16",
+            ]),
+        );
+        frmd_ok(
+            &dir,
+            &[
+                "train",
+                "student",
+                "--data",
+                "d.safetensors",
+                "--out",
+                "s",
+                "--teacher",
+                "t",
+                "--steps",
+                "5",
+                "--batch",
+                "8",
+                "--warmup",
+                "1",
+                "--eval-episodes",
+                "0",
+            ],
+        );
+        frmd_ok(
+            &dir,
+            &with_tiny(&[
+                "train",
+                "dp",
+                "--data",
+                "d.safetensors",
+                "--out",
+                "dp",
+                "--steps",
+                "5",
+                "--backbone",
+                "mlp:8",
+            ]),
+        );
+        frmd_ok(
+            &dir,
+            &[
+                "export", "--ckpt", "s", "--out", "baked", "--blob", "s.blob",
+            ],
+        );
         copy_dir(&dir.join("s"), &dir.join("student"));
         dir
     })
@@ -47,7 +134,10 @@ pub fn fixture() -> &'static Path {
 
 /// A name per test binary, so two test files do not share (and race on) one directory.
 fn exe_tag() -> String {
-    std::env::current_exe().ok().and_then(|p| p.file_stem().map(|s| s.to_string_lossy().into_owned())).unwrap_or_default()
+    std::env::current_exe()
+        .ok()
+        .and_then(|p| p.file_stem().map(|s| s.to_string_lossy().into_owned()))
+        .unwrap_or_default()
 }
 
 pub fn copy_dir(from: &Path, to: &Path) {
@@ -60,7 +150,11 @@ pub fn copy_dir(from: &Path, to: &Path) {
 
 /// A fresh scratch directory inside the fixture's parent for cases that write.
 pub fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("frmd-cli-scratch-{}-{}-{name}", std::process::id(), exe_tag()));
+    let dir = std::env::temp_dir().join(format!(
+        "frmd-cli-scratch-{}-{}-{name}",
+        std::process::id(),
+        exe_tag()
+    ));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
@@ -75,7 +169,10 @@ pub fn hash_tree(dir: &Path) -> BTreeMap<PathBuf, u64> {
     while let Some(d) = stack.pop() {
         for entry in std::fs::read_dir(&d).unwrap() {
             let path = entry.unwrap().path();
-            if path.file_name().is_some_and(|n| n.to_string_lossy().starts_with(".frmd-write-probe-")) {
+            if path
+                .file_name()
+                .is_some_and(|n| n.to_string_lossy().starts_with(".frmd-write-probe-"))
+            {
                 continue;
             }
             if path.is_dir() {
@@ -83,7 +180,9 @@ pub fn hash_tree(dir: &Path) -> BTreeMap<PathBuf, u64> {
                 stack.push(path);
             } else {
                 let bytes = std::fs::read(&path).unwrap();
-                let hash = bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3));
+                let hash = bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
+                    (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3)
+                });
                 out.insert(path.strip_prefix(dir).unwrap().to_path_buf(), hash);
             }
         }
@@ -98,22 +197,44 @@ pub fn rejects(cwd: &Path, args: &[&str], needles: &[&str]) {
     let before = hash_tree(cwd);
     let out = frmd(cwd, args);
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "frmd {args:?}: exit {:?}, stderr: {stderr}", out.status);
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "frmd {args:?}: exit {:?}, stderr: {stderr}",
+        out.status
+    );
     let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert_eq!(lines.len(), 1, "frmd {args:?}: expected one error line, got: {stderr}");
+    assert_eq!(
+        lines.len(),
+        1,
+        "frmd {args:?}: expected one error line, got: {stderr}"
+    );
     assert!(lines[0].starts_with("error: "), "frmd {args:?}: {stderr}");
-    assert!(lines[0].len() < 400, "frmd {args:?}: error line too long ({} chars): {stderr}", lines[0].len());
+    assert!(
+        lines[0].len() < 400,
+        "frmd {args:?}: error line too long ({} chars): {stderr}",
+        lines[0].len()
+    );
     for needle in needles {
-        assert!(lines[0].contains(needle), "frmd {args:?}: error does not mention {needle:?}: {stderr}");
+        assert!(
+            lines[0].contains(needle),
+            "frmd {args:?}: error does not mention {needle:?}: {stderr}"
+        );
     }
-    assert_eq!(before, hash_tree(cwd), "frmd {args:?} changed files in {}", cwd.display());
+    assert_eq!(
+        before,
+        hash_tree(cwd),
+        "frmd {args:?} changed files in {}",
+        cwd.display()
+    );
 }
 
 /// Writes a copy of checkpoint `from` to `to` with `frmd.json` edited by `edit`.
 pub fn edited_checkpoint(from: &Path, to: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
     copy_dir(from, to);
     let path = to.join("frmd.json");
-    let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
     edit(&mut json);
     std::fs::write(&path, serde_json::to_string_pretty(&json).unwrap()).unwrap();
 }

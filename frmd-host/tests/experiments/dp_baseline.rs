@@ -23,27 +23,59 @@ fn roughness(chunk: &[f32], k: usize) -> f64 {
 #[test]
 #[ignore]
 fn dp_denoising_on_training_windows() {
-    let Some((ckpt, ds)) = diagnostic_inputs() else { return };
+    let Some((ckpt, ds)) = diagnostic_inputs() else {
+        return;
+    };
     for steps in [10usize, 100] {
-        if FloatPolicy::load(Path::new(&ckpt), None, None).unwrap().config().prodmp().is_some() {
+        if FloatPolicy::load(Path::new(&ckpt), None, None)
+            .unwrap()
+            .config()
+            .prodmp()
+            .is_some()
+        {
             break;
         }
         let mut policy = FloatPolicy::load(Path::new(&ckpt), Some(steps), None).unwrap();
         let cfg = policy.network().net.config().clone();
         let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
         let (obs_w, k, traj) = (cfg.history * cfg.obs_dim, cfg.action_dim, cfg.traj_dim());
-        let (mut err, mut first, mut rough_out, mut rough_truth, mut count) = (0.0, 0.0, 0.0, 0.0, 0);
+        let (mut err, mut first, mut rough_out, mut rough_truth, mut count) =
+            (0.0, 0.0, 0.0, 0.0, 0);
         for i in (0..w.len()).step_by(w.len() / 200 + 1) {
-            let out = policy.sample_normalized(&w.obs[i * obs_w..(i + 1) * obs_w], &w.prev_action[i * k..(i + 1) * k], &w.prev_rate[i * k..(i + 1) * k]).unwrap();
+            let out = policy
+                .sample_normalized(
+                    &w.obs[i * obs_w..(i + 1) * obs_w],
+                    &w.prev_action[i * k..(i + 1) * k],
+                    &w.prev_rate[i * k..(i + 1) * k],
+                )
+                .unwrap();
             let truth = &w.actions[i * traj..(i + 1) * traj];
-            err += out.iter().zip(truth).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>() / traj as f64;
-            first += out.iter().zip(truth).take(k).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>() / k as f64;
+            err += out
+                .iter()
+                .zip(truth)
+                .map(|(a, b)| f64::from((a - b).abs()))
+                .sum::<f64>()
+                / traj as f64;
+            first += out
+                .iter()
+                .zip(truth)
+                .take(k)
+                .map(|(a, b)| f64::from((a - b).abs()))
+                .sum::<f64>()
+                / k as f64;
             rough_out += roughness(&out, k);
             rough_truth += roughness(truth, k);
             count += 1;
         }
         let c = count as f64;
-        eprintln!("{}: chunk error {:.4}, first-action error {:.4}, roughness out {:.4} truth {:.4}", policy.name(), err / c, first / c, rough_out / c, rough_truth / c);
+        eprintln!(
+            "{}: chunk error {:.4}, first-action error {:.4}, roughness out {:.4} truth {:.4}",
+            policy.name(),
+            err / c,
+            first / c,
+            rough_out / c,
+            rough_truth / c
+        );
     }
     // Sensitivity to the rate input: chunk error with v0 perturbed by white noise whose
     // per-step size (std * dt) is `jitter` normalized units, for any checkpoint role.
@@ -56,14 +88,32 @@ fn dp_denoising_on_training_windows() {
         for jitter in [0.0f64, 0.004, 0.008, 0.016] {
             let (mut err, mut count) = (0.0, 0);
             for i in (0..w.len()).step_by(w.len() / 200 + 1) {
-                let v0: Vec<f32> = w.prev_rate[i * k..(i + 1) * k].iter().map(|v| v + (rng.normal() * jitter / f64::from(ds.dt)) as f32).collect();
+                let v0: Vec<f32> = w.prev_rate[i * k..(i + 1) * k]
+                    .iter()
+                    .map(|v| v + (rng.normal() * jitter / f64::from(ds.dt)) as f32)
+                    .collect();
                 policy.reset(i as u64);
-                let out = policy.sample_normalized(&w.obs[i * obs_w..(i + 1) * obs_w], &w.prev_action[i * k..(i + 1) * k], &v0).unwrap();
+                let out = policy
+                    .sample_normalized(
+                        &w.obs[i * obs_w..(i + 1) * obs_w],
+                        &w.prev_action[i * k..(i + 1) * k],
+                        &v0,
+                    )
+                    .unwrap();
                 let truth = &w.actions[i * traj..(i + 1) * traj];
-                err += out.iter().zip(truth).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>() / traj as f64;
+                err += out
+                    .iter()
+                    .zip(truth)
+                    .map(|(a, b)| f64::from((a - b).abs()))
+                    .sum::<f64>()
+                    / traj as f64;
                 count += 1;
             }
-            eprintln!("{}: v0 jitter {jitter}: chunk error {:.4}", policy.name(), err / count as f64);
+            eprintln!(
+                "{}: v0 jitter {jitter}: chunk error {:.4}",
+                policy.name(),
+                err / count as f64
+            );
         }
         // Sensitivity to the goal: output change when the goal fields (FRMD_GOAL_DIMS, e.g.
         // "4,5") of every history entry are taken from another window.
@@ -79,15 +129,43 @@ fn dp_denoising_on_training_windows() {
                     }
                 }
                 policy.reset(i as u64);
-                let a = policy.sample_normalized(&w.obs[i * obs_w..(i + 1) * obs_w], &w.prev_action[i * k..(i + 1) * k], &w.prev_rate[i * k..(i + 1) * k]).unwrap();
+                let a = policy
+                    .sample_normalized(
+                        &w.obs[i * obs_w..(i + 1) * obs_w],
+                        &w.prev_action[i * k..(i + 1) * k],
+                        &w.prev_rate[i * k..(i + 1) * k],
+                    )
+                    .unwrap();
                 policy.reset(i as u64);
-                let b = policy.sample_normalized(&obs, &w.prev_action[i * k..(i + 1) * k], &w.prev_rate[i * k..(i + 1) * k]).unwrap();
-                change += a.iter().zip(&b).rev().take(k).map(|(x, y)| f64::from((x - y).abs())).sum::<f64>() / k as f64;
+                let b = policy
+                    .sample_normalized(
+                        &obs,
+                        &w.prev_action[i * k..(i + 1) * k],
+                        &w.prev_rate[i * k..(i + 1) * k],
+                    )
+                    .unwrap();
+                change += a
+                    .iter()
+                    .zip(&b)
+                    .rev()
+                    .take(k)
+                    .map(|(x, y)| f64::from((x - y).abs()))
+                    .sum::<f64>()
+                    / k as f64;
                 // Reference: how far apart the two goals are (normalized units, mean over dims).
-                truth_change += dims.iter().map(|&d| f64::from((w.obs[i * obs_w + d] - w.obs[j * obs_w + d]).abs())).sum::<f64>() / dims.len() as f64;
+                truth_change += dims
+                    .iter()
+                    .map(|&d| f64::from((w.obs[i * obs_w + d] - w.obs[j * obs_w + d]).abs()))
+                    .sum::<f64>()
+                    / dims.len() as f64;
                 count += 1;
             }
-            eprintln!("{}: goal swap changes the chunk's last action by {:.4} (goals differ by {:.4})", policy.name(), change / count as f64, truth_change / count as f64);
+            eprintln!(
+                "{}: goal swap changes the chunk's last action by {:.4} (goals differ by {:.4})",
+                policy.name(),
+                change / count as f64,
+                truth_change / count as f64
+            );
         }
         if cfg.prodmp().is_some() {
             return;
@@ -104,14 +182,47 @@ fn dp_denoising_on_training_windows() {
     for t in [0usize, 1, 2, 5, 10, 20, 40, 60, 80, 90, 99] {
         let abar = policy.schedule().alpha_bars[t];
         let eps = gaussian(&mut rng, idx.len(), traj, &Device::Cpu).unwrap();
-        let x = ((&batch.x0 * abar.sqrt()).unwrap() + (&eps * (1.0 - abar).sqrt()).unwrap()).unwrap();
-        let pred = predict_noise(&policy.network().net, policy.schedule(), &x, &batch.cond, &vec![t; idx.len()]).unwrap();
-        let mse = (&pred - &eps).unwrap().sqr().unwrap().mean_all().unwrap().to_scalar::<f32>().unwrap();
-        let x0_hat = ((&x - (&pred * (1.0 - abar).sqrt()).unwrap()).unwrap() / abar.sqrt()).unwrap();
-        let x0_err = (&x0_hat - &batch.x0).unwrap().abs().unwrap().mean_all().unwrap().to_scalar::<f32>().unwrap();
+        let x =
+            ((&batch.x0 * abar.sqrt()).unwrap() + (&eps * (1.0 - abar).sqrt()).unwrap()).unwrap();
+        let pred = predict_noise(
+            &policy.network().net,
+            policy.schedule(),
+            &x,
+            &batch.cond,
+            &vec![t; idx.len()],
+        )
+        .unwrap();
+        let mse = (&pred - &eps)
+            .unwrap()
+            .sqr()
+            .unwrap()
+            .mean_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
+        let x0_hat =
+            ((&x - (&pred * (1.0 - abar).sqrt()).unwrap()).unwrap() / abar.sqrt()).unwrap();
+        let x0_err = (&x0_hat - &batch.x0)
+            .unwrap()
+            .abs()
+            .unwrap()
+            .mean_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
         let sigma = ((1.0 - abar) / abar).sqrt();
-        let flat = x0_hat.clamp(-1f32, 1f32).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
-        let rough = flat.chunks_exact(traj).map(|c| roughness(c, k)).sum::<f64>() / idx.len() as f64;
+        let flat = x0_hat
+            .clamp(-1f32, 1f32)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap();
+        let rough = flat
+            .chunks_exact(traj)
+            .map(|c| roughness(c, k))
+            .sum::<f64>()
+            / idx.len() as f64;
         eprintln!("t {t:3} (sigma {sigma:9.4}): eps mse {mse:.4}, one-shot x0 abs error {x0_err:.4}, roughness {rough:.4}");
     }
 }
@@ -123,7 +234,9 @@ fn dp_denoising_on_training_windows() {
 #[test]
 #[ignore]
 fn closed_vs_demo_trace() {
-    let Some((ckpt, ds)) = diagnostic_inputs() else { return };
+    let Some((ckpt, ds)) = diagnostic_inputs() else {
+        return;
+    };
     let mut policy = FloatPolicy::load(Path::new(&ckpt), None, None).unwrap();
     let cfg = policy.network().net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
@@ -133,19 +246,49 @@ fn closed_vs_demo_trace() {
     let mut task = frmd_host::tasks::make_task(&ds.task).unwrap();
     task.reset(0);
     policy.reset(1);
-    eprintln!("demo obs 0 {:?} / task obs {:?}", &ds.obs[..o], task.observe());
+    eprintln!(
+        "demo obs 0 {:?} / task obs {:?}",
+        &ds.obs[..o],
+        task.observe()
+    );
     let mut hist = vec![task.observe(); cfg.history];
     let mut prev: Vec<f32> = task.ee_position().iter().map(|&v| v as f32).collect();
     let mut rate = vec![0f32; a];
-    let fmt = |v: &[f32]| v.iter().map(|x| format!("{x:.3}")).collect::<Vec<_>>().join(",");
+    let fmt = |v: &[f32]| {
+        v.iter()
+            .map(|x| format!("{x:.3}"))
+            .collect::<Vec<_>>()
+            .join(",")
+    };
     for q in 0..8 {
         let t = (q * 8).min(end - 1);
-        let chunk = policy.act(&PolicyInput { obs_history: &hist, prev_action: &prev, prev_rate: &rate }).unwrap();
-        let mut demo_norm = policy.sample_normalized(&w.obs[t * obs_w..(t + 1) * obs_w], &w.prev_action[t * k..(t + 1) * k], &w.prev_rate[t * k..(t + 1) * k]).unwrap();
+        let chunk = policy
+            .act(&PolicyInput {
+                obs_history: &hist,
+                prev_action: &prev,
+                prev_rate: &rate,
+            })
+            .unwrap();
+        let mut demo_norm = policy
+            .sample_normalized(
+                &w.obs[t * obs_w..(t + 1) * obs_w],
+                &w.prev_action[t * k..(t + 1) * k],
+                &w.prev_rate[t * k..(t + 1) * k],
+            )
+            .unwrap();
         policy.normalization().action.denormalize(&mut demo_norm);
         let last = (t + cfg.horizon - 1).min(end - 1);
-        eprintln!("q {q} t {t}: closed obs [{}] prev [{}] rate [{}]", fmt(hist.last().unwrap()), fmt(&prev), fmt(&rate));
-        eprintln!("          demo   obs [{}] prev [{}]", fmt(&ds.obs[t * o..(t + 1) * o]), fmt(&ds.action[t.saturating_sub(1) * a..t.saturating_sub(1) * a + a]));
+        eprintln!(
+            "q {q} t {t}: closed obs [{}] prev [{}] rate [{}]",
+            fmt(hist.last().unwrap()),
+            fmt(&prev),
+            fmt(&rate)
+        );
+        eprintln!(
+            "          demo   obs [{}] prev [{}]",
+            fmt(&ds.obs[t * o..(t + 1) * o]),
+            fmt(&ds.action[t.saturating_sub(1) * a..t.saturating_sub(1) * a + a])
+        );
         eprintln!("          closed chunk first [{}] last [{}]; open-loop on demo window first [{}] last [{}]; demo actions first [{}] last [{}]",
             fmt(&chunk[0]), fmt(&chunk[cfg.horizon - 1]), fmt(&demo_norm[..a]), fmt(&demo_norm[traj - a..]), fmt(&ds.action[t * a..(t + 1) * a]), fmt(&ds.action[last * a..(last + 1) * a]));
         for act in chunk.iter().take(8) {
@@ -167,20 +310,34 @@ fn closed_vs_demo_trace() {
 #[test]
 #[ignore]
 fn reach_endings() {
-    let Ok(ckpt) = std::env::var("FRMD_CKPT") else { return };
-    let steps = std::env::var("FRMD_STEPS").ok().and_then(|s| s.parse().ok());
+    let Ok(ckpt) = std::env::var("FRMD_CKPT") else {
+        return;
+    };
+    let steps = std::env::var("FRMD_STEPS")
+        .ok()
+        .and_then(|s| s.parse().ok());
     let mut policy = FloatPolicy::load(Path::new(&ckpt), steps, None).unwrap();
     let history = policy.input_sizes().2;
     let mut task = frmd_host::tasks::make_task("reach").unwrap();
     for i in 0..10 {
         let mut trace: Vec<(f32, f32)> = Vec::new();
-        let run = frmd_host::eval::rollout(task.as_mut(), &mut policy, frmd_host::eval::eval_seed(0, i), 8, history, &mut |obs, _| {
-            let dist = ((obs[0] - obs[4]).powi(2) + (obs[1] - obs[5]).powi(2)).sqrt();
-            let speed = (obs[2].powi(2) + obs[3].powi(2)).sqrt();
-            trace.push((dist, speed));
-        })
+        let run = frmd_host::eval::rollout(
+            task.as_mut(),
+            &mut policy,
+            frmd_host::eval::eval_seed(0, i),
+            8,
+            history,
+            &mut |obs, _| {
+                let dist = ((obs[0] - obs[4]).powi(2) + (obs[1] - obs[5]).powi(2)).sqrt();
+                let speed = (obs[2].powi(2) + obs[3].powi(2)).sqrt();
+                trace.push((dist, speed));
+            },
+        )
         .unwrap();
-        let closest = trace.iter().cloned().fold((f32::MAX, 0.0), |a, b| if b.0 < a.0 { b } else { a });
+        let closest = trace
+            .iter()
+            .cloned()
+            .fold((f32::MAX, 0.0), |a, b| if b.0 < a.0 { b } else { a });
         let last = trace.last().cloned().unwrap_or_default();
         let late_speed = trace.iter().rev().take(20).map(|t| t.1).sum::<f32>() / 20.0;
         eprintln!("seed {i}: success {} closest {:.3} m at speed {:.3}; final {:.3} m speed {:.3}; mean speed of last 20 steps {:.3}", run.success, closest.0, closest.1, last.0, last.1, late_speed);
@@ -193,34 +350,59 @@ fn reach_endings() {
 #[test]
 #[ignore]
 fn ddim_chain_on_first_windows() {
-    let Some((ckpt, ds)) = diagnostic_inputs() else { return };
+    let Some((ckpt, ds)) = diagnostic_inputs() else {
+        return;
+    };
     let policy = FloatPolicy::load(Path::new(&ckpt), Some(10), None).unwrap();
     let cfg = policy.network().net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
     let traj = cfg.traj_dim();
-    let starts: Vec<usize> = std::iter::once(0).chain(ds.episode_ends.iter().map(|&e| e as usize)).take(3).collect();
+    let starts: Vec<usize> = std::iter::once(0)
+        .chain(ds.episode_ends.iter().map(|&e| e as usize))
+        .take(3)
+        .collect();
     let sched = policy.schedule();
     let net = &policy.network().net;
     let mut rng = HostRng::new(4);
     for &i in &starts {
         let batch = frmd_host::train::batch::gather(&w, &cfg, &[i], &Device::Cpu).unwrap();
         let truth = &w.actions[i * traj..(i + 1) * traj];
-        eprintln!("window {i}: truth last ({:.3},{:.3}) prev ({:.3},{:.3})", truth[traj - 2], truth[traj - 1], w.prev_action[i * 2], w.prev_action[i * 2 + 1]);
+        eprintln!(
+            "window {i}: truth last ({:.3},{:.3}) prev ({:.3},{:.3})",
+            truth[traj - 2],
+            truth[traj - 1],
+            w.prev_action[i * 2],
+            w.prev_action[i * 2 + 1]
+        );
         let mut x = gaussian(&mut rng, 1, traj, &Device::Cpu).unwrap();
         for t in (0..10).rev().map(|i| i * 10) {
             let abar = sched.alpha_bars[t];
             let eps = predict_noise(net, sched, &x, &batch.cond, &[t]).unwrap();
-            let x0 = ((&x - (&eps * (1.0 - abar).sqrt()).unwrap()).unwrap() / abar.sqrt()).unwrap().clamp(-1f32, 1f32).unwrap();
+            let x0 = ((&x - (&eps * (1.0 - abar).sqrt()).unwrap()).unwrap() / abar.sqrt())
+                .unwrap()
+                .clamp(-1f32, 1f32)
+                .unwrap();
             let noise = gaussian(&mut rng, 1, traj, &Device::Cpu).unwrap();
-            let xt_true = ((&batch.x0 * abar.sqrt()).unwrap() + (&noise * (1.0 - abar).sqrt()).unwrap()).unwrap();
+            let xt_true = ((&batch.x0 * abar.sqrt()).unwrap()
+                + (&noise * (1.0 - abar).sqrt()).unwrap())
+            .unwrap();
             let eps_true = predict_noise(net, sched, &xt_true, &batch.cond, &[t]).unwrap();
-            let x0_true = ((&xt_true - (&eps_true * (1.0 - abar).sqrt()).unwrap()).unwrap() / abar.sqrt()).unwrap();
+            let x0_true = ((&xt_true - (&eps_true * (1.0 - abar).sqrt()).unwrap()).unwrap()
+                / abar.sqrt())
+            .unwrap();
             let a = x0.flatten_all().unwrap().to_vec1::<f32>().unwrap();
             let b = x0_true.flatten_all().unwrap().to_vec1::<f32>().unwrap();
-            eprintln!("  t {t:2}: chain x0 last ({:.3},{:.3})  one-shot from truth ({:.3},{:.3})", a[traj - 2], a[traj - 1], b[traj - 2], b[traj - 1]);
+            eprintln!(
+                "  t {t:2}: chain x0 last ({:.3},{:.3})  one-shot from truth ({:.3},{:.3})",
+                a[traj - 2],
+                a[traj - 1],
+                b[traj - 2],
+                b[traj - 1]
+            );
             let abar_prev = if t > 0 { sched.alpha_bars[t - 10] } else { 1.0 };
             let eps = ((&x - (&x0 * abar.sqrt()).unwrap()).unwrap() / (1.0 - abar).sqrt()).unwrap();
-            x = ((x0 * abar_prev.sqrt()).unwrap() + (eps * (1.0 - abar_prev).sqrt()).unwrap()).unwrap();
+            x = ((x0 * abar_prev.sqrt()).unwrap() + (eps * (1.0 - abar_prev).sqrt()).unwrap())
+                .unwrap();
         }
     }
 }
@@ -231,24 +413,51 @@ fn ddim_chain_on_first_windows() {
 #[test]
 #[ignore]
 fn start_travel() {
-    let Some((ckpt, ds)) = diagnostic_inputs() else { return };
+    let Some((ckpt, ds)) = diagnostic_inputs() else {
+        return;
+    };
     let mut policy = FloatPolicy::load(Path::new(&ckpt), None, None).unwrap();
     let cfg = policy.network().net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
     let (obs_w, k, traj) = (cfg.history * cfg.obs_dim, cfg.action_dim, cfg.traj_dim());
-    let travel = |chunk: &[f32], y0: &[f32]| chunk[traj - k..].iter().zip(y0).map(|(a, b)| (a - b).powi(2)).sum::<f32>().sqrt();
-    let episode: usize = std::env::var("FRMD_EPISODE").ok().and_then(|s| s.parse().ok()).unwrap_or(0);
-    let start = if episode == 0 { 0 } else { ds.episode_ends[episode - 1] as usize };
+    let travel = |chunk: &[f32], y0: &[f32]| {
+        chunk[traj - k..]
+            .iter()
+            .zip(y0)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f32>()
+            .sqrt()
+    };
+    let episode: usize = std::env::var("FRMD_EPISODE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    let start = if episode == 0 {
+        0
+    } else {
+        ds.episode_ends[episode - 1] as usize
+    };
     let mut line = String::new();
     for i in start..start + 14 {
         let y0 = &w.prev_action[i * k..(i + 1) * k];
         let mut model = 0.0;
         for seed in 0..4 {
             policy.reset(seed);
-            let out = policy.sample_normalized(&w.obs[i * obs_w..(i + 1) * obs_w], y0, &w.prev_rate[i * k..(i + 1) * k]).unwrap();
+            let out = policy
+                .sample_normalized(
+                    &w.obs[i * obs_w..(i + 1) * obs_w],
+                    y0,
+                    &w.prev_rate[i * k..(i + 1) * k],
+                )
+                .unwrap();
             model += travel(&out, y0) / 4.0;
         }
-        line += &format!(" {}:{:.3}/{:.3}", i - start, travel(&w.actions[i * traj..(i + 1) * traj], y0), model);
+        line += &format!(
+            " {}:{:.3}/{:.3}",
+            i - start,
+            travel(&w.actions[i * traj..(i + 1) * traj], y0),
+            model
+        );
     }
     eprintln!("{} travel truth/model:{line}", policy.name());
 }
@@ -262,43 +471,116 @@ fn start_travel() {
 fn regression_start_travel() {
     use frmd_host::models::{Activation, BackboneConfig, HeadConfig, ModelConfig};
     use frmd_host::train::optim::{OptimConfig, ScheduledAdamW};
-    let Ok(data) = std::env::var("FRMD_DATA") else { return };
-    let steps: usize = std::env::var("FRMD_STEPS").ok().and_then(|s| s.parse().ok()).unwrap_or(5000);
+    let Ok(data) = std::env::var("FRMD_DATA") else {
+        return;
+    };
+    let steps: usize = std::env::var("FRMD_STEPS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(5000);
     let ds = frmd_host::data::Dataset::load(Path::new(&data)).unwrap();
     let (w, _) = ds.windows(2, 12).unwrap();
-    let cfg = ModelConfig { obs_dim: ds.obs_dim, history: 2, action_dim: ds.action_dim, horizon: 12, control_dt: f64::from(ds.dt), embed_dim: 16,
-        backbone: BackboneConfig::Mlp { hidden: vec![256, 256, 256], activation: Activation::Silu }, head: HeadConfig::Raw };
+    let cfg = ModelConfig {
+        obs_dim: ds.obs_dim,
+        history: 2,
+        action_dim: ds.action_dim,
+        horizon: 12,
+        control_dt: f64::from(ds.dt),
+        embed_dim: 16,
+        backbone: BackboneConfig::Mlp {
+            hidden: vec![256, 256, 256],
+            activation: Activation::Silu,
+        },
+        head: HeadConfig::Raw,
+    };
     let net = OwnedNetwork::new_seeded(&cfg, 0, &Device::Cpu).unwrap();
-    let mut opt = ScheduledAdamW::new(net.varmap.all_vars(), OptimConfig { lr: 1e-3, weight_decay: 1e-6, warmup_steps: 500, total_steps: steps, min_lr_ratio: 0.0, head_lr_scale: 1.0 }).unwrap();
+    let mut opt = ScheduledAdamW::new(
+        net.varmap.all_vars(),
+        OptimConfig {
+            lr: 1e-3,
+            weight_decay: 1e-6,
+            warmup_steps: 500,
+            total_steps: steps,
+            min_lr_ratio: 0.0,
+            head_lr_scale: 1.0,
+        },
+    )
+    .unwrap();
     let mut rng = HostRng::new(1);
     let (k, traj) = (cfg.action_dim, cfg.traj_dim());
     for step in 0..steps {
         let batch = frmd_host::train::batch::sample(&w, &cfg, 128, &mut rng, &Device::Cpu).unwrap();
         let zeros = batch.x0.zeros_like().unwrap();
-        let emb = frmd_host::diffusion::precond::embedding(&vec![0.0; 128], cfg.embed_dim, &Device::Cpu).unwrap();
+        let emb =
+            frmd_host::diffusion::precond::embedding(&vec![0.0; 128], cfg.embed_dim, &Device::Cpu)
+                .unwrap();
         let out = net.net.predict(&zeros, &batch.cond, &emb).unwrap();
-        let loss = (out - &batch.x0).unwrap().sqr().unwrap().mean_all().unwrap();
+        let loss = (out - &batch.x0)
+            .unwrap()
+            .sqr()
+            .unwrap()
+            .mean_all()
+            .unwrap();
         opt.backward_step(&loss).unwrap();
-        if step % 1000 == 0 { eprintln!("step {step}: loss {:.5}", loss.to_scalar::<f32>().unwrap()); }
+        if step % 1000 == 0 {
+            eprintln!("step {step}: loss {:.5}", loss.to_scalar::<f32>().unwrap());
+        }
     }
-    let travel = |chunk: &[f32], y0: &[f32]| chunk[traj - k..].iter().zip(y0).map(|(a, b)| (a - b).powi(2)).sum::<f32>().sqrt();
+    let travel = |chunk: &[f32], y0: &[f32]| {
+        chunk[traj - k..]
+            .iter()
+            .zip(y0)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f32>()
+            .sqrt()
+    };
     let mut line = String::new();
     let mut err = 0.0;
     let idx: Vec<usize> = (0..w.len()).collect();
     for i in 0..14 {
         let b = frmd_host::train::batch::gather(&w, &cfg, &[i], &Device::Cpu).unwrap();
-        let emb = frmd_host::diffusion::precond::embedding(&[0.0], cfg.embed_dim, &Device::Cpu).unwrap();
-        let out = net.net.predict(&b.x0.zeros_like().unwrap(), &b.cond, &emb).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        let emb =
+            frmd_host::diffusion::precond::embedding(&[0.0], cfg.embed_dim, &Device::Cpu).unwrap();
+        let out = net
+            .net
+            .predict(&b.x0.zeros_like().unwrap(), &b.cond, &emb)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap();
         let y0 = &w.prev_action[i * k..(i + 1) * k];
-        line += &format!(" {i}:{:.3}/{:.3}", travel(&w.actions[i * traj..(i + 1) * traj], y0), travel(&out, y0));
+        line += &format!(
+            " {i}:{:.3}/{:.3}",
+            travel(&w.actions[i * traj..(i + 1) * traj], y0),
+            travel(&out, y0)
+        );
     }
     for chunk in idx.chunks(512) {
         let b = frmd_host::train::batch::gather(&w, &cfg, chunk, &Device::Cpu).unwrap();
-        let emb = frmd_host::diffusion::precond::embedding(&vec![0.0; chunk.len()], cfg.embed_dim, &Device::Cpu).unwrap();
-        let out = net.net.predict(&b.x0.zeros_like().unwrap(), &b.cond, &emb).unwrap();
-        err += (out - &b.x0).unwrap().abs().unwrap().sum_all().unwrap().to_scalar::<f32>().unwrap() as f64;
+        let emb = frmd_host::diffusion::precond::embedding(
+            &vec![0.0; chunk.len()],
+            cfg.embed_dim,
+            &Device::Cpu,
+        )
+        .unwrap();
+        let out = net
+            .net
+            .predict(&b.x0.zeros_like().unwrap(), &b.cond, &emb)
+            .unwrap();
+        err += (out - &b.x0)
+            .unwrap()
+            .abs()
+            .unwrap()
+            .sum_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap() as f64;
     }
-    eprintln!("regression: mean abs chunk error {:.4}; travel truth/model:{line}", err / (w.len() * traj) as f64);
+    eprintln!(
+        "regression: mean abs chunk error {:.4}; travel truth/model:{line}",
+        err / (w.len() * traj) as f64
+    );
 }
 
 /// Which input decides the DP's clean estimate: for condition windows 0 and 8 of episode 0 and
@@ -308,31 +590,65 @@ fn regression_start_travel() {
 #[test]
 #[ignore]
 fn cond_vs_input() {
-    let Some((ckpt, ds)) = diagnostic_inputs() else { return };
+    let Some((ckpt, ds)) = diagnostic_inputs() else {
+        return;
+    };
     let policy = FloatPolicy::load(Path::new(&ckpt), Some(10), None).unwrap();
     let cfg = policy.network().net.config().clone();
     let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
     let (k, traj) = (cfg.action_dim, cfg.traj_dim());
     let mut rng = HostRng::new(5);
     for (ci, xi) in [(0usize, 0usize), (0, 8), (8, 0), (8, 8)] {
-        let cond = frmd_host::train::batch::gather(&w, &cfg, &[ci; 16], &Device::Cpu).unwrap().cond;
-        let x0 = frmd_host::train::batch::gather(&w, &cfg, &[xi; 16], &Device::Cpu).unwrap().x0;
+        let cond = frmd_host::train::batch::gather(&w, &cfg, &[ci; 16], &Device::Cpu)
+            .unwrap()
+            .cond;
+        let x0 = frmd_host::train::batch::gather(&w, &cfg, &[xi; 16], &Device::Cpu)
+            .unwrap()
+            .x0;
         let y0 = &w.prev_action[ci * k..(ci + 1) * k];
         let mut line = String::new();
         for t in [0usize, 5, 20, 50, 80, 95] {
             let abar = policy.schedule().alpha_bars[t];
             let eps = gaussian(&mut rng, 16, traj, &Device::Cpu).unwrap();
             let x = ((&x0 * abar.sqrt()).unwrap() + (&eps * (1.0 - abar).sqrt()).unwrap()).unwrap();
-            let pred = predict_noise(&policy.network().net, policy.schedule(), &x, &cond, &[t; 16]).unwrap();
-            let est = ((&x - (&pred * (1.0 - abar).sqrt()).unwrap()).unwrap() / abar.sqrt()).unwrap().mean(0).unwrap().to_vec1::<f32>().unwrap();
-            let travel = est[traj - k..].iter().zip(y0).map(|(a, b)| (a - b).powi(2)).sum::<f32>().sqrt();
+            let pred = predict_noise(
+                &policy.network().net,
+                policy.schedule(),
+                &x,
+                &cond,
+                &[t; 16],
+            )
+            .unwrap();
+            let est = ((&x - (&pred * (1.0 - abar).sqrt()).unwrap()).unwrap() / abar.sqrt())
+                .unwrap()
+                .mean(0)
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap();
+            let travel = est[traj - k..]
+                .iter()
+                .zip(y0)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f32>()
+                .sqrt();
             line += &format!(" t{t}:{travel:.3}");
             if t == 50 {
                 let tr = &w.actions[xi * traj..(xi + 1) * traj];
                 eprintln!("   t50 est first ({:.3},{:.3}) mid ({:.3},{:.3}) last ({:.3},{:.3}); input truth first ({:.3},{:.3}) mid ({:.3},{:.3}) last ({:.3},{:.3}); y0 ({:.3},{:.3})", est[0], est[1], est[12], est[13], est[traj - 2], est[traj - 1], tr[0], tr[1], tr[12], tr[13], tr[traj - 2], tr[traj - 1], y0[0], y0[1]);
             }
         }
-        let truth = |i: usize| w.actions[i * traj + traj - k..(i + 1) * traj].iter().zip(y0).map(|(a, b)| (a - b).powi(2)).sum::<f32>().sqrt();
-        eprintln!("cond {ci} input {xi} (truth travel from this y0: cond's {:.3}, input's {:.3}):{line}", truth(ci), truth(xi));
+        let truth = |i: usize| {
+            w.actions[i * traj + traj - k..(i + 1) * traj]
+                .iter()
+                .zip(y0)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f32>()
+                .sqrt()
+        };
+        eprintln!(
+            "cond {ci} input {xi} (truth travel from this y0: cond's {:.3}, input's {:.3}):{line}",
+            truth(ci),
+            truth(xi)
+        );
     }
 }

@@ -20,9 +20,9 @@ mod toy_sweeps;
 mod prelude {
     pub use candle_core::Device;
     pub use frmd_host::diffusion::samplers::{gaussian, Solver};
-    pub use frmd_host::tasks::{Policy, PolicyInput};
     pub use frmd_host::models::{Condition, OwnedNetwork};
     pub use frmd_host::policy::float::FloatPolicy;
+    pub use frmd_host::tasks::{Policy, PolicyInput};
     pub use std::path::Path;
 
     /// The checkpoint directory and demonstrations named by `FRMD_CKPT` and `FRMD_DATA`; `None`

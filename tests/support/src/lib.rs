@@ -16,7 +16,10 @@ impl AlignedBlob {
     pub fn new(bytes: &[u8]) -> Self {
         let mut words = vec![0_u128; bytes.len().div_ceil(16)];
         bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..bytes.len()].copy_from_slice(bytes);
-        AlignedBlob { words, len: bytes.len() }
+        AlignedBlob {
+            words,
+            len: bytes.len(),
+        }
     }
 
     pub fn bytes(&self) -> &[u8] {

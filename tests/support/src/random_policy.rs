@@ -125,7 +125,9 @@ pub fn random_policy(seed: u64, steps: usize, dims: &Dims) -> QuantizedPolicy {
         action_max: vec![0.5; k],
         prodmp,
         steps: (0..steps)
-            .map(|i| StepConstants::consistency(&SigmaConfig::default(), sigmas[i], i as u32).unwrap())
+            .map(|i| {
+                StepConstants::consistency(&SigmaConfig::default(), sigmas[i], i as u32).unwrap()
+            })
             .collect(),
         first_layer_biases,
         luts: vec![lut.table],

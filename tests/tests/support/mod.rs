@@ -1,29 +1,39 @@
 //! Shared setup of the end-to-end tests: a small `reach` dataset and a briefly trained teacher and
 //! student, both through the library behind `frmd train` (which also writes
 //! calibration.safetensors), and the export `frmd export` does.
+use frmd_core::blob::BlobError;
+use frmd_core::policy::PolicyDims;
 use frmd_host::data::collect::collect_demos;
 use frmd_host::diffusion::samplers::Solver;
 use frmd_host::equiv::{run as equiv, EquivConfig, EquivReport};
+use frmd_host::export::BAKED_BLOB_FILE;
 use frmd_host::export::{export_student, write_export, ExportConfig};
 use frmd_host::models::ProDmpOutput;
 use frmd_host::train::distill::DistillConfig;
 use frmd_host::train::recipe::{StudentRun, TeacherRun, TrainConfig};
 use frmd_host::train::run::{run_student, run_teacher};
 use frmd_host::train::teacher::TeacherConfig;
-use frmd_core::blob::BlobError;
-use frmd_core::policy::PolicyDims;
-use frmd_host::export::BAKED_BLOB_FILE;
 use std::path::{Path, PathBuf};
 
 /// The sizes of the tiny runs: history 2, `reach` (6 observations, 2 DoF), horizon 8, 6 basis
 /// functions plus the goal.
-pub const TINY_DIMS: PolicyDims = PolicyDims { history: 2, obs_dim: 6, action_dim: 2, horizon: 8, params_per_dof: 7 };
+pub const TINY_DIMS: PolicyDims = PolicyDims {
+    history: 2,
+    obs_dim: 6,
+    action_dim: 2,
+    horizon: 8,
+    params_per_dof: 7,
+};
 
 /// A loaded blob's `check_dims` accepts [`TINY_DIMS`] and refuses another horizon and basis.
 pub fn assert_tiny_dims(check_dims: impl Fn(&PolicyDims) -> Result<(), BlobError>) {
     assert_eq!(check_dims(&TINY_DIMS), Ok(()));
     assert!(matches!(
-        check_dims(&PolicyDims { horizon: 12, params_per_dof: 21, ..TINY_DIMS }),
+        check_dims(&PolicyDims {
+            horizon: 12,
+            params_per_dof: 21,
+            ..TINY_DIMS
+        }),
         Err(BlobError::DimensionMismatch(_))
     ));
 }
@@ -84,7 +94,12 @@ impl TinyRun {
     pub fn export(&self, ckpt: &Path) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         let cfg = ExportConfig::for_checkpoint(ckpt);
         let student = export_student(&cfg)?;
-        write_export(&cfg, &student, Some(&self.baked), Some(&self.dir.join("student.blob")))?;
+        write_export(
+            &cfg,
+            &student,
+            Some(&self.baked),
+            Some(&self.dir.join("student.blob")),
+        )?;
         Ok(())
     }
 
@@ -112,7 +127,10 @@ pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
     let (teacher, student, baked) = (dir.join("teacher"), dir.join("student"), dir.join("baked"));
     run_teacher(&TeacherRun {
         train: common(tiny, &data, teacher.clone(), tiny.teacher_steps),
-        teacher: TeacherConfig { weight: tiny.loss_weight.parse().unwrap(), ..TeacherConfig::default() },
+        teacher: TeacherConfig {
+            weight: tiny.loss_weight.parse().unwrap(),
+            ..TeacherConfig::default()
+        },
         output: ProDmpOutput::BoundarySkip,
         auto_scale_basis: false,
         eval_solver: Some(Solver::Heun),
@@ -121,7 +139,14 @@ pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
     run_student(&StudentRun {
         train: common(tiny, &data, student.clone(), tiny.student_steps),
         teacher: teacher.clone(),
-        distill: DistillConfig { levels: 18, teacher_steps: 2, solver: Solver::Heun, target_ema: 0.95, eval_ema: 0.9, ..DistillConfig::default() },
+        distill: DistillConfig {
+            levels: 18,
+            teacher_steps: 2,
+            solver: Solver::Heun,
+            target_ema: 0.95,
+            eval_ema: 0.9,
+            ..DistillConfig::default()
+        },
         shape: Default::default(),
     })
     .unwrap();

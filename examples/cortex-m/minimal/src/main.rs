@@ -17,7 +17,9 @@ mod baked {
 
 #[entry]
 fn main() -> ! {
-    let Ok(mut policy) = baked::policy() else { stop("the baked policy does not validate") };
+    let Ok(mut policy) = baked::policy() else {
+        stop("the baked policy does not validate")
+    };
     // The robot's state: the last action (metres) and the last HISTORY observations.
     if policy.reset(&[0.05; baked::ACTION_DIM]).is_err() {
         stop("reset");
@@ -30,9 +32,16 @@ fn main() -> ! {
     }
     // One chunk: HORIZON actions. The noise seed makes it repeatable.
     let mut rng = Rng::new(2024);
-    let Ok(chunk) = policy.act(Noise::Rng(&mut rng)) else { stop("act") };
+    let Ok(chunk) = policy.act(Noise::Rng(&mut rng)) else {
+        stop("act")
+    };
     for (dof, value) in chunk.positions[0].iter().enumerate() {
-        hprintln!("first action, dof {}: {} (bits {:08x})", dof, value, value.to_bits());
+        hprintln!(
+            "first action, dof {}: {} (bits {:08x})",
+            dof,
+            value,
+            value.to_bits()
+        );
     }
     debug::exit(debug::EXIT_SUCCESS);
     stop("semihosting exit returned")

@@ -4,9 +4,9 @@
 #![no_main]
 
 use cortex_m_rt::entry;
-use frmd_firmware_support::mlp_workload::{MlpWorkload, CASES};
 use frmd_cortex_m::report::exit_failure;
 use frmd_cortex_m::{baked_mlp, bench, BAKED_PRODMP};
+use frmd_firmware_support::mlp_workload::{MlpWorkload, CASES};
 
 #[entry]
 fn main() -> ! {

@@ -18,12 +18,20 @@ mod baked {
 }
 
 /// Request payload capacity: the larger of ACT and RESET.
-const REQUEST: usize = max(act_len(baked::HISTORY, baked::OBS_DIM, baked::ACTION_DIM), RESET_LEN);
+const REQUEST: usize = max(
+    act_len(baked::HISTORY, baked::OBS_DIM, baked::ACTION_DIM),
+    RESET_LEN,
+);
 /// Reply frame capacity: the larger of CHUNK and the INFO / ERROR payloads, framed.
-const REPLY: usize = max(chunk_len(baked::HORIZON, baked::ACTION_DIM), 128) + HEADER_LEN + TRAILER_LEN;
+const REPLY: usize =
+    max(chunk_len(baked::HORIZON, baked::ACTION_DIM), 128) + HEADER_LEN + TRAILER_LEN;
 
 const fn max(a: usize, b: usize) -> usize {
-    if a > b { a } else { b }
+    if a > b {
+        a
+    } else {
+        b
+    }
 }
 
 #[entry]
@@ -32,5 +40,16 @@ fn main() -> ! {
         Ok(policy) => policy,
         Err(error) => exit_failure(&error),
     };
-    Server::<_, { baked::HISTORY }, { baked::OBS_DIM }, { baked::ACTION_DIM }, { baked::HORIZON }, { baked::PARAMS_PER_DOF }, { baked::INPUT_WIDTH }, REQUEST, REPLY>::new(policy).run()
+    Server::<
+        _,
+        { baked::HISTORY },
+        { baked::OBS_DIM },
+        { baked::ACTION_DIM },
+        { baked::HORIZON },
+        { baked::PARAMS_PER_DOF },
+        { baked::INPUT_WIDTH },
+        REQUEST,
+        REPLY,
+    >::new(policy)
+    .run()
 }

@@ -43,7 +43,10 @@ fn breakdown(
     digest: u64,
 ) -> Result<(), PolicyError> {
     let mut policy_scratch = Scratch::new();
-    let network = MarkedNetwork::new(images::network_of(model, &mut policy_scratch), stage_report::systick);
+    let network = MarkedNetwork::new(
+        images::network_of(model, &mut policy_scratch),
+        stage_report::systick,
+    );
     let policy = images::transformer_policy(network);
     let mut staged = PolicyWorkload::with_name(policy, TRANSFORMER_NAME);
     let mut scratch = Scratch::new();

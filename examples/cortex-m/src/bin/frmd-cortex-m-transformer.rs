@@ -8,8 +8,8 @@
 #![no_main]
 
 use cortex_m_rt::entry;
-use frmd_cortex_m::images::{self, Scratch, TRANSFORMER_NAME};
 use frmd_cortex_m::bench;
+use frmd_cortex_m::images::{self, Scratch, TRANSFORMER_NAME};
 use frmd_firmware_support::policy_workload::{PolicyWorkload, CASES};
 
 #[entry]

@@ -74,7 +74,11 @@ impl KernelWorkload {
     }
 
     fn layer(&self) -> FullyConnected<'_> {
-        let weights = self.weights.0.get(self.offset..self.offset + self.width * self.rows).unwrap_or(&[]);
+        let weights = self
+            .weights
+            .0
+            .get(self.offset..self.offset + self.width * self.rows)
+            .unwrap_or(&[]);
         FullyConnected::new(self.width, self.rows, weights, &self.bias[..self.rows])
     }
 }
@@ -120,7 +124,11 @@ impl Workload for KernelWorkload {
         self.offset = case % 4;
         self.wide = case % 2 == 1;
         self.with_table = case % 3 != 0;
-        self.clamp = if case % 6 == 5 { (-20, 35) } else { (i8::MIN, i8::MAX) };
+        self.clamp = if case % 6 == 5 {
+            (-20, 35)
+        } else {
+            (i8::MIN, i8::MAX)
+        };
         self.zero_point = draw(256) as i32 - 128;
         let extreme = case % 4 == 2;
         for w in self.weights.0.iter_mut() {
@@ -155,7 +163,11 @@ impl Workload for KernelWorkload {
             activation_min: self.clamp.0,
             activation_max: self.clamp.1,
         };
-        let table = if self.with_table { Some(&self.table.table) } else { None };
+        let table = if self.with_table {
+            Some(&self.table.table)
+        } else {
+            None
+        };
         let layer = self.layer();
         let input = if self.wide {
             LayerInput::Int16(&self.input_wide[..self.width])
@@ -166,7 +178,8 @@ impl Workload for KernelWorkload {
         layer.forward_activated(&requant, table, input, &mut output[..self.rows])?;
         let mut accumulators = [0_i32; MAX_ROWS];
         if !self.wide {
-            layer.forward_accumulators(&self.input[..self.width], &mut accumulators[..self.rows])?;
+            layer
+                .forward_accumulators(&self.input[..self.width], &mut accumulators[..self.rows])?;
         }
         self.output = output;
         self.accumulators = accumulators;

@@ -10,10 +10,10 @@
 //! case: the MLP outputs (ProDMP parameters, DoF-major), then `pos` and `vel` as in
 //! [`crate::prodmp_workload`].
 
-use frmd_core::hash::Fnv1a64;
 use crate::prodmp_workload::{digest_trajectory, Baked};
 use crate::shape::{DOF, HORIZON, MLP_INPUT, MLP_WIDTH, PARAMS};
 use crate::workload::Workload;
+use frmd_core::hash::Fnv1a64;
 use frmd_core::model::mlp::{Int8Mlp, Int8Scratch, ModelError};
 use frmd_core::prodmp::ProDmpError;
 use frmd_core::rng::Rng;
@@ -99,7 +99,13 @@ impl Workload for MlpWorkload<'_> {
             .forward(obs, self.params.as_flattened_mut(), &mut self.scratch)
             .map_err(PolicyCallError::Network)?;
         self.baked
-            .decode(&self.params, &self.y0, &self.v0, &mut self.pos, &mut self.vel)
+            .decode(
+                &self.params,
+                &self.y0,
+                &self.v0,
+                &mut self.pos,
+                &mut self.vel,
+            )
             .map_err(PolicyCallError::Decode)
     }
 
@@ -111,7 +117,12 @@ impl Workload for MlpWorkload<'_> {
 
     /// The network's layers (`in_features * out_features` each), then the decode.
     fn macs(&self) -> u64 {
-        let layers = self.mlp.hidden.iter().map(|layer| &layer.fc).chain([&self.mlp.output.fc]);
+        let layers = self
+            .mlp
+            .hidden
+            .iter()
+            .map(|layer| &layer.fc)
+            .chain([&self.mlp.output.fc]);
         let network: usize = layers.map(|fc| fc.in_features * fc.out_features).sum();
         network as u64 + crate::workload::prodmp_decode_macs(HORIZON, DOF, PARAMS)
     }

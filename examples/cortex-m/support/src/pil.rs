@@ -151,7 +151,10 @@ pub fn parse_header(bytes: &[u8; HEADER_LEN]) -> Result<Header, ErrorCode> {
     if payload_len > MAX_PAYLOAD {
         return Err(ErrorCode::TooLong);
     }
-    Ok(Header { type_byte: bytes[2], payload_len })
+    Ok(Header {
+        type_byte: bytes[2],
+        payload_len,
+    })
 }
 
 /// The CRC a frame carries: over its type, reserved and length bytes and its payload.
@@ -218,7 +221,13 @@ mod tests {
         assert_eq!(n, HEADER_LEN + RESET_LEN + TRAILER_LEN);
         let head: [u8; HEADER_LEN] = out[..HEADER_LEN].try_into().unwrap();
         let parsed = parse_header(&head).unwrap();
-        assert_eq!(parsed, Header { type_byte: 0x02, payload_len: 8 });
+        assert_eq!(
+            parsed,
+            Header {
+                type_byte: 0x02,
+                payload_len: 8
+            }
+        );
         let payload = &out[HEADER_LEN..HEADER_LEN + 8];
         let crc = u32::from_le_bytes(out[n - 4..n].try_into().unwrap());
         assert_eq!(frame_crc(&head, payload), crc);

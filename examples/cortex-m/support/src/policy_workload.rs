@@ -12,8 +12,8 @@
 //! measured call samples with `Noise::Rng(Rng::new(NOISE_SEED + c))`. Digest per case: the chunk's
 //! positions, then velocities (`[time][dof]`, little-endian f32).
 
-use frmd_core::hash::Fnv1a64;
 use crate::workload::Workload;
+use frmd_core::hash::Fnv1a64;
 use frmd_core::policy::{Network, Noise, Policy, PolicyError, Trajectory};
 use frmd_core::rng::Rng;
 
@@ -89,7 +89,10 @@ impl<
             name,
             macs: 0,
             noise_seed: NOISE_SEED,
-            chunk: Trajectory { positions: [[0.0; K]; N], velocities: [[0.0; K]; N] },
+            chunk: Trajectory {
+                positions: [[0.0; K]; N],
+                velocities: [[0.0; K]; N],
+            },
         }
     }
 }
@@ -144,7 +147,12 @@ impl<
     }
 
     fn digest_outputs(&self, digest: &mut Fnv1a64) {
-        for row in self.chunk.positions.iter().chain(self.chunk.velocities.iter()) {
+        for row in self
+            .chunk
+            .positions
+            .iter()
+            .chain(self.chunk.velocities.iter())
+        {
             digest.f32s(row);
         }
     }

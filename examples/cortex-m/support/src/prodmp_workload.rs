@@ -9,9 +9,9 @@
 //! over the little-endian bytes of `pos` then `vel` (`[time][dof]`, row-major) of every case in
 //! order, each case decoded once for the digest (repeats give identical outputs).
 
-use frmd_core::hash::Fnv1a64;
 use crate::shape::{DOF, HORIZON, PARAMS};
 use crate::workload::Workload;
+use frmd_core::hash::Fnv1a64;
 use frmd_core::prodmp::{BakedProDmp, ProDmpError};
 use frmd_core::rng::Rng;
 
@@ -36,7 +36,11 @@ impl Inputs {
     /// Input number `case` of the fixed list (see the module docs).
     pub fn fixed(case: usize) -> Self {
         let mut rng = Rng::new(INPUT_SEED.wrapping_add(case as u64));
-        let mut inputs = Self { params: [[0.0; PARAMS]; DOF], y0: [0.0; DOF], v0: [0.0; DOF] };
+        let mut inputs = Self {
+            params: [[0.0; PARAMS]; DOF],
+            y0: [0.0; DOF],
+            v0: [0.0; DOF],
+        };
         for value in inputs.params.iter_mut().flatten() {
             *value = 2.0 * rng.uniform() - 1.0;
         }
@@ -86,7 +90,13 @@ impl Workload for ProDmpWorkload<'_> {
     /// One chunk decode.
     fn run(&mut self) -> Result<(), ProDmpError> {
         let inputs = core::hint::black_box(&self.inputs);
-        self.baked.decode(&inputs.params, &inputs.y0, &inputs.v0, &mut self.pos, &mut self.vel)
+        self.baked.decode(
+            &inputs.params,
+            &inputs.y0,
+            &inputs.v0,
+            &mut self.pos,
+            &mut self.vel,
+        )
     }
 
     /// `pos`, then `vel`.

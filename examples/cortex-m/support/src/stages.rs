@@ -6,7 +6,9 @@
 
 use frmd_core::kernels::{dequantize_accumulators, LayerInput};
 use frmd_core::model::linear::{Int8Linear, RequantizedLinear};
-use frmd_core::model::mlp::{quantize_input_i16, quantize_input_two_plane, InputPrecision, ModelError};
+use frmd_core::model::mlp::{
+    quantize_input_i16, quantize_input_two_plane, InputPrecision, ModelError,
+};
 use frmd_core::policy::{Network, PolicyError};
 use frmd_core::quant::QuantParams;
 
@@ -23,7 +25,11 @@ pub struct Marks<const S: usize> {
 
 impl<const S: usize> Marks<S> {
     pub const fn new(clock: Clock) -> Self {
-        Self { clock, ticks: [0; S], count: 0 }
+        Self {
+            clock,
+            ticks: [0; S],
+            count: 0,
+        }
     }
 
     /// Forgets the readings (call at the start of a pass).
@@ -56,7 +62,10 @@ pub struct MarkedNetwork<Net> {
 impl<Net: Network> MarkedNetwork<Net> {
     /// `inner`, reading `clock` at the entry and the exit of every forward pass.
     pub fn new(inner: Net, clock: Clock) -> Self {
-        Self { inner, marks: Marks::new(clock) }
+        Self {
+            inner,
+            marks: Marks::new(clock),
+        }
     }
 
     /// The wrapped network.
@@ -83,7 +92,12 @@ impl<Net: Network> Network for MarkedNetwork<Net> {
         self.inner.num_noise_variants()
     }
 
-    fn forward(&mut self, variant: usize, input: &[f32], output: &mut [f32]) -> Result<(), PolicyError> {
+    fn forward(
+        &mut self,
+        variant: usize,
+        input: &[f32],
+        output: &mut [f32],
+    ) -> Result<(), PolicyError> {
         self.marks.clear();
         self.marks.mark();
         let result = self.inner.forward(variant, input, output);
@@ -135,7 +149,10 @@ impl<'a, const L: usize, const S: usize, const WIDTH: usize> StagedMlpNetwork<'a
         }
         // Once here, as `Int8MlpNetwork` does, so that `forward` need not repeat it.
         for layer in &hidden {
-            layer.requant.validate(layer.fc.out_features).map_err(|e| PolicyError::Model(ModelError::Kernel(e)))?;
+            layer
+                .requant
+                .validate(layer.fc.out_features)
+                .map_err(|e| PolicyError::Model(ModelError::Kernel(e)))?;
         }
         Ok(Self {
             input,
@@ -164,7 +181,9 @@ impl<'a, const L: usize, const S: usize, const WIDTH: usize> StagedMlpNetwork<'a
     }
 }
 
-impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNetwork<'_, L, S, WIDTH> {
+impl<const L: usize, const S: usize, const WIDTH: usize> Network
+    for StagedMlpNetwork<'_, L, S, WIDTH>
+{
     fn input_width(&self) -> usize {
         self.hidden.first().map_or(0, |layer| layer.fc.in_features)
     }
@@ -175,17 +194,27 @@ impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNe
 
     fn num_noise_variants(&self) -> usize {
         let width = self.hidden.first().map_or(0, |layer| layer.fc.out_features);
-        self.first_layer_biases.len().checked_div(width).unwrap_or(0)
+        self.first_layer_biases
+            .len()
+            .checked_div(width)
+            .unwrap_or(0)
     }
 
-    fn forward(&mut self, variant: usize, input: &[f32], output: &mut [f32]) -> Result<(), PolicyError> {
+    fn forward(
+        &mut self,
+        variant: usize,
+        input: &[f32],
+        output: &mut [f32],
+    ) -> Result<(), PolicyError> {
         self.marks.clear();
         self.marks.mark();
         let mut hidden = self.hidden;
         if let Some(first) = hidden.first_mut() {
             if !self.first_layer_biases.is_empty() {
                 let width = first.fc.out_features;
-                let start = variant.checked_mul(width).ok_or(PolicyError::NoiseVariantIndex)?;
+                let start = variant
+                    .checked_mul(width)
+                    .ok_or(PolicyError::NoiseVariantIndex)?;
                 first.fc.bias = start
                     .checked_add(width)
                     .and_then(|end| self.first_layer_biases.get(start..end))
@@ -196,7 +225,9 @@ impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNe
         }
         let model = |error| PolicyError::Model(ModelError::Kernel(error));
         let (mut current, mut next) = (&mut self.ping, &mut self.pong);
-        let first = current.get_mut(..input.len()).ok_or(PolicyError::InputWidth)?;
+        let first = current
+            .get_mut(..input.len())
+            .ok_or(PolicyError::InputWidth)?;
         let mut width = input.len();
         let mut layers = &hidden[..];
         match self.input_precision {
@@ -207,7 +238,9 @@ impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNe
                 self.marks.mark();
             }
             InputPrecision::Int16 => {
-                let (layer, rest) = hidden.split_first().ok_or(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer))?;
+                let (layer, rest) = hidden
+                    .split_first()
+                    .ok_or(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer))?;
                 let codes = bytemuck::cast_slice_mut::<i32, i16>(self.accumulators.as_mut_slice())
                     .get_mut(..input.len())
                     .ok_or(PolicyError::InputWidth)?;
@@ -215,7 +248,9 @@ impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNe
                 self.marks.mark();
                 let out_width = layer.fc.out_features;
                 let layer_output = next.get_mut(..out_width).ok_or(PolicyError::OutputWidth)?;
-                layer.forward_prevalidated(LayerInput::Int16(codes), layer_output).map_err(model)?;
+                layer
+                    .forward_prevalidated(LayerInput::Int16(codes), layer_output)
+                    .map_err(model)?;
                 core::mem::swap(&mut current, &mut next);
                 width = out_width;
                 layers = rest;
@@ -225,12 +260,21 @@ impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNe
                 let fine = next.get_mut(..input.len()).ok_or(PolicyError::InputWidth)?;
                 quantize_input_two_plane(input, self.input, first, fine);
                 self.marks.mark();
-                let (layer, rest) = hidden.split_first().ok_or(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer))?;
+                let (layer, rest) = hidden
+                    .split_first()
+                    .ok_or(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer))?;
                 let out_width = layer.fc.out_features;
-                let accumulators = self.accumulators.get_mut(..out_width).ok_or(PolicyError::OutputWidth)?;
-                layer.two_plane_accumulators(first, fine, accumulators).map_err(model)?;
+                let accumulators = self
+                    .accumulators
+                    .get_mut(..out_width)
+                    .ok_or(PolicyError::OutputWidth)?;
+                layer
+                    .two_plane_accumulators(first, fine, accumulators)
+                    .map_err(model)?;
                 let layer_output = next.get_mut(..out_width).ok_or(PolicyError::OutputWidth)?;
-                layer.requantize_and_activate(accumulators, layer_output).map_err(model)?;
+                layer
+                    .requantize_and_activate(accumulators, layer_output)
+                    .map_err(model)?;
                 core::mem::swap(&mut current, &mut next);
                 width = out_width;
                 layers = rest;
@@ -241,7 +285,9 @@ impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNe
             let out_width = layer.fc.out_features;
             let layer_input = current.get(..width).ok_or(PolicyError::InputWidth)?;
             let layer_output = next.get_mut(..out_width).ok_or(PolicyError::OutputWidth)?;
-            layer.forward_prevalidated(LayerInput::Int8(layer_input), layer_output).map_err(model)?;
+            layer
+                .forward_prevalidated(LayerInput::Int8(layer_input), layer_output)
+                .map_err(model)?;
             core::mem::swap(&mut current, &mut next);
             width = out_width;
             self.marks.mark();
@@ -251,7 +297,10 @@ impl<const L: usize, const S: usize, const WIDTH: usize> Network for StagedMlpNe
             .accumulators
             .get_mut(..self.output.fc.out_features)
             .ok_or(PolicyError::OutputWidth)?;
-        self.output.fc.forward_accumulators(last_input, accumulators).map_err(model)?;
+        self.output
+            .fc
+            .forward_accumulators(last_input, accumulators)
+            .map_err(model)?;
         self.marks.mark();
         dequantize_accumulators(accumulators, self.output.output_scales, output).map_err(model)?;
         self.marks.mark();

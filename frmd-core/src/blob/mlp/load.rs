@@ -2,7 +2,9 @@
 
 use heapless::Vec;
 
-use super::{HiddenLayerDesc, MlpDescriptor, INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MLP_MAGIC};
+use super::{
+    HiddenLayerDesc, MlpDescriptor, INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MLP_MAGIC,
+};
 use crate::blob::container::{self, Data, SectionId};
 use crate::blob::policy_tables::{self, PolicyTables};
 use crate::blob::BlobError;
@@ -68,7 +70,10 @@ impl<'a> LoadedMlp<'a> {
             (INPUT_INT16, false) => InputPrecision::Int16,
             _ => return Err(BlobError::InputQuantization),
         };
-        d.header.layout.validate().map_err(|_| BlobError::InputLayout)?;
+        d.header
+            .layout
+            .validate()
+            .map_err(|_| BlobError::InputLayout)?;
         let input_width = d
             .header
             .layout

@@ -14,10 +14,7 @@ use super::container::{self, Section, SectionId, SectionWriter};
 use super::policy_tables::{self, PolicyHeader, PolicySections};
 use super::BlobError;
 use crate::model::mlp::{InputPrecision, Int8Mlp};
-use crate::policy::{
-    PolicyConfig,
-    MAX_HIDDEN_LAYERS,
-};
+use crate::policy::{PolicyConfig, MAX_HIDDEN_LAYERS};
 
 /// First four bytes of an MLP blob.
 pub const MLP_MAGIC: [u8; 4] = *b"FRMD";
@@ -130,7 +127,10 @@ fn expect_len(actual: usize, expected: Option<usize>, id: SectionId) -> Result<(
 
 /// Lays out the sections of `parts` (every length checked against the stated shapes) and
 /// returns the descriptor.
-fn emit(parts: &MlpBlobParts<'_>, writer: &mut SectionWriter<'_>) -> Result<MlpDescriptor, BlobError> {
+fn emit(
+    parts: &MlpBlobParts<'_>,
+    writer: &mut SectionWriter<'_>,
+) -> Result<MlpDescriptor, BlobError> {
     let tables = policy_tables::write(writer, &parts.config)?;
     let first_layer_biases = writer.i32s(parts.noise_variants)?;
     let activations = parts.mlp.hidden.iter().filter_map(|layer| layer.activation);
@@ -144,7 +144,11 @@ fn emit(parts: &MlpBlobParts<'_>, writer: &mut SectionWriter<'_>) -> Result<MlpD
         let weight_count = out.checked_mul(fc.in_features);
         expect_len(fc.weights.len(), weight_count, SectionId::HiddenWeights(id))?;
         expect_len(fc.bias.len(), Some(out), SectionId::HiddenBias(id))?;
-        expect_len(requant.multipliers.len(), Some(out), SectionId::HiddenMultipliers(id))?;
+        expect_len(
+            requant.multipliers.len(),
+            Some(out),
+            SectionId::HiddenMultipliers(id),
+        )?;
         expect_len(requant.shifts.len(), Some(out), SectionId::HiddenShifts(id))?;
         let lut = layer.activation.map(|_| {
             next_lut += 1;
@@ -166,7 +170,11 @@ fn emit(parts: &MlpBlobParts<'_>, writer: &mut SectionWriter<'_>) -> Result<MlpD
     }
     let (fc, scales) = (&parts.mlp.output.fc, parts.mlp.output.output_scales);
     let out = fc.out_features;
-    expect_len(fc.weights.len(), out.checked_mul(fc.in_features), SectionId::OutputWeights)?;
+    expect_len(
+        fc.weights.len(),
+        out.checked_mul(fc.in_features),
+        SectionId::OutputWeights,
+    )?;
     expect_len(fc.bias.len(), Some(out), SectionId::OutputBias)?;
     expect_len(scales.len(), Some(out), SectionId::OutputScales)?;
     let output = OutputLayerDesc {

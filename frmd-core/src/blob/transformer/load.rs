@@ -2,7 +2,10 @@
 
 use heapless::Vec;
 
-use super::{BlockDesc, LinearDesc, NormDesc, TensorField, TransformerDescriptor, MAX_BLOCKS, TRANSFORMER_MAGIC};
+use super::{
+    BlockDesc, LinearDesc, NormDesc, TensorField, TransformerDescriptor, MAX_BLOCKS,
+    TRANSFORMER_MAGIC,
+};
 use crate::blob::container::{self, Data, SectionId};
 use crate::blob::mlp::LUT_LEN;
 use crate::blob::policy_tables::{self, PolicyTables};
@@ -46,7 +49,11 @@ fn field(part: Part, field: TensorField) -> SectionId {
     SectionId::Transformer { part, field }
 }
 
-fn read_norm<'a>(data: &Data<'a>, d: &NormDesc, part: Part) -> Result<LayerNormWeights<'a>, BlobError> {
+fn read_norm<'a>(
+    data: &Data<'a>,
+    d: &NormDesc,
+    part: Part,
+) -> Result<LayerNormWeights<'a>, BlobError> {
     Ok(LayerNormWeights {
         gamma: data.finite_any(d.gamma, field(part, TensorField::Gamma))?,
         beta: data.finite_any(d.beta, field(part, TensorField::Beta))?,
@@ -88,7 +95,10 @@ fn read_block<'a>(
     let fc1_part = Part::Fc1 { layer };
     let fc1 = read_linear(data, &d.fc1, width, fc1_part)?;
     if !fc1.linear.output_scales.is_empty() {
-        return Err(BlobError::SectionLength(field(fc1_part, TensorField::Scales)));
+        return Err(BlobError::SectionLength(field(
+            fc1_part,
+            TensorField::Scales,
+        )));
     }
     let fc2 = read_linear(data, &d.fc2, hidden, Part::Fc2 { layer })?;
     let table = data.exact::<i8>(d.gelu, Some(LUT_LEN), field(fc1_part, TensorField::Lut))?;
@@ -105,8 +115,10 @@ fn read_block<'a>(
             fc1: RequantizedLinear {
                 fc: fc1.linear.fc,
                 requant: FcRequant {
-                    multipliers: data
-                        .cast::<i32>(d.fc1_multipliers, field(fc1_part, TensorField::Multipliers))?,
+                    multipliers: data.cast::<i32>(
+                        d.fc1_multipliers,
+                        field(fc1_part, TensorField::Multipliers),
+                    )?,
                     shifts: data.cast::<i32>(d.fc1_shifts, field(fc1_part, TensorField::Shifts))?,
                     output_zero_point: d.fc1_output_zero_point,
                     activation_min: i8::MIN,
@@ -139,7 +151,10 @@ impl<'a> LoadedTransformer<'a> {
 
     fn view(d: &TransformerDescriptor, data: &Data<'a>) -> Result<Self, BlobError> {
         let tables = policy_tables::read(data, &d.header, &d.tables)?;
-        d.header.layout.validate().map_err(|_| BlobError::InputLayout)?;
+        d.header
+            .layout
+            .validate()
+            .map_err(|_| BlobError::InputLayout)?;
         if d.header.layout.segments() != STANDARD_SEGMENTS {
             return Err(BlobError::InputLayout);
         }

@@ -160,10 +160,18 @@ fn write_quantized(
     writer: &mut SectionWriter<'_>,
     layer: &QuantizedLinear<'_>,
 ) -> Result<LinearDesc, BlobError> {
-    write_linear(writer, layer.input, &layer.linear.fc, layer.linear.output_scales)
+    write_linear(
+        writer,
+        layer.input,
+        &layer.linear.fc,
+        layer.linear.output_scales,
+    )
 }
 
-fn write_input(writer: &mut SectionWriter<'_>, layer: &TokenLinear<'_>) -> Result<LinearDesc, BlobError> {
+fn write_input(
+    writer: &mut SectionWriter<'_>,
+    layer: &TokenLinear<'_>,
+) -> Result<LinearDesc, BlobError> {
     match layer {
         TokenLinear::Int8(layer) => write_quantized(writer, layer),
         // The format holds int8 input layers only.
@@ -171,14 +179,20 @@ fn write_input(writer: &mut SectionWriter<'_>, layer: &TokenLinear<'_>) -> Resul
     }
 }
 
-fn write_norm(writer: &mut SectionWriter<'_>, norm: &LayerNormWeights<'_>) -> Result<NormDesc, BlobError> {
+fn write_norm(
+    writer: &mut SectionWriter<'_>,
+    norm: &LayerNormWeights<'_>,
+) -> Result<NormDesc, BlobError> {
     Ok(NormDesc {
         gamma: writer.f32s(norm.gamma.iter())?,
         beta: writer.f32s(norm.beta.iter())?,
     })
 }
 
-fn write_block(writer: &mut SectionWriter<'_>, block: &Int8Block<'_>) -> Result<BlockDesc, BlobError> {
+fn write_block(
+    writer: &mut SectionWriter<'_>,
+    block: &Int8Block<'_>,
+) -> Result<BlockDesc, BlobError> {
     let ff = &block.feed_forward;
     let gelu = ff.fc1.activation.ok_or(BlobError::Encode)?;
     Ok(BlockDesc {
@@ -237,7 +251,10 @@ pub fn transformer_encoded_len(parts: &TransformerBlobParts<'_>) -> Result<usize
 /// ([`transformer_encoded_len`]). Fails with a named error if a size does not fit the format
 /// (more than [`MAX_BLOCKS`] blocks, sizes beyond u32, f32 input layers); the loader checks
 /// every shape.
-pub fn encode_transformer(parts: &TransformerBlobParts<'_>, out: &mut [u8]) -> Result<usize, BlobError> {
+pub fn encode_transformer(
+    parts: &TransformerBlobParts<'_>,
+    out: &mut [u8],
+) -> Result<usize, BlobError> {
     container::encode(TRANSFORMER_MAGIC, out, |writer| emit(parts, writer))
 }
 

@@ -140,7 +140,10 @@ impl F32Mlp<'_> {
 
     fn check_io(&self, input_len: usize, output_len: usize) -> Result<(), ModelError> {
         self.validate(usize::MAX)?;
-        check_lengths((input_len, output_len), (self.input_width(), self.output_width()))
+        check_lengths(
+            (input_len, output_len),
+            (self.input_width(), self.output_width()),
+        )
     }
 
     /// The layers on the input in `ping` (shapes checked by the caller).

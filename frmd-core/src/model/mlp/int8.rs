@@ -2,7 +2,8 @@
 //! [`Int8Linear`] output layer.
 
 use super::{
-    check_lengths, check_widths, quantize_input_i16, quantize_input_two_plane, InputPrecision, ModelError,
+    check_lengths, check_widths, quantize_input_i16, quantize_input_two_plane, InputPrecision,
+    ModelError,
 };
 use crate::kernels::LayerInput;
 use crate::model::linear::{Int8Linear, RequantizedLinear};
@@ -219,7 +220,10 @@ impl Int8Mlp<'_> {
 
     fn check_io(&self, input_len: usize, output_len: usize) -> Result<(), ModelError> {
         self.validate(usize::MAX)?;
-        check_lengths((input_len, output_len), (self.input_width(), self.output_width()))
+        check_lengths(
+            (input_len, output_len),
+            (self.input_width(), self.output_width()),
+        )
     }
 
     /// `hidden`, then the output layer, on the `width` codes in `current` (ping-pong with

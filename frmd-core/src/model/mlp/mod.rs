@@ -35,9 +35,9 @@ mod tests;
 pub use float::{F32Buffers, F32Mlp, F32Scratch};
 pub use int8::{Int8Buffers, Int8Mlp, Int8Scratch};
 
+use crate::kernels::KernelError;
 #[cfg(doc)]
 use crate::model::linear::{Int8Linear, RequantizedLinear};
-use crate::kernels::KernelError;
 use crate::quant::{quantize_i16, quantize_two_plane, QuantParams};
 
 /// Why a forward pass refused its arguments.

@@ -5,9 +5,9 @@
 extern crate std;
 
 use super::*;
+use crate::kernels::{Activation, FullyConnected, KernelError};
 use crate::model::fixture::{quantize_layer, FloatLayer, MlpRanges, QuantLayer, QuantMlp};
 use crate::model::linear::{F32Linear, Int8Linear, RequantizedLinear};
-use crate::kernels::{Activation, FullyConnected, KernelError};
 use crate::quant::{reference, requantization_multiplier, QuantParams, FINE_INPUT_BITS};
 use crate::rng::Rng;
 use std::{vec, vec::Vec};
@@ -80,10 +80,7 @@ fn hidden_with<'a>(fix: &'a Fixture, first: &'a QuantLayer) -> Vec<RequantizedLi
 
 /// Naive int8 forward: i64 dot products, the wide requantization model, table lookups by index.
 fn naive_int8_forward(fix: &Fixture, input: &[f32]) -> Vec<f32> {
-    let x: Vec<i8> = input
-        .iter()
-        .map(|v| fix.quant.input.quantize(*v))
-        .collect();
+    let x: Vec<i8> = input.iter().map(|v| fix.quant.input.quantize(*v)).collect();
     naive_int8_tail(fix, &fix.quant.hidden, x)
 }
 

@@ -99,7 +99,11 @@ where
     let scale = attention_scale(head_dim);
     let w = work;
     for (layer, block) in blocks.iter().enumerate() {
-        for (x, n) in w.residual.chunks_exact(width).zip(w.normed.chunks_exact_mut(width)) {
+        for (x, n) in w
+            .residual
+            .chunks_exact(width)
+            .zip(w.normed.chunks_exact_mut(width))
+        {
             block.norm1.apply(x, w.row)?;
             block.qkv.encode(w.row, n);
         }
@@ -120,39 +124,36 @@ where
                 key_layer.apply(n, w.accumulators, key)?;
                 value_layer.apply(n, w.accumulators, value)?;
             }
-            for (n, out) in w.normed.chunks_exact(width).zip(w.attention.chunks_exact_mut(width)) {
+            for (n, out) in w
+                .normed
+                .chunks_exact(width)
+                .zip(w.attention.chunks_exact_mut(width))
+            {
                 query_layer.apply(n, w.accumulators, w.query)?;
                 let out = out
                     .get_mut(start..start + head_dim)
                     .ok_or(TransformerError::Kernel(KernelError::OutputLength))?;
-                block.proj.attend_head(
-                    w.query,
-                    w.keys,
-                    w.values,
-                    scale,
-                    w.scores,
-                    w.head_out,
-                    out,
-                )?;
+                block
+                    .proj
+                    .attend_head(w.query, w.keys, w.values, scale, w.scores, w.head_out, out)?;
             }
         }
         if let Some(values) = L::observed(w.attention) {
             observe(TransformerProbe::Attention { layer }, values);
         }
-        for (x, a) in w.residual.chunks_exact_mut(width).zip(w.attention.chunks_exact(width)) {
+        for (x, a) in w
+            .residual
+            .chunks_exact_mut(width)
+            .zip(w.attention.chunks_exact(width))
+        {
             block.proj.apply(a, w.accumulators, w.row)?;
             add_assign(x, w.row);
         }
         for x in w.residual.chunks_exact_mut(width) {
             block.norm2.apply(x, w.row)?;
-            block.feed_forward.run(
-                layer,
-                w.row,
-                w.normed,
-                w.hidden,
-                w.accumulators,
-                observe,
-            )?;
+            block
+                .feed_forward
+                .run(layer, w.row, w.normed, w.hidden, w.accumulators, observe)?;
             add_assign(x, w.row);
         }
         observe(TransformerProbe::Block { layer }, w.residual);
@@ -170,7 +171,11 @@ pub(super) fn finish<L: LinearSteps, O: FnMut(TransformerProbe, &[f32])>(
     observe: &mut O,
 ) -> Result<(), TransformerError> {
     let width = shape.width;
-    for (x, n) in work.residual.chunks_exact(width).zip(work.normed.chunks_exact_mut(width)) {
+    for (x, n) in work
+        .residual
+        .chunks_exact(width)
+        .zip(work.normed.chunks_exact_mut(width))
+    {
         final_norm.apply(x, work.row)?;
         head.encode(work.row, n);
     }

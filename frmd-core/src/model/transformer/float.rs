@@ -55,21 +55,43 @@ fn check_linear(
 impl BlockLinear for F32Linear<'_> {
     type Code = f32;
 
-    fn check(&self, in_features: usize, out_features: usize, part: Part) -> Result<(), TransformerError> {
+    fn check(
+        &self,
+        in_features: usize,
+        out_features: usize,
+        part: Part,
+    ) -> Result<(), TransformerError> {
         check_linear(self, in_features, out_features, Activation::Identity, part)
     }
 }
 
 impl InputLinear for F32Linear<'_> {
-    fn check(&self, in_features: usize, out_features: usize, part: Part) -> Result<(), TransformerError> {
+    fn check(
+        &self,
+        in_features: usize,
+        out_features: usize,
+        part: Part,
+    ) -> Result<(), TransformerError> {
         check_linear(self, in_features, out_features, Activation::Identity, part)
     }
 }
 
 impl FeedForward for F32FeedForward<'_> {
     fn check(&self, width: usize, hidden: usize, layer: usize) -> Result<(), TransformerError> {
-        check_linear(&self.fc1, width, hidden, Activation::GeluSigmoid, Part::Fc1 { layer })?;
-        check_linear(&self.fc2, hidden, width, Activation::Identity, Part::Fc2 { layer })
+        check_linear(
+            &self.fc1,
+            width,
+            hidden,
+            Activation::GeluSigmoid,
+            Part::Fc1 { layer },
+        )?;
+        check_linear(
+            &self.fc2,
+            hidden,
+            width,
+            Activation::Identity,
+            Part::Fc2 { layer },
+        )
     }
 }
 
@@ -84,7 +106,12 @@ impl LinearSteps for F32Linear<'_> {
         }
     }
 
-    fn apply(&self, codes: &[f32], _accumulators: &mut [i32], output: &mut [f32]) -> Result<(), KernelError> {
+    fn apply(
+        &self,
+        codes: &[f32],
+        _accumulators: &mut [i32],
+        output: &mut [f32],
+    ) -> Result<(), KernelError> {
         self.forward(codes, output)
     }
 
@@ -138,7 +165,10 @@ impl FeedForwardSteps<f32> for F32FeedForward<'_> {
 
 /// A feed-forward MLP's error as the transformer's (the shapes were checked by `validate`, so
 /// only kernel failures are expected).
-pub(super) fn feed_forward_error(error: crate::model::mlp::ModelError, layer: usize) -> TransformerError {
+pub(super) fn feed_forward_error(
+    error: crate::model::mlp::ModelError,
+    layer: usize,
+) -> TransformerError {
     use crate::model::mlp::ModelError;
     match error {
         ModelError::Kernel(error) => TransformerError::Kernel(error),
@@ -328,6 +358,13 @@ impl F32Transformer<'_> {
             accumulators: &mut [],
         };
         run_blocks(shape, self.blocks, &mut work, &mut observe)?;
-        finish(shape, &self.final_norm, &self.head, &mut work, output, &mut observe)
+        finish(
+            shape,
+            &self.final_norm,
+            &self.head,
+            &mut work,
+            output,
+            &mut observe,
+        )
     }
 }

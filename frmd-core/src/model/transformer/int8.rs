@@ -103,13 +103,23 @@ fn check_quantized(
 impl BlockLinear for QuantizedLinear<'_> {
     type Code = i8;
 
-    fn check(&self, in_features: usize, out_features: usize, part: Part) -> Result<(), TransformerError> {
+    fn check(
+        &self,
+        in_features: usize,
+        out_features: usize,
+        part: Part,
+    ) -> Result<(), TransformerError> {
         check_quantized(self, in_features, out_features, part)
     }
 }
 
 impl InputLinear for TokenLinear<'_> {
-    fn check(&self, in_features: usize, out_features: usize, part: Part) -> Result<(), TransformerError> {
+    fn check(
+        &self,
+        in_features: usize,
+        out_features: usize,
+        part: Part,
+    ) -> Result<(), TransformerError> {
         match self {
             TokenLinear::Float(layer) => InputLinear::check(layer, in_features, out_features, part),
             TokenLinear::Int8(layer) => check_quantized(layer, in_features, out_features, part),
@@ -159,7 +169,12 @@ impl LinearSteps for QuantizedLinear<'_> {
         quantize_into(values, self.input, codes);
     }
 
-    fn apply(&self, codes: &[i8], accumulators: &mut [i32], output: &mut [f32]) -> Result<(), KernelError> {
+    fn apply(
+        &self,
+        codes: &[i8],
+        accumulators: &mut [i32],
+        output: &mut [f32],
+    ) -> Result<(), KernelError> {
         let acc = accumulators
             .get_mut(..output.len())
             .ok_or(KernelError::OutputLength)?;
@@ -285,7 +300,13 @@ impl Int8Transformer<'_> {
         };
         let mut ignore = |_: TransformerProbe, _: &[f32]| {};
         run_blocks(shape, self.blocks, &mut work, &mut ignore)?;
-        finish(shape, &self.final_norm, &self.head, &mut work, output, &mut ignore)
+        finish(
+            shape,
+            &self.final_norm,
+            &self.head,
+            &mut work,
+            output,
+            &mut ignore,
+        )
     }
 }
-

@@ -116,15 +116,23 @@ pub trait BlockLinear: Copy {
     type Code: Copy;
 
     /// Checks consistent slices and `in_features -> out_features`.
-    fn check(&self, in_features: usize, out_features: usize, part: Part)
-        -> Result<(), TransformerError>;
+    fn check(
+        &self,
+        in_features: usize,
+        out_features: usize,
+        part: Part,
+    ) -> Result<(), TransformerError>;
 }
 
 /// A token input layer (`traj_in`, `cond_in`): [`F32Linear`] or [`TokenLinear`].
 pub trait InputLinear: Copy {
     /// Checks consistent slices and `in_features -> out_features`.
-    fn check(&self, in_features: usize, out_features: usize, part: Part)
-        -> Result<(), TransformerError>;
+    fn check(
+        &self,
+        in_features: usize,
+        out_features: usize,
+        part: Part,
+    ) -> Result<(), TransformerError>;
 }
 
 /// A feed-forward `fc2(gelu(fc1(x)))`: [`F32FeedForward`] or [`Int8FeedForward`].
@@ -217,7 +225,8 @@ impl<'a, I: InputLinear, L: BlockLinear, FF: FeedForward> Transformer<'a, I, L, 
         self.final_norm.check(shape.width, Part::FinalNorm)?;
         self.traj_in
             .check(shape.action_dim, shape.width, Part::TrajIn)?;
-        self.cond_in.check(shape.cond_dim, shape.width, Part::CondIn)?;
+        self.cond_in
+            .check(shape.cond_dim, shape.width, Part::CondIn)?;
         for (layer, block) in self.blocks.iter().enumerate() {
             block.check(shape, layer)?;
         }

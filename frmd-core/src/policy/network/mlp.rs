@@ -157,7 +157,9 @@ impl<const WIDTH: usize> Network for Int8MlpNetwork<'_, WIDTH> {
         self.layers
             .hidden
             .first()
-            .map_or(self.layers.output.fc.in_features, |layer| layer.fc.in_features)
+            .map_or(self.layers.output.fc.in_features, |layer| {
+                layer.fc.in_features
+            })
     }
 
     fn output_width(&self) -> usize {

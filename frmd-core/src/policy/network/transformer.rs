@@ -33,7 +33,9 @@ pub trait TransformerWork {
     fn buffers(&mut self) -> TransformerBuffers<'_>;
 }
 
-impl<const F: usize, const B: usize, const A: usize> TransformerWork for TransformerScratch<F, B, A> {
+impl<const F: usize, const B: usize, const A: usize> TransformerWork
+    for TransformerScratch<F, B, A>
+{
     fn buffers(&mut self) -> TransformerBuffers<'_> {
         TransformerScratch::buffers(self)
     }
@@ -194,11 +196,11 @@ mod tests {
     extern crate std;
 
     use super::*;
-    use crate::model::transformer::TransformerShape;
-    use crate::policy::InputSegment;
     use crate::kernels::Activation;
     use crate::model::linear::F32Linear;
+    use crate::model::transformer::TransformerShape;
     use crate::model::transformer::{F32Block, F32FeedForward, LayerNormWeights};
+    use crate::policy::InputSegment;
     use crate::rng::Rng;
     use std::{vec, vec::Vec};
 

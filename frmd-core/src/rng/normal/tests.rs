@@ -33,15 +33,23 @@ fn table_holds_the_quantiles() {
             let p = libm::exp2(-(k as f64 + 1.0)) * (1.0 + j as f64 / SEGMENTS as f64);
             let want = libm::round(half_normal_quantile(p) * 1_048_576.0) as i64;
             let got = i64::from(TABLE[k * (SEGMENTS + 1) + j]);
-            assert!((got - want).abs() <= 1, "octave {k} segment {j}: {got} vs {want}");
+            assert!(
+                (got - want).abs() <= 1,
+                "octave {k} segment {j}: {got} vs {want}"
+            );
         }
         // Octaves meet: the end of octave k + 1 is the start of octave k.
         if k + 1 < OCTAVES {
-            assert_eq!(TABLE[(k + 1) * (SEGMENTS + 1) + SEGMENTS], TABLE[k * (SEGMENTS + 1)]);
+            assert_eq!(
+                TABLE[(k + 1) * (SEGMENTS + 1) + SEGMENTS],
+                TABLE[k * (SEGMENTS + 1)]
+            );
         }
     }
     // The interpolation product fits in i32.
-    let segments = TABLE.chunks_exact(SEGMENTS + 1).flat_map(|octave| octave.windows(2));
+    let segments = TABLE
+        .chunks_exact(SEGMENTS + 1)
+        .flat_map(|octave| octave.windows(2));
     let widest = segments.map(|w| (w[1] - w[0]).abs()).max().unwrap();
     assert!(i64::from(widest) << FRACTION_BITS < 1 << 31, "{widest}");
 }
@@ -154,7 +162,11 @@ fn gaussian_tails_and_distribution() {
         assert!((got - p).abs() < 5.0 * se, "P(|z| > {t}): {got:e} vs {p:e}");
     }
     for (count, x) in below.iter().zip(&points) {
-        let cdf = if *x < 0.0 { 0.5 * tail(-x) } else { 1.0 - 0.5 * tail(*x) };
+        let cdf = if *x < 0.0 {
+            0.5 * tail(-x)
+        } else {
+            1.0 - 0.5 * tail(*x)
+        };
         let got = f64::from(*count) / n;
         assert!((got - cdf).abs() < 0.002, "CDF({x}): {got} vs {cdf}");
     }

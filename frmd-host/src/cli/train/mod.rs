@@ -201,7 +201,11 @@ pub struct AugmentArgs {
 
 impl From<AugmentArgs> for CondAugment {
     fn from(a: AugmentArgs) -> Self {
-        CondAugment { prob: a.aug_prob, y0_std: a.aug_y0_std, v0_std: a.aug_v0_std }
+        CondAugment {
+            prob: a.aug_prob,
+            y0_std: a.aug_y0_std,
+            v0_std: a.aug_v0_std,
+        }
     }
 }
 
@@ -209,7 +213,14 @@ impl From<TeacherArgs> for TeacherRun {
     fn from(a: TeacherArgs) -> Self {
         TeacherRun {
             train: a.common.over(TrainConfig::teacher_recipe()),
-            teacher: TeacherConfig { weight: a.loss_weight, sampling: SigmaSampling { uniform_fraction: a.sigma_uniform_fraction }, augment: a.augment.into(), ema: a.ema },
+            teacher: TeacherConfig {
+                weight: a.loss_weight,
+                sampling: SigmaSampling {
+                    uniform_fraction: a.sigma_uniform_fraction,
+                },
+                augment: a.augment.into(),
+                ema: a.ema,
+            },
             output: a.parametrization,
             auto_scale_basis: a.auto_scale_basis,
             eval_solver: a.eval_solver,
@@ -250,12 +261,26 @@ pub struct StudentArgs {
 impl From<StudentArgs> for StudentRun {
     fn from(a: StudentArgs) -> Self {
         let c = &a.common;
-        let shape = StudentShape { history: c.history, horizon: c.horizon, num_basis: c.num_basis, backbone: c.backbone.clone(), embed_dim: c.embed_dim };
+        let shape = StudentShape {
+            history: c.history,
+            horizon: c.horizon,
+            num_basis: c.num_basis,
+            backbone: c.backbone.clone(),
+            embed_dim: c.embed_dim,
+        };
         StudentRun {
             shape,
             train: a.common.over(TrainConfig::student_recipe()),
             teacher: a.teacher,
-            distill: DistillConfig { levels: a.levels, teacher_steps: a.k, solver: a.solver, target_ema: a.target_ema, eval_ema: a.eval_ema, augment: a.augment.into(), output: a.parametrization },
+            distill: DistillConfig {
+                levels: a.levels,
+                teacher_steps: a.k,
+                solver: a.solver,
+                target_ema: a.target_ema,
+                eval_ema: a.eval_ema,
+                augment: a.augment.into(),
+                output: a.parametrization,
+            },
         }
     }
 }
@@ -275,7 +300,13 @@ pub struct DpArgs {
 
 impl From<DpArgs> for DpRun {
     fn from(a: DpArgs) -> Self {
-        DpRun { train: a.common.over(TrainConfig::dp_recipe()), dp: DpConfig { parametrization: a.parametrization, eval_ema: a.ema } }
+        DpRun {
+            train: a.common.over(TrainConfig::dp_recipe()),
+            dp: DpConfig {
+                parametrization: a.parametrization,
+                eval_ema: a.ema,
+            },
+        }
     }
 }
 
@@ -285,7 +316,14 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<ExitCode> {
         TrainCommand::Student(args) => run_student(&args.into())?,
         TrainCommand::Dp(args) => run_dp(&args.into())?,
         TrainCommand::Probe(a) => {
-            let cfg = ProbeConfig { ckpt: a.ckpt, data: a.data, holdout: a.holdout, steps: a.steps, solver: a.solver, windows: a.windows };
+            let cfg = ProbeConfig {
+                ckpt: a.ckpt,
+                data: a.data,
+                holdout: a.holdout,
+                steps: a.steps,
+                solver: a.solver,
+                windows: a.windows,
+            };
             let (sampler, report) = run_probe(&cfg)?;
             println!("{} {sampler:?}: {report}", cfg.ckpt.display());
             return Ok(ExitCode::SUCCESS);

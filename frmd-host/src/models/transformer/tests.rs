@@ -9,31 +9,70 @@ use candle_nn::VarMap;
 use std::collections::HashMap;
 
 fn sizes() -> TransformerSizes {
-    TransformerSizes { layers: 2, heads: 2, width: 16, horizon: 5, action_dim: 3, cond_dim: 7, embed_dim: 4, output: 9 }
+    TransformerSizes {
+        layers: 2,
+        heads: 2,
+        width: 16,
+        horizon: 5,
+        action_dim: 3,
+        cond_dim: 7,
+        embed_dim: 4,
+        output: 9,
+    }
 }
 
 /// The broadcast-form forward pass (the previous implementation), reading the same variables.
-fn reference_forward(vars: &HashMap<String, Tensor>, s: &TransformerSizes, x: &Tensor, cond: &Tensor, emb: &Tensor) -> Result<Tensor> {
-    let get = |name: &str| vars.get(&format!("transformer.{name}")).cloned().expect("variable");
-    let linear = |name: &str| candle_nn::Linear::new(get(&format!("{name}.weight")), Some(get(&format!("{name}.bias"))));
-    let norm = |name: &str, xs: &Tensor| candle_nn::ops::layer_norm_slow(xs, &get(&format!("{name}.weight")), &get(&format!("{name}.bias")), 1e-5);
+fn reference_forward(
+    vars: &HashMap<String, Tensor>,
+    s: &TransformerSizes,
+    x: &Tensor,
+    cond: &Tensor,
+    emb: &Tensor,
+) -> Result<Tensor> {
+    let get = |name: &str| {
+        vars.get(&format!("transformer.{name}"))
+            .cloned()
+            .expect("variable")
+    };
+    let linear = |name: &str| {
+        candle_nn::Linear::new(
+            get(&format!("{name}.weight")),
+            Some(get(&format!("{name}.bias"))),
+        )
+    };
+    let norm = |name: &str, xs: &Tensor| {
+        candle_nn::ops::layer_norm_slow(
+            xs,
+            &get(&format!("{name}.weight")),
+            &get(&format!("{name}.bias")),
+            1e-5,
+        )
+    };
     let batch = x.dim(0)?;
     let steps = linear("traj_in").forward(&x.reshape((batch, s.horizon, s.action_dim))?)?;
     let cond_token = linear("cond_in").forward(cond)?.unsqueeze(1)?;
     let noise_token = linear("noise_in").forward(emb)?.unsqueeze(1)?;
-    let mut h = Tensor::cat(&[&cond_token, &noise_token, &steps], 1)?.broadcast_add(&get("pos_embedding"))?;
+    let mut h = Tensor::cat(&[&cond_token, &noise_token, &steps], 1)?
+        .broadcast_add(&get("pos_embedding"))?;
     let head_dim = s.width / s.heads;
     for i in 0..s.layers {
         let p = format!("blocks.{i}");
         let (b, t, w) = h.dims3()?;
         let qkv = linear(&format!("{p}.qkv")).forward(&norm(&format!("{p}.norm1"), &h)?)?;
-        let qkv = qkv.reshape((b, t, 3, s.heads, head_dim))?.permute((2, 0, 3, 1, 4))?;
-        let (q, k, v) = (qkv.get(0)?.contiguous()?, qkv.get(1)?.contiguous()?, qkv.get(2)?.contiguous()?);
+        let qkv = qkv
+            .reshape((b, t, 3, s.heads, head_dim))?
+            .permute((2, 0, 3, 1, 4))?;
+        let (q, k, v) = (
+            qkv.get(0)?.contiguous()?,
+            qkv.get(1)?.contiguous()?,
+            qkv.get(2)?.contiguous()?,
+        );
         let scores = (q.matmul(&k.t()?)? / (head_dim as f64).sqrt())?;
         let attn = candle_nn::ops::softmax(&scores, D::Minus1)?.matmul(&v)?;
         let attn = attn.transpose(1, 2)?.reshape((b, t, w))?;
         h = (&h + linear(&format!("{p}.proj")).forward(&attn)?)?;
-        let hidden = gelu_sigmoid(&linear(&format!("{p}.fc1")).forward(&norm(&format!("{p}.norm2"), &h)?)?)?;
+        let hidden =
+            gelu_sigmoid(&linear(&format!("{p}.fc1")).forward(&norm(&format!("{p}.norm2"), &h)?)?)?;
         h = (&h + linear(&format!("{p}.fc2")).forward(&hidden)?)?;
     }
     let h = norm("final_norm", &h)?;
@@ -41,7 +80,9 @@ fn reference_forward(vars: &HashMap<String, Tensor>, s: &TransformerSizes, x: &T
 }
 
 fn random(shape: (usize, usize), rng: &mut HostRng) -> Tensor {
-    let values: Vec<f32> = (0..shape.0 * shape.1).map(|_| rng.normal() as f32).collect();
+    let values: Vec<f32> = (0..shape.0 * shape.1)
+        .map(|_| rng.normal() as f32)
+        .collect();
     Tensor::from_vec(values, shape, &Device::Cpu).unwrap()
 }
 
@@ -59,7 +100,8 @@ fn matches_the_broadcast_form_in_values_and_gradients() {
             let n = var.dims()[0];
             let offset = if name.ends_with(".weight") { 1.0 } else { 0.0 };
             let values: Vec<f32> = (0..n).map(|_| offset + 0.3 * rng.normal() as f32).collect();
-            var.set(&Tensor::from_vec(values, n, &Device::Cpu).unwrap()).unwrap();
+            var.set(&Tensor::from_vec(values, n, &Device::Cpu).unwrap())
+                .unwrap();
         }
     }
     let batch = 4;
@@ -68,12 +110,31 @@ fn matches_the_broadcast_form_in_values_and_gradients() {
     let emb = random((batch, s.embed_dim), &mut rng);
     let target = random((batch, s.output), &mut rng);
     let ours = model.forward(&x, &cond, &emb).unwrap();
-    let tensors: HashMap<String, Tensor> = sorted_vars(&varmap).into_iter().map(|(n, v)| (n, v.as_tensor().clone())).collect();
+    let tensors: HashMap<String, Tensor> = sorted_vars(&varmap)
+        .into_iter()
+        .map(|(n, v)| (n, v.as_tensor().clone()))
+        .collect();
     let reference = reference_forward(&tensors, &s, &x, &cond, &emb).unwrap();
-    let value_error = (&ours - &reference).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
-    let scale = reference.abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+    let value_error = (&ours - &reference)
+        .unwrap()
+        .abs()
+        .unwrap()
+        .max_all()
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap();
+    let scale = reference
+        .abs()
+        .unwrap()
+        .max_all()
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap();
     assert!(scale > 0.1, "degenerate output (max |y| = {scale})");
-    assert!(value_error <= 2e-5 * scale, "forward differs by {value_error} (output scale {scale})");
+    assert!(
+        value_error <= 2e-5 * scale,
+        "forward differs by {value_error} (output scale {scale})"
+    );
 
     let loss = |y: &Tensor| (y - &target).unwrap().sqr().unwrap().sum_all().unwrap();
     let ours_grads = loss(&ours).backward().unwrap();
@@ -81,12 +142,32 @@ fn matches_the_broadcast_form_in_values_and_gradients() {
     let vars = sorted_vars(&varmap);
     assert_eq!(vars.len(), 5 * 2 + 2 * s.layers * 6 + 1, "variable count");
     for (name, var) in vars {
-        let g = ours_grads.get(var.as_tensor()).unwrap_or_else(|| panic!("no gradient reaches `{name}`"));
-        let r = reference_grads.get(var.as_tensor()).unwrap_or_else(|| panic!("reference: no gradient for `{name}`"));
-        let norm = r.abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
-        let diff = (g - r).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+        let g = ours_grads
+            .get(var.as_tensor())
+            .unwrap_or_else(|| panic!("no gradient reaches `{name}`"));
+        let r = reference_grads
+            .get(var.as_tensor())
+            .unwrap_or_else(|| panic!("reference: no gradient for `{name}`"));
+        let norm = r
+            .abs()
+            .unwrap()
+            .max_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
+        let diff = (g - r)
+            .unwrap()
+            .abs()
+            .unwrap()
+            .max_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
         assert!(norm > 0.0, "`{name}` has an all-zero gradient");
-        assert!(diff <= 1e-4 * norm, "`{name}`: gradient differs by {diff} (max |grad| {norm})");
+        assert!(
+            diff <= 1e-4 * norm,
+            "`{name}`: gradient differs by {diff} (max |grad| {norm})"
+        );
     }
 }
 
@@ -95,7 +176,11 @@ fn batch_rows_do_not_interact() {
     // Row b of a batch equals the same input run alone (the ones-matmuls must not mix rows).
     let s = sizes();
     let varmap = VarMap::new();
-    let model = Transformer::new(&s, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu).pp("transformer")).unwrap();
+    let model = Transformer::new(
+        &s,
+        VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu).pp("transformer"),
+    )
+    .unwrap();
     init_seeded(&varmap, 5).unwrap();
     let mut rng = HostRng::derive(11, "rows");
     let x = random((3, s.horizon * s.action_dim), &mut rng);
@@ -103,8 +188,21 @@ fn batch_rows_do_not_interact() {
     let emb = random((3, s.embed_dim), &mut rng);
     let all = model.forward(&x, &cond, &emb).unwrap();
     for b in 0..3 {
-        let one = model.forward(&x.narrow(0, b, 1).unwrap(), &cond.narrow(0, b, 1).unwrap(), &emb.narrow(0, b, 1).unwrap()).unwrap();
-        let diff = (one - all.narrow(0, b, 1).unwrap()).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+        let one = model
+            .forward(
+                &x.narrow(0, b, 1).unwrap(),
+                &cond.narrow(0, b, 1).unwrap(),
+                &emb.narrow(0, b, 1).unwrap(),
+            )
+            .unwrap();
+        let diff = (one - all.narrow(0, b, 1).unwrap())
+            .unwrap()
+            .abs()
+            .unwrap()
+            .max_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
         assert!(diff < 1e-5, "row {b} differs by {diff}");
     }
 }

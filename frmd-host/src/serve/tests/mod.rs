@@ -70,11 +70,7 @@ fn act(executed: u32, obs: &[f64]) -> Request {
 }
 
 /// Runs `input` through a server and decodes every reply frame (which must all be valid).
-fn run_server(
-    input: &[u8],
-    session: &mut Session,
-    policy: &mut Echo,
-) -> (Vec<Reply>, StreamEnd) {
+fn run_server(input: &[u8], session: &mut Session, policy: &mut Echo) -> (Vec<Reply>, StreamEnd) {
     let mut out = Vec::new();
     let end = serve_stream(Cursor::new(input), &mut out, session, policy).unwrap();
     (decode_all_replies(&out, session.info().float_type), end)
@@ -129,6 +125,6 @@ fn raw(msg_type: u8, payload: &[u8]) -> Vec<u8> {
 const OBS: [f64; 6] = [0.5, -1.0, 2.0, 0.5, -1.0, 2.0];
 
 mod codec;
-mod session;
 mod served;
+mod session;
 mod stream;

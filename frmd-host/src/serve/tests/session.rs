@@ -289,8 +289,7 @@ fn a_rejected_request_changes_nothing() {
         ];
         list.extend_from_slice(extra);
         list.push(act(2, &OBS));
-        let (replies, _) =
-            run_server(&requests(&list, ft), &mut session(ft), &mut Echo::default());
+        let (replies, _) = run_server(&requests(&list, ft), &mut session(ft), &mut Echo::default());
         chunk(replies.last().unwrap()).actions.clone()
     };
     let clean = run(&[]);

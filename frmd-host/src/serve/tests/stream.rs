@@ -159,8 +159,8 @@ fn fuzz_the_server_with_arbitrary_and_mutated_streams() {
             };
             let mut s = session(ft);
             let mut out = Vec::new();
-            let end = serve_stream(Cursor::new(&input), &mut out, &mut s, &mut Echo::default())
-                .unwrap();
+            let end =
+                serve_stream(Cursor::new(&input), &mut out, &mut s, &mut Echo::default()).unwrap();
             let replies = decode_all_replies(&out, ft);
             if end == StreamEnd::Truncated {
                 let Some(Reply::Error(e)) = replies.last() else {

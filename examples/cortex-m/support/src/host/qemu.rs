@@ -77,7 +77,9 @@ pub fn digest_line(stdout: &str) -> Option<&str> {
 /// The value of the first `key: value` line of `stdout`.
 pub fn line_value<'a>(stdout: &'a str, key: &str) -> Option<&'a str> {
     let prefix = format!("{key}: ");
-    stdout.lines().find_map(|line| line.strip_prefix(prefix.as_str()))
+    stdout
+        .lines()
+        .find_map(|line| line.strip_prefix(prefix.as_str()))
 }
 
 /// All output lines joined by ` | `, for one-line logging.

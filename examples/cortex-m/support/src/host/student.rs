@@ -20,12 +20,25 @@ pub fn student_dir() -> PathBuf {
 /// (build script and test helper).
 pub fn student() -> QuantizedPolicy {
     let dir = student_dir();
-    let exported = export_checkpoint(&dir, ExportOptions::default(), None)
-        .unwrap_or_else(|error| panic!("exporting the student {} failed: {error:#}", dir.display()));
+    let exported =
+        export_checkpoint(&dir, ExportOptions::default(), None).unwrap_or_else(|error| {
+            panic!("exporting the student {} failed: {error:#}", dir.display())
+        });
     let policy = exported.policy;
-    let shape = (policy.history, policy.obs_dim, policy.action_dim, policy.horizon, policy.params_per_dof);
+    let shape = (
+        policy.history,
+        policy.obs_dim,
+        policy.action_dim,
+        policy.horizon,
+        policy.params_per_dof,
+    );
     let expected = (STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS);
-    assert_eq!(shape, expected, "{}: (history, obs_dim, dof, horizon, params) disagree with shape.rs", dir.display());
+    assert_eq!(
+        shape,
+        expected,
+        "{}: (history, obs_dim, dof, horizon, params) disagree with shape.rs",
+        dir.display()
+    );
     policy
 }
 
@@ -39,7 +52,10 @@ impl AlignedBlob {
     pub fn new(blob: &[u8]) -> Self {
         let mut words = vec![0_u128; blob.len().div_ceil(16)];
         bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..blob.len()].copy_from_slice(blob);
-        Self { words, len: blob.len() }
+        Self {
+            words,
+            len: blob.len(),
+        }
     }
 
     /// The blob of `policy` (`frmd_export::blob::write`); panics if the policy cannot be written.

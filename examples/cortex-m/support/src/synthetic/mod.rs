@@ -10,7 +10,11 @@ pub mod transformer;
 
 /// Rust source of `values` as a comma-separated list of integer literals (build.rs code).
 pub(crate) fn rust_ints(values: &[i32]) -> String {
-    values.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(", ")
+    values
+        .iter()
+        .map(|v| v.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Rust source of `values` as a comma-separated list of bit-exact `f32::from_bits` expressions.

@@ -9,11 +9,11 @@
 //! [`super::mlp`]. Weights are random: only cost, memory and host/firmware equality
 //! matter, not what it computes.
 
+use super::mlp::{generate_with, LayerData};
 use crate::shape::{
     config, CONTROL_DT, DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM,
     POLICY_STEPS,
 };
-use super::mlp::{generate_with, LayerData};
 use frmd_core::policy::{InputLayout, StepConstants};
 use frmd_core::prodmp::BakedProDmp;
 use frmd_core::sigma::SigmaConfig;
@@ -51,7 +51,11 @@ fn hidden_layer(layer: &LayerData) -> QuantizedLayer {
 pub fn generate() -> QuantizedPolicy {
     let layout = InputLayout::standard(CONTROL_DT as f32);
     let input_width = layout.width(POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON);
-    assert_eq!(input_width, Some(POLICY_INPUT), "shape::POLICY_INPUT disagrees with the layout");
+    assert_eq!(
+        input_width,
+        Some(POLICY_INPUT),
+        "shape::POLICY_INPUT disagrees with the layout"
+    );
     let model = generate_with(POLICY_INPUT, POLICY_WEIGHT_SEED, MODEL_INPUT_RANGE);
     let lut = model.hidden[0].lut.expect("hidden layers have a SiLU LUT");
     let baked = BakedProDmp::<HORIZON, PARAMS>::from_config(&config()).expect("bake the decoder");

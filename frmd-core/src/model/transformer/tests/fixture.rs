@@ -5,8 +5,8 @@ extern crate std;
 
 use super::super::*;
 use crate::kernels::{gelu_sigmoid, Activation, FcRequant, Lut8};
-use crate::model::linear::{F32Linear, Int8Linear, QuantizedLinear, RequantizedLinear};
 use crate::model::fixture::{quantize_layer, FloatLayer, QuantLayer, Range};
+use crate::model::linear::{F32Linear, Int8Linear, QuantizedLinear, RequantizedLinear};
 use crate::quant::{requantization_multiplier, QuantParams};
 use crate::rng::Rng;
 use std::collections::HashMap;
