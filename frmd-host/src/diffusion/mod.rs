@@ -34,6 +34,7 @@ macro_rules! variant_names {
     };
 }
 
+pub mod consistency;
 pub mod ddpm;
 pub mod loss;
 pub mod precond;

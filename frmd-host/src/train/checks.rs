@@ -4,6 +4,7 @@
 use super::batch::CondAugment;
 use super::recipe::{DpRun, ProbeConfig, StudentRun, StudentShape, TeacherRun, TrainConfig};
 use crate::data::Dataset;
+use crate::diffusion::samplers::Solver;
 use crate::limits::{
     self, conflict, count, decay, non_negative, positive, probability, OptionError,
 };
@@ -129,7 +130,38 @@ impl StudentRun {
         )?;
         decay("target-ema", self.distill.target_ema)?;
         decay("eval-ema", self.distill.eval_ema)?;
-        validate_augment(&self.distill.augment)
+        validate_augment(&self.distill.augment)?;
+        self.validate_objective()
+    }
+
+    /// The distillation objective's options (`train::distill::DistillConfig`).
+    fn validate_objective(&self) -> Result<(), OptionError> {
+        let d = &self.distill;
+        if d.solver == Solver::DpmPp2m {
+            return Err(conflict(
+                "solver",
+                "train student",
+                "the steps between paired levels use euler or heun",
+            ));
+        }
+        let start = d.levels_start.unwrap_or(d.levels);
+        count("levels-start", start, 2, d.levels)?;
+        count("k", d.teacher_steps, 1, start - 1)?;
+        non_negative("anchor-sigma", d.anchor_sigma)?;
+        non_negative("consistency-weight", d.consistency_weight)?;
+        non_negative("map-weight", d.map_weight)?;
+        non_negative("dsm-weight", d.dsm_weight)?;
+        positive("dsm-max-sigma", d.dsm_max_sigma)?;
+        count("map-steps", d.map_steps, 1, limits::MAX_SAMPLER_STEPS)?;
+        count("map-only-steps", d.map_only_steps, 0, self.train.steps)?;
+        if d.consistency_weight == 0.0 && d.map_weight == 0.0 {
+            return Err(conflict(
+                "consistency-weight",
+                "--map-weight 0",
+                "with both terms off nothing is trained",
+            ));
+        }
+        Ok(())
     }
 
     /// The student takes its shape from the teacher: a model option given for it must equal the

@@ -1,48 +1,81 @@
-//! Consistency distillation, the paper's Algorithm 1: student and target start as copies of the
-//! teacher; each step draws a level index, noises clean trajectories to sigma_{n+K}, runs K
-//! teacher ODE steps between adjacent levels down to sigma_n, and regresses
-//! f_student(x_{n+K}, sigma_{n+K}) on f_target(x_n, sigma_n); then target <- EMA_mu(student).
-//! A separate slow EMA of the student is what gets evaluated and saved.
-use super::batch::{check_windows, sample_augmented, CondAugment};
+//! Consistency distillation of the one-step student. Student and target start as copies of the
+//! teacher; each step regresses the student's output at a noisy chunk on a target derived from
+//! the teacher, then moves the target towards the student (EMA). A slow EMA of the student is
+//! what gets evaluated and saved.
+//!
+//! With the defaults this is the paper's Algorithm 1: a level index drawn uniformly, clean
+//! trajectories noised to sigma_{n+K}, K teacher ODE steps down to sigma_n along the grid, and
+//! `f_student(x_{n+K}, sigma_{n+K})` regressed on `f_target(x_n, sigma_n)` in squared error. The
+//! other terms and settings ([`DistillConfig`]; `diffusion::consistency` for the pieces) come
+//! from the one-step literature; docs/experiments.md reports what each measured.
+use super::batch::{check_windows, sample_augmented, Batch, CondAugment};
 use super::optim::ScheduledAdamW;
 use super::{run_loop, LoopConfig, ProgressFn, TrainReport};
 use crate::data::windows::WindowSet;
-use crate::diffusion::precond::consistency;
-use crate::diffusion::samplers::{gaussian, ode_step, Solver};
-use crate::diffusion::sigma_err;
+use crate::diffusion::consistency::{
+    sub_grid, Distance, Jump, LevelCurriculum, LevelGrid, LevelSampling, LevelWeight, Pairs,
+};
+use crate::diffusion::precond::{column, consistency, teacher_denoise};
+use crate::diffusion::samplers::{gaussian, ode_step, sample_teacher, Solver};
 use crate::models::init::ema_update;
-use crate::models::{HeadConfig, OwnedNetwork, ProDmpOutput};
+use crate::models::{HeadConfig, Network, OwnedNetwork, ProDmpOutput};
 use crate::rng::HostRng;
-use anyhow::bail;
-use candle_core::Device;
+use candle_core::{Device, Tensor};
 use frmd_core::sigma::SigmaConfig;
 use serde::{Deserialize, Serialize};
 
-/// Distillation settings (paper: K = 2, target EMA 0.95; N = 40 and eval EMA 0.99 measured best,
-/// see docs/experiments.md).
+/// Distillation settings. `Default` is the recipe (docs/design.md section 7).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct DistillConfig {
-    /// Number N of Karras levels of the consistency discretization.
+    /// Number N of Karras levels of the consistency discretization (at the end of a curriculum).
     pub levels: usize,
     /// Teacher ODE steps K between the two levels of a training pair.
     pub teacher_steps: usize,
     /// Solver of those steps (Euler or Heun).
     pub solver: Solver,
-    /// Target-network EMA mu.
+    /// Target-network EMA mu (0: the target is the student itself).
     pub target_ema: f64,
     /// Slow EMA of the student used for evaluation and export.
     pub eval_ema: f64,
     /// Initial-condition perturbation of the training windows (as for the teacher, so the
     /// student learns the teacher's recovery chunks too).
-    #[serde(default)]
     pub augment: CondAugment,
     /// Output parametrization of the student (`None`: the teacher's). The student starts from
     /// the teacher's weights either way.
-    #[serde(default)]
     pub output: Option<ProDmpOutput>,
+    /// Distance between student and target.
+    pub distance: Distance,
+    /// Weight of a pair of levels.
+    pub level_weight: LevelWeight,
+    /// How the higher level of a pair is drawn.
+    pub level_sampling: LevelSampling,
+    /// Curriculum: N starts here and doubles in equal stages up to `levels` (`None`: fixed N).
+    pub levels_start: Option<usize>,
+    /// Adjacent or far-apart pairs.
+    pub jump: Jump,
+    /// Pairs whose lower level is at most this take the teacher's own denoised output there as
+    /// their target instead of the target network's (0: off).
+    pub anchor_sigma: f64,
+    /// Weight of the consistency term.
+    pub consistency_weight: f64,
+    /// Weight of the ODE-map term: the student's one-step output from `sigma_max z` regressed on
+    /// the teacher's DPM-Solver++(2M) solution from the same start (0: off).
+    pub map_weight: f64,
+    /// Teacher steps of that solution.
+    pub map_steps: usize,
+    /// Warm start: the first this many steps train the ODE-map term alone.
+    pub map_only_steps: usize,
+    /// Weight of an auxiliary denoising term on the student at levels up to `dsm_max_sigma`
+    /// (Consistency Policy's DSM term; 0: off).
+    pub dsm_weight: f64,
+    /// Highest level of the denoising term (log-uniform from sigma_min).
+    pub dsm_max_sigma: f64,
 }
 
 impl Default for DistillConfig {
+    /// The paper's Algorithm 1 with K = 2 Heun steps and target EMA 0.95; N = 40 and eval EMA
+    /// 0.99 measured best (docs/experiments.md).
     fn default() -> Self {
         DistillConfig {
             levels: 40,
@@ -52,6 +85,18 @@ impl Default for DistillConfig {
             eval_ema: 0.99,
             augment: CondAugment::NONE,
             output: None,
+            distance: Distance::L2,
+            level_weight: LevelWeight::Uniform,
+            level_sampling: LevelSampling::Uniform,
+            levels_start: None,
+            jump: Jump::Adjacent,
+            anchor_sigma: 0.0,
+            consistency_weight: 1.0,
+            map_weight: 0.0,
+            map_steps: 10,
+            map_only_steps: 0,
+            dsm_weight: 0.0,
+            dsm_max_sigma: 1.0,
         }
     }
 }
@@ -63,6 +108,141 @@ pub struct Distilled {
     /// The raw student.
     pub student: OwnedNetwork,
     pub report: TrainReport,
+}
+
+/// The networks and settings one step reads.
+struct Nets<'a> {
+    teacher: &'a Network,
+    target: &'a Network,
+    student: &'a Network,
+    sig: &'a SigmaConfig,
+    cfg: &'a DistillConfig,
+}
+
+impl Nets<'_> {
+    /// The teacher's ODE solution from `noisy` at `pairs.high` down to `pairs.low`.
+    fn teacher_path(
+        &self,
+        noisy: &Tensor,
+        batch: &Batch,
+        pairs: &Pairs,
+        grid: &LevelGrid,
+    ) -> anyhow::Result<Tensor> {
+        let heun = self.cfg.solver == Solver::Heun;
+        let k = self.cfg.teacher_steps;
+        let mut x = noisy.clone();
+        match grid.jump {
+            Jump::Adjacent => {
+                let index = &pairs.high_index;
+                for s in 0..k {
+                    let from: Vec<f64> = index.iter().map(|&j| grid.levels[j + s]).collect();
+                    let to: Vec<f64> = index.iter().map(|&j| grid.levels[j + s + 1]).collect();
+                    x = ode_step(self.teacher, self.sig, &x, &batch.cond, &from, &to, heun)?
+                        .detach();
+                }
+            }
+            Jump::Far => {
+                let sub = sub_grid(&pairs.high, &pairs.low, k, self.sig.rho);
+                for w in sub.windows(2) {
+                    x = ode_step(self.teacher, self.sig, &x, &batch.cond, &w[0], &w[1], heun)?
+                        .detach();
+                }
+            }
+        }
+        Ok(x)
+    }
+
+    /// The consistency target at the pair's lower level: the ODE solution itself at sigma = 0,
+    /// the teacher's denoised output at anchored levels, otherwise the target network.
+    fn target_at_low(
+        &self,
+        x_low: &Tensor,
+        batch: &Batch,
+        pairs: &Pairs,
+    ) -> anyhow::Result<Tensor> {
+        let device = x_low.device();
+        let floor = self.sig.sigma_min;
+        let at: Vec<f64> = pairs.low.iter().map(|&l| l.max(floor)).collect();
+        let mut out = consistency(self.target, self.sig, x_low, &batch.cond, &at)?;
+        let anchored: Vec<f64> = pairs
+            .low
+            .iter()
+            .map(|&l| f64::from(l > 0.0 && l <= self.cfg.anchor_sigma))
+            .collect();
+        if anchored.iter().any(|&a| a > 0.0) {
+            let denoised = teacher_denoise(self.teacher, self.sig, x_low, &batch.cond, &at)?;
+            let keep: Vec<f64> = anchored.iter().map(|a| 1.0 - a).collect();
+            out = (out.broadcast_mul(&column(&keep, device)?)?
+                + denoised.broadcast_mul(&column(&anchored, device)?)?)?;
+        }
+        let zero: Vec<f64> = pairs.low.iter().map(|&l| f64::from(l <= 0.0)).collect();
+        if zero.iter().any(|&z| z > 0.0) {
+            let keep: Vec<f64> = zero.iter().map(|z| 1.0 - z).collect();
+            out = (out.broadcast_mul(&column(&keep, device)?)?
+                + x_low.broadcast_mul(&column(&zero, device)?)?)?;
+        }
+        Ok(out.detach())
+    }
+
+    /// The consistency term on one batch.
+    fn consistency_term(
+        &self,
+        batch: &Batch,
+        grid: &LevelGrid,
+        rng: &mut HostRng,
+    ) -> anyhow::Result<Tensor> {
+        let size = batch.x0.dim(0)?;
+        let device = batch.x0.device();
+        let pairs = grid.draw(size, rng);
+        let eps = gaussian(rng, size, batch.x0.dim(1)?, device)?;
+        let noisy = (&batch.x0 + eps.broadcast_mul(&column(&pairs.high, device)?)?)?;
+        let x_low = self.teacher_path(&noisy, batch, &pairs, grid)?;
+        let target = self.target_at_low(&x_low, batch, &pairs)?;
+        let predicted = consistency(self.student, self.sig, &noisy, &batch.cond, &pairs.high)?;
+        let weights = grid.weights(&pairs, self.cfg.level_weight);
+        self.cfg
+            .distance
+            .weighted_mean(&predicted, &target, &weights)
+    }
+
+    /// The ODE-map term: one student step from sigma_max z against the teacher's solution.
+    fn map_term(&self, batch: &Batch, rng: &mut HostRng) -> anyhow::Result<Tensor> {
+        let (size, dim) = batch.x0.dims2()?;
+        let start = (gaussian(rng, size, dim, batch.x0.device())? * self.sig.sigma_max)?;
+        let target = sample_teacher(
+            self.teacher,
+            self.sig,
+            &batch.cond,
+            start.clone(),
+            self.cfg.map_steps,
+            Solver::DpmPp2m,
+        )?
+        .detach();
+        let levels = vec![self.sig.sigma_max; size];
+        let predicted = consistency(self.student, self.sig, &start, &batch.cond, &levels)?;
+        self.cfg
+            .distance
+            .weighted_mean(&predicted, &target, &vec![1.0; size])
+    }
+
+    /// The denoising term: the student's output at a low level against the clean chunk.
+    fn dsm_term(&self, batch: &Batch, rng: &mut HostRng) -> anyhow::Result<Tensor> {
+        let (size, dim) = batch.x0.dims2()?;
+        let device = batch.x0.device();
+        let (lo, hi) = (self.sig.sigma_min.ln(), self.cfg.dsm_max_sigma.ln());
+        // Strictly above sigma_min, where the direct student is its network.
+        let levels: Vec<f64> = (0..size)
+            .map(|_| {
+                (lo + (hi - lo) * (1.0 - rng.uniform()))
+                    .exp()
+                    .max(self.sig.sigma_min * 1.0001)
+            })
+            .collect();
+        let eps = gaussian(rng, size, dim, device)?;
+        let noisy = (&batch.x0 + eps.broadcast_mul(&column(&levels, device)?)?)?;
+        let predicted = consistency(self.student, self.sig, &noisy, &batch.cond, &levels)?;
+        Distance::L2.weighted_mean(&predicted, &batch.x0, &vec![1.0; size])
+    }
 }
 
 /// Distills `teacher` into a consistency student.
@@ -79,31 +259,36 @@ pub fn distill(
         *output = wanted;
     }
     check_windows(windows, &model)?;
-    if dcfg.solver == Solver::DpmPp2m {
-        bail!("distillation steps use Euler or Heun");
-    }
-    if dcfg.levels < dcfg.teacher_steps + 1 || dcfg.teacher_steps == 0 {
-        bail!(
-            "distillation needs 1 <= K < N (got K = {}, N = {})",
-            dcfg.teacher_steps,
-            dcfg.levels
-        );
-    }
     let device = Device::Cpu;
-    let levels = (0..dcfg.levels)
-        .map(|i| sig.karras_sigma(i, dcfg.levels))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(sigma_err("distillation levels"))?;
+    let curriculum = LevelCurriculum {
+        start: dcfg.levels_start.unwrap_or(dcfg.levels),
+        end: dcfg.levels,
+        total_steps: cfg.steps,
+    };
+    let grid_for =
+        |n: usize| LevelGrid::new(sig, n, dcfg.teacher_steps, dcfg.jump, dcfg.level_sampling);
+    let mut grid = grid_for(curriculum.levels_at(0))?;
     let student = teacher.duplicate_as(&model, &device)?;
     let target = teacher.duplicate_as(&model, &device)?;
     let eval_student = teacher.duplicate_as(&model, &device)?;
     let mut opt = ScheduledAdamW::for_network(&student, cfg.optim.clone())?;
     let mut rng = HostRng::derive(cfg.seed, "distill-batches");
-    let k = dcfg.teacher_steps;
-    let heun = dcfg.solver == Solver::Heun;
+    let mut map_rng = HostRng::derive(cfg.seed, "distill-map");
+    let mut dsm_rng = HostRng::derive(cfg.seed, "distill-dsm");
     let report = run_loop(
         cfg,
-        |_| {
+        |step| {
+            let n = curriculum.levels_at(step);
+            if n != grid.levels.len() {
+                grid = grid_for(n)?;
+            }
+            let nets = Nets {
+                teacher: &teacher.net,
+                target: &target.net,
+                student: &student.net,
+                sig,
+                cfg: dcfg,
+            };
             let batch = sample_augmented(
                 windows,
                 &model,
@@ -112,23 +297,27 @@ pub fn distill(
                 &mut rng,
                 &device,
             )?;
-            let size = cfg.batch_size;
-            // Descending index: level j is sigma_{n+K}, level j + K is sigma_n.
-            let starts: Vec<usize> = (0..size).map(|_| rng.below(dcfg.levels - k)).collect();
-            let high: Vec<f64> = starts.iter().map(|&j| levels[j]).collect();
-            let eps = gaussian(&mut rng, size, model.traj_dim(), &device)?;
-            let noisy = (&batch.x0
-                + eps.broadcast_mul(&crate::diffusion::precond::column(&high, &device)?)?)?;
-            let mut x = noisy.clone();
-            for s in 0..k {
-                let from: Vec<f64> = starts.iter().map(|&j| levels[j + s]).collect();
-                let to: Vec<f64> = starts.iter().map(|&j| levels[j + s + 1]).collect();
-                x = ode_step(&teacher.net, sig, &x, &batch.cond, &from, &to, heun)?.detach();
+            let map_only = step < dcfg.map_only_steps;
+            let mut terms: Vec<Tensor> = Vec::new();
+            if !map_only && dcfg.consistency_weight > 0.0 {
+                let term = nets.consistency_term(&batch, &grid, &mut rng)?;
+                terms.push(if dcfg.consistency_weight == 1.0 {
+                    term
+                } else {
+                    (term * dcfg.consistency_weight)?
+                });
             }
-            let low: Vec<f64> = starts.iter().map(|&j| levels[j + k]).collect();
-            let target_out = consistency(&target.net, sig, &x, &batch.cond, &low)?.detach();
-            let predicted = consistency(&student.net, sig, &noisy, &batch.cond, &high)?;
-            let loss = (predicted - target_out)?.sqr()?.mean_all()?;
+            if map_only || dcfg.map_weight > 0.0 {
+                let w = if map_only { 1.0 } else { dcfg.map_weight };
+                terms.push((nets.map_term(&batch, &mut map_rng)? * w)?);
+            }
+            if !map_only && dcfg.dsm_weight > 0.0 {
+                terms.push((nets.dsm_term(&batch, &mut dsm_rng)? * dcfg.dsm_weight)?);
+            }
+            let mut loss = terms.remove(0);
+            for t in terms {
+                loss = (loss + t)?;
+            }
             let lr = opt.current_lr();
             opt.backward_step(&loss)?;
             ema_update(&target.varmap, &student.varmap, dcfg.target_ema)?;

@@ -6,6 +6,8 @@ pub mod batch;
 pub mod checks;
 pub mod curve;
 pub mod distill;
+#[cfg(test)]
+mod distill_tests;
 pub mod dp;
 #[cfg(test)]
 mod dp_checkpoint_tests;

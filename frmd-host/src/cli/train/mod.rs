@@ -1,5 +1,6 @@
 //! `frmd train teacher|student|dp|probe`: the flags of [`crate::train::recipe`]'s run configs
 //! (every default is read from their `Default`), handed to [`crate::train::run`].
+use crate::diffusion::consistency::{Distance, Jump, LevelSampling, LevelWeight};
 use crate::diffusion::ddpm::EpsParametrization;
 use crate::diffusion::loss::{LossWeight, SigmaSampling};
 use crate::diffusion::samplers::Solver;
@@ -256,11 +257,59 @@ pub struct StudentArgs {
     pub parametrization: Option<ProDmpOutput>,
     #[command(flatten)]
     pub augment: AugmentArgs,
+    #[command(flatten)]
+    pub objective: ObjectiveArgs,
+}
+
+/// The distillation objective (`train::distill::DistillConfig`, `diffusion::consistency`).
+#[derive(Args, Debug)]
+pub struct ObjectiveArgs {
+    /// Distance between student and target: l2 | pseudo-huber.
+    #[arg(long, default_value_t = DistillConfig::default().distance)]
+    pub distance: Distance,
+    /// Weight of a pair of levels: uniform | inverse-gap (1 / (sigma_high - sigma_low), mean 1).
+    #[arg(long, default_value_t = DistillConfig::default().level_weight)]
+    pub level_weight: LevelWeight,
+    /// How the higher level of a pair is drawn: uniform | log-normal (over the grid).
+    #[arg(long, default_value_t = DistillConfig::default().level_sampling)]
+    pub level_sampling: LevelSampling,
+    /// Curriculum: start with this many levels and double up to --levels in equal stages
+    /// (default: --levels throughout).
+    #[arg(long)]
+    pub levels_start: Option<usize>,
+    /// Pair levels: adjacent (K grid steps apart) | far (any lower level or 0, the teacher
+    /// integrating in K Heun steps).
+    #[arg(long, default_value_t = DistillConfig::default().jump)]
+    pub jump: Jump,
+    /// Pairs whose lower level is at most this take the teacher's denoised output as target
+    /// (0: off).
+    #[arg(long, default_value_t = DistillConfig::default().anchor_sigma)]
+    pub anchor_sigma: f64,
+    /// Weight of the consistency term (0: the ODE-map term alone).
+    #[arg(long, default_value_t = DistillConfig::default().consistency_weight)]
+    pub consistency_weight: f64,
+    /// Weight of the ODE-map term: one student step from sigma_max z regressed on the teacher's
+    /// DPM-Solver++(2M) solution from the same z (0: off).
+    #[arg(long, default_value_t = DistillConfig::default().map_weight)]
+    pub map_weight: f64,
+    /// Teacher steps of the ODE-map solution.
+    #[arg(long, default_value_t = DistillConfig::default().map_steps)]
+    pub map_steps: usize,
+    /// Warm start: train the ODE-map term alone for the first this many steps.
+    #[arg(long, default_value_t = DistillConfig::default().map_only_steps)]
+    pub map_only_steps: usize,
+    /// Weight of an auxiliary denoising term on the student at low levels (0: off).
+    #[arg(long, default_value_t = DistillConfig::default().dsm_weight)]
+    pub dsm_weight: f64,
+    /// Highest noise level of the denoising term.
+    #[arg(long, default_value_t = DistillConfig::default().dsm_max_sigma)]
+    pub dsm_max_sigma: f64,
 }
 
 impl From<StudentArgs> for StudentRun {
     fn from(a: StudentArgs) -> Self {
         let c = &a.common;
+        let o = a.objective;
         let shape = StudentShape {
             history: c.history,
             horizon: c.horizon,
@@ -280,6 +329,18 @@ impl From<StudentArgs> for StudentRun {
                 eval_ema: a.eval_ema,
                 augment: a.augment.into(),
                 output: a.parametrization,
+                distance: o.distance,
+                level_weight: o.level_weight,
+                level_sampling: o.level_sampling,
+                levels_start: o.levels_start,
+                jump: o.jump,
+                anchor_sigma: o.anchor_sigma,
+                consistency_weight: o.consistency_weight,
+                map_weight: o.map_weight,
+                map_steps: o.map_steps,
+                map_only_steps: o.map_only_steps,
+                dsm_weight: o.dsm_weight,
+                dsm_max_sigma: o.dsm_max_sigma,
             },
         }
     }
