@@ -34,6 +34,9 @@ class BenchConfig:
     multi_seed_tasks: list = field(default_factory=lambda: ["reach-v3", "push-v3", "peg-insert-side-v3"])
     multi_seeds: list = field(default_factory=lambda: [1, 2])
     demos: int = 100
+    # Data options of `collect` (tasks.OBS_LAYOUTS; expert steps after the first success).
+    obs: str = "raw"
+    after_success: int = 0
     episodes: int = 50
     # None: `frmd train`'s default backbone (the recipe of issue 13: "the CLI's default").
     backbone: str | None = None
@@ -63,6 +66,13 @@ class BenchConfig:
                 for seed in self.multi_seeds:
                     if seed not in self.seeds:
                         yield task, seed
+
+
+def data_file_name(task: str, obs: str, after_success: int) -> str:
+    """TASK.safetensors for the default data, else a name that says the options (so files collected
+    with other options are never taken for each other)."""
+    suffix = "" if (obs, after_success) == ("raw", 0) else f"-{obs}-after{after_success}"
+    return f"{task}{suffix}.safetensors"
 
 
 class StepFailed(Exception):
@@ -103,10 +113,11 @@ class Runner:
         self.say(f"{name}: finished in {time.perf_counter() - t0:.0f} s")
 
     def data(self, task: str) -> Path:
-        path = Path(self.cfg.data_dir) / f"{task}.safetensors"
+        path = Path(self.cfg.data_dir) / data_file_name(task, self.cfg.obs, self.cfg.after_success)
         path.parent.mkdir(parents=True, exist_ok=True)
-        self.run(f"{task}-collect", path, [self.python, "-m", "frmd_metaworld", "collect", "--task", task,
-                                           "--episodes", str(self.cfg.demos), "--out", str(path)])
+        self.run(f"{path.stem}-collect", path, [self.python, "-m", "frmd_metaworld", "collect", "--task", task,
+                                                "--episodes", str(self.cfg.demos), "--obs", self.cfg.obs,
+                                                "--after-success", str(self.cfg.after_success), "--out", str(path)])
         return path
 
     def train(self, task: str, seed: int, data: Path) -> Path:

@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from .tasks import GROUPS, TASKS
+from .tasks import GROUPS, OBS_LAYOUTS, TASKS
 
 
 def _progress(task: str, total: int):
@@ -47,8 +47,8 @@ def cmd_collect(args) -> int:
         if path.exists() and not args.force:
             print(f"{task}: {path} exists, skipped (--force to redo)", flush=True)
             continue
-        data, stats = collect(task, args.episodes, args.seed,
-                              progress=_progress(task, args.episodes))
+        data, stats = collect(task, args.episodes, args.seed, progress=_progress(task, args.episodes),
+                              obs_layout=args.obs, after_success=args.after_success)
         tmp = path.with_name(path.name + ".partial")
         data.save(tmp)
         os.replace(tmp, path)
@@ -68,7 +68,8 @@ def cmd_eval(args) -> int:
         started = time.perf_counter()
         try:
             report = evaluate(task, policy, args.episodes, args.first_seed, args.exec_steps,
-                              progress=_progress(task, args.episodes))
+                              progress=_progress(task, args.episodes),
+                              obs_layout=None if args.obs == "auto" else args.obs)
         finally:
             policy.close()
         report["wall_seconds"] = time.perf_counter() - started
@@ -118,7 +119,7 @@ def cmd_benchmark(args) -> int:
     overrides = {k: v for k, v in {
         "tasks": args.task, "demos": args.demos, "episodes": args.episodes, "backbone": args.backbone,
         "train_steps": args.train_steps, "student_steps": args.student_steps, "data_dir": args.data_dir,
-        "out": args.out, "frmd": args.frmd,
+        "out": args.out, "frmd": args.frmd, "obs": args.obs, "after_success": args.after_success,
         "seeds": [int(s) for s in args.seeds.split(",")] if args.seeds else None,
         "multi_seed_tasks": ([] if args.multi_seed_tasks == "none" else _tasks(args.multi_seed_tasks))
         if args.multi_seed_tasks else None}.items() if v is not None}
@@ -173,6 +174,10 @@ def main(argv=None) -> int:
     c.add_argument("--out", help="output file (one task)")
     c.add_argument("--out-dir", help="output directory: TASK.safetensors per task; existing files are skipped")
     c.add_argument("--force", action="store_true", help="overwrite existing files")
+    c.add_argument("--obs", choices=OBS_LAYOUTS, default="raw", help="observation layout: raw (MetaWorld's 39 "
+                   "floats) or relative (those and goal - hand, object - hand, goal - object)")
+    c.add_argument("--after-success", type=int, default=0, metavar="K",
+                   help="record K more expert steps after the first success (default 0: stop there)")
     c.set_defaults(run=cmd_collect)
 
     e = sub.add_parser("eval", help="closed-loop evaluation: the expert, or a policy server")
@@ -185,6 +190,8 @@ def main(argv=None) -> int:
     e.add_argument("--json", help="write the report here (one task)")
     e.add_argument("--json-dir", help="write TASK-LABEL.json per task here")
     e.add_argument("--label", default="policy", help="file label with --json-dir")
+    e.add_argument("--obs", choices=("auto",) + OBS_LAYOUTS, default="auto", help="observation layout the policy "
+                   "reads (default: the one whose length the server announces)")
     e.set_defaults(run=cmd_eval)
 
     i = sub.add_parser("info", help="summarize dataset files")
@@ -211,6 +218,9 @@ def main(argv=None) -> int:
     m.add_argument("--demos", type=int, help="demonstrations per task collected when DATA_DIR lacks the file (default 100)")
     m.add_argument("--episodes", type=int, help="evaluation episodes per task and method (default 50)")
     m.add_argument("--backbone", help="backbone of all three models (default: frmd train's default)")
+    m.add_argument("--obs", choices=OBS_LAYOUTS, help="observation layout of the collected data (default raw)")
+    m.add_argument("--after-success", type=int, metavar="K", help="expert steps recorded after the first "
+                   "success (default 0)")
     m.add_argument("--train-steps", type=int, help="gradient steps of teacher and DP (default: frmd train's)")
     m.add_argument("--student-steps", type=int, help="gradient steps of the student (default: as --train-steps)")
     m.add_argument("--data-dir", help="demonstration files TASK.safetensors (collected if missing; default ./data)")

@@ -15,27 +15,38 @@ import time
 import numpy as np
 
 from .dataset import Dataset
-from .tasks import (ACTION_DIM, DT, EVAL_SEED_OFFSET, MAX_STEPS, OBS_DIM, SeededEnv, check_task, expert_policy,
-                    package_versions)
+from .tasks import (ACTION_DIM, DT, EVAL_SEED_OFFSET, MAX_STEPS, SeededEnv, check_task, expert_policy,
+                    layout_dim, observe, package_versions)
 
 
-def expert_episode(env: SeededEnv, expert, seed: int):
-    """(observations, actions, success) of one expert episode, stopping at the first success."""
+def expert_episode(env: SeededEnv, expert, seed: int, obs_layout: str = "raw", after_success: int = 0):
+    """(observations, actions, success) of one expert episode, stopping at the first success, or
+    `after_success` steps later (the expert keeps acting; the episode still counts as a success).
+    Observations are recorded in `obs_layout`; the expert reads the raw ones."""
     obs = env.reset(seed)
-    observations, actions, success = [], [], False
+    observations, actions, success, left = [], [], False, after_success
     for _ in range(MAX_STEPS):
         action = expert(obs)
-        observations.append(obs)
+        observations.append(observe(obs, obs_layout))
         actions.append(action)
-        obs, success, truncated = env.step(action)
-        if success or truncated:
+        obs, now, truncated = env.step(action)
+        if success:
+            left -= 1
+        success = success or now
+        if truncated or (success and left <= 0):
             break
     return np.array(observations), np.array(actions), success
 
 
-def collect(task: str, episodes: int, seed: int = 0, max_attempts: int | None = None, progress=None):
-    """(Dataset, stats) with `episodes` successful demonstrations of `task`."""
+def collect(task: str, episodes: int, seed: int = 0, max_attempts: int | None = None, progress=None,
+            obs_layout: str = "raw", after_success: int = 0):
+    """(Dataset, stats) with `episodes` successful demonstrations of `task`, observations in
+    `obs_layout` (tasks.OBS_LAYOUTS), each recorded until `after_success` steps past its first
+    success."""
     check_task(task)
+    obs_dim = layout_dim(obs_layout)
+    if not 0 <= after_success <= MAX_STEPS:
+        raise ValueError(f"after_success must be in 0..{MAX_STEPS}, got {after_success}")
     if episodes < 1:
         raise ValueError("at least one episode must be collected")
     max_attempts = max_attempts or episodes + 10 + episodes // 5
@@ -51,7 +62,7 @@ def collect(task: str, episodes: int, seed: int = 0, max_attempts: int | None = 
         episode_seed = seed + attempt
         attempt += 1
         t0 = time.perf_counter()
-        obs, act, success = expert_episode(env, expert, episode_seed)
+        obs, act, success = expert_episode(env, expert, episode_seed, obs_layout, after_success)
         step_time += time.perf_counter() - t0
         steps += len(act)
         if not success:
@@ -78,14 +89,18 @@ def collect(task: str, episodes: int, seed: int = 0, max_attempts: int | None = 
             "failed_seeds": json.dumps(failed),
             "versions": json.dumps(package_versions()),
             "environment": "goal-observable v3, _freeze_rand_vec=False, seeded_rand_vec=True, env.seed(s) then reset()",
-            "episode_end": "first step with info['success'] true (inclusive); max 500 steps",
-            "obs_note": "float32 copy of the float64 observation the expert acted on",
+            "episode_end": (f"first step with info['success'] true (inclusive), then {after_success} more expert "
+                            "steps; max 500 steps"),
+            "after_success": str(after_success),
+            "obs_layout": obs_layout,
+            "obs_note": ("float32 copy of the float64 observation the expert acted on" +
+                         ("" if obs_layout == "raw" else ", then goal - hand, object - hand, goal - object")),
             "action_note": "expert action clipped to [-1, 1]: hand displacement (x 1 cm) xyz, gripper",
             "eval_seeds": "evaluation uses seeds 2**63 + i, disjoint from these",
         },
     )
     data.validate()
-    if data.obs.shape[1] != OBS_DIM or data.action.shape[1] != ACTION_DIM:
+    if data.obs.shape[1] != obs_dim or data.action.shape[1] != ACTION_DIM:
         raise RuntimeError(f"unexpected shapes {data.obs.shape} {data.action.shape}")
     stats = {"task": task, "episodes": episodes, "attempted": attempt, "failed": len(failed),
              "steps": int(len(data.obs)), "mean_length": float(np.mean(lengths)),

@@ -24,7 +24,8 @@ import numpy as np
 
 from . import metrics
 from .protocol import F64, Client
-from .tasks import DT, MAX_STEPS, SeededEnv, check_task, eval_seed, expert_policy, package_versions
+from .tasks import (DT, MAX_STEPS, SeededEnv, check_task, eval_seed, expert_policy, layout_dim, layout_of_dim,
+                    observe, package_versions)
 
 
 class ExpertPolicy:
@@ -34,6 +35,7 @@ class ExpertPolicy:
         self.expert = expert_policy(task)
         self.name, self.history, self.horizon, self.exec_steps = "expert", 1, 1, 1
         self.float_type = "f64"
+        self.obs_dim = layout_dim("raw")
 
     def reset(self, seed: int) -> None:
         pass
@@ -57,6 +59,7 @@ class ServedPolicy:
         self.name = info.name or command
         self.history, self.horizon, self.exec_steps = info.obs_history, info.horizon, info.exec_steps
         self.float_type = "f64" if info.float_type == F64 else "f32"
+        self.obs_dim = info.obs_dim
         if abs(info.dt - DT) > 1e-9 and info.dt != 0:
             raise ValueError(f"the server's policy was trained at dt {info.dt} s, MetaWorld steps {DT} s")
         self.info = info
@@ -72,10 +75,10 @@ class ServedPolicy:
         self.client.close()
 
 
-def rollout(env: SeededEnv, policy, seed: int, exec_steps: int, timings: dict) -> dict:
+def rollout(env: SeededEnv, policy, seed: int, exec_steps: int, timings: dict, obs_layout: str = "raw") -> dict:
     obs = env.reset(seed)
     policy.reset(seed)
-    history = deque([obs] * policy.history, maxlen=policy.history)
+    history = deque([observe(obs, obs_layout)] * policy.history, maxlen=policy.history)
     ee_path, cmd_path = [obs[:3].copy()], [env.commanded_position()]
     steps, executed, success, failed = 0, 0, False, False
     while steps < MAX_STEPS and not success:
@@ -90,7 +93,7 @@ def rollout(env: SeededEnv, policy, seed: int, exec_steps: int, timings: dict) -
             timings["step"].append(time.perf_counter() - t0)
             steps += 1
             executed += 1
-            history.append(obs)
+            history.append(observe(obs, obs_layout))
             ee_path.append(obs[:3].copy())
             cmd_path.append(env.commanded_position())
             failed = failed or env.unstable()
@@ -103,9 +106,16 @@ def rollout(env: SeededEnv, policy, seed: int, exec_steps: int, timings: dict) -
 
 
 def evaluate(task: str, policy, episodes: int = 50, first_seed: int = 0, exec_steps: int | None = None,
-             warmup_calls: int = 5, progress=None) -> dict:
-    """The report of `frmd eval --json`, plus round-trip timing and provenance fields."""
+             warmup_calls: int = 5, progress=None, obs_layout: str | None = None) -> dict:
+    """The report of `frmd eval --json`, plus round-trip timing and provenance fields.
+    `obs_layout` (tasks.OBS_LAYOUTS) is what the policy observes; None: the layout of the policy's
+    observation length (the server's hello)."""
     check_task(task)
+    if obs_layout is None:
+        obs_layout = layout_of_dim(policy.obs_dim)
+    elif layout_dim(obs_layout) != policy.obs_dim:
+        raise ValueError(f"the policy observes {policy.obs_dim} floats, the {obs_layout!r} layout has "
+                         f"{layout_dim(obs_layout)}")
     if episodes < 1:
         raise ValueError("at least one evaluation episode is needed")
     exec_steps = exec_steps or policy.exec_steps
@@ -117,11 +127,11 @@ def evaluate(task: str, policy, episodes: int = 50, first_seed: int = 0, exec_st
         obs = env.reset(seed)
         policy.reset(seed)
         for _ in range(warmup_calls):
-            policy.act([obs] * policy.history, 0)
+            policy.act([observe(obs, obs_layout)] * policy.history, 0)
     timings = {"roundtrip": [], "policy": [], "step": []}
     records = []
     for index in range(episodes):
-        records.append(rollout(env, policy, eval_seed(first_seed, index), exec_steps, timings))
+        records.append(rollout(env, policy, eval_seed(first_seed, index), exec_steps, timings, obs_layout))
         if progress:
             progress(index + 1, records[-1])
     successes = sum(r["success"] for r in records)
@@ -138,6 +148,7 @@ def evaluate(task: str, policy, episodes: int = 50, first_seed: int = 0, exec_st
         "mean_length_success": metrics.mean([r["length"] for r in records if r["success"]]),
         "exec_steps": exec_steps,
         "history": policy.history,
+        "obs_layout": obs_layout,
         "first_seed": first_seed,
         "chunk_calls": len(micros["policy"]),
         "latency_us_median": metrics.quantile(micros["policy"], 0.5),
