@@ -149,7 +149,8 @@ def cmd_benchmark(args) -> int:
         notes.append("INCOMPLETE: no trained-model reports for " + ", ".join(f"{t} seed {s}" for t, s in missing)
                      + "; the group and overall rows cover only the tasks that have them. The same "
                      "command without --report-only resumes the run.")
-    written = report.write(results, md, command, notes)
+    instructions = json.loads(Path(args.instructions).read_text()) if args.instructions else None
+    written = report.write(results, md, command, notes, instructions)
     runner.say(f"wrote {md}, {md.with_suffix('.json')}, {md.with_suffix('.png')} ({len(results['rows'])} reports)")
     if args.quick and not failed:
         report.quick_check(written, md)
@@ -228,6 +229,8 @@ def main(argv=None) -> int:
     m.add_argument("--frmd", help="the frmd binary (default: frmd on PATH)")
     m.add_argument("--results", help="results.md path (results.json and .png beside it; default OUT/results.md)")
     m.add_argument("--note", action="append", help="a line for the results file (repeatable)")
+    m.add_argument("--instructions", metavar="JSON", help="Cortex-M4 instructions per chunk of each method "
+                   "({\"student-1\": N, ...}): adds the success-per-instruction-budget line")
     m.add_argument("--report-only", action="store_true", help="run nothing: write the results files from the "
                    "reports OUT already holds (e.g. while parts of a run are still going)")
     m.set_defaults(run=cmd_benchmark)
