@@ -12,14 +12,19 @@
 //! plane) are only reordered. Two output rows then go through the assembly loop eight columns per
 //! step: one `LDM` of four input words, one `LDRD` of eight weights per row, and per weight word
 //! two `SXTB16` and two `SMLAD`: 19 instructions per 16 multiply-accumulates (1.19 per MAC; the
-//! loop branch adds 2 per four steps, see [`super::dsp_asm::row_pairs`]). Wider int8 inputs are
-//! unpacked in the loop instead (24 per 16). The accumulators start at the rows' biases; the last
-//! `in_features % 8` columns are added in Rust.
+//! loop branch adds 2 per four steps, see [`super::dsp_asm::row_pairs`]). Wider inputs are
+//! unpacked in the loop instead (24 per 16: int8 by `SXTB16`, int16 by `PKHBT`/`PKHTB`). The
+//! accumulators start at the rows' biases (int32 accumulators) or at 0 (each 512-column chunk of
+//! an int64 accumulator, see `kernels::Accumulator`); the last `in_features % 8` columns are added
+//! in Rust. The int16-activation layers run the same loop: the pair buffer then holds their int16
+//! codes as they are.
 //!
 //! Bit-exactness: every product of an int8 weight and an int8 or int16 input fits a halfword
 //! product, the pair sum fits in 32 bits, and `SMLAD` adds it to the accumulator modulo 2^32 (on
 //! signed overflow it only sets the sticky Q flag). Wrapping int32 addition is associative and
 //! commutative, so the sums equal the portable kernel's for every input.
+
+use core::ops::Range;
 
 use super::dsp_asm::{row_pairs, Input, BLOCK};
 use super::rows::RowInput;
@@ -61,52 +66,68 @@ impl Prepared {
     }
 }
 
-/// `sums[r] = bias[r] + dot(row_r, input)` for the first `sums.len()` (at most [`BLOCK_ROWS`])
-/// rows of `rows` (row-major, `input.len()` columns; missing bias entries count as 0). Rows go
-/// two at a time through the assembly kernels when they start on word boundaries (4-aligned
-/// weights, width a multiple of 4); otherwise, and for an odd last row, the portable dot
-/// products are used.
+/// `sums[r] = start[r] + dot(row_r[columns], input[columns])` (int32, wrapping) for the first
+/// `sums.len()` (at most [`BLOCK_ROWS`]) rows of `rows` (row-major, `input.len()` columns; missing
+/// `start` entries count as 0): the whole row for int32 accumulators, one 512-column chunk of it
+/// for int64 ones. Rows go two at a time through the assembly kernels when they start on word
+/// boundaries (4-aligned weights, width a multiple of 4); otherwise, and for an odd last row, the
+/// portable dot products are used. Inputs wider than the pair buffer are unpacked in the loop:
+/// int8 codes by `SXTB16`, int16 codes (word-aligned) by `PKHBT`/`PKHTB`.
 #[inline(always)]
 pub(crate) fn block_sums<T: RowInput>(
     prepared: &Prepared,
     input: &[T],
     rows: &[i8],
-    bias: &[i32],
+    columns: Range<usize>,
+    start: &[i32],
     sums: &mut [i32],
 ) {
     let width = input.len();
-    let blocks = width / BLOCK;
+    let first = columns.start;
+    let chunk = input.get(columns.clone()).unwrap_or(&[]);
+    let count = chunk.len();
+    let blocks = count / BLOCK;
     let head = blocks * BLOCK;
-    // The rows' biases as pairs: the caller's own when it has one per row, else a padded copy.
+    // The rows' start values as pairs: the caller's own when it has one per row, else a padded
+    // copy.
     let mut padded = [[0_i32; 2]; BLOCK_ROWS / 2];
-    let start: &[[i32; 2]] = match bias.get(..sums.len()) {
+    let start_pairs: &[[i32; 2]] = match start.get(..sums.len()) {
         Some(own) => own.as_chunks::<2>().0,
         None => {
-            for (slot, b) in padded.as_flattened_mut().iter_mut().zip(bias) {
+            for (slot, b) in padded.as_flattened_mut().iter_mut().zip(start) {
                 *slot = *b;
             }
             &padded
         }
     };
     let (sum_pairs, _) = sums.as_chunks_mut::<2>();
-    let source = match (prepared.expanded, T::as_i8(input)) {
-        (true, _) => Some(Input::Pairs(&prepared.pairs)),
-        (false, Some(bytes)) => Some(Input::Bytes(bytes)),
-        (false, None) => None,
+    // The pair buffer holds the input from column 0 (only inputs up to 256 columns, one chunk).
+    let source = match (
+        prepared.expanded && first == 0,
+        T::as_i8(chunk),
+        T::as_i16(chunk),
+    ) {
+        (true, _, _) => Some(Input::Pairs(&prepared.pairs)),
+        (false, Some(bytes), _) => Some(Input::Bytes(bytes)),
+        (false, None, Some(halves)) => Some(Input::Halves(halves)),
+        (false, None, None) => None,
     };
-    let paired =
-        source.is_some_and(|source| row_pairs(rows, width, source, blocks, start, sum_pairs));
+    let chunk_rows = rows.get(first..).unwrap_or(&[]);
+    let paired = source
+        .is_some_and(|source| row_pairs(chunk_rows, width, source, blocks, start_pairs, sum_pairs));
     let done = if paired { 2 * sum_pairs.len() } else { 0 };
     let (paired, rest) = sums.split_at_mut(done);
-    if head < width {
-        let input_tail = input.get(head..).unwrap_or(&[]);
+    if head < count {
+        let input_tail = chunk.get(head..).unwrap_or(&[]);
+        let tail_columns = first + head..columns.end;
         for (sum, row) in paired.iter_mut().zip(rows.chunks_exact(width)) {
-            *sum = sum.wrapping_add(T::dot(row.get(head..).unwrap_or(&[]), input_tail));
+            let row_tail = row.get(tail_columns.clone()).unwrap_or(&[]);
+            *sum = sum.wrapping_add(T::dot(row_tail, input_tail));
         }
     }
     let rest_rows = rows.get(done * width..).unwrap_or(&[]).chunks_exact(width);
     for (r, (sum, row)) in rest.iter_mut().zip(rest_rows).enumerate() {
-        let b = bias.get(done + r).copied().unwrap_or(0);
-        *sum = b.wrapping_add(T::dot(row, input));
+        let b = start.get(done + r).copied().unwrap_or(0);
+        *sum = b.wrapping_add(T::dot(row.get(columns.clone()).unwrap_or(&[]), chunk));
     }
 }
