@@ -90,16 +90,20 @@ fn saturate_i64_to_i32(q: i64) -> i32 {
 
 /// Real value of an int64 accumulator at scale `scale` (the int16 network's dequantized layers),
 /// without an i64 -> f32 conversion (a library call on 32-bit cores whose cost may depend on the
-/// value): `hi = acc >> 24`, `lo = acc & (2^24 - 1)`, then
+/// value): `hi = (acc + 2^23) >> 24`, `lo = acc - hi 2^24` (in `[-2^23, 2^23)`), then
 /// `(hi as f32) * (scale * 2^24) + (lo as f32) * scale` in f32, each operation rounded once (no
-/// fused multiply-add), so every target gives the same bits. `lo` is exact in f32, `hi` is exact
-/// for `|acc| < 2^55` (and wraps beyond), `scale * 2^24` is exact; the result is within about
-/// 1.5 ulp of `acc * scale`.
+/// fused multiply-add), so every target gives the same bits.
+///
+/// `lo` is exact in f32, `hi` for `|acc| < 2^48` (beyond, it rounds; beyond `2^55` it wraps),
+/// `scale * 2^24` is exact. Because `|lo| <= 2^23 <= |hi| 2^24 / 2`, the two products never
+/// cancel (a floor split with `lo >= 0` would: `-3 = -2^24 + (2^24 - 3)` loses everything but the
+/// rounding error of `lo * scale`), so the result is within about 2 ulp of `acc * scale`; for
+/// `|acc| < 2^23` it is exactly `acc as f32 * scale`, the int32 path's value.
 #[inline(always)]
 pub fn dequantize_wide(acc: i64, scale: f32) -> f32 {
-    let hi = (acc >> 24) as i32;
-    let lo = (acc & 0x00FF_FFFF) as i32;
-    (hi as f32) * (scale * 16_777_216.0) + (lo as f32) * scale
+    let hi = acc.wrapping_add(1 << 23) >> 24;
+    let lo = acc.wrapping_sub(hi << 24) as i32;
+    (hi as i32 as f32) * (scale * 16_777_216.0) + (lo as f32) * scale
 }
 
 /// Symmetric int16 scale for a tensor whose largest magnitude is `max_abs`: `max_abs / 32767`

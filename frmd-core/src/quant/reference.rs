@@ -124,12 +124,13 @@ pub fn lookup16(table: &[i16], x: i16) -> Option<i16> {
 }
 
 /// The int64 accumulator's f32 value by the split of `quant::dequantize_wide`, with the parts
-/// from Euclidean division: `hi = floor(acc / 2^24)`, `lo = acc mod 2^24`, then
-/// `hi * (scale * 2^24) + lo * scale` in f32 (for `|acc| < 2^55`).
+/// from Euclidean division: `hi = floor((acc + 2^23) / 2^24)`, `lo = (acc + 2^23) mod 2^24 -
+/// 2^23`, then `hi * (scale * 2^24) + lo * scale` in f32 (for `|acc| < 2^48`).
 pub fn dequantize_wide(acc: i64, scale: f32) -> f32 {
-    let hi = i128::from(acc).div_euclid(1 << 24) as i32;
-    let lo = i128::from(acc).rem_euclid(1 << 24) as i32;
-    let high = hi as f32 * (scale * 16_777_216.0);
-    let low = lo as f32 * scale;
+    let shifted = i128::from(acc) + (1 << 23);
+    let hi = shifted.div_euclid(1 << 24) as f32;
+    let lo = (shifted.rem_euclid(1 << 24) - (1 << 23)) as f32;
+    let high = hi * (scale * 16_777_216.0);
+    let low = lo * scale;
     high + low
 }
