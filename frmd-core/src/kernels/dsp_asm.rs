@@ -178,7 +178,7 @@ pub(crate) fn row_pairs(
     let (input_len, input_aligned) = match input {
         Input::Pairs(pairs) => (pairs.len().saturating_mul(2), true),
         Input::Bytes(bytes) => (bytes.len(), true),
-        Input::Halves(halves) => (halves.len(), (halves.as_ptr() as usize) % 4 == 0),
+        Input::Halves(halves) => (halves.len(), (halves.as_ptr() as usize).is_multiple_of(4)),
     };
     // The last row's last byte read is at (2 out.len() - 1) width + columns.
     let rows_fit = match (out.len().checked_mul(2)).and_then(|n| n.checked_sub(1)) {
@@ -192,8 +192,8 @@ pub(crate) fn row_pairs(
         && columns <= width
         && columns <= input_len
         && input_aligned
-        && width % 4 == 0
-        && (rows.as_ptr() as usize) % 4 == 0
+        && width.is_multiple_of(4)
+        && (rows.as_ptr() as usize).is_multiple_of(4)
         && start.len() >= out.len()
         && rows_fit;
     if !ok {

@@ -15,7 +15,7 @@
 #[cfg(target_arch = "x86_64")]
 use super::dot::{dot_i8_i16_prefix, dot_i8_prefix};
 use super::precision::{Accumulator, Precision};
-use super::rows::{for_each_accumulator, for_each_block, for_each_sum, RowInput};
+use super::rows::{for_each_block, for_each_sum, RowInput};
 use super::KernelError;
 #[cfg(target_arch = "x86_64")]
 use crate::quant::requantize_to_i8;
@@ -227,6 +227,7 @@ impl<'a, A: Accumulator> FullyConnected<'a, A> {
             .zip(row_blocks.remainder().chunks_exact(width))
             .zip(bias_tail);
         for ((out, row), bias) in tail {
+            use super::rows::for_each_accumulator;
             let bias = core::slice::from_ref(bias);
             match input {
                 LayerInput::Int8(values) => {
