@@ -1,4 +1,5 @@
-//! The `asm!` inner loops of [`super::dsp`] (Armv7E-M / Armv8-M Mainline DSP extension).
+//! The `asm!` inner loops of [`super::dsp`] (Armv7E-M / Armv8-M Mainline DSP extension), and the
+//! int16-activation layers' requantization ([`scale_s64`]) and table lookup ([`lookup16`]).
 //!
 //! Each function checks its slice bounds before the assembly block and returns plain sums; the
 //! blocks only read memory inside the borrowed slices and change only declared registers and
@@ -9,6 +10,8 @@
 //! array.
 
 #![allow(unsafe_code)]
+
+use super::lut16::Lut16Table;
 
 /// Columns per step of the assembly loops.
 pub(crate) const BLOCK: usize = 8;
@@ -237,4 +240,94 @@ pub(crate) fn row_pairs(
         row_0 = row_0.wrapping_add(2 * width);
     }
     true
+}
+
+/// `quant::requantize_s64` of one int64 accumulator up to its clamp: the Q15 multiplier
+/// `usat15((M >> 16) + bit15(M))`, `p = acc * m15` (`UMULL` + `MLA`, modulo 2^64), the arithmetic
+/// shift by `n = (14 - shift) mod 64` and the saturation to int32 (register-specified shifts give
+/// 0 for `LSL`/`LSR` and the sign for `ASR` at 32 and more, so the only condition is `n >= 32`,
+/// the channel's, not the data's), then `(s >> 1) + (s & 1)`. 22 instructions, no branch, no
+/// memory access; LLVM's form of the same Rust took about 35 (64-bit compare chains for the
+/// saturation).
+#[inline(always)]
+pub(crate) fn scale_s64(acc: i64, multiplier: i32, shift: i32) -> i32 {
+    let low = acc as u32;
+    let high = (acc >> 32) as u32;
+    let out: i32;
+    // SAFETY: register arithmetic only (no memory access, no stack); it changes only the declared
+    // registers and the flags.
+    unsafe {
+        core::arch::asm!(
+            ".arch armv7e-m",
+            // m15 in `m` (the multiplier's register).
+            "ubfx {t}, {m}, #15, #1",
+            "asr {m}, {m}, #16",
+            "add {m}, {m}, {t}",
+            "usat {m}, #15, {m}",
+            // (hi:lo) = acc * m15 modulo 2^64.
+            "umull {lo}, {t}, {lo}, {m}",
+            "mla {hi}, {hi}, {m}, {t}",
+            // n = (14 - shift) mod 64 in `n` (the shift's register).
+            "rsb {n}, {n}, #14",
+            "and {n}, {n}, #63",
+            // q = (hi:lo) >> n: its low word in a, its high word in t.
+            "lsr {a}, {lo}, {n}",
+            "rsb {t}, {n}, #32",
+            "lsl {t}, {hi}, {t}",
+            "orr {a}, {a}, {t}",
+            "subs {t}, {n}, #32",
+            "it pl",
+            "asrpl {a}, {hi}, {t}",
+            "asr {t}, {hi}, {n}",
+            // sat32(q): keep a if the high word is its sign, else (sign ^ i32::MAX).
+            "cmp {t}, {a}, asr #31",
+            "itt ne",
+            "mvnne {a}, #0x80000000",
+            "eorne {a}, {a}, {t}, asr #31",
+            // (s >> 1) + (s & 1).
+            "and {t}, {a}, #1",
+            "add {a}, {t}, {a}, asr #1",
+            m = inout(reg) multiplier => _,
+            n = inout(reg) shift => _,
+            lo = inout(reg) low => _,
+            hi = inout(reg) high => _,
+            t = out(reg) _,
+            a = out(reg) out,
+            options(pure, nomem, nostack),
+        );
+    }
+    out
+}
+
+/// `lut16::lookup(table, x)` with one unaligned `LDR` of the knot pair `(t[i], t[i+1])` and one
+/// `SMLAD` against `(128 - f, f)` with 64 added: `(t[i] (128 - f) + t[i+1] f + 64) >> 7`, 8
+/// instructions in 5 registers.
+#[inline(always)]
+pub(crate) fn lookup16(table: &Lut16Table, x: i16) -> i16 {
+    let y: i32;
+    // SAFETY: `x` is a sign-extended int16, so the index `(x >> 7) + 256` is in 0..=511 and the
+    // word read at byte offset `2 index <= 1022` ends at byte 1026 at most, inside the 1026-byte
+    // table; unaligned `LDR` is allowed on these cores (see the module documentation). Nothing
+    // else is read or written.
+    unsafe {
+        core::arch::asm!(
+            ".arch armv7e-m",
+            "asr {i}, {x}, #7",
+            "add {i}, {i}, #256",
+            "ldr {p}, [{t}, {i}, lsl #1]",
+            // f in x, (128 - f, f) in i.
+            "and {x}, {x}, #127",
+            "rsb {i}, {x}, #128",
+            "orr {i}, {i}, {x}, lsl #16",
+            "smlad {p}, {p}, {i}, {c}",
+            "asr {p}, {p}, #7",
+            x = inout(reg) i32::from(x) => _,
+            t = in(reg) table.as_ptr(),
+            c = in(reg) 64_i32,
+            i = out(reg) _,
+            p = out(reg) y,
+            options(pure, readonly, nostack),
+        );
+    }
+    y as i16
 }

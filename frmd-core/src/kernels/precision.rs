@@ -18,10 +18,14 @@ use core::ops::Range;
 
 use super::fc::LayerInput;
 use super::lut::{self, LutTable};
-use super::lut16::{self, Lut16Table};
+#[cfg(not(frmd_arm_dsp))]
+use super::lut16;
+use super::lut16::Lut16Table;
 use super::rows::BLOCK_ROWS;
+#[cfg(not(frmd_arm_dsp))]
+use crate::quant::requantize_s64;
 use crate::quant::{
-    dequantize_accumulator, dequantize_wide, requantize_s64, requantize_valid, BIAS16_MAX, CHUNK16,
+    dequantize_accumulator, dequantize_wide, requantize_valid, BIAS16_MAX, CHUNK16,
     IN_FEATURES16_MAX, SHIFT16_MAX, SHIFT16_MIN, SHIFT_MAX, SHIFT_MIN,
 };
 
@@ -121,7 +125,7 @@ impl Accumulator for i32 {
 
 impl sealed::Accumulate for i64 {
     /// One kernel call per 512-column chunk, started at 0; each int32 result is sign-extended and
-    /// added to the row's int64 sum, which starts at the bias.
+    /// added to the row's int64 sum (the first chunk's to the bias).
     #[inline(always)]
     fn block(
         bias: &[i64],
@@ -129,21 +133,32 @@ impl sealed::Accumulate for i64 {
         width: usize,
         mut kernel: impl FnMut(Range<usize>, &[i32], &mut [i32]),
     ) {
+        // Start values for the row kernels: zeros they can read as pairs in place.
+        const ZERO: [i32; BLOCK_ROWS] = [0; BLOCK_ROWS];
         let mut residues = [0_i32; BLOCK_ROWS];
         let rows = sums.len().min(BLOCK_ROWS);
         let (Some(sums), Some(residues)) = (sums.get_mut(..rows), residues.get_mut(..rows)) else {
             return;
         };
-        for (sum, b) in sums
-            .iter_mut()
-            .zip(bias.iter().chain(core::iter::repeat(&0)))
-        {
-            *sum = *b;
+        let first_end = width.min(CHUNK16);
+        kernel(0..first_end, &ZERO, residues);
+        match bias.get(..rows) {
+            Some(bias) => {
+                for ((sum, b), residue) in sums.iter_mut().zip(bias).zip(residues.iter()) {
+                    *sum = b.wrapping_add(i64::from(*residue));
+                }
+            }
+            None => {
+                let bias = bias.iter().chain(core::iter::repeat(&0));
+                for ((sum, b), residue) in sums.iter_mut().zip(bias).zip(residues.iter()) {
+                    *sum = b.wrapping_add(i64::from(*residue));
+                }
+            }
         }
-        let mut start = 0;
+        let mut start = first_end;
         while start < width {
             let end = start.saturating_add(CHUNK16).min(width);
-            kernel(start..end, &[], residues);
+            kernel(start..end, &ZERO, residues);
             for (sum, residue) in sums.iter_mut().zip(residues.iter()) {
                 *sum = sum.wrapping_add(i64::from(*residue));
             }
@@ -276,6 +291,8 @@ impl Precision for i16 {
     fn zero_point_valid(zero_point: i32) -> bool {
         zero_point == 0
     }
+    /// On DSP cores the rounding shift and saturation are one `asm!` block
+    /// (`dsp_asm::scale_s64`, the same steps; the QEMU digests compare it with the host).
     #[inline(always)]
     fn requantize(
         acc: i64,
@@ -285,10 +302,22 @@ impl Precision for i16 {
         lo: i16,
         hi: i16,
     ) -> i16 {
+        #[cfg(frmd_arm_dsp)]
+        {
+            let r = super::dsp_asm::scale_s64(acc, multiplier, shift);
+            r.max(i32::from(lo)).min(i32::from(hi)) as i16
+        }
+        #[cfg(not(frmd_arm_dsp))]
         requantize_s64(acc, multiplier, shift, lo, hi)
     }
+    /// On DSP cores one `SMLAD` of the knot pair (`dsp_asm::lookup16`, the same arithmetic).
     #[inline(always)]
     fn lookup(table: &Lut16Table, x: i16) -> i16 {
+        #[cfg(frmd_arm_dsp)]
+        {
+            super::dsp_asm::lookup16(table, x)
+        }
+        #[cfg(not(frmd_arm_dsp))]
         lut16::lookup(table, x)
     }
     #[inline(always)]
