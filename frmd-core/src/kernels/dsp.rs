@@ -131,3 +131,82 @@ pub(crate) fn block_sums<T: RowInput>(
         *sum = b.wrapping_add(T::dot(row.get(columns.clone()).unwrap_or(&[]), chunk));
     }
 }
+
+/// `FullyConnected::forward_validated` for int16 outputs of a layer up to 512 columns wide (one
+/// int64 chunk; wider layers return `false` and take the generic rows): per block of
+/// [`BLOCK_ROWS`] rows the int32 sums from 0 ([`block_sums`]), then in one loop per row
+/// `acc = bias + sext(sum)` (two instructions), the requantization (`dsp_asm::scale_s64`), the
+/// clamp and the table, so no int64 accumulator goes through memory. The same values as the
+/// generic path (the `kernels` firmware image's digest compares both with the host).
+#[inline(always)]
+pub(crate) fn requantize_rows_wide<T: RowInput>(
+    fc: &super::FullyConnected<'_, i64>,
+    requant: &super::FcRequant<'_, i16>,
+    table: Option<&super::Lut16Table>,
+    input: &[T],
+    output: &mut [i16],
+) -> bool {
+    const ZERO: [i32; BLOCK_ROWS] = [0; BLOCK_ROWS];
+    let width = input.len();
+    if width == 0 || width > crate::quant::CHUNK16 {
+        return false;
+    }
+    let mut prepared = Prepared::new();
+    prepared.fill(input);
+    let mut sums = [0_i32; BLOCK_ROWS];
+    let mut first = 0;
+    for rows in fc.weights.chunks(BLOCK_ROWS * width) {
+        let count = rows.len() / width;
+        let end = first + count;
+        let Some(out_sums) = sums.get_mut(..count) else {
+            break;
+        };
+        block_sums(&prepared, input, rows, 0..width, &ZERO, out_sums);
+        if let (Some(out), Some(bias), Some(m), Some(s)) = (
+            output.get_mut(first..end),
+            fc.bias.get(first..end),
+            requant.multipliers.get(first..end),
+            requant.shifts.get(first..end),
+        ) {
+            let bounds = (requant.activation_min, requant.activation_max);
+            match table {
+                Some(table) => requantize_sums(out_sums, bias, m, s, bounds, out, &|y| {
+                    super::dsp_asm::lookup16(table, y)
+                }),
+                None => requantize_sums(out_sums, bias, m, s, bounds, out, &|y| y),
+            }
+        }
+        first = end;
+    }
+    true
+}
+
+/// `out[r] = map(clamp(scale_s64(bias[r] + sext(sums[r]), m[r], s[r])))` for one block of rows.
+/// Not inlined (the loop has the registers to itself); the full int16 range takes a loop
+/// whose clamp is one `SSAT`.
+#[inline(never)]
+fn requantize_sums(
+    sums: &[i32],
+    bias: &[i64],
+    multipliers: &[i32],
+    shifts: &[i32],
+    (lo, hi): (i16, i16),
+    out: &mut [i16],
+    map: &impl Fn(i16) -> i16,
+) {
+    let channels = out
+        .iter_mut()
+        .zip(sums.iter().zip(bias))
+        .zip(multipliers.iter().zip(shifts));
+    if (lo, hi) == (i16::MIN, i16::MAX) {
+        for ((out, (sum, b)), (m, s)) in channels {
+            let r = super::dsp_asm::scale_s64(b.wrapping_add(i64::from(*sum)), *m, *s);
+            *out = map(r.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16);
+        }
+    } else {
+        for ((out, (sum, b)), (m, s)) in channels {
+            let r = super::dsp_asm::scale_s64(b.wrapping_add(i64::from(*sum)), *m, *s);
+            *out = map(r.max(i32::from(lo)).min(i32::from(hi)) as i16);
+        }
+    }
+}

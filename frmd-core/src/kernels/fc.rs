@@ -278,6 +278,10 @@ impl<'a, A: Accumulator> FullyConnected<'a, A> {
             P::forward_x86(self, avx2, requant, activation, input, output);
             return Ok(());
         }
+        #[cfg(frmd_arm_dsp)]
+        if P::forward_dsp(self, requant, activation, input, output) {
+            return Ok(());
+        }
         match input {
             LayerInput::Int8(values) => {
                 self.requantize_activated(requant, activation, values, output)

@@ -50,8 +50,27 @@ pub(crate) mod sealed {
         );
     }
 
-    /// The x86-64 requantizing kernels of a precision.
+    /// The x86-64 requantizing kernels of a precision, and the DSP cores' fused int16 path.
     pub trait Quantize {
+        /// `FullyConnected::forward_validated` on DSP cores when the precision has a kernel of
+        /// its own for this layer (the caller checked every length); `false` means "use the
+        /// generic rows". int8: never; int16: layers up to 512 columns (one chunk), where the
+        /// bias is added to each row's int32 sum inside the requantization loop.
+        #[cfg(frmd_arm_dsp)]
+        #[inline(always)]
+        fn forward_dsp(
+            _fc: &crate::kernels::FullyConnected<'_, <Self as super::Precision>::Acc>,
+            _requant: &crate::kernels::FcRequant<'_, Self>,
+            _table: Option<&<Self as super::Precision>::Table>,
+            _input: crate::kernels::LayerInput<'_>,
+            _output: &mut [Self],
+        ) -> bool
+        where
+            Self: super::Precision,
+        {
+            false
+        }
+
         /// `FullyConnected::forward_validated` with the AVX2 kernels (the caller checked every
         /// length).
         #[cfg(target_arch = "x86_64")]
@@ -252,6 +271,25 @@ impl sealed::Quantize for i16 {
         output: &mut [i16],
     ) {
         fc.forward_avx2_wide(avx2, requant, table, input, output);
+    }
+
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn forward_dsp(
+        fc: &super::FullyConnected<'_, i64>,
+        requant: &super::FcRequant<'_, i16>,
+        table: Option<&Lut16Table>,
+        input: LayerInput<'_>,
+        output: &mut [i16],
+    ) -> bool {
+        match input {
+            LayerInput::Int8(values) => {
+                super::dsp::requantize_rows_wide(fc, requant, table, values, output)
+            }
+            LayerInput::Int16(values) => {
+                super::dsp::requantize_rows_wide(fc, requant, table, values, output)
+            }
+        }
     }
 }
 
