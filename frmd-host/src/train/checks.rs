@@ -78,7 +78,8 @@ impl TrainConfig {
 fn validate_augment(a: &CondAugment) -> Result<(), OptionError> {
     probability("aug-prob", a.prob)?;
     non_negative("aug-y0-std", a.y0_std)?;
-    non_negative("aug-v0-std", a.v0_std)
+    non_negative("aug-v0-std", a.v0_std)?;
+    non_negative("aug-obs-std", a.obs_std)
 }
 
 impl TeacherRun {
