@@ -16,6 +16,9 @@
     )
 )]
 
+#[cfg(any(test, feature = "alloc"))]
+extern crate alloc;
+
 pub mod blob;
 pub mod hash;
 pub mod kernels;

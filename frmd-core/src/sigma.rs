@@ -41,6 +41,9 @@ impl core::fmt::Display for SigmaError {
     }
 }
 
+/// No variant wraps another error.
+impl core::error::Error for SigmaError {}
+
 /// The EDM noise-level configuration. Defaults: `sigma_min` 0.002, `sigma_max` 80, `rho` 7,
 /// `sigma_data` 0.5. Serialized as is in a checkpoint's `frmd.json` (`sigma`).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

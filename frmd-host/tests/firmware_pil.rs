@@ -18,7 +18,7 @@ use frmd_host::policy::int8::Int8Policy;
 const EPISODES: usize = 4;
 
 fn host_policy() -> Int8Policy {
-    let blob = frmd_export::blob::write(&student()).expect("blob of the checked-in student");
+    let blob = student().blob().expect("blob of the checked-in student");
     Int8Policy::from_blob(&blob, "int8").expect("host int8 policy")
 }
 

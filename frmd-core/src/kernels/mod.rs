@@ -33,6 +33,9 @@ pub use lut::{Lut8, LutTable};
 pub use norm::{layer_norm, layer_norm_in_place};
 pub use softmax::softmax_in_place;
 
+/// Rows per block that the row kernels (`rows::for_each_block`) hand to their caller.
+pub(crate) const BLOCK_ROWS: usize = 16;
+
 /// Why a kernel refused its arguments. Small and `Copy`; each variant names the offending slice.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum KernelError {
@@ -87,3 +90,6 @@ impl core::fmt::Display for KernelError {
         f.write_str(text)
     }
 }
+
+/// No variant wraps another error.
+impl core::error::Error for KernelError {}

@@ -153,12 +153,23 @@ impl core::fmt::Display for PolicyError {
             Self::NonFiniteNoise => f.write_str("supplied noise is not finite"),
             Self::NonFiniteOutput => f.write_str("sampled chunk is not finite"),
             Self::BakedData => f.write_str("baked weight section out of range or misaligned"),
-            Self::Model(e) => write!(f, "network: {e}"),
-            Self::Decode(e) => write!(f, "ProDMP decode: {e}"),
-            Self::Transformer(e) => write!(f, "transformer: {e}"),
+            Self::Model(_) => f.write_str("the network failed"),
+            Self::Decode(_) => f.write_str("the ProDMP decode failed"),
+            Self::Transformer(_) => f.write_str("the transformer network failed"),
             Self::TransformerLayout => {
                 f.write_str("transformer network needs the standard input layout")
             }
+        }
+    }
+}
+
+impl core::error::Error for PolicyError {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        match self {
+            Self::Model(error) => Some(error),
+            Self::Decode(error) => Some(error),
+            Self::Transformer(error) => Some(error),
+            _ => None,
         }
     }
 }

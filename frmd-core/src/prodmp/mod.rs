@@ -102,3 +102,6 @@ impl core::fmt::Display for ProDmpError {
         f.write_str(text)
     }
 }
+
+/// No variant wraps another error.
+impl core::error::Error for ProDmpError {}

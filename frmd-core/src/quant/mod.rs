@@ -86,3 +86,6 @@ impl core::fmt::Display for QuantError {
         f.write_str(text)
     }
 }
+
+/// No variant wraps another error.
+impl core::error::Error for QuantError {}

@@ -2,12 +2,12 @@
 //! section 6.
 use crate::checkpoint::{CALIBRATION_FILE, CONFIG_FILE, WEIGHTS_FILE};
 use crate::eval::plot::{plot_paths, PLOTTED_EPISODES};
-use crate::eval::{evaluate, expert_policy, EvalConfig, EvalReport};
+use crate::eval::{evaluate, expert_policy, EvalConfig};
 use crate::limits::{self, OptionError};
 use crate::tasks::Policy;
 use anyhow::bail;
 use clap::Args;
-use frmd_export::artifact::{check_output_file, write_atomic};
+use frmd_formats::artifact::{check_output_file, write_atomic};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -69,35 +69,6 @@ pub struct EvalArgs {
     /// request and count the chunks whose bits differ from the firmware's.
     #[arg(long, requires = "firmware")]
     pub check_host: bool,
-}
-
-/// Prints the human-readable summary of a report.
-pub fn print_report(report: &EvalReport) {
-    println!(
-        "task {} / policy {} / {} episodes (exec {} of each chunk, history {})",
-        report.task, report.policy, report.episodes, report.exec_steps, report.history
-    );
-    println!(
-        "  success        {:.1} % ({} of {}), 95 % Wilson [{:.1}, {:.1}] %",
-        100.0 * report.success_rate,
-        report.successes,
-        report.episodes,
-        100.0 * report.success_ci95[0],
-        100.0 * report.success_ci95[1]
-    );
-    println!(
-        "  length         {:.1} steps (successful: {:.1})",
-        report.mean_length, report.mean_length_success
-    );
-    println!(
-        "  latency/chunk  median {:.1} us, p99 {:.1} us over {} calls (RAYON_NUM_THREADS={})",
-        report.latency_us_median, report.latency_us_p99, report.chunk_calls, report.threads
-    );
-    println!("  sim step       {:.2} us", report.sim_step_us);
-    println!(
-        "  non-smooth     {:.2} per episode (end effector), {:.2} (actions); RMS jerk {:.2} m/s^3",
-        report.non_smooth_ee_mean, report.non_smooth_action_mean, report.rms_jerk_mean
-    );
 }
 
 /// Options that do not go together: one policy source, and the sampler options only with a
@@ -199,11 +170,25 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
     let blob = args.blob.clone().or_else(|| {
         args.baked
             .as_ref()
-            .map(|d| d.join(crate::export::BAKED_BLOB_FILE))
+            .map(|d| d.join(frmd_export::bake::BLOB_FILE))
     });
     check_outputs(&args, blob.as_deref())?;
     if let Some(board) = &args.firmware {
-        return super::eval_firmware::run(&args, board, blob.as_deref());
+        anyhow::ensure!(
+            args.ckpt.is_none(),
+            "--firmware runs a baked int8 policy; --ckpt does not apply (use --baked DIR)"
+        );
+        return super::eval_firmware::run(&super::eval_firmware::FirmwareEval {
+            task: &args.task,
+            board,
+            baked: args.baked.as_deref(),
+            check_host: args.check_host,
+            blob: blob.as_deref(),
+            json: args.json.as_deref(),
+            episodes: args.episodes,
+            exec_steps: args.exec_steps,
+            first_seed: args.first_seed,
+        });
     }
     let (mut policy, history): (Box<dyn Policy>, usize) = match (&blob, &args.ckpt) {
         (Some(path), _) => {
@@ -234,7 +219,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
     };
     cfg.validate_for(policy.as_ref())?;
     let report = evaluate(&args.task, policy.as_mut(), &cfg)?;
-    print_report(&report);
+    print!("{report}");
     if let Some(path) = &args.json {
         write_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
         println!("  report         {}", path.display());

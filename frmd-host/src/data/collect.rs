@@ -82,7 +82,7 @@ pub struct Collected {
 pub fn collect_to_file(cfg: &CollectConfig) -> anyhow::Result<Collected> {
     cfg.validate()?;
     make_task(&cfg.task)?;
-    frmd_export::artifact::check_output_file(&cfg.out, "--out", cfg.force, &[])?;
+    frmd_formats::artifact::check_output_file(&cfg.out, "--out", cfg.force, &[])?;
     let mut progress = Progress::new(
         &format!("collect {}", cfg.task),
         cfg.episodes as u64,

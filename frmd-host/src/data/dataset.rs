@@ -223,7 +223,7 @@ impl Dataset {
                 self.action_before_start.as_str().to_string(),
             );
         }
-        frmd_export::safetensors_bytes::serialize(tensors, &meta)
+        frmd_formats::safetensors_bytes::serialize(tensors, &meta)
     }
 
     /// Parses and validates safetensors bytes.
@@ -286,6 +286,6 @@ impl Dataset {
     /// Validates and writes the dataset to `path`.
     pub fn save(&self, path: &Path) -> anyhow::Result<()> {
         let bytes = self.to_bytes()?;
-        frmd_export::artifact::write_atomic(path, &bytes)
+        frmd_formats::artifact::write_atomic(path, &bytes)
     }
 }

@@ -14,7 +14,7 @@ use candle_core::{DType, Device, Tensor, D};
 use candle_nn::{VarBuilder, VarMap};
 use decoder::ProDmpDecoder;
 
-pub use frmd_export::checkpoint::{BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput};
+pub use frmd_formats::checkpoint::{BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput};
 
 /// Conditioning of one batch, in normalized units.
 #[derive(Clone, Debug)]

@@ -4,11 +4,12 @@
 use super::frame::{FloatType, MAX_NAME, MAX_PAYLOAD};
 use super::reply::ModelInfo;
 use super::session::{ActInput, ServedPolicy, Session};
-use crate::export::{ExportConfig, BAKED_BLOB_FILE, EXPORT_INFO_FILE};
+use crate::export::{ExportConfig, EXPORT_INFO_FILE};
 use crate::policy::float::FloatPolicy;
 use crate::policy::int8::Int8Policy;
 use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
+use frmd_export::bake::BLOB_FILE;
 use std::path::{Path, PathBuf};
 
 /// Where the served policy comes from.
@@ -162,18 +163,11 @@ fn exported_dt(dir: &Path) -> anyhow::Result<Option<f64>> {
     if !path.exists() {
         return Ok(None);
     }
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let info: ExportConfig = serde_json::from_str(&text).with_context(|| {
-        format!(
-            "{}: not the export settings `frmd export` writes",
-            path.display()
-        )
-    })?;
+    let info = ExportConfig::read(dir)?;
     if info.checkpoint.is_empty() {
         bail!("{}: field `checkpoint` is missing or empty (expected the exported checkpoint directory)", path.display());
     }
-    match frmd_export::checkpoint::CheckpointMeta::read(Path::new(&info.checkpoint)) {
+    match frmd_formats::checkpoint::CheckpointMeta::read(Path::new(&info.checkpoint)) {
         Ok(meta) => Ok(Some(meta.model.control_dt)),
         // The checkpoint may have moved since the export; the blob alone still serves.
         Err(_) => Ok(None),
@@ -212,7 +206,7 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
         }
         PolicySource::Baked(dir) | PolicySource::Blob(dir) => {
             let (path, beside) = match source {
-                PolicySource::Baked(_) => (dir.join(BAKED_BLOB_FILE), dir.clone()),
+                PolicySource::Baked(_) => (dir.join(BLOB_FILE), dir.clone()),
                 _ => (
                     dir.clone(),
                     dir.parent().map(Path::to_path_buf).unwrap_or_default(),

@@ -21,7 +21,7 @@ pub fn plot_learning_curve(
     loss: &[(usize, f64)],
     success: &[(usize, f64)],
 ) -> anyhow::Result<()> {
-    frmd_export::artifact::write_atomic_with(out, |tmp| draw_curve(tmp, task, role, loss, success))
+    frmd_formats::artifact::write_atomic_with(out, |tmp| draw_curve(tmp, task, role, loss, success))
 }
 
 fn draw_curve(

@@ -123,7 +123,7 @@ fn finish(
         let set = prepared
             .windows
             .calibration_rows(CALIBRATION_ROWS, cfg.seed);
-        frmd_export::calibration_file::write(&cfg.out.join(CALIBRATION_FILE), &set)?;
+        frmd_formats::calibration::write(&cfg.out.join(CALIBRATION_FILE), &set)?;
     }
     let evaluated = mon.evaluate(report.steps, net);
     mon.finish();

@@ -2,10 +2,11 @@
 
 use heapless::Vec;
 
+use super::MlpSection;
 use super::{
     HiddenLayerDesc, MlpDescriptor, INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MLP_MAGIC,
 };
-use crate::blob::container::{self, Data, SectionId};
+use crate::blob::container::{self, Data};
 use crate::blob::policy_tables::{self, PolicyTables};
 use crate::blob::BlobError;
 use crate::kernels::{FcRequant, FullyConnected, LutTable};
@@ -79,10 +80,10 @@ impl<'a> LoadedMlp<'a> {
             .layout
             .width_of(&tables.dims)
             .ok_or(BlobError::InputLayout)?;
-        let lut_bytes = data.cast::<i8>(d.luts, SectionId::Luts)?;
+        let lut_bytes = data.cast::<i8>(d.luts, MlpSection::Luts.into())?;
         if !lut_bytes.len().is_multiple_of(LUT_LEN) || lut_bytes.len() / LUT_LEN > MAX_HIDDEN_LAYERS
         {
-            return Err(BlobError::SectionLength(SectionId::Luts));
+            return Err(BlobError::SectionLength(MlpSection::Luts.into()));
         }
         let luts = lut_bytes.chunks_exact(LUT_LEN);
         let mut hidden = Vec::new();
@@ -96,12 +97,15 @@ impl<'a> LoadedMlp<'a> {
         let first_width = hidden
             .first()
             .map_or(output.fc.out_features, |layer| layer.fc.out_features);
-        let noise_variants = data.cast::<i32>(d.first_layer_biases, SectionId::FirstLayerBiases)?;
+        let noise_variants =
+            data.cast::<i32>(d.first_layer_biases, MlpSection::FirstLayerBiases.into())?;
         let variants = noise_variants
             .len()
             .checked_div(first_width)
             .filter(|_| noise_variants.len().is_multiple_of(first_width))
-            .ok_or(BlobError::SectionLength(SectionId::FirstLayerBiases))?;
+            .ok_or(BlobError::SectionLength(
+                MlpSection::FirstLayerBiases.into(),
+            ))?;
         policy_tables::check_variants(&tables.steps, variants)?;
         Ok(Self {
             tables,
@@ -226,15 +230,23 @@ fn read_hidden<'a, 'l>(
     let weights = data.exact::<i8>(
         desc.weights,
         outputs.checked_mul(inputs),
-        SectionId::HiddenWeights(layer),
+        MlpSection::HiddenWeights(layer).into(),
     )?;
-    let bias = data.exact::<i32>(desc.bias, Some(outputs), SectionId::HiddenBias(layer))?;
+    let bias = data.exact::<i32>(
+        desc.bias,
+        Some(outputs),
+        MlpSection::HiddenBias(layer).into(),
+    )?;
     let multipliers = data.exact::<i32>(
         desc.multipliers,
         Some(outputs),
-        SectionId::HiddenMultipliers(layer),
+        MlpSection::HiddenMultipliers(layer).into(),
     )?;
-    let shifts = data.exact::<i32>(desc.shifts, Some(outputs), SectionId::HiddenShifts(layer))?;
+    let shifts = data.exact::<i32>(
+        desc.shifts,
+        Some(outputs),
+        MlpSection::HiddenShifts(layer).into(),
+    )?;
     if multipliers.iter().any(|m| *m < 0) {
         return Err(BlobError::NegativeMultiplier { layer });
     }
@@ -289,10 +301,10 @@ fn read_output<'a>(
     let weights = data.exact::<i8>(
         out.weights,
         outputs.checked_mul(inputs),
-        SectionId::OutputWeights,
+        MlpSection::OutputWeights.into(),
     )?;
-    let bias = data.exact::<i32>(out.bias, Some(outputs), SectionId::OutputBias)?;
-    let output_scales = data.finite(out.scales, Some(outputs), SectionId::OutputScales)?;
+    let bias = data.exact::<i32>(out.bias, Some(outputs), MlpSection::OutputBias.into())?;
+    let output_scales = data.finite(out.scales, Some(outputs), MlpSection::OutputScales.into())?;
     Ok(Int8Linear {
         fc: FullyConnected::new(inputs, outputs, weights, bias),
         output_scales,

@@ -27,7 +27,17 @@ pub const TRANSFORMER_MAGIC: [u8; 4] = *b"FRMT";
 /// Most blocks a transformer blob can hold.
 pub const MAX_BLOCKS: usize = 8;
 
-/// Which array of a transformer part a section holds (for [`SectionId::Transformer`]).
+/// A section of a transformer blob: which part, which array (for
+/// [`SectionId::Transformer`](super::SectionId::Transformer)).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TransformerSection {
+    /// The model part.
+    pub part: crate::model::transformer::Part,
+    /// The array of that part.
+    pub field: TensorField,
+}
+
+/// Which array of a transformer part a section holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TensorField {
     /// i8 weights.

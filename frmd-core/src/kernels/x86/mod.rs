@@ -32,7 +32,8 @@
 mod matvec;
 mod requant;
 
-pub(crate) use matvec::BLOCK_ROWS;
+/// Output channels (weight rows) per call of the row kernels, and lanes of a requantized block.
+pub(crate) const BLOCK_ROWS: usize = 8;
 pub(crate) use requant::RequantBlock;
 
 use core::arch::x86_64::{__cpuid, __cpuid_count, _xgetbv};

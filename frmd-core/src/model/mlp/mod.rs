@@ -72,7 +72,7 @@ impl From<KernelError> for ModelError {
 impl core::fmt::Display for ModelError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::Kernel(e) => write!(f, "kernel error: {e}"),
+            Self::Kernel(_) => f.write_str("a kernel refused a layer"),
             Self::LayerWidth { index } => {
                 write!(
                     f,
@@ -86,6 +86,15 @@ impl core::fmt::Display for ModelError {
             Self::TwoPlaneWithoutHiddenLayer => {
                 f.write_str("two-plane or 16-bit input quantization needs a hidden first layer")
             }
+        }
+    }
+}
+
+impl core::error::Error for ModelError {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        match self {
+            Self::Kernel(error) => Some(error),
+            _ => None,
         }
     }
 }

@@ -1,10 +1,46 @@
-//! `calibration.safetensors` beside a student checkpoint: `cond` [R, m O + 2 K] f32 (normalized
-//! `[obs history, y0, v0]` rows from the training windows) and metadata `seed` (the noise seed of
-//! [`crate::calibrate::CalibrationSet`]), so that exporting needs only the checkpoint directory.
-use crate::calibrate::CalibrationSet;
+//! Calibration rows ([`CalibrationSet`]) and their file, `calibration.safetensors` beside a
+//! student checkpoint: `cond` [R, m O + 2 K] f32 (normalized `[obs history, y0, v0]` rows from the
+//! training windows) and metadata `seed` (the noise seed), so that exporting needs only the
+//! checkpoint directory.
 use anyhow::{bail, Context};
+use frmd_core::rng::Rng;
 use std::collections::BTreeMap;
 use std::path::Path;
+
+/// Calibration conditions: rows of `[obs history, y0, v0]` in normalized units (v0 per second),
+/// as in training windows. Noise is drawn per row from `frmd_core::rng::Rng::new(seed + row)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CalibrationSet {
+    /// Width of one row (`m O + 2 K`).
+    pub cond_dim: usize,
+    /// Row-major conditions.
+    pub cond: Vec<f32>,
+    /// Seed of the per-row noise streams.
+    pub seed: u64,
+}
+
+impl CalibrationSet {
+    /// Number of whole rows.
+    pub fn rows(&self) -> usize {
+        self.cond.len().checked_div(self.cond_dim).unwrap_or(0)
+    }
+
+    /// Row `row` (empty past the end).
+    pub fn row(&self, row: usize) -> &[f32] {
+        let start = row.saturating_mul(self.cond_dim);
+        self.cond
+            .get(start..start.saturating_add(self.cond_dim))
+            .unwrap_or(&[])
+    }
+
+    /// Noise of row `row` for `steps` steps of `traj` values.
+    pub fn noise(&self, row: usize, steps: usize, traj: usize) -> Vec<f32> {
+        let mut rng = Rng::new(self.seed.wrapping_add(row as u64));
+        let mut z = vec![0.0; steps * traj];
+        rng.fill_gaussian(&mut z);
+        z
+    }
+}
 
 /// Writes `set` to `path`.
 pub fn write(path: &Path, set: &CalibrationSet) -> anyhow::Result<()> {

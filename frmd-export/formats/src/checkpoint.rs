@@ -8,17 +8,17 @@
 //!   `transformer.pos_embedding` `[n + 2, W]`, `transformer.final_norm.{weight,bias}` and per
 //!   block `transformer.blocks.{i}.{norm1,qkv,proj,norm2,fc1,fc2}.{weight,bias}`.
 mod config;
+mod normalization;
 
-pub use config::{
-    Activation, BackboneConfig, HeadConfig, ModelConfig, Normalization, Normalizer, ProDmpOutput,
-};
+pub use config::{Activation, BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput};
+pub use normalization::{Normalization, Normalizer};
 
 use anyhow::{bail, Context};
 use frmd_core::prodmp::ProDmpConfig;
 use frmd_core::sigma::SigmaConfig;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Version of the checkpoint layout.
 pub const FORMAT_VERSION: u32 = 1;
@@ -33,44 +33,70 @@ pub const CALIBRATION_FILE: &str = "calibration.safetensors";
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Role {
+    /// The multi-step diffusion teacher.
     Teacher,
+    /// The one-step consistency student (what the exporter takes).
     Student,
+    /// The diffusion-policy baseline.
     Dp,
+}
+
+/// The role as `frmd.json` spells it: `teacher`, `student`, `dp`.
+impl std::fmt::Display for Role {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Role::Teacher => "teacher",
+            Role::Student => "student",
+            Role::Dp => "dp",
+        })
+    }
 }
 
 /// Where the training data came from.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct DatasetInfo {
+    /// The task the demonstrations are of.
     pub task: String,
+    /// The data file as given to training.
     pub path: String,
     /// FNV-1a 64 of the data file's bytes, hex.
     pub digest: String,
+    /// Training windows cut from it.
     pub windows: usize,
 }
 
 /// One tensor the weights file must contain.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TensorSpec {
+    /// Variable name (candle `VarBuilder` path).
     pub name: String,
+    /// Element type, `F32`.
     pub dtype: String,
+    /// Dimensions.
     pub shape: Vec<usize>,
 }
 
 /// Contents of `frmd.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CheckpointMeta {
+    /// [`FORMAT_VERSION`].
     pub format_version: u32,
+    /// Which method the checkpoint holds.
     pub role: Role,
+    /// The network.
     pub model: ModelConfig,
     /// The decoder of a ProDMP head (must equal [`ModelConfig::prodmp`], the policy convention
     /// for the model's sizes); `None` for a raw head.
     pub prodmp: Option<ProDmpConfig>,
+    /// The noise schedule.
     pub sigma: SigmaConfig,
     /// Observation and action normalization (raw units <-> [-1, 1]).
     pub normalization: Option<Normalization>,
+    /// The training data.
     pub dataset: DatasetInfo,
     /// Free-form training summary (steps, seed, losses, timings, evaluation results).
     pub training: serde_json::Value,
+    /// The tensors of `model.safetensors` ([`expected_tensors`] of the model).
     pub tensors: Vec<TensorSpec>,
 }
 
@@ -331,6 +357,7 @@ pub fn prodmp_matches(a: &ProDmpConfig, b: &ProDmpConfig) -> bool {
 /// One f32 tensor read from the weights file.
 #[derive(Clone, Debug, PartialEq)]
 pub struct F32Tensor {
+    /// Dimensions.
     pub shape: Vec<usize>,
     /// Row-major values.
     pub values: Vec<f32>,
@@ -402,10 +429,14 @@ pub fn read_weights(
     Ok(out)
 }
 
-/// A validated checkpoint in memory: config plus every tensor.
+/// A validated checkpoint in memory: where it was read from, its config and every tensor.
 #[derive(Clone, Debug)]
 pub struct Checkpoint {
+    /// The checkpoint directory.
+    pub dir: PathBuf,
+    /// `frmd.json`.
     pub meta: CheckpointMeta,
+    /// `model.safetensors`, by name.
     pub tensors: BTreeMap<String, F32Tensor>,
 }
 
@@ -414,7 +445,11 @@ impl Checkpoint {
     pub fn read(dir: &Path) -> anyhow::Result<Self> {
         let meta = CheckpointMeta::read(dir)?;
         let tensors = read_weights(dir, &meta)?;
-        Ok(Checkpoint { meta, tensors })
+        Ok(Checkpoint {
+            dir: dir.to_path_buf(),
+            meta,
+            tensors,
+        })
     }
 
     /// Values of tensor `name`.
