@@ -26,6 +26,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 pub mod fixtures;
+#[cfg(test)]
+mod tests;
 
 /// What to time.
 #[derive(Clone, Debug, PartialEq)]
