@@ -13,6 +13,7 @@
 //! The MLP's module ([`crate::mlp::bake`]) holds const tables plus an aligned `weights.bin`; the
 //! transformer's ([`crate::transformer::bake`]) embeds the blob and loads it with frmd-core's
 //! checked loader.
+use anyhow::Context;
 use std::path::{Path, PathBuf};
 
 use crate::fold::ProDmpTablesOwned;
@@ -61,17 +62,16 @@ pub fn decoder_expression(prodmp: &ProDmpTablesOwned, params_per_dof: usize) -> 
 /// Writes `files` (name, bytes) into `dir` (created if missing), each atomically; returns their
 /// paths.
 pub(crate) fn write_files(dir: &Path, files: &[(&str, &[u8])]) -> anyhow::Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir)
-        .map_err(anyhow::Error::from)
-        .and_then(|()| {
-            files
-                .iter()
-                .map(|(name, bytes)| {
-                    let path = dir.join(name);
-                    frmd_formats::artifact::write_atomic(&path, bytes)?;
-                    Ok(path)
-                })
-                .collect()
-        })
-        .map_err(|e| e.context(format!("writing {}", dir.display())))
+    let write = || -> anyhow::Result<Vec<PathBuf>> {
+        std::fs::create_dir_all(dir)?;
+        files
+            .iter()
+            .map(|(name, bytes)| {
+                let path = dir.join(name);
+                frmd_formats::artifact::write_atomic(&path, bytes)?;
+                Ok(path)
+            })
+            .collect()
+    };
+    write().with_context(|| format!("writing {}", dir.display()))
 }

@@ -58,7 +58,7 @@ pub fn write(path: &Path, set: &CalibrationSet) -> anyhow::Result<()> {
         vec![rows, set.cond_dim],
         &bytes,
     )
-    .map_err(|e| anyhow::anyhow!("calibration tensor: {e}"))?;
+    .context("calibration tensor")?;
     let meta = BTreeMap::from([("seed".to_string(), set.seed.to_string())]);
     let data = crate::safetensors_bytes::serialize([("cond", view)], &meta)
         .context("serializing calibration")?;
@@ -69,7 +69,7 @@ pub fn write(path: &Path, set: &CalibrationSet) -> anyhow::Result<()> {
 pub fn read(path: &Path, cond_dim: usize) -> anyhow::Result<CalibrationSet> {
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
     let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        .with_context(|| path.display().to_string())?;
     let seed = meta
         .metadata()
         .as_ref()
@@ -77,10 +77,10 @@ pub fn read(path: &Path, cond_dim: usize) -> anyhow::Result<CalibrationSet> {
         .and_then(|s| s.parse().ok())
         .with_context(|| format!("{}: missing or bad metadata `seed`", path.display()))?;
     let file = safetensors::SafeTensors::deserialize(&bytes)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        .with_context(|| path.display().to_string())?;
     let view = file
         .tensor("cond")
-        .map_err(|e| anyhow::anyhow!("{}: tensor `cond`: {e}", path.display()))?;
+        .with_context(|| format!("{}: tensor `cond`", path.display()))?;
     if view.dtype() != safetensors::Dtype::F32
         || view.shape().len() != 2
         || view.shape()[1] != cond_dim

@@ -177,17 +177,16 @@ impl CheckpointMeta {
         }
     }
 
-    /// Checks the config's internal consistency (version, sizes, ProDMP, sigma, tensor list).
+    /// Checks the config's internal consistency (version, sizes, ProDMP, sigma, tensor list); an
+    /// error names the field (`model.horizon`, `sigma.sigma_max`, `tensors[3]`).
     pub fn validate(&self) -> anyhow::Result<()> {
         if self.format_version != FORMAT_VERSION {
             bail!(
-                "{CONFIG_FILE}: format_version {} is not supported (expected {FORMAT_VERSION})",
+                "format_version {} is not supported (expected {FORMAT_VERSION})",
                 self.format_version
             );
         }
-        self.model
-            .validate()
-            .map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: model.{e}"))?;
+        self.model.validate()?;
         validate_sigma(&self.sigma)?;
         let expected_prodmp = self.model.prodmp();
         let same = match (&self.prodmp, &expected_prodmp) {
@@ -196,18 +195,17 @@ impl CheckpointMeta {
         };
         if !same {
             bail!(
-                "{CONFIG_FILE}: {}",
+                "{}",
                 first_difference("prodmp", &self.prodmp, &expected_prodmp)
             );
         }
         if let Some(norm) = &self.normalization {
-            norm.validate(self.model.obs_dim, self.model.action_dim)
-                .map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: {e}"))?;
+            norm.validate(self.model.obs_dim, self.model.action_dim)?;
         }
         match (self.role, self.prodmp.is_some()) {
-            (Role::Dp, true) => bail!("{CONFIG_FILE}: a DP checkpoint must have a raw head"),
+            (Role::Dp, true) => bail!("a DP checkpoint must have a raw head"),
             (Role::Teacher | Role::Student, false) => {
-                bail!("{CONFIG_FILE}: teacher and student checkpoints need a ProDMP head")
+                bail!("teacher and student checkpoints need a ProDMP head")
             }
             _ => {}
         }
@@ -237,7 +235,7 @@ impl CheckpointMeta {
                 ),
             };
             bail!(
-                "{CONFIG_FILE}: {detail} ({} listed, {} implied)",
+                "{detail} ({} listed, {} implied)",
                 self.tensors.len(),
                 expected.len()
             );
@@ -249,15 +247,14 @@ impl CheckpointMeta {
     pub fn read(dir: &Path) -> anyhow::Result<Self> {
         let path = dir.join(CONFIG_FILE);
         let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-        Self::from_json(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))
+        Self::from_json(&bytes).with_context(|| dir.display().to_string())
     }
 
     /// Parses and validates the bytes of a `frmd.json` (what [`Self::read`] does after reading
     /// the file; the entry point of the checkpoint-config fuzz target).
     pub fn from_json(bytes: &[u8]) -> anyhow::Result<Self> {
-        let meta: CheckpointMeta =
-            serde_json::from_slice(bytes).map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: {e}"))?;
-        meta.validate()?;
+        let meta: CheckpointMeta = serde_json::from_slice(bytes).context(CONFIG_FILE)?;
+        meta.validate().context(CONFIG_FILE)?;
         Ok(meta)
     }
 }
@@ -275,25 +272,28 @@ fn validate_sigma(s: &SigmaConfig) -> anyhow::Result<()> {
         ("sigma_data", s.sigma_data),
     ] {
         if !(value.is_finite() && value > 0.0) {
-            bail!("{CONFIG_FILE}: sigma.{field} is {value}, expected a finite number > 0");
+            bail!("sigma.{field} is {value}, expected a finite number > 0");
         }
     }
     if s.sigma_max > MAX_SIGMA {
         bail!(
-            "{CONFIG_FILE}: sigma.sigma_max is {}, expected at most {MAX_SIGMA}",
+            "sigma.sigma_max is {}, expected at most {MAX_SIGMA}",
             s.sigma_max
         );
     }
     if s.sigma_min >= s.sigma_max {
-        bail!("{CONFIG_FILE}: sigma.sigma_min {} is not below sigma.sigma_max {}, expected sigma_min < sigma_max", s.sigma_min, s.sigma_max);
+        bail!(
+            "sigma.sigma_min {} is not below sigma.sigma_max {}, expected sigma_min < sigma_max",
+            s.sigma_min,
+            s.sigma_max
+        );
     }
     for (field, value) in [("rho", s.rho), ("sigma_data", s.sigma_data)] {
         if value > MAX_SIGMA {
-            bail!("{CONFIG_FILE}: sigma.{field} is {value}, expected at most {MAX_SIGMA}");
+            bail!("sigma.{field} is {value}, expected at most {MAX_SIGMA}");
         }
     }
-    s.validate()
-        .map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))
+    s.validate().context("sigma")
 }
 
 /// The first field in which `have` and `want` differ, as `path.field is X, expected Y`.
@@ -372,7 +372,7 @@ pub fn read_weights(
     let path = dir.join(WEIGHTS_FILE);
     let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
     let tensors = safetensors::SafeTensors::deserialize(&bytes)
-        .map_err(|e| anyhow::anyhow!("{WEIGHTS_FILE} is not a valid safetensors file: {e}"))?;
+        .with_context(|| format!("{WEIGHTS_FILE} is not a valid safetensors file"))?;
     let mut present: Vec<String> = tensors.names().into_iter().map(|n| n.to_string()).collect();
     present.sort();
     let expected: Vec<&str> = meta.tensors.iter().map(|t| t.name.as_str()).collect();
@@ -393,7 +393,7 @@ pub fn read_weights(
         let name = &spec.name;
         let view = tensors
             .tensor(name)
-            .map_err(|e| anyhow::anyhow!("tensor `{name}`: {e}"))?;
+            .with_context(|| format!("tensor `{name}`"))?;
         if view.dtype() != safetensors::Dtype::F32 {
             bail!(
                 "tensor `{name}`: dtype {:?} in {WEIGHTS_FILE}, F32 expected",

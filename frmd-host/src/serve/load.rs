@@ -78,7 +78,8 @@ impl Served {
     /// A fresh session for one connection.
     pub fn session(&self) -> anyhow::Result<Session> {
         Session::new(self.info.clone(), self.default_init.clone())
-            .map_err(|e| anyhow::anyhow!("server setup: {e}"))
+            .map_err(anyhow::Error::msg)
+            .context("server setup")
     }
 }
 
@@ -280,7 +281,8 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
         name: short_name(name),
     };
     info.validate()
-        .map_err(|e| anyhow::anyhow!("{what}: cannot be served: {e}"))?;
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("{what}: cannot be served"))?;
     let policy = Adapter::new(policy, history, obs_dim, horizon * action_dim, cfg.zeros);
     Ok(Served {
         info,

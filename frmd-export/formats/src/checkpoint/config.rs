@@ -303,23 +303,26 @@ impl ModelConfig {
         ];
         for (field, value, max) in sizes {
             if !(1..=max).contains(&value) {
-                bail!("{field} is {value}, expected 1 to {max}");
+                bail!("model.{field} is {value}, expected 1 to {max}");
             }
         }
         if !(self.control_dt.is_finite() && self.control_dt > 0.0) {
             bail!(
-                "control_dt is {}, expected a finite number of seconds > 0",
+                "model.control_dt is {}, expected a finite number of seconds > 0",
                 self.control_dt
             );
         }
         if !self.embed_dim.is_multiple_of(2) {
-            bail!("embed_dim is {}, expected an even number", self.embed_dim);
+            bail!(
+                "model.embed_dim is {}, expected an even number",
+                self.embed_dim
+            );
         }
         match &self.backbone {
             BackboneConfig::Mlp { hidden, .. } => {
                 if hidden.is_empty() || hidden.len() > 64 {
                     bail!(
-                        "backbone.hidden has {} layers, expected 1 to 64",
+                        "model.backbone.hidden has {} layers, expected 1 to 64",
                         hidden.len()
                     );
                 }
@@ -328,7 +331,7 @@ impl ModelConfig {
                     .enumerate()
                     .find(|(_, w)| !(1..=65_536).contains(*w))
                 {
-                    bail!("backbone.hidden[{i}] is {w}, expected 1 to 65536");
+                    bail!("model.backbone.hidden[{i}] is {w}, expected 1 to 65536");
                 }
             }
             BackboneConfig::Transformer {
@@ -342,19 +345,19 @@ impl ModelConfig {
                     ("width", *width, 65_536),
                 ] {
                     if !(1..=max).contains(&value) {
-                        bail!("backbone.{field} is {value}, expected 1 to {max}");
+                        bail!("model.backbone.{field} is {value}, expected 1 to {max}");
                     }
                 }
                 if width % heads != 0 {
                     bail!(
-                        "backbone.width is {width}, expected a multiple of backbone.heads {heads}"
+                        "model.backbone.width is {width}, expected a multiple of model.backbone.heads {heads}"
                     );
                 }
             }
         }
         if let HeadConfig::ProDmp { num_basis, .. } = self.head {
             if !(1..=256).contains(&num_basis) {
-                bail!("head.num_basis is {num_basis}, expected 1 to 256");
+                bail!("model.head.num_basis is {num_basis}, expected 1 to 256");
             }
         }
         Ok(())
