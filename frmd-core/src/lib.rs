@@ -3,6 +3,7 @@
 //! `#![no_std]` and no `alloc`: every buffer is a fixed-size array or a caller-owned slice whose
 //! size is known at compile time. No function on an input path panics; errors are small enums.
 #![no_std]
+#![warn(missing_docs)]
 #![cfg_attr(
     not(test),
     deny(

@@ -15,6 +15,7 @@ pub const RENOISE_LOW: f64 = 0.04;
 
 /// Why a noise-level computation was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum SigmaError {
     /// `sigma_min`, `sigma_max`, `rho` or `sigma_data` is not finite and positive, or
     /// `sigma_min >= sigma_max`.

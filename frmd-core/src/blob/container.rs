@@ -1,5 +1,5 @@
 //! The container every blob shares: fixed header, postcard descriptor, aligned sections; its
-//! parse side ([`parse`], [`Data`]) and its emit side ([`encode`], [`SectionWriter`]).
+//! parse side (`parse`, `Data`) and its emit side (`encode`, `SectionWriter`).
 //!
 //! ```text
 //! offset  size  field (little endian)
@@ -296,7 +296,7 @@ fn descriptor_len<D: Serialize>(descriptor: &D) -> Result<usize, BlobError> {
         .map_err(|_| BlobError::Encode)
 }
 
-/// Length of the blob [`encode`] writes for `emit`.
+/// Length of the blob `encode` writes for `emit`.
 pub(crate) fn encoded_len<D: Serialize>(
     mut emit: impl FnMut(&mut SectionWriter<'_>) -> Result<D, BlobError>,
 ) -> Result<usize, BlobError> {

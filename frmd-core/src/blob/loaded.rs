@@ -10,6 +10,8 @@ use crate::policy::{
 };
 
 /// A checked blob of either format, borrowing its bytes.
+// No allocator to box the larger variant: a program that takes either format reserves it.
+#[allow(clippy::large_enum_variant)]
 pub enum LoadedBlob<'a> {
     /// An MLP blob (magic [`MLP_MAGIC`]).
     Mlp(LoadedMlp<'a>),
@@ -77,6 +79,8 @@ impl<'a> LoadedBlob<'a> {
 }
 
 /// The int8 network of a [`LoadedBlob`].
+// As for `LoadedBlob`: the MLP network holds its scratch in place, no allocator to box it.
+#[allow(clippy::large_enum_variant)]
 pub enum BlobNetwork<'a, const WIDTH: usize, S> {
     /// The MLP of an MLP blob.
     Mlp(Int8MlpNetwork<'a, WIDTH>),

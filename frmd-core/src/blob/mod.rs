@@ -42,8 +42,9 @@ use crate::policy::PolicyError;
 
 /// Names a section in errors: the format that defines it, with that format's own tag.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum SectionId {
-    /// A section every policy blob carries ([`policy_tables`]).
+    /// A section every policy blob carries (normalization, decoder tables, steps).
     Policy(PolicySection),
     /// A section of an MLP blob.
     Mlp(MlpSection),
@@ -71,6 +72,7 @@ impl From<TransformerSection> for SectionId {
 
 /// Which size of a blob is zero or differs from the expected one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Dimension {
     /// History length `M`.
     History,
@@ -87,6 +89,7 @@ pub enum Dimension {
 /// Why a blob was rejected (or could not be written). Small and `Copy`; each variant names the
 /// problem and, where it applies, the section or layer.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum BlobError {
     /// The buffer is shorter than the header or than the total length the header states.
     Truncated,

@@ -18,6 +18,7 @@ pub const STEP_WORDS: usize = 6;
 
 /// The sections every policy blob carries (for [`SectionId::Policy`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum PolicySection {
     /// Observation min/max.
     ObsNorm,

@@ -466,3 +466,21 @@ fn two_plane_flag_reaches_the_network() {
     let unknown = with_descriptor(&blob, |d| d.input_precision = 3);
     assert_eq!(load_copy(&unknown), Err(BlobError::InputQuantization));
 }
+
+/// The sample blob the loader's doctest loads (`tests/data/sample_policy.blob`) is what the
+/// encoder writes for the test model. Regenerate with
+/// `FRMD_BLESS=1 cargo test -p frmd-core committed_sample_blob`.
+#[test]
+fn committed_sample_blob_is_current() {
+    let blob = model_blob(&TestModel::new(7, &[80.0]));
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/sample_policy.blob");
+    if std::env::var_os("FRMD_BLESS").is_some() {
+        std::fs::write(path, &blob).unwrap();
+    }
+    let committed = std::fs::read(path).unwrap();
+    assert!(
+        committed == blob,
+        "{path} differs from the encoder's blob of the test model (FRMD_BLESS=1 to update)"
+    );
+    load_copy(&committed).unwrap();
+}

@@ -38,6 +38,7 @@ pub(crate) const BLOCK_ROWS: usize = 16;
 
 /// Why a kernel refused its arguments. Small and `Copy`; each variant names the offending slice.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum KernelError {
     /// The two operands of a dot product differ in length.
     OperandLength,

@@ -9,7 +9,7 @@
 //!   outputs `a`, `b` and sets `state = [lo(a), hi(a), lo(b), hi(b)]` (same as `rand_xoshiro`'s
 //!   `seed_from_u64`). SplitMix64 never outputs zero twice in a row, so the state is never all zero.
 //! - [`Rng::uniform`]: `(next_u32() >> 8) * 2^-24`, exactly representable, in `[0, 1)`.
-//! - [`Rng::gaussian`]: one `u32` draw through the integer quantile table of [`normal`]
+//! - [`Rng::gaussian`]: one `u32` draw through the integer quantile table of the private `normal` module
 //!   (sign bit, octave of the tail probability by leading zeros, linear interpolation), giving `z`
 //!   in units of `2^-20` that converts exactly to f32. Samples are bounded by 5.663. Integer
 //!   arithmetic only, so the samples are the same bits on every target, and the same

@@ -21,18 +21,42 @@ use crate::quant::{QuantParams, SHIFT_MAX, SHIFT_MIN};
 /// A validated MLP blob, borrowed: weights, biases, requantization parameters, tables, scales,
 /// normalization and decoder tables stay in the blob (`'a`); the steps are copied. Its
 /// [`Self::config`] and [`Self::network`] borrow only the blob, so the policy built from them may
-/// outlive the `LoadedMlp`:
+/// outlive the `LoadedMlp`.
 ///
-/// ```text
-/// let loaded = LoadedMlp::load(BLOB)?;           // BLOB: 4-aligned &'static [u8]
-/// loaded.check_dims(&EXPECTED)?;                 // the sizes the firmware was built for
-/// let mut policy = loaded.policy::<2, 10, 3, 12, 21, 64, 256>()?;  // capacities, scratch width
-/// policy.reset(&current_position)?;
-/// loop {
-///     policy.observe(&read_sensors())?;
-///     if need_new_chunk { policy.act(Noise::Rng(&mut rng))?; }
-///     if let Some(action) = policy.next_action() { command(action); }
+/// A firmware keeps the blob in flash, 16-aligned, checks it once at boot and runs the policy
+/// over it (here: a small sample policy, 2 x 3 observations, 2 DoF, horizon 6):
+///
+/// ```
+/// use frmd_core::blob::{BlobError, LoadedMlp};
+/// use frmd_core::policy::{AlignedBytes, Noise, PolicyDims};
+/// use frmd_core::rng::Rng;
+///
+/// macro_rules! sample {
+///     () => {
+///         include_bytes!(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/sample_policy.blob"))
+///     };
 /// }
+/// static BLOB: AlignedBytes<{ sample!().len() }> = AlignedBytes(*sample!());
+///
+/// // Magic, version, CRC-32, descriptor, every section's bounds, alignment, length and values.
+/// let loaded = LoadedMlp::load(&BLOB.0)?;
+/// // The sizes this firmware was built for.
+/// let expected = PolicyDims { history: 2, obs_dim: 3, action_dim: 2, horizon: 6, params_per_dof: 4 };
+/// loaded.check_dims(&expected)?;
+/// // Capacities M, O, K, N, P, the model input I and the scratch width of the widest layer.
+/// let mut policy = loaded.policy::<2, 3, 2, 6, 4, 32, 40>()?;
+/// policy.reset(&[0.0, 0.1])?; // the robot's current position
+/// policy.observe(&[0.2, -0.1, 0.4])?; // every control tick
+/// policy.act(Noise::Rng(&mut Rng::new(7)))?; // when a new chunk is needed
+/// while let Some(action) = policy.next_action() {
+///     assert!(action.iter().all(|a| a.is_finite())); // command it
+/// }
+///
+/// // A damaged blob is refused with a named error, never a panic.
+/// let mut damaged = BLOB.0;
+/// damaged[40] ^= 1;
+/// assert!(matches!(LoadedMlp::load(&damaged), Err(BlobError::CrcMismatch { .. })));
+/// # Ok::<(), Box<dyn core::error::Error>>(())
 /// ```
 #[derive(Clone, Debug)]
 pub struct LoadedMlp<'a> {

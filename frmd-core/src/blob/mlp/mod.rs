@@ -1,7 +1,7 @@
 //! MLP blobs (magic [`MLP_MAGIC`], `b"FRMD"`): the [`MlpDescriptor`], its emit side
 //! ([`encode_mlp`] from borrowed [`MlpBlobParts`]) and its parse side ([`LoadedMlp`]).
 //!
-//! Data area, in order: the policy sections ([`super::policy_tables`]), the first-layer bias
+//! Data area, in order: the policy sections (`blob::policy_tables`), the first-layer bias
 //! variants (i32), the activation tables (i8, [`LUT_LEN`] each, one per hidden layer that has one,
 //! in layer order), then per hidden layer weights (i8 `[out, in]`), bias, multipliers and shifts
 //! (i32 `[out]`), then the output layer's weights, bias and dequantization scales (f32). The data
@@ -28,8 +28,9 @@ pub const INPUT_INT16: u8 = 2;
 pub const LUT_LEN: usize = 256;
 
 /// The sections of an MLP blob besides the policy sections (for
-/// [`SectionId::Mlp`](super::SectionId::Mlp)).
+/// [`SectionId::Mlp`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum MlpSection {
     /// First-layer bias variants.
     FirstLayerBiases,

@@ -42,6 +42,7 @@ use crate::quant::{quantize_i16, quantize_two_plane, QuantParams};
 
 /// Why a forward pass refused its arguments.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ModelError {
     /// A kernel refused a layer's arguments (names the slice).
     Kernel(KernelError),
@@ -101,6 +102,7 @@ impl core::error::Error for ModelError {
 
 /// How the f32 input vector is quantized for the first layer.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum InputPrecision {
     /// One int8 code per value ([`QuantParams::quantize`]), as TFLite.
     #[default]

@@ -6,6 +6,7 @@ use crate::kernels::KernelError;
 
 /// A named tensor group of the backbone (used in errors). `layer` is the 0-based block index.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Part {
     /// The per-step trajectory input layer (`k -> W`).
     TrajIn,
@@ -55,6 +56,7 @@ pub enum Part {
 
 /// Which scratch buffer is too small.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ScratchBuffer {
     /// The f32 buffer.
     Floats,
@@ -66,6 +68,7 @@ pub enum ScratchBuffer {
 
 /// Why a transformer forward pass refused its arguments. Small and `Copy`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum TransformerError {
     /// A [`TransformerShape`] size is zero.
     ZeroSize,
