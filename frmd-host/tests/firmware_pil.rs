@@ -31,7 +31,8 @@ fn firmware_closes_the_loop_bit_for_bit_with_the_host_policy() {
     ) {
         return;
     }
-    let image = build(&repo, "m4", None).expect("build the pil image for m4");
+    let image =
+        build(&repo, frmd_host::firmware::Board::M4, None).expect("build the pil image for m4");
     let firmware = FirmwarePolicy::start(&image).expect("boot the pil image");
     let host = host_policy();
     let dims = host.dims();

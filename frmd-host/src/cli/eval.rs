@@ -1,8 +1,10 @@
 //! `frmd eval`: closed-loop evaluation of a policy on a task, with the metrics of docs/design.md
 //! section 6.
 use crate::checkpoint::{CALIBRATION_FILE, CONFIG_FILE, WEIGHTS_FILE};
+use crate::diffusion::samplers::Solver;
 use crate::eval::plot::{plot_paths, PLOTTED_EPISODES};
 use crate::eval::{evaluate, expert_policy, EvalConfig};
+use crate::firmware::Board;
 use crate::limits::{self, OptionError};
 use crate::tasks::Policy;
 use anyhow::bail;
@@ -52,7 +54,7 @@ pub struct EvalArgs {
     pub steps: Option<usize>,
     /// Teacher ODE solver for --ckpt: euler | heun | dpm++2m.
     #[arg(long)]
-    pub solver: Option<String>,
+    pub solver: Option<Solver>,
     /// int8 student blob (written by `frmd export --blob`) run by frmd-core.
     #[arg(long)]
     pub blob: Option<PathBuf>,
@@ -64,7 +66,7 @@ pub struct EvalArgs {
     /// m7, m33, m0, m55) under QEMU; reports the instructions per chunk the image counted. Bakes
     /// --baked DIR's module, else the checked-in reach student.
     #[arg(long, value_name = "CORE")]
-    pub firmware: Option<String>,
+    pub firmware: Option<Board>,
     /// With --firmware: also run the host int8 policy (the blob beside --baked, or --blob) on every
     /// request and count the chunks whose bits differ from the firmware's.
     #[arg(long, requires = "firmware")]
@@ -173,7 +175,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
             .map(|d| d.join(frmd_export::bake::BLOB_FILE))
     });
     check_outputs(&args, blob.as_deref())?;
-    if let Some(board) = &args.firmware {
+    if let Some(board) = args.firmware {
         anyhow::ensure!(
             args.ckpt.is_none(),
             "--firmware runs a baked int8 policy; --ckpt does not apply (use --baked DIR)"
@@ -196,7 +198,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
             let history = p.history();
             (Box::new(p), history)
         }
-        (None, Some(dir)) => crate::policy::float::boxed(dir, args.steps, args.solver.as_deref())?,
+        (None, Some(dir)) => crate::policy::float::boxed(dir, args.steps, args.solver)?,
         (None, None) => match args.policy.as_deref().unwrap_or("expert") {
             "expert" => (
                 expert_policy(&args.task)?,

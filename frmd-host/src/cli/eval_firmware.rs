@@ -3,6 +3,7 @@
 use crate::eval::{evaluate, EvalConfig, EvalReport};
 use crate::firmware::lockstep::{Lockstep, LockstepCount};
 use crate::firmware::policy::{FirmwareInfo, FirmwarePolicy, InstructionStats};
+use crate::firmware::Board;
 use crate::policy::int8::Int8Policy;
 use crate::tasks::Policy;
 use serde::Serialize;
@@ -12,8 +13,8 @@ use std::process::ExitCode;
 /// What `frmd eval --firmware` runs.
 pub struct FirmwareEval<'a> {
     pub task: &'a str,
-    /// Core of the `pil` image (`run-qemu.sh` board name).
-    pub board: &'a str,
+    /// Core of the `pil` image.
+    pub board: Board,
     /// Baked module directory to build into the image (else the checked-in reach student).
     pub baked: Option<&'a Path>,
     /// Also run the host int8 policy of `blob` on every request and count differing chunks.

@@ -11,7 +11,7 @@ use std::collections::VecDeque;
 use std::time::Instant;
 
 pub mod metrics;
-pub mod plot;
+pub(crate) mod plot;
 
 #[cfg(test)]
 mod tests;
@@ -50,7 +50,7 @@ impl Default for EvalConfig {
 }
 
 impl EvalConfig {
-    /// Checks the counts against [`crate::limits`] and that every seed of the run stays in the
+    /// Checks the counts against `crate::limits` and that every seed of the run stays in the
     /// evaluation stream (`first_seed + episodes <= 2^63`, no wrap into the collection seeds).
     pub fn validate(&self) -> Result<(), OptionError> {
         limits::count("episodes", self.episodes, 1, limits::MAX_EPISODES)?;

@@ -12,7 +12,7 @@ pub struct DecoderRows {
     pub num_params: usize,
     /// [horizon, num_params], row t = coefficients of theta for position at time (t+1) dt.
     pub pos_params: Vec<f64>,
-    /// [horizon] coefficients of y0 and v0 (v0 in units per second).
+    /// \[horizon\] coefficients of y0 and v0 (v0 in units per second).
     pub pos_y0: Vec<f64>,
     pub pos_v0: Vec<f64>,
 }
@@ -82,7 +82,7 @@ impl ProDmpDecoder {
         self.num_dof * self.num_params
     }
 
-    /// `theta` [B, k (b+1)] (DoF-major: params[d] = [w_0 .. w_{b-1}, g]), `y0` [B, k],
+    /// `theta` [B, k (b+1)] (DoF-major: params\[d\] = [w_0 .. w_{b-1}, g]), `y0` [B, k],
     /// `v0` [B, k] (units per second) -> positions [B, n k], step-major.
     pub fn decode(&self, theta: &Tensor, y0: &Tensor, v0: &Tensor) -> anyhow::Result<Tensor> {
         let batch = theta.dim(0)?;

@@ -13,7 +13,7 @@
 //! dependencies) may parse a 17-digit decimal 1 ulp off. That is far below every tolerance, but a
 //! time written exactly at the end of the pre-computed range (`delay + 6 tau`) can then land just
 //! beyond it and be reported as out of range.
-pub mod check;
+pub(crate) mod check;
 
 use frmd_core::prodmp::ProDmpError;
 use serde::Deserialize;

@@ -4,7 +4,9 @@
 use super::frame::{FloatType, MAX_NAME, MAX_PAYLOAD};
 use super::reply::ModelInfo;
 use super::session::{ActInput, ServedPolicy, Session};
+use crate::diffusion::samplers::Solver;
 use crate::export::{ExportConfig, EXPORT_INFO_FILE};
+use crate::firmware::Board;
 use crate::policy::float::FloatPolicy;
 use crate::policy::int8::Int8Policy;
 use crate::tasks::{Policy, PolicyInput};
@@ -18,9 +20,12 @@ pub enum PolicySource {
     /// A float checkpoint directory; `steps` and `solver` override the role's default sampler
     /// (teacher Heun 10, student 1 step, DP DDIM 10; DP with 100 steps is DDPM).
     Checkpoint {
+        /// The checkpoint directory.
         dir: PathBuf,
+        /// Sampling steps.
         steps: Option<usize>,
-        solver: Option<String>,
+        /// The teacher's ODE solver.
+        solver: Option<Solver>,
     },
     /// A baked module directory (`frmd export --out`): its `policy.blob`.
     Baked(PathBuf),
@@ -29,7 +34,9 @@ pub enum PolicySource {
     /// The `pil` firmware image on a QEMU core (`crate::firmware`), baking `baked`'s module (or
     /// the checked-in reach student): every chunk comes from the emulated MCU.
     Firmware {
-        board: String,
+        /// The core.
+        board: Board,
+        /// A baked module directory to bake into the image.
         baked: Option<PathBuf>,
     },
 }
@@ -188,11 +195,7 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
         String,
     ) = match source {
         PolicySource::Checkpoint { dir, steps, solver } => {
-            let solver = solver
-                .as_deref()
-                .map(crate::diffusion::samplers::Solver::parse)
-                .transpose()?;
-            let policy = FloatPolicy::load(dir, *steps, solver)?;
+            let policy = FloatPolicy::load(dir, *steps, *solver)?;
             let c = policy.config().clone();
             let name = format!("{} {}", policy.name(), dir.display());
             (
@@ -228,7 +231,7 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
         }
         PolicySource::Firmware { board, baked } => {
             let image =
-                crate::firmware::build(&crate::firmware::default_repo(), board, baked.as_deref())?;
+                crate::firmware::build(&crate::firmware::default_repo(), *board, baked.as_deref())?;
             let policy = crate::firmware::policy::FirmwarePolicy::start(&image)?;
             let i = policy.info().clone();
             let dt = match baked {
