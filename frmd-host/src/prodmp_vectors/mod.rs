@@ -1,4 +1,4 @@
-//! Reference vectors for the ProDMP decoder (schema of `shared/testdata/prodmp_vectors.json`,
+//! Reference vectors for the ProDMP decoder (schema of `frmd-core/tests/data/prodmp_vectors.json`,
 //! produced from mp_pytorch 0.1.4 in float64): parsing, validation and the f64/f32 check.
 //!
 //! Schema: `{ "cases": [case..], ..metadata }` with, per case, `name`, `config` (mp_pytorch
@@ -172,7 +172,7 @@ impl fmt::Display for VectorsError {
             Self::Malformed { path, source } => write!(
                 f,
                 "{} is not a ProDMP vectors file (JSON with \"cases\" in the schema of \
-                 shared/testdata/prodmp_vectors.json; NaN/Infinity are not allowed): {source}",
+                 frmd-core/tests/data/prodmp_vectors.json; NaN/Infinity are not allowed): {source}",
                 path.display()
             ),
             Self::NoCases => write!(f, "vectors file has no cases"),
