@@ -10,8 +10,9 @@
 
 #[cfg(target_arch = "x86_64")]
 use super::dot::dot_i8_prefix;
+use super::dot::RowInput;
 use super::lut::{self, LutTable};
-use super::rows::{for_each_block, for_each_sum, RowInput};
+use super::rows::{for_each_block, for_each_sum};
 use super::KernelError;
 #[cfg(target_arch = "x86_64")]
 use crate::quant::requantize_to_i8;

@@ -7,7 +7,7 @@
 //! - weights: int8 symmetric per output channel, `real = scale[c] * q`, `q` in `[-127, 127]`;
 //! - bias: int32 with scale `input_scale * weight_scale[c]`, the input zero point folded in
 //!   (`bias_q - input_zero_point * sum(w_q)`), so the kernels never see the input zero point;
-//! - requantization: [`fixed_point`] (Q31 multiplier and shift, TFLite double rounding).
+//! - requantization: `fixed_point` (Q31 multiplier and shift, TFLite double rounding).
 //!
 //! Rounding modes, stated once:
 //! - float -> integer ([`quantize`], weights, bias, multiplier mantissas): round half away from
@@ -42,6 +42,7 @@ mod wide_input_tests;
 /// Why a quantization parameter cannot be computed. Small and `Copy`; each variant names the
 /// offending quantity.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum QuantError {
     /// A real multiplier is NaN or infinite.
     NonFiniteMultiplier,
@@ -86,3 +87,6 @@ impl core::fmt::Display for QuantError {
         f.write_str(text)
     }
 }
+
+/// No variant wraps another error.
+impl core::error::Error for QuantError {}

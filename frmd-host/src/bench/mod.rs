@@ -14,7 +14,7 @@
 use crate::checkpoint::Role;
 use crate::diffusion::samplers::Solver;
 use crate::eval::metrics::quantile;
-use crate::export::{export_mlp, ExportConfig};
+use crate::export::{export_student, ExportConfig};
 use crate::models::BackboneConfig;
 use crate::policy::float::FloatPolicy;
 use crate::policy::int8::Int8Policy;
@@ -26,6 +26,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 pub mod fixtures;
+#[cfg(test)]
+mod tests;
 
 /// What to time.
 #[derive(Clone, Debug, PartialEq)]
@@ -214,14 +216,13 @@ fn core_policies(cfg: &BenchConfig) -> Result<CorePolicySet, String> {
                 .map(|c| (c.int8, c.core_f32, cfg.backbone.clone())));
         }
         let ckpt = cfg.dir.join("student");
-        let exported = export_mlp(&ExportConfig::for_checkpoint(&ckpt))
+        let student = export_student(&ExportConfig::for_checkpoint(&ckpt), false)
             .with_context(|| format!("exporting {}", ckpt.display()))?;
-        let blob = frmd_export::blob::write(&exported.policy)
-            .map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
-        let backbone = exported.checkpoint.meta.model.backbone.clone();
+        let backbone = student.meta().model.backbone.clone();
+        let blob = student.blob().to_vec();
         Ok(Ok((
             Int8Policy::from_blob(&blob, "int8")?,
-            Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?,
+            Int8Policy::f32_twin(&blob, student, "core-f32")?,
             backbone,
         )))
     };
@@ -381,5 +382,5 @@ pub fn write_json(path: &Path, rows: &[BenchRow], note: Option<&str>) -> anyhow:
     let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into());
     let value =
         serde_json::json!({ "threads": threads, "batch": 1, "results": rows, "note": note });
-    frmd_export::artifact::write_atomic(path, serde_json::to_string_pretty(&value)?.as_bytes())
+    frmd_formats::artifact::write_atomic(path, serde_json::to_string_pretty(&value)?.as_bytes())
 }

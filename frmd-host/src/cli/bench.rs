@@ -47,7 +47,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
     crate::limits::count("calls", cfg.calls, 1, crate::limits::MAX_CHECKS)?;
     crate::limits::count("warmup", cfg.warmup, 0, crate::limits::MAX_CHECKS)?;
     if let Some(path) = &args.json {
-        frmd_export::artifact::check_output_file(path, "--json", args.force, &[])?;
+        frmd_formats::artifact::check_output_file(path, "--json", args.force, &[])?;
     }
     let (rows, note) = bench_rows(&cfg)?;
     print_table(&rows, cfg.warmup, note.as_deref());

@@ -15,8 +15,8 @@
 //! does not depend on order), plus the bias with wrapping addition as in `FullyConnected`.
 #![allow(unsafe_code)]
 
-use super::requant::{pack_i8, requantize_lanes, RequantBlock};
-use super::Avx2;
+use super::requant::{load_i32, pack_i8, requantize_lanes, RequantBlock};
+use super::{Avx2, BLOCK_ROWS};
 use crate::kernels::dot::dot_i8_prefix;
 use core::arch::x86_64::{
     __m128i, __m256i, _mm256_add_epi32, _mm256_cvtepi8_epi16, _mm256_dpbusd_avx_epi32,
@@ -25,9 +25,6 @@ use core::arch::x86_64::{
     _mm256_xor_si256, _mm256_zextsi128_si256, _mm_cvtepi8_epi16, _mm_loadl_epi64, _mm_loadu_si128,
     _mm_madd_epi16,
 };
-
-/// Output channels (weight rows) per call.
-pub(crate) const BLOCK_ROWS: usize = 8;
 
 /// Columns per `vpmaddwd` step.
 const COLUMNS: usize = 16;
@@ -307,15 +304,6 @@ fn widen(block: &[i8; COLUMNS]) -> __m256i {
     // has no alignment requirement.
     let bytes = unsafe { _mm_loadu_si128(block.as_ptr().cast::<__m128i>()) };
     _mm256_cvtepi8_epi16(bytes)
-}
-
-/// Loads eight int32 lanes.
-#[inline]
-#[target_feature(enable = "avx2")]
-pub(super) fn load_i32(values: &[i32; BLOCK_ROWS]) -> __m256i {
-    // SAFETY: the pointer comes from a `&[i32; 8]`: 32 initialized, readable bytes; `loadu` has no
-    // alignment requirement.
-    unsafe { _mm256_loadu_si256(values.as_ptr().cast::<__m256i>()) }
 }
 
 #[cfg(test)]

@@ -1,4 +1,4 @@
-//! Folding a transformer-lite student checkpoint into frmd-core's transformer structure, in f32.
+//! The transformer-lite student folded into frmd-core's transformer structure, in f32.
 //!
 //! The candle model (frmd-host `models/transformer.rs`, variables under `transformer.`) embeds
 //! the tokens `[cond_in(cond), noise_in(embedding(c_noise)), traj_in(c_in x_i) ...]`, adds
@@ -6,59 +6,33 @@
 //! `fc2`), `final_norm` and a `head` over the flattened tokens. Per sampling step `i` the noise
 //! level is fixed, so `noise_in(embedding(c_noise(sigma_i))) + pos_embedding[1]` is one constant
 //! `W`-long token ([`frmd_core::model::transformer::fold_noise_token`]); the runtime selects it by
-//! the step's `noise_variant` ([`frmd_core::policy::TransformerNetwork`]), the way the
-//! MLP selects its per-step first-layer bias.
-//!
-//! The result ([`FoldedTransformer`]) runs on frmd-core's own f32 path
-//! ([`F32Transformer`]); [`quantize`] calibrates it with the transformer probes and quantizes it
-//! into an owned [`QuantizedTransformer`] that views as frmd-core's [`Int8Transformer`].
-//! [`crate::blob::write_transformer`] encodes it as the `FRMT` blob (the supported firmware form),
-//! [`bake`] writes a
-//! module that embeds that blob with compile-time sizes, `QuantizedTransformer::memory` gives the
-//! RAM/flash figures and [`reference::check_layers`] is check (d) of the bit-accuracy harness.
-//!
-//! [`Int8Transformer`]: frmd_core::model::transformer::Int8Transformer
+//! the step's `noise_variant` ([`frmd_core::policy::TransformerNetwork`]), the way the MLP selects
+//! its per-step first-layer bias. The result ([`FoldedTransformer`]) runs on frmd-core's own f32
+//! path ([`F32Transformer`]).
 
-pub mod bake;
-mod memory;
-mod quantize;
-pub mod reference;
-#[cfg(test)]
-mod tests;
-
-pub use quantize::{calibrate, quantize, QuantizedLinear, QuantizedTransformer, TransformerRanges};
-
-use crate::checkpoint::Normalization;
-use crate::checkpoint::{BackboneConfig, Checkpoint, ModelConfig, Role};
-use crate::fold::{mlp_layout, sample_chunk, step_constants, FloatLayer};
-use crate::ProDmpTablesOwned;
+use crate::fold::{FloatLayer, StudentBase};
+use crate::host::{HostScratch, HOST_ACCUMULATORS, HOST_BYTES, HOST_FLOATS};
 use anyhow::{bail, Context};
 use frmd_core::kernels::Activation;
 use frmd_core::model::linear::F32Linear;
 use frmd_core::model::transformer::{
     fold_noise_token, F32Block, F32FeedForward, F32Transformer, LayerNormWeights, TransformerProbe,
-    TransformerScratch, TransformerShape,
+    TransformerShape,
 };
-use frmd_core::policy::{
-    InputLayout, PolicyConfig, RangeNormalizer, Sampler, StepConstants, StepTable,
-};
-use frmd_core::sigma::{noise_embedding, SigmaConfig};
-
-/// Scratch for the exporter's f32 and int8 transformer passes (enough for `transformer`, 6 x 256
-/// with horizon 16): floats, bytes, accumulators.
-pub type HostScratch = TransformerScratch<HOST_FLOATS, HOST_BYTES, HOST_ACCUMULATORS>;
-const HOST_FLOATS: usize = 32_768;
-const HOST_BYTES: usize = 16_384;
-const HOST_ACCUMULATORS: usize = 1_024;
+use frmd_core::policy::{PolicyConfig, RangeNormalizer, Sampler, StepTable};
+use frmd_formats::checkpoint::{BackboneConfig, Checkpoint, Normalization};
 
 /// LayerNorm affine parameters (`[W]` each).
 #[derive(Clone, Debug, PartialEq)]
 pub struct FloatNorm {
+    /// Scale.
     pub gamma: Vec<f32>,
+    /// Shift.
     pub beta: Vec<f32>,
 }
 
 impl FloatNorm {
+    /// frmd-core's view of the parameters.
     pub fn view(&self) -> LayerNormWeights<'_> {
         LayerNormWeights {
             gamma: &self.gamma,
@@ -70,32 +44,41 @@ impl FloatNorm {
 /// One pre-LayerNorm block in f32.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FloatBlock {
+    /// LayerNorm before attention.
     pub norm1: FloatNorm,
+    /// Query, key and value projection (`3 W` outputs).
     pub qkv: FloatLayer,
+    /// Attention output projection.
     pub proj: FloatLayer,
+    /// LayerNorm before the feed-forward.
     pub norm2: FloatNorm,
+    /// Feed-forward expansion (`4 W`, GELU).
     pub fc1: FloatLayer,
+    /// Feed-forward contraction.
     pub fc2: FloatLayer,
 }
 
 /// A transformer student folded for `steps.len()` sampling steps.
 #[derive(Clone, Debug)]
 pub struct FoldedTransformer {
-    pub config: ModelConfig,
-    pub sigma: SigmaConfig,
+    /// What every student carries.
+    pub base: StudentBase,
+    /// Sizes of frmd-core's transformer.
     pub shape: TransformerShape,
+    /// Embedding of each trajectory step.
     pub traj_in: FloatLayer,
+    /// Embedding of the condition.
     pub cond_in: FloatLayer,
     /// Per step: `noise_in(embedding(c_noise(sigma_i))) + pos_embedding[1]`, `W` values.
     pub noise_tokens: Vec<Vec<f32>>,
     /// `[T, W]` learned positions (row 1 unused at run time).
     pub positions: Vec<f32>,
+    /// The blocks.
     pub blocks: Vec<FloatBlock>,
+    /// LayerNorm after the last block.
     pub final_norm: FloatNorm,
+    /// Output layer over the flattened tokens.
     pub head: FloatLayer,
-    pub steps: Vec<StepConstants>,
-    pub layout: InputLayout,
-    pub prodmp: ProDmpTablesOwned,
 }
 
 pub(crate) fn f32_view(layer: &FloatLayer) -> F32Linear<'_> {
@@ -140,23 +123,16 @@ impl FoldedTransformer {
     /// Folds a transformer student checkpoint for `steps` sampling steps, refusing what the
     /// runtime cannot represent (naming the reason).
     pub fn new(ckpt: &Checkpoint, steps: usize) -> anyhow::Result<Self> {
-        let meta = &ckpt.meta;
-        let config = &meta.model;
-        if meta.role != Role::Student {
-            bail!("only student checkpoints can be exported; this one is a {:?} (its sampler needs many network evaluations)", meta.role);
-        }
+        let base = StudentBase::new(&ckpt.meta, steps)?;
+        let config = &base.config;
         let BackboneConfig::Transformer {
             layers,
             heads,
             width,
         } = config.backbone
         else {
-            bail!(
-                "not a transformer checkpoint (backbone {:?}); use fold::FoldedMlp",
-                config.backbone
-            );
+            bail!("an MLP backbone folds with mlp::FoldedMlp");
         };
-        let prodmp_cfg = config.prodmp().context("a student needs a ProDMP head")?;
         let shape = TransformerShape {
             horizon: config.horizon,
             action_dim: config.action_dim,
@@ -168,7 +144,7 @@ impl FoldedTransformer {
         };
         shape
             .validate()
-            .map_err(|e| anyhow::anyhow!("transformer shape {shape:?}: {e}"))?;
+            .with_context(|| format!("transformer shape {shape:?}"))?;
         let lens = shape.f32_scratch();
         let int8 = shape.int8_scratch();
         if lens.floats.max(int8.floats) > HOST_FLOATS
@@ -177,12 +153,6 @@ impl FoldedTransformer {
         {
             bail!("transformer shape {shape:?} needs more scratch than the exporter's host scratch holds");
         }
-        let sigma: SigmaConfig = meta.sigma;
-        let steps = step_constants(
-            &sigma,
-            meta.model.prodmp_output().unwrap_or_default(),
-            steps,
-        )?;
         let (w, tokens) = (width, shape.tokens());
         let positions = ckpt.tensor("transformer.pos_embedding")?.to_vec();
         if positions.len() != tokens * w {
@@ -192,29 +162,23 @@ impl FoldedTransformer {
             );
         }
         let noise_in = linear(ckpt, "noise_in", config.embed_dim, w)?;
-        let mut embedding = vec![0.0f64; config.embed_dim];
-        let mut noise_tokens = Vec::with_capacity(steps.len());
-        for i in 0..steps.len() {
-            let level = sigma
-                .consistency_sampling_sigma(i, steps.len())
-                .map_err(|e| anyhow::anyhow!("sampling level: {e:?}"))?;
-            let c_noise = sigma
-                .c_noise(level)
-                .map_err(|e| anyhow::anyhow!("c_noise: {e:?}"))?;
-            noise_embedding(c_noise, &mut embedding)
-                .map_err(|e| anyhow::anyhow!("noise embedding: {e:?}"))?;
-            let embedding32: Vec<f32> = embedding.iter().map(|&e| e as f32).collect();
-            let mut token = vec![0.0f32; w];
-            fold_noise_token(
-                &shape,
-                &f32_view(&noise_in),
-                &embedding32,
-                &positions,
-                &mut token,
-            )
-            .map_err(|e| anyhow::anyhow!("folding the noise token of step {i}: {e}"))?;
-            noise_tokens.push(token);
-        }
+        let noise_tokens = base
+            .embeddings
+            .iter()
+            .enumerate()
+            .map(|(i, embedding)| {
+                let mut token = vec![0.0f32; w];
+                fold_noise_token(
+                    &shape,
+                    &f32_view(&noise_in),
+                    embedding,
+                    &positions,
+                    &mut token,
+                )
+                .with_context(|| format!("folding the noise token of step {i}"))?;
+                Ok(token)
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
         let blocks = (0..layers)
             .map(|i| {
                 let p = format!("blocks.{i}");
@@ -232,8 +196,6 @@ impl FoldedTransformer {
             })
             .collect::<anyhow::Result<Vec<_>>>()?;
         let folded = FoldedTransformer {
-            config: config.clone(),
-            sigma,
             shape,
             traj_in: linear(ckpt, "traj_in", config.action_dim, w)?,
             cond_in: linear(ckpt, "cond_in", config.cond_dim(), w)?,
@@ -242,14 +204,12 @@ impl FoldedTransformer {
             blocks,
             final_norm: norm(ckpt, "final_norm", w)?,
             head: linear(ckpt, "head", shape.token_values(), shape.output)?,
-            steps,
-            layout: mlp_layout(config)?,
-            prodmp: ProDmpTablesOwned::from_config(&prodmp_cfg, config.horizon)?,
+            base,
         };
         folded
             .view(&folded.f32_blocks(), 0)?
             .validate()
-            .map_err(|e| anyhow::anyhow!("folded transformer: {e}"))?;
+            .context("folded transformer")?;
         Ok(folded)
     }
 
@@ -294,15 +254,16 @@ impl FoldedTransformer {
 
     /// The policy configuration with normalization `norm` as frmd-core's view.
     pub fn config<'a>(&'a self, norm: &'a Normalization) -> PolicyConfig<'a> {
+        let base = &self.base;
         PolicyConfig {
-            history: self.config.history,
+            history: base.config.history,
             obs_norm: RangeNormalizer::new(&norm.obs.min, &norm.obs.max),
             action_norm: RangeNormalizer::new(&norm.action.min, &norm.action.max),
             sampler: Sampler {
-                steps: StepTable::new(&self.steps),
-                decoder: self.prodmp.view(),
-                layout: self.layout,
-                control_dt: self.config.control_dt as f32,
+                steps: StepTable::new(&base.steps),
+                decoder: base.prodmp.view(),
+                layout: base.layout,
+                control_dt: base.config.control_dt as f32,
             },
         }
     }
@@ -336,11 +297,11 @@ impl FoldedTransformer {
         let mut out = vec![0.0; self.shape.output];
         model
             .forward_observed(trajectory, condition, &mut out, &mut scratch, observe)
-            .map_err(|e| anyhow::anyhow!("f32 transformer forward: {e}"))?;
+            .context("f32 transformer forward")?;
         Ok(out)
     }
 
-    /// The f32 consistency sampler (see [`crate::fold::sample_chunk`]), calling
+    /// The f32 consistency sampler ([`StudentBase::sample`]), calling
     /// `observe(step, probe, values)` for every probe of every step.
     pub fn sample(
         &self,
@@ -348,14 +309,8 @@ impl FoldedTransformer {
         noise: &[f32],
         mut observe: impl FnMut(usize, TransformerProbe, &[f32]),
     ) -> anyhow::Result<Vec<f32>> {
-        sample_chunk(
-            &self.config,
-            &self.layout,
-            &self.steps,
-            &self.prodmp,
-            cond,
-            noise,
-            |i, input| self.forward_observed(i, input, |p, v| observe(i, p, v)),
-        )
+        self.base.sample(cond, noise, |i, input| {
+            self.forward_observed(i, input, |p, v| observe(i, p, v))
+        })
     }
 }

@@ -8,16 +8,17 @@
 //!   `transformer.pos_embedding` `[n + 2, W]`, `transformer.final_norm.{weight,bias}` and per
 //!   block `transformer.blocks.{i}.{norm1,qkv,proj,norm2,fc1,fc2}.{weight,bias}`.
 mod config;
+mod normalization;
+mod weights;
 
-pub use config::{
-    Activation, BackboneConfig, HeadConfig, ModelConfig, Normalization, Normalizer, ProDmpOutput,
-};
+pub use config::{Activation, BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput};
+pub use normalization::{Normalization, Normalizer};
+pub use weights::{read_weights, Checkpoint, F32Tensor};
 
 use anyhow::{bail, Context};
 use frmd_core::prodmp::ProDmpConfig;
 use frmd_core::sigma::SigmaConfig;
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Version of the checkpoint layout.
@@ -33,44 +34,70 @@ pub const CALIBRATION_FILE: &str = "calibration.safetensors";
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Role {
+    /// The multi-step diffusion teacher.
     Teacher,
+    /// The one-step consistency student (what the exporter takes).
     Student,
+    /// The diffusion-policy baseline.
     Dp,
+}
+
+/// The role as `frmd.json` spells it: `teacher`, `student`, `dp`.
+impl std::fmt::Display for Role {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Role::Teacher => "teacher",
+            Role::Student => "student",
+            Role::Dp => "dp",
+        })
+    }
 }
 
 /// Where the training data came from.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct DatasetInfo {
+    /// The task the demonstrations are of.
     pub task: String,
+    /// The data file as given to training.
     pub path: String,
     /// FNV-1a 64 of the data file's bytes, hex.
     pub digest: String,
+    /// Training windows cut from it.
     pub windows: usize,
 }
 
 /// One tensor the weights file must contain.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TensorSpec {
+    /// Variable name (candle `VarBuilder` path).
     pub name: String,
+    /// Element type, `F32`.
     pub dtype: String,
+    /// Dimensions.
     pub shape: Vec<usize>,
 }
 
 /// Contents of `frmd.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CheckpointMeta {
+    /// [`FORMAT_VERSION`].
     pub format_version: u32,
+    /// Which method the checkpoint holds.
     pub role: Role,
+    /// The network.
     pub model: ModelConfig,
     /// The decoder of a ProDMP head (must equal [`ModelConfig::prodmp`], the policy convention
     /// for the model's sizes); `None` for a raw head.
     pub prodmp: Option<ProDmpConfig>,
+    /// The noise schedule.
     pub sigma: SigmaConfig,
     /// Observation and action normalization (raw units <-> [-1, 1]).
     pub normalization: Option<Normalization>,
+    /// The training data.
     pub dataset: DatasetInfo,
     /// Free-form training summary (steps, seed, losses, timings, evaluation results).
     pub training: serde_json::Value,
+    /// The tensors of `model.safetensors` ([`expected_tensors`] of the model).
     pub tensors: Vec<TensorSpec>,
 }
 
@@ -151,17 +178,16 @@ impl CheckpointMeta {
         }
     }
 
-    /// Checks the config's internal consistency (version, sizes, ProDMP, sigma, tensor list).
+    /// Checks the config's internal consistency (version, sizes, ProDMP, sigma, tensor list); an
+    /// error names the field (`model.horizon`, `sigma.sigma_max`, `tensors[3]`).
     pub fn validate(&self) -> anyhow::Result<()> {
         if self.format_version != FORMAT_VERSION {
             bail!(
-                "{CONFIG_FILE}: format_version {} is not supported (expected {FORMAT_VERSION})",
+                "format_version {} is not supported (expected {FORMAT_VERSION})",
                 self.format_version
             );
         }
-        self.model
-            .validate()
-            .map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: model.{e}"))?;
+        self.model.validate()?;
         validate_sigma(&self.sigma)?;
         let expected_prodmp = self.model.prodmp();
         let same = match (&self.prodmp, &expected_prodmp) {
@@ -170,18 +196,17 @@ impl CheckpointMeta {
         };
         if !same {
             bail!(
-                "{CONFIG_FILE}: {}",
+                "{}",
                 first_difference("prodmp", &self.prodmp, &expected_prodmp)
             );
         }
         if let Some(norm) = &self.normalization {
-            norm.validate(self.model.obs_dim, self.model.action_dim)
-                .map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: {e}"))?;
+            norm.validate(self.model.obs_dim, self.model.action_dim)?;
         }
         match (self.role, self.prodmp.is_some()) {
-            (Role::Dp, true) => bail!("{CONFIG_FILE}: a DP checkpoint must have a raw head"),
+            (Role::Dp, true) => bail!("a DP checkpoint must have a raw head"),
             (Role::Teacher | Role::Student, false) => {
-                bail!("{CONFIG_FILE}: teacher and student checkpoints need a ProDMP head")
+                bail!("teacher and student checkpoints need a ProDMP head")
             }
             _ => {}
         }
@@ -211,7 +236,7 @@ impl CheckpointMeta {
                 ),
             };
             bail!(
-                "{CONFIG_FILE}: {detail} ({} listed, {} implied)",
+                "{detail} ({} listed, {} implied)",
                 self.tensors.len(),
                 expected.len()
             );
@@ -223,15 +248,14 @@ impl CheckpointMeta {
     pub fn read(dir: &Path) -> anyhow::Result<Self> {
         let path = dir.join(CONFIG_FILE);
         let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-        Self::from_json(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))
+        Self::from_json(&bytes).with_context(|| dir.display().to_string())
     }
 
     /// Parses and validates the bytes of a `frmd.json` (what [`Self::read`] does after reading
     /// the file; the entry point of the checkpoint-config fuzz target).
     pub fn from_json(bytes: &[u8]) -> anyhow::Result<Self> {
-        let meta: CheckpointMeta =
-            serde_json::from_slice(bytes).map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: {e}"))?;
-        meta.validate()?;
+        let meta: CheckpointMeta = serde_json::from_slice(bytes).context(CONFIG_FILE)?;
+        meta.validate().context(CONFIG_FILE)?;
         Ok(meta)
     }
 }
@@ -249,25 +273,28 @@ fn validate_sigma(s: &SigmaConfig) -> anyhow::Result<()> {
         ("sigma_data", s.sigma_data),
     ] {
         if !(value.is_finite() && value > 0.0) {
-            bail!("{CONFIG_FILE}: sigma.{field} is {value}, expected a finite number > 0");
+            bail!("sigma.{field} is {value}, expected a finite number > 0");
         }
     }
     if s.sigma_max > MAX_SIGMA {
         bail!(
-            "{CONFIG_FILE}: sigma.sigma_max is {}, expected at most {MAX_SIGMA}",
+            "sigma.sigma_max is {}, expected at most {MAX_SIGMA}",
             s.sigma_max
         );
     }
     if s.sigma_min >= s.sigma_max {
-        bail!("{CONFIG_FILE}: sigma.sigma_min {} is not below sigma.sigma_max {}, expected sigma_min < sigma_max", s.sigma_min, s.sigma_max);
+        bail!(
+            "sigma.sigma_min {} is not below sigma.sigma_max {}, expected sigma_min < sigma_max",
+            s.sigma_min,
+            s.sigma_max
+        );
     }
     for (field, value) in [("rho", s.rho), ("sigma_data", s.sigma_data)] {
         if value > MAX_SIGMA {
-            bail!("{CONFIG_FILE}: sigma.{field} is {value}, expected at most {MAX_SIGMA}");
+            bail!("sigma.{field} is {value}, expected at most {MAX_SIGMA}");
         }
     }
-    s.validate()
-        .map_err(|e| anyhow::anyhow!("{CONFIG_FILE}: sigma: {e}"))
+    s.validate().context("sigma")
 }
 
 /// The first field in which `have` and `want` differ, as `path.field is X, expected Y`.
@@ -326,102 +353,4 @@ pub fn prodmp_matches(a: &ProDmpConfig, b: &ProDmpConfig) -> bool {
         )
     };
     exact(a) == exact(b) && floats(a).iter().zip(floats(b)).all(|(&x, y)| close(x, y))
-}
-
-/// One f32 tensor read from the weights file.
-#[derive(Clone, Debug, PartialEq)]
-pub struct F32Tensor {
-    pub shape: Vec<usize>,
-    /// Row-major values.
-    pub values: Vec<f32>,
-}
-
-/// Reads `dir/model.safetensors`, checking that it holds exactly the tensors `meta` lists, each
-/// F32 with the listed shape and finite values.
-pub fn read_weights(
-    dir: &Path,
-    meta: &CheckpointMeta,
-) -> anyhow::Result<BTreeMap<String, F32Tensor>> {
-    let path = dir.join(WEIGHTS_FILE);
-    let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-    let tensors = safetensors::SafeTensors::deserialize(&bytes)
-        .map_err(|e| anyhow::anyhow!("{WEIGHTS_FILE} is not a valid safetensors file: {e}"))?;
-    let mut present: Vec<String> = tensors.names().into_iter().map(|n| n.to_string()).collect();
-    present.sort();
-    let expected: Vec<&str> = meta.tensors.iter().map(|t| t.name.as_str()).collect();
-    let missing: Vec<&str> = expected
-        .iter()
-        .copied()
-        .filter(|n| !present.iter().any(|p| p == n))
-        .collect();
-    let unexpected: Vec<&String> = present
-        .iter()
-        .filter(|p| !expected.contains(&p.as_str()))
-        .collect();
-    if !missing.is_empty() || !unexpected.is_empty() {
-        bail!("{WEIGHTS_FILE} does not match {CONFIG_FILE}: missing tensors {missing:?}, unexpected tensors {unexpected:?}");
-    }
-    let mut out = BTreeMap::new();
-    for spec in &meta.tensors {
-        let name = &spec.name;
-        let view = tensors
-            .tensor(name)
-            .map_err(|e| anyhow::anyhow!("tensor `{name}`: {e}"))?;
-        if view.dtype() != safetensors::Dtype::F32 {
-            bail!(
-                "tensor `{name}`: dtype {:?} in {WEIGHTS_FILE}, F32 expected",
-                view.dtype()
-            );
-        }
-        if view.shape() != spec.shape.as_slice() {
-            bail!(
-                "tensor `{name}`: shape {:?} in {WEIGHTS_FILE}, {:?} expected from {CONFIG_FILE}",
-                view.shape(),
-                spec.shape
-            );
-        }
-        let values: Vec<f32> = view
-            .data()
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect();
-        if let Some(bad) = values.iter().position(|v| !v.is_finite()) {
-            bail!(
-                "tensor `{name}`: non-finite value {} at flat index {bad}",
-                values[bad]
-            );
-        }
-        out.insert(
-            name.clone(),
-            F32Tensor {
-                shape: spec.shape.clone(),
-                values,
-            },
-        );
-    }
-    Ok(out)
-}
-
-/// A validated checkpoint in memory: config plus every tensor.
-#[derive(Clone, Debug)]
-pub struct Checkpoint {
-    pub meta: CheckpointMeta,
-    pub tensors: BTreeMap<String, F32Tensor>,
-}
-
-impl Checkpoint {
-    /// Reads and validates `dir` (config and weights).
-    pub fn read(dir: &Path) -> anyhow::Result<Self> {
-        let meta = CheckpointMeta::read(dir)?;
-        let tensors = read_weights(dir, &meta)?;
-        Ok(Checkpoint { meta, tensors })
-    }
-
-    /// Values of tensor `name`.
-    pub fn tensor(&self, name: &str) -> anyhow::Result<&[f32]> {
-        self.tensors
-            .get(name)
-            .map(|t| t.values.as_slice())
-            .with_context(|| format!("tensor `{name}` is missing from the checkpoint"))
-    }
 }

@@ -1,58 +1,16 @@
-//! [`QuantizedPolicy`]: the owned, target-independent result of quantization, from which both
-//! output forms (blob and baked module) are written.
+//! [`QuantizedMlp`]: the owned, target-independent result of quantizing an MLP student, from
+//! which both output forms (blob and baked module) are written.
 
-use frmd_core::blob::{MlpBlobParts, LUT_LEN};
+use crate::fold::ProDmpTablesOwned;
+use crate::memory::{policy_table_bytes, state_bytes, MemoryFigures};
+use frmd_core::blob::{encode_mlp, mlp_encoded_len, BlobError, MlpBlobParts, LUT_LEN};
 use frmd_core::kernels::{FcRequant, FullyConnected};
 use frmd_core::model::linear::{Int8Linear, RequantizedLinear};
 use frmd_core::model::mlp::{InputPrecision, Int8Mlp};
 use frmd_core::policy::{
-    InputLayout, PolicyConfig, ProDmpTables, RangeNormalizer, Sampler, StepConstants, StepTable,
+    InputLayout, PolicyConfig, PolicyDims, RangeNormalizer, Sampler, StepConstants, StepTable,
 };
-use frmd_core::prodmp::BakedProDmp;
 use frmd_core::quant::QuantParams;
-
-/// ProDMP decoder tables (row-major `[N][P]` and `[N]`), as [`BakedProDmp`] holds them.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ProDmpTablesOwned {
-    /// `[N][P]` position coefficients of `[w.., g]`.
-    pub pos_params: Vec<f32>,
-    /// `[N][P]` velocity coefficients (1/s).
-    pub vel_params: Vec<f32>,
-    /// `[N]` position coefficient of `y0`.
-    pub pos_y0: Vec<f32>,
-    /// `[N]` position coefficient of `v0` (s).
-    pub pos_v0: Vec<f32>,
-    /// `[N]` velocity coefficient of `y0` (1/s).
-    pub vel_y0: Vec<f32>,
-    /// `[N]` velocity coefficient of `v0`.
-    pub vel_v0: Vec<f32>,
-}
-
-impl ProDmpTablesOwned {
-    /// Copies the tables of a baked decoder.
-    pub fn from_baked<const N: usize, const P: usize>(baked: &BakedProDmp<N, P>) -> Self {
-        Self {
-            pos_params: baked.pos_params.as_flattened().to_vec(),
-            vel_params: baked.vel_params.as_flattened().to_vec(),
-            pos_y0: baked.pos_y0.to_vec(),
-            pos_v0: baked.pos_v0.to_vec(),
-            vel_y0: baked.vel_y0.to_vec(),
-            vel_v0: baked.vel_v0.to_vec(),
-        }
-    }
-
-    /// The tables as frmd-core's decoder view.
-    pub fn view(&self) -> ProDmpTables<'_> {
-        ProDmpTables {
-            pos_params: &self.pos_params,
-            vel_params: &self.vel_params,
-            pos_y0: &self.pos_y0,
-            pos_v0: &self.pos_v0,
-            vel_y0: &self.vel_y0,
-            vel_v0: &self.vel_v0,
-        }
-    }
-}
 
 /// One quantized hidden layer (int8 FC, per-channel requantization, optional LUT).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -75,7 +33,7 @@ pub struct QuantizedLayer {
     pub activation_min: i8,
     /// Upper output clamp.
     pub activation_max: i8,
-    /// Index into [`QuantizedPolicy::luts`] of the activation, if any.
+    /// Index into [`QuantizedMlp::luts`] of the activation, if any.
     pub lut: Option<usize>,
 }
 
@@ -94,9 +52,21 @@ pub struct QuantizedOutput {
     pub scales: Vec<f32>,
 }
 
+/// Alignment of every array in the weight file.
+const ALIGN: usize = 16;
+
+/// One array of the weight file: byte offset and element count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WeightEntry {
+    /// Byte offset in the weight file (multiple of 16).
+    pub offset: usize,
+    /// Number of elements.
+    pub count: usize,
+}
+
 /// A calibrated, quantized student with everything the firmware needs besides code.
 #[derive(Clone, Debug, PartialEq)]
-pub struct QuantizedPolicy {
+pub struct QuantizedMlp {
     /// History length `M`.
     pub history: usize,
     /// Observation dimension `O`.
@@ -139,29 +109,31 @@ pub struct QuantizedPolicy {
     pub output: QuantizedOutput,
 }
 
-/// RAM and flash figures of a policy (bytes).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct MemoryFigures {
-    /// Widest layer (input, hidden or output): the `WIDTH` of the scratch buffers.
-    pub scratch_width: usize,
-    /// Forward-pass scratch: two int8 activations and one int32 accumulator row of `WIDTH`.
-    pub scratch_bytes: usize,
-    /// Sampler working memory and policy state (history, chunk buffers, input vector), f32.
-    pub state_bytes: usize,
-    /// Weight file: int8 weights, int32 biases (incl. bias variants), padding.
-    pub weights_bytes: usize,
-    /// Constant tables: multipliers, shifts, LUTs, output scales, ProDMP, normalization, steps.
-    pub table_bytes: usize,
-}
-
-impl MemoryFigures {
-    /// Total read-only bytes (weights plus tables).
-    pub fn flash_bytes(&self) -> usize {
-        self.weights_bytes + self.table_bytes
+impl QuantizedMlp {
+    /// Where each array goes: per hidden layer (weights i8, bias i32), then the first-layer bias
+    /// variants (i32), the output weights (i8) and bias (i32). Returns the entries in that order and
+    /// the file length.
+    pub fn weight_file_layout(&self) -> (Vec<WeightEntry>, usize) {
+        let mut entries = Vec::new();
+        let mut cursor = 0;
+        let mut place = |count: usize, size: usize| {
+            let entry = WeightEntry {
+                offset: cursor,
+                count,
+            };
+            cursor = (cursor + count * size).div_ceil(ALIGN) * ALIGN;
+            entries.push(entry);
+        };
+        for layer in &self.hidden {
+            place(layer.weights.len(), 1);
+            place(layer.bias.len(), 4);
+        }
+        place(self.first_layer_biases.len(), 4);
+        place(self.output.weights.len(), 1);
+        place(self.output.bias.len(), 4);
+        (entries, cursor)
     }
-}
 
-impl QuantizedPolicy {
     /// Width of the model input vector per the layout.
     pub fn input_width(&self) -> Option<usize> {
         self.layout
@@ -237,35 +209,43 @@ impl QuantizedPolicy {
         f(&parts)
     }
 
+    /// The policy's sizes.
+    pub fn dims(&self) -> PolicyDims {
+        PolicyDims {
+            history: self.history,
+            obs_dim: self.obs_dim,
+            action_dim: self.action_dim,
+            horizon: self.horizon,
+            params_per_dof: self.params_per_dof,
+        }
+    }
+
+    /// The self-describing blob (format in [`frmd_core::blob::mlp`]); a named error if a part's
+    /// length disagrees with the stated shapes.
+    pub fn blob(&self) -> Result<Vec<u8>, BlobError> {
+        self.with_parts(|parts| {
+            let mut out = vec![0_u8; mlp_encoded_len(parts)?];
+            let written = encode_mlp(parts, &mut out)?;
+            out.truncate(written);
+            Ok(out)
+        })
+    }
+
     /// RAM/flash figures of the baked form (estimates of the tables the generated module holds;
     /// the exact RAM of the policy object is `size_of::<BakedPolicy>()` in the generated module).
     pub fn memory(&self) -> MemoryFigures {
         let width = self.scratch_width();
-        let (m, o, k, n, p) = (
-            self.history,
-            self.obs_dim,
-            self.action_dim,
-            self.horizon,
-            self.params_per_dof,
-        );
-        let input = self.input_width().unwrap_or(0);
-        // history ring + ordered copy, 2 x noisy/noise, 3 trajectories (decoded, normalized,
-        // chunk) of positions and velocities, input vector, params, prev action and rate.
-        let floats = 2 * m * o + 2 * n * k + 6 * n * k + input + k * p + 2 * k;
-        let weights_bytes = crate::bake::weight_file_layout(self).1;
+        let dims = self.dims();
         let channels: usize = self.hidden.iter().map(|l| l.out_features).sum();
-        let table_bytes = 8 * channels
-            + LUT_LEN * self.luts.len()
-            + 4 * self.output.out_features
-            + 4 * n * (2 * p + 4)
-            + 8 * (o + k)
-            + 24 * self.steps.len();
         MemoryFigures {
             scratch_width: width,
             scratch_bytes: 6 * width,
-            state_bytes: 4 * floats,
-            weights_bytes,
-            table_bytes,
+            state_bytes: state_bytes(&dims, self.input_width().unwrap_or(0)),
+            weights_bytes: self.weight_file_layout().1,
+            table_bytes: 8 * channels
+                + LUT_LEN * self.luts.len()
+                + 4 * self.output.out_features
+                + policy_table_bytes(&dims, self.steps.len()),
         }
     }
 }

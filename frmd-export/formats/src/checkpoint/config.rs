@@ -1,7 +1,6 @@
-//! The pure-data model configuration stored in `frmd.json` (backbone, head, sizes) and the
-//! normalization, shared by the candle models (frmd-host) and the exporter.
+//! The pure-data model configuration stored in `frmd.json` (backbone, head, sizes), shared by
+//! the candle models (frmd-host) and the exporter.
 use anyhow::{bail, Context};
-use frmd_core::policy::{denormalize_value, normalize_value};
 use frmd_core::prodmp::ProDmpConfig;
 use serde::{Deserialize, Serialize};
 
@@ -19,13 +18,20 @@ pub enum Activation {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum BackboneConfig {
+    /// A multilayer perceptron over the concatenated input.
     Mlp {
+        /// Hidden layer widths.
         hidden: Vec<usize>,
+        /// Hidden-layer activation.
         activation: Activation,
     },
+    /// A pre-LayerNorm transformer over condition, noise and trajectory tokens.
     Transformer {
+        /// Blocks.
         layers: usize,
+        /// Attention heads.
         heads: usize,
+        /// Token width.
         width: usize,
     },
 }
@@ -201,6 +207,7 @@ impl std::fmt::Display for ProDmpOutput {
 pub enum HeadConfig {
     /// k (b+1) ProDMP parameters, decoded to positions in the graph.
     ProDmp {
+        /// Basis functions per DoF (a DoF has `num_basis + 1` parameters with its goal).
         num_basis: usize,
         /// Output parametrization (absent in older checkpoints: `direct`).
         #[serde(default)]
@@ -221,9 +228,11 @@ pub enum HeadConfig {
 /// Everything that fixes the network's variables and its input/output layout.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelConfig {
+    /// Observation dimension O.
     pub obs_dim: usize,
     /// Observation history m.
     pub history: usize,
+    /// Action dimension (DoF) K.
     pub action_dim: usize,
     /// Prediction horizon n.
     pub horizon: usize,
@@ -231,7 +240,9 @@ pub struct ModelConfig {
     pub control_dt: f64,
     /// Length of the noise embedding (`frmd_core::sigma::noise_embedding`).
     pub embed_dim: usize,
+    /// The network between input and head.
     pub backbone: BackboneConfig,
+    /// What the network outputs.
     pub head: HeadConfig,
 }
 
@@ -246,6 +257,8 @@ impl ModelConfig {
         self.horizon * self.action_dim
     }
 
+    /// The decoder of a ProDMP head (the policy convention for these sizes); `None` for a raw
+    /// head.
     pub fn prodmp(&self) -> Option<ProDmpConfig> {
         match self.head {
             HeadConfig::ProDmp {
@@ -270,6 +283,7 @@ impl ModelConfig {
         }
     }
 
+    /// Width of the network output (`k (b + 1)` ProDMP parameters, or `n k` raw values).
     pub fn output_dim(&self) -> usize {
         match self.head {
             HeadConfig::ProDmp { num_basis, .. } => self.action_dim * (num_basis + 1),
@@ -289,23 +303,26 @@ impl ModelConfig {
         ];
         for (field, value, max) in sizes {
             if !(1..=max).contains(&value) {
-                bail!("{field} is {value}, expected 1 to {max}");
+                bail!("model.{field} is {value}, expected 1 to {max}");
             }
         }
         if !(self.control_dt.is_finite() && self.control_dt > 0.0) {
             bail!(
-                "control_dt is {}, expected a finite number of seconds > 0",
+                "model.control_dt is {}, expected a finite number of seconds > 0",
                 self.control_dt
             );
         }
         if !self.embed_dim.is_multiple_of(2) {
-            bail!("embed_dim is {}, expected an even number", self.embed_dim);
+            bail!(
+                "model.embed_dim is {}, expected an even number",
+                self.embed_dim
+            );
         }
         match &self.backbone {
             BackboneConfig::Mlp { hidden, .. } => {
                 if hidden.is_empty() || hidden.len() > 64 {
                     bail!(
-                        "backbone.hidden has {} layers, expected 1 to 64",
+                        "model.backbone.hidden has {} layers, expected 1 to 64",
                         hidden.len()
                     );
                 }
@@ -314,7 +331,7 @@ impl ModelConfig {
                     .enumerate()
                     .find(|(_, w)| !(1..=65_536).contains(*w))
                 {
-                    bail!("backbone.hidden[{i}] is {w}, expected 1 to 65536");
+                    bail!("model.backbone.hidden[{i}] is {w}, expected 1 to 65536");
                 }
             }
             BackboneConfig::Transformer {
@@ -328,147 +345,21 @@ impl ModelConfig {
                     ("width", *width, 65_536),
                 ] {
                     if !(1..=max).contains(&value) {
-                        bail!("backbone.{field} is {value}, expected 1 to {max}");
+                        bail!("model.backbone.{field} is {value}, expected 1 to {max}");
                     }
                 }
                 if width % heads != 0 {
                     bail!(
-                        "backbone.width is {width}, expected a multiple of backbone.heads {heads}"
+                        "model.backbone.width is {width}, expected a multiple of model.backbone.heads {heads}"
                     );
                 }
             }
         }
         if let HeadConfig::ProDmp { num_basis, .. } = self.head {
             if !(1..=256).contains(&num_basis) {
-                bail!("head.num_basis is {num_basis}, expected 1 to 256");
+                bail!("model.head.num_basis is {num_basis}, expected 1 to 256");
             }
         }
         Ok(())
-    }
-}
-
-/// Per-dimension affine map from raw units to [-1, 1], fitted on training min/max: the bounds
-/// that the runtime's `frmd_core::policy::RangeNormalizer` bakes, applied with the same formula
-/// (`frmd_core::policy::normalize_value`). Constant dimensions (max == min) map to 0.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Normalizer {
-    pub min: Vec<f32>,
-    pub max: Vec<f32>,
-}
-
-/// Normalizers for observations and actions, fitted together on a training set.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Normalization {
-    pub obs: Normalizer,
-    pub action: Normalizer,
-}
-
-impl Normalization {
-    /// Sizes `obs_dim`/`action_dim`, finite bounds and `min <= max` in every dimension; the
-    /// first violation is named (`normalization.obs.min[2]`).
-    pub fn validate(&self, obs_dim: usize, action_dim: usize) -> anyhow::Result<()> {
-        for (name, n, dim) in [
-            ("obs", &self.obs, obs_dim),
-            ("action", &self.action, action_dim),
-        ] {
-            for (bound, values) in [("min", &n.min), ("max", &n.max)] {
-                if values.len() != dim {
-                    bail!("normalization.{name}.{bound} has {} values, expected {dim} (the model's {name} dimension)", values.len());
-                }
-                if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                    bail!(
-                        "normalization.{name}.{bound}[{i}] is {}, expected a finite number",
-                        values[i]
-                    );
-                }
-            }
-            if let Some(i) = (0..dim).find(|&i| n.min[i] > n.max[i]) {
-                bail!(
-                    "normalization.{name}.min[{i}] is {} above max[{i}] {}, expected min <= max",
-                    n.min[i],
-                    n.max[i]
-                );
-            }
-        }
-        Ok(())
-    }
-}
-
-impl Normalizer {
-    /// Per-dimension min/max over the rows of `data` ([rows, dim], row-major). Non-finite values
-    /// are ignored; a dimension without finite values gets min = max = 0.
-    pub fn fit(data: &[f32], dim: usize) -> Self {
-        let mut min = vec![f32::INFINITY; dim];
-        let mut max = vec![f32::NEG_INFINITY; dim];
-        if dim > 0 {
-            for row in data.chunks_exact(dim) {
-                for ((lo, hi), &v) in min.iter_mut().zip(max.iter_mut()).zip(row) {
-                    if v.is_finite() {
-                        *lo = lo.min(v);
-                        *hi = hi.max(v);
-                    }
-                }
-            }
-        }
-        for (lo, hi) in min.iter_mut().zip(max.iter_mut()) {
-            if *lo > *hi {
-                (*lo, *hi) = (0.0, 0.0);
-            }
-        }
-        Self { min, max }
-    }
-
-    /// Widens every dimension whose range is above 0 but below `min_range` to `min_range`,
-    /// centred on its midpoint, so sensor jitter in a nearly constant dimension does not become a
-    /// full-scale input. Exactly constant dimensions stay constant (they map to 0).
-    pub fn with_min_range(mut self, min_range: f32) -> Self {
-        for (lo, hi) in self.min.iter_mut().zip(self.max.iter_mut()) {
-            let range = *hi - *lo;
-            if range > 0.0 && range < min_range {
-                let mid = 0.5 * (*lo + *hi);
-                (*lo, *hi) = (mid - 0.5 * min_range, mid + 0.5 * min_range);
-            }
-        }
-        self
-    }
-
-    pub fn dim(&self) -> usize {
-        self.min.len()
-    }
-
-    /// Raw to [-1, 1] in place; `x` holds whole rows of `dim` values (a trailing partial row is
-    /// mapped with the leading dimensions). Constant dimensions map to 0.
-    pub fn normalize(&self, x: &mut [f32]) {
-        if self.min.is_empty() {
-            return;
-        }
-        for row in x.chunks_mut(self.min.len()) {
-            for ((v, &lo), &hi) in row.iter_mut().zip(&self.min).zip(&self.max) {
-                *v = normalize_value(*v, lo, hi);
-            }
-        }
-    }
-
-    /// [-1, 1] to raw in place (inverse of [`Normalizer::normalize`]; constant dimensions map to
-    /// their constant).
-    pub fn denormalize(&self, x: &mut [f32]) {
-        if self.min.is_empty() {
-            return;
-        }
-        for row in x.chunks_mut(self.min.len()) {
-            for ((v, &lo), &hi) in row.iter_mut().zip(&self.min).zip(&self.max) {
-                *v = denormalize_value(*v, lo, hi);
-            }
-        }
-    }
-
-    /// Normalized units per raw unit for each dimension (0 for constant dimensions); rates and
-    /// other differences scale by this factor.
-    pub fn scale(&self) -> Vec<f32> {
-        self.min
-            .iter()
-            .zip(&self.max)
-            .map(|(&lo, &hi)| if hi > lo { 2.0 / (hi - lo) } else { 0.0 })
-            .collect()
     }
 }
