@@ -9,7 +9,7 @@ use std::process::ExitCode;
 #[derive(Args, Debug)]
 pub struct BenchArgs {
     /// Policies as DIR[:STEPS[:SOLVER]], e.g. `runs/quickstart/teacher:10:heun`, `dir/dp:100`.
-    /// Default: student:1, teacher:10:heun, dp:100, dp:10 from --dir.
+    /// Default: student:1, student:2, teacher:10:heun, dp:100, dp:10 from --dir.
     #[arg(long = "policy")]
     pub policies: Vec<PolicySpec>,
     /// Directory holding `student/`, `teacher/` and `dp/` checkpoints (as written by quickstart).

@@ -1,5 +1,5 @@
-//! Training: the EDM teacher, consistency distillation of the student (the paper's Algorithm 1)
-//! and the DP baseline, sharing one loop shape (seeded batches, scheduled AdamW, a progress
+//! Training: the EDM teacher, consistency distillation of the student (Algorithm 1 plus the ODE
+//! map) and the DP baseline, sharing one loop shape (seeded batches, scheduled AdamW, a progress
 //! callback every `log_every` steps); [`recipe`] holds the settings of a run (their `Default` is
 //! the recipe) and [`run`] turns a demonstration file into a checkpoint directory.
 pub mod batch;
