@@ -7,9 +7,10 @@
 #      crate that does `extern crate alloc;`, then one with `extern crate std;`) must FAIL under
 #      the same command, which shows the method can catch a violation.
 #   2. `cargo tree -e normal --target thumbv7em-none-eabihf`: frmd-core's direct dependencies are
-#      only libm, micromath, heapless, bytemuck, postcard, defmt (default and all features).
+#      only libm, micromath, heapless, bytemuck, postcard, defmt (default features, and every
+#      firmware feature: `defmt`, `reference`; `alloc` is the host-only feature and is left out).
 #   3. frmd-core builds normally with --release for thumbv7em-none-eabihf, thumbv8m.main-none-eabihf
-#      and thumbv6m-none-eabi.
+#      and thumbv6m-none-eabi, and with the `defmt` feature for thumbv7em-none-eabihf.
 #
 # Uses the rustup toolchain with the rust-src component if `rustup component add rust-src` works,
 # otherwise Debian's rustc-web + rust-web-src (installed by scripts/setup-cortex-m.sh --path debian).
@@ -102,9 +103,12 @@ $(tail -n 20 "$log")"
     say "negative control: 'extern crate $crate_name' is rejected under -Z build-std=core"
 done
 
-# --- 1b. frmd-core with only `core`: default features and all features.
-for features in "" "--all-features"; do
-    log="$proof_dir/frmd-core-build-std${features:+-all-features}.log"
+# Every feature a firmware may enable (`alloc` is for std hosts and their tests only).
+firmware_features="--features defmt,reference"
+
+# --- 1b. frmd-core with only `core`: default features and every firmware feature.
+for features in "" "$firmware_features"; do
+    log="$proof_dir/frmd-core-build-std${features:+-firmware-features}.log"
     mkdir -p "$proof_dir"
     if ! proof_cargo build --release -p frmd-core $features >"$log" 2>&1; then
         tail -n 30 "$log" >&2
@@ -114,7 +118,7 @@ for features in "" "--all-features"; do
 done
 
 # --- 2. Direct dependencies of frmd-core on the target are from the allowed list.
-for features in "" "--all-features"; do
+for features in "" "$firmware_features"; do
     deps="$("$FRMD_CM_CARGO" tree -p frmd-core -e normal --target "$target" $features \
         --depth 1 --prefix none --format '{p}' 2>&1)" || fail "cargo tree failed: $deps"
     bad=""
@@ -145,4 +149,10 @@ for build_target in "$target" thumbv8m.main-none-eabihf thumbv6m-none-eabi; do
     fi
     say "frmd-core builds for $build_target --release ($FRMD_CM_PATH toolchain)"
 done
+log="$build_root/frmd-core-$target-defmt-release.log"
+if ! bash scripts/cortex-m-cargo.sh build --release -p frmd-core --features defmt >"$log" 2>&1; then
+    tail -n 30 "$log" >&2
+    fail "frmd-core with the defmt feature does not build for $target --release (log: $log)"
+fi
+say "frmd-core with the defmt feature builds for $target --release"
 say "OK: frmd-core links neither alloc nor std"

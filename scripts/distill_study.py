@@ -60,10 +60,46 @@ class Study:
         with self.lock:
             print(f"[{time.time() - self.started:7.0f} s] {text}", flush=True)
 
+    def claim(self, name: str, done: Path) -> Path | None:
+        """The step's lock file in RUNS/locks, once no other live process holds it (several study
+        processes may share RUNS); None when `done` appeared meanwhile."""
+        lock = self.runs / "locks" / f"{name}.lock"
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        while not done.exists():
+            try:
+                fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+            except FileExistsError:
+                try:
+                    pid = int(lock.read_text() or 0)
+                    os.kill(pid, 0)
+                except (ValueError, ProcessLookupError, FileNotFoundError):
+                    lock.unlink(missing_ok=True)  # its process is gone
+                    continue
+                except PermissionError:
+                    pass
+                time.sleep(20)
+                continue
+            os.write(fd, str(os.getpid()).encode())
+            os.close(fd)
+            if done.exists():
+                lock.unlink()
+                return None
+            return lock
+        return None
+
     def step(self, name: str, done: Path, argv: list, cwd: Path | None = None, retry_dir: Path | None = None) -> None:
         """Runs `argv` unless `done` exists; a half-written checkpoint dir is replaced (--force)."""
         if done.exists():
             return
+        lock = self.claim(name, done)
+        if lock is None:
+            return
+        try:
+            self.execute(name, done, argv, cwd, retry_dir)
+        finally:
+            lock.unlink(missing_ok=True)
+
+    def execute(self, name: str, done: Path, argv: list, cwd: Path | None, retry_dir: Path | None) -> None:
         if retry_dir is not None and retry_dir.exists() and any(retry_dir.iterdir()):
             argv = [*argv, "--force"]
         log = self.logs / f"{name}.log"

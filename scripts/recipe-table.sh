@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# README's Status table: the default recipe on the built-in tasks, several training seeds.
+# The recipe table of docs/status.md: the default recipe on the built-in tasks, several training seeds.
 #
 #   scripts/recipe-table.sh [OUT_DIR] [TASKS] [SEEDS]
 #   defaults: runs/recipe "reach avoid push insert" "0 1 2"

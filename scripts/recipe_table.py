@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Summarize a run tree written by scripts/recipe-table.sh into README's Status table.
+"""Summarize a run tree written by scripts/recipe-table.sh into the recipe table of docs/status.md.
 
 usage: recipe_table.py RUNS_DIR [--json OUT]
        recipe_table.py RUNS_DIR --copy-reports DEST   (the reports behind the table, as committed

@@ -8,9 +8,9 @@
 //! 3. Generates the synthetic int8 MLP (`frmd_firmware_support::synthetic::mlp`): weights as `synthetic_mlp.bin`,
 //!    everything else as `synthetic_mlp.rs`.
 //! 4. Exports the checked-in trained student (`policy/reach/`: `model.safetensors`, `frmd.json`,
-//!    `calibration.safetensors`) with `frmd_export::export::export_checkpoint` and bakes it into
-//!    `$OUT_DIR/student/` (`policy.rs` + `weights.bin`, plus `network_macs.rs`) for the `policy`
-//!    and `policy-stages` images.
+//!    `calibration.safetensors`) with `frmd_export::export` and bakes it into `$OUT_DIR/student/`
+//!    (`policy.rs` + `weights.bin` + `policy.blob`, plus `network_macs.rs`) for the `policy` and
+//!    `policy-stages` images.
 //!    The synthetic one-step policy (`synthetic::policy`) is baked into
 //!    `$OUT_DIR/synthetic_policy/` only for the `transformer` images, which use its configuration
 //!    (normalization, step constants, decoder, 44-input layout), not its MLP.
@@ -22,8 +22,9 @@ use std::{
 };
 
 use frmd_core::prodmp::BakedProDmp;
-use frmd_export::ProDmpTablesOwned;
-use frmd_firmware_support::host::student::student;
+use frmd_export::fold::ProDmpTablesOwned;
+use frmd_export::mlp::QuantizedMlp;
+use frmd_firmware_support::host::student::student_export;
 use frmd_firmware_support::shape;
 use frmd_firmware_support::synthetic;
 
@@ -44,9 +45,14 @@ fn bake_prodmp(out: &Path) {
 /// ranges over its calibration file, balanced inputs) and bakes it into `$OUT_DIR/student/`.
 /// The host test `frmd-export/tests/cortex_m_policy.rs` runs the same export as a blob.
 fn bake_student(out: &Path) {
-    let policy = &student();
-    frmd_export::bake::write_module(policy, &out.join("student"))
+    let student = student_export();
+    student
+        .write_module(&out.join("student"))
         .unwrap_or_else(|error| panic!("baking the student failed: {error:#}"));
+    let policy = &student
+        .mlp()
+        .expect("the policy images run an MLP student")
+        .policy;
     let layers = policy
         .hidden
         .iter()
@@ -66,7 +72,7 @@ fn bake_student(out: &Path) {
 }
 
 /// The second (fine-plane) product of a two-plane first layer.
-fn two_plane_macs(policy: &frmd_export::QuantizedPolicy) -> usize {
+fn two_plane_macs(policy: &QuantizedMlp) -> usize {
     match (policy.input_precision, policy.hidden.first()) {
         (frmd_core::model::mlp::InputPrecision::TwoPlane, Some(first)) => {
             first.in_features * first.out_features
@@ -121,7 +127,7 @@ fn main() {
     fs::write(out.join("synthetic_mlp.rs"), model.rust_source()).expect("write synthetic_mlp.rs");
     bake_student(&out);
     bake_pil(&out);
-    frmd_export::bake::write_module(
+    frmd_export::mlp::bake::write_module(
         &synthetic::policy::generate(),
         &out.join("synthetic_policy"),
     )

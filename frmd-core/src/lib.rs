@@ -3,6 +3,7 @@
 //! `#![no_std]` and no `alloc`: every buffer is a fixed-size array or a caller-owned slice whose
 //! size is known at compile time. No function on an input path panics; errors are small enums.
 #![no_std]
+#![warn(missing_docs)]
 #![cfg_attr(
     not(test),
     deny(
@@ -15,6 +16,9 @@
         clippy::unimplemented
     )
 )]
+
+#[cfg(any(test, feature = "alloc"))]
+extern crate alloc;
 
 pub mod blob;
 pub mod hash;

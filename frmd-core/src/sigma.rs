@@ -15,6 +15,7 @@ pub const RENOISE_LOW: f64 = 0.04;
 
 /// Why a noise-level computation was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum SigmaError {
     /// `sigma_min`, `sigma_max`, `rho` or `sigma_data` is not finite and positive, or
     /// `sigma_min >= sigma_max`.
@@ -40,6 +41,9 @@ impl core::fmt::Display for SigmaError {
         f.write_str(text)
     }
 }
+
+/// No variant wraps another error.
+impl core::error::Error for SigmaError {}
 
 /// The EDM noise-level configuration. Defaults: `sigma_min` 0.002, `sigma_max` 80, `rho` 7,
 /// `sigma_data` 0.5. Serialized as is in a checkpoint's `frmd.json` (`sigma`).

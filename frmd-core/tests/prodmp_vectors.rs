@@ -1,5 +1,5 @@
 //! The f64 and baked f32 ProDMP decoders against mp_pytorch 0.1.4 reference vectors
-//! (`tests/data/prodmp_vectors.json`, a copy of `shared/testdata/prodmp_vectors.json`).
+//! (`tests/data/prodmp_vectors.json`, computed with mp_pytorch and committed with the tests).
 use frmd_core::prodmp::{apply_row_f32, BakedProDmp, ProDmp, ProDmpConfig};
 use serde_json::Value;
 use std::path::PathBuf;
@@ -9,10 +9,6 @@ const F32_TOL: f64 = 1e-4;
 
 fn repo_copy() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/prodmp_vectors.json")
-}
-
-fn shared_copy() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/testdata/prodmp_vectors.json")
 }
 
 fn load(path: &PathBuf) -> Value {
@@ -173,21 +169,6 @@ fn all_cases_match_reference_f64() {
     let (count, worst) = check_f64(&load(&repo_copy()));
     assert_eq!(count, 18);
     eprintln!("f64: {count} cases, worst scaled error {worst:.3e}");
-}
-
-#[test]
-fn shared_vectors_match_when_present() {
-    let path = shared_copy();
-    if !path.exists() {
-        eprintln!(
-            "note: {} not present; the repo copy is tested instead",
-            path.display()
-        );
-        return;
-    }
-    let (count, worst) = check_f64(&load(&path));
-    assert!(count >= 18);
-    eprintln!("shared f64: {count} cases, worst scaled error {worst:.3e}");
 }
 
 /// Baked f32 policy decoder on the cases in policy form (init 0, times k tau / N, k = 1..=N).

@@ -1,139 +1,235 @@
-//! Checkpoint directory -> [`QuantizedPolicy`] in one call (usable from a firmware build.rs).
-use crate::calibrate::{
-    calibrate, input_gains, quantize, widen, CalibrationSet, RangeMethod, Ranges,
-};
-use crate::checkpoint::{Checkpoint, CALIBRATION_FILE};
-use crate::fold::FoldedMlp;
-use crate::transformer::{FoldedTransformer, QuantizedTransformer, TransformerRanges};
-use crate::QuantizedPolicy;
-use anyhow::Context;
-use frmd_core::model::mlp::InputPrecision;
-use std::path::Path;
+//! The one entry point: [`export`] (or [`export_checkpoint`] for a checkpoint already read) takes
+//! a student checkpoint through the exporter of its backbone and checks the blob with frmd-core's
+//! loader; the [`ExportedStudent`] it returns offers the blob, the baked module, the memory report
+//! and the checks of the bit-accuracy harness for every backbone alike.
+use std::fmt;
+use std::path::{Path, PathBuf};
 
-/// Export settings.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ExportOptions {
-    /// Sampling steps baked into the step table (1..=4).
-    pub steps: usize,
-    pub ranges: RangeMethod,
-    /// Balance the input segments' ranges with [`crate::fold::FoldedMlp::with_input_gains`].
-    pub balance_inputs: bool,
-    /// How the MLP's first layer takes the input: one 16-bit plane
-    /// (`frmd_core::model::mlp::InputPrecision::Int16`, the default: about 16-bit input precision
-    /// in one pass), two int8 planes (`TwoPlane`: the same precision in two passes) or one int8
-    /// plane (`Int8`).
-    pub input_precision: InputPrecision,
-    /// With a 16-bit or two-plane input: the calibrated input range is widened by this factor
-    /// (>= 1), so observations beyond the training range (closed-loop states the demonstrations
-    /// never visited) reach the network instead of saturating; the fine grid keeps the resolution
-    /// (`range / 2^16`). Ignored for plain int8 input.
-    pub input_headroom: f32,
+use anyhow::Context;
+use frmd_core::policy::{Network, PolicyDims};
+use frmd_formats::calibration::{self, CalibrationSet};
+use frmd_formats::checkpoint::{
+    BackboneConfig, Checkpoint, CheckpointMeta, Normalization, CALIBRATION_FILE,
+};
+
+use crate::backbone::{ExportOptions, ExportedNetwork};
+use crate::fold::check_student;
+use crate::host::HostScratch;
+use crate::memory::MemoryFigures;
+use crate::mlp::MlpExport;
+use crate::reference::KernelCheck;
+use crate::transformer::TransformerExport;
+
+/// A student checkpoint exported by the exporter of its backbone, its blob checked.
+#[derive(Clone, Debug)]
+pub struct ExportedStudent {
+    meta: CheckpointMeta,
+    options: ExportOptions,
+    calibration: CalibrationSet,
+    network: Backbone,
+    blob: Vec<u8>,
 }
 
-/// Default [`ExportOptions::input_headroom`]: the weaker built-in task policies reach normalized
-/// observations of 3-16 in closed loop (training range +-1).
-pub const DEFAULT_INPUT_HEADROOM: f32 = 8.0;
+/// The exporter's result for each backbone.
+#[derive(Clone, Debug)]
+enum Backbone {
+    Mlp(MlpExport),
+    Transformer(TransformerExport),
+}
 
-impl Default for ExportOptions {
-    fn default() -> Self {
-        ExportOptions {
-            steps: 1,
-            ranges: RangeMethod::MinMax,
-            balance_inputs: true,
-            input_precision: InputPrecision::Int16,
-            input_headroom: DEFAULT_INPUT_HEADROOM,
+impl Backbone {
+    fn get(&self) -> &dyn ExportedNetwork {
+        match self {
+            Backbone::Mlp(mlp) => mlp,
+            Backbone::Transformer(transformer) => transformer,
         }
     }
 }
 
-/// Everything an export produced.
-#[derive(Clone, Debug)]
-pub struct Exported {
-    pub checkpoint: Checkpoint,
-    pub folded: FoldedMlp,
-    pub ranges: Ranges,
-    pub policy: QuantizedPolicy,
-}
-
-fn read_checkpoint(dir: &Path) -> anyhow::Result<Checkpoint> {
-    Checkpoint::read(dir).with_context(|| format!("checkpoint {}", dir.display()))
-}
-
-/// The calibration rows of an export: `calibration`, else the checkpoint's own
-/// `dir/calibration.safetensors`.
-fn calibration_rows(
+/// Reads the student checkpoint in `dir` once and exports it: see [`export_checkpoint`].
+pub fn export(
     dir: &Path,
-    checkpoint: &Checkpoint,
+    options: &ExportOptions,
     calibration: Option<CalibrationSet>,
-) -> anyhow::Result<CalibrationSet> {
-    match calibration {
-        Some(set) => Ok(set),
-        None => crate::calibration_file::read(&dir.join(CALIBRATION_FILE), checkpoint.meta.model.cond_dim())
-            .context("no calibration data given and the checkpoint's calibration file is unusable (pass --data)"),
-    }
+) -> anyhow::Result<ExportedStudent> {
+    export_checkpoint(Checkpoint::read(dir)?, options, calibration)
 }
 
-/// Reads `dir`, folds, calibrates on `calibration` (or `dir/calibration.safetensors` when
-/// `None`) and quantizes.
+/// Exports `checkpoint` with the exporter of its backbone: folds it for `options.steps` sampling
+/// steps, calibrates on `calibration` (or the checkpoint's own `calibration.safetensors` when
+/// `None`), quantizes, encodes the blob and loads it back with frmd-core's loader (the
+/// firmware's) into a host policy: an export the runtime would refuse is an error here, not a
+/// file.
 pub fn export_checkpoint(
-    dir: &Path,
-    options: ExportOptions,
+    checkpoint: Checkpoint,
+    options: &ExportOptions,
     calibration: Option<CalibrationSet>,
-) -> anyhow::Result<Exported> {
-    let checkpoint = read_checkpoint(dir)?;
-    let folded = FoldedMlp::new(&checkpoint, options.steps)
-        .with_context(|| format!("cannot export {}", dir.display()))?;
-    let norm = checkpoint
-        .meta
+) -> anyhow::Result<ExportedStudent> {
+    let dir = checkpoint.dir.display().to_string();
+    let meta = &checkpoint.meta;
+    check_student(meta).with_context(|| format!("cannot export {dir}"))?;
+    let calibration = match calibration {
+        Some(set) => set,
+        None => calibration::read(
+            &checkpoint.dir.join(CALIBRATION_FILE),
+            meta.model.cond_dim(),
+        )
+        .with_context(|| format!("{dir}: no calibration rows given and its {CALIBRATION_FILE} is unusable (calibrate on the training demonstrations, `frmd export --data`)"))?,
+    };
+    let norm = meta
         .normalization
         .clone()
-        .with_context(|| format!("{}: checkpoint has no normalization", dir.display()))?;
-    let set = calibration_rows(dir, &checkpoint, calibration)?;
-    let folded = if options.balance_inputs {
-        folded.with_input_gains(input_gains(&folded, &set)?)?
-    } else {
-        folded
-    };
-    let mut ranges = calibrate(&folded, &set, options.ranges)?;
-    if options.input_precision != InputPrecision::Int8 {
-        ranges.input = widen(ranges.input, options.input_headroom).context("input headroom")?;
+        .with_context(|| format!("{dir}: checkpoint has no normalization"))?;
+    let network = match meta.model.backbone {
+        BackboneConfig::Mlp { .. } => {
+            crate::mlp::export(&checkpoint, options, &calibration, &norm).map(Backbone::Mlp)
+        }
+        BackboneConfig::Transformer { .. } => {
+            crate::transformer::export(&checkpoint, options, &calibration)
+                .map(Backbone::Transformer)
+        }
     }
-    let policy = quantize(&folded, &ranges, &norm, options.input_precision)?;
-    Ok(Exported {
-        checkpoint,
-        folded,
-        ranges,
-        policy,
+    .with_context(|| format!("cannot export {dir}"))?;
+    let blob = network
+        .get()
+        .blob(&norm)
+        .with_context(|| format!("{dir}: encoding the blob"))?;
+    crate::host::check_blob(&blob).with_context(|| {
+        format!("{dir}: the exported blob does not load with the runtime's loader")
+    })?;
+    Ok(ExportedStudent {
+        meta: checkpoint.meta,
+        options: *options,
+        calibration,
+        network,
+        blob,
     })
 }
 
-/// Everything a transformer export produced.
-#[derive(Clone, Debug)]
-pub struct ExportedTransformer {
-    pub checkpoint: Checkpoint,
-    pub ranges: TransformerRanges,
-    /// The int8 model; its `folded` field is the f32 reference.
-    pub model: QuantizedTransformer,
+impl ExportedStudent {
+    /// The checkpoint's `frmd.json`.
+    pub fn meta(&self) -> &CheckpointMeta {
+        &self.meta
+    }
+
+    /// The settings it was exported with.
+    pub fn options(&self) -> &ExportOptions {
+        &self.options
+    }
+
+    /// The rows it was calibrated on.
+    pub fn calibration(&self) -> &CalibrationSet {
+        &self.calibration
+    }
+
+    /// The checkpoint's normalization (an exported student always has one).
+    pub fn normalization(&self) -> Option<&Normalization> {
+        self.meta.normalization.as_ref()
+    }
+
+    /// The self-describing blob (`policy.blob`), checked with frmd-core's loader.
+    pub fn blob(&self) -> &[u8] {
+        &self.blob
+    }
+
+    /// The policy's sizes.
+    pub fn dims(&self) -> PolicyDims {
+        self.network.get().dims()
+    }
+
+    /// Sampling steps baked into the step table.
+    pub fn steps(&self) -> usize {
+        self.network.get().steps()
+    }
+
+    /// RAM and flash figures of the baked form.
+    pub fn memory(&self) -> MemoryFigures {
+        self.network.get().memory()
+    }
+
+    /// Writes the baked module (see [`crate::bake`]) and the blob into `dir`; returns the files
+    /// written.
+    pub fn write_module(&self, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+        self.network.get().write_module(&self.blob, dir)
+    }
+
+    /// The folded student's sampler on frmd-core's f32 path (check (a) of docs/design.md
+    /// section 6): the chunk positions (normalized, `[n][k]`) for condition `cond` and
+    /// standard-normal `noise` (`steps * n * k` values), reporting each step's model input to
+    /// `on_input(step, input)`.
+    pub fn sample_f32(
+        &self,
+        cond: &[f32],
+        noise: &[f32],
+        mut on_input: impl FnMut(usize, &[f32]),
+    ) -> anyhow::Result<Vec<f32>> {
+        self.network.get().sample_f32(cond, noise, &mut on_input)
+    }
+
+    /// Check (d): the int8 kernels on the exported weights against a wide-integer model (an
+    /// MLP's whole network on `inputs`, step-0 model inputs, plus edge inputs; a transformer's
+    /// every linear layer on random and edge rows). The check's name says which.
+    pub fn check_kernels(&self, inputs: &[Vec<f32>]) -> anyhow::Result<KernelCheck> {
+        self.network.get().check_kernels(inputs)
+    }
+
+    /// Calls `run` with frmd-core's f32 network of the folded student, the int8 network's twin
+    /// (a transformer runs in `scratch`): the runtime's policy over it isolates quantization from
+    /// everything else.
+    pub fn with_f32_network<R>(
+        &self,
+        scratch: &mut HostScratch,
+        run: impl FnOnce(&mut dyn Network) -> anyhow::Result<R>,
+    ) -> anyhow::Result<R> {
+        let mut run = Some(run);
+        let mut result = None;
+        self.network
+            .get()
+            .with_f32_network(scratch, &mut |network| {
+                if let Some(run) = run.take() {
+                    result = Some(run(network)?);
+                }
+                Ok(())
+            })?;
+        result.context("the f32 network was not built")
+    }
+
+    /// The MLP exporter's result, for tools that look inside an MLP (none for a transformer).
+    pub fn mlp(&self) -> Option<&MlpExport> {
+        match &self.network {
+            Backbone::Mlp(mlp) => Some(mlp),
+            Backbone::Transformer(_) => None,
+        }
+    }
+
+    /// The transformer exporter's result (none for an MLP).
+    pub fn transformer(&self) -> Option<&TransformerExport> {
+        match &self.network {
+            Backbone::Transformer(transformer) => Some(transformer),
+            Backbone::Mlp(_) => None,
+        }
+    }
 }
 
-/// [`export_checkpoint`] for a transformer student: reads `dir`, folds the per-step noise tokens,
-/// calibrates with the transformer probes on `calibration` (or `dir/calibration.safetensors`)
-/// and quantizes. `options.balance_inputs` and `options.input_precision` do not apply (each input
-/// layer has its own scale).
-pub fn export_transformer_checkpoint(
-    dir: &Path,
-    options: ExportOptions,
-    calibration: Option<CalibrationSet>,
-) -> anyhow::Result<ExportedTransformer> {
-    let checkpoint = read_checkpoint(dir)?;
-    let folded = FoldedTransformer::new(&checkpoint, options.steps)
-        .with_context(|| format!("cannot export {}", dir.display()))?;
-    let set = calibration_rows(dir, &checkpoint, calibration)?;
-    let ranges = crate::transformer::calibrate(&folded, &set, options.ranges)?;
-    let model = crate::transformer::quantize(&folded, &ranges)?;
-    Ok(ExportedTransformer {
-        checkpoint,
-        ranges,
-        model,
-    })
+/// The summary `frmd export` prints: shape, steps and calibration, backbone details, memory.
+impl fmt::Display for ExportedStudent {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let network = self.network.get();
+        let d = network.dims();
+        writeln!(
+            f,
+            "policy: {:?}, m {} O {} K {} n {} P {}, {} step(s), calibration {} on {} rows",
+            self.meta.model.backbone,
+            d.history,
+            d.obs_dim,
+            d.action_dim,
+            d.horizon,
+            d.params_per_dof,
+            network.steps(),
+            self.options.ranges,
+            network.calibration_rows()
+        )?;
+        network.details(f)?;
+        write!(f, "{} (blob {} B)", network.memory(), self.blob.len())
+    }
 }

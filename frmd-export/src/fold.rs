@@ -1,7 +1,7 @@
-//! Folding a student checkpoint into the runtime's structure, in f32: per-step constants from the
-//! sigma schedule, the noise embedding of each step folded into a first-layer bias variant, and
-//! the input layout of the float model. The result ([`FoldedMlp`]) runs on frmd-core's own f32
-//! path ([`frmd_core::model::mlp::F32Mlp`]) and is what calibration and quantization start from.
+//! Folding shared by both backbones, in f32: the step table from the sigma schedule, the noise
+//! embedding of every sampling step (which each backbone folds into its network: the MLP's
+//! first-layer bias, the transformer's noise token), the float models' input layout, the baked
+//! ProDMP decoder tables and the host consistency sampler over any folded network.
 //!
 //! The student is the consistency function of frmd-host (`diffusion/precond.rs`) in its
 //! checkpoint's output parametrization: with the boundary skip, step i has the consistency
@@ -10,38 +10,28 @@
 //! student has `c_skip = 0`, `c_out = 1`. Sampling levels are `consistency_sampling_sigma(i,
 //! steps)`, re-noised with `sqrt(sigma_i^2 - sigma_min^2)` (frmd-host
 //! `samplers::sample_consistency`).
-//!
-//! Input gains: the model input is quantized with one int8 scale for the whole vector, and the
-//! `c_in`-scaled noisy trajectory (about +-4.5 at sigma_max) would otherwise set that scale for
-//! the observations (+-1). [`FoldedMlp::with_input_gains`] multiplies the trajectory segment by
-//! `traj_gain` (folded into every step's baked `c_in`) and the rate segment by `rate_gain` (folded
-//! into the layout's `rate_scale`), and divides the matching first-layer weight columns by the
-//! same gains, so the f32 function is unchanged while every segment spans about the same range.
-//! The baked `c_in` is therefore `c_in(sigma) * traj_gain`.
-use crate::checkpoint::{Activation, BackboneConfig, Checkpoint, ModelConfig, ProDmpOutput, Role};
 use anyhow::{bail, Context};
 use frmd_core::kernels::Activation as KernelActivation;
 use frmd_core::model::linear::F32Linear;
-use frmd_core::model::mlp::{F32Mlp, F32Scratch, Probe};
 use frmd_core::policy::{
-    skip_output, F32MlpNetwork, InputLayout, InputSegment, StepConstants, MAX_HIDDEN_LAYERS,
-    MAX_STEPS,
+    skip_output, InputLayout, InputSegment, ProDmpTables, StepConstants, MAX_STEPS,
 };
-use frmd_core::prodmp::{apply_row_f32, ProDmp, ProDmpConfig};
+use frmd_core::prodmp::{apply_row_f32, BakedProDmp, ProDmp, ProDmpConfig};
 use frmd_core::sigma::{noise_embedding, SigmaConfig};
-
-use crate::ProDmpTablesOwned;
-
-/// Widest layer the exporter's f32 path (and the host int8 runners) handle.
-pub const MAX_WIDTH: usize = 1024;
+use frmd_formats::checkpoint::{CheckpointMeta, ModelConfig, ProDmpOutput, Role};
 
 /// One f32 layer, row-major `[out, in]` weights.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FloatLayer {
+    /// Input width.
     pub in_features: usize,
+    /// Output width.
     pub out_features: usize,
+    /// `[out, in]` weights.
     pub weights: Vec<f32>,
+    /// `[out]` bias.
     pub bias: Vec<f32>,
+    /// Activation after the bias.
     pub activation: KernelActivation,
 }
 
@@ -58,96 +48,52 @@ impl FloatLayer {
     }
 }
 
-/// A student MLP folded for `steps` sampling steps.
-#[derive(Clone, Debug)]
-pub struct FoldedMlp {
-    pub config: ModelConfig,
-    pub sigma: SigmaConfig,
-    /// Hidden layers; the first one's weights lack the embedding columns.
-    pub hidden: Vec<FloatLayer>,
-    pub output: FloatLayer,
-    /// Per step: first hidden layer bias with `W_emb . embedding(c_noise(sigma_i))` added.
-    pub first_layer_biases: Vec<Vec<f32>>,
-    pub steps: Vec<StepConstants>,
-    pub layout: InputLayout,
-    pub prodmp: ProDmpTablesOwned,
-    /// Input gains applied so far (1 after [`FoldedMlp::new`]).
-    pub gains: InputGains,
-}
-
-/// Factors on the trajectory and rate input segments (see the module docs).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct InputGains {
-    pub traj_gain: f32,
-    pub rate_gain: f32,
-}
-
-impl Default for InputGains {
-    fn default() -> Self {
-        InputGains {
-            traj_gain: 1.0,
-            rate_gain: 1.0,
-        }
-    }
-}
-
-fn kernel_activation(a: Activation) -> KernelActivation {
-    match a {
-        Activation::Silu => KernelActivation::Silu,
-        Activation::Mish => KernelActivation::Mish,
-    }
-}
-
-/// The step table for `steps` (1..=4) sampling steps of a student with output parametrization
-/// `output`.
-pub fn step_constants(
-    sigma: &SigmaConfig,
-    output: ProDmpOutput,
-    steps: usize,
-) -> anyhow::Result<Vec<StepConstants>> {
-    if !(1..=MAX_STEPS).contains(&steps) {
-        bail!("the student samples with 1..={MAX_STEPS} steps, not {steps}");
-    }
-    let err = |what: &'static str| move |e| anyhow::anyhow!("{what}: {e:?}");
-    (0..steps)
-        .map(|i| {
-            let level = sigma
-                .consistency_sampling_sigma(i, steps)
-                .map_err(err("sampling level"))?;
-            let step = StepConstants::consistency(sigma, level, i as u32)
-                .map_err(err("step constants"))?;
-            Ok(match output {
-                ProDmpOutput::Direct => StepConstants {
-                    c_skip: 0.0,
-                    c_out: 1.0,
-                    ..step
-                },
-                ProDmpOutput::BoundarySkip => step,
-            })
-        })
-        .collect()
-}
-
-/// The float MLP's input order: `[obs history, y0, v0 * control_dt, c_in x]` (the embedding,
-/// which follows, is folded into the bias).
-pub fn mlp_layout(config: &ModelConfig) -> anyhow::Result<InputLayout> {
-    InputLayout::new(
-        &[
-            InputSegment::ObsHistory,
-            InputSegment::PrevAction,
-            InputSegment::PrevRate,
-            InputSegment::NoisyTrajectory,
-        ],
-        config.control_dt as f32,
-    )
-    .map_err(|e| anyhow::anyhow!("input layout: {e}"))
+/// ProDMP decoder tables (row-major `[N][P]` and `[N]`), as [`BakedProDmp`] holds them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProDmpTablesOwned {
+    /// `[N][P]` position coefficients of `[w.., g]`.
+    pub pos_params: Vec<f32>,
+    /// `[N][P]` velocity coefficients (1/s).
+    pub vel_params: Vec<f32>,
+    /// `[N]` position coefficient of `y0`.
+    pub pos_y0: Vec<f32>,
+    /// `[N]` position coefficient of `v0` (s).
+    pub pos_v0: Vec<f32>,
+    /// `[N]` velocity coefficient of `y0` (1/s).
+    pub vel_y0: Vec<f32>,
+    /// `[N]` velocity coefficient of `v0`.
+    pub vel_v0: Vec<f32>,
 }
 
 impl ProDmpTablesOwned {
+    /// Copies the tables of a baked decoder.
+    pub fn from_baked<const N: usize, const P: usize>(baked: &BakedProDmp<N, P>) -> Self {
+        Self {
+            pos_params: baked.pos_params.as_flattened().to_vec(),
+            vel_params: baked.vel_params.as_flattened().to_vec(),
+            pos_y0: baked.pos_y0.to_vec(),
+            pos_v0: baked.pos_v0.to_vec(),
+            vel_y0: baked.vel_y0.to_vec(),
+            vel_v0: baked.vel_v0.to_vec(),
+        }
+    }
+
+    /// The tables as frmd-core's decoder view.
+    pub fn view(&self) -> ProDmpTables<'_> {
+        ProDmpTables {
+            pos_params: &self.pos_params,
+            vel_params: &self.vel_params,
+            pos_y0: &self.pos_y0,
+            pos_v0: &self.pos_v0,
+            vel_y0: &self.vel_y0,
+            vel_v0: &self.vel_v0,
+        }
+    }
+
     /// Tables for `cfg` at the policy's query times `tau/n .. tau` (as
     /// [`frmd_core::prodmp::BakedProDmp::from_config`], for run-time sizes).
     pub fn from_config(cfg: &ProDmpConfig, horizon: usize) -> anyhow::Result<Self> {
-        let decoder = ProDmp::new(cfg).map_err(|e| anyhow::anyhow!("ProDMP config: {e:?}"))?;
+        let decoder = ProDmp::new(cfg).context("ProDMP config")?;
         let p = cfg.num_params_per_dof();
         let mut t = ProDmpTablesOwned {
             pos_params: vec![],
@@ -162,7 +108,7 @@ impl ProDmpTablesOwned {
             let (mut pos, mut vel) = (vec![0.0; p], vec![0.0; p]);
             let c = decoder
                 .linear_row(0.0, time, &mut pos, &mut vel)
-                .map_err(|e| anyhow::anyhow!("ProDMP row {step}: {e:?}"))?;
+                .with_context(|| format!("ProDMP row {step}"))?;
             t.pos_params.extend(pos.iter().map(|&v| v as f32));
             t.vel_params.extend(vel.iter().map(|&v| v as f32));
             t.pos_y0.push(c.pos_y0 as f32);
@@ -209,227 +155,60 @@ impl ProDmpTablesOwned {
     }
 }
 
-impl FoldedMlp {
-    /// Folds a student MLP checkpoint for `steps` sampling steps, refusing what the runtime
-    /// cannot represent.
-    pub fn new(ckpt: &Checkpoint, steps: usize) -> anyhow::Result<Self> {
-        let meta = &ckpt.meta;
+/// Refuses a checkpoint that is not a student: its sampler needs many network evaluations.
+pub(crate) fn check_student(meta: &CheckpointMeta) -> anyhow::Result<()> {
+    if meta.role != Role::Student {
+        bail!(
+            "this is a {} checkpoint; only students can be exported (its sampler needs many network evaluations)",
+            meta.role
+        );
+    }
+    Ok(())
+}
+
+/// The parts of a student checkpoint that do not depend on its backbone: what every folded
+/// network carries besides its layers.
+#[derive(Clone, Debug)]
+pub struct StudentBase {
+    /// The model configuration.
+    pub config: ModelConfig,
+    /// The noise schedule.
+    pub sigma: SigmaConfig,
+    /// The step table.
+    pub steps: Vec<StepConstants>,
+    /// The model input layout ([`input_layout`]).
+    pub layout: InputLayout,
+    /// The decoder tables at the policy's query times.
+    pub prodmp: ProDmpTablesOwned,
+    /// Per step, the noise embedding the network folds in ([`step_embeddings`]).
+    pub embeddings: Vec<Vec<f32>>,
+}
+
+impl StudentBase {
+    /// The shared parts of `meta` for `steps` sampling steps; refuses a checkpoint that is not a
+    /// student (its sampler needs many network evaluations) or has no ProDMP head.
+    pub fn new(meta: &CheckpointMeta, steps: usize) -> anyhow::Result<Self> {
+        check_student(meta)?;
         let config = &meta.model;
-        if meta.role != Role::Student {
-            bail!("only student checkpoints can be exported; this one is a {:?} (its sampler needs many network evaluations)", meta.role);
-        }
-        let (hidden_sizes, activation) = match &config.backbone {
-            BackboneConfig::Mlp { hidden, activation } => (hidden.clone(), *activation),
-            BackboneConfig::Transformer { .. } => bail!(
-                "transformer backbones fold with transformer::FoldedTransformer (export::export_transformer_checkpoint); the MLP blob/baked formats cannot hold them"
-            ),
-        };
-        if hidden_sizes.len() > MAX_HIDDEN_LAYERS {
-            bail!(
-                "{} hidden layers exceed the runtime limit of {MAX_HIDDEN_LAYERS}",
-                hidden_sizes.len()
-            );
-        }
-        let prodmp_cfg = config.prodmp().context("a student needs a ProDMP head")?;
-        let layout = mlp_layout(config)?;
-        let input_width = layout
-            .width(
-                config.history,
-                config.obs_dim,
-                config.action_dim,
-                config.horizon,
-            )
-            .context("input width overflows")?;
-        let widest = hidden_sizes
-            .iter()
-            .copied()
-            .chain([input_width, config.output_dim()])
-            .max()
-            .unwrap_or(0);
-        if widest > MAX_WIDTH {
-            bail!("layer width {widest} exceeds the exporter's limit of {MAX_WIDTH}");
-        }
-        let sigma: SigmaConfig = meta.sigma;
-        let steps = step_constants(
-            &sigma,
-            meta.model.prodmp_output().unwrap_or_default(),
-            steps,
-        )?;
-        let mut layers = Vec::new();
-        let mut width = input_width + config.embed_dim;
-        for (i, &out) in hidden_sizes
-            .iter()
-            .chain([&config.output_dim()])
-            .enumerate()
-        {
-            let weights = ckpt.tensor(&format!("mlp.layers.{i}.weight"))?.to_vec();
-            let bias = ckpt.tensor(&format!("mlp.layers.{i}.bias"))?.to_vec();
-            let act = if i < hidden_sizes.len() {
-                kernel_activation(activation)
-            } else {
-                KernelActivation::Identity
-            };
-            layers.push(FloatLayer {
-                in_features: width,
-                out_features: out,
-                weights,
-                bias,
-                activation: act,
-            });
-            width = out;
-        }
-        let output = layers.pop().context("internal: no output layer")?;
-        let mut hidden = layers;
-        let first = hidden
-            .first_mut()
-            .context("a student MLP has at least one hidden layer")?;
-        // Split the first layer's columns: [input | embedding].
-        let full_in = first.in_features;
-        let mut embedding = vec![0.0f64; config.embed_dim];
-        let mut first_layer_biases = Vec::new();
-        for i in 0..steps.len() {
-            let level = sigma
-                .consistency_sampling_sigma(i, steps.len())
-                .map_err(|e| anyhow::anyhow!("sampling level: {e:?}"))?;
-            let c_noise = sigma
-                .c_noise(level)
-                .map_err(|e| anyhow::anyhow!("c_noise: {e:?}"))?;
-            noise_embedding(c_noise, &mut embedding)
-                .map_err(|e| anyhow::anyhow!("noise embedding: {e:?}"))?;
-            let bias: Vec<f32> = (0..first.out_features)
-                .map(|o| {
-                    let row = &first.weights[o * full_in + input_width..(o + 1) * full_in];
-                    let folded: f64 = row
-                        .iter()
-                        .zip(&embedding)
-                        .map(|(w, e)| f64::from(*w) * ((*e as f32) as f64))
-                        .sum();
-                    (f64::from(first.bias[o]) + folded) as f32
-                })
-                .collect();
-            first_layer_biases.push(bias);
-        }
-        first.weights = first
-            .weights
-            .chunks_exact(full_in)
-            .flat_map(|row| row[..input_width].iter().copied())
-            .collect();
-        first.in_features = input_width;
-        first.bias = first_layer_biases[0].clone();
-        Ok(FoldedMlp {
+        let prodmp = config.prodmp().context("a student needs a ProDMP head")?;
+        let output = config.prodmp_output().unwrap_or_default();
+        let steps = step_constants(&meta.sigma, output, steps)?;
+        Ok(Self {
             config: config.clone(),
-            sigma,
-            hidden,
-            output,
-            first_layer_biases,
+            sigma: meta.sigma,
+            embeddings: step_embeddings(&meta.sigma, steps.len(), config.embed_dim)?,
             steps,
-            layout,
-            prodmp: ProDmpTablesOwned::from_config(&prodmp_cfg, config.horizon)?,
-            gains: InputGains::default(),
+            layout: input_layout(config)?,
+            prodmp: ProDmpTablesOwned::from_config(&prodmp, config.horizon)?,
         })
     }
 
-    /// The same function with the trajectory and rate input segments scaled by `gains` (relative
-    /// to the current ones) and the first layer's matching columns divided by them.
-    pub fn with_input_gains(&self, gains: InputGains) -> anyhow::Result<Self> {
-        let (traj, rate) = (gains.traj_gain, gains.rate_gain);
-        if !(traj.is_finite() && traj > 0.0 && rate.is_finite() && rate > 0.0) {
-            bail!("input gains must be finite and positive, got {gains:?}");
-        }
-        let c = &self.config;
-        let (obs_len, k) = (c.history * c.obs_dim, c.action_dim);
-        let mut out = self.clone();
-        let first = out
-            .hidden
-            .first_mut()
-            .context("a student MLP has at least one hidden layer")?;
-        let width = first.in_features;
-        for row in first.weights.chunks_exact_mut(width) {
-            for (i, w) in row.iter_mut().enumerate() {
-                if i >= obs_len + 2 * k {
-                    *w /= traj;
-                } else if i >= obs_len + k {
-                    *w /= rate;
-                }
-            }
-        }
-        for step in &mut out.steps {
-            step.c_in *= traj;
-        }
-        out.layout.rate_scale *= rate;
-        out.gains = InputGains {
-            traj_gain: self.gains.traj_gain * traj,
-            rate_gain: self.gains.rate_gain * rate,
-        };
-        Ok(out)
-    }
-
-    /// All first-layer bias variants back to back (the layout [`F32MlpNetwork`] takes).
-    pub fn flat_first_layer_biases(&self) -> Vec<f32> {
-        self.first_layer_biases.concat()
-    }
-
-    /// frmd-core's [`F32MlpNetwork`] over these weights, with `biases` from
-    /// [`Self::flat_first_layer_biases`] (the f32 twin of the int8 network, for the runtime's
-    /// own sampler and policy).
-    pub fn f32_network<'a, const WIDTH: usize>(
-        &'a self,
-        biases: &'a [f32],
-    ) -> anyhow::Result<F32MlpNetwork<'a, WIDTH>> {
-        let views: Vec<F32Linear<'a>> = self.hidden.iter().map(|l| l.view(&l.bias)).collect();
-        F32MlpNetwork::new(&views, self.output.view(&self.output.bias), biases)
-            .map_err(|e| anyhow::anyhow!("f32 network: {e}"))
-    }
-
-    /// Input width of the folded network.
-    pub fn input_width(&self) -> usize {
-        self.hidden
-            .first()
-            .map_or(self.output.in_features, |l| l.in_features)
-    }
-
-    /// Runs step `step`'s network on `input` through frmd-core's f32 path, reporting every
-    /// probe to `observe`; returns the `K * P` ProDMP parameters.
-    pub fn forward_observed(
-        &self,
-        step: usize,
-        input: &[f32],
-        mut observe: impl FnMut(Probe, &[f32]),
-    ) -> anyhow::Result<Vec<f32>> {
-        let bias = self
-            .first_layer_biases
-            .get(step)
-            .context("step index out of range")?;
-        let views: Vec<F32Linear<'_>> = self
-            .hidden
-            .iter()
-            .enumerate()
-            .map(|(i, l)| l.view(if i == 0 { bias } else { &l.bias }))
-            .collect();
-        let mlp = F32Mlp {
-            hidden: &views,
-            output: self.output.view(&self.output.bias),
-        };
-        let mut scratch = Box::new(F32Scratch::<MAX_WIDTH>::new());
-        let mut out = vec![0.0; self.output.out_features];
-        mlp.forward_observed(input, &mut out, &mut scratch, &mut observe)
-            .map_err(|e| anyhow::anyhow!("f32 forward: {e}"))?;
-        Ok(out)
-    }
-
-    /// Builds the model input of one step (see [`model_input`]).
-    pub fn input(&self, step: &StepConstants, cond: &[f32], x: &[f32]) -> anyhow::Result<Vec<f32>> {
-        model_input(&self.config, &self.layout, step, cond, x)
-    }
-
-    /// The f32 consistency sampler over all steps with the given standard-normal `noise`
-    /// (`steps * n * k` values): returns the chunk positions (normalized, `[n][k]`), calling
-    /// `observe(step, probe, values)` for every probe of every step.
+    /// The host consistency sampler ([`sample_chunk`]) with this student's tables.
     pub fn sample(
         &self,
         cond: &[f32],
         noise: &[f32],
-        mut observe: impl FnMut(usize, Probe, &[f32]),
+        forward: impl FnMut(usize, &[f32]) -> anyhow::Result<Vec<f32>>,
     ) -> anyhow::Result<Vec<f32>> {
         sample_chunk(
             &self.config,
@@ -438,9 +217,74 @@ impl FoldedMlp {
             &self.prodmp,
             cond,
             noise,
-            |i, input| self.forward_observed(i, input, |p, v| observe(i, p, v)),
+            forward,
         )
     }
+}
+
+/// The step table for `steps` (1..=4) sampling steps of a student with output parametrization
+/// `output`.
+pub fn step_constants(
+    sigma: &SigmaConfig,
+    output: ProDmpOutput,
+    steps: usize,
+) -> anyhow::Result<Vec<StepConstants>> {
+    if !(1..=MAX_STEPS).contains(&steps) {
+        bail!("the student samples with 1..={MAX_STEPS} steps, not {steps}");
+    }
+    (0..steps)
+        .map(|i| {
+            let level = sigma
+                .consistency_sampling_sigma(i, steps)
+                .context("sampling level")?;
+            let step =
+                StepConstants::consistency(sigma, level, i as u32).context("step constants")?;
+            Ok(match output {
+                ProDmpOutput::Direct => StepConstants {
+                    c_skip: 0.0,
+                    c_out: 1.0,
+                    ..step
+                },
+                ProDmpOutput::BoundarySkip => step,
+            })
+        })
+        .collect()
+}
+
+/// The noise embedding `embedding(c_noise(sigma_i))` of every sampling step of a
+/// `steps`-step sampler, `embed_dim` values each (computed in f64, rounded to f32).
+pub fn step_embeddings(
+    sigma: &SigmaConfig,
+    steps: usize,
+    embed_dim: usize,
+) -> anyhow::Result<Vec<Vec<f32>>> {
+    let mut embedding = vec![0.0f64; embed_dim];
+    (0..steps)
+        .map(|i| {
+            let level = sigma
+                .consistency_sampling_sigma(i, steps)
+                .context("sampling level")?;
+            let c_noise = sigma.c_noise(level).context("c_noise")?;
+            noise_embedding(c_noise, &mut embedding).context("noise embedding")?;
+            Ok(embedding.iter().map(|&e| e as f32).collect())
+        })
+        .collect()
+}
+
+/// The float models' input order: `[obs history, y0, v0 * control_dt, c_in x]` (the noise
+/// embedding is folded into the network: the MLP's first-layer bias, the transformer's noise
+/// token).
+pub fn input_layout(config: &ModelConfig) -> anyhow::Result<InputLayout> {
+    InputLayout::new(
+        &[
+            InputSegment::ObsHistory,
+            InputSegment::PrevAction,
+            InputSegment::PrevRate,
+            InputSegment::NoisyTrajectory,
+        ],
+        config.control_dt as f32,
+    )
+    .context("input layout")
 }
 
 /// Builds the model input of one step in the standard layout: `cond = [obs history, y0, v0]`

@@ -1,31 +1,45 @@
-//! FRMD export: turns a float student checkpoint into a baked int8 model for frmd-core.
+//! FRMD export: a float student checkpoint in, a calibrated int8 policy for frmd-core out, as a
+//! self-describing blob or a baked Rust module, for every backbone through one call:
 //!
-//! - [`artifact`]: atomic writes and the checks of output paths every command runs first;
-//! - [`checkpoint`]: `frmd.json` schema (shared with frmd-host) and a candle-free reader;
-//! - [`fold`]: the student folded for 1..=4 sampling steps, on frmd-core's f32 path;
-//! - [`calibrate`]: activation ranges from that f32 path, then quantization;
-//! - [`export`]: checkpoint directory -> [`QuantizedPolicy`] in one call (for build.rs);
-//! - [`QuantizedPolicy`]: the owned result of quantization;
-//! - [`blob::write`]: the self-describing blob (format in [`frmd_core::blob`]);
-//! - [`bake::write_module`]: a generated Rust module plus an aligned `weights.bin`;
-//! - [`safetensors_bytes`]: safetensors files whose bytes do not depend on a `HashMap`'s order;
-//! - [`reference`]: independent wide-integer checks of the int8 kernels;
-//! - [`transformer`]: the same pipeline for transformer-lite students (fold per-step noise
-//!   tokens, calibrate with frmd-core's transformer probes, quantize, write the `FRMT` blob).
+//! ```no_run
+//! # fn main() -> anyhow::Result<()> {
+//! let dir = std::path::Path::new("runs/reach/student");
+//! let student = frmd_export::export(dir, &frmd_export::ExportOptions::default(), None)?;
+//! student.write_module(std::path::Path::new("baked"))?; // policy.rs + data files + policy.blob
+//! println!("{student}"); // shape, calibration, RAM and flash
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! The crate has frmd-core's shape: what every backbone shares at the root, one folder per
+//! backbone beside it.
+//!
+//! - [`export()`] / [`export_checkpoint`]: the entry point, returning an [`ExportedStudent`];
+//!   [`ExportOptions`] its settings;
+//! - [`fold`]: step table, noise embeddings, input layout, ProDMP tables and the host sampler of
+//!   every folded student; [`calibrate`]: range methods and int8 weight/bias helpers;
+//!   [`memory`]: RAM/flash figures; [`bake`]: what every generated module offers; [`reference`](mod@reference):
+//!   the wide-integer checks' outcome and the requantization check; [`host`]: the capacities
+//!   with which std programs run an exported policy;
+//! - [`mlp`] and [`transformer`]: each backbone's fold, calibration, quantization, blob, baked
+//!   module and kernel check.
+//!
+//! The files training shares (checkpoint schema, calibration rows, reproducible safetensors,
+//! atomic artifacts) are the crate `frmd-formats` (`frmd-export/formats`), re-exported as
+//! [`formats`].
+#![warn(missing_docs)]
 
-pub mod artifact;
+mod backbone;
 pub mod bake;
-pub mod blob;
 pub mod calibrate;
-pub mod calibration_file;
-pub mod checkpoint;
-pub mod export;
+mod export;
 pub mod fold;
-pub mod quantized;
+pub mod host;
+pub mod memory;
+pub mod mlp;
 pub mod reference;
-pub mod safetensors_bytes;
 pub mod transformer;
 
-pub use quantized::{
-    MemoryFigures, ProDmpTablesOwned, QuantizedLayer, QuantizedOutput, QuantizedPolicy,
-};
+pub use backbone::{ExportOptions, DEFAULT_INPUT_HEADROOM};
+pub use export::{export, export_checkpoint, ExportedStudent};
+pub use frmd_formats as formats;

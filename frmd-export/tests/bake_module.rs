@@ -6,7 +6,7 @@ mod baked {
     include!("baked/policy.rs");
 }
 
-use frmd_core::blob::LoadedMlp;
+use frmd_core::blob::{AlignedBlob, LoadedMlp};
 use frmd_core::policy::Noise;
 use frmd_core::rng::Rng;
 use frmd_test_support::random_policy::*;
@@ -14,15 +14,12 @@ use frmd_test_support::random_policy::*;
 #[test]
 fn baked_module_runs_bit_identical_to_the_blob() {
     let policy = sample_policy(GOLDEN_SEED, GOLDEN_STEPS);
-    let blob = frmd_export::blob::write(&policy).unwrap();
-    let mut words = vec![0_u128; blob.len().div_ceil(16)];
-    bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
-    let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
-    let loaded = LoadedMlp::load(bytes).unwrap();
+    let blob = AlignedBlob::new(&policy.blob().unwrap());
+    let loaded = LoadedMlp::load(blob.bytes()).unwrap();
     let mut from_blob = loaded
         .policy::<M, O, K, N, P, { baked::INPUT_WIDTH }, { baked::SCRATCH_WIDTH }>()
         .unwrap();
-    let mut from_module = baked::policy().unwrap();
+    let mut from_module = baked::policy(&mut baked::Storage::new()).unwrap();
     for seed in 0..4 {
         for p in [&mut from_blob as &mut dyn Runner, &mut from_module] {
             p.start();

@@ -1,25 +1,16 @@
 //! The exporter's blob round-trips through frmd-core's loader into a working policy.
 
-use frmd_core::blob::{BlobError, LoadedMlp, SectionId};
+use frmd_core::blob::{AlignedBlob, BlobError, LoadedMlp, MlpSection, PolicySection};
 use frmd_core::policy::Noise;
 use frmd_core::rng::Rng;
 use frmd_test_support::random_policy::*;
-
-/// Copies into a 16-aligned buffer (a `Vec<u8>` has no alignment guarantee).
-fn aligned(bytes: &[u8]) -> Vec<u128> {
-    let mut words = vec![0_u128; bytes.len().div_ceil(16)];
-    bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..bytes.len()].copy_from_slice(bytes);
-    words
-}
 
 #[test]
 fn written_blob_loads_and_matches_the_parts() {
     for steps in [1, 3] {
         let policy = sample_policy(5, steps);
-        let blob = frmd_export::blob::write(&policy).unwrap();
-        let words = aligned(&blob);
-        let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
-        let loaded = LoadedMlp::load(bytes).unwrap();
+        let blob = AlignedBlob::new(&policy.blob().unwrap());
+        let loaded = LoadedMlp::load(blob.bytes()).unwrap();
         assert_eq!(loaded.steps(), &policy.steps[..]);
         assert_eq!(loaded.layout(), &policy.layout);
         assert_eq!(loaded.decoder().pos_params, &policy.prodmp.pos_params[..]);
@@ -40,13 +31,13 @@ fn inconsistent_policy_is_refused_by_name() {
     let mut policy = sample_policy(6, 1);
     policy.hidden[1].shifts.pop();
     assert_eq!(
-        frmd_export::blob::write(&policy),
-        Err(BlobError::SectionLength(SectionId::HiddenShifts(1)))
+        policy.blob(),
+        Err(BlobError::SectionLength(MlpSection::HiddenShifts(1).into()))
     );
     let mut policy = sample_policy(6, 1);
     policy.action_max.push(1.0);
     assert_eq!(
-        frmd_export::blob::write(&policy),
-        Err(BlobError::SectionLength(SectionId::ActionNorm))
+        policy.blob(),
+        Err(BlobError::SectionLength(PolicySection::ActionNorm.into()))
     );
 }

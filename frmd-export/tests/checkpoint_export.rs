@@ -1,14 +1,17 @@
 //! Exporter unit tests on synthetic checkpoints written without candle: validation names what is
 //! wrong, unsupported checkpoints are refused with a reason, and a blob written from a checkpoint
 //! round-trips through frmd-core's loader and matches the wide-integer model.
-use frmd_core::rng::Rng;
+use frmd_core::blob::AlignedBlob;
 use frmd_core::sigma::SigmaConfig;
-use frmd_export::calibrate::{CalibrationSet, RangeMethod};
-use frmd_export::checkpoint::{
+use frmd_export::calibrate::RangeMethod;
+use frmd_export::formats::calibration::{self, CalibrationSet};
+use frmd_export::formats::checkpoint::{
     Activation, BackboneConfig, CheckpointMeta, HeadConfig, ModelConfig, Normalization, Normalizer,
-    ProDmpOutput, Role, CONFIG_FILE, WEIGHTS_FILE,
+    ProDmpOutput, Role, CALIBRATION_FILE, CONFIG_FILE,
 };
-use frmd_export::export::{export_checkpoint, ExportOptions};
+use frmd_export::mlp::MlpExport;
+use frmd_export::ExportOptions;
+use frmd_test_support::checkpoint::{scratch_dir, write_meta, write_weights, Init};
 use std::path::{Path, PathBuf};
 
 fn model(backbone: BackboneConfig) -> ModelConfig {
@@ -35,44 +38,8 @@ fn mlp() -> BackboneConfig {
     }
 }
 
-fn write_weights(
-    dir: &Path,
-    meta: &CheckpointMeta,
-    seed: u64,
-    tweak: impl Fn(&str, &mut Vec<usize>),
-) {
-    let mut rng = Rng::new(seed);
-    let mut owned = Vec::new();
-    for spec in &meta.tensors {
-        let mut shape = spec.shape.clone();
-        tweak(&spec.name, &mut shape);
-        let fan_in = *shape.last().unwrap() as f32;
-        let values: Vec<u8> = (0..shape.iter().product::<usize>())
-            .flat_map(|_| (rng.gaussian() / fan_in.sqrt()).to_le_bytes())
-            .collect();
-        owned.push((spec.name.clone(), shape, values));
-    }
-    let views: Vec<(String, safetensors::tensor::TensorView<'_>)> = owned
-        .iter()
-        .map(|(n, s, v)| {
-            (
-                n.clone(),
-                safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), v)
-                    .unwrap(),
-            )
-        })
-        .collect();
-    std::fs::write(
-        dir.join(WEIGHTS_FILE),
-        safetensors::serialize(views, None).unwrap(),
-    )
-    .unwrap();
-}
-
 fn checkpoint(tag: &str, role: Role, backbone: BackboneConfig) -> (PathBuf, CheckpointMeta) {
-    let dir = std::env::temp_dir().join(format!("frmd-export-ckpt-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir(&format!("export-ckpt-{tag}"));
     let mut meta = CheckpointMeta::describe(role, &model(backbone), SigmaConfig::default());
     meta.normalization = Some(Normalization {
         obs: Normalizer {
@@ -84,31 +51,26 @@ fn checkpoint(tag: &str, role: Role, backbone: BackboneConfig) -> (PathBuf, Chec
             max: vec![0.5, 0.9],
         },
     });
-    std::fs::write(
-        dir.join(CONFIG_FILE),
-        serde_json::to_string_pretty(&meta).unwrap(),
-    )
-    .unwrap();
-    write_weights(&dir, &meta, 5, |_, _| {});
+    write_meta(&dir, &meta);
+    write_weights(&dir, &meta, 5, Init::FanIn, |_, _| {});
     (dir, meta)
 }
 
-fn calibration(cond_dim: usize, rows: usize) -> CalibrationSet {
-    let mut rng = Rng::new(9);
-    CalibrationSet {
-        cond_dim,
-        cond: (0..rows * cond_dim)
-            .map(|_| (rng.gaussian() * 0.5).clamp(-1.0, 1.0))
-            .collect(),
-        seed: 17,
-    }
+fn calibration(rows: usize) -> CalibrationSet {
+    frmd_test_support::checkpoint::calibration_rows(&model(mlp()), rows, 9, 17)
+}
+
+/// The MLP export of `dir` with `options` on `set` (the checkpoint's own file when `None`).
+fn export_mlp(dir: &Path, options: ExportOptions, set: Option<CalibrationSet>) -> MlpExport {
+    let student = frmd_export::export(dir, &options, set).unwrap();
+    student.mlp().expect("an MLP student").clone()
 }
 
 fn export_err(dir: &Path) -> String {
-    let set = calibration(model(mlp()).cond_dim(), 8);
+    let set = calibration(8);
     format!(
         "{:#}",
-        export_checkpoint(dir, ExportOptions::default(), Some(set)).unwrap_err()
+        frmd_export::export(dir, &ExportOptions::default(), Some(set)).unwrap_err()
     )
 }
 
@@ -117,7 +79,7 @@ fn refuses_what_it_cannot_represent_by_name() {
     let (dir, _) = checkpoint("teacher", Role::Teacher, mlp());
     let err = export_err(&dir);
     assert!(
-        err.contains("only student checkpoints") && err.contains("Teacher"),
+        err.contains("only students can be exported") && err.contains("teacher"),
         "{err}"
     );
 
@@ -130,18 +92,11 @@ fn refuses_what_it_cannot_represent_by_name() {
             width: 8,
         },
     );
-    let err = export_err(&dir);
-    assert!(
-        err.contains("transformer backbones fold with transformer::FoldedTransformer"),
-        "{err}"
-    );
-    let set = calibration(model(mlp()).cond_dim(), 8);
-    let exported = frmd_export::export::export_transformer_checkpoint(
-        &dir,
-        ExportOptions::default(),
-        Some(set),
-    )
-    .unwrap();
+    // The entry point picks the transformer's exporter.
+    let student =
+        frmd_export::export(&dir, &ExportOptions::default(), Some(calibration(8))).unwrap();
+    assert!(student.mlp().is_none());
+    let exported = student.transformer().expect("a transformer export");
     assert_eq!(exported.model.folded.shape.width, 8);
     assert_eq!(exported.ranges.rows, 8);
 
@@ -158,7 +113,7 @@ fn refuses_what_it_cannot_represent_by_name() {
 
     // A tensor with the wrong shape is named.
     let (dir, meta) = checkpoint("shape", Role::Student, mlp());
-    write_weights(&dir, &meta, 5, |name, shape| {
+    write_weights(&dir, &meta, 5, Init::FanIn, |name, shape| {
         if name == "mlp.layers.1.weight" {
             shape[0] += 1;
         }
@@ -183,7 +138,7 @@ fn refuses_what_it_cannot_represent_by_name() {
     let (dir, _) = checkpoint("nocal", Role::Student, mlp());
     let err = format!(
         "{:#}",
-        export_checkpoint(&dir, ExportOptions::default(), None).unwrap_err()
+        frmd_export::export(&dir, &ExportOptions::default(), None).unwrap_err()
     );
     assert!(err.contains("calibration"), "{err}");
 
@@ -198,46 +153,28 @@ fn refuses_what_it_cannot_represent_by_name() {
 #[test]
 fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
     let (dir, meta) = checkpoint("roundtrip", Role::Student, mlp());
-    let set = calibration(meta.model.cond_dim(), 32);
+    let set = calibration(32);
     // Calibration file round trip.
-    frmd_export::calibration_file::write(
-        &dir.join(frmd_export::checkpoint::CALIBRATION_FILE),
-        &set,
-    )
-    .unwrap();
+    let file = dir.join(CALIBRATION_FILE);
+    calibration::write(&file, &set).unwrap();
     assert_eq!(
-        frmd_export::calibration_file::read(
-            &dir.join(frmd_export::checkpoint::CALIBRATION_FILE),
-            meta.model.cond_dim()
-        )
-        .unwrap(),
+        calibration::read(&file, meta.model.cond_dim()).unwrap(),
         set
     );
-    assert!(frmd_export::calibration_file::read(
-        &dir.join(frmd_export::checkpoint::CALIBRATION_FILE),
-        5
-    )
-    .is_err());
+    assert!(calibration::read(&file, 5).is_err());
 
     for (steps, ranges) in [(1, RangeMethod::MinMax), (3, RangeMethod::MinMax)] {
-        let exported = export_checkpoint(
-            &dir,
-            ExportOptions {
-                steps,
-                ranges,
-                ..Default::default()
-            },
-            None,
-        )
-        .unwrap();
+        let options = ExportOptions {
+            steps,
+            ranges,
+            ..Default::default()
+        };
+        let exported = export_mlp(&dir, options, None);
         let policy = &exported.policy;
         assert_eq!(policy.steps.len(), steps);
         assert_eq!(policy.first_layer_biases.len(), steps * 16);
-        let blob = frmd_export::blob::write(policy).unwrap();
-        let mut words = vec![0u32; blob.len().div_ceil(4)];
-        bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
-        let bytes = &bytemuck::cast_slice::<u32, u8>(&words)[..blob.len()];
-        let loaded = frmd_core::blob::LoadedMlp::load(bytes).unwrap();
+        let blob = AlignedBlob::new(&policy.blob().unwrap());
+        let loaded = frmd_core::blob::LoadedMlp::load(blob.bytes()).unwrap();
         assert_eq!(
             loaded.dims(),
             frmd_core::policy::PolicyDims {
@@ -256,21 +193,24 @@ fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
         let mut worst = 0f32;
         for row in 0..set.rows() {
             // The calibration inputs of every step (the f32 sampler's own model inputs).
-            let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
             let mut inputs = Vec::new();
             exported
                 .folded
-                .sample(cond, &set.noise(row, steps, 10), |step, probe, values| {
-                    if probe == frmd_core::model::mlp::Probe::Input {
-                        inputs.push((step, values.to_vec()));
-                    }
-                })
+                .sample(
+                    set.row(row),
+                    &set.noise(row, steps, 10),
+                    |step, probe, values| {
+                        if probe == frmd_core::model::mlp::Probe::Input {
+                            inputs.push((step, values.to_vec()));
+                        }
+                    },
+                )
                 .unwrap();
             assert_eq!(inputs.len(), steps);
             for (step, input) in inputs {
                 let mut out = vec![0f32; 8];
                 net.forward(step, &input, &mut out).unwrap();
-                let wide = frmd_export::reference::wide_network(policy, step, &input).unwrap();
+                let wide = frmd_export::mlp::reference::wide_network(policy, step, &input).unwrap();
                 assert_eq!(
                     net.accumulators()
                         .iter()
@@ -298,16 +238,16 @@ fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
         // inputs; 4.5 % without on this random net, while balancing halves the error of a
         // trained reach student).
         assert!(worst < 0.12, "relative int8 error {worst}");
-        let check = frmd_export::reference::check_network::<64>(policy, &[]).unwrap();
+        let check = frmd_export::mlp::reference::check_network::<64>(policy, &[]).unwrap();
         assert!(check.passed(), "{check:?}");
     }
 }
 
 #[test]
 fn percentile_ranges_are_no_wider_than_minmax() {
-    let (dir, meta) = checkpoint("percentile", Role::Student, mlp());
-    let set = calibration(meta.model.cond_dim(), 32);
-    let minmax = export_checkpoint(
+    let (dir, _) = checkpoint("percentile", Role::Student, mlp());
+    let set = calibration(32);
+    let minmax = export_mlp(
         &dir,
         ExportOptions {
             steps: 2,
@@ -315,9 +255,8 @@ fn percentile_ranges_are_no_wider_than_minmax() {
             ..Default::default()
         },
         Some(set.clone()),
-    )
-    .unwrap();
-    let pct = export_checkpoint(
+    );
+    let pct = export_mlp(
         &dir,
         ExportOptions {
             steps: 2,
@@ -325,8 +264,7 @@ fn percentile_ranges_are_no_wider_than_minmax() {
             ..Default::default()
         },
         Some(set),
-    )
-    .unwrap();
+    );
     assert!(pct.ranges.input.scale <= minmax.ranges.input.scale);
     for ((p_pre, p_out), (m_pre, m_out)) in pct.ranges.hidden.iter().zip(&minmax.ranges.hidden) {
         assert!(p_pre.scale <= m_pre.scale && p_out.scale <= m_out.scale);
@@ -336,9 +274,9 @@ fn percentile_ranges_are_no_wider_than_minmax() {
 /// Balancing the input segments keeps the f32 function and narrows the input quantization step.
 #[test]
 fn input_gains_keep_the_function_and_narrow_the_input_scale() {
-    let (dir, meta) = checkpoint("gains", Role::Student, mlp());
-    let set = calibration(meta.model.cond_dim(), 32);
-    let plain = export_checkpoint(
+    let (dir, _) = checkpoint("gains", Role::Student, mlp());
+    let set = calibration(32);
+    let plain = export_mlp(
         &dir,
         ExportOptions {
             steps: 2,
@@ -346,17 +284,15 @@ fn input_gains_keep_the_function_and_narrow_the_input_scale() {
             ..Default::default()
         },
         Some(set.clone()),
-    )
-    .unwrap();
-    let balanced = export_checkpoint(
+    );
+    let balanced = export_mlp(
         &dir,
         ExportOptions {
             steps: 2,
             ..Default::default()
         },
         Some(set.clone()),
-    )
-    .unwrap();
+    );
     let gains = balanced.folded.gains;
     assert!(gains.traj_gain < 0.5 && gains.traj_gain > 0.05, "{gains:?}");
     assert!(balanced.ranges.input.scale < 0.5 * plain.ranges.input.scale);
@@ -365,10 +301,15 @@ fn input_gains_keep_the_function_and_narrow_the_input_scale() {
         plain.policy.steps[1].c_in * gains.traj_gain
     );
     for row in 0..set.rows() {
-        let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
         let noise = set.noise(row, 2, 10);
-        let a = plain.folded.sample(cond, &noise, |_, _, _| {}).unwrap();
-        let b = balanced.folded.sample(cond, &noise, |_, _, _| {}).unwrap();
+        let a = plain
+            .folded
+            .sample(set.row(row), &noise, |_, _, _| {})
+            .unwrap();
+        let b = balanced
+            .folded
+            .sample(set.row(row), &noise, |_, _, _| {})
+            .unwrap();
         for (x, y) in a.iter().zip(&b) {
             assert!((x - y).abs() <= 1e-4 * (1.0 + x.abs()), "{x} vs {y}");
         }
@@ -390,44 +331,33 @@ fn requantization_matches_the_wide_model() {
 fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
     use frmd_core::model::mlp::InputPrecision;
     use frmd_core::policy::Network;
-    let (dir, meta) = checkpoint("wide-input", Role::Student, mlp());
-    let set = calibration(meta.model.cond_dim(), 32);
+    let (dir, _) = checkpoint("wide-input", Role::Student, mlp());
+    let set = calibration(32);
     let export = |input_precision| {
-        export_checkpoint(
-            &dir,
-            ExportOptions {
-                input_precision,
-                ..Default::default()
-            },
-            Some(set.clone()),
-        )
-        .unwrap()
+        let options = ExportOptions {
+            input_precision,
+            ..Default::default()
+        };
+        export_mlp(&dir, options, Some(set.clone()))
     };
-    let wide = export_checkpoint(&dir, ExportOptions::default(), Some(set.clone())).unwrap();
+    let wide = export_mlp(&dir, ExportOptions::default(), Some(set.clone()));
     let two = export(InputPrecision::TwoPlane);
     let int8 = export(InputPrecision::Int8);
     assert_eq!(wide.policy.input_precision, InputPrecision::Int16);
     assert_eq!(two.policy.input_precision, InputPrecision::TwoPlane);
     assert_eq!(int8.policy.input_precision, InputPrecision::Int8);
-    let headroom = frmd_export::export::DEFAULT_INPUT_HEADROOM;
+    let headroom = frmd_export::DEFAULT_INPUT_HEADROOM;
     assert!((two.policy.input.scale / int8.policy.input.scale - headroom).abs() < 0.05 * headroom);
     assert_eq!(wide.policy.input, two.policy.input);
     let policies = [&wide.policy, &two.policy, &int8.policy];
     // The blobs keep the precision; their networks are the wide model's.
-    let blobs: Vec<Vec<u32>> = policies[..2]
+    let blobs: Vec<AlignedBlob> = policies[..2]
         .iter()
-        .map(|policy| {
-            let blob = frmd_export::blob::write(policy).unwrap();
-            let mut words = vec![0u32; blob.len().div_ceil(4) + 1];
-            bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
-            words
-        })
+        .map(|policy| AlignedBlob::new(&policy.blob().unwrap()))
         .collect();
     let loaded: Vec<_> = blobs
         .iter()
-        .map(|words| {
-            frmd_core::blob::LoadedMlp::load(bytemuck::cast_slice::<u32, u8>(words)).unwrap()
-        })
+        .map(|blob| frmd_core::blob::LoadedMlp::load(blob.bytes()).unwrap())
         .collect();
     let mut loaded_nets: Vec<_> = loaded
         .iter()
@@ -437,14 +367,13 @@ fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
     assert_eq!(loaded_nets[1].input_precision(), InputPrecision::TwoPlane);
     let mut nets: Vec<_> = policies
         .iter()
-        .map(|policy| frmd_export::reference::int8_network::<64>(policy).unwrap())
+        .map(|policy| frmd_export::mlp::reference::int8_network::<64>(policy).unwrap())
         .collect();
     let mut errors = [0f64; 3];
     for row in 0..set.rows() {
-        let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
         let mut input = Vec::new();
         two.folded
-            .sample(cond, &set.noise(row, 1, 10), |_, p, v| {
+            .sample(set.row(row), &set.noise(row, 1, 10), |_, p, v| {
                 if p == frmd_core::model::mlp::Probe::Input {
                     input = v.to_vec()
                 }
@@ -463,7 +392,7 @@ fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
             let mut loaded_out = vec![0f32; 8];
             loaded_net.forward(0, &input, &mut loaded_out).unwrap();
             assert_eq!(loaded_out, outs[n]);
-            let model = frmd_export::reference::wide_network(policies[n], 0, &input).unwrap();
+            let model = frmd_export::mlp::reference::wide_network(policies[n], 0, &input).unwrap();
             assert_eq!(
                 nets[n]
                     .accumulators()
@@ -496,7 +425,7 @@ fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
         "16-bit {error_wide} vs two-plane {error_two}"
     );
     for policy in &policies[..2] {
-        let check = frmd_export::reference::check_network::<64>(policy, &[]).unwrap();
+        let check = frmd_export::mlp::reference::check_network::<64>(policy, &[]).unwrap();
         assert!(check.passed(), "{check:?}");
     }
 }

@@ -1,8 +1,8 @@
 //! An exported policy runs bit-identically on Cortex-M and on the host.
 //!
 //! The firmware `examples/cortex-m` (binary `frmd-cortex-m-policy`) exports the checked-in trained
-//! student `examples/cortex-m/policy/reach/` with `export::export_checkpoint` and bakes it with
-//! `bake::write_module` in its build.rs, then times `Policy::act` on QEMU. Here the same checkpoint
+//! student `examples/cortex-m/policy/reach/` with `frmd_export::export` and bakes it with
+//! `ExportedStudent::write_module` in its build.rs, then times `Policy::act` on QEMU. Here the same checkpoint
 //! goes through the same export call (`frmd_firmware_support::host::student`), is written as a
 //! blob, loaded with `frmd_core::blob::LoadedMlp` and driven through the same workload;
 //! `qemu_policy_digest_matches_host` requires the firmware's printed digest on every board of
@@ -10,9 +10,10 @@
 //! it, or with FRMD_SKIP_QEMU=1, it prints why and passes without checking
 //! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
 
+use frmd_core::blob::AlignedBlob;
 use frmd_core::blob::LoadedMlp;
 use frmd_firmware_support::host::qemu;
-use frmd_firmware_support::host::student::{student, AlignedBlob};
+use frmd_firmware_support::host::student::student;
 use frmd_firmware_support::policy_workload::PolicyWorkload;
 use frmd_firmware_support::shape::{
     DOF, HORIZON, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM,
@@ -20,7 +21,7 @@ use frmd_firmware_support::shape::{
 use frmd_firmware_support::workload::digest_all;
 
 fn host_digest() -> u64 {
-    let blob = AlignedBlob::of(&student());
+    let blob = AlignedBlob::new(&student().blob().expect("write the blob"));
     let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
     let policy = loaded
         .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>(
@@ -50,43 +51,43 @@ fn student_export_is_deterministic_and_acts() {
 fn student_sixteen_bit_input_is_as_accurate_as_two_planes() {
     use frmd_core::model::mlp::{InputPrecision, Probe};
     use frmd_core::policy::Network;
-    use frmd_export::export::{export_checkpoint, ExportOptions};
+    use frmd_export::ExportOptions;
     let dir = frmd_firmware_support::host::student::student_dir();
     let export = |input_precision| {
-        export_checkpoint(
-            &dir,
-            ExportOptions {
-                input_precision,
-                ..Default::default()
-            },
-            None,
-        )
-        .expect("export the student")
+        let options = ExportOptions {
+            input_precision,
+            ..Default::default()
+        };
+        let student = frmd_export::export(&dir, &options, None).expect("export the student");
+        student.mlp().expect("an MLP student").clone()
     };
     let (wide, two) = (
         export(InputPrecision::Int16),
         export(InputPrecision::TwoPlane),
     );
-    let set = frmd_export::calibration_file::read(
+    let set = frmd_export::formats::calibration::read(
         &dir.join("calibration.safetensors"),
-        wide.checkpoint.meta.model.cond_dim(),
+        wide.folded.base.config.cond_dim(),
     )
     .expect("calibration rows");
     let mut nets = [
-        frmd_export::reference::int8_network::<MLP_WIDTH>(&wide.policy).unwrap(),
-        frmd_export::reference::int8_network::<MLP_WIDTH>(&two.policy).unwrap(),
+        frmd_export::mlp::reference::int8_network::<MLP_WIDTH>(&wide.policy).unwrap(),
+        frmd_export::mlp::reference::int8_network::<MLP_WIDTH>(&two.policy).unwrap(),
     ];
     let traj = wide.policy.horizon * wide.policy.action_dim;
     let mut errors = [[0_f64; 2]; 2];
     for row in 0..set.rows() {
-        let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
         let mut input = Vec::new();
         wide.folded
-            .sample(cond, &set.noise(row, 1, traj), |_, probe, values| {
-                if probe == Probe::Input {
-                    input = values.to_vec()
-                }
-            })
+            .sample(
+                set.row(row),
+                &set.noise(row, 1, traj),
+                |_, probe, values| {
+                    if probe == Probe::Input {
+                        input = values.to_vec()
+                    }
+                },
+            )
             .unwrap();
         let mut beyond = input.clone();
         for v in beyond
@@ -129,7 +130,7 @@ fn qemu_minimal_example_acts_like_the_host() {
     if !qemu::available("qemu_minimal_example_acts_like_the_host", &root) {
         return;
     }
-    let blob = AlignedBlob::of(&student());
+    let blob = AlignedBlob::new(&student().blob().expect("write the blob"));
     let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
     let mut policy = loaded
         .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>(

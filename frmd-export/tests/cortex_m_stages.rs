@@ -11,13 +11,14 @@
 
 use std::sync::atomic::{AtomicU32, Ordering};
 
+use frmd_core::blob::AlignedBlob;
 use frmd_core::blob::LoadedMlp;
 use frmd_core::model::linear::RequantizedLinear;
 use frmd_core::model::mlp::InputPrecision;
 use frmd_core::policy::Policy;
-use frmd_export::QuantizedPolicy;
+use frmd_export::mlp::QuantizedMlp;
 use frmd_firmware_support::host::qemu::{self, line_value};
-use frmd_firmware_support::host::student::{student, AlignedBlob};
+use frmd_firmware_support::host::student::student;
 use frmd_firmware_support::policy_workload::PolicyWorkload;
 use frmd_firmware_support::shape::{
     DOF, HORIZON, MLP_HIDDEN, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM,
@@ -34,7 +35,7 @@ fn counting_clock() -> u32 {
 }
 
 /// The hidden layers of `quantized` as frmd-core layers over its own arrays.
-fn hidden_layers(quantized: &QuantizedPolicy) -> [RequantizedLinear<'_>; LAYERS] {
+fn hidden_layers(quantized: &QuantizedMlp) -> [RequantizedLinear<'_>; LAYERS] {
     let layers = quantized.hidden_layers();
     std::array::from_fn(|i| layers[i])
 }
@@ -45,7 +46,7 @@ fn staged_mlp_network_matches_int8_network() {
     // The firmware's breakdown must cover the exporter's default 16-bit first-layer input.
     assert_eq!(quantized.input_precision, InputPrecision::Int16);
     assert_eq!(quantized.hidden.len(), LAYERS);
-    let blob = AlignedBlob::of(&quantized);
+    let blob = AlignedBlob::new(&quantized.blob().expect("write the blob"));
     let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
     let reference = loaded
         .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>(

@@ -11,10 +11,10 @@
 //! FRMD_SKIP_QEMU=1, it prints why and passes without checking (unless FRMD_REQUIRE_QEMU is set,
 //! as in CI: then it fails).
 
+use frmd_core::blob::AlignedBlob;
 use frmd_core::blob::LoadedMlp;
 use frmd_core::policy::{Int8TransformerNetwork, Policy, PolicyError};
 use frmd_firmware_support::host::qemu;
-use frmd_firmware_support::host::student::AlignedBlob;
 use frmd_firmware_support::policy_workload::PolicyWorkload;
 use frmd_firmware_support::shape::{
     self, DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
@@ -34,7 +34,7 @@ type Network<'a> = Int8TransformerNetwork<'a, &'a mut Scratch>;
 
 /// Digest of the fixed cases (and the first chunk's positions, to check they vary).
 fn host_digest() -> Result<u64, PolicyError> {
-    let blob = AlignedBlob::of(&synthetic_policy::generate());
+    let blob = AlignedBlob::new(&synthetic_policy::generate().blob().expect("write the blob"));
     let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
     let config = loaded.config();
     let data = synthetic_transformer::generate();

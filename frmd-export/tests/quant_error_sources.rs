@@ -1,7 +1,6 @@
-//! Manual diagnostic: which quantization point dominates the int8 error of a real student.
+//! Manual diagnostic: which quantization point dominates the int8 error of a real MLP student.
 //! FRMD_CKPT=dir (with calibration.safetensors) cargo test -p frmd-export --test quant_error_sources -- --ignored --nocapture
-use frmd_core::model::mlp::Probe;
-use frmd_export::export::{export_checkpoint, ExportOptions};
+use frmd_core::policy::Network;
 
 #[test]
 #[ignore]
@@ -9,43 +8,27 @@ fn input_quantization_share_of_the_error() {
     let Ok(dir) = std::env::var("FRMD_CKPT") else {
         return;
     };
-    let exported =
-        export_checkpoint(std::path::Path::new(&dir), ExportOptions::default(), None).unwrap();
-    let set = frmd_export::calibration_file::read(
-        &std::path::Path::new(&dir).join("calibration.safetensors"),
-        exported.folded.config.cond_dim(),
-    )
-    .unwrap();
-    let policy = &exported.policy;
-    let mut net = frmd_export::reference::int8_network::<1024>(policy).unwrap();
-    use frmd_core::policy::Network;
+    let student =
+        frmd_export::export(std::path::Path::new(&dir), &Default::default(), None).unwrap();
+    let exported = student.mlp().expect("an MLP student");
+    let set = student.calibration();
+    let (folded, policy) = (&exported.folded, &exported.policy);
+    let mut net = frmd_export::mlp::reference::int8_network::<1024>(policy).unwrap();
     let (mut err_int8, mut err_input_only, mut n) = (0f64, 0f64, 0usize);
     for row in 0..set.rows() {
-        let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
         let mut input = Vec::new();
-        exported
-            .folded
-            .sample(
-                cond,
-                &set.noise(row, 1, exported.folded.config.traj_dim()),
-                |_, p, v| {
-                    if p == Probe::Input {
-                        input = v.to_vec()
-                    }
-                },
-            )
+        let noise = set.noise(row, 1, folded.base.config.traj_dim());
+        student
+            .sample_f32(set.row(row), &noise, |_, v| input = v.to_vec())
             .unwrap();
-        let float = exported
-            .folded
-            .forward_observed(0, &input, |_, _| {})
-            .unwrap();
+        let float = folded.forward_observed(0, &input, |_, _| {}).unwrap();
         let mut out = vec![0f32; float.len()];
         net.forward(0, &input, &mut out).unwrap();
         let fq: Vec<f32> = input
             .iter()
             .map(|&v| policy.input.dequantize(policy.input.quantize(v)))
             .collect();
-        let float_fq = exported.folded.forward_observed(0, &fq, |_, _| {}).unwrap();
+        let float_fq = folded.forward_observed(0, &fq, |_, _| {}).unwrap();
         for ((f, q), g) in float.iter().zip(&out).zip(&float_fq) {
             err_int8 += f64::from((f - q).abs());
             err_input_only += f64::from((f - g).abs());

@@ -27,10 +27,8 @@ fn int8_policy_act_time_on_host() {
             hidden: vec![256, 256, 256],
         };
         let policy = random_policy(3, steps, &dims);
-        let blob = frmd_export::blob::write(&policy).unwrap();
-        let mut words = vec![0_u128; blob.len().div_ceil(16)];
-        bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..blob.len()].copy_from_slice(&blob);
-        let bytes = &bytemuck::cast_slice::<u128, u8>(&words)[..blob.len()];
+        let blob = frmd_core::blob::AlignedBlob::new(&policy.blob().unwrap());
+        let bytes = blob.bytes();
         let loaded = LoadedMlp::load(bytes).unwrap();
         let mut runtime = loaded.policy::<M, O, K, N, P, 64, 256>().unwrap();
         runtime.reset(&[0.0; K]).unwrap();
@@ -47,7 +45,7 @@ fn int8_policy_act_time_on_host() {
             "{steps} step(s), MLP {}-256-256-256-{}: {per_act:.1} us per chunk on this host; blob {} B, flash {} B, scratch {} B",
             policy.input_width().unwrap(),
             K * P,
-            blob.len(),
+            bytes.len(),
             memory.flash_bytes(),
             memory.scratch_bytes
         );

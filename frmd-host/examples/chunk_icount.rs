@@ -1,11 +1,10 @@
 //! Instruction counts per chunk under callgrind: runs `CHUNKS` (argument 2, default 1) int8 or
 //! float chunks (argument 1: int8 | int8-avx2 | int8-portable | core-f32 | candle-f32) of a
 //! randomly initialized student at the reach shape with backbone argument 3 (default `mlp`;
-//! `transformer-lite` exports the `FRMT` blob and runs frmd-core's int8 transformer policy). Per-chunk Ir = (Ir(101 chunks) -
+//! `transformer-lite` runs frmd-core's int8 transformer policy). Per-chunk Ir = (Ir(101 chunks) -
 //! Ir(1 chunk)) / 100. `int8-avx2` / `int8-portable` run the int8 policy with frmd-core's AVX-VNNI
 //! / AVX2 kernels turned off (x86-64; callgrind's virtual CPU reports no AVX-VNNI anyway).
 use frmd_host::bench::fixtures::{reach_input, reach_student};
-use frmd_host::policy::int8::Int8Policy;
 use frmd_host::tasks::{Policy, PolicyInput};
 
 fn main() -> anyhow::Result<()> {
@@ -15,30 +14,7 @@ fn main() -> anyhow::Result<()> {
     let backbone = args.get(3).map(String::as_str).unwrap_or("mlp");
     let dir = std::env::temp_dir().join(format!("frmd-icount-{}", std::process::id()));
     let mut p = reach_student(&dir, &backbone.parse()?, 1)?;
-    // Transformer students: `reach_student` saved the checkpoint and calibration rows; export them
-    // with the transformer exporter.
-    let mut transformer: Option<(Int8Policy, Int8Policy, usize)> = None;
-    if backbone.starts_with("transformer") {
-        let exported =
-            frmd_export::export::export_transformer_checkpoint(&dir, Default::default(), None)?;
-        let norm = exported
-            .checkpoint
-            .meta
-            .normalization
-            .clone()
-            .ok_or_else(|| anyhow::anyhow!("no normalization"))?;
-        let blob = frmd_export::blob::write_transformer(&exported.model, &norm)
-            .map_err(|e| anyhow::anyhow!("blob: {e}"))?;
-        let int8 = Int8Policy::from_blob(&blob, "int8")?;
-        let twin =
-            Int8Policy::transformer_f32_twin(&blob, exported.model.folded.clone(), "core-f32")?;
-        transformer = Some((int8, twin, exported.model.memory().flash_bytes()));
-    }
-    let flash = match (&transformer, &p.core) {
-        (Some((_, _, flash)), _) => *flash,
-        (None, Ok(core)) => core.flash_bytes,
-        (None, Err(_)) => 0,
-    };
+    let flash = p.core.as_ref().map_or(0, |core| core.flash_bytes);
     #[cfg(target_arch = "x86_64")]
     match which {
         "int8-portable" => drop(frmd_core::kernels::x86::set_avx2_enabled(false)),
@@ -50,16 +26,14 @@ fn main() -> anyhow::Result<()> {
     } else {
         which
     };
-    let policy: &mut dyn Policy = match (which_policy, &mut transformer, &mut p.core) {
-        ("candle-f32", _, _) => &mut p.float,
-        ("int8", Some((int8, _, _)), _) => int8,
-        ("core-f32", Some((_, twin, _)), _) => twin,
-        ("int8", None, Ok(core)) => &mut core.int8,
-        ("core-f32", None, Ok(core)) => &mut core.core_f32,
-        ("int8" | "core-f32", None, Err(reason)) => {
+    let policy: &mut dyn Policy = match (which_policy, &mut p.core) {
+        ("candle-f32", _) => &mut p.float,
+        ("int8", Ok(core)) => &mut core.int8,
+        ("core-f32", Ok(core)) => &mut core.core_f32,
+        ("int8" | "core-f32", Err(reason)) => {
             anyhow::bail!("no frmd-core policy for {backbone}: {reason}")
         }
-        (other, _, _) => anyhow::bail!("unknown policy {other}"),
+        (other, _) => anyhow::bail!("unknown policy {other}"),
     };
     let (history, prev, rate) = reach_input();
     let input = PolicyInput {

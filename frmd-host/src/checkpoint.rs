@@ -1,16 +1,16 @@
 //! Checkpoints: `model.safetensors` (plain f32 tensors, candle VarMap layout) + `frmd.json`
 //! (format version, role, model config, ProDMP and sigma configs, normalization, dataset digest,
 //! training summary and the expected list of tensors). The schema, its validation and the
-//! candle-free tensor reader live in `frmd_export::checkpoint` (one definition, shared with the
+//! candle-free tensor reader live in `frmd_formats::checkpoint` (one definition, shared with the
 //! exporter); this module adds candle save/load.
 use crate::models::init::sorted_vars;
 use crate::models::OwnedNetwork;
 use anyhow::Context;
 use candle_core::{Device, Tensor};
-use frmd_export::artifact::{write_atomic, write_atomic_with};
+use frmd_formats::artifact::{write_atomic, write_atomic_with};
 use std::path::Path;
 
-pub use frmd_export::checkpoint::{
+pub use frmd_formats::checkpoint::{
     expected_tensors, fnv1a_hex, read_weights, CheckpointMeta, DatasetInfo, Role, TensorSpec,
     CALIBRATION_FILE, CONFIG_FILE, FORMAT_VERSION, WEIGHTS_FILE,
 };

@@ -10,33 +10,33 @@
 //!   (`frmd_export::reference`): requantization on edges, ties and random inputs, and the
 //!   exported network's accumulators on the (a) inputs plus saturating/zero-point edge inputs.
 //!
-//! Also checked: the baked blob is reproduced bit for bit by re-exporting the checkpoint.
-//! Transformer-lite students (`FRMT` blob) get the same rows; see [`run_transformer`] for (d).
-use crate::checkpoint::Role;
-use crate::checkpoint::{self, CheckpointMeta};
+//! Also checked: the baked blob is reproduced bit for bit by re-exporting the checkpoint. Every
+//! backbone gets the same rows: the re-export ([`frmd_export::ExportedStudent`]) provides the
+//! f32 path, the f32 network of the twin policy and check (d) for its backbone.
+use crate::checkpoint::{self, CheckpointMeta, Role};
 use crate::diffusion::samplers::{gaussian, sample_consistency};
 use crate::eval::{run_episodes, EvalConfig};
-use crate::export::{
-    calibration_from_data, export_mlp, export_transformer, is_transformer, transformer_blob,
-    ExportConfig, BAKED_BLOB_FILE, EXPORT_INFO_FILE,
-};
+use crate::export::{export_student, ExportConfig};
 use crate::limits::{self, OptionError};
 use crate::models::Condition;
-use crate::policy::float::{role_name, FloatPolicy};
+use crate::policy::float::FloatPolicy;
 use crate::policy::int8::Int8Policy;
 use crate::tasks::{Policy, PolicyInput};
 use anyhow::Context;
 use candle_core::Device;
-use frmd_core::model::mlp::Probe;
 use frmd_core::rng::Rng;
-use frmd_export::fold::MAX_WIDTH;
+use frmd_export::bake::BLOB_FILE;
+use frmd_export::reference::KernelCheck;
+use frmd_export::ExportedStudent;
 use serde::Serialize;
 use std::path::PathBuf;
 
 /// Harness settings and bounds.
 #[derive(Clone, Debug)]
 pub struct EquivConfig {
+    /// The student checkpoint.
     pub ckpt: PathBuf,
+    /// Its baked module directory (`frmd export --out`).
     pub baked: PathBuf,
     /// Closed-loop episodes per method (0 skips the success-rate check).
     pub episodes: usize,
@@ -48,8 +48,9 @@ pub struct EquivConfig {
     pub data: Option<PathBuf>,
     /// (a) bound, normalized units.
     pub max_f32_error: f64,
-    /// (b) bounds as fractions of the mean action range (max and mean abs error).
+    /// (b) bound of the max abs error as a fraction of the mean action range.
     pub max_int8_error_frac: f64,
+    /// (b) bound of the mean abs error as a fraction of the mean action range.
     pub mean_int8_error_frac: f64,
     /// (b) success-rate difference bound, percentage points.
     pub max_success_diff_points: f64,
@@ -115,17 +116,24 @@ impl EquivConfig {
 /// One line of the report.
 #[derive(Clone, Debug, Serialize)]
 pub struct EquivRow {
+    /// Which check of docs/design.md section 6 (`a`..`d`, `export`).
     pub check: String,
+    /// What was measured.
     pub metric: String,
+    /// The measurement.
     pub value: f64,
     /// `value <= bound` passes; `None`: informational.
     pub bound: Option<f64>,
+    /// Whether the row passed (`None`: informational).
     pub pass: Option<bool>,
+    /// Context: inputs, episodes, first mismatch.
     pub note: String,
 }
 
+/// The harness's rows.
 #[derive(Clone, Debug, Serialize)]
 pub struct EquivReport {
+    /// One row per measurement.
     pub rows: Vec<EquivRow>,
     /// Every bounded row passed.
     pub passed: bool,
@@ -142,67 +150,52 @@ fn row(check: &str, metric: &str, value: f64, bound: Option<f64>, note: String) 
     }
 }
 
-/// Everything the checks share: the export settings, the candle student, calibration rows.
+/// Everything the checks share: the candle student, the re-export (with its calibration rows)
+/// and the baked blob.
 struct Setup {
-    info: ExportConfig,
     meta: CheckpointMeta,
     net: crate::models::OwnedNetwork,
     norm: crate::data::Normalization,
-    set: frmd_export::calibrate::CalibrationSet,
+    student: ExportedStudent,
     blob: Vec<u8>,
 }
 
 fn setup(cfg: &EquivConfig) -> anyhow::Result<Setup> {
     cfg.validate()?;
-    let role = CheckpointMeta::read(&cfg.ckpt)?.role;
-    if role != Role::Student {
-        anyhow::bail!("--ckpt {}: this is a {}, not a student (equiv checks an exported student against its checkpoint)", cfg.ckpt.display(), role_name(role));
+    let (meta, net): (CheckpointMeta, _) = checkpoint::load(&cfg.ckpt)?;
+    if meta.role != Role::Student {
+        anyhow::bail!("--ckpt {}: this is a {}, not a student (equiv checks an exported student against its checkpoint)", cfg.ckpt.display(), meta.role);
     }
-    let info_path = cfg.baked.join(EXPORT_INFO_FILE);
-    let mut info: ExportConfig = serde_json::from_str(
-        &std::fs::read_to_string(&info_path)
-            .with_context(|| format!("reading {}", info_path.display()))?,
-    )
-    .with_context(|| format!("parsing {}", info_path.display()))?;
+    let mut info = ExportConfig::read(&cfg.baked)?;
     info.checkpoint = cfg.ckpt.display().to_string();
     if let Some(data) = &cfg.data {
         info.calibration_data = Some(data.display().to_string());
     }
-    let blob_path = cfg.baked.join(BAKED_BLOB_FILE);
+    let blob_path = cfg.baked.join(BLOB_FILE);
     let blob =
         std::fs::read(&blob_path).with_context(|| format!("reading {}", blob_path.display()))?;
-    let (meta, net): (CheckpointMeta, _) = checkpoint::load(&cfg.ckpt)?;
     let norm = meta
         .normalization
         .clone()
         .context("checkpoint has no normalization")?;
-    let set = match &info.calibration_data {
-        Some(d) => calibration_from_data(std::path::Path::new(d), &cfg.ckpt)?,
-        None => frmd_export::calibration_file::read(
-            &cfg.ckpt.join(checkpoint::CALIBRATION_FILE),
-            meta.model.cond_dim(),
-        )?,
-    };
     Ok(Setup {
-        info,
+        student: export_student(&info, false)?,
         meta,
         net,
         norm,
-        set,
         blob,
     })
 }
 
-/// Checks (a) and (b) open loop: the candle student, frmd-core's f32 path (`core_f32(cond,
-/// noise)`, normalized units) and the int8 policy on the first `cfg.inputs` calibration rows with
-/// fresh noise.
+/// Checks (a) and (b) open loop: the candle student, frmd-core's f32 path (normalized units) and
+/// the int8 policy on the first `cfg.inputs` calibration rows with fresh noise. Returns the rows
+/// and the f32 path's step-0 model inputs (for check (d)).
 fn open_loop(
     cfg: &EquivConfig,
     s: &Setup,
-    steps: usize,
     int8: &mut Int8Policy,
-    mut core_f32: impl FnMut(&[f32], &[f32]) -> anyhow::Result<Vec<f32>>,
-) -> anyhow::Result<Vec<EquivRow>> {
+) -> anyhow::Result<(Vec<EquivRow>, Vec<Vec<f32>>)> {
+    let steps = s.student.steps();
     let model = &s.meta.model;
     let sigma = s.meta.sigma;
     let (k, traj, obs_w) = (
@@ -211,7 +204,8 @@ fn open_loop(
         model.history * model.obs_dim,
     );
     let norm = &s.norm;
-    let set = &s.set;
+    let set = s.student.calibration();
+    let mut network_inputs = Vec::new();
     let rate_scale = norm.action.scale();
     let range: f64 = norm
         .action
@@ -242,7 +236,11 @@ fn open_loop(
             sample_consistency(&s.net.net, &sigma, &condition, &z, steps, &mut rng)?
                 .flatten_all()?
                 .to_vec1()?;
-        let core = core_f32(cond, &noise)?;
+        let core = s.student.sample_f32(cond, &noise, |step, input| {
+            if step == 0 {
+                network_inputs.push(input.to_vec());
+            }
+        })?;
         max_a = float
             .iter()
             .zip(&core)
@@ -282,7 +280,7 @@ fn open_loop(
         }
     }
     let mean_b = sum_b / count_b.max(1) as f64;
-    Ok(vec![
+    let rows = vec![
         row(
             "a",
             "core f32 vs candle float: max abs error (normalized)",
@@ -310,7 +308,8 @@ fn open_loop(
                 100.0 * cfg.mean_int8_error_frac
             ),
         ),
-    ])
+    ];
+    Ok((rows, network_inputs))
 }
 
 /// Success rates of the candle student, the int8 policy and the runtime policy with frmd-core's
@@ -318,10 +317,10 @@ fn open_loop(
 fn closed_loop(
     cfg: &EquivConfig,
     s: &Setup,
-    steps: usize,
     int8: &mut Int8Policy,
     twin: &mut Int8Policy,
 ) -> anyhow::Result<Vec<EquivRow>> {
+    let steps = s.student.steps();
     let task = s.meta.dataset.task.clone();
     let eval = EvalConfig {
         episodes: cfg.episodes,
@@ -346,7 +345,7 @@ fn closed_loop(
 }
 
 fn blob_row(blob: &[u8], rebuilt: &[u8], cfg: &EquivConfig) -> EquivRow {
-    let path = cfg.baked.join(BAKED_BLOB_FILE);
+    let path = cfg.baked.join(BLOB_FILE);
     row(
         "export",
         "baked blob differs from a re-export (0 = identical)",
@@ -367,18 +366,19 @@ fn qemu_row() -> EquivRow {
     }
 }
 
-fn requant_row(cfg: &EquivConfig) -> EquivRow {
-    let requant = frmd_export::reference::check_requantization(cfg.random_requant, 0x0dd5);
+/// A row of check (d): mismatches of `check` (its name is the metric), which must be 0.
+fn kernel_row(check: &KernelCheck) -> EquivRow {
     row(
         "d",
-        "requantization mismatches vs i128 model",
-        requant.mismatches as f64,
+        &check.name,
+        check.mismatches as f64,
         Some(0.0),
         format!(
             "{} cases{}",
-            requant.cases,
-            requant
+            check.cases,
+            check
                 .first_mismatch
+                .as_ref()
                 .map(|m| format!("; first: {m}"))
                 .unwrap_or_default()
         ),
@@ -390,87 +390,22 @@ fn report(rows: Vec<EquivRow>) -> EquivReport {
     EquivReport { rows, passed }
 }
 
-/// Runs every check; the checkpoint's backbone picks the MLP or the transformer path.
+/// Runs every check.
 pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
     let s = setup(cfg)?;
-    if is_transformer(&s.info)? {
-        return run_transformer(cfg, &s);
-    }
-    let exported = export_mlp(&s.info)?;
-    let rebuilt =
-        frmd_export::blob::write(&exported.policy).map_err(|e| anyhow::anyhow!("encoding: {e}"))?;
-    let mut rows = vec![blob_row(&s.blob, &rebuilt, cfg)];
-    let folded = &exported.folded;
-    let steps = folded.steps.len();
+    let mut rows = vec![blob_row(&s.blob, s.student.blob(), cfg)];
     let mut int8 = Int8Policy::from_blob(&s.blob, "int8")?;
-    let mut network_inputs = Vec::new();
-    rows.extend(open_loop(cfg, &s, steps, &mut int8, |cond, noise| {
-        folded.sample(cond, noise, |step, probe, values| {
-            if step == 0 && probe == Probe::Input {
-                network_inputs.push(values.to_vec());
-            }
-        })
-    })?);
+    let (open, network_inputs) = open_loop(cfg, &s, &mut int8)?;
+    rows.extend(open);
     if cfg.episodes > 0 {
-        let mut twin = Int8Policy::f32_twin(&s.blob, folded.clone(), "core-f32")?;
-        rows.extend(closed_loop(cfg, &s, steps, &mut int8, &mut twin)?);
+        let mut twin = Int8Policy::f32_twin(&s.blob, s.student.clone(), "core-f32")?;
+        rows.extend(closed_loop(cfg, &s, &mut int8, &mut twin)?);
     }
     rows.push(qemu_row());
-    rows.push(requant_row(cfg));
-    let network =
-        frmd_export::reference::check_network::<MAX_WIDTH>(&exported.policy, &network_inputs)?;
-    rows.push(row(
-        "d",
-        "int8 network accumulator mismatches vs wide model",
-        network.mismatches as f64,
-        Some(0.0),
-        format!(
-            "{} cases{}",
-            network.cases,
-            network
-                .first_mismatch
-                .map(|m| format!("; first: {m}"))
-                .unwrap_or_default()
-        ),
-    ));
-    Ok(report(rows))
-}
-
-/// The checks for a transformer-lite student (`FRMT` blob): the same (a), (b), (c) rows; (d) is
-/// the requantization check plus every exported int8 linear layer against the wide-integer model
-/// ([`frmd_export::transformer::reference::check_layers`]; the f32 LayerNorm/attention/residual
-/// parts are covered by (a) and (b)).
-fn run_transformer(cfg: &EquivConfig, s: &Setup) -> anyhow::Result<EquivReport> {
-    let exported = export_transformer(&s.info)?;
-    let rebuilt = transformer_blob(&exported)?;
-    let mut rows = vec![blob_row(&s.blob, &rebuilt, cfg)];
-    let folded = &exported.model.folded;
-    let steps = folded.steps.len();
-    let mut int8 = Int8Policy::from_blob(&s.blob, "int8")?;
-    rows.extend(open_loop(cfg, s, steps, &mut int8, |cond, noise| {
-        folded.sample(cond, noise, |_, _, _| {})
-    })?);
-    if cfg.episodes > 0 {
-        let mut twin = Int8Policy::transformer_f32_twin(&s.blob, folded.clone(), "core-f32")?;
-        rows.extend(closed_loop(cfg, s, steps, &mut int8, &mut twin)?);
-    }
-    rows.push(qemu_row());
-    rows.push(requant_row(cfg));
-    let layers = frmd_export::transformer::reference::check_layers(&exported.model, 16, 0x7f3e)?;
-    rows.push(row(
-        "d",
-        "int8 transformer layer mismatches vs wide model",
-        layers.mismatches as f64,
-        Some(0.0),
-        format!(
-            "{} cases (every int8 linear layer, fc1 requantization + GELU table){}",
-            layers.cases,
-            layers
-                .first_mismatch
-                .map(|m| format!("; first: {m}"))
-                .unwrap_or_default()
-        ),
-    ));
+    let mut requant = frmd_export::reference::check_requantization(cfg.random_requant, 0x0dd5);
+    requant.name = "requantization mismatches vs i128 model".into();
+    rows.push(kernel_row(&requant));
+    rows.push(kernel_row(&s.student.check_kernels(&network_inputs)?));
     Ok(report(rows))
 }
 

@@ -1,7 +1,9 @@
 //! A small seeded PRNG for host-side training: parameter initialization, batch sampling and
 //! diffusion noise. Candle's own RNG cannot be seeded on the CPU, so every random number used by
-//! training and float sampling comes from here (xoshiro256** seeded through SplitMix64, Gaussian
-//! samples by Box-Muller).
+//! training and float sampling comes from here (xoshiro256** seeded through frmd-core's
+//! SplitMix64, Gaussian samples by [`box_muller`], which the task streams share).
+
+use frmd_core::rng::SplitMix64;
 
 /// Deterministic generator: the same seed gives the same stream on every machine.
 #[derive(Clone, Debug)]
@@ -10,23 +12,19 @@ pub struct HostRng {
     spare_normal: Option<f64>,
 }
 
-fn splitmix64(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
+/// Two independent standard normal samples from `u1` in (0, 1] and `u2` in [0, 1) (the
+/// Box-Muller transform): `r cos(2 pi u2)` and `r sin(2 pi u2)` with `r = sqrt(-2 ln u1)`.
+pub fn box_muller(u1: f64, u2: f64) -> (f64, f64) {
+    let radius = (-2.0 * u1.ln()).sqrt();
+    let angle = std::f64::consts::TAU * u2;
+    (radius * angle.cos(), radius * angle.sin())
 }
 
 impl HostRng {
+    /// The stream of `seed`.
     pub fn new(seed: u64) -> Self {
-        let mut sm = seed;
-        let state = [
-            splitmix64(&mut sm),
-            splitmix64(&mut sm),
-            splitmix64(&mut sm),
-            splitmix64(&mut sm),
-        ];
+        let mut seeder = SplitMix64::new(seed);
+        let state = std::array::from_fn(|_| seeder.next_u64());
         HostRng {
             state,
             spare_normal: None,
@@ -42,6 +40,7 @@ impl HostRng {
         HostRng::new(h)
     }
 
+    /// Next 64 random bits.
     pub fn next_u64(&mut self) -> u64 {
         let s = &mut self.state;
         let result = s[1].wrapping_mul(5).rotate_left(7).wrapping_mul(9);
@@ -74,11 +73,9 @@ impl HostRng {
             return z;
         }
         let u1 = 1.0 - self.uniform(); // (0, 1]
-        let u2 = self.uniform();
-        let radius = (-2.0 * u1.ln()).sqrt();
-        let angle = 2.0 * std::f64::consts::PI * u2;
-        self.spare_normal = Some(radius * angle.sin());
-        radius * angle.cos()
+        let (z, spare) = box_muller(u1, self.uniform());
+        self.spare_normal = Some(spare);
+        z
     }
 
     /// `len` standard normal samples as f32.
@@ -107,5 +104,22 @@ mod tests {
             HostRng::derive(1, "a").next_u64(),
             HostRng::derive(1, "b").next_u64()
         );
+    }
+
+    /// The stream every checkpoint and recorded result was made with, to the bit.
+    #[test]
+    fn recorded_stream_is_unchanged() {
+        let mut rng = HostRng::new(7);
+        let bits: Vec<u64> = (0..3).map(|_| rng.next_u64()).collect();
+        assert_eq!(
+            bits,
+            [0xb358faf74ef9765a, 0x475c3d964f482cd2, 0xd6f1d349952c7996]
+        );
+        let normals: Vec<u64> = (0..3).map(|_| rng.normal().to_bits()).collect();
+        assert_eq!(
+            normals,
+            [0x4006803c052962a1, 0xbfc4b2791c2b5a85, 0x3ffe26f011359475]
+        );
+        assert_eq!(HostRng::derive(3, "noise").next_u64(), 0x63079ed36c1d4ae4);
     }
 }

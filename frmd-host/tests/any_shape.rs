@@ -3,17 +3,16 @@
 //! synthetic weights) and a small one, each exported as a blob, loaded and run through the
 //! evaluation policy interface, with the chunk frmd-core's own policy computes.
 
-use frmd_core::blob::LoadedMlp;
+use frmd_core::blob::{AlignedBlob, LoadedMlp};
 use frmd_core::policy::{Noise, PolicyDims};
 use frmd_core::rng::Rng;
 use frmd_host::policy::int8::Int8Policy;
 use frmd_host::tasks::{Policy, PolicyInput};
 use frmd_test_support::random_policy::{random_policy, Dims};
-use frmd_test_support::AlignedBlob;
 
 fn run_shape(dims: Dims) {
     let policy = random_policy(7, 2, &dims);
-    let blob = frmd_export::blob::write(&policy).unwrap();
+    let blob = policy.blob().unwrap();
     let mut host = Int8Policy::from_blob(&blob, "int8").unwrap();
     let expected = PolicyDims {
         history: dims.m,

@@ -18,7 +18,7 @@ use frmd_host::policy::int8::Int8Policy;
 const EPISODES: usize = 4;
 
 fn host_policy() -> Int8Policy {
-    let blob = frmd_export::blob::write(&student()).expect("blob of the checked-in student");
+    let blob = student().blob().expect("blob of the checked-in student");
     Int8Policy::from_blob(&blob, "int8").expect("host int8 policy")
 }
 
@@ -31,7 +31,8 @@ fn firmware_closes_the_loop_bit_for_bit_with_the_host_policy() {
     ) {
         return;
     }
-    let image = build(&repo, "m4", None).expect("build the pil image for m4");
+    let image =
+        build(&repo, frmd_host::firmware::Board::M4, None).expect("build the pil image for m4");
     let firmware = FirmwarePolicy::start(&image).expect("boot the pil image");
     let host = host_policy();
     let dims = host.dims();

@@ -5,7 +5,7 @@
 //! must not imply more than bounded sizes.
 use frmd_core::rng::Rng;
 use frmd_core::sigma::SigmaConfig;
-use frmd_export::checkpoint::{expected_tensors, CheckpointMeta, Role};
+use frmd_formats::checkpoint::{expected_tensors, CheckpointMeta, Role};
 use frmd_host::data::{ActionBeforeStart, Dataset, Normalization, Normalizer};
 use frmd_host::models::{BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput};
 use serde_json::{json, Value};

@@ -1,7 +1,7 @@
 //! End to end: collect a small `reach` dataset, train a tiny teacher, distill a tiny student
 //! (through the `frmd train` code paths, which also write calibration.safetensors), export it
 //! (`frmd export`), load the blob with frmd-core and run the bit-accuracy harness.
-use frmd_test_support::AlignedBlob;
+use frmd_core::blob::AlignedBlob;
 
 mod support;
 use support::{assert_tiny_dims, equiv_within_bounds, row, train_tiny, Tiny};
@@ -22,9 +22,11 @@ fn tiny_student_exports_and_meets_the_harness_bounds() {
         },
     );
     // The exporter refuses the teacher, naming the reason.
-    let err =
-        frmd_export::export::export_checkpoint(&run.teacher, Default::default(), None).unwrap_err();
-    assert!(format!("{err:#}").contains("Teacher"), "{err:#}");
+    let err = frmd_export::export(&run.teacher, &Default::default(), None).unwrap_err();
+    assert!(
+        format!("{err:#}").contains("a teacher checkpoint"),
+        "{err:#}"
+    );
 
     let blob = AlignedBlob::new(&run.export_student());
     for file in ["policy.rs", "weights.bin", "export.json"] {

@@ -2,7 +2,7 @@
 //! transformer-lite teacher and student through the `frmd train` code paths, export the student
 //! with `frmd export` (the backbone picks the transformer exporter: `FRMT` blob plus generated
 //! loader module), load the blob with frmd-core and run the bit-accuracy harness.
-use frmd_test_support::AlignedBlob;
+use frmd_core::blob::AlignedBlob;
 
 mod support;
 use support::{assert_tiny_dims, equiv_within_bounds, row, train_tiny, Tiny};
@@ -52,10 +52,9 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
 
     // The flash figure counts every section the loader views: the blob adds only its header,
     // descriptor and alignment padding.
-    let exported =
-        frmd_export::export::export_transformer_checkpoint(student, Default::default(), None)
-            .unwrap();
-    let memory = exported.model.memory();
+    let student_export = frmd_export::export(student, &Default::default(), None).unwrap();
+    let exported = student_export.transformer().expect("a transformer export");
+    let memory = student_export.memory();
     assert_eq!(
         memory.scratch_bytes,
         exported.model.folded.shape.int8_scratch().ram_bytes()

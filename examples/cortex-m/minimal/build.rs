@@ -1,33 +1,33 @@
-//! Bakes the policy into `$OUT_DIR` and puts a memory map on the linker path.
+//! Exports and bakes the policy into `$OUT_DIR` and puts a memory map on the linker path.
 //!
-//! In your own firmware: point `CHECKPOINT` at your exported student (or call
-//! `frmd_export::bake::write_module` on any `QuantizedPolicy`) and keep your chip's `memory.x`
-//! next to Cargo.toml instead of `board_memory_map`.
+//! In your own firmware: point `CHECKPOINT` at your student (any backbone: the generated module
+//! offers the same `Storage`, `policy()` and sizes for each) and keep your chip's `memory.x` next
+//! to Cargo.toml instead of `board_memory_map`.
 use std::{
     env, fs,
     path::{Path, PathBuf},
 };
 
-/// The student checkpoint (`frmd.json`, `model.safetensors`, `calibration.safetensors`).
+/// The student checkpoint (`frmd.json`, `model.safetensors`, `calibration.safetensors`);
+/// `FRMD_MINIMAL_CHECKPOINT=DIR` bakes another one (the host test of a transformer-lite student).
 const CHECKPOINT: &str = "../policy/reach";
 
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    let exported = frmd_export::export::export_checkpoint(
-        Path::new(CHECKPOINT),
-        frmd_export::export::ExportOptions::default(),
-        None,
-    )
-    .unwrap_or_else(|error| panic!("exporting {CHECKPOINT} failed: {error:#}"));
-    frmd_export::bake::write_module(&exported.policy, &out)
-        .unwrap_or_else(|error| panic!("baking {CHECKPOINT} failed: {error:#}"));
+    let checkpoint = env::var_os("FRMD_MINIMAL_CHECKPOINT")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(CHECKPOINT));
+    frmd_export::export(&checkpoint, &frmd_export::ExportOptions::default(), None)
+        .and_then(|student| student.write_module(&out))
+        .unwrap_or_else(|error| panic!("exporting {} failed: {error:#}", checkpoint.display()));
 
     let target = env::var("TARGET").unwrap_or_default();
     let memory_map = frmd_firmware_support::host::board_memory_map(&target);
     fs::copy(Path::new("..").join(memory_map), out.join("memory.x")).expect("copy memory.x");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
-    println!("cargo:rerun-if-changed={CHECKPOINT}");
+    println!("cargo:rerun-if-changed={}", checkpoint.display());
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-env-changed=FRMD_CM_MEMORY_MAP");
+    println!("cargo:rerun-if-env-changed=FRMD_MINIMAL_CHECKPOINT");
 }

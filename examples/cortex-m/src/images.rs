@@ -25,7 +25,7 @@ pub type StudentWorkload = PolicyWorkload<
 
 /// The baked student's policy as a workload that states its multiply-accumulates.
 pub fn student_workload() -> StudentWorkload {
-    let policy = match student::policy() {
+    let policy = match student::policy(&mut student::Storage::new()) {
         Ok(policy) => policy,
         Err(error) => exit_failure(&error),
     };

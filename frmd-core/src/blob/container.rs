@@ -1,5 +1,5 @@
 //! The container every blob shares: fixed header, postcard descriptor, aligned sections; its
-//! parse side ([`parse`], [`Data`]) and its emit side ([`encode`], [`SectionWriter`]).
+//! parse side (`parse`, `Data`) and its emit side (`encode`, `SectionWriter`).
 //!
 //! ```text
 //! offset  size  field (little endian)
@@ -17,12 +17,15 @@
 //! the blob is read in place on little-endian targets (Cortex-M, x86-64, aarch64); the loader
 //! needs the blob to start at a 4-byte aligned address (it checks, see
 //! [`BlobError::SectionMisaligned`]).
+//!
+//! The container knows no format's sections: a format names each section it reads with its own
+//! tag ([`SectionId`]), which the checks here only pass on into their errors.
 
 use bytemuck::PodCastError;
 use serde::{Deserialize, Serialize};
 
 use super::crc32::crc32;
-use super::BlobError;
+use super::{BlobError, SectionId};
 
 /// The format version this crate writes. Version 3 turned the MLP descriptor's two-plane flag
 /// into an input precision code (adding the 16-bit input plane); postcard encodes the old `bool`
@@ -42,44 +45,6 @@ pub struct Section {
     pub offset: u32,
     /// Length in bytes.
     pub len: u32,
-}
-
-/// Names a section in errors.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum SectionId {
-    /// Observation min/max.
-    ObsNorm,
-    /// Action min/max.
-    ActionNorm,
-    /// ProDMP tables.
-    ProDmp,
-    /// Step constants.
-    Steps,
-    /// MLP: first-layer bias variants.
-    FirstLayerBiases,
-    /// MLP: activation tables.
-    Luts,
-    /// MLP: hidden layer `n` weights.
-    HiddenWeights(u8),
-    /// MLP: hidden layer `n` bias.
-    HiddenBias(u8),
-    /// MLP: hidden layer `n` multipliers.
-    HiddenMultipliers(u8),
-    /// MLP: hidden layer `n` shifts.
-    HiddenShifts(u8),
-    /// MLP: output layer weights.
-    OutputWeights,
-    /// MLP: output layer bias.
-    OutputBias,
-    /// MLP: output layer dequantization scales.
-    OutputScales,
-    /// A section of a transformer blob: which part, which array.
-    Transformer {
-        /// The model part.
-        part: crate::model::transformer::Part,
-        /// The array of that part.
-        field: super::transformer::TensorField,
-    },
 }
 
 /// `value` rounded up to a multiple of `align` (a power of two); `None` on overflow.
@@ -331,7 +296,7 @@ fn descriptor_len<D: Serialize>(descriptor: &D) -> Result<usize, BlobError> {
         .map_err(|_| BlobError::Encode)
 }
 
-/// Length of the blob [`encode`] writes for `emit`.
+/// Length of the blob `encode` writes for `emit`.
 pub(crate) fn encoded_len<D: Serialize>(
     mut emit: impl FnMut(&mut SectionWriter<'_>) -> Result<D, BlobError>,
 ) -> Result<usize, BlobError> {

@@ -11,8 +11,11 @@
 //! descriptor at run time; `check_dims` compares them with the sizes a firmware image was built
 //! for. Every check failure is a named [`BlobError`]; nothing panics on any input.
 
+#[cfg(any(test, feature = "alloc"))]
+mod aligned;
 pub mod container;
 pub mod crc32;
+mod loaded;
 pub mod mlp;
 mod policy_tables;
 pub mod transformer;
@@ -20,24 +23,56 @@ pub mod transformer;
 #[cfg(test)]
 mod tests;
 
-pub use container::{
-    Section, SectionId, FORMAT_VERSION, HEADER_LEN, MIN_FORMAT_VERSION, SECTION_ALIGN,
-};
+#[cfg(any(test, feature = "alloc"))]
+pub use aligned::AlignedBlob;
+pub use container::{Section, FORMAT_VERSION, HEADER_LEN, MIN_FORMAT_VERSION, SECTION_ALIGN};
+pub use loaded::{BlobNetwork, LoadedBlob};
 pub use mlp::{
     encode_mlp, mlp_encoded_len, HiddenLayerDesc, LoadedMlp, MlpBlobParts, MlpDescriptor,
-    OutputLayerDesc, INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MLP_MAGIC,
+    MlpSection, OutputLayerDesc, INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MLP_MAGIC,
 };
-pub use policy_tables::{PolicyHeader, PolicySections, STEP_WORDS};
+pub use policy_tables::{PolicyHeader, PolicySection, PolicySections, STEP_WORDS};
 pub use transformer::{
     encode_transformer, transformer_encoded_len, LoadedTransformer, TransformerBlobParts,
-    TransformerDescriptor, TRANSFORMER_MAGIC,
+    TransformerDescriptor, TransformerSection, TRANSFORMER_MAGIC,
 };
 
 use crate::model::transformer::TransformerError;
 use crate::policy::PolicyError;
 
+/// Names a section in errors: the format that defines it, with that format's own tag.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SectionId {
+    /// A section every policy blob carries (normalization, decoder tables, steps).
+    Policy(PolicySection),
+    /// A section of an MLP blob.
+    Mlp(MlpSection),
+    /// A section of a transformer blob.
+    Transformer(TransformerSection),
+}
+
+impl From<PolicySection> for SectionId {
+    fn from(section: PolicySection) -> Self {
+        Self::Policy(section)
+    }
+}
+
+impl From<MlpSection> for SectionId {
+    fn from(section: MlpSection) -> Self {
+        Self::Mlp(section)
+    }
+}
+
+impl From<TransformerSection> for SectionId {
+    fn from(section: TransformerSection) -> Self {
+        Self::Transformer(section)
+    }
+}
+
 /// Which size of a blob is zero or differs from the expected one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Dimension {
     /// History length `M`.
     History,
@@ -54,6 +89,7 @@ pub enum Dimension {
 /// Why a blob was rejected (or could not be written). Small and `Copy`; each variant names the
 /// problem and, where it applies, the section or layer.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum BlobError {
     /// The buffer is shorter than the header or than the total length the header states.
     Truncated,
@@ -198,8 +234,18 @@ impl core::fmt::Display for BlobError {
             Self::BufferTooSmall => f.write_str("output buffer too small for the blob"),
             Self::Encode => f.write_str("descriptor encoding failed"),
             Self::TooLarge => f.write_str("blob too large (layers or sizes)"),
-            Self::Policy(e) => write!(f, "policy: {e}"),
-            Self::Transformer(e) => write!(f, "transformer: {e}"),
+            Self::Policy(_) => f.write_str("the blob's policy does not validate"),
+            Self::Transformer(_) => f.write_str("the blob's transformer does not validate"),
+        }
+    }
+}
+
+impl core::error::Error for BlobError {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        match self {
+            Self::Policy(error) => Some(error),
+            Self::Transformer(error) => Some(error),
+            _ => None,
         }
     }
 }

@@ -4,8 +4,8 @@
 //! Element types: normalization and ProDMP tables f32 (`[min; o]` then `[max; o]`; the six decoder
 //! tables back to back as in [`ProDmpTables::split`]); steps `STEP_WORDS` u32 words each.
 
-use super::container::{Data, Section, SectionId, SectionWriter};
-use super::{BlobError, Dimension};
+use super::container::{Data, Section, SectionWriter};
+use super::{BlobError, Dimension, SectionId};
 use crate::policy::{
     InputLayout, PolicyConfig, PolicyDims, ProDmpTables, RangeNormalizer, Sampler, StepConstants,
     StepTable, MAX_STEPS,
@@ -15,6 +15,20 @@ use serde::{Deserialize, Serialize};
 /// Words per step in the step-constants section: `sigma, renoise_std, c_in, c_skip, c_out` as
 /// f32 bit patterns, then `noise_variant`.
 pub const STEP_WORDS: usize = 6;
+
+/// The sections every policy blob carries (for [`SectionId::Policy`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PolicySection {
+    /// Observation min/max.
+    ObsNorm,
+    /// Action min/max.
+    ActionNorm,
+    /// ProDMP tables.
+    ProDmp,
+    /// Step constants.
+    Steps,
+}
 
 /// The sizes, control period and input layout every policy blob's descriptor starts with.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -91,15 +105,15 @@ pub(crate) fn write(
     config: &PolicyConfig<'_>,
 ) -> Result<PolicySections, BlobError> {
     let (obs, action) = (&config.obs_norm, &config.action_norm);
-    same_len(obs.min, obs.max, SectionId::ObsNorm)?;
-    same_len(action.min, action.max, SectionId::ActionNorm)?;
+    same_len(obs.min, obs.max, PolicySection::ObsNorm.into())?;
+    same_len(action.min, action.max, PolicySection::ActionNorm.into())?;
     let t = &config.sampler.decoder;
     let (n, p) = (t.horizon(), t.params_per_dof());
     let consistent = Some(t.pos_params.len()) == n.checked_mul(p)
         && t.vel_params.len() == t.pos_params.len()
         && [t.pos_v0, t.vel_y0, t.vel_v0].iter().all(|c| c.len() == n);
     if !consistent {
-        return Err(BlobError::SectionLength(SectionId::ProDmp));
+        return Err(BlobError::SectionLength(PolicySection::ProDmp.into()));
     }
     let tables = t
         .pos_params
@@ -207,15 +221,15 @@ pub(crate) fn read<'a>(
             .ok_or(BlobError::SectionLength(id))?;
         Ok(RangeNormalizer::new(min, max))
     };
-    let obs_norm = normalizer(s.obs_norm, obs_dim, SectionId::ObsNorm)?;
-    let action_norm = normalizer(s.action_norm, action_dim, SectionId::ActionNorm)?;
+    let obs_norm = normalizer(s.obs_norm, obs_dim, PolicySection::ObsNorm.into())?;
+    let action_norm = normalizer(s.action_norm, action_dim, PolicySection::ActionNorm.into())?;
     if obs_norm.validate().is_err() || action_norm.validate().is_err() {
         return Err(BlobError::Normalization);
     }
     let count = ProDmpTables::len_for(horizon, params_per_dof);
-    let values = data.finite(s.prodmp, count, SectionId::ProDmp)?;
+    let values = data.finite(s.prodmp, count, PolicySection::ProDmp.into())?;
     let decoder = ProDmpTables::split(values, horizon, params_per_dof)
-        .ok_or(BlobError::SectionLength(SectionId::ProDmp))?;
+        .ok_or(BlobError::SectionLength(PolicySection::ProDmp.into()))?;
     let steps = read_steps(data, s.steps)?;
     Ok(PolicyTables {
         dims,
@@ -228,9 +242,9 @@ pub(crate) fn read<'a>(
 }
 
 fn read_steps(data: &Data<'_>, section: Section) -> Result<StepTable, BlobError> {
-    let words = data.cast::<u32>(section, SectionId::Steps)?;
+    let words = data.cast::<u32>(section, PolicySection::Steps.into())?;
     if !words.len().is_multiple_of(STEP_WORDS) {
-        return Err(BlobError::SectionLength(SectionId::Steps));
+        return Err(BlobError::SectionLength(PolicySection::Steps.into()));
     }
     let count = words.len() / STEP_WORDS;
     if count == 0 || count > MAX_STEPS {

@@ -18,30 +18,6 @@ fn blob_policy<'a>(loaded: &Loaded<'a>) -> Result<Int8Policy<'a>, PolicyError> {
     loaded.policy::<M, O, K, N, P, I, WIDTH>()
 }
 
-/// A 16-byte aligned byte buffer.
-struct Aligned {
-    words: Vec<u128>,
-    len: usize,
-    shift: usize,
-}
-
-impl Aligned {
-    fn new(bytes: &[u8], shift: usize) -> Self {
-        let mut words = vec![0_u128; (bytes.len() + shift) / 16 + 1];
-        let raw: &mut [u8] = bytemuck::cast_slice_mut(&mut words);
-        raw[shift..shift + bytes.len()].copy_from_slice(bytes);
-        Self {
-            words,
-            len: bytes.len(),
-            shift,
-        }
-    }
-    fn bytes(&self) -> &[u8] {
-        let raw: &[u8] = bytemuck::cast_slice(&self.words);
-        &raw[self.shift..self.shift + self.len]
-    }
-}
-
 fn model_blob(model: &TestModel) -> Vec<u8> {
     let hidden = model.int8_layers();
     let parts = model.blob_parts(&hidden);
@@ -62,7 +38,7 @@ fn load(bytes: &[u8]) -> Result<Loaded<'_>, BlobError> {
 }
 
 fn load_copy(bytes: &[u8]) -> Result<(), BlobError> {
-    let buffer = Aligned::new(bytes, 0);
+    let buffer = AlignedBlob::new(bytes);
     load(buffer.bytes()).map(|_| ())
 }
 
@@ -111,7 +87,7 @@ fn round_trip_gives_the_same_policy_bit_for_bit() {
     for sigmas in [&[80.0][..], &[80.0, 2.0, 0.3][..]] {
         let model = TestModel::new(21, sigmas);
         let blob = model_blob(&model);
-        let buffer = Aligned::new(&blob, 0);
+        let buffer = AlignedBlob::new(&blob);
         let loaded = load(buffer.bytes()).unwrap();
         assert_eq!(loaded.steps(), &model.steps[..]);
         assert_eq!(
@@ -150,7 +126,7 @@ fn round_trip_gives_the_same_policy_bit_for_bit() {
 fn truncation_at_every_length_is_rejected() {
     let model = TestModel::new(22, &[80.0, 1.0]);
     let blob = model_blob(&model);
-    let buffer = Aligned::new(&blob, 0);
+    let buffer = AlignedBlob::new(&blob);
     let bytes = buffer.bytes();
     for len in 0..bytes.len() {
         assert_eq!(
@@ -213,7 +189,7 @@ fn header_damage_is_named() {
 fn dimension_mismatches_are_named() {
     let model = TestModel::new(24, &[80.0]);
     let blob = model_blob(&model);
-    let buffer = Aligned::new(&blob, 0);
+    let buffer = AlignedBlob::new(&blob);
     let bytes = buffer.bytes();
     let expect = |dims: crate::policy::PolicyDims| load(bytes).unwrap().check_dims(&dims).err();
     assert_eq!(load(bytes).unwrap().dims(), DIMS);
@@ -284,23 +260,23 @@ fn shape_and_value_damage_is_named() {
     );
     check(
         with_descriptor(&blob, |d| d.hidden[0].weights.offset = 1 << 30),
-        BlobError::SectionBounds(SectionId::HiddenWeights(0)),
+        BlobError::SectionBounds(MlpSection::HiddenWeights(0).into()),
     );
     check(
         with_descriptor(&blob, |d| d.tables.obs_norm.offset += 4),
-        BlobError::SectionMisaligned(SectionId::ObsNorm),
+        BlobError::SectionMisaligned(PolicySection::ObsNorm.into()),
     );
     check(
         with_descriptor(&blob, |d| d.hidden[1].bias.len -= 4),
-        BlobError::SectionLength(SectionId::HiddenBias(1)),
+        BlobError::SectionLength(MlpSection::HiddenBias(1).into()),
     );
     check(
         with_descriptor(&blob, |d| d.output.scales.len -= 2),
-        BlobError::SectionLength(SectionId::OutputScales),
+        BlobError::SectionLength(MlpSection::OutputScales.into()),
     );
     check(
         with_descriptor(&blob, |d| d.first_layer_biases.len -= 4),
-        BlobError::SectionLength(SectionId::FirstLayerBiases),
+        BlobError::SectionLength(MlpSection::FirstLayerBiases.into()),
     );
     check(
         with_descriptor(&blob, |d| d.hidden[1].lut = Some(7)),
@@ -334,11 +310,11 @@ fn shape_and_value_damage_is_named() {
     );
     check(
         poke(&blob, d.tables.obs_norm, 4, &f32::NAN.to_le_bytes()),
-        BlobError::NonFinite(SectionId::ObsNorm),
+        BlobError::NonFinite(PolicySection::ObsNorm.into()),
     );
     check(
         poke(&blob, d.tables.prodmp, 8, &f32::INFINITY.to_le_bytes()),
-        BlobError::NonFinite(SectionId::ProDmp),
+        BlobError::NonFinite(PolicySection::ProDmp.into()),
     );
     check(
         poke(&blob, d.tables.action_norm, 0, &9.0_f32.to_le_bytes()),
@@ -374,15 +350,15 @@ fn misaligned_buffer_is_rejected() {
     let model = TestModel::new(26, &[80.0]);
     let blob = model_blob(&model);
     for shift in [1, 2, 3] {
-        let buffer = Aligned::new(&blob, shift);
+        let buffer = AlignedBlob::shifted(&blob, shift);
         assert_eq!(
             load(buffer.bytes()).err(),
-            Some(BlobError::SectionMisaligned(SectionId::ObsNorm)),
+            Some(BlobError::SectionMisaligned(PolicySection::ObsNorm.into())),
             "shift {shift}"
         );
     }
     // 4-byte alignment is enough.
-    let buffer = Aligned::new(&blob, 4);
+    let buffer = AlignedBlob::shifted(&blob, 4);
     assert!(load(buffer.bytes()).is_ok());
 }
 
@@ -395,13 +371,13 @@ fn writer_checks_part_lengths() {
     parts.config.obs_norm.min = &model.obs_range.0[..2];
     assert_eq!(
         encode_mlp(&parts, &mut out),
-        Err(BlobError::SectionLength(SectionId::ObsNorm))
+        Err(BlobError::SectionLength(PolicySection::ObsNorm.into()))
     );
     let mut parts = model.blob_parts(&hidden);
     parts.mlp.output.output_scales = &model.quant.output_scales[1..];
     assert_eq!(
         encode_mlp(&parts, &mut out),
-        Err(BlobError::SectionLength(SectionId::OutputScales))
+        Err(BlobError::SectionLength(MlpSection::OutputScales.into()))
     );
     let parts = model.blob_parts(&hidden);
     let len = mlp_encoded_len(&parts).unwrap();
@@ -450,7 +426,7 @@ proptest! {
         fix_crc(&mut bytes);
         if let Ok(()) = load_copy(&bytes) {
             // A blob that still loads must give a policy that runs or fails by name.
-            let buffer = Aligned::new(&bytes, 0);
+            let buffer = AlignedBlob::new(&bytes);
             let loaded = load(buffer.bytes()).unwrap();
             if let Ok(mut policy) = blob_policy(&loaded) {
                 policy.reset(&[0.0, 0.2]).unwrap();
@@ -465,17 +441,17 @@ proptest! {
 fn two_plane_flag_reaches_the_network() {
     let model = TestModel::new(31, &[80.0]);
     let blob = model_blob(&model);
-    let plain = Aligned::new(&blob, 0);
+    let plain = AlignedBlob::new(&blob);
     let loaded = load(plain.bytes()).unwrap();
     let precision = loaded.network::<WIDTH>().unwrap().input_precision();
     assert_eq!(precision, crate::model::mlp::InputPrecision::Int8);
     let flagged = with_descriptor(&blob, |d| d.input_precision = INPUT_TWO_PLANE);
-    let buffer = Aligned::new(&flagged, 0);
+    let buffer = AlignedBlob::new(&flagged);
     let loaded = load(buffer.bytes()).unwrap();
     let precision = loaded.network::<WIDTH>().unwrap().input_precision();
     assert_eq!(precision, crate::model::mlp::InputPrecision::TwoPlane);
     let wide = with_descriptor(&blob, |d| d.input_precision = INPUT_INT16);
-    let buffer = Aligned::new(&wide, 0);
+    let buffer = AlignedBlob::new(&wide);
     let loaded = load(buffer.bytes()).unwrap();
     let precision = loaded.network::<WIDTH>().unwrap().input_precision();
     assert_eq!(precision, crate::model::mlp::InputPrecision::Int16);
@@ -489,4 +465,22 @@ fn two_plane_flag_reaches_the_network() {
     }
     let unknown = with_descriptor(&blob, |d| d.input_precision = 3);
     assert_eq!(load_copy(&unknown), Err(BlobError::InputQuantization));
+}
+
+/// The sample blob the loader's doctest loads (`tests/data/sample_policy.blob`) is what the
+/// encoder writes for the test model. Regenerate with
+/// `FRMD_BLESS=1 cargo test -p frmd-core committed_sample_blob`.
+#[test]
+fn committed_sample_blob_is_current() {
+    let blob = model_blob(&TestModel::new(7, &[80.0]));
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/sample_policy.blob");
+    if std::env::var_os("FRMD_BLESS").is_some() {
+        std::fs::write(path, &blob).unwrap();
+    }
+    let committed = std::fs::read(path).unwrap();
+    assert!(
+        committed == blob,
+        "{path} differs from the encoder's blob of the test model (FRMD_BLESS=1 to update)"
+    );
+    load_copy(&committed).unwrap();
 }

@@ -55,6 +55,65 @@ pub(crate) fn dot_i8_i16_prefix(a: &[i8], b: &[i16]) -> i32 {
     })
 }
 
+/// An input element type of the row kernels.
+pub(crate) trait RowInput: Copy {
+    /// `sum_i row[i] * input[i]` over the common prefix (int32, wrapping).
+    fn dot(row: &[i8], input: &[Self]) -> i32;
+    /// The value as a sign-extended halfword (low 16 bits of the `u32`).
+    #[cfg(frmd_arm_dsp)]
+    fn half(self) -> u32;
+    /// The input as int8 codes, if it is int8.
+    #[cfg(frmd_arm_dsp)]
+    fn as_i8(input: &[Self]) -> Option<&[i8]>;
+    /// The input as int16 codes, if it is int16.
+    #[cfg(frmd_arm_dsp)]
+    fn as_i16(input: &[Self]) -> Option<&[i16]>;
+}
+
+impl RowInput for i8 {
+    #[inline(always)]
+    fn dot(row: &[i8], input: &[i8]) -> i32 {
+        dot_i8_prefix(row, input)
+    }
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn half(self) -> u32 {
+        u32::from(i16::from(self) as u16)
+    }
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn as_i8(input: &[i8]) -> Option<&[i8]> {
+        Some(input)
+    }
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn as_i16(_: &[i8]) -> Option<&[i16]> {
+        None
+    }
+}
+
+impl RowInput for i16 {
+    #[inline(always)]
+    fn dot(row: &[i8], input: &[i16]) -> i32 {
+        dot_i8_i16_prefix(row, input)
+    }
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn half(self) -> u32 {
+        u32::from(self as u16)
+    }
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn as_i8(_: &[i16]) -> Option<&[i8]> {
+        None
+    }
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn as_i16(input: &[i16]) -> Option<&[i16]> {
+        Some(input)
+    }
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     extern crate std;
@@ -95,20 +154,6 @@ pub(crate) mod tests {
             let input: Vec<i8> = (0..columns).map(|_| byte()).collect();
             check(&weights, &input);
         }
-    }
-
-    #[test]
-    fn row_dots_match_wide_sums() {
-        random_cases(0x3A7, |weights, input| {
-            let mut got = Vec::new();
-            crate::kernels::rows::for_each_sum(input, weights, &[], |sum| got.push(i64::from(sum)));
-            assert_eq!(
-                got,
-                wide_row_sums(weights, input),
-                "columns {}",
-                input.len()
-            );
-        });
     }
 
     fn naive(a: &[i8], b: &[i8]) -> i64 {

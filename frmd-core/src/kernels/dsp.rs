@@ -1,5 +1,5 @@
 //! Two rows of an int8 matrix-vector product on Arm cores with the DSP extension
-//! (Cortex-M4/M7/M33), for [`super::rows::for_each_block`].
+//! (Cortex-M4/M7/M33), for `super::rows::for_each_block`.
 //!
 //! Compiled only with `cfg(frmd_arm_dsp)` (set by `build.rs`); every other target uses the
 //! portable dot products. The `asm!` inner loops are in [`super::dsp_asm`], the only module of
@@ -24,11 +24,11 @@
 //! signed overflow it only sets the sticky Q flag). Wrapping int32 addition is associative and
 //! commutative, so the sums equal the portable kernel's for every input.
 
+use super::dot::RowInput;
 use core::ops::Range;
 
 use super::dsp_asm::{row_pairs, Input, BLOCK};
-use super::rows::RowInput;
-use super::rows::BLOCK_ROWS;
+use super::BLOCK_ROWS;
 
 /// Widest input that is rewritten to halfword pairs on the stack (2 bytes per column: 512 bytes).
 pub(crate) const EXPANDED_COLUMNS: usize = 256;

@@ -12,37 +12,15 @@
 //! table ([`super::LutTable`], or the interpolated [`super::Lut16Table`]) maps every requantized output in
 //! the same pass.
 
+use super::dot::RowInput;
 #[cfg(target_arch = "x86_64")]
 use super::dot::{dot_i8_i16_prefix, dot_i8_prefix};
+pub use super::input::LayerInput;
 use super::precision::{Accumulator, Precision};
-use super::rows::{for_each_block, for_each_sum, RowInput};
+use super::rows::{for_each_block, for_each_sum};
 use super::KernelError;
 #[cfg(target_arch = "x86_64")]
 use crate::quant::requantize_to_i8;
-
-/// The input vector of a fully connected layer.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum LayerInput<'a> {
-    /// int8 codes (every hidden layer, and a first layer with int8 input).
-    Int8(&'a [i8]),
-    /// int16 codes of the 16-bit input plane (`model::mlp::InputPrecision::Int16`).
-    Int16(&'a [i16]),
-}
-
-impl LayerInput<'_> {
-    /// Number of input values.
-    pub fn len(&self) -> usize {
-        match self {
-            Self::Int8(values) => values.len(),
-            Self::Int16(values) => values.len(),
-        }
-    }
-
-    /// Whether there are no input values.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-}
 
 /// Weights and bias of one fully connected layer, borrowed (typically `&'static` baked data).
 /// `A` is the accumulator and bias type: `i32` (int8 activations, the default) or `i64` (int16

@@ -23,6 +23,7 @@ mod dsp;
 #[cfg(frmd_arm_dsp)]
 mod dsp_asm;
 pub mod fc;
+mod input;
 pub mod lut;
 pub mod lut16;
 pub mod norm;
@@ -41,8 +42,12 @@ pub use norm::{layer_norm, layer_norm_in_place};
 pub use precision::{Accumulator, Precision};
 pub use softmax::softmax_in_place;
 
+/// Rows per block that the row kernels (`rows::for_each_block`) hand to their caller.
+pub(crate) const BLOCK_ROWS: usize = 16;
+
 /// Why a kernel refused its arguments. Small and `Copy`; each variant names the offending slice.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum KernelError {
     /// The two operands of a dot product differ in length.
     OperandLength,
@@ -102,3 +107,6 @@ impl core::fmt::Display for KernelError {
         f.write_str(text)
     }
 }
+
+/// No variant wraps another error.
+impl core::error::Error for KernelError {}

@@ -16,12 +16,12 @@
 use core::fmt::Debug;
 use core::ops::Range;
 
-use super::fc::LayerInput;
+use super::input::LayerInput;
 use super::lut::{self, LutTable};
 #[cfg(not(frmd_arm_dsp))]
 use super::lut16;
 use super::lut16::Lut16Table;
-use super::rows::BLOCK_ROWS;
+use super::BLOCK_ROWS;
 #[cfg(not(frmd_arm_dsp))]
 use crate::quant::requantize_s64;
 use crate::quant::{
@@ -38,7 +38,7 @@ pub(crate) mod sealed {
 
     /// How the int32 column sums of the row kernels make a block of accumulators.
     pub trait Accumulate: Copy {
-        /// Fills `sums` (at most `rows::BLOCK_ROWS` rows of `width` columns) with
+        /// Fills `sums` (at most `BLOCK_ROWS` rows of `width` columns) with
         /// `bias[r] + the row's products` by calls `kernel(columns, start, residues)`, each of
         /// which must set `residues[r] = start[r] + sum over columns of the row's products`
         /// (int32, wrapping; missing `start` entries count as 0).

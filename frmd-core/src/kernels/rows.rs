@@ -12,70 +12,9 @@
 //! ran fewer instructions but was slower: LLVM's `punpcklbw` sign extension read a stale register
 //! and chained the whole loop body.)
 
-use super::dot::{dot_i8_i16_prefix, dot_i8_prefix};
+use super::dot::RowInput;
 use super::precision::Accumulator;
-
-/// An input element type of the row kernels.
-pub(crate) trait RowInput: Copy {
-    /// `sum_i row[i] * input[i]` over the common prefix (int32, wrapping).
-    fn dot(row: &[i8], input: &[Self]) -> i32;
-    /// The value as a sign-extended halfword (low 16 bits of the `u32`).
-    #[cfg(frmd_arm_dsp)]
-    fn half(self) -> u32;
-    /// The input as int8 codes, if it is int8.
-    #[cfg(frmd_arm_dsp)]
-    fn as_i8(input: &[Self]) -> Option<&[i8]>;
-    /// The input as int16 codes, if it is int16.
-    #[cfg(frmd_arm_dsp)]
-    fn as_i16(input: &[Self]) -> Option<&[i16]>;
-}
-
-impl RowInput for i8 {
-    #[inline(always)]
-    fn dot(row: &[i8], input: &[i8]) -> i32 {
-        dot_i8_prefix(row, input)
-    }
-    #[cfg(frmd_arm_dsp)]
-    #[inline(always)]
-    fn half(self) -> u32 {
-        u32::from(i16::from(self) as u16)
-    }
-    #[cfg(frmd_arm_dsp)]
-    #[inline(always)]
-    fn as_i8(input: &[i8]) -> Option<&[i8]> {
-        Some(input)
-    }
-    #[cfg(frmd_arm_dsp)]
-    #[inline(always)]
-    fn as_i16(_: &[i8]) -> Option<&[i16]> {
-        None
-    }
-}
-
-impl RowInput for i16 {
-    #[inline(always)]
-    fn dot(row: &[i8], input: &[i16]) -> i32 {
-        dot_i8_i16_prefix(row, input)
-    }
-    #[cfg(frmd_arm_dsp)]
-    #[inline(always)]
-    fn half(self) -> u32 {
-        u32::from(self as u16)
-    }
-    #[cfg(frmd_arm_dsp)]
-    #[inline(always)]
-    fn as_i8(_: &[i16]) -> Option<&[i8]> {
-        None
-    }
-    #[cfg(frmd_arm_dsp)]
-    #[inline(always)]
-    fn as_i16(input: &[i16]) -> Option<&[i16]> {
-        Some(input)
-    }
-}
-
-/// Rows per block that [`for_each_block`] hands to its caller.
-pub(crate) const BLOCK_ROWS: usize = 16;
+use super::BLOCK_ROWS;
 
 /// Calls `block(first, sums)` for consecutive blocks of up to [`BLOCK_ROWS`] rows of the
 /// row-major `weights` (`input.len()` columns; a partial last row is ignored), in order, with
@@ -161,4 +100,26 @@ pub(crate) fn for_each_accumulator<T: RowInput, A: Accumulator>(
     for_each_block(input, weights, bias, |_, sums| {
         sums.iter().copied().for_each(&mut emit)
     });
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::for_each_sum;
+    use crate::kernels::dot::tests::{random_cases, wide_row_sums};
+    use std::vec::Vec;
+
+    #[test]
+    fn row_dots_match_wide_sums() {
+        random_cases(0x3A7, |weights, input| {
+            let mut got = Vec::new();
+            for_each_sum(input, weights, &[], |sum| got.push(i64::from(sum)));
+            assert_eq!(
+                got,
+                wide_row_sums(weights, input),
+                "columns {}",
+                input.len()
+            );
+        });
+    }
 }

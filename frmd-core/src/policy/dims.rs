@@ -4,6 +4,7 @@
 /// Sizes of a policy: observation history `m`, observation dimension `o`, action dimension
 /// (DoF) `k`, horizon `n`, ProDMP parameters per DoF `p = num_basis + 1`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct PolicyDims {
     /// Observation history length `m`.
     pub history: usize,

@@ -22,6 +22,71 @@
 //! configuration. The [`Policy`]'s const generics `M, O, K, N, P, I` are the capacities of its
 //! buffers (`I` the model input), at least those sizes: a firmware image bakes them exactly, a
 //! host picks capacities large enough for any exported shape.
+//!
+//! # Example
+//!
+//! A policy over hand-made parts (a firmware gets them from a baked module or a blob, see
+//! [`crate::blob::LoadedMlp`]): one observation of 2 values, 1 DoF, chunks of 4 actions from 3
+//! basis functions and a goal, one sampling step, a tiny f32 MLP.
+//!
+//! ```
+//! use frmd_core::kernels::Activation;
+//! use frmd_core::model::linear::F32Linear;
+//! use frmd_core::policy::{
+//!     F32MlpNetwork, InputLayout, Noise, Policy, PolicyConfig, ProDmpTables, RangeNormalizer,
+//!     Sampler, StepConstants, StepTable,
+//! };
+//! use frmd_core::prodmp::{BakedProDmp, ProDmpConfig};
+//! use frmd_core::rng::Rng;
+//! use frmd_core::sigma::SigmaConfig;
+//!
+//! const DT: f32 = 0.05;
+//! let decoder = BakedProDmp::<4, 4>::from_config(&ProDmpConfig::policy(1, 3, 4, DT.into()))?;
+//! let sigma = SigmaConfig::default();
+//! let steps = [StepConstants::consistency(&sigma, sigma.sigma_max, 0)?];
+//! let (obs_min, obs_max, action_min, action_max) = ([-1.0; 2], [1.0; 2], [-0.5], [0.5]);
+//! let config = PolicyConfig {
+//!     history: 1,
+//!     obs_norm: RangeNormalizer::new(&obs_min, &obs_max),
+//!     action_norm: RangeNormalizer::new(&action_min, &action_max),
+//!     sampler: Sampler {
+//!         steps: StepTable::new(&steps),
+//!         decoder: ProDmpTables::from_baked(&decoder),
+//!         layout: InputLayout::standard(DT),
+//!         control_dt: DT,
+//!     },
+//! };
+//! // Model input: 2 observations, the last action and its rate, the 4-step noisy chunk.
+//! let (w1, b1, w2, b2) = ([0.1_f32; 8 * 6], [0.0; 6], [0.2; 6 * 4], [0.0; 4]);
+//! let hidden = [F32Linear {
+//!     in_features: 8,
+//!     out_features: 6,
+//!     weights: &w1,
+//!     bias: &b1,
+//!     activation: Activation::Silu,
+//! }];
+//! let output = F32Linear {
+//!     in_features: 6,
+//!     out_features: 4,
+//!     weights: &w2,
+//!     bias: &b2,
+//!     activation: Activation::Identity,
+//! };
+//! let network = F32MlpNetwork::<8>::new(&hidden, output, &[])?;
+//! // Capacities M, O, K, N, P and the model input I: at least the sizes above.
+//! let mut policy = Policy::<_, 1, 2, 1, 4, 4, 8>::new(config, network)?;
+//! policy.reset(&[0.0])?; // the last commanded action
+//! policy.observe(&[0.3, -0.2])?; // every control tick
+//! let chunk = policy.act(Noise::Rng(&mut Rng::new(7)))?; // when a new chunk is needed
+//! assert!(chunk.positions.iter().flatten().all(|p| p.is_finite()));
+//! let mut executed = 0;
+//! while let Some(action) = policy.next_action() {
+//!     assert!(action[0].abs() <= 10.0); // command it (robot units)
+//!     executed += 1;
+//! }
+//! assert_eq!(executed, 4);
+//! # Ok::<(), Box<dyn core::error::Error>>(())
+//! ```
 
 mod baked;
 mod decoder;
@@ -65,6 +130,7 @@ use crate::prodmp::ProDmpError;
 
 /// Why the policy refused a call. Small and `Copy`; each variant names the problem.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum PolicyError {
     /// Observation element `index` is NaN or infinite.
     NonFiniteObservation {
@@ -153,12 +219,23 @@ impl core::fmt::Display for PolicyError {
             Self::NonFiniteNoise => f.write_str("supplied noise is not finite"),
             Self::NonFiniteOutput => f.write_str("sampled chunk is not finite"),
             Self::BakedData => f.write_str("baked weight section out of range or misaligned"),
-            Self::Model(e) => write!(f, "network: {e}"),
-            Self::Decode(e) => write!(f, "ProDMP decode: {e}"),
-            Self::Transformer(e) => write!(f, "transformer: {e}"),
+            Self::Model(_) => f.write_str("the network failed"),
+            Self::Decode(_) => f.write_str("the ProDMP decode failed"),
+            Self::Transformer(_) => f.write_str("the transformer network failed"),
             Self::TransformerLayout => {
                 f.write_str("transformer network needs the standard input layout")
             }
+        }
+    }
+}
+
+impl core::error::Error for PolicyError {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        match self {
+            Self::Model(error) => Some(error),
+            Self::Decode(error) => Some(error),
+            Self::Transformer(error) => Some(error),
+            _ => None,
         }
     }
 }

@@ -1,6 +1,6 @@
 //! Per-dimension min/max normalization to `[-1, 1]` (docs/design.md s.4). [`normalize_value`] and
 //! [`denormalize_value`] are the one definition, also used by the exporter's fitted
-//! `frmd_export::checkpoint::Normalizer` (which training uses), so the firmware sees
+//! `frmd_formats::checkpoint::Normalizer` (which training uses), so the firmware sees
 //! bit-identical model inputs:
 //! `normalized = 2 (raw - min) / (max - min) - 1`, `raw = (normalized + 1) 0.5 (max - min) + min`;
 //! a constant dimension (`max == min`) maps to 0 and back to its constant. Rates (differences per
@@ -11,7 +11,7 @@ use super::PolicyError;
 
 /// One raw value to `[-1, 1]` with its dimension's bounds (0 for a constant dimension). The one
 /// definition of the formula: the runtime's [`RangeNormalizer`] and the exporter's fitted
-/// `frmd_export::checkpoint::Normalizer` both call it.
+/// `frmd_formats::checkpoint::Normalizer` both call it.
 #[inline]
 pub fn normalize_value(raw: f32, min: f32, max: f32) -> f32 {
     if max > min {

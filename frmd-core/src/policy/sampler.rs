@@ -61,6 +61,7 @@ impl Noise<'_> {
 /// `N` times of `K` DoFs: the `n k` values of a policy with smaller sizes are the first ones of
 /// the flattened arrays, step-major (for `n = N`, `k = K` simply `[t][d]`).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Trajectory<const N: usize, const K: usize> {
     /// Positions (normalized or robot units, as stated where used).
     pub positions: [[f32; K]; N],

@@ -10,9 +10,13 @@ use super::ProDmpError;
 /// (units/s) of one DoF at one query time. Relative-goal terms are folded into `pos_y0`/`vel_y0`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct BoundaryCoefficients {
+    /// Position per unit of `y0`.
     pub pos_y0: f64,
+    /// Position per unit of `v0` (seconds).
     pub pos_v0: f64,
+    /// Velocity per unit of `y0` (1/s).
     pub vel_y0: f64,
+    /// Velocity per unit of `v0`.
     pub vel_v0: f64,
 }
 
@@ -21,9 +25,13 @@ pub struct BoundaryCoefficients {
 /// `pos = xi1 y0 + xi2 tau v0 + H theta`, `d pos / ds = dxi1 y0 + dxi2 tau v0 + H' theta`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct BoundaryTerms {
+    /// `xi_1`: the homogeneous solution that starts at 1 with zero slope.
     pub xi1: f64,
+    /// `xi_2`: the homogeneous solution that starts at 0 with unit slope.
     pub xi2: f64,
+    /// `d xi_1 / ds`.
     pub dxi1: f64,
+    /// `d xi_2 / ds`.
     pub dxi2: f64,
 }
 
@@ -100,6 +108,7 @@ impl ProDmp {
         })
     }
 
+    /// The configuration it was built from.
     pub fn config(&self) -> &ProDmpConfig {
         &self.cfg
     }

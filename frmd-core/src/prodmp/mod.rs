@@ -24,6 +24,7 @@ pub use decoder::{apply_row, linear_row, BoundaryCoefficients, BoundaryTerms, Pr
 
 /// Why a ProDMP could not be built or evaluated. Each variant names one problem.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ProDmpError {
     /// `num_dof` is 0.
     ZeroDof,
@@ -102,3 +103,6 @@ impl core::fmt::Display for ProDmpError {
         f.write_str(text)
     }
 }
+
+/// No variant wraps another error.
+impl core::error::Error for ProDmpError {}

@@ -7,7 +7,7 @@
 //! - weights: int8 symmetric per output channel, `real = scale[c] * q`, `q` in `[-127, 127]`;
 //! - bias: int32 with scale `input_scale * weight_scale[c]`, the input zero point folded in
 //!   (`bias_q - input_zero_point * sum(w_q)`), so the kernels never see the input zero point;
-//! - requantization: [`fixed_point`] (Q31 multiplier and shift, TFLite double rounding).
+//! - requantization: `fixed_point` (Q31 multiplier and shift, TFLite double rounding).
 //!
 //! The 16x8 scheme (int16 symmetric activations, int8 weights, int64 bias; TFLite / CMSIS-NN
 //! `s16`) adds [`requantize_s64`] (Q15 multiplier, one rounding), [`dequantize_wide`],
@@ -54,6 +54,7 @@ mod wide_input_tests;
 /// Why a quantization parameter cannot be computed. Small and `Copy`; each variant names the
 /// offending quantity.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum QuantError {
     /// A real multiplier is NaN or infinite.
     NonFiniteMultiplier,
@@ -99,3 +100,6 @@ impl core::fmt::Display for QuantError {
         f.write_str(text)
     }
 }
+
+/// No variant wraps another error.
+impl core::error::Error for QuantError {}

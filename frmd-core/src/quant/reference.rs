@@ -1,5 +1,5 @@
 //! Wide-integer model (tests and the `reference` feature) of requantization, written directly from the formulas in
-//! [`super::fixed_point`] with i128 arithmetic and floor divisions (no masks, no nudges), so it
+//! `quant::fixed_point` with i128 arithmetic and floor divisions (no masks, no nudges), so it
 //! shares no code path with the implementation.
 
 /// `floor((a * b + 2^30) / 2^31)` saturated to i32: round half up of `a * b / 2^31`.

@@ -9,7 +9,7 @@
 //!   outputs `a`, `b` and sets `state = [lo(a), hi(a), lo(b), hi(b)]` (same as `rand_xoshiro`'s
 //!   `seed_from_u64`). SplitMix64 never outputs zero twice in a row, so the state is never all zero.
 //! - [`Rng::uniform`]: `(next_u32() >> 8) * 2^-24`, exactly representable, in `[0, 1)`.
-//! - [`Rng::gaussian`]: one `u32` draw through the integer quantile table of [`normal`]
+//! - [`Rng::gaussian`]: one `u32` draw through the integer quantile table of the private `normal` module
 //!   (sign bit, octave of the tail probability by leading zeros, linear interpolation), giving `z`
 //!   in units of `2^-20` that converts exactly to f32. Samples are bounded by 5.663. Integer
 //!   arithmetic only, so the samples are the same bits on every target, and the same
@@ -31,7 +31,12 @@ impl SplitMix64 {
     #[inline]
     pub fn next_u64(&mut self) -> u64 {
         self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.state;
+        Self::mix(self.state)
+    }
+
+    /// The output function: a bijection on `u64` (also a good hash of a seed and a tag).
+    #[inline]
+    pub const fn mix(mut z: u64) -> u64 {
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
         z ^ (z >> 31)

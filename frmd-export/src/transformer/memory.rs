@@ -1,9 +1,9 @@
 //! RAM and flash figures of an exported transformer policy (the blob form), in the same
 //! [`MemoryFigures`] terms as the MLP.
 
+use super::fold::FloatNorm;
 use super::quantize::{QuantizedLinear, QuantizedTransformer};
-use super::FloatNorm;
-use crate::MemoryFigures;
+use crate::memory::{policy_table_bytes, state_bytes, MemoryFigures};
 
 fn linear_weight_bytes(layer: &QuantizedLinear) -> usize {
     layer.weights.len() + 4 * layer.bias.len()
@@ -28,11 +28,12 @@ impl QuantizedTransformer {
     /// descriptor and alignment padding on top.
     pub fn memory(&self) -> MemoryFigures {
         let f = &self.folded;
-        let c = &f.config;
-        let (m, o, k, n) = (c.history, c.obs_dim, c.action_dim, c.horizon);
-        let p = c.output_dim() / k.max(1);
-        let input = f.layout.width(m, o, k, n).unwrap_or(0);
-        let floats = 2 * m * o + 2 * n * k + 6 * n * k + input + k * p + 2 * k;
+        let dims = self.dims();
+        let input = f
+            .base
+            .layout
+            .width(dims.history, dims.obs_dim, dims.action_dim, dims.horizon)
+            .unwrap_or(0);
         let scratch = f.shape.int8_scratch();
         // fc1 is requantized to int8 (multipliers and shifts below), so its output scales are not
         // stored; every other linear layer dequantizes with its output scales.
@@ -56,25 +57,15 @@ impl QuantizedTransformer {
                     + b.gelu.table.len()
             })
             .sum();
-        let t = &f.prodmp;
-        let prodmp = 4
-            * (t.pos_params.len()
-                + t.vel_params.len()
-                + t.pos_y0.len()
-                + t.pos_v0.len()
-                + t.vel_y0.len()
-                + t.vel_v0.len());
         let table_bytes = linears.iter().map(|l| linear_table_bytes(l)).sum::<usize>()
             + block_tables
             + norm_bytes(&f.final_norm)
             + 4 * (f.positions.len() + f.noise_tokens.iter().map(Vec::len).sum::<usize>())
-            + prodmp
-            + 8 * (o + k)
-            + 24 * f.steps.len();
+            + policy_table_bytes(&dims, f.base.steps.len());
         MemoryFigures {
             scratch_width: f.shape.width,
             scratch_bytes: scratch.ram_bytes(),
-            state_bytes: 4 * floats,
+            state_bytes: state_bytes(&dims, input),
             weights_bytes,
             table_bytes,
         }

@@ -10,16 +10,23 @@
 //! range, GELU is a 256-entry table from the `Fc1` to the `Gelu` parameters; the residual stream,
 //! LayerNorms, attention and noise tokens stay f32.
 
-use super::{FloatNorm, FoldedTransformer};
-use crate::calibrate::{int_bias, quantize_weights, CalibrationSet, RangeMethod, Recorder};
-use crate::fold::{sample_chunk, FloatLayer};
-use anyhow::{bail, Context};
+use super::fold::{FloatNorm, FoldedTransformer};
+use crate::calibrate::{check_rows, int_bias, quantize_weights, RangeMethod, Recorder};
+use crate::fold::FloatLayer;
+use crate::host::HostScratch;
+use anyhow::Context;
+use frmd_core::blob::{
+    encode_transformer, transformer_encoded_len, BlobError, TransformerBlobParts,
+};
 use frmd_core::kernels::{gelu_sigmoid, FcRequant, FullyConnected, Lut8};
 use frmd_core::model::linear::{Int8Linear, QuantizedLinear as LinearView, RequantizedLinear};
 use frmd_core::model::transformer::{
     Int8Block, Int8FeedForward, Int8Transformer, TokenLinear, TransformerProbe,
 };
+use frmd_core::policy::PolicyDims;
 use frmd_core::quant::{requantization_multiplier, QuantParams};
+use frmd_formats::calibration::CalibrationSet;
+use frmd_formats::checkpoint::Normalization;
 use std::collections::BTreeMap;
 
 /// Activation parameters per probe, from calibration.
@@ -66,22 +73,12 @@ pub fn calibrate(
     set: &CalibrationSet,
     method: RangeMethod,
 ) -> anyhow::Result<TransformerRanges> {
-    let c = &model.config;
-    if set.cond_dim != c.cond_dim() {
-        bail!(
-            "calibration rows have {} values, the model's condition has {}",
-            set.cond_dim,
-            c.cond_dim()
-        );
-    }
-    if set.rows() == 0 {
-        bail!("the calibration set is empty");
-    }
+    let c = &model.base.config;
+    check_rows(set, c.cond_dim())?;
     let mut recorders: BTreeMap<(usize, usize), (TransformerProbe, Recorder)> = BTreeMap::new();
     for row in 0..set.rows() {
-        let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
-        let noise = set.noise(row, model.steps.len(), c.traj_dim());
-        model.sample(cond, &noise, |_, probe, values| {
+        let noise = set.noise(row, model.base.steps.len(), c.traj_dim());
+        model.sample(set.row(row), &noise, |_, probe, values| {
             let entry = recorders
                 .entry(probe_key(probe))
                 .or_insert_with(|| (probe, Recorder::default()));
@@ -101,8 +98,11 @@ pub fn calibrate(
 /// An owned int8 linear layer with f32 input and output (frmd-core's `QuantizedLinear`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct QuantizedLinear {
+    /// Quantization of the f32 input.
     pub input: QuantParams,
+    /// Input width.
     pub in_features: usize,
+    /// Output width.
     pub out_features: usize,
     /// `[out, in]` int8.
     pub weights: Vec<i8>,
@@ -135,6 +135,7 @@ impl QuantizedLinear {
         })
     }
 
+    /// frmd-core's int8 fully connected layer over these weights.
     pub fn fc(&self) -> FullyConnected<'_> {
         FullyConnected::new(
             self.in_features,
@@ -144,6 +145,7 @@ impl QuantizedLinear {
         )
     }
 
+    /// frmd-core's view of the layer (f32 in, f32 out).
     pub fn view(&self) -> LinearView<'_> {
         LinearView {
             input: self.input,
@@ -158,27 +160,40 @@ impl QuantizedLinear {
 /// One quantized block.
 #[derive(Clone, Debug, PartialEq)]
 pub struct QuantizedBlock {
+    /// LayerNorm before attention (f32).
     pub norm1: FloatNorm,
+    /// Query, key and value projection.
     pub qkv: QuantizedLinear,
+    /// Attention output projection.
     pub proj: QuantizedLinear,
+    /// LayerNorm before the feed-forward (f32).
     pub norm2: FloatNorm,
+    /// Feed-forward expansion, requantized to int8 for the GELU table.
     pub fc1: QuantizedLinear,
     /// Parameters of the `fc1` output (GELU table input).
     pub fc1_output: QuantParams,
     /// Per-channel Q31 requantization of `fc1` to `fc1_output`.
     pub fc1_multipliers: Vec<i32>,
+    /// Per-channel shifts of that requantization.
     pub fc1_shifts: Vec<i32>,
+    /// GELU from the `fc1` output parameters to the `fc2` input parameters.
     pub gelu: Lut8,
+    /// Feed-forward contraction.
     pub fc2: QuantizedLinear,
 }
 
 /// The owned int8 transformer plus everything the policy needs around it.
 #[derive(Clone, Debug)]
 pub struct QuantizedTransformer {
+    /// The f32 model it was quantized from (norms, tokens, positions stay f32).
     pub folded: FoldedTransformer,
+    /// Trajectory token embedding.
     pub traj_in: QuantizedLinear,
+    /// Condition token embedding.
     pub cond_in: QuantizedLinear,
+    /// The blocks.
     pub blocks: Vec<QuantizedBlock>,
+    /// Output layer.
     pub head: QuantizedLinear,
 }
 
@@ -201,10 +216,8 @@ pub fn quantize(
             let (mut fc1_multipliers, mut fc1_shifts) = (Vec::new(), Vec::new());
             for (o, w) in fc1.weight_scales.iter().enumerate() {
                 let (m, s) = requantization_multiplier(fc1.input.scale, *w, fc1_output.scale)
-                    .map_err(|e| {
-                        anyhow::anyhow!(
-                            "block {layer} fc1 channel {o}: requantization multiplier: {e:?}"
-                        )
+                    .with_context(|| {
+                        format!("block {layer} fc1 channel {o}: requantization multiplier")
                     })?;
                 fc1_multipliers.push(m);
                 fc1_shifts.push(s);
@@ -221,7 +234,7 @@ pub fn quantize(
                 fc1_multipliers,
                 fc1_shifts,
                 gelu: Lut8::build(gelu_sigmoid, fc1_output, gelu_output)
-                    .map_err(|e| anyhow::anyhow!("block {layer} GELU table: {e:?}"))?,
+                    .with_context(|| format!("block {layer} GELU table"))?,
                 fc2: QuantizedLinear::new(&b.fc2, gelu_output).with_context(context)?,
             })
         })
@@ -238,7 +251,7 @@ pub fn quantize(
     quantized
         .view(&quantized.int8_blocks(), 0)?
         .validate()
-        .map_err(|e| anyhow::anyhow!("quantized transformer: {e}"))?;
+        .context("quantized transformer")?;
     Ok(quantized)
 }
 
@@ -307,25 +320,48 @@ impl QuantizedTransformer {
                         input.len()
                     )
                 })?;
-        let mut scratch = Box::new(super::HostScratch::new());
+        let mut scratch = Box::new(HostScratch::new());
         let mut out = vec![0.0; model.shape.output];
         model
             .forward(trajectory, condition, &mut out, &mut scratch)
-            .map_err(|e| anyhow::anyhow!("int8 transformer forward: {e}"))?;
+            .context("int8 transformer forward")?;
         Ok(out)
     }
 
     /// The int8 consistency sampler (same steps and decode as [`FoldedTransformer::sample`]).
     pub fn sample(&self, cond: &[f32], noise: &[f32]) -> anyhow::Result<Vec<f32>> {
-        let f = &self.folded;
-        sample_chunk(
-            &f.config,
-            &f.layout,
-            &f.steps,
-            &f.prodmp,
-            cond,
-            noise,
-            |i, input| self.forward(i, input),
-        )
+        self.folded
+            .base
+            .sample(cond, noise, |i, input| self.forward(i, input))
+    }
+
+    /// The policy's sizes.
+    pub fn dims(&self) -> PolicyDims {
+        let c = &self.folded.base.config;
+        PolicyDims {
+            history: c.history,
+            obs_dim: c.obs_dim,
+            action_dim: c.action_dim,
+            horizon: c.horizon,
+            params_per_dof: c.output_dim() / c.action_dim.max(1),
+        }
+    }
+
+    /// The `FRMT` blob with normalization `norm` (format in [`frmd_core::blob::transformer`]); a
+    /// named error if a size does not fit the format (more than
+    /// [`frmd_core::blob::transformer::MAX_BLOCKS`] blocks, sizes beyond u32). The loader checks
+    /// every shape.
+    pub fn blob(&self, norm: &Normalization) -> Result<Vec<u8>, BlobError> {
+        let blocks = self.int8_blocks();
+        let noise_tokens = self.folded.flat_noise_tokens();
+        let parts = TransformerBlobParts {
+            config: self.folded.config(norm),
+            model: self.view(&blocks, 0).map_err(|_| BlobError::Encode)?,
+            noise_tokens: &noise_tokens,
+        };
+        let mut out = vec![0_u8; transformer_encoded_len(&parts)?];
+        let written = encode_transformer(&parts, &mut out)?;
+        out.truncate(written);
+        Ok(out)
     }
 }

@@ -11,6 +11,7 @@
 
 use super::quantize::{QuantizedLinear, QuantizedTransformer};
 use crate::reference::KernelCheck;
+use anyhow::Context;
 use frmd_core::kernels::FcRequant;
 use frmd_core::quant::reference;
 use frmd_core::rng::Rng;
@@ -58,28 +59,13 @@ fn input_rows(
     rows
 }
 
-fn record(check: &mut KernelCheck, equal: bool, describe: impl FnOnce() -> String) {
-    check.cases += 1;
-    if !equal {
-        check.mismatches += 1;
-        if check.first_mismatch.is_none() {
-            check.first_mismatch = Some(describe());
-        }
-    }
-}
-
 /// Runs the check with `random_rows` random input rows per layer (plus 4 edge rows).
 pub fn check_layers(
     model: &QuantizedTransformer,
     random_rows: usize,
     seed: u64,
 ) -> anyhow::Result<KernelCheck> {
-    let mut check = KernelCheck {
-        name: "int8 transformer linear layers vs i64/i128 model".into(),
-        cases: 0,
-        mismatches: 0,
-        first_mismatch: None,
-    };
+    let mut check = KernelCheck::new("int8 transformer layer mismatches vs wide model (every int8 linear layer, fc1 requantization + GELU table)");
     let mut rng = Rng::new(seed);
     let mut layers: Vec<(String, &QuantizedLinear)> = vec![
         ("traj_in".into(), &model.traj_in),
@@ -107,10 +93,10 @@ pub fn check_layers(
         .enumerate()
         {
             fc.forward_accumulators(input, &mut acc)
-                .map_err(|e| anyhow::anyhow!("{name}: {e:?}"))?;
+                .with_context(|| name.clone())?;
             let want = wide_accumulators(layer, input);
             let got: Vec<i64> = acc.iter().map(|&a| i64::from(a)).collect();
-            record(&mut check, got == want, || {
+            check.record(got == want, || {
                 format!(
                     "{name} row {r}: first differing accumulator {:?}",
                     got.iter().zip(&want).position(|(a, b)| a != b)
@@ -140,7 +126,7 @@ pub fn check_layers(
             b.fc1
                 .fc()
                 .forward(&requant, input, &mut out)
-                .map_err(|e| anyhow::anyhow!("block {i} fc1: {e:?}"))?;
+                .with_context(|| format!("block {i} fc1"))?;
             let mut gelu = out.clone();
             b.gelu.apply_in_place(&mut gelu);
             let want: Vec<(i8, i8)> = wide_accumulators(&b.fc1, input)
@@ -159,7 +145,7 @@ pub fn check_layers(
                 })
                 .collect();
             let got: Vec<(i8, i8)> = out.iter().copied().zip(gelu).collect();
-            record(&mut check, got == want, || {
+            check.record(got == want, || {
                 format!(
                     "block {i} fc1 requantize/GELU row {r}: first differing channel {:?}",
                     got.iter().zip(&want).position(|(a, b)| a != b)

@@ -2,13 +2,16 @@
 //! crate is read, folded, calibrated, quantized and sampled by the int8 and f32 paths.
 
 use super::*;
-use crate::calibrate::{CalibrationSet, RangeMethod};
-use crate::checkpoint::{
-    expected_tensors, CheckpointMeta, HeadConfig, Normalization, Normalizer, ProDmpOutput,
-    CONFIG_FILE, WEIGHTS_FILE,
-};
+use crate::calibrate::RangeMethod;
+use crate::host::HostScratch;
+use frmd_core::blob::AlignedBlob;
 use frmd_core::policy::{F32TransformerNetwork, Int8TransformerNetwork, Network};
 use frmd_core::rng::Rng;
+use frmd_formats::calibration::CalibrationSet;
+use frmd_formats::checkpoint::{
+    BackboneConfig, Checkpoint, HeadConfig, ModelConfig, Normalization, ProDmpOutput, Role,
+};
+use frmd_test_support::checkpoint::{scratch_dir, unit_normalization, Init};
 use std::path::PathBuf;
 
 fn lite_config() -> ModelConfig {
@@ -28,87 +31,24 @@ fn lite_config() -> ModelConfig {
     }
 }
 
-/// Writes `frmd.json` + `model.safetensors` with random weights of the right names and shapes
-/// into a fresh temporary directory. The output head is scaled down so that chunks span about
-/// the [-1, 1] range of normalized data, as a trained student's do (few-step sampling feeds a
-/// step's output back in as the next step's input).
+/// A student checkpoint of `config` with random weights drawn like a trained transformer's, in
+/// a fresh temporary directory.
 fn write_checkpoint(name: &str, config: &ModelConfig, seed: u64) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("frmd-tfexport-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let mut meta = CheckpointMeta::describe(Role::Student, config, SigmaConfig::default());
-    meta.normalization = Some(Normalization {
-        obs: Normalizer {
-            min: vec![-1.0; config.obs_dim],
-            max: vec![1.0; config.obs_dim],
-        },
-        action: Normalizer {
-            min: vec![-1.0; config.action_dim],
-            max: vec![1.0; config.action_dim],
-        },
-    });
-    std::fs::write(
-        dir.join(CONFIG_FILE),
-        serde_json::to_string_pretty(&meta).unwrap(),
-    )
-    .unwrap();
-    let mut rng = Rng::new(seed);
-    let data: Vec<(String, Vec<usize>, Vec<u8>)> = expected_tensors(config)
-        .into_iter()
-        .map(|spec| {
-            let len: usize = spec.shape.iter().product();
-            let fan_in = spec.shape.get(1).copied().unwrap_or(1) as f32;
-            let values: Vec<f32> = (0..len)
-                .map(|_| {
-                    let g = rng.gaussian();
-                    if spec.name.ends_with("norm1.weight")
-                        || spec.name.ends_with("norm2.weight")
-                        || spec.name.ends_with("final_norm.weight")
-                    {
-                        1.0 + 0.1 * g
-                    } else if spec.name == "transformer.head.weight" {
-                        0.25 * g / fan_in.sqrt()
-                    } else if spec.shape.len() == 2 && !spec.name.ends_with("pos_embedding") {
-                        g / fan_in.sqrt()
-                    } else {
-                        0.1 * g
-                    }
-                })
-                .collect();
-            (
-                spec.name,
-                spec.shape,
-                values.iter().flat_map(|v| v.to_le_bytes()).collect(),
-            )
-        })
-        .collect();
-    let views: Vec<(String, safetensors::tensor::TensorView<'_>)> = data
-        .iter()
-        .map(|(name, shape, bytes)| {
-            (
-                name.clone(),
-                safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), bytes)
-                    .unwrap(),
-            )
-        })
-        .collect();
-    std::fs::write(
-        dir.join(WEIGHTS_FILE),
-        safetensors::serialize(views, None).unwrap(),
-    )
-    .unwrap();
+    let dir = scratch_dir(&format!("tfexport-{name}"));
+    let norm = unit_normalization(config.obs_dim, config.action_dim);
+    frmd_test_support::checkpoint::write_checkpoint(
+        &dir,
+        Role::Student,
+        config,
+        norm,
+        seed,
+        Init::Transformer,
+    );
     dir
 }
 
 fn calibration_set(config: &ModelConfig, rows: usize, seed: u64) -> CalibrationSet {
-    let mut rng = Rng::new(seed);
-    let cond = (0..rows * config.cond_dim())
-        .map(|_| (0.5 * rng.gaussian()).clamp(-1.0, 1.0))
-        .collect();
-    CalibrationSet {
-        cond_dim: config.cond_dim(),
-        cond,
-        seed,
-    }
+    frmd_test_support::checkpoint::calibration_rows(config, rows, seed, seed)
 }
 
 /// Max and mean absolute int8-vs-f32 chunk error (normalized action units) over the rows of
@@ -118,10 +58,9 @@ fn chunk_error(quantized: &QuantizedTransformer, set: &CalibrationSet) -> (f32, 
     let (mut max, mut sum, mut count) = (0.0f32, 0.0f64, 0usize);
     let (mut lo, mut hi) = (f32::MAX, f32::MIN);
     for row in 0..set.rows() {
-        let cond = &set.cond[row * set.cond_dim..(row + 1) * set.cond_dim];
-        let noise = set.noise(row, f.steps.len(), f.config.traj_dim());
-        let want = f.sample(cond, &noise, |_, _, _| {}).unwrap();
-        let got = quantized.sample(cond, &noise).unwrap();
+        let noise = set.noise(row, f.base.steps.len(), f.base.config.traj_dim());
+        let want = f.sample(set.row(row), &noise, |_, _, _| {}).unwrap();
+        let got = quantized.sample(set.row(row), &noise).unwrap();
         for (g, w) in got.iter().zip(&want) {
             max = max.max((g - w).abs());
             sum += f64::from((g - w).abs());
@@ -182,14 +121,14 @@ fn adapters_run_the_exported_model_behind_the_network_trait() {
     let mut int8_scratch = Box::new(HostScratch::new());
     let mut f32_net = F32TransformerNetwork::new(
         folded.view(&f32_blocks, 0).unwrap(),
-        &folded.layout,
+        &folded.base.layout,
         &tokens,
         &mut *f32_scratch,
     )
     .unwrap();
     let mut int8_net = Int8TransformerNetwork::new(
         quantized.view(&int8_blocks, 0).unwrap(),
-        &folded.layout,
+        &folded.base.layout,
         &tokens,
         &mut *int8_scratch,
     )
@@ -204,8 +143,9 @@ fn adapters_run_the_exported_model_behind_the_network_trait() {
         .map(|_| 0.3 * rng.gaussian())
         .collect();
     let x: Vec<f32> = (0..config.traj_dim()).map(|_| rng.gaussian()).collect();
-    for (i, step) in folded.steps.iter().enumerate() {
-        let input = crate::fold::model_input(&config, &folded.layout, step, &cond, &x).unwrap();
+    for (i, step) in folded.base.steps.iter().enumerate() {
+        let input =
+            crate::fold::model_input(&config, &folded.base.layout, step, &cond, &x).unwrap();
         let mut out = vec![0.0; config.output_dim()];
         f32_net.forward(i, &input, &mut out).unwrap();
         assert_eq!(
@@ -226,7 +166,7 @@ fn refuses_non_transformer_and_non_student_checkpoints() {
     let dir = write_checkpoint("mlp", &config, 1);
     let error = FoldedTransformer::new(&Checkpoint::read(&dir).unwrap(), 1).unwrap_err();
     assert!(
-        error.to_string().contains("not a transformer checkpoint"),
+        format!("{error:#}").contains("folds with mlp::FoldedMlp"),
         "{error}"
     );
     std::fs::remove_dir_all(&dir).unwrap();
@@ -237,21 +177,13 @@ fn refuses_non_transformer_and_non_student_checkpoints() {
     ckpt.meta.role = Role::Teacher;
     let error = FoldedTransformer::new(&ckpt, 1).unwrap_err();
     assert!(
-        error.to_string().contains("only student checkpoints"),
+        format!("{error:#}").contains("only students can be exported"),
         "{error}"
     );
     let ckpt = Checkpoint::read(&dir).unwrap();
     let error = FoldedTransformer::new(&ckpt, 5).unwrap_err();
-    assert!(error.to_string().contains("1..=4"), "{error}");
+    assert!(format!("{error:#}").contains("1..=4"), "{error:#}");
     std::fs::remove_dir_all(&dir).unwrap();
-}
-
-/// `bytes` copied into a 4-aligned buffer (plus `shift` leading bytes to misalign on purpose).
-fn aligned(bytes: &[u8], shift: usize) -> Vec<u32> {
-    let mut words = vec![0u32; (bytes.len() + shift).div_ceil(4)];
-    bytemuck::cast_slice_mut::<u32, u8>(&mut words)[shift..shift + bytes.len()]
-        .copy_from_slice(bytes);
-    words
 }
 
 type Lite<'a> = frmd_core::blob::LoadedTransformer<'a>;
@@ -278,10 +210,10 @@ fn exported_lite(name: &str, steps: usize) -> (QuantizedTransformer, Normalizati
 fn blob_round_trip_is_bit_exact_and_drives_the_core_policy() {
     use frmd_core::policy::{Noise, Policy};
     let (quantized, norm, dir) = exported_lite("blob", 2);
-    let bytes = crate::blob::write_transformer(&quantized, &norm).unwrap();
-    let words = aligned(&bytes, 0);
-    let loaded = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()]).unwrap();
-    assert_eq!(loaded.steps(), &quantized.folded.steps[..]);
+    let bytes = quantized.blob(&norm).unwrap();
+    let aligned = AlignedBlob::new(&bytes);
+    let loaded = Lite::load(aligned.bytes()).unwrap();
+    assert_eq!(loaded.steps(), &quantized.folded.base.steps[..]);
     let mut scratch = Box::new(HostScratch::new());
     let mut network = loaded.network(&mut *scratch).unwrap();
     assert_eq!(network.num_noise_variants(), 2);
@@ -292,9 +224,9 @@ fn blob_round_trip_is_bit_exact_and_drives_the_core_policy() {
         .map(|_| 0.3 * rng.gaussian())
         .collect();
     let x: Vec<f32> = (0..config.traj_dim()).map(|_| rng.gaussian()).collect();
-    for (i, step) in quantized.folded.steps.iter().enumerate() {
-        let input =
-            crate::fold::model_input(&config, &quantized.folded.layout, step, &cond, &x).unwrap();
+    for (i, step) in quantized.folded.base.steps.iter().enumerate() {
+        let layout = &quantized.folded.base.layout;
+        let input = crate::fold::model_input(&config, layout, step, &cond, &x).unwrap();
         let mut out = vec![0.0; config.output_dim()];
         network.forward(i, &input, &mut out).unwrap();
         assert_eq!(out, quantized.forward(i, &input).unwrap(), "step {i}");
@@ -313,15 +245,11 @@ fn blob_round_trip_is_bit_exact_and_drives_the_core_policy() {
 #[test]
 fn blob_loader_rejects_damage_by_name() {
     use frmd_core::blob::transformer::TensorField;
-    use frmd_core::blob::SectionId;
-    use frmd_core::blob::{BlobError, Dimension};
+    use frmd_core::blob::{BlobError, Dimension, TransformerSection};
     use frmd_core::model::transformer::{Part, TransformerError};
     let (quantized, norm, dir) = exported_lite("damage", 1);
-    let bytes = crate::blob::write_transformer(&quantized, &norm).unwrap();
-    let load = |b: &[u8], shift: usize| {
-        let words = aligned(b, shift);
-        Lite::load(&bytemuck::cast_slice(&words)[shift..shift + b.len()]).err()
-    };
+    let bytes = quantized.blob(&norm).unwrap();
+    let load = |b: &[u8], shift: usize| Lite::load(AlignedBlob::shifted(b, shift).bytes()).err();
     assert_eq!(load(&bytes, 0).map(|e| e.to_string()), None);
     assert_eq!(
         load(&bytes[..bytes.len() - 1], 0),
@@ -341,7 +269,7 @@ fn blob_loader_rejects_damage_by_name() {
         load(&bytes, 1),
         Some(BlobError::SectionMisaligned(_))
     ));
-    let words = aligned(&bytes, 0);
+    let aligned = AlignedBlob::new(&bytes);
     let expected = frmd_core::policy::PolicyDims {
         history: 2,
         obs_dim: 5,
@@ -349,8 +277,7 @@ fn blob_loader_rejects_damage_by_name() {
         horizon: 8,
         params_per_dof: 5,
     };
-    let wrong_dims = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()])
-        .and_then(|loaded| loaded.check_dims(&expected));
+    let wrong_dims = Lite::load(aligned.bytes()).and_then(|loaded| loaded.check_dims(&expected));
     assert_eq!(
         wrong_dims.err(),
         Some(BlobError::DimensionMismatch(Dimension::ActionDim))
@@ -362,10 +289,7 @@ fn blob_loader_rejects_damage_by_name() {
         .head
         .weights
         .truncate(short_head.head.weights.len() - row);
-    let err = load(
-        &crate::blob::write_transformer(&short_head, &norm).unwrap(),
-        0,
-    );
+    let err = load(&short_head.blob(&norm).unwrap(), 0);
     assert!(
         matches!(
             err,
@@ -378,19 +302,19 @@ fn blob_loader_rejects_damage_by_name() {
     );
     let mut nan_norm = quantized.clone();
     nan_norm.blocks[0].norm2.gamma[3] = f32::NAN;
-    let err = load(
-        &crate::blob::write_transformer(&nan_norm, &norm).unwrap(),
-        0,
-    );
+    let err = load(&nan_norm.blob(&norm).unwrap(), 0);
     assert_eq!(
         err,
-        Some(BlobError::NonFinite(SectionId::Transformer {
-            part: Part::Norm2 { layer: 0 },
-            field: TensorField::Gamma
-        }))
+        Some(BlobError::NonFinite(
+            TransformerSection {
+                part: Part::Norm2 { layer: 0 },
+                field: TensorField::Gamma
+            }
+            .into()
+        ))
     );
     // An MLP loader refuses a transformer blob by magic.
-    let mlp = frmd_core::blob::LoadedMlp::load(&bytemuck::cast_slice(&words)[..bytes.len()]);
+    let mlp = frmd_core::blob::LoadedMlp::load(aligned.bytes());
     assert_eq!(mlp.err(), Some(BlobError::BadMagic));
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -402,9 +326,9 @@ fn blob_loader_rejects_damage_by_name() {
 fn core_policy_int8_blob_chunk_tracks_f32_policy_chunk() {
     use frmd_core::policy::{Noise, Policy};
     let (quantized, norm, dir) = exported_lite("policy", 1);
-    let bytes = crate::blob::write_transformer(&quantized, &norm).unwrap();
-    let words = aligned(&bytes, 0);
-    let loaded = Lite::load(&bytemuck::cast_slice(&words)[..bytes.len()]).unwrap();
+    let bytes = quantized.blob(&norm).unwrap();
+    let aligned = AlignedBlob::new(&bytes);
+    let loaded = Lite::load(aligned.bytes()).unwrap();
     let mut int8_scratch = Box::new(HostScratch::new());
     let mut int8 = Policy::<_, 2, 5, 3, 8, 5, 64>::new(
         loaded.config(),
@@ -417,7 +341,7 @@ fn core_policy_int8_blob_chunk_tracks_f32_policy_chunk() {
     let mut f32_scratch = Box::new(HostScratch::new());
     let f32_net = F32TransformerNetwork::new(
         folded.view(&f32_blocks, 0).unwrap(),
-        &folded.layout,
+        &folded.base.layout,
         &tokens,
         &mut *f32_scratch,
     )

@@ -192,7 +192,19 @@ pub type BakedPolicy = Policy<
     INPUT_WIDTH,
 >;
 
+/// What the policy borrows besides this module's statics: nothing (the MLP network holds
+/// its scratch); a type so that a firmware calls every baked module alike.
+#[derive(Debug, Default)]
+pub struct Storage;
+
+impl Storage {
+    /// The storage (`const`: it can be a `static`).
+    pub const fn new() -> Self {
+        Storage
+    }
+}
+
 /// A ready policy (validated); call `reset` before the first chunk.
-pub fn policy() -> Result<BakedPolicy, PolicyError> {
+pub fn policy(_storage: &mut Storage) -> Result<BakedPolicy, PolicyError> {
     Policy::new(config(), network::<SCRATCH_WIDTH>()?)
 }

@@ -3,7 +3,7 @@
 //! `Ok` or a named error, never a panic or an unbounded allocation.
 #![no_main]
 
-use frmd_export::checkpoint::{expected_tensors, CheckpointMeta};
+use frmd_formats::checkpoint::{expected_tensors, CheckpointMeta};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

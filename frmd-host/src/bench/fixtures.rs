@@ -14,8 +14,8 @@ use crate::train::recipe::TrainConfig;
 use candle_core::Device;
 use frmd_core::rng::Rng;
 use frmd_core::sigma::SigmaConfig;
-use frmd_export::calibrate::CalibrationSet;
-use frmd_export::export::{export_checkpoint, ExportOptions};
+use frmd_export::ExportOptions;
+use frmd_formats::calibration::CalibrationSet;
 use std::path::Path;
 
 /// Actions of the synthetic models (planar tasks).
@@ -115,7 +115,7 @@ pub fn reach_student(
     let cond: Vec<f32> = (0..64 * cond_dim)
         .map(|_| (0.5 * rng.gaussian()).clamp(-1.0, 1.0))
         .collect();
-    frmd_export::calibration_file::write(
+    frmd_formats::calibration::write(
         &dir.join(CALIBRATION_FILE),
         &CalibrationSet {
             cond_dim,
@@ -123,14 +123,13 @@ pub fn reach_student(
             seed,
         },
     )?;
-    let core = match export_checkpoint(dir, ExportOptions::default(), None) {
-        Ok(exported) => {
-            let blob = frmd_export::blob::write(&exported.policy)
-                .map_err(|e| anyhow::anyhow!("blob: {e}"))?;
+    let core = match frmd_export::export(dir, &ExportOptions::default(), None) {
+        Ok(student) => {
+            let blob = student.blob().to_vec();
             Ok(CorePolicies {
-                core_f32: Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?,
+                flash_bytes: student.memory().flash_bytes(),
                 int8: Int8Policy::from_blob(&blob, "int8")?,
-                flash_bytes: exported.policy.memory().flash_bytes(),
+                core_f32: Int8Policy::f32_twin(&blob, student, "core-f32")?,
             })
         }
         Err(e) => Err(format!("{e:#}")),

@@ -6,7 +6,7 @@
 //! `... portable`).
 //!
 //! By default it times the checkpoints `frmd quickstart` wrote (`runs/quickstart/{student,
-//! teacher,dp}`): student 1 step, teacher 10 Heun steps, DP 100 (DDPM) and 10 (DDIM) steps, all
+//! teacher,dp}`): student 1 and 2 steps (candle, and frmd-core int8), teacher 10 Heun steps, DP 100 (DDPM) and 10 (DDIM) steps, all
 //! with the same backbone. [`BenchConfig::policies`] times other checkpoints instead, and
 //! [`BenchConfig::synthetic`] times randomly initialized networks of a given backbone (latency
 //! does not depend on the weights), which needs no checkpoint at all. [`fixtures`] builds such
@@ -14,18 +14,21 @@
 use crate::checkpoint::Role;
 use crate::diffusion::samplers::Solver;
 use crate::eval::metrics::quantile;
-use crate::export::{export_mlp, ExportConfig};
+use crate::export::{export_student, ExportConfig};
 use crate::models::BackboneConfig;
 use crate::policy::float::FloatPolicy;
 use crate::policy::int8::Int8Policy;
 use crate::quickstart::QuickstartConfig;
 use crate::tasks::{Policy, PolicyInput};
 use anyhow::Context;
+use frmd_core::policy::PolicyDims;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 pub mod fixtures;
+#[cfg(test)]
+mod tests;
 
 /// What to time.
 #[derive(Clone, Debug, PartialEq)]
@@ -168,6 +171,7 @@ pub fn time_policy(
 fn default_float_policies(cfg: &BenchConfig) -> anyhow::Result<Vec<FloatPolicy>> {
     let kinds = [
         (Role::Student, "student", 1, None),
+        (Role::Student, "student", 2, None),
         (Role::Teacher, "teacher", 10, Some(Solver::Heun)),
         (Role::Dp, "dp", 100, None),
         (Role::Dp, "dp", 10, None),
@@ -200,49 +204,63 @@ struct CorePolicySet {
     policies: LabelledPolicies,
 }
 
-/// The frmd-core int8 and f32 one-step policies for the comparison: the student in `--dir`
-/// exported as `frmd export` does it (or, with `--synthetic`, a random student of `--backbone`
-/// exported the same way). Returns the policies, or why there are none.
+/// The frmd-core int8 and f32 policies for the comparison: the student in `--dir` exported as
+/// `frmd export` does it, one step and (int8) two steps (or, with `--synthetic`, a random
+/// one-step student of `--backbone` exported the same way). Returns the policies, or why there
+/// are none.
 fn core_policies(cfg: &BenchConfig) -> Result<CorePolicySet, String> {
-    let build = || -> anyhow::Result<Result<(Int8Policy, Int8Policy, BackboneConfig), String>> {
-        if cfg.synthetic {
-            let dir = std::env::temp_dir().join(format!("frmd-bench-{}", std::process::id()));
-            let policies = fixtures::reach_student(&dir, &cfg.backbone, 7);
-            let _ = std::fs::remove_dir_all(&dir);
-            return Ok(policies?
-                .core
-                .map(|c| (c.int8, c.core_f32, cfg.backbone.clone())));
-        }
-        let ckpt = cfg.dir.join("student");
-        let exported = export_mlp(&ExportConfig::for_checkpoint(&ckpt))
-            .with_context(|| format!("exporting {}", ckpt.display()))?;
-        let blob = frmd_export::blob::write(&exported.policy)
-            .map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?;
-        let backbone = exported.checkpoint.meta.model.backbone.clone();
-        Ok(Ok((
-            Int8Policy::from_blob(&blob, "int8")?,
-            Int8Policy::f32_twin(&blob, exported.folded.clone(), "core-f32")?,
-            backbone,
-        )))
-    };
-    match build() {
-        Ok(Ok((int8, f32_twin, backbone))) => {
-            let dims = int8.dims();
-            Ok(CorePolicySet {
-                backbone: backbone_label(&backbone),
-                input: FixedInput::new(dims.obs_dim, dims.action_dim, dims.history),
-                policies: vec![
+    let build =
+        || -> anyhow::Result<Result<(LabelledPolicies, BackboneConfig, PolicyDims), String>> {
+            if cfg.synthetic {
+                let dir = std::env::temp_dir().join(format!("frmd-bench-{}", std::process::id()));
+                let policies = fixtures::reach_student(&dir, &cfg.backbone, 7);
+                let _ = std::fs::remove_dir_all(&dir);
+                return Ok(policies?.core.map(|c| {
+                    let dims = c.int8.dims();
                     (
-                        "frmd-core int8 1-step".to_string(),
-                        Box::new(int8) as Box<dyn Policy>,
-                    ),
-                    ("frmd-core f32 1-step".to_string(), Box::new(f32_twin)),
-                ],
-            })
-        }
+                        one_step_rows(c.int8, c.core_f32),
+                        cfg.backbone.clone(),
+                        dims,
+                    )
+                }));
+            }
+            let ckpt = cfg.dir.join("student");
+            let export = |steps| {
+                let config = ExportConfig {
+                    steps,
+                    ..ExportConfig::for_checkpoint(&ckpt)
+                };
+                export_student(&config, false)
+                    .with_context(|| format!("exporting {} with {steps} step(s)", ckpt.display()))
+            };
+            let student = export(1)?;
+            let backbone = student.meta().model.backbone.clone();
+            let blob = student.blob().to_vec();
+            let int8 = Int8Policy::from_blob(&blob, "int8")?;
+            let dims = int8.dims();
+            let mut labelled =
+                one_step_rows(int8, Int8Policy::f32_twin(&blob, student, "core-f32")?);
+            let two_step = Int8Policy::from_blob(export(2)?.blob(), "int8-2")?;
+            labelled.push(("frmd-core int8 2-step".to_string(), Box::new(two_step)));
+            Ok(Ok((labelled, backbone, dims)))
+        };
+    match build() {
+        Ok(Ok((policies, backbone, dims))) => Ok(CorePolicySet {
+            backbone: backbone_label(&backbone),
+            input: FixedInput::new(dims.obs_dim, dims.action_dim, dims.history),
+            policies,
+        }),
         Ok(Err(reason)) => Err(format!("frmd-core policies unavailable: {reason}")),
         Err(e) => Err(format!("frmd-core policies unavailable: {e:#}")),
     }
+}
+
+/// The one-step int8 policy and its f32 twin with their table labels.
+fn one_step_rows(int8: Int8Policy, f32_twin: Int8Policy) -> LabelledPolicies {
+    vec![
+        ("frmd-core int8 1-step".to_string(), Box::new(int8)),
+        ("frmd-core f32 1-step".to_string(), Box::new(f32_twin)),
+    ]
 }
 
 /// Runs the whole comparison and returns its rows (reference row first when present) plus a
@@ -381,5 +399,5 @@ pub fn write_json(path: &Path, rows: &[BenchRow], note: Option<&str>) -> anyhow:
     let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into());
     let value =
         serde_json::json!({ "threads": threads, "batch": 1, "results": rows, "note": note });
-    frmd_export::artifact::write_atomic(path, serde_json::to_string_pretty(&value)?.as_bytes())
+    frmd_formats::artifact::write_atomic(path, serde_json::to_string_pretty(&value)?.as_bytes())
 }

@@ -9,7 +9,7 @@ use std::process::ExitCode;
 #[derive(Args, Debug)]
 pub struct BenchArgs {
     /// Policies as DIR[:STEPS[:SOLVER]], e.g. `runs/quickstart/teacher:10:heun`, `dir/dp:100`.
-    /// Default: student:1, teacher:10:heun, dp:100, dp:10 from --dir.
+    /// Default: student:1, student:2, teacher:10:heun, dp:100, dp:10 from --dir.
     #[arg(long = "policy")]
     pub policies: Vec<PolicySpec>,
     /// Directory holding `student/`, `teacher/` and `dp/` checkpoints (as written by quickstart).
@@ -47,7 +47,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
     crate::limits::count("calls", cfg.calls, 1, crate::limits::MAX_CHECKS)?;
     crate::limits::count("warmup", cfg.warmup, 0, crate::limits::MAX_CHECKS)?;
     if let Some(path) = &args.json {
-        frmd_export::artifact::check_output_file(path, "--json", args.force, &[])?;
+        frmd_formats::artifact::check_output_file(path, "--json", args.force, &[])?;
     }
     let (rows, note) = bench_rows(&cfg)?;
     print_table(&rows, cfg.warmup, note.as_deref());

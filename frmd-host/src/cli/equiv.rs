@@ -2,9 +2,10 @@
 //! non-zero when a bound is exceeded.
 use crate::checkpoint::{CONFIG_FILE, WEIGHTS_FILE};
 use crate::equiv::{print, run as run_equiv, EquivConfig};
-use crate::export::{BAKED_BLOB_FILE, EXPORT_INFO_FILE};
+use crate::export::EXPORT_INFO_FILE;
 use clap::Args;
-use frmd_export::artifact::{check_output_file, write_atomic};
+use frmd_export::bake::BLOB_FILE;
+use frmd_formats::artifact::{check_output_file, write_atomic};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -53,7 +54,7 @@ pub fn run(args: EquivArgs) -> anyhow::Result<ExitCode> {
         let inputs = [
             args.ckpt.join(CONFIG_FILE),
             args.ckpt.join(WEIGHTS_FILE),
-            args.baked.join(BAKED_BLOB_FILE),
+            args.baked.join(BLOB_FILE),
             args.baked.join(EXPORT_INFO_FILE),
         ];
         check_output_file(

@@ -1,13 +1,15 @@
 //! `frmd eval`: closed-loop evaluation of a policy on a task, with the metrics of docs/design.md
 //! section 6.
 use crate::checkpoint::{CALIBRATION_FILE, CONFIG_FILE, WEIGHTS_FILE};
+use crate::diffusion::samplers::Solver;
 use crate::eval::plot::{plot_paths, PLOTTED_EPISODES};
-use crate::eval::{evaluate, expert_policy, EvalConfig, EvalReport};
+use crate::eval::{evaluate, expert_policy, EvalConfig};
+use crate::firmware::Board;
 use crate::limits::{self, OptionError};
 use crate::tasks::Policy;
 use anyhow::bail;
 use clap::Args;
-use frmd_export::artifact::{check_output_file, write_atomic};
+use frmd_formats::artifact::{check_output_file, write_atomic};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -52,7 +54,7 @@ pub struct EvalArgs {
     pub steps: Option<usize>,
     /// Teacher ODE solver for --ckpt: euler | heun | dpm++2m.
     #[arg(long)]
-    pub solver: Option<String>,
+    pub solver: Option<Solver>,
     /// int8 student blob (written by `frmd export --blob`) run by frmd-core.
     #[arg(long)]
     pub blob: Option<PathBuf>,
@@ -64,40 +66,11 @@ pub struct EvalArgs {
     /// m7, m33, m0, m55) under QEMU; reports the instructions per chunk the image counted. Bakes
     /// --baked DIR's module, else the checked-in reach student.
     #[arg(long, value_name = "CORE")]
-    pub firmware: Option<String>,
+    pub firmware: Option<Board>,
     /// With --firmware: also run the host int8 policy (the blob beside --baked, or --blob) on every
     /// request and count the chunks whose bits differ from the firmware's.
     #[arg(long, requires = "firmware")]
     pub check_host: bool,
-}
-
-/// Prints the human-readable summary of a report.
-pub fn print_report(report: &EvalReport) {
-    println!(
-        "task {} / policy {} / {} episodes (exec {} of each chunk, history {})",
-        report.task, report.policy, report.episodes, report.exec_steps, report.history
-    );
-    println!(
-        "  success        {:.1} % ({} of {}), 95 % Wilson [{:.1}, {:.1}] %",
-        100.0 * report.success_rate,
-        report.successes,
-        report.episodes,
-        100.0 * report.success_ci95[0],
-        100.0 * report.success_ci95[1]
-    );
-    println!(
-        "  length         {:.1} steps (successful: {:.1})",
-        report.mean_length, report.mean_length_success
-    );
-    println!(
-        "  latency/chunk  median {:.1} us, p99 {:.1} us over {} calls (RAYON_NUM_THREADS={})",
-        report.latency_us_median, report.latency_us_p99, report.chunk_calls, report.threads
-    );
-    println!("  sim step       {:.2} us", report.sim_step_us);
-    println!(
-        "  non-smooth     {:.2} per episode (end effector), {:.2} (actions); RMS jerk {:.2} m/s^3",
-        report.non_smooth_ee_mean, report.non_smooth_action_mean, report.rms_jerk_mean
-    );
 }
 
 /// Options that do not go together: one policy source, and the sampler options only with a
@@ -199,11 +172,25 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
     let blob = args.blob.clone().or_else(|| {
         args.baked
             .as_ref()
-            .map(|d| d.join(crate::export::BAKED_BLOB_FILE))
+            .map(|d| d.join(frmd_export::bake::BLOB_FILE))
     });
     check_outputs(&args, blob.as_deref())?;
-    if let Some(board) = &args.firmware {
-        return super::eval_firmware::run(&args, board, blob.as_deref());
+    if let Some(board) = args.firmware {
+        anyhow::ensure!(
+            args.ckpt.is_none(),
+            "--firmware runs a baked int8 policy; --ckpt does not apply (use --baked DIR)"
+        );
+        return super::eval_firmware::run(&super::eval_firmware::FirmwareEval {
+            task: &args.task,
+            board,
+            baked: args.baked.as_deref(),
+            check_host: args.check_host,
+            blob: blob.as_deref(),
+            json: args.json.as_deref(),
+            episodes: args.episodes,
+            exec_steps: args.exec_steps,
+            first_seed: args.first_seed,
+        });
     }
     let (mut policy, history): (Box<dyn Policy>, usize) = match (&blob, &args.ckpt) {
         (Some(path), _) => {
@@ -211,7 +198,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
             let history = p.history();
             (Box::new(p), history)
         }
-        (None, Some(dir)) => crate::policy::float::boxed(dir, args.steps, args.solver.as_deref())?,
+        (None, Some(dir)) => crate::policy::float::boxed(dir, args.steps, args.solver)?,
         (None, None) => match args.policy.as_deref().unwrap_or("expert") {
             "expert" => (
                 expert_policy(&args.task)?,
@@ -234,7 +221,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<ExitCode> {
     };
     cfg.validate_for(policy.as_ref())?;
     let report = evaluate(&args.task, policy.as_mut(), &cfg)?;
-    print_report(&report);
+    print!("{report}");
     if let Some(path) = &args.json {
         write_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
         println!("  report         {}", path.display());

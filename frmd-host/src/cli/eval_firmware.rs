@@ -1,13 +1,31 @@
 //! `frmd eval --firmware CORE`: the closed loop through the emulated MCU (the library side is
 //! [`crate::firmware`]).
-use super::eval::{print_report, EvalArgs};
 use crate::eval::{evaluate, EvalConfig, EvalReport};
 use crate::firmware::lockstep::{Lockstep, LockstepCount};
 use crate::firmware::policy::{FirmwareInfo, FirmwarePolicy, InstructionStats};
+use crate::firmware::Board;
 use crate::policy::int8::Int8Policy;
 use crate::tasks::Policy;
 use serde::Serialize;
+use std::path::Path;
 use std::process::ExitCode;
+
+/// What `frmd eval --firmware` runs.
+pub struct FirmwareEval<'a> {
+    pub task: &'a str,
+    /// Core of the `pil` image.
+    pub board: Board,
+    /// Baked module directory to build into the image (else the checked-in reach student).
+    pub baked: Option<&'a Path>,
+    /// Also run the host int8 policy of `blob` on every request and count differing chunks.
+    pub check_host: bool,
+    /// The host int8 policy's blob (`--blob`, or the one beside `--baked`).
+    pub blob: Option<&'a Path>,
+    pub json: Option<&'a Path>,
+    pub episodes: usize,
+    pub exec_steps: usize,
+    pub first_seed: u64,
+}
 
 /// The JSON report of a firmware evaluation: the usual fields plus the firmware's.
 #[derive(Serialize)]
@@ -20,22 +38,11 @@ struct FirmwareReport<'a> {
     host_check: Option<&'a LockstepCount>,
 }
 
-/// `blob`: the host int8 policy's blob (from `--blob`, or beside `--baked`), for `--check-host`.
-pub fn run(
-    args: &EvalArgs,
-    board: &str,
-    blob: Option<&std::path::Path>,
-) -> anyhow::Result<ExitCode> {
-    anyhow::ensure!(
-        args.ckpt.is_none(),
-        "--firmware runs a baked int8 policy; --ckpt does not apply (use --baked DIR)"
-    );
+/// Runs the closed loop through the emulated MCU and prints the report.
+pub fn run(args: &FirmwareEval<'_>) -> anyhow::Result<ExitCode> {
+    let board = args.board;
     eprintln!("building the pil image for {board} (examples/cortex-m/run-qemu.sh) ...");
-    let image = crate::firmware::build(
-        &crate::firmware::default_repo(),
-        board,
-        args.baked.as_deref(),
-    )?;
+    let image = crate::firmware::build(&crate::firmware::default_repo(), board, args.baked)?;
     let firmware = FirmwarePolicy::start(&image)?;
     let info = firmware.info().clone();
     let cfg = EvalConfig {
@@ -46,20 +53,20 @@ pub fn run(
         ..EvalConfig::default()
     };
     let (report, stats, host_check) = if args.check_host {
-        let path = blob.ok_or_else(|| anyhow::anyhow!("--check-host needs the host policy: pass --baked DIR (with policy.blob) or --blob FILE"))?;
+        let path = args.blob.ok_or_else(|| anyhow::anyhow!("--check-host needs the host policy: pass --baked DIR (with policy.blob) or --blob FILE"))?;
         let mut lockstep = Lockstep::new(firmware, Int8Policy::load(path)?);
-        let report = evaluate(&args.task, &mut lockstep, &cfg)?;
+        let report = evaluate(args.task, &mut lockstep, &cfg)?;
         let stats = lockstep.lead.stats();
         lockstep.lead.close()?;
         (report, stats, Some(lockstep.count))
     } else {
         let mut firmware = firmware;
-        let report = evaluate(&args.task, &mut firmware as &mut dyn Policy, &cfg)?;
+        let report = evaluate(args.task, &mut firmware as &mut dyn Policy, &cfg)?;
         let stats = firmware.stats();
         firmware.close()?;
         (report, stats, None)
     };
-    print_report(&report);
+    print!("{report}");
     println!(
         "  firmware       {} ({}, {} / {}), flash {} B, static RAM {} B",
         info.board, info.core, image.machine, image.cpu, info.flash_bytes, info.ram_static_bytes
@@ -78,14 +85,17 @@ pub fn run(
                 .map_or(String::new(), |i| format!(" (first difference: chunk {i})"))
         );
     }
-    if let Some(path) = &args.json {
+    if let Some(path) = args.json {
         let full = FirmwareReport {
             report: &report,
             firmware: &info,
             instructions: &stats,
             host_check: host_check.as_ref(),
         };
-        frmd_export::artifact::write_atomic(path, serde_json::to_string_pretty(&full)?.as_bytes())?;
+        frmd_formats::artifact::write_atomic(
+            path,
+            serde_json::to_string_pretty(&full)?.as_bytes(),
+        )?;
         println!("  report         {}", path.display());
     }
     let identical = host_check.is_none_or(|count| count.differing_chunks == 0);

@@ -1,14 +1,11 @@
 //! `frmd export`: student checkpoint -> calibrated int8 policy ([`crate::export`]), written as a
 //! baked Rust module directory and/or a blob, with the RAM and flash figures of the policy.
 use crate::checkpoint::{CALIBRATION_FILE, CONFIG_FILE, WEIGHTS_FILE};
-use crate::export::{
-    export_student, save_calibration, write_export, ExportConfig, ExportedStudent, BAKED_BLOB_FILE,
-    EXPORT_INFO_FILE,
-};
-use anyhow::{bail, Context};
+use crate::export::{export_student, write_export, ExportConfig};
+use anyhow::bail;
 use clap::Args;
-use frmd_export::artifact::{check_output_dir, check_output_file};
-use frmd_export::MemoryFigures;
+use frmd_export::bake::BLOB_FILE;
+use frmd_formats::artifact::{check_output_dir, check_output_file};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -76,84 +73,6 @@ fn same_dir(a: &Path, b: &Path) -> bool {
     norm(a) == norm(b)
 }
 
-fn print_memory(m: &MemoryFigures, blob_len: usize) {
-    println!(
-        "  RAM    scratch {} B (width {}) + state {} B = {} B",
-        m.scratch_bytes,
-        m.scratch_width,
-        m.state_bytes,
-        m.scratch_bytes + m.state_bytes
-    );
-    println!(
-        "  flash  weights {} B + tables {} B = {} B (blob {} B)",
-        m.weights_bytes,
-        m.table_bytes,
-        m.flash_bytes(),
-        blob_len
-    );
-}
-
-fn print_summary(args: &ExportArgs, cfg: &ExportConfig, student: &ExportedStudent) {
-    let blob = student.blob();
-    match student {
-        ExportedStudent::Mlp { exported, .. } => {
-            if let Some(dir) = &args.out {
-                println!("baked module: {}/{{policy.rs, weights.bin, {BAKED_BLOB_FILE}, {EXPORT_INFO_FILE}}}", dir.display());
-            }
-            if let Some(path) = &args.blob {
-                println!("blob: {} ({} bytes)", path.display(), blob.len());
-            }
-            let policy = &exported.policy;
-            let model = &exported.checkpoint.meta.model;
-            println!(
-                "policy: {:?}, m {} O {} K {} n {} P {}, {} step(s), calibration {} on {} rows",
-                model.backbone,
-                policy.history,
-                policy.obs_dim,
-                policy.action_dim,
-                policy.horizon,
-                policy.params_per_dof,
-                policy.steps.len(),
-                cfg.calibration,
-                exported.ranges.rows
-            );
-            let gains = exported.folded.gains;
-            println!(
-                "  input  int8 scale {:.5} (zero point {}, {:?}) over the whole input vector; segment gains: trajectory {:.4}, rate {:.4}",
-                policy.input.scale, policy.input.zero_point, policy.input_precision, gains.traj_gain, gains.rate_gain
-            );
-            print_memory(&policy.memory(), blob.len());
-        }
-        ExportedStudent::Transformer { exported, .. } => {
-            if let Some(dir) = &args.out {
-                println!(
-                    "transformer module: {}/{{{}, {BAKED_BLOB_FILE}, {EXPORT_INFO_FILE}}} (the module embeds the blob and loads it with frmd-core's checked loader)",
-                    dir.display(),
-                    frmd_export::transformer::bake::MODULE_FILE
-                );
-            }
-            if let Some(path) = &args.blob {
-                println!("blob: {} ({} bytes)", path.display(), blob.len());
-            }
-            let f = &exported.model.folded;
-            let model = &exported.checkpoint.meta.model;
-            println!(
-                "policy: {:?}, m {} O {} K {} n {} P {}, {} step(s), calibration {} on {} rows",
-                model.backbone,
-                model.history,
-                model.obs_dim,
-                model.action_dim,
-                model.horizon,
-                model.output_dim() / model.action_dim.max(1),
-                f.steps.len(),
-                cfg.calibration,
-                exported.ranges.rows
-            );
-            print_memory(&exported.model.memory(), blob.len());
-        }
-    }
-}
-
 pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     if args.out.is_none() && args.blob.is_none() {
         bail!("nothing to write: pass --out DIR and/or --blob FILE");
@@ -176,7 +95,7 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
             if path
                 .parent()
                 .zip(path.file_name())
-                .is_some_and(|(p, n)| same_dir(p, dir) && n == BAKED_BLOB_FILE)
+                .is_some_and(|(p, n)| same_dir(p, dir) && n == BLOB_FILE)
             {
                 bail!(
                     "--blob {} is the blob --out writes; drop --blob",
@@ -188,15 +107,11 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     if args.save_calibration && args.data.is_none() {
         bail!("--save-calibration needs --data");
     }
-    if args.save_calibration {
-        let data = args
-            .data
-            .as_ref()
-            .context("--save-calibration needs --data")?;
-        save_calibration(data, &args.ckpt)?;
+    let student = export_student(&cfg, args.save_calibration)?;
+    let written = write_export(&cfg, &student, args.out.as_deref(), args.blob.as_deref())?;
+    for path in written {
+        println!("wrote {}", path.display());
     }
-    let student = export_student(&cfg)?;
-    write_export(&cfg, &student, args.out.as_deref(), args.blob.as_deref())?;
-    print_summary(&args, &cfg, &student);
+    println!("{student}");
     Ok(ExitCode::SUCCESS)
 }

@@ -4,16 +4,16 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
-pub mod bench;
-pub mod collect;
-pub mod equiv;
-pub mod eval;
-pub mod eval_firmware;
-pub mod export;
-pub mod prodmp;
-pub mod quickstart;
-pub mod serve;
-pub mod train;
+pub(crate) mod bench;
+pub(crate) mod collect;
+pub(crate) mod equiv;
+pub(crate) mod eval;
+pub(crate) mod eval_firmware;
+pub(crate) mod export;
+pub(crate) mod prodmp;
+pub(crate) mod quickstart;
+pub(crate) mod serve;
+pub(crate) mod train;
 
 /// FRMD: from demonstrations to a one-step diffusion policy in controller firmware.
 #[derive(Parser, Debug)]

@@ -9,7 +9,7 @@ pub enum ProdmpCommand {
     /// Decode every case of a vectors file with the f64 decoder and with f32 linear rows (the
     /// baked decoder's arithmetic) and report errors; exits 1 if any case is above tolerance.
     Check {
-        /// Vectors file in the schema of shared/testdata/prodmp_vectors.json.
+        /// Vectors file in the schema of frmd-core/tests/data/prodmp_vectors.json.
         #[arg(long)]
         vectors: PathBuf,
         /// Pass threshold of the f64 path, error |ours - ref| / max(|ref|, 1).

@@ -1,5 +1,7 @@
 //! `frmd serve`: one policy behind the binary protocol of docs/serve-protocol.md, on
 //! stdin/stdout or a Unix socket. The server itself is `crate::serve`.
+use crate::diffusion::samplers::Solver;
+use crate::firmware::Board;
 use crate::serve::{self, FloatType, PolicySource, ServeConfig};
 use clap::Args;
 use std::path::PathBuf;
@@ -16,7 +18,7 @@ pub struct ServeArgs {
     pub steps: Option<usize>,
     /// Teacher ODE solver for --ckpt: euler | heun | dpm++2m.
     #[arg(long, requires = "ckpt")]
-    pub solver: Option<String>,
+    pub solver: Option<Solver>,
     /// Baked module directory (`frmd export --out`): serves the int8 blob written beside it.
     #[arg(long)]
     pub baked: Option<PathBuf>,
@@ -27,7 +29,7 @@ pub struct ServeArgs {
     /// bakes --baked DIR's module (default: the checked-in reach student) and answers every ACT
     /// with the emulated MCU's chunk.
     #[arg(long, value_name = "CORE")]
-    pub firmware: Option<String>,
+    pub firmware: Option<Board>,
     /// Listen on this Unix socket path instead of stdin/stdout (one client at a time).
     #[arg(long)]
     pub socket: Option<PathBuf>,
@@ -35,8 +37,8 @@ pub struct ServeArgs {
     #[arg(long, requires = "socket")]
     pub connections: Option<usize>,
     /// Value type of observations and actions on the wire: f32 | f64.
-    #[arg(long, default_value = "f32")]
-    pub float: String,
+    #[arg(long, default_value_t = FloatType::F32)]
+    pub float: FloatType,
     /// Actions the client should execute from each chunk (announced in HELLO_OK; default 8 or
     /// the horizon if shorter).
     #[arg(long)]
@@ -56,19 +58,14 @@ pub struct ServeArgs {
 
 pub fn run(args: ServeArgs) -> anyhow::Result<ExitCode> {
     let source = match (&args.ckpt, &args.baked, &args.blob, &args.firmware) {
-        (Some(dir), None, None, None) => PolicySource::Checkpoint { dir: dir.clone(), steps: args.steps, solver: args.solver.clone() },
-        (None, baked, None, Some(board)) => PolicySource::Firmware { board: board.clone(), baked: baked.clone() },
+        (Some(dir), None, None, None) => PolicySource::Checkpoint { dir: dir.clone(), steps: args.steps, solver: args.solver },
+        (None, baked, None, Some(board)) => PolicySource::Firmware { board: *board, baked: baked.clone() },
         (None, Some(dir), None, None) => PolicySource::Baked(dir.clone()),
         (None, None, Some(path), None) => PolicySource::Blob(path.clone()),
         _ => anyhow::bail!("pass exactly one of --ckpt, --baked, --blob (or --firmware CORE, optionally with --baked DIR)"),
     };
-    let float_type = match args.float.as_str() {
-        "f32" => FloatType::F32,
-        "f64" => FloatType::F64,
-        other => anyhow::bail!("--float {other:?}: expected f32 or f64"),
-    };
     let cfg = ServeConfig {
-        float_type,
+        float_type: args.float,
         exec_steps: args.exec_steps,
         dt: args.dt,
         init_action: args.init_action.clone(),

@@ -82,7 +82,7 @@ pub struct Collected {
 pub fn collect_to_file(cfg: &CollectConfig) -> anyhow::Result<Collected> {
     cfg.validate()?;
     make_task(&cfg.task)?;
-    frmd_export::artifact::check_output_file(&cfg.out, "--out", cfg.force, &[])?;
+    frmd_formats::artifact::check_output_file(&cfg.out, "--out", cfg.force, &[])?;
     let mut progress = Progress::new(
         &format!("collect {}", cfg.task),
         cfg.episodes as u64,
@@ -138,7 +138,7 @@ fn max_attempts(episodes: usize, perturbed: bool) -> usize {
 
 /// Collects `episodes` successful expert demonstrations of `task` on seeds `seed`, `seed + 1`, ...
 /// Failed expert episodes are skipped; at most `episodes + 10 + episodes / 5` seeds are tried,
-/// three times as many with `noise` (see [`super::perturb`]: the executed actions are perturbed,
+/// three times as many with `noise` (see `super::perturb`: the executed actions are perturbed,
 /// the recorded ones are the expert's). Seeds must stay below the evaluation stream
 /// ([`EVAL_SEED_OFFSET`]).
 pub fn collect_demos(

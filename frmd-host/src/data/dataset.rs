@@ -4,6 +4,7 @@
 //! [E] i64 (cumulative exclusive ends, strictly increasing, the last equal to T), plus string
 //! metadata `task`, `dt` (control period, seconds) and `source` (who produced it), and optionally
 //! `action_before_start` ([`ActionBeforeStart`]).
+use anyhow::Context;
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -223,17 +224,15 @@ impl Dataset {
                 self.action_before_start.as_str().to_string(),
             );
         }
-        frmd_export::safetensors_bytes::serialize(tensors, &meta)
+        frmd_formats::safetensors_bytes::serialize(tensors, &meta)
     }
 
     /// Parses and validates safetensors bytes.
     pub fn from_bytes(bytes: &[u8]) -> anyhow::Result<Dataset> {
-        let file = SafeTensors::deserialize(bytes).map_err(|e| {
-            anyhow::anyhow!("not a valid safetensors file (truncated or corrupt header/data): {e}")
-        })?;
-        let (_, meta) = SafeTensors::read_metadata(bytes).map_err(|e| {
-            anyhow::anyhow!("not a valid safetensors file (truncated or corrupt header): {e}")
-        })?;
+        let file = SafeTensors::deserialize(bytes)
+            .context("not a valid safetensors file (truncated or corrupt header/data)")?;
+        let (_, meta) = SafeTensors::read_metadata(bytes)
+            .context("not a valid safetensors file (truncated or corrupt header)")?;
         let meta = meta.metadata();
         let (obs_shape, obs) = tensor(&file, "obs", Dtype::F32, 2)?;
         let (action_shape, action) = tensor(&file, "action", Dtype::F32, 2)?;
@@ -246,8 +245,8 @@ impl Dataset {
         );
         let dt_text = metadata(meta, "dt")?;
         let dt: f32 = dt_text
-            .parse()
-            .map_err(|_| anyhow::anyhow!("metadata `dt` is {dt_text:?}, not a number"))?;
+            .parse::<f32>()
+            .with_context(|| format!("metadata `dt` is {dt_text:?}, not a number"))?;
         let dataset = Dataset {
             obs: obs
                 .chunks_exact(4)
@@ -278,14 +277,13 @@ impl Dataset {
     /// Loads and validates a dataset file; errors name the file and what is wrong.
     pub fn load(path: &Path) -> anyhow::Result<Dataset> {
         let bytes = std::fs::read(path)
-            .map_err(|e| anyhow::anyhow!("cannot read dataset {}: {e}", path.display()))?;
-        Self::from_bytes(&bytes)
-            .map_err(|e| anyhow::anyhow!("invalid dataset {}: {e}", path.display()))
+            .with_context(|| format!("cannot read dataset {}", path.display()))?;
+        Self::from_bytes(&bytes).with_context(|| format!("invalid dataset {}", path.display()))
     }
 
     /// Validates and writes the dataset to `path`.
     pub fn save(&self, path: &Path) -> anyhow::Result<()> {
         let bytes = self.to_bytes()?;
-        frmd_export::artifact::write_atomic(path, &bytes)
+        frmd_formats::artifact::write_atomic(path, &bytes)
     }
 }

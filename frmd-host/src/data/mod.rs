@@ -1,10 +1,10 @@
 //! Demonstration datasets: the safetensors format of docs/design.md section 4, validation, training
 //! windows and [-1, 1] normalization.
 pub mod collect;
-pub mod dataset;
-pub mod perturb;
+pub(crate) mod dataset;
+pub(crate) mod perturb;
 pub mod toy;
-pub mod windows;
+pub(crate) mod windows;
 
 #[cfg(test)]
 mod tests;

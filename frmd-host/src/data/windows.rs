@@ -1,7 +1,7 @@
 //! Training windows cut from demonstrations: the contract between datasets and training.
 
-use frmd_export::calibrate::CalibrationSet;
-pub use frmd_export::checkpoint::{Normalization, Normalizer};
+use frmd_formats::calibration::CalibrationSet;
+pub use frmd_formats::checkpoint::{Normalization, Normalizer};
 
 /// Smallest normalizer range, raw units. MetaWorld demonstrations have observation dimensions
 /// that barely move (a resting object's quaternion jitters by +-0.002: 12 dimensions of reach-v3
@@ -50,8 +50,8 @@ impl WindowSet {
 
     /// Up to `rows` evenly spaced window conditions `[obs history, y0, v0]` (normalized) as
     /// calibration rows for the exporter, with a noise seed derived from `seed`. Training
-    /// writes [`CALIBRATION_ROWS`] of them beside a student checkpoint
-    /// (`frmd_export::calibration_file`).
+    /// writes `CALIBRATION_ROWS` of them beside a student checkpoint
+    /// (`frmd_formats::calibration`).
     pub fn calibration_rows(&self, rows: usize, seed: u64) -> CalibrationSet {
         let (obs_w, k) = (self.history * self.obs_dim, self.action_dim);
         let stride = (self.len() / rows.max(1)).max(1);
@@ -84,7 +84,7 @@ impl super::Dataset {
     /// zero action (`Zero`, displacement commands: what `frmd serve` resets with), rate 0 either
     /// way; why it matters is measured in docs/design.md, section 4.
     ///
-    /// Normalizer ranges below [`MIN_NORM_RANGE`] are widened to it (exactly constant dimensions
+    /// Normalizer ranges below `MIN_NORM_RANGE` are widened to it (exactly constant dimensions
     /// stay constant).
     pub fn windows(
         &self,

@@ -40,7 +40,7 @@ pub mod loss;
 pub mod precond;
 pub mod samplers;
 
-/// Maps a `frmd_core::sigma` error into an `anyhow` error naming the quantity.
+/// Wraps a `frmd_core::sigma` error (its source kept) in the context naming the quantity.
 pub(crate) fn sigma_err(what: &str) -> impl Fn(frmd_core::sigma::SigmaError) -> anyhow::Error + '_ {
-    move |e| anyhow::anyhow!("{what}: {e}")
+    move |e| anyhow::Error::new(e).context(what.to_string())
 }

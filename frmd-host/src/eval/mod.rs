@@ -11,7 +11,7 @@ use std::collections::VecDeque;
 use std::time::Instant;
 
 pub mod metrics;
-pub mod plot;
+pub(crate) mod plot;
 
 #[cfg(test)]
 mod tests;
@@ -50,7 +50,7 @@ impl Default for EvalConfig {
 }
 
 impl EvalConfig {
-    /// Checks the counts against [`crate::limits`] and that every seed of the run stays in the
+    /// Checks the counts against `crate::limits` and that every seed of the run stays in the
     /// evaluation stream (`first_seed + episodes <= 2^63`, no wrap into the collection seeds).
     pub fn validate(&self) -> Result<(), OptionError> {
         limits::count("episodes", self.episodes, 1, limits::MAX_EPISODES)?;
@@ -147,6 +147,42 @@ pub struct EvalReport {
     pub per_episode: Vec<EpisodeRecord>,
     #[serde(skip)]
     pub kept_paths: Vec<KeptPath>,
+}
+
+/// The human-readable summary of a report (what `frmd eval` prints).
+impl std::fmt::Display for EvalReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "task {} / policy {} / {} episodes (exec {} of each chunk, history {})",
+            self.task, self.policy, self.episodes, self.exec_steps, self.history
+        )?;
+        writeln!(
+            f,
+            "  success        {:.1} % ({} of {}), 95 % Wilson [{:.1}, {:.1}] %",
+            100.0 * self.success_rate,
+            self.successes,
+            self.episodes,
+            100.0 * self.success_ci95[0],
+            100.0 * self.success_ci95[1]
+        )?;
+        writeln!(
+            f,
+            "  length         {:.1} steps (successful: {:.1})",
+            self.mean_length, self.mean_length_success
+        )?;
+        writeln!(
+            f,
+            "  latency/chunk  median {:.1} us, p99 {:.1} us over {} calls (RAYON_NUM_THREADS={})",
+            self.latency_us_median, self.latency_us_p99, self.chunk_calls, self.threads
+        )?;
+        writeln!(f, "  sim step       {:.2} us", self.sim_step_us)?;
+        writeln!(
+            f,
+            "  non-smooth     {:.2} per episode (end effector), {:.2} (actions); RMS jerk {:.2} m/s^3",
+            self.non_smooth_ee_mean, self.non_smooth_action_mean, self.rms_jerk_mean
+        )
+    }
 }
 
 /// The raw outcome of one rollout.

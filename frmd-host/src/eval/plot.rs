@@ -118,9 +118,9 @@ fn legend_swatch(chart: &mut Chart<'_, '_>, label: &str, color: RGBColor) -> any
 }
 
 /// Draws the kept paths of `report` over their layouts into a PNG at `out`.
-/// The file is written atomically (`frmd_export::artifact`).
+/// The file is written atomically (`frmd_formats::artifact`).
 pub fn plot_paths(out: &Path, report: &EvalReport) -> anyhow::Result<()> {
-    frmd_export::artifact::write_atomic_with(out, |tmp| draw_paths(tmp, report))
+    frmd_formats::artifact::write_atomic_with(out, |tmp| draw_paths(tmp, report))
 }
 
 fn draw_paths(out: &Path, report: &EvalReport) -> anyhow::Result<()> {

@@ -16,8 +16,60 @@ pub mod link;
 pub mod lockstep;
 pub mod policy;
 
-/// The cores `run-qemu.sh` boots (which of them build depends on the installed targets).
-pub const BOARDS: [&str; 5] = ["m4", "m7", "m33", "m0", "m55"];
+/// A core `run-qemu.sh` boots (which of them build depends on the installed targets); written and
+/// parsed as the script's board name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Board {
+    /// Cortex-M4F (mps2-an386).
+    M4,
+    /// Cortex-M7 (mps2-an500, the M4's image).
+    M7,
+    /// Cortex-M33 (mps2-an505).
+    M33,
+    /// Cortex-M0 (micro:bit).
+    M0,
+    /// Cortex-M55 (mps3-an547, the M33's code).
+    M55,
+}
+
+impl Board {
+    /// Every board, in `run-qemu.sh`'s order.
+    pub const ALL: [Board; 5] = [Board::M4, Board::M7, Board::M33, Board::M0, Board::M55];
+
+    /// The board's name for `run-qemu.sh`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Board::M4 => "m4",
+            Board::M7 => "m7",
+            Board::M33 => "m33",
+            Board::M0 => "m0",
+            Board::M55 => "m55",
+        }
+    }
+}
+
+impl std::fmt::Display for Board {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Board {
+    type Err = anyhow::Error;
+
+    fn from_str(text: &str) -> anyhow::Result<Self> {
+        Board::ALL
+            .into_iter()
+            .find(|board| board.name() == text)
+            .with_context(|| {
+                let names: Vec<&str> = Board::ALL.iter().map(|b| b.name()).collect();
+                format!(
+                    "unknown firmware core `{text}`; expected one of {}",
+                    names.join(", ")
+                )
+            })
+    }
+}
 
 /// A built `pil` image and how QEMU runs it.
 #[derive(Clone, Debug)]
@@ -38,13 +90,7 @@ pub fn default_repo() -> PathBuf {
 /// Builds the `pil` image for `board` with `run-qemu.sh` (a no-op when it is up to date) and
 /// returns where it is and how to boot it. `baked`: a baked module directory (`frmd export --out`,
 /// MLP students) to bake into the image instead of the checked-in reach student.
-pub fn build(repo: &Path, board: &str, baked: Option<&Path>) -> anyhow::Result<FirmwareImage> {
-    if !BOARDS.contains(&board) {
-        bail!(
-            "unknown firmware core {board:?}; expected one of {}",
-            BOARDS.join(", ")
-        );
-    }
+pub fn build(repo: &Path, board: Board, baked: Option<&Path>) -> anyhow::Result<FirmwareImage> {
     let script = repo.join("examples/cortex-m/run-qemu.sh");
     anyhow::ensure!(
         script.is_file(),
@@ -54,7 +100,7 @@ pub fn build(repo: &Path, board: &str, baked: Option<&Path>) -> anyhow::Result<F
     let mut command = Command::new("bash");
     command
         .arg(&script)
-        .args([board, "pil"])
+        .args([board.name(), "pil"])
         .env("FRMD_QEMU_BUILD_ONLY", "1")
         .env("CARGO_TARGET_DIR", repo.join("examples/cortex-m/target"))
         .env_remove("FRMD_PIL_BAKED");
@@ -95,7 +141,7 @@ pub fn build(repo: &Path, board: &str, baked: Option<&Path>) -> anyhow::Result<F
             })
     };
     Ok(FirmwareImage {
-        board: board.to_owned(),
+        board: board.to_string(),
         elf: PathBuf::from(field("elf")?),
         machine: field("machine")?,
         cpu: field("cpu")?,

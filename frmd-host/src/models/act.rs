@@ -2,10 +2,10 @@
 //! for inputs above ~88 and is slow).
 use candle_core::{Result, Tensor};
 
-pub use frmd_export::checkpoint::Activation;
+pub use frmd_formats::checkpoint::Activation;
 
 /// The candle forward of an [`Activation`] (the enum itself is part of the checkpoint schema in
-/// `frmd_export::checkpoint`).
+/// `frmd_formats::checkpoint`).
 pub trait ActivationExt {
     fn apply(self, xs: &Tensor) -> Result<Tensor>;
 }

@@ -1,7 +1,7 @@
 //! The ProDMP decoder inside the candle graph: a fixed linear map of (theta, y0, v0) whose
 //! coefficients come from `frmd_core::prodmp::linear_row` (the one ProDMP implementation), at
 //! query times tau/n, 2 tau/n, .., tau (tau = n dt) with initial time 0 (docs/design.md section 2, policy case).
-use anyhow::{anyhow, Context};
+use anyhow::Context;
 use candle_core::{Device, Tensor};
 use frmd_core::prodmp::{ProDmp, ProDmpConfig};
 
@@ -12,14 +12,14 @@ pub struct DecoderRows {
     pub num_params: usize,
     /// [horizon, num_params], row t = coefficients of theta for position at time (t+1) dt.
     pub pos_params: Vec<f64>,
-    /// [horizon] coefficients of y0 and v0 (v0 in units per second).
+    /// \[horizon\] coefficients of y0 and v0 (v0 in units per second).
     pub pos_y0: Vec<f64>,
     pub pos_v0: Vec<f64>,
 }
 
 impl DecoderRows {
     pub fn new(cfg: &ProDmpConfig, horizon: usize) -> anyhow::Result<Self> {
-        let decoder = ProDmp::new(cfg).map_err(|e| anyhow!("invalid ProDMP config: {e}"))?;
+        let decoder = ProDmp::new(cfg).context("invalid ProDMP config")?;
         let num_params = cfg.num_params_per_dof();
         let mut pos_params = vec![0.0; horizon * num_params];
         let mut vel_params = vec![0.0; num_params];
@@ -30,7 +30,7 @@ impl DecoderRows {
             let time = (t + 1) as f64 * (cfg.tau / horizon as f64);
             let coeffs = decoder
                 .linear_row(0.0, time, row, &mut vel_params)
-                .map_err(|e| anyhow!("ProDMP row at t = {time}: {e}"))?;
+                .with_context(|| format!("ProDMP row at t = {time}"))?;
             pos_y0.push(coeffs.pos_y0);
             pos_v0.push(coeffs.pos_v0);
         }
@@ -82,7 +82,7 @@ impl ProDmpDecoder {
         self.num_dof * self.num_params
     }
 
-    /// `theta` [B, k (b+1)] (DoF-major: params[d] = [w_0 .. w_{b-1}, g]), `y0` [B, k],
+    /// `theta` [B, k (b+1)] (DoF-major: params\[d\] = [w_0 .. w_{b-1}, g]), `y0` [B, k],
     /// `v0` [B, k] (units per second) -> positions [B, n k], step-major.
     pub fn decode(&self, theta: &Tensor, y0: &Tensor, v0: &Tensor) -> anyhow::Result<Tensor> {
         let batch = theta.dim(0)?;

@@ -1,11 +1,11 @@
 //! Float denoising networks (candle): a backbone conditioned on the observation history, the
 //! last action and its rate, and the noise level; either a ProDMP head (teacher and student,
 //! k (b+1) parameters decoded to a trajectory in the graph) or a raw n k head (DP baseline).
-pub mod act;
+pub(crate) mod act;
 pub mod decoder;
-pub mod init;
-pub mod mlp;
-pub mod transformer;
+pub(crate) mod init;
+pub(crate) mod mlp;
+pub(crate) mod transformer;
 
 pub use act::Activation;
 pub use frmd_core::prodmp::ProDmpConfig;
@@ -14,7 +14,7 @@ use candle_core::{DType, Device, Tensor, D};
 use candle_nn::{VarBuilder, VarMap};
 use decoder::ProDmpDecoder;
 
-pub use frmd_export::checkpoint::{BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput};
+pub use frmd_formats::checkpoint::{BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput};
 
 /// Conditioning of one batch, in normalized units.
 #[derive(Clone, Debug)]
@@ -162,7 +162,7 @@ pub struct OwnedNetwork {
 }
 
 impl OwnedNetwork {
-    /// Builds the network and initializes every variable from `seed` (see [`init::init_seeded`]).
+    /// Builds the network and initializes every variable from `seed` (see `init::init_seeded`).
     pub fn new_seeded(cfg: &ModelConfig, seed: u64, device: &Device) -> anyhow::Result<Self> {
         let varmap = VarMap::new();
         let net = Network::new(cfg, VarBuilder::from_varmap(&varmap, DType::F32, device))?;

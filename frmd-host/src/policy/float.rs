@@ -29,15 +29,6 @@ pub fn dp_parametrization(meta: &CheckpointMeta) -> anyhow::Result<EpsParametriz
     }
 }
 
-/// The role as users write it (teacher, student, dp).
-pub fn role_name(role: Role) -> &'static str {
-    match role {
-        Role::Teacher => "teacher",
-        Role::Student => "student",
-        Role::Dp => "dp",
-    }
-}
-
 /// How a float policy turns noise into a chunk.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Sampler {
@@ -49,7 +40,7 @@ pub enum Sampler {
 impl Sampler {
     /// Default sampler for a role: teacher Heun 10 steps (the solver can be overridden),
     /// student 1 step, DP DDIM 10 steps; `steps` overrides the count (DP: 100 means DDPM).
-    /// Teacher and DP take 1 to [`limits::MAX_SAMPLER_STEPS`] steps; a solver is the teacher's
+    /// Teacher and DP take 1 to `limits::MAX_SAMPLER_STEPS` steps; a solver is the teacher's
     /// alone (an error for the other roles, which have none to set).
     pub fn for_role(
         role: Role,
@@ -62,7 +53,7 @@ impl Sampler {
             } else {
                 "the consistency sampler"
             };
-            return Err(limits::conflict("solver", format!("a {} checkpoint", role_name(role)), format!("only a teacher has an ODE solver to choose ({solver} given; this checkpoint uses {sampler})")));
+            return Err(limits::conflict("solver", format!("a {role} checkpoint"), format!("only a teacher has an ODE solver to choose ({solver} given; this checkpoint uses {sampler})")));
         }
         Ok(match role {
             Role::Teacher => {
@@ -229,7 +220,7 @@ impl FloatPolicy {
         &self.schedule
     }
 
-    /// One chunk in normalized units from normalized inputs: `obs` [m O], `y0`, `v0` [k].
+    /// One chunk in normalized units from normalized inputs: `obs` [m O], `y0`, `v0` \[k\].
     pub fn sample_normalized(
         &mut self,
         obs: &[f32],
@@ -319,9 +310,8 @@ impl Policy for FloatPolicy {
 pub fn boxed(
     dir: &Path,
     steps: Option<usize>,
-    solver: Option<&str>,
+    solver: Option<Solver>,
 ) -> anyhow::Result<(Box<dyn Policy>, usize)> {
-    let solver = solver.map(Solver::parse).transpose()?;
     let policy = FloatPolicy::load(dir, steps, solver)?;
     let history = policy.net.net.config().history;
     Ok((Box::new(policy), history))

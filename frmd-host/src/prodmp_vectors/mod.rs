@@ -1,4 +1,4 @@
-//! Reference vectors for the ProDMP decoder (schema of `shared/testdata/prodmp_vectors.json`,
+//! Reference vectors for the ProDMP decoder (schema of `frmd-core/tests/data/prodmp_vectors.json`,
 //! produced from mp_pytorch 0.1.4 in float64): parsing, validation and the f64/f32 check.
 //!
 //! Schema: `{ "cases": [case..], ..metadata }` with, per case, `name`, `config` (mp_pytorch
@@ -13,7 +13,7 @@
 //! dependencies) may parse a 17-digit decimal 1 ulp off. That is far below every tolerance, but a
 //! time written exactly at the end of the pre-computed range (`delay + 6 tau`) can then land just
 //! beyond it and be reported as out of range.
-pub mod check;
+pub(crate) mod check;
 
 use frmd_core::prodmp::ProDmpError;
 use serde::Deserialize;
@@ -172,7 +172,7 @@ impl fmt::Display for VectorsError {
             Self::Malformed { path, source } => write!(
                 f,
                 "{} is not a ProDMP vectors file (JSON with \"cases\" in the schema of \
-                 shared/testdata/prodmp_vectors.json; NaN/Infinity are not allowed): {source}",
+                 frmd-core/tests/data/prodmp_vectors.json; NaN/Infinity are not allowed): {source}",
                 path.display()
             ),
             Self::NoCases => write!(f, "vectors file has no cases"),

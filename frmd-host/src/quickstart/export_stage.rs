@@ -24,7 +24,7 @@ fn export_inner(student_dir: &Path, out: &Path) -> anyhow::Result<Int8Export> {
     std::fs::create_dir_all(&baked)?;
     // The default export (1 step, min-max calibration on the rows saved beside the student).
     let cfg = ExportConfig::for_checkpoint(student_dir);
-    let exported = export_student(&cfg)?;
+    let exported = export_student(&cfg, false)?;
     write_export(&cfg, &exported, Some(&baked), None)?;
     let policy = Int8Policy::from_blob(exported.blob(), "int8-student-1")?;
     let history = policy.history();
@@ -47,7 +47,7 @@ fn export_inner(student_dir: &Path, out: &Path) -> anyhow::Result<Int8Export> {
         (Some(max), Some(mean)) => format!("max {max:.4} / mean {mean:.4} m"),
         _ => "equiv report has no (b) rows".into(),
     };
-    frmd_export::artifact::write_atomic(
+    frmd_formats::artifact::write_atomic(
         &out.join("eval").join("equiv.json"),
         serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;

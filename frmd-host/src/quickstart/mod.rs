@@ -262,7 +262,7 @@ fn evaluate(
     let plot = a.out.join("plots").join(format!("{method}.png"));
     plot_paths(&plot, &report)?;
     let json = a.out.join("eval").join(format!("{method}.json"));
-    frmd_export::artifact::write_atomic(&json, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    frmd_formats::artifact::write_atomic(&json, serde_json::to_string_pretty(&report)?.as_bytes())?;
     artifacts.push((format!("{method} paths plot"), plot));
     artifacts.push((format!("{method} report"), json));
     Ok(MethodRow {
@@ -291,7 +291,7 @@ fn float_row(
 pub fn run_pipeline(a: &QuickstartConfig) -> anyhow::Result<QuickstartSummary> {
     a.validate()?;
     crate::tasks::make_task(&a.task)?;
-    frmd_export::artifact::check_output_dir(&a.out, "--out", a.force, &[])?;
+    frmd_formats::artifact::check_output_dir(&a.out, "--out", a.force, &[])?;
     for dir in ["plots", "eval"] {
         std::fs::create_dir_all(a.out.join(dir))
             .with_context(|| format!("cannot create {}", a.out.join(dir).display()))?;
@@ -408,8 +408,11 @@ pub fn run_pipeline(a: &QuickstartConfig) -> anyhow::Result<QuickstartSummary> {
         threads: std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "unset".into()),
     };
     let json = a.out.join("summary.json");
-    frmd_export::artifact::write_atomic(&json, serde_json::to_string_pretty(&summary)?.as_bytes())?;
-    frmd_export::artifact::write_atomic(
+    frmd_formats::artifact::write_atomic(
+        &json,
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    frmd_formats::artifact::write_atomic(
         &a.out.join("summary.txt"),
         table::render(&summary).as_bytes(),
     )?;

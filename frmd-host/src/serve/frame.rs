@@ -73,7 +73,30 @@ pub enum FloatType {
     F64 = 2,
 }
 
+/// `f32` or `f64`, as `frmd serve --float` takes it.
+impl std::fmt::Display for FloatType {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            FloatType::F32 => "f32",
+            FloatType::F64 => "f64",
+        })
+    }
+}
+
+impl std::str::FromStr for FloatType {
+    type Err = String;
+
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        match text {
+            "f32" => Ok(FloatType::F32),
+            "f64" => Ok(FloatType::F64),
+            other => Err(format!("`{other}`: expected f32 or f64")),
+        }
+    }
+}
+
 impl FloatType {
+    /// The type of wire code `byte` (1: f32, 2: f64).
     pub fn from_u8(byte: u8) -> Option<FloatType> {
         match byte {
             1 => Some(FloatType::F32),

@@ -4,11 +4,14 @@
 use super::frame::{FloatType, MAX_NAME, MAX_PAYLOAD};
 use super::reply::ModelInfo;
 use super::session::{ActInput, ServedPolicy, Session};
-use crate::export::{ExportConfig, BAKED_BLOB_FILE, EXPORT_INFO_FILE};
+use crate::diffusion::samplers::Solver;
+use crate::export::{ExportConfig, EXPORT_INFO_FILE};
+use crate::firmware::Board;
 use crate::policy::float::FloatPolicy;
 use crate::policy::int8::Int8Policy;
 use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
+use frmd_export::bake::BLOB_FILE;
 use std::path::{Path, PathBuf};
 
 /// Where the served policy comes from.
@@ -17,9 +20,12 @@ pub enum PolicySource {
     /// A float checkpoint directory; `steps` and `solver` override the role's default sampler
     /// (teacher Heun 10, student 1 step, DP DDIM 10; DP with 100 steps is DDPM).
     Checkpoint {
+        /// The checkpoint directory.
         dir: PathBuf,
+        /// Sampling steps.
         steps: Option<usize>,
-        solver: Option<String>,
+        /// The teacher's ODE solver.
+        solver: Option<Solver>,
     },
     /// A baked module directory (`frmd export --out`): its `policy.blob`.
     Baked(PathBuf),
@@ -28,7 +34,9 @@ pub enum PolicySource {
     /// The `pil` firmware image on a QEMU core (`crate::firmware`), baking `baked`'s module (or
     /// the checked-in reach student): every chunk comes from the emulated MCU.
     Firmware {
-        board: String,
+        /// The core.
+        board: Board,
+        /// A baked module directory to bake into the image.
         baked: Option<PathBuf>,
     },
 }
@@ -77,7 +85,8 @@ impl Served {
     /// A fresh session for one connection.
     pub fn session(&self) -> anyhow::Result<Session> {
         Session::new(self.info.clone(), self.default_init.clone())
-            .map_err(|e| anyhow::anyhow!("server setup: {e}"))
+            .map_err(anyhow::Error::msg)
+            .context("server setup")
     }
 }
 
@@ -162,18 +171,11 @@ fn exported_dt(dir: &Path) -> anyhow::Result<Option<f64>> {
     if !path.exists() {
         return Ok(None);
     }
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let info: ExportConfig = serde_json::from_str(&text).with_context(|| {
-        format!(
-            "{}: not the export settings `frmd export` writes",
-            path.display()
-        )
-    })?;
+    let info = ExportConfig::read(dir)?;
     if info.checkpoint.is_empty() {
         bail!("{}: field `checkpoint` is missing or empty (expected the exported checkpoint directory)", path.display());
     }
-    match frmd_export::checkpoint::CheckpointMeta::read(Path::new(&info.checkpoint)) {
+    match frmd_formats::checkpoint::CheckpointMeta::read(Path::new(&info.checkpoint)) {
         Ok(meta) => Ok(Some(meta.model.control_dt)),
         // The checkpoint may have moved since the export; the blob alone still serves.
         Err(_) => Ok(None),
@@ -193,11 +195,7 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
         String,
     ) = match source {
         PolicySource::Checkpoint { dir, steps, solver } => {
-            let solver = solver
-                .as_deref()
-                .map(crate::diffusion::samplers::Solver::parse)
-                .transpose()?;
-            let policy = FloatPolicy::load(dir, *steps, solver)?;
+            let policy = FloatPolicy::load(dir, *steps, *solver)?;
             let c = policy.config().clone();
             let name = format!("{} {}", policy.name(), dir.display());
             (
@@ -212,7 +210,7 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
         }
         PolicySource::Baked(dir) | PolicySource::Blob(dir) => {
             let (path, beside) = match source {
-                PolicySource::Baked(_) => (dir.join(BAKED_BLOB_FILE), dir.clone()),
+                PolicySource::Baked(_) => (dir.join(BLOB_FILE), dir.clone()),
                 _ => (
                     dir.clone(),
                     dir.parent().map(Path::to_path_buf).unwrap_or_default(),
@@ -233,7 +231,7 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
         }
         PolicySource::Firmware { board, baked } => {
             let image =
-                crate::firmware::build(&crate::firmware::default_repo(), board, baked.as_deref())?;
+                crate::firmware::build(&crate::firmware::default_repo(), *board, baked.as_deref())?;
             let policy = crate::firmware::policy::FirmwarePolicy::start(&image)?;
             let i = policy.info().clone();
             let dt = match baked {
@@ -286,7 +284,8 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
         name: short_name(name),
     };
     info.validate()
-        .map_err(|e| anyhow::anyhow!("{what}: cannot be served: {e}"))?;
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("{what}: cannot be served"))?;
     let policy = Adapter::new(policy, history, obs_dim, horizon * action_dim, cfg.zeros);
     Ok(Served {
         info,

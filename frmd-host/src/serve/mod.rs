@@ -4,21 +4,21 @@
 //! std only, no dependencies in the protocol part. Nothing here panics on any input: every
 //! malformed frame becomes a [`ProtocolError`] with the code and text the specification lists.
 //!
-//! - [`frame`]: constants, header, frame reader; [`error`]: error codes;
-//! - [`request`], [`reply`]: the messages, each encoded and decoded side by side ([`fields`]
+//! - `frame`: constants, header, frame reader; `error`: error codes;
+//! - `request`, `reply`: the messages, each encoded and decoded side by side (`fields`
 //!   holds the shared payload helpers);
-//! - [`session`]: order and `executed` rules, timing; [`server`]: the loop over a byte stream,
+//! - `session`: order and `executed` rules, timing; `server`: the loop over a byte stream,
 //!   stdin/stdout and a Unix socket;
 //! - [`load`]: the policy behind the server (checkpoint, baked module, blob) and its HELLO_OK.
-pub mod error;
+pub(crate) mod error;
 mod fields;
 mod firmware;
-pub mod frame;
-pub mod load;
-pub mod reply;
-pub mod request;
-pub mod server;
-pub mod session;
+pub(crate) mod frame;
+pub(crate) mod load;
+pub(crate) mod reply;
+pub(crate) mod request;
+pub(crate) mod server;
+pub(crate) mod session;
 
 pub use error::{ErrorCode, ProtocolError};
 pub use frame::{

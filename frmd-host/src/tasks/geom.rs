@@ -242,30 +242,6 @@ impl TimedPath {
     }
 }
 
-/// A scripted expert's progress along its plan: the timed path (planned on the episode's first
-/// call) and the control steps taken along it.
-#[derive(Clone, Debug, Default)]
-pub struct PathFollower {
-    plan: Option<TimedPath>,
-    step: usize,
-}
-
-impl PathFollower {
-    /// Forgets the plan (a new episode).
-    pub fn reset(&mut self) {
-        *self = Self::default();
-    }
-
-    /// The position target of the current control step (`dt` seconds each), planning with `plan`
-    /// first if there is no plan yet; then moves on one step.
-    pub fn next(&mut self, dt: f64, plan: impl FnOnce() -> TimedPath) -> V2 {
-        let path = self.plan.get_or_insert_with(plan);
-        let target = path.at(self.step as f64 * dt);
-        self.step += 1;
-        target
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -47,8 +47,6 @@ pub const PEG_WIDTH: f64 = 0.10;
 pub const CLEARANCE: f64 = 0.01;
 /// Slot depth, metres.
 pub const SLOT_DEPTH: f64 = 0.20;
-/// Peg length (for plots), metres.
-pub const PEG_LENGTH: f64 = 0.30;
 const FRICTION: f64 = 0.5;
 /// The tip counts as inserted within this distance of the slot bottom, metres.
 const INSERT_TOLERANCE: f64 = 0.02;

@@ -1,6 +1,6 @@
 //! Built-in planar manipulation tasks with scripted experts.
 //!
-//! Every task shares one end effector model ([`point_mass`]): a point mass that tracks a commanded
+//! Every task shares one end effector model (`point_mass`): a point mass that tracks a commanded
 //! 2-D position target (metres) with a stiff critically damped loop. Actions are therefore
 //! position targets `[x, y]`, and the ProDMP initial condition of a chunk is the last commanded
 //! action. All tasks use a control period of 0.1 s and live in the square [-2, 2]^2 m, a scale at
@@ -22,17 +22,17 @@
 //! demonstrations spread over the arena do not pin that geometry down everywhere
 //! (docs/design.md, "Observations").
 //!
-//! Seeds: a task's layout is a pure function of the episode seed (see [`rng::TaskRng`]). The
+//! Seeds: a task's layout is a pure function of the episode seed (see `rng::TaskRng`). The
 //! evaluator uses seeds from a disjoint range (see `eval::EVAL_SEED_OFFSET`).
 pub mod avoid;
-pub mod expert;
-pub mod geom;
-pub mod insert;
-pub mod point_mass;
+pub(crate) mod expert;
+pub(crate) mod geom;
+pub(crate) mod insert;
+pub(crate) mod point_mass;
 mod policy;
-pub mod push;
-pub mod reach;
-pub mod rng;
+pub(crate) mod push;
+pub(crate) mod reach;
+pub(crate) mod rng;
 
 pub use policy::{Policy, PolicyInput};
 

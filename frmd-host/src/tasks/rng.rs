@@ -1,13 +1,16 @@
 //! A small deterministic random stream for task layouts and expert choices.
 //!
-//! SplitMix64 (Steele, Lea and Flood 2014): one 64-bit state, every seed valid, and streams for
-//! different purposes derived by mixing a tag into the seed, so that the layout of an episode and
-//! the expert's coin flips are independent yet both fixed by the episode seed.
+//! frmd-core's SplitMix64 (Steele, Lea and Flood 2014): one 64-bit state, every seed valid, and
+//! streams for different purposes derived by mixing a tag into the seed, so that the layout of an
+//! episode and the expert's coin flips are independent yet both fixed by the episode seed.
 
-/// SplitMix64 generator.
+use crate::rng::box_muller;
+use frmd_core::rng::SplitMix64;
+
+/// A SplitMix64 stream of one purpose.
 #[derive(Clone, Debug)]
 pub struct TaskRng {
-    state: u64,
+    stream: SplitMix64,
 }
 
 impl TaskRng {
@@ -15,15 +18,16 @@ impl TaskRng {
     pub fn new(seed: u64, tag: &[u8]) -> Self {
         let mut state = seed ^ 0x6a09_e667_f3bc_c908;
         for &byte in tag {
-            state = mix(state ^ u64::from(byte));
+            state = SplitMix64::mix(state ^ u64::from(byte));
         }
-        Self { state }
+        Self {
+            stream: SplitMix64::new(state),
+        }
     }
 
     /// Next 64 random bits.
     pub fn next_u64(&mut self) -> u64 {
-        self.state = self.state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        mix(self.state)
+        self.stream.next_u64()
     }
 
     /// Uniform in [0, 1) with 53 bits of resolution.
@@ -39,8 +43,8 @@ impl TaskRng {
     /// A standard normal sample (Box-Muller; one of the pair is discarded to keep no state).
     pub fn gaussian(&mut self) -> f64 {
         // 1 - unit() lies in (0, 1], so the logarithm is finite.
-        let radius = (-2.0 * (1.0 - self.unit()).ln()).sqrt();
-        radius * (std::f64::consts::TAU * self.unit()).cos()
+        let u1 = 1.0 - self.unit();
+        box_muller(u1, self.unit()).0
     }
 
     /// A fair coin as +1.0 or -1.0.
@@ -51,13 +55,6 @@ impl TaskRng {
             -1.0
         }
     }
-}
-
-/// The SplitMix64 output function (a bijection on u64).
-fn mix(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 #[cfg(test)]
@@ -88,6 +85,22 @@ mod tests {
         assert!(
             (tail - 0.05).abs() < 0.01,
             "two-sided 5 % tail holds {tail}"
+        );
+    }
+
+    /// The stream every task layout and expert choice was made with, to the bit.
+    #[test]
+    fn recorded_stream_is_unchanged() {
+        let mut rng = TaskRng::new(7, b"layout");
+        let bits: Vec<u64> = (0..3).map(|_| rng.next_u64()).collect();
+        assert_eq!(
+            bits,
+            [0x7b465cf8375acadb, 0x8f377efbdd9ddf0c, 0xf588733c79d76c17]
+        );
+        let normals: Vec<u64> = (0..3).map(|_| rng.gaussian().to_bits()).collect();
+        assert_eq!(
+            normals,
+            [0x3fcbfba6f3f20ff3, 0x3fef0d5fffad5381, 0xbfd5cb7484f786a3]
         );
     }
 }

@@ -94,6 +94,12 @@ pub struct CondAugment {
     pub prob: f64,
     pub y0_std: f64,
     pub v0_std: f64,
+    /// Standard deviation of one offset added to every observation frame of a perturbed window
+    /// (normalized units; the same offset for each frame of the history, so frame differences
+    /// stay). For a student the targets come from the teacher at the perturbed input, so this
+    /// widens the inputs the teacher is imitated on (docs/experiments.md).
+    #[serde(default)]
+    pub obs_std: f64,
 }
 
 impl CondAugment {
@@ -102,10 +108,11 @@ impl CondAugment {
         prob: 0.0,
         y0_std: 0.0,
         v0_std: 0.0,
+        obs_std: 0.0,
     };
 
     pub fn is_active(&self) -> bool {
-        self.prob > 0.0 && (self.y0_std > 0.0 || self.v0_std > 0.0)
+        self.prob > 0.0 && (self.y0_std > 0.0 || self.v0_std > 0.0 || self.obs_std > 0.0)
     }
 }
 
@@ -161,6 +168,15 @@ pub fn sample_augmented(
                 .prev_rate
                 .push(windows.prev_rate[i * k + d] + dv as f32);
         }
+        if hit && augment.obs_std > 0.0 {
+            let offsets: Vec<f32> = (0..cfg.obs_dim)
+                .map(|_| (augment.obs_std * rng.normal()) as f32)
+                .collect();
+            let start = perturbed.obs.len() - obs_w;
+            for (j, v) in perturbed.obs[start..].iter_mut().enumerate() {
+                *v += offsets[j % cfg.obs_dim];
+            }
+        }
     }
     let all: Vec<usize> = (0..size).collect();
     gather(&perturbed, cfg, &all, device)
@@ -204,6 +220,7 @@ mod tests {
             prob: 1.0,
             y0_std: 0.1,
             v0_std: 2.0,
+            obs_std: 0.0,
         };
         let batch = sample_augmented(
             &windows,
@@ -243,5 +260,50 @@ mod tests {
             sample_augmented(&windows, &cfg, 2000, &half, &mut HostRng::new(3), &device).unwrap();
         let moved = rows(&batch.cond.y0).iter().filter(|y| **y != 0.0).count();
         assert!((800..1200).contains(&moved), "{moved} of 2000 perturbed");
+    }
+
+    #[test]
+    fn observation_offsets_are_shared_by_the_frames_of_a_window() {
+        let device = Device::Cpu;
+        let mut cfg = toy_config(HeadConfig::ProDmp {
+            num_basis: 4,
+            output: ProDmpOutput::Direct,
+            auto_scale_basis: false,
+        });
+        let mut windows = bimodal_windows(&cfg, 64, 1).unwrap();
+        // Two frames of two observations per window, all zero.
+        cfg.history = 2;
+        cfg.obs_dim = 2;
+        windows.history = 2;
+        windows.obs_dim = 2;
+        windows.obs = vec![0.0; 64 * 4];
+        let augment = CondAugment {
+            prob: 1.0,
+            obs_std: 0.3,
+            ..CondAugment::NONE
+        };
+        let batch = sample_augmented(
+            &windows,
+            &cfg,
+            2000,
+            &augment,
+            &mut HostRng::new(5),
+            &device,
+        )
+        .unwrap();
+        let obs: Vec<f32> = rows(&batch.cond.features)
+            .chunks_exact(cfg.history * cfg.obs_dim + 2)
+            .flat_map(|r| r[..4].to_vec())
+            .collect();
+        for w in obs.chunks_exact(4) {
+            assert_eq!(w[0], w[2], "frames share the offset");
+            assert_eq!(w[1], w[3]);
+        }
+        let spread = (obs.iter().map(|x| f64::from(x * x)).sum::<f64>() / obs.len() as f64).sqrt();
+        assert!((spread - 0.3).abs() < 0.02, "offset spread {spread}");
+        assert_eq!(
+            rows(&batch.cond.y0).iter().filter(|y| **y != 0.0).count(),
+            0
+        );
     }
 }

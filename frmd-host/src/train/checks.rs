@@ -1,6 +1,6 @@
 //! Checks of a training run before any work: every option of the run configs against
 //! [`crate::limits`], a student's model options against its teacher, the data against the task
-//! it names, and the output directory (see `frmd_export::artifact`).
+//! it names, and the output directory (see `frmd_formats::artifact`).
 use super::batch::CondAugment;
 use super::recipe::{DpRun, ProbeConfig, StudentRun, StudentShape, TeacherRun, TrainConfig};
 use crate::data::Dataset;
@@ -71,14 +71,15 @@ impl TrainConfig {
                 input.display()
             );
         }
-        frmd_export::artifact::check_output_dir(&self.out, "--out", self.force, &inputs)
+        frmd_formats::artifact::check_output_dir(&self.out, "--out", self.force, &inputs)
     }
 }
 
 fn validate_augment(a: &CondAugment) -> Result<(), OptionError> {
     probability("aug-prob", a.prob)?;
     non_negative("aug-y0-std", a.y0_std)?;
-    non_negative("aug-v0-std", a.v0_std)
+    non_negative("aug-v0-std", a.v0_std)?;
+    non_negative("aug-obs-std", a.obs_std)
 }
 
 impl TeacherRun {

@@ -21,7 +21,7 @@ pub fn plot_learning_curve(
     loss: &[(usize, f64)],
     success: &[(usize, f64)],
 ) -> anyhow::Result<()> {
-    frmd_export::artifact::write_atomic_with(out, |tmp| draw_curve(tmp, task, role, loss, success))
+    frmd_formats::artifact::write_atomic_with(out, |tmp| draw_curve(tmp, task, role, loss, success))
 }
 
 fn draw_curve(
@@ -34,9 +34,8 @@ fn draw_curve(
     register_font()?;
     let root = BitMapBackend::new(out, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(plot_err)?;
-    let role_name = format!("{role:?}").to_lowercase();
     let root = root
-        .titled(&format!("{task}: {role_name} training"), (FONT, 22))
+        .titled(&format!("{task}: {role} training"), (FONT, 22))
         .map_err(plot_err)?;
     let (top, bottom) = root.split_vertically(330);
     let max_step = loss

@@ -1,20 +1,20 @@
-//! Training: the EDM teacher, consistency distillation of the student (the paper's Algorithm 1)
-//! and the DP baseline, sharing one loop shape (seeded batches, scheduled AdamW, a progress
+//! Training: the EDM teacher, consistency distillation of the student (Algorithm 1 plus the ODE
+//! map) and the DP baseline, sharing one loop shape (seeded batches, scheduled AdamW, a progress
 //! callback every `log_every` steps); [`recipe`] holds the settings of a run (their `Default` is
 //! the recipe) and [`run`] turns a demonstration file into a checkpoint directory.
 pub mod batch;
-pub mod checks;
-pub mod curve;
+pub(crate) mod checks;
+pub(crate) mod curve;
 pub mod distill;
 #[cfg(test)]
 mod distill_tests;
 pub mod dp;
 #[cfg(test)]
 mod dp_checkpoint_tests;
-pub mod holdout;
+pub(crate) mod holdout;
 mod monitor;
 pub mod optim;
-pub mod padding;
+pub(crate) mod padding;
 pub mod recipe;
 pub mod run;
 pub mod teacher;

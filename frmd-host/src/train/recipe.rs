@@ -162,7 +162,7 @@ pub struct TeacherRun {
     /// Output parametrization of the ProDMP head.
     pub output: ProDmpOutput,
     /// Scale every ProDMP basis column to a largest value of 1 (mp_pytorch's `auto_scale_basis`;
-    /// `frmd_export::checkpoint::HeadConfig::ProDmp`).
+    /// `frmd_formats::checkpoint::HeadConfig::ProDmp`).
     pub auto_scale_basis: bool,
     /// ODE solver of the evaluation during training (`None`: the teacher sampler's default).
     pub eval_solver: Option<Solver>,

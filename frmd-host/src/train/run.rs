@@ -1,5 +1,5 @@
 //! A training run from a demonstration file to a checkpoint directory (what `frmd train` does):
-//! load and window the data, build the model of the recipe, train while the [`Monitor`] shows
+//! load and window the data, build the model of the recipe, train while the `Monitor` shows
 //! progress and evaluates, then write the checkpoint (`model.safetensors` + `frmd.json` with the
 //! training summary), the calibration rows beside a student (`calibration.safetensors`, so that
 //! exporting needs only the checkpoint directory) and `learning_curve.png`.
@@ -19,7 +19,7 @@ use crate::data::{Dataset, Normalization, WindowSet};
 use crate::diffusion::ddpm::DP_TRAIN_STEPS;
 use crate::diffusion::samplers::Solver;
 use crate::models::{HeadConfig, ModelConfig, OwnedNetwork};
-use crate::policy::float::{role_name, Sampler, DP_TRAINING_KEY};
+use crate::policy::float::{Sampler, DP_TRAINING_KEY};
 use anyhow::Context;
 use frmd_core::sigma::SigmaConfig;
 use serde_json::json;
@@ -123,7 +123,7 @@ fn finish(
         let set = prepared
             .windows
             .calibration_rows(CALIBRATION_ROWS, cfg.seed);
-        frmd_export::calibration_file::write(&cfg.out.join(CALIBRATION_FILE), &set)?;
+        frmd_formats::calibration::write(&cfg.out.join(CALIBRATION_FILE), &set)?;
     }
     let evaluated = mon.evaluate(report.steps, net);
     mon.finish();
@@ -245,7 +245,7 @@ pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
         anyhow::bail!(
             "--teacher {}: this is a {} checkpoint, not a teacher",
             run.teacher.display(),
-            role_name(tmeta.role)
+            tmeta.role
         );
     }
     let tcfg = teacher.net.config().clone();

@@ -161,7 +161,7 @@ pub fn scratch(name: &str) -> PathBuf {
 }
 
 /// FNV-1a of every file under `dir` by relative path (what "no file changed" compares). The
-/// write probes of `frmd_export::artifact` (created and removed at once by an `frmd` that another
+/// write probes of `frmd_formats::artifact` (created and removed at once by an `frmd` that another
 /// test runs in the same fixture directory at the same time) are not files of the tree.
 pub fn hash_tree(dir: &Path) -> BTreeMap<PathBuf, u64> {
     let mut out = BTreeMap::new();

@@ -1,4 +1,4 @@
-//! A deterministic random [`QuantizedPolicy`] with valid parameters (not a trained model: the
+//! A deterministic random [`QuantizedMlp`] with valid parameters (not a trained model: the
 //! export tests check that both output forms carry it exactly, the host tests that any shape
 //! runs).
 
@@ -8,7 +8,8 @@ use frmd_core::prodmp::ProDmpConfig;
 use frmd_core::quant::{quantize_multiplier, QuantParams};
 use frmd_core::rng::Rng;
 use frmd_core::sigma::SigmaConfig;
-use frmd_export::{ProDmpTablesOwned, QuantizedLayer, QuantizedOutput, QuantizedPolicy};
+use frmd_export::fold::ProDmpTablesOwned;
+use frmd_export::mlp::{QuantizedLayer, QuantizedMlp, QuantizedOutput};
 
 pub const M: usize = 2;
 pub const O: usize = 4;
@@ -58,7 +59,7 @@ pub struct Dims {
 }
 
 /// Two hidden layers (SiLU LUT on the first, none on the second), `steps` sampling steps.
-pub fn sample_policy(seed: u64, steps: usize) -> QuantizedPolicy {
+pub fn sample_policy(seed: u64, steps: usize) -> QuantizedMlp {
     let dims = Dims {
         m: M,
         o: O,
@@ -76,7 +77,7 @@ pub fn sample_policy(seed: u64, steps: usize) -> QuantizedPolicy {
 }
 
 /// A random policy of the given sizes (observations in [-1, 1], actions in [-0.5, 0.5]).
-pub fn random_policy(seed: u64, steps: usize, dims: &Dims) -> QuantizedPolicy {
+pub fn random_policy(seed: u64, steps: usize, dims: &Dims) -> QuantizedMlp {
     let Dims { m, o, k, n, p, .. } = *dims;
     let mut rng = Rng::new(seed);
     let layout = InputLayout::standard(DT);
@@ -109,7 +110,7 @@ pub fn random_policy(seed: u64, steps: usize, dims: &Dims) -> QuantizedPolicy {
     let sigmas = [80.0, 1.5, 0.4, 0.1];
     let cfg = ProDmpConfig::policy(k, p - 1, n, f64::from(DT));
     let prodmp = ProDmpTablesOwned::from_config(&cfg, n).unwrap();
-    QuantizedPolicy {
+    QuantizedMlp {
         history: m,
         obs_dim: o,
         action_dim: k,

@@ -3,10 +3,10 @@
 //! calibration.safetensors), and the export `frmd export` does.
 use frmd_core::blob::BlobError;
 use frmd_core::policy::PolicyDims;
+use frmd_export::bake::BLOB_FILE;
 use frmd_host::data::collect::collect_demos;
 use frmd_host::diffusion::samplers::Solver;
 use frmd_host::equiv::{run as equiv, EquivConfig, EquivReport};
-use frmd_host::export::BAKED_BLOB_FILE;
 use frmd_host::export::{export_student, write_export, ExportConfig};
 use frmd_host::models::ProDmpOutput;
 use frmd_host::train::distill::DistillConfig;
@@ -91,9 +91,9 @@ impl TinyRun {
     /// What `frmd export --ckpt CKPT --out BAKED --blob DIR/student.blob` does (one step,
     /// min-max calibration, the default 16-bit input): exports `ckpt` into `baked` and
     /// `dir/student.blob`.
-    pub fn export(&self, ckpt: &Path) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    pub fn export(&self, ckpt: &Path) -> anyhow::Result<()> {
         let cfg = ExportConfig::for_checkpoint(ckpt);
-        let student = export_student(&cfg)?;
+        let student = export_student(&cfg, false)?;
         write_export(
             &cfg,
             &student,
@@ -107,7 +107,7 @@ impl TinyRun {
     /// equals the baked one, which is returned.
     pub fn export_student(&self) -> Vec<u8> {
         self.export(&self.student).unwrap();
-        let blob = std::fs::read(self.baked.join(BAKED_BLOB_FILE)).unwrap();
+        let blob = std::fs::read(self.baked.join(BLOB_FILE)).unwrap();
         assert_eq!(std::fs::read(self.dir.join("student.blob")).unwrap(), blob);
         blob
     }

@@ -36,7 +36,7 @@ const fn max(a: usize, b: usize) -> usize {
 
 #[entry]
 fn main() -> ! {
-    let policy = match baked::policy() {
+    let policy = match baked::policy(&mut baked::Storage::new()) {
         Ok(policy) => policy,
         Err(error) => exit_failure(&error),
     };

@@ -2,10 +2,11 @@
 
 use heapless::Vec;
 
+use super::MlpSection;
 use super::{
     HiddenLayerDesc, MlpDescriptor, INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MLP_MAGIC,
 };
-use crate::blob::container::{self, Data, SectionId};
+use crate::blob::container::{self, Data};
 use crate::blob::policy_tables::{self, PolicyTables};
 use crate::blob::BlobError;
 use crate::kernels::{FcRequant, FullyConnected, LutTable};
@@ -20,18 +21,42 @@ use crate::quant::{QuantParams, SHIFT_MAX, SHIFT_MIN};
 /// A validated MLP blob, borrowed: weights, biases, requantization parameters, tables, scales,
 /// normalization and decoder tables stay in the blob (`'a`); the steps are copied. Its
 /// [`Self::config`] and [`Self::network`] borrow only the blob, so the policy built from them may
-/// outlive the `LoadedMlp`:
+/// outlive the `LoadedMlp`.
 ///
-/// ```text
-/// let loaded = LoadedMlp::load(BLOB)?;           // BLOB: 4-aligned &'static [u8]
-/// loaded.check_dims(&EXPECTED)?;                 // the sizes the firmware was built for
-/// let mut policy = loaded.policy::<2, 10, 3, 12, 21, 64, 256>()?;  // capacities, scratch width
-/// policy.reset(&current_position)?;
-/// loop {
-///     policy.observe(&read_sensors())?;
-///     if need_new_chunk { policy.act(Noise::Rng(&mut rng))?; }
-///     if let Some(action) = policy.next_action() { command(action); }
+/// A firmware keeps the blob in flash, 16-aligned, checks it once at boot and runs the policy
+/// over it (here: a small sample policy, 2 x 3 observations, 2 DoF, horizon 6):
+///
+/// ```
+/// use frmd_core::blob::{BlobError, LoadedMlp};
+/// use frmd_core::policy::{AlignedBytes, Noise, PolicyDims};
+/// use frmd_core::rng::Rng;
+///
+/// macro_rules! sample {
+///     () => {
+///         include_bytes!(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/sample_policy.blob"))
+///     };
 /// }
+/// static BLOB: AlignedBytes<{ sample!().len() }> = AlignedBytes(*sample!());
+///
+/// // Magic, version, CRC-32, descriptor, every section's bounds, alignment, length and values.
+/// let loaded = LoadedMlp::load(&BLOB.0)?;
+/// // The sizes this firmware was built for.
+/// let expected = PolicyDims { history: 2, obs_dim: 3, action_dim: 2, horizon: 6, params_per_dof: 4 };
+/// loaded.check_dims(&expected)?;
+/// // Capacities M, O, K, N, P, the model input I and the scratch width of the widest layer.
+/// let mut policy = loaded.policy::<2, 3, 2, 6, 4, 32, 40>()?;
+/// policy.reset(&[0.0, 0.1])?; // the robot's current position
+/// policy.observe(&[0.2, -0.1, 0.4])?; // every control tick
+/// policy.act(Noise::Rng(&mut Rng::new(7)))?; // when a new chunk is needed
+/// while let Some(action) = policy.next_action() {
+///     assert!(action.iter().all(|a| a.is_finite())); // command it
+/// }
+///
+/// // A damaged blob is refused with a named error, never a panic.
+/// let mut damaged = BLOB.0;
+/// damaged[40] ^= 1;
+/// assert!(matches!(LoadedMlp::load(&damaged), Err(BlobError::CrcMismatch { .. })));
+/// # Ok::<(), Box<dyn core::error::Error>>(())
 /// ```
 #[derive(Clone, Debug)]
 pub struct LoadedMlp<'a> {
@@ -79,10 +104,10 @@ impl<'a> LoadedMlp<'a> {
             .layout
             .width_of(&tables.dims)
             .ok_or(BlobError::InputLayout)?;
-        let lut_bytes = data.cast::<i8>(d.luts, SectionId::Luts)?;
+        let lut_bytes = data.cast::<i8>(d.luts, MlpSection::Luts.into())?;
         if !lut_bytes.len().is_multiple_of(LUT_LEN) || lut_bytes.len() / LUT_LEN > MAX_HIDDEN_LAYERS
         {
-            return Err(BlobError::SectionLength(SectionId::Luts));
+            return Err(BlobError::SectionLength(MlpSection::Luts.into()));
         }
         let luts = lut_bytes.chunks_exact(LUT_LEN);
         let mut hidden = Vec::new();
@@ -96,12 +121,15 @@ impl<'a> LoadedMlp<'a> {
         let first_width = hidden
             .first()
             .map_or(output.fc.out_features, |layer| layer.fc.out_features);
-        let noise_variants = data.cast::<i32>(d.first_layer_biases, SectionId::FirstLayerBiases)?;
+        let noise_variants =
+            data.cast::<i32>(d.first_layer_biases, MlpSection::FirstLayerBiases.into())?;
         let variants = noise_variants
             .len()
             .checked_div(first_width)
             .filter(|_| noise_variants.len().is_multiple_of(first_width))
-            .ok_or(BlobError::SectionLength(SectionId::FirstLayerBiases))?;
+            .ok_or(BlobError::SectionLength(
+                MlpSection::FirstLayerBiases.into(),
+            ))?;
         policy_tables::check_variants(&tables.steps, variants)?;
         Ok(Self {
             tables,
@@ -226,15 +254,23 @@ fn read_hidden<'a, 'l>(
     let weights = data.exact::<i8>(
         desc.weights,
         outputs.checked_mul(inputs),
-        SectionId::HiddenWeights(layer),
+        MlpSection::HiddenWeights(layer).into(),
     )?;
-    let bias = data.exact::<i32>(desc.bias, Some(outputs), SectionId::HiddenBias(layer))?;
+    let bias = data.exact::<i32>(
+        desc.bias,
+        Some(outputs),
+        MlpSection::HiddenBias(layer).into(),
+    )?;
     let multipliers = data.exact::<i32>(
         desc.multipliers,
         Some(outputs),
-        SectionId::HiddenMultipliers(layer),
+        MlpSection::HiddenMultipliers(layer).into(),
     )?;
-    let shifts = data.exact::<i32>(desc.shifts, Some(outputs), SectionId::HiddenShifts(layer))?;
+    let shifts = data.exact::<i32>(
+        desc.shifts,
+        Some(outputs),
+        MlpSection::HiddenShifts(layer).into(),
+    )?;
     if multipliers.iter().any(|m| *m < 0) {
         return Err(BlobError::NegativeMultiplier { layer });
     }
@@ -289,10 +325,10 @@ fn read_output<'a>(
     let weights = data.exact::<i8>(
         out.weights,
         outputs.checked_mul(inputs),
-        SectionId::OutputWeights,
+        MlpSection::OutputWeights.into(),
     )?;
-    let bias = data.exact::<i32>(out.bias, Some(outputs), SectionId::OutputBias)?;
-    let output_scales = data.finite(out.scales, Some(outputs), SectionId::OutputScales)?;
+    let bias = data.exact::<i32>(out.bias, Some(outputs), MlpSection::OutputBias.into())?;
+    let output_scales = data.finite(out.scales, Some(outputs), MlpSection::OutputScales.into())?;
     Ok(Int8Linear {
         fc: FullyConnected::new(inputs, outputs, weights, bias),
         output_scales,

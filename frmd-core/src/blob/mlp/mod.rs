@@ -1,7 +1,7 @@
 //! MLP blobs (magic [`MLP_MAGIC`], `b"FRMD"`): the [`MlpDescriptor`], its emit side
 //! ([`encode_mlp`] from borrowed [`MlpBlobParts`]) and its parse side ([`LoadedMlp`]).
 //!
-//! Data area, in order: the policy sections ([`super::policy_tables`]), the first-layer bias
+//! Data area, in order: the policy sections (`blob::policy_tables`), the first-layer bias
 //! variants (i32), the activation tables (i8, [`LUT_LEN`] each, one per hidden layer that has one,
 //! in layer order), then per hidden layer weights (i8 `[out, in]`), bias, multipliers and shifts
 //! (i32 `[out]`), then the output layer's weights, bias and dequantization scales (f32). The data
@@ -10,9 +10,9 @@
 use heapless::Vec;
 use serde::{Deserialize, Serialize};
 
-use super::container::{self, Section, SectionId, SectionWriter};
+use super::container::{self, Section, SectionWriter};
 use super::policy_tables::{self, PolicyHeader, PolicySections};
-use super::BlobError;
+use super::{BlobError, SectionId};
 use crate::model::mlp::{InputPrecision, Int8Mlp};
 use crate::policy::{PolicyConfig, MAX_HIDDEN_LAYERS};
 
@@ -26,6 +26,31 @@ pub const INPUT_TWO_PLANE: u8 = 1;
 pub const INPUT_INT16: u8 = 2;
 /// Bytes per table in the activation-table section (outputs for input codes -128..=127).
 pub const LUT_LEN: usize = 256;
+
+/// The sections of an MLP blob besides the policy sections (for
+/// [`SectionId::Mlp`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MlpSection {
+    /// First-layer bias variants.
+    FirstLayerBiases,
+    /// Activation tables.
+    Luts,
+    /// Hidden layer `n` weights.
+    HiddenWeights(u8),
+    /// Hidden layer `n` bias.
+    HiddenBias(u8),
+    /// Hidden layer `n` multipliers.
+    HiddenMultipliers(u8),
+    /// Hidden layer `n` shifts.
+    HiddenShifts(u8),
+    /// Output layer weights.
+    OutputWeights,
+    /// Output layer bias.
+    OutputBias,
+    /// Output layer dequantization scales.
+    OutputScales,
+}
 
 /// One hidden layer: int8 FC, per-channel requantization, optional activation table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -142,14 +167,22 @@ fn emit(
         let (fc, requant) = (&layer.fc, &layer.requant);
         let out = fc.out_features;
         let weight_count = out.checked_mul(fc.in_features);
-        expect_len(fc.weights.len(), weight_count, SectionId::HiddenWeights(id))?;
-        expect_len(fc.bias.len(), Some(out), SectionId::HiddenBias(id))?;
+        expect_len(
+            fc.weights.len(),
+            weight_count,
+            MlpSection::HiddenWeights(id).into(),
+        )?;
+        expect_len(fc.bias.len(), Some(out), MlpSection::HiddenBias(id).into())?;
         expect_len(
             requant.multipliers.len(),
             Some(out),
-            SectionId::HiddenMultipliers(id),
+            MlpSection::HiddenMultipliers(id).into(),
         )?;
-        expect_len(requant.shifts.len(), Some(out), SectionId::HiddenShifts(id))?;
+        expect_len(
+            requant.shifts.len(),
+            Some(out),
+            MlpSection::HiddenShifts(id).into(),
+        )?;
         let lut = layer.activation.map(|_| {
             next_lut += 1;
             next_lut - 1
@@ -173,10 +206,10 @@ fn emit(
     expect_len(
         fc.weights.len(),
         out.checked_mul(fc.in_features),
-        SectionId::OutputWeights,
+        MlpSection::OutputWeights.into(),
     )?;
-    expect_len(fc.bias.len(), Some(out), SectionId::OutputBias)?;
-    expect_len(scales.len(), Some(out), SectionId::OutputScales)?;
+    expect_len(fc.bias.len(), Some(out), MlpSection::OutputBias.into())?;
+    expect_len(scales.len(), Some(out), MlpSection::OutputScales.into())?;
     let output = OutputLayerDesc {
         in_features: small(fc.in_features)?,
         out_features: small(out)?,

@@ -3,13 +3,13 @@
 use heapless::Vec;
 
 use super::{
-    BlockDesc, LinearDesc, NormDesc, TensorField, TransformerDescriptor, MAX_BLOCKS,
-    TRANSFORMER_MAGIC,
+    BlockDesc, LinearDesc, NormDesc, TensorField, TransformerDescriptor, TransformerSection,
+    MAX_BLOCKS, TRANSFORMER_MAGIC,
 };
-use crate::blob::container::{self, Data, SectionId};
+use crate::blob::container::{self, Data};
 use crate::blob::mlp::LUT_LEN;
 use crate::blob::policy_tables::{self, PolicyTables};
-use crate::blob::BlobError;
+use crate::blob::{BlobError, SectionId};
 use crate::kernels::{FcRequant, FullyConnected};
 use crate::model::linear::{Int8Linear, QuantizedLinear, RequantizedLinear};
 use crate::model::transformer::{
@@ -46,7 +46,7 @@ pub struct LoadedTransformer<'a> {
 }
 
 fn field(part: Part, field: TensorField) -> SectionId {
-    SectionId::Transformer { part, field }
+    TransformerSection { part, field }.into()
 }
 
 fn read_norm<'a>(

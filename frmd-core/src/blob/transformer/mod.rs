@@ -3,7 +3,7 @@
 //! [`TransformerBlobParts`]) and its parse side ([`LoadedTransformer`]). An MLP loader rejects a
 //! transformer blob (and vice versa) with [`BlobError::BadMagic`].
 //!
-//! Data area, in order: the policy sections ([`super::policy_tables`]), the noise tokens (f32
+//! Data area, in order: the policy sections (`blob::policy_tables`), the noise tokens (f32
 //! `[variants][W]`; a step's `noise_variant` selects its token), the positions, `traj_in`,
 //! `cond_in`, per block `norm1`, `qkv`, `proj`, `norm2`, `fc1` (with its multipliers, shifts and
 //! GELU table), `fc2`, then `final_norm` and `head`. Element types: norms, positions, tokens,
@@ -27,8 +27,20 @@ pub const TRANSFORMER_MAGIC: [u8; 4] = *b"FRMT";
 /// Most blocks a transformer blob can hold.
 pub const MAX_BLOCKS: usize = 8;
 
-/// Which array of a transformer part a section holds (for [`SectionId::Transformer`]).
+/// A section of a transformer blob: which part, which array (for
+/// [`SectionId::Transformer`](super::SectionId::Transformer)).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TransformerSection {
+    /// The model part.
+    pub part: crate::model::transformer::Part,
+    /// The array of that part.
+    pub field: TensorField,
+}
+
+/// Which array of a transformer part a section holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum TensorField {
     /// i8 weights.
     Weights,

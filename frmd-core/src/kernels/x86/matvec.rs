@@ -21,8 +21,8 @@
 //! accumulator, see `x86::wide`).
 #![allow(unsafe_code)]
 
-use super::requant::{pack_i8, requantize_lanes, RequantBlock};
-use super::Avx2;
+use super::requant::{load_i32, pack_i8, requantize_lanes, RequantBlock};
+use super::{Avx2, BLOCK_ROWS};
 use crate::kernels::dot::{dot_i8_i16_prefix, dot_i8_prefix};
 use crate::kernels::LayerInput;
 use core::arch::x86_64::{
@@ -33,9 +33,6 @@ use core::arch::x86_64::{
     _mm_madd_epi16,
 };
 use core::ops::Range;
-
-/// Output channels (weight rows) per call.
-pub(crate) const BLOCK_ROWS: usize = 8;
 
 /// Columns per `vpmaddwd` step.
 const COLUMNS: usize = 16;
@@ -391,15 +388,6 @@ fn load_halves_half(block: &[i16; HALF]) -> __m128i {
     // SAFETY: the pointer comes from a `&[i16; 8]`: 16 initialized, readable bytes; `loadu` has
     // no alignment requirement.
     unsafe { _mm_loadu_si128(block.as_ptr().cast::<__m128i>()) }
-}
-
-/// Loads eight int32 lanes.
-#[inline]
-#[target_feature(enable = "avx2")]
-pub(super) fn load_i32(values: &[i32; BLOCK_ROWS]) -> __m256i {
-    // SAFETY: the pointer comes from a `&[i32; 8]`: 32 initialized, readable bytes; `loadu` has no
-    // alignment requirement.
-    unsafe { _mm256_loadu_si256(values.as_ptr().cast::<__m256i>()) }
 }
 
 /// Column sums `[dot(rows[r][start..], input[start..]) for r in 0..8]` of an int8 input (AVX2

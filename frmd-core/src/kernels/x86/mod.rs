@@ -2,10 +2,10 @@
 //! (`kernels::rows::for_each_block`, SSE2 through LLVM, and `quant::requantize_to_i8`) are the
 //! fallback and the definition: the tests compare both on random and extreme inputs.
 //!
-//! - [`matvec`]: eight rows of a fully connected layer at once (`vpmaddwd`, or `vpdpbusd` on
+//! - `matvec`: eight rows of a fully connected layer at once (`vpmaddwd`, or `vpdpbusd` on
 //!   CPUs with AVX-VNNI), with the bias added and, for hidden layers, requantized in registers;
-//! - [`requant`]: requantization of eight accumulators at once;
-//! - [`wide`]: the int16-activation layers (int64 accumulation from 512-column int32 chunk sums,
+//! - `requant`: requantization of eight accumulators at once;
+//! - `wide`: the int16-activation layers (int64 accumulation from 512-column int32 chunk sums,
 //!   requantization to int16 and the interpolated table in registers).
 //!
 //! Detection is `no_std`: `CPUID` leaf 1 (AVX and OSXSAVE bits), `XGETBV` (the OS saves the SSE
@@ -18,11 +18,11 @@
 //! `kernels::dsp_asm`). There are four kinds of `unsafe` expression:
 //! - `_xgetbv(0)` here: requires the `XGETBV` instruction, which exists when `CPUID.1:ECX.OSXSAVE`
 //!   (bit 27) is set; it is called only after checking that bit.
-//! - calls of `#[target_feature(enable = "avx2")]` functions from the methods of the [`Avx2`]
+//! - calls of `#[target_feature(enable = "avx2")]` functions from the methods of the `Avx2`
 //!   token: sound when the CPU supports AVX2 and the OS enabled the AVX state. A token is made
-//!   only by [`Avx2::get`] after [`avx2_active`] returned true, and that state only becomes
-//!   "active" through [`detect_avx2`]. The `avx2,avxvnni` functions are called only when the
-//!   token's `vnni` flag is set, which [`avx_vnni_active`] sets only after [`detect_avx_vnni`].
+//!   only by `Avx2::get` after [`avx2_active`] returned true, and that state only becomes
+//!   "active" through `detect_avx2`. The `avx2,avxvnni` functions are called only when the
+//!   token's `vnni` flag is set, which [`avx_vnni_active`] sets only after `detect_avx_vnni`.
 //!   (Disabling a path later leaves existing tokens valid: the CPU still has the instructions.)
 //! - unaligned loads and stores (`_mm_loadu_si128`, `_mm256_loadu_si256`, `_mm256_storeu_si256`,
 //!   `_mm_storeu_si128`) through pointers made from references to fixed-size arrays of exactly
@@ -40,7 +40,8 @@ mod matvec;
 mod requant;
 mod wide;
 
-pub(crate) use matvec::BLOCK_ROWS;
+/// Output channels (weight rows) per call of the row kernels, and lanes of a requantized block.
+pub(crate) const BLOCK_ROWS: usize = 8;
 pub(crate) use requant::RequantBlock;
 
 use core::arch::x86_64::{__cpuid, __cpuid_count, _xgetbv};
@@ -55,7 +56,7 @@ const INACTIVE: u8 = 2;
 
 static AVX2_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
 
-/// Proof that the AVX2 kernels may run: [`Avx2::get`] hands one out only while [`avx2_active`]
+/// Proof that the AVX2 kernels may run: `Avx2::get` hands one out only while [`avx2_active`]
 /// is true. The kernels are methods of this token (`matvec`, `requant`). `vnni` records whether
 /// the AVX-VNNI variant of the matrix-vector kernel may run too ([`avx_vnni_active`]).
 #[derive(Clone, Copy, Debug)]
@@ -163,7 +164,7 @@ fn detect_avx2() -> bool {
 }
 
 /// `CPUID.(7,1):EAX.AVX-VNNI` (bit 4); the register state is the AVX one, checked by
-/// [`detect_avx2`], which every caller requires as well.
+/// `detect_avx2`, which every caller requires as well.
 fn detect_avx_vnni() -> bool {
     const AVX_VNNI: u32 = 1 << 4;
     if __cpuid(0).eax < 7 || __cpuid_count(7, 0).eax < 1 {

@@ -21,17 +21,26 @@
 //! `SHIFT_MIN..=SHIFT_MAX` (so `left <= 30`, `right <= 31`), zero point in `[-128, 127]`.
 #![allow(unsafe_code)]
 
-use super::matvec::{load_i32, BLOCK_ROWS};
 #[cfg(test)]
 use super::Avx2;
+use super::BLOCK_ROWS;
 use core::arch::x86_64::{
     __m256i, _mm256_add_epi32, _mm256_add_epi64, _mm256_and_si256, _mm256_blend_epi32,
     _mm256_blendv_epi8, _mm256_castsi256_si128, _mm256_cmpeq_epi32, _mm256_cmpgt_epi32,
-    _mm256_extracti128_si256, _mm256_max_epi32, _mm256_min_epi32, _mm256_mul_epi32,
-    _mm256_packs_epi16, _mm256_packs_epi32, _mm256_set1_epi32, _mm256_set1_epi64x,
-    _mm256_setzero_si256, _mm256_slli_epi64, _mm256_sllv_epi32, _mm256_srai_epi32,
-    _mm256_srav_epi32, _mm256_srli_epi64, _mm256_sub_epi32, _mm_cvtsi128_si32,
+    _mm256_extracti128_si256, _mm256_loadu_si256, _mm256_max_epi32, _mm256_min_epi32,
+    _mm256_mul_epi32, _mm256_packs_epi16, _mm256_packs_epi32, _mm256_set1_epi32,
+    _mm256_set1_epi64x, _mm256_setzero_si256, _mm256_slli_epi64, _mm256_sllv_epi32,
+    _mm256_srai_epi32, _mm256_srav_epi32, _mm256_srli_epi64, _mm256_sub_epi32, _mm_cvtsi128_si32,
 };
+
+/// Loads eight int32 lanes.
+#[inline]
+#[target_feature(enable = "avx2")]
+pub(super) fn load_i32(values: &[i32; BLOCK_ROWS]) -> __m256i {
+    // SAFETY: the pointer comes from a `&[i32; 8]`: 32 initialized, readable bytes; `loadu` has no
+    // alignment requirement.
+    unsafe { _mm256_loadu_si256(values.as_ptr().cast::<__m256i>()) }
+}
 
 /// Requantization parameters of eight output channels (as in `kernels::FcRequant`, which
 /// validates them: shifts in `SHIFT_MIN..=SHIFT_MAX`, zero point in `[-128, 127]`).

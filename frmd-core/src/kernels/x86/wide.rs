@@ -19,8 +19,10 @@
 //!    `t[i] (128 - f) + t[i+1] f`, then `+ 64` and `>> 7`: `lut16::lookup` exactly.
 #![allow(unsafe_code)]
 
-use super::matvec::{load_i32, row_sums_i16, row_sums_i8, split_rows, BLOCK_ROWS};
+use super::matvec::{row_sums_i16, row_sums_i8, split_rows};
+use super::requant::load_i32;
 use super::Avx2;
+use super::BLOCK_ROWS;
 use crate::kernels::lut16::{self, Lut16Table};
 use crate::kernels::rows::for_each_accumulator;
 use crate::kernels::{FcRequant, FullyConnected, LayerInput};

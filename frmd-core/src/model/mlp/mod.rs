@@ -42,6 +42,7 @@ use crate::quant::{quantize_i16, quantize_two_plane, QuantParams};
 
 /// Why a forward pass refused its arguments.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ModelError {
     /// A kernel refused a layer's arguments (names the slice).
     Kernel(KernelError),
@@ -72,7 +73,7 @@ impl From<KernelError> for ModelError {
 impl core::fmt::Display for ModelError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::Kernel(e) => write!(f, "kernel error: {e}"),
+            Self::Kernel(_) => f.write_str("a kernel refused a layer"),
             Self::LayerWidth { index } => {
                 write!(
                     f,
@@ -90,8 +91,18 @@ impl core::fmt::Display for ModelError {
     }
 }
 
+impl core::error::Error for ModelError {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        match self {
+            Self::Kernel(error) => Some(error),
+            _ => None,
+        }
+    }
+}
+
 /// How the f32 input vector is quantized for the first layer.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum InputPrecision {
     /// One int8 code per value ([`QuantParams::quantize`]), as TFLite.
     #[default]

@@ -6,6 +6,7 @@ use crate::kernels::KernelError;
 
 /// A named tensor group of the backbone (used in errors). `layer` is the 0-based block index.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Part {
     /// The per-step trajectory input layer (`k -> W`).
     TrajIn,
@@ -55,6 +56,7 @@ pub enum Part {
 
 /// Which scratch buffer is too small.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ScratchBuffer {
     /// The f32 buffer.
     Floats,
@@ -66,6 +68,7 @@ pub enum ScratchBuffer {
 
 /// Why a transformer forward pass refused its arguments. Small and `Copy`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum TransformerError {
     /// A [`TransformerShape`] size is zero.
     ZeroSize,
@@ -131,7 +134,7 @@ impl core::fmt::Display for TransformerError {
             Self::HeadsDoNotDivideWidth => f.write_str("width is not a multiple of heads"),
             Self::SizeOverflow => f.write_str("a transformer size overflows usize"),
             Self::LayerCount => f.write_str("number of blocks differs from shape.layers"),
-            Self::Weights { part, error } => write!(f, "{part:?}: {error}"),
+            Self::Weights { part, .. } => write!(f, "{part:?}: its arrays do not fit its sizes"),
             Self::Features { part } => write!(f, "{part:?}: sizes do not match the shape"),
             Self::InputParams { part } => write!(f, "{part:?}: invalid quantization parameters"),
             Self::Activation { part } => write!(f, "{part:?}: linear layer must be Identity"),
@@ -143,7 +146,16 @@ impl core::fmt::Display for TransformerError {
             Self::ScratchTooSmall { buffer, needed } => {
                 write!(f, "{buffer:?} scratch too small: {needed} elements needed")
             }
-            Self::Kernel(e) => write!(f, "kernel error: {e}"),
+            Self::Kernel(_) => f.write_str("a kernel failed"),
+        }
+    }
+}
+
+impl core::error::Error for TransformerError {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        match self {
+            Self::Weights { error, .. } | Self::Kernel(error) => Some(error),
+            _ => None,
         }
     }
 }

@@ -29,6 +29,28 @@ pub trait Network {
     ) -> Result<(), PolicyError>;
 }
 
+/// A borrowed network drives the sampler too (e.g. `&mut dyn Network` on a host that picks the
+/// network at run time).
+impl<N: Network + ?Sized> Network for &mut N {
+    fn input_width(&self) -> usize {
+        (**self).input_width()
+    }
+    fn output_width(&self) -> usize {
+        (**self).output_width()
+    }
+    fn num_noise_variants(&self) -> usize {
+        (**self).num_noise_variants()
+    }
+    fn forward(
+        &mut self,
+        variant: usize,
+        input: &[f32],
+        output: &mut [f32],
+    ) -> Result<(), PolicyError> {
+        (**self).forward(variant, input, output)
+    }
+}
+
 /// The noise-level variants of a network: rows of `len` values back to back, or none (then the
 /// network's own values serve variant 0 and no other).
 #[derive(Clone, Copy, Debug, PartialEq)]

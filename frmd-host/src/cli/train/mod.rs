@@ -198,6 +198,10 @@ pub struct AugmentArgs {
     /// Standard deviation of the v0 perturbation, normalized action units per second.
     #[arg(long, default_value_t = CondAugment::default().v0_std)]
     pub aug_v0_std: f64,
+    /// Standard deviation of an offset added to the observations of a perturbed window
+    /// (normalized units, the same offset for every frame of the history).
+    #[arg(long, default_value_t = CondAugment::default().obs_std)]
+    pub aug_obs_std: f64,
 }
 
 impl From<AugmentArgs> for CondAugment {
@@ -206,6 +210,7 @@ impl From<AugmentArgs> for CondAugment {
             prob: a.aug_prob,
             y0_std: a.aug_y0_std,
             v0_std: a.aug_v0_std,
+            obs_std: a.aug_obs_std,
         }
     }
 }

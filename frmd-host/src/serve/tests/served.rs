@@ -1,8 +1,9 @@
 //! Real policies behind the server: a small student checkpoint (float) and its int8 export,
 //! served through `serve_stream` on in-memory pipes, with malformed input between valid calls.
 use super::*;
-use crate::export::{BAKED_BLOB_FILE, EXPORT_INFO_FILE};
+use crate::export::EXPORT_INFO_FILE;
 use crate::serve::{load, PolicySource, ServeConfig, Served};
+use frmd_export::bake::BLOB_FILE;
 use std::path::{Path, PathBuf};
 
 /// A random student at the reach shape (M 2, O 6, K 2, N 12) under `dir`, with its int8 blob
@@ -11,15 +12,14 @@ fn student_and_blob(dir: &Path) -> PathBuf {
     std::fs::create_dir_all(dir).unwrap();
     crate::bench::fixtures::reach_student(
         dir,
-        &frmd_export::checkpoint::BackboneConfig::preset("mlp").unwrap(),
+        &frmd_formats::checkpoint::BackboneConfig::preset("mlp").unwrap(),
         3,
     )
     .unwrap();
-    let exported = frmd_export::export::export_checkpoint(dir, Default::default(), None).unwrap();
-    let blob = frmd_export::blob::write(&exported.policy).unwrap();
+    let exported = frmd_export::export(dir, &Default::default(), None).unwrap();
     let baked = dir.join("baked");
     std::fs::create_dir_all(&baked).unwrap();
-    std::fs::write(baked.join(BAKED_BLOB_FILE), blob).unwrap();
+    std::fs::write(baked.join(BLOB_FILE), exported.blob()).unwrap();
     std::fs::write(
         baked.join(EXPORT_INFO_FILE),
         serde_json::json!({ "checkpoint": dir.display().to_string() }).to_string(),
@@ -152,7 +152,7 @@ fn a_student_checkpoint_and_its_int8_export_serve_and_survive_bad_input() {
     let mut int8 = load(&PolicySource::Baked(baked.clone()), &cfg).unwrap();
     check_session(&mut int8);
     // The bare blob finds the control period in the export.json beside it.
-    let blob = load(&PolicySource::Blob(baked.join(BAKED_BLOB_FILE)), &cfg).unwrap();
+    let blob = load(&PolicySource::Blob(baked.join(BLOB_FILE)), &cfg).unwrap();
     assert_eq!(blob.info.dt, 0.05);
     // float and int8 agree to quantization error on the same chunk.
     let (f, q) = (session_replies(&mut float), session_replies(&mut int8));

@@ -1,5 +1,6 @@
 //! Whole streams: end of input, early answers to oversized frames, fuzzing.
 use super::*;
+use crate::rng::HostRng;
 use std::io::{self, Read};
 
 #[test]
@@ -83,26 +84,12 @@ fn a_too_large_frame_is_answered_before_its_payload_arrives() {
     }
 }
 
-/// xorshift64*: a small deterministic generator for the fuzz loops.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-}
-
 /// Random byte streams, and valid sessions with random byte flips, insertions and cuts: the
 /// server always ends, every reply it writes is a valid frame, and it answers each complete
 /// frame it read.
 #[test]
 fn fuzz_the_server_with_arbitrary_and_mutated_streams() {
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut rng = HostRng::new(0x9e37_79b9_7f4a_7c15);
     for ft in [FloatType::F32, FloatType::F64] {
         let valid = requests(
             &[
@@ -127,7 +114,7 @@ fn fuzz_the_server_with_arbitrary_and_mutated_streams() {
             let input: Vec<u8> = if round % 3 == 0 {
                 // Random bytes, with small lengths and valid versions/types made likely.
                 let len = rng.below(200);
-                let mut bytes: Vec<u8> = (0..len).map(|_| rng.next() as u8).collect();
+                let mut bytes: Vec<u8> = (0..len).map(|_| rng.next_u64() as u8).collect();
                 let mut at = 0;
                 while at + 8 <= bytes.len() {
                     if rng.below(2) == 0 {
@@ -150,8 +137,8 @@ fn fuzz_the_server_with_arbitrary_and_mutated_streams() {
                     let at = rng.below(bytes.len());
                     match rng.below(4) {
                         0 => bytes[at] ^= 1 << rng.below(8),
-                        1 => bytes[at] = rng.next() as u8,
-                        2 => bytes.insert(at, rng.next() as u8),
+                        1 => bytes[at] = rng.next_u64() as u8,
+                        2 => bytes.insert(at, rng.next_u64() as u8),
                         _ => bytes.truncate(at),
                     }
                 }
@@ -180,11 +167,11 @@ fn fuzz_the_server_with_arbitrary_and_mutated_streams() {
 /// The decoders on random payloads of every type: errors, never panics.
 #[test]
 fn fuzz_the_decoders() {
-    let mut rng = Rng(77);
+    let mut rng = HostRng::new(77);
     let info = toy_info(FloatType::F32);
     for _ in 0..20_000 {
         let len = rng.below(64);
-        let payload: Vec<u8> = (0..len).map(|_| rng.next() as u8).collect();
+        let payload: Vec<u8> = (0..len).map(|_| rng.next_u64() as u8).collect();
         for t in [0x01, 0x02, 0x03, 0x04, 0x81, 0x82, 0x83, 0x84, 0xff] {
             let t = MsgType::from_u8(t).unwrap();
             let _ = decode_request(t, &payload, &info);

@@ -54,10 +54,16 @@ pub fn available(test: &str, root: &Path) -> bool {
 /// The firmware builds in its own target directory (run-qemu.sh's default), so manual runs and
 /// tests share one build; it is never the directory of the `cargo test` running the caller.
 pub fn run(root: &Path, board: &str, image: &str) -> String {
+    run_with_env(root, board, image, &[])
+}
+
+/// [`run`] with extra environment variables for the build (e.g. `FRMD_MINIMAL_CHECKPOINT`).
+pub fn run_with_env(root: &Path, board: &str, image: &str, env: &[(&str, &Path)]) -> String {
     let output = Command::new("bash")
         .arg(root.join("examples/cortex-m/run-qemu.sh"))
         .args([board, image])
         .env("CARGO_TARGET_DIR", root.join("examples/cortex-m/target"))
+        .envs(env.iter().copied())
         .output()
         .expect("run examples/cortex-m/run-qemu.sh");
     let stdout = String::from_utf8_lossy(&output.stdout).into_owned();

@@ -1,5 +1,6 @@
-//! A deterministic synthetic one-step policy as a `frmd_export::QuantizedPolicy` (used by
-//! `build.rs`, which bakes it with `frmd_export::bake::write_module` for the `transformer` images,
+//! A deterministic synthetic one-step policy as a `frmd_export::mlp::QuantizedMlp` (used by
+//! `build.rs`, which bakes it with `frmd_export::mlp::bake::write_module` for the `transformer`
+//! images,
 //! and by the host test `frmd-export/tests/cortex_m_transformer.rs`, which writes it as a blob and
 //! runs it with `frmd_core::blob::LoadedMlp`). Only its configuration (normalization, step
 //! constants, decoder, input layout) is used: the transformer replaces its MLP as the network.
@@ -17,7 +18,8 @@ use crate::shape::{
 use frmd_core::policy::{InputLayout, StepConstants};
 use frmd_core::prodmp::BakedProDmp;
 use frmd_core::sigma::SigmaConfig;
-use frmd_export::{ProDmpTablesOwned, QuantizedLayer, QuantizedOutput, QuantizedPolicy};
+use frmd_export::fold::ProDmpTablesOwned;
+use frmd_export::mlp::{QuantizedLayer, QuantizedMlp, QuantizedOutput};
 
 /// Seed of the weight stream.
 pub const POLICY_WEIGHT_SEED: u64 = 0x4652_4D44_504F_4C31;
@@ -48,7 +50,7 @@ fn hidden_layer(layer: &LayerData) -> QuantizedLayer {
 }
 
 /// Generates the policy (deterministic: the same bytes on every host).
-pub fn generate() -> QuantizedPolicy {
+pub fn generate() -> QuantizedMlp {
     let layout = InputLayout::standard(CONTROL_DT as f32);
     let input_width = layout.width(POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON);
     assert_eq!(
@@ -59,7 +61,7 @@ pub fn generate() -> QuantizedPolicy {
     let model = generate_with(POLICY_INPUT, POLICY_WEIGHT_SEED, MODEL_INPUT_RANGE);
     let lut = model.hidden[0].lut.expect("hidden layers have a SiLU LUT");
     let baked = BakedProDmp::<HORIZON, PARAMS>::from_config(&config()).expect("bake the decoder");
-    QuantizedPolicy {
+    QuantizedMlp {
         history: POLICY_HISTORY,
         obs_dim: POLICY_OBS_DIM,
         action_dim: DOF,

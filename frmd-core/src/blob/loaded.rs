@@ -1,0 +1,124 @@
+//! A blob of either format, told apart by its magic ([`LoadedBlob`]), and the int8 network of
+//! either ([`BlobNetwork`]): what a program holds that runs whatever student it is given (the host
+//! tools, a firmware that takes policy updates of any backbone). A firmware built for one backbone
+//! uses its loader ([`LoadedMlp`], [`LoadedTransformer`]) directly.
+
+use super::{BlobError, LoadedMlp, LoadedTransformer, MLP_MAGIC, TRANSFORMER_MAGIC};
+use crate::policy::{
+    Int8MlpNetwork, Int8TransformerNetwork, Network, PolicyConfig, PolicyDims, PolicyError,
+    StepConstants, TransformerWork,
+};
+
+/// A checked blob of either format, borrowing its bytes.
+// No allocator to box the larger variant: a program that takes either format reserves it.
+#[allow(clippy::large_enum_variant)]
+pub enum LoadedBlob<'a> {
+    /// An MLP blob (magic [`MLP_MAGIC`]).
+    Mlp(LoadedMlp<'a>),
+    /// A transformer blob (magic [`TRANSFORMER_MAGIC`]).
+    Transformer(LoadedTransformer<'a>),
+}
+
+impl<'a> LoadedBlob<'a> {
+    /// Checks and views `bytes` with the loader of the format its magic names;
+    /// [`BlobError::BadMagic`] for any other magic, [`BlobError::Truncated`] below four bytes.
+    pub fn load(bytes: &'a [u8]) -> Result<Self, BlobError> {
+        match bytes.get(..4) {
+            Some(magic) if magic == MLP_MAGIC => LoadedMlp::load(bytes).map(Self::Mlp),
+            Some(magic) if magic == TRANSFORMER_MAGIC => {
+                LoadedTransformer::load(bytes).map(Self::Transformer)
+            }
+            Some(_) => Err(BlobError::BadMagic),
+            None => Err(BlobError::Truncated),
+        }
+    }
+
+    /// The policy's sizes.
+    pub fn dims(&self) -> PolicyDims {
+        match self {
+            Self::Mlp(blob) => blob.dims(),
+            Self::Transformer(blob) => blob.dims(),
+        }
+    }
+
+    /// [`BlobError::DimensionMismatch`] unless the blob has the sizes `expected`.
+    pub fn check_dims(&self, expected: &PolicyDims) -> Result<(), BlobError> {
+        match self {
+            Self::Mlp(blob) => blob.check_dims(expected),
+            Self::Transformer(blob) => blob.check_dims(expected),
+        }
+    }
+
+    /// The sampling step table.
+    pub fn steps(&self) -> &[StepConstants] {
+        match self {
+            Self::Mlp(blob) => blob.steps(),
+            Self::Transformer(blob) => blob.steps(),
+        }
+    }
+
+    /// The policy configuration (normalization, sampler) borrowing the blob.
+    pub fn config(&self) -> PolicyConfig<'a> {
+        match self {
+            Self::Mlp(blob) => blob.config(),
+            Self::Transformer(blob) => blob.config(),
+        }
+    }
+
+    /// The int8 network: an MLP with scratch for layers up to `WIDTH` wide, or a transformer
+    /// running in `scratch` (unused by an MLP).
+    pub fn network<const WIDTH: usize, S: TransformerWork>(
+        &self,
+        scratch: S,
+    ) -> Result<BlobNetwork<'_, WIDTH, S>, PolicyError> {
+        Ok(match self {
+            Self::Mlp(blob) => BlobNetwork::Mlp(blob.network::<WIDTH>()?),
+            Self::Transformer(blob) => BlobNetwork::Transformer(blob.network(scratch)?),
+        })
+    }
+}
+
+/// The int8 network of a [`LoadedBlob`].
+// As for `LoadedBlob`: the MLP network holds its scratch in place, no allocator to box it.
+#[allow(clippy::large_enum_variant)]
+pub enum BlobNetwork<'a, const WIDTH: usize, S> {
+    /// The MLP of an MLP blob.
+    Mlp(Int8MlpNetwork<'a, WIDTH>),
+    /// The transformer of a transformer blob.
+    Transformer(Int8TransformerNetwork<'a, S>),
+}
+
+impl<const WIDTH: usize, S: TransformerWork> Network for BlobNetwork<'_, WIDTH, S> {
+    fn input_width(&self) -> usize {
+        match self {
+            Self::Mlp(net) => net.input_width(),
+            Self::Transformer(net) => net.input_width(),
+        }
+    }
+
+    fn output_width(&self) -> usize {
+        match self {
+            Self::Mlp(net) => net.output_width(),
+            Self::Transformer(net) => net.output_width(),
+        }
+    }
+
+    fn num_noise_variants(&self) -> usize {
+        match self {
+            Self::Mlp(net) => net.num_noise_variants(),
+            Self::Transformer(net) => net.num_noise_variants(),
+        }
+    }
+
+    fn forward(
+        &mut self,
+        variant: usize,
+        input: &[f32],
+        output: &mut [f32],
+    ) -> Result<(), PolicyError> {
+        match self {
+            Self::Mlp(net) => net.forward(variant, input, output),
+            Self::Transformer(net) => net.forward(variant, input, output),
+        }
+    }
+}

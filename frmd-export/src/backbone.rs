@@ -1,0 +1,89 @@
+//! What the entry point ([`crate::export`]) and each backbone's exporter ([`crate::mlp`],
+//! [`crate::transformer`]) share: the options every exporter takes and the operations on its
+//! result, so that nothing above this crate chooses between backbones.
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use frmd_core::blob::BlobError;
+use frmd_core::model::mlp::InputPrecision;
+use frmd_core::policy::{Network, PolicyDims};
+use frmd_formats::checkpoint::Normalization;
+
+use crate::calibrate::RangeMethod;
+use crate::host::HostScratch;
+use crate::memory::MemoryFigures;
+use crate::reference::KernelCheck;
+
+/// Export settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExportOptions {
+    /// Sampling steps baked into the step table (1..=4).
+    pub steps: usize,
+    /// How activation ranges are chosen from the calibration values.
+    pub ranges: RangeMethod,
+    /// MLP: balance the input segments' ranges with
+    /// [`FoldedMlp::with_input_gains`](crate::mlp::FoldedMlp::with_input_gains).
+    pub balance_inputs: bool,
+    /// MLP: how the first layer takes the input: one 16-bit plane
+    /// (`frmd_core::model::mlp::InputPrecision::Int16`, the default: about 16-bit input precision
+    /// in one pass), two int8 planes (`TwoPlane`: the same precision in two passes) or one int8
+    /// plane (`Int8`). A transformer quantizes each input layer with its own scale.
+    pub input_precision: InputPrecision,
+    /// MLP, with a 16-bit or two-plane input: the calibrated input range is widened by this
+    /// factor (>= 1), so observations beyond the training range (closed-loop states the
+    /// demonstrations never visited) reach the network instead of saturating; the fine grid keeps
+    /// the resolution (`range / 2^16`). Ignored for plain int8 input.
+    pub input_headroom: f32,
+}
+
+/// Default [`ExportOptions::input_headroom`]: the weaker built-in task policies reach normalized
+/// observations of 3-16 in closed loop (training range +-1).
+pub const DEFAULT_INPUT_HEADROOM: f32 = 8.0;
+
+impl Default for ExportOptions {
+    fn default() -> Self {
+        ExportOptions {
+            steps: 1,
+            ranges: RangeMethod::MinMax,
+            balance_inputs: true,
+            input_precision: InputPrecision::Int16,
+            input_headroom: DEFAULT_INPUT_HEADROOM,
+        }
+    }
+}
+
+/// A backbone's calibrated, quantized student and what can be done with it.
+pub(crate) trait ExportedNetwork {
+    /// The policy's sizes.
+    fn dims(&self) -> PolicyDims;
+    /// Sampling steps in the step table.
+    fn steps(&self) -> usize;
+    /// Calibration rows the ranges came from.
+    fn calibration_rows(&self) -> usize;
+    /// The self-describing blob with normalization `norm`.
+    fn blob(&self, norm: &Normalization) -> Result<Vec<u8>, BlobError>;
+    /// Writes the baked module and `blob` into `dir`; returns the files written.
+    fn write_module(&self, blob: &[u8], dir: &Path) -> anyhow::Result<Vec<PathBuf>>;
+    /// RAM and flash figures of the baked form.
+    fn memory(&self) -> MemoryFigures;
+    /// Lines of the export summary beyond the shape and the memory, if any.
+    fn details(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result;
+    /// The folded student's f32 sampler on frmd-core's f32 path, reporting each step's model
+    /// input to `on_input`.
+    fn sample_f32(
+        &self,
+        cond: &[f32],
+        noise: &[f32],
+        on_input: &mut dyn FnMut(usize, &[f32]),
+    ) -> anyhow::Result<Vec<f32>>;
+    /// Check (d): the int8 kernels on the exported weights against a wide-integer model,
+    /// with `inputs` (step-0 model inputs) where the backbone's check takes inputs.
+    fn check_kernels(&self, inputs: &[Vec<f32>]) -> anyhow::Result<KernelCheck>;
+    /// Calls `run` with frmd-core's f32 network of the folded student (the int8 network's twin),
+    /// running a transformer in `scratch`.
+    fn with_f32_network(
+        &self,
+        scratch: &mut HostScratch,
+        run: &mut dyn FnMut(&mut dyn Network) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()>;
+}

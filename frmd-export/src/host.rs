@@ -1,0 +1,74 @@
+//! How std programs run an exported student with frmd-core: the capacities of the host policy's
+//! buffers (heapless style: any exported shape up to these runs without a code change, the blob's
+//! descriptor gives the sizes at run time), the transformer scratch, and [`check_blob`], which an
+//! export passes before anything is written.
+use anyhow::{bail, Context};
+use frmd_core::blob::{AlignedBlob, LoadedBlob};
+use frmd_core::model::transformer::TransformerScratch;
+use frmd_core::policy::{Policy, PolicyDims};
+use frmd_core::prodmp::MAX_NUM_BASIS;
+
+/// Longest observation history the host runs.
+pub const MAX_HISTORY: usize = 16;
+/// Largest observation dimension the host runs.
+pub const MAX_OBS_DIM: usize = 128;
+/// Largest action dimension (DoF) the host runs.
+pub const MAX_ACTION_DIM: usize = 32;
+/// Longest horizon the host runs.
+pub const MAX_HORIZON: usize = 64;
+/// Most ProDMP parameters per DoF (the decoder's limit).
+pub const MAX_PARAMS_PER_DOF: usize = MAX_NUM_BASIS + 1;
+/// Widest MLP layer (and model input) the exporter's f32 path and the host policies handle.
+pub const MAX_WIDTH: usize = 1024;
+
+/// frmd-core's policy with the host capacities (the model input up to [`MAX_WIDTH`]).
+pub type HostPolicy<'a, Net> = Policy<
+    'a,
+    Net,
+    MAX_HISTORY,
+    MAX_OBS_DIM,
+    MAX_ACTION_DIM,
+    MAX_HORIZON,
+    MAX_PARAMS_PER_DOF,
+    MAX_WIDTH,
+>;
+
+/// Scratch for the host's f32 and int8 transformer passes (enough for the `transformer`
+/// backbone, 6 x 256 with horizon 16): floats, bytes, accumulators.
+pub type HostScratch = TransformerScratch<HOST_FLOATS, HOST_BYTES, HOST_ACCUMULATORS>;
+pub(crate) const HOST_FLOATS: usize = 32_768;
+pub(crate) const HOST_BYTES: usize = 16_384;
+pub(crate) const HOST_ACCUMULATORS: usize = 1_024;
+
+/// Refuses a policy whose sizes exceed the host's capacities, naming its shape.
+pub fn check_capacity(d: &PolicyDims) -> anyhow::Result<()> {
+    let limits = [
+        ("history", d.history, MAX_HISTORY),
+        ("obs_dim", d.obs_dim, MAX_OBS_DIM),
+        ("action_dim", d.action_dim, MAX_ACTION_DIM),
+        ("horizon", d.horizon, MAX_HORIZON),
+        ("params_per_dof", d.params_per_dof, MAX_PARAMS_PER_DOF),
+    ];
+    if let Some((field, value, max)) = limits.iter().find(|(_, v, max)| v > max) {
+        bail!(
+            "blob shape history {} obs_dim {} action_dim {} horizon {} params_per_dof {}: the host runs {field} up to {max}, not {value}",
+            d.history, d.obs_dim, d.action_dim, d.horizon, d.params_per_dof
+        );
+    }
+    Ok(())
+}
+
+/// Loads `blob` with frmd-core's loader (the firmware's) and builds its policy with the host
+/// capacities: a blob the runtime would refuse is an error here. Returns the policy's sizes.
+pub fn check_blob(blob: &[u8]) -> anyhow::Result<PolicyDims> {
+    let aligned = AlignedBlob::new(blob);
+    let loaded = LoadedBlob::load(aligned.bytes()).context("loading the blob")?;
+    let dims = loaded.dims();
+    check_capacity(&dims)?;
+    let mut scratch = Box::new(HostScratch::new());
+    let network = loaded
+        .network::<MAX_WIDTH, _>(&mut *scratch)
+        .context("the blob's network")?;
+    HostPolicy::new(loaded.config(), network).context("the blob's policy")?;
+    Ok(dims)
+}

@@ -1,0 +1,263 @@
+//! Calibration and quantization of a [`FoldedMlp`] into a [`QuantizedMlp`].
+//!
+//! Calibration runs frmd-core's f32 path (through [`FoldedMlp::sample`], i.e. the same
+//! multi-step sampler with re-noising) over calibration conditions with seeded noise, and
+//! records per tensor the input, every pre-activation and every hidden output. Ranges are the
+//! min/max or a symmetric percentile of the recorded values. Quantization then follows
+//! docs/design.md section 5 with frmd-core's `quant` helpers (per-channel symmetric weights, int32 bias
+//! with the input zero point folded, Q31 requantization to the pre-activation range, a 256-entry
+//! LUT to the output range, a dequantized output layer). With a 16-bit input
+//! (`frmd_core::model::mlp::InputPrecision::Int16`, the default of
+//! [`crate::ExportOptions`]) the first layer's bias and multipliers are made for the
+//! fine input scale `input_scale / 2^8` (zero point `frmd_core::quant::wide_zero_point`); with a
+//! two-plane input (`TwoPlane`) only its multipliers are; for both the exporter widens the input
+//! range (see [`crate::ExportOptions::input_headroom`]).
+use super::fold::{FoldedMlp, InputGains};
+use super::quantized::{QuantizedLayer, QuantizedMlp, QuantizedOutput};
+use crate::calibrate::{check_rows, int_bias, quantize_weights, RangeMethod, Recorder};
+use anyhow::{bail, Context};
+use frmd_core::blob::LUT_LEN;
+use frmd_core::kernels::Lut8;
+use frmd_core::model::mlp::{InputPrecision, Probe};
+use frmd_core::quant::{
+    requantization_multiplier, wide_scale, wide_zero_point, QuantParams, FINE_INPUT_BITS,
+};
+use frmd_formats::calibration::CalibrationSet;
+use frmd_formats::checkpoint::Normalization;
+
+/// Activation parameters found by calibration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Ranges {
+    /// The model input.
+    pub input: QuantParams,
+    /// Per hidden layer: (pre-activation, output).
+    pub hidden: Vec<(QuantParams, QuantParams)>,
+    /// Calibration rows run (each through every sampling step).
+    pub rows: usize,
+}
+
+/// Runs the f32 sampler over `set` and derives the activation parameters.
+pub fn calibrate(
+    model: &FoldedMlp,
+    set: &CalibrationSet,
+    method: RangeMethod,
+) -> anyhow::Result<Ranges> {
+    let c = &model.base.config;
+    check_rows(set, c.cond_dim())?;
+    let layers = model.hidden.len();
+    let mut input = Recorder::default();
+    let mut pre: Vec<Recorder> = (0..layers).map(|_| Recorder::default()).collect();
+    let mut out: Vec<Recorder> = (0..layers).map(|_| Recorder::default()).collect();
+    for row in 0..set.rows() {
+        let noise = set.noise(row, model.base.steps.len(), c.traj_dim());
+        model.sample(set.row(row), &noise, |_, probe, values| match probe {
+            Probe::Input => input.values.extend_from_slice(values),
+            Probe::PreActivation(l) => pre[l].values.extend_from_slice(values),
+            Probe::Output(l) => out[l].values.extend_from_slice(values),
+            Probe::Final => {}
+        })?;
+    }
+    let input = input.params(method, "the model input")?;
+    let hidden = pre
+        .iter_mut()
+        .zip(out.iter_mut())
+        .enumerate()
+        .map(|(l, (p, o))| {
+            Ok((
+                p.params(method, &format!("layer {l} pre-activation"))?,
+                o.params(method, &format!("layer {l} output"))?,
+            ))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(Ranges {
+        input,
+        hidden,
+        rows: set.rows(),
+    })
+}
+
+/// Gains that bring the trajectory and rate input segments to the absolute range of the
+/// observation and previous-action segments (at least 1), from the f32 sampler's inputs over
+/// `set` (see [`FoldedMlp::with_input_gains`]).
+pub fn input_gains(model: &FoldedMlp, set: &CalibrationSet) -> anyhow::Result<InputGains> {
+    let c = &model.base.config;
+    let (obs_len, k) = (c.history * c.obs_dim, c.action_dim);
+    let (mut fixed, mut rate, mut traj) = (1f32, 0f32, 0f32);
+    for row in 0..set.rows() {
+        let noise = set.noise(row, model.base.steps.len(), c.traj_dim());
+        model.sample(set.row(row), &noise, |_, probe, values| {
+            if probe == Probe::Input {
+                for (i, v) in values.iter().enumerate() {
+                    let a = v.abs();
+                    if i < obs_len + k {
+                        fixed = fixed.max(a);
+                    } else if i < obs_len + 2 * k {
+                        rate = rate.max(a);
+                    } else {
+                        traj = traj.max(a);
+                    }
+                }
+            }
+        })?;
+    }
+    let gain = |range: f32| if range > 0.0 { fixed / range } else { 1.0 };
+    Ok(InputGains {
+        traj_gain: gain(traj),
+        rate_gain: gain(rate),
+    })
+}
+
+/// How far the first layer's accumulators can reach, per channel, given `|bias|` (the largest
+/// over the bias variants) and `sum |w|` of its row.
+type AccumulatorBound = fn(bias: i64, weight_sum: i64) -> i64;
+
+/// Two-plane input (`frmd_core::quant::combine_plane_accumulators`): with int8 codes of magnitude
+/// at most 128, `2^8 (|bias| + 128 sum|w|) + 128 sum|w|`.
+const TWO_PLANE_BOUND: AccumulatorBound =
+    |bias, weight_sum| ((bias + 128 * weight_sum) << FINE_INPUT_BITS) + 128 * weight_sum;
+
+/// 16-bit input: with codes of magnitude at most 2^15, `|bias| + 2^15 sum|w|`.
+const INT16_BOUND: AccumulatorBound = |bias, weight_sum| bias + (weight_sum << 15);
+
+/// Checks that no first-layer accumulator of a wide input can leave i32 (`what` names the input
+/// in the error): `bound` must fit for every channel and bias variant.
+fn check_accumulator_range(
+    weights: &[i8],
+    in_features: usize,
+    biases: &[i32],
+    bound: AccumulatorBound,
+    what: &str,
+) -> anyhow::Result<()> {
+    for (o, row) in weights.chunks_exact(in_features).enumerate() {
+        let weight_sum: i64 = row.iter().map(|w| i64::from(*w).abs()).sum();
+        let bias = biases
+            .iter()
+            .skip(o)
+            .step_by(weights.len() / in_features)
+            .map(|b| i64::from(*b).abs())
+            .max()
+            .unwrap_or(0);
+        let reach = bound(bias, weight_sum);
+        if reach > i64::from(i32::MAX) {
+            bail!("first layer channel {o}: {what} accumulators could reach {reach} and leave i32 (export with plain int8 input)");
+        }
+    }
+    Ok(())
+}
+
+/// Quantizes `model` with the calibrated `ranges`, normalization and ProDMP tables into a
+/// [`QuantizedMlp`] whose first layer takes its input as `input_precision` says.
+pub fn quantize(
+    model: &FoldedMlp,
+    ranges: &Ranges,
+    norm: &Normalization,
+    input_precision: InputPrecision,
+) -> anyhow::Result<QuantizedMlp> {
+    let base = &model.base;
+    let c = &base.config;
+    let mut current = ranges.input;
+    let mut hidden = Vec::new();
+    let mut luts: Vec<[i8; LUT_LEN]> = Vec::new();
+    let mut first_layer_biases = Vec::new();
+    for (l, (layer, &(pre, out))) in model.hidden.iter().zip(&ranges.hidden).enumerate() {
+        let q = quantize_weights(layer).with_context(|| format!("hidden layer {l}"))?;
+        // The 16-bit input's codes are on the fine grid: so are the first layer's biases.
+        let bias_input = match (l, input_precision) {
+            (0, InputPrecision::Int16) => QuantParams {
+                scale: wide_scale(current),
+                zero_point: wide_zero_point(current),
+            },
+            _ => current,
+        };
+        let bias = int_bias(&layer.bias, &q, bias_input, layer.in_features)
+            .with_context(|| format!("hidden layer {l}"))?;
+        // The scale of the accumulators this layer requantizes.
+        let mut accumulator_input_scale = bias_input.scale;
+        if l == 0 {
+            for variant in &model.first_layer_biases {
+                first_layer_biases.extend(
+                    int_bias(variant, &q, bias_input, layer.in_features)
+                        .context("first-layer bias variant")?,
+                );
+            }
+            let bound = match input_precision {
+                InputPrecision::Int16 => Some((INT16_BOUND, "16-bit input")),
+                InputPrecision::TwoPlane => Some((TWO_PLANE_BOUND, "two-plane input")),
+                InputPrecision::Int8 => None,
+            };
+            if let Some((bound, what)) = bound {
+                for biases in [&first_layer_biases, &bias] {
+                    check_accumulator_range(&q.weights, layer.in_features, biases, bound, what)?;
+                }
+            }
+            if input_precision == InputPrecision::TwoPlane {
+                accumulator_input_scale = current.scale / (1_u32 << FINE_INPUT_BITS) as f32;
+            }
+        }
+        let (mut multipliers, mut shifts) = (Vec::new(), Vec::new());
+        for (o, scale) in q.scales.iter().enumerate() {
+            let (m, s) = requantization_multiplier(accumulator_input_scale, *scale, pre.scale)
+                .with_context(|| {
+                    format!("hidden layer {l} channel {o}: requantization multiplier")
+                })?;
+            multipliers.push(m);
+            shifts.push(s);
+        }
+        let activation = layer.activation;
+        let lut = Lut8::build(|x| activation.apply(x), pre, out)
+            .with_context(|| format!("hidden layer {l}: activation table"))?;
+        let mut table = [0i8; LUT_LEN];
+        for (i, slot) in table.iter_mut().enumerate() {
+            *slot = lut.lookup((i as i32 - 128) as i8);
+        }
+        luts.push(table);
+        hidden.push(QuantizedLayer {
+            in_features: layer.in_features,
+            out_features: layer.out_features,
+            weights: q.weights,
+            bias,
+            multipliers,
+            shifts,
+            output_zero_point: pre.zero_point,
+            activation_min: i8::MIN,
+            activation_max: i8::MAX,
+            lut: Some(luts.len() - 1),
+        });
+        current = out;
+    }
+    let q = quantize_weights(&model.output).context("output layer")?;
+    let bias = int_bias(&model.output.bias, &q, current, model.output.in_features)
+        .context("output layer")?;
+    let output = QuantizedOutput {
+        in_features: model.output.in_features,
+        out_features: model.output.out_features,
+        scales: q.scales.iter().map(|s| current.scale * s).collect(),
+        weights: q.weights,
+        bias,
+    };
+    Ok(QuantizedMlp {
+        history: c.history,
+        obs_dim: c.obs_dim,
+        action_dim: c.action_dim,
+        horizon: c.horizon,
+        params_per_dof: c.output_dim() / c.action_dim,
+        control_dt: c.control_dt as f32,
+        layout: base.layout,
+        input: ranges.input,
+        input_precision: if model.hidden.is_empty() {
+            InputPrecision::Int8
+        } else {
+            input_precision
+        },
+        obs_min: norm.obs.min.clone(),
+        obs_max: norm.obs.max.clone(),
+        action_min: norm.action.min.clone(),
+        action_max: norm.action.max.clone(),
+        prodmp: base.prodmp.clone(),
+        steps: base.steps.clone(),
+        first_layer_biases,
+        luts,
+        hidden,
+        output,
+    })
+}
