@@ -6,8 +6,8 @@
 //! `qemu_digests_match_host` builds the firmware images, runs them on every QEMU board of
 //! `run-qemu.sh` (Cortex-M4F, M7, M33, M0, M55) and requires each printed digest to equal the
 //! host's: ProDMP decode (f32), int8 MLP + decode and the fully connected kernels on random
-//! shapes are bit-identical on x86-64 and on every core, DSP kernels or portable, FPU or soft
-//! float. It needs
+//! shapes (int8 activations, and int16 activations with int64 accumulation) are bit-identical on
+//! x86-64 and on every core, DSP kernels or portable, FPU or soft float. It needs
 //! `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without it, or with
 //! FRMD_SKIP_QEMU=1, it prints why and passes without checking
 //! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
@@ -54,7 +54,7 @@ fn kernel_cases_agree_on_the_host_paths() {
     }
     let mut workload = kernel_workload::KernelWorkload::new();
     let mut widths = Vec::new();
-    for case in 0..kernel_workload::CASES {
+    for case in 0..kernel_workload::INT8_CASES {
         use frmd_firmware_support::workload::Workload;
         workload.prepare(case).unwrap();
         widths.push((workload.width(), workload.rows()));
@@ -73,6 +73,79 @@ fn kernel_cases_agree_on_the_host_paths() {
         );
     }
     assert!(widths.iter().any(|(_, r)| r % 2 == 1) && widths.iter().any(|(_, r)| r % 2 == 0));
+}
+
+/// The int8 cases alone give the digest the workload had before the int16 cases were added: the
+/// generic kernels left every int8 bit where it was.
+#[test]
+fn int8_kernel_cases_keep_their_digest() {
+    use frmd_firmware_support::workload::Workload;
+    let mut workload = kernel_workload::KernelWorkload::new();
+    let mut digest = frmd_core::hash::Fnv1a64::new();
+    for case in 0..kernel_workload::INT8_CASES {
+        workload.prepare(case).unwrap();
+        workload.run().unwrap();
+        workload.digest_outputs(&mut digest);
+    }
+    assert_eq!(digest.finish(), kernel_workload::INT8_DIGEST);
+}
+
+/// The int16-activation cases equal frmd-core's wide-integer model on the host (and the QEMU
+/// test shows every core computes the host's bytes), and they reach what they are meant to:
+/// the pair buffer (<= 256 columns), in-loop int16 unpacking (257..=512), several 512-column
+/// chunks, every width remainder mod 8 and step count mod 4 on aligned rows, a second 16-row
+/// block, wrapped chunk sums, clamped and unclamped outputs.
+#[test]
+fn int16_kernel_cases_match_the_wide_model() {
+    use frmd_firmware_support::workload::Workload;
+    let mut workload = kernel_workload::KernelWorkload::new();
+    let mut shapes = Vec::new();
+    let (mut wrapped, mut unclamped, mut clamped) = (0, 0, 0);
+    for case in kernel_workload::INT8_CASES..kernel_workload::CASES {
+        workload.prepare(case).unwrap();
+        workload.run().unwrap();
+        let coverage = workload
+            .int16_against_model()
+            .unwrap_or_else(|e| panic!("case {case}: {e}"));
+        wrapped += coverage.wrapped_rows;
+        unclamped += coverage.unclamped;
+        clamped += coverage.clamped;
+        shapes.push((workload.width(), workload.rows(), workload.aligned()));
+    }
+    let aligned: Vec<(usize, usize)> = shapes
+        .iter()
+        .filter(|(_, _, a)| *a)
+        .map(|(w, r, _)| (*w, *r))
+        .collect();
+    assert!(aligned.iter().any(|(w, _)| *w <= 256 && w % 8 == 0));
+    assert!(aligned
+        .iter()
+        .any(|(w, _)| (257..=512).contains(w) && w % 4 == 0));
+    assert!(aligned.iter().any(|(w, _)| *w > 1024 && w % 4 == 0));
+    for remainder in 0..8 {
+        assert!(
+            shapes.iter().any(|(w, _, _)| w % 8 == remainder),
+            "no int16 width = {remainder} mod 8"
+        );
+    }
+    for steps in 0..4 {
+        assert!(
+            aligned
+                .iter()
+                .any(|(w, _)| (w / 8) % 4 == steps && w % 4 == 0),
+            "no aligned int16 width with {steps} steps mod 4"
+        );
+    }
+    assert!(shapes.iter().any(|(_, r, _)| *r > 16));
+    assert!(shapes.iter().any(|(_, _, a)| !*a));
+    assert!(wrapped > 0, "no wrapped chunk sum");
+    assert!(
+        unclamped > 100 && clamped > 20,
+        "{unclamped} unclamped, {clamped} clamped"
+    );
+    eprintln!(
+        "int16 cases: {wrapped} wrapped rows, {unclamped} unclamped, {clamped} clamped outputs"
+    );
 }
 
 #[test]

@@ -13,6 +13,9 @@
 //!   policy configuration with a synthetic int8 transformer-lite backbone instead of the MLP.
 //! - `frmd-cortex-m-pil` (src/bin/frmd-cortex-m-pil.rs): processor in the loop, a baked policy
 //!   answering act requests from the host over semihosting (see [`pil`]).
+//! - `frmd-cortex-m-kernels` (src/bin/frmd-cortex-m-kernels.rs): frmd-core's fully connected
+//!   kernels on random shapes (int8 and int16 activations) for the host's digest comparison, then
+//!   (not on the M0) instructions per layer at fixed shapes (src/layer_report.rs).
 //! - `frmd-cortex-m-policy-stages`, `frmd-cortex-m-transformer-stages`: the policy (same baked
 //!   student) and the transformer measurements followed by a per-stage breakdown
 //!   (`stage <name>: <instructions>` lines, see src/stage_report.rs).
@@ -30,6 +33,8 @@ pub mod baked_mlp;
 pub mod baked_transformer;
 pub mod bench;
 pub mod images;
+#[cfg(not(frmd_armv6m))]
+pub mod layer_report;
 pub mod memory;
 pub mod pil;
 pub mod report;

@@ -65,6 +65,9 @@ pub(crate) trait RowInput: Copy {
     /// The input as int8 codes, if it is int8.
     #[cfg(frmd_arm_dsp)]
     fn as_i8(input: &[Self]) -> Option<&[i8]>;
+    /// The input as int16 codes, if it is int16.
+    #[cfg(frmd_arm_dsp)]
+    fn as_i16(input: &[Self]) -> Option<&[i16]>;
 }
 
 impl RowInput for i8 {
@@ -82,6 +85,11 @@ impl RowInput for i8 {
     fn as_i8(input: &[i8]) -> Option<&[i8]> {
         Some(input)
     }
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn as_i16(_: &[i8]) -> Option<&[i16]> {
+        None
+    }
 }
 
 impl RowInput for i16 {
@@ -98,6 +106,11 @@ impl RowInput for i16 {
     #[inline(always)]
     fn as_i8(_: &[i16]) -> Option<&[i8]> {
         None
+    }
+    #[cfg(frmd_arm_dsp)]
+    #[inline(always)]
+    fn as_i16(input: &[i16]) -> Option<&[i16]> {
+        Some(input)
     }
 }
 

@@ -1,48 +1,30 @@
-//! int8 fully connected layer: `y[o] = requant(bias[o] + sum_i w[o][i] * x[i])`.
+//! Fully connected layer: `y[o] = requant(bias[o] + sum_i w[o][i] * x[i])`, for int8 activations
+//! (int32 bias and accumulators) and, generic over [`Precision`], int16 activations (the 16x8
+//! scheme: int64 bias and accumulators, see [`Accumulator`]).
 //!
 //! Weights are int8 symmetric per output channel, row-major `[out_features, in_features]`; the
-//! int32 bias already contains the folded input zero point (`quant::fold_input_zero_point`), so the
-//! kernel is a plain int8 matrix-vector product. The input is int8, or int16 for a first layer fed
-//! the 16-bit input plane ([`LayerInput::Int16`]). Requantization per output channel uses
-//! [`crate::quant::requantize_to_i8`]; the activation clamp (`activation_min..=activation_max`)
-//! implements ReLU-like activations for free, and an optional table ([`LutTable`]) maps every requantized
-//! output in the same pass.
+//! bias already contains the folded input zero point (`quant::fold_input_zero_point`), so the
+//! kernel is a plain matrix-vector product. The input is int8 or int16 ([`LayerInput`]: the 16-bit
+//! input plane of a first layer, or an int16-activation layer's input). Requantization per output
+//! channel uses [`crate::quant::requantize_to_i8`] (int8 outputs) or
+//! [`crate::quant::requantize_s64`] (int16 outputs); the activation clamp
+//! (`activation_min..=activation_max`) implements ReLU-like activations for free, and an optional
+//! table ([`super::LutTable`], or the interpolated [`super::Lut16Table`]) maps every requantized output in
+//! the same pass.
 
-#[cfg(target_arch = "x86_64")]
-use super::dot::dot_i8_prefix;
 use super::dot::RowInput;
-use super::lut::{self, LutTable};
+#[cfg(target_arch = "x86_64")]
+use super::dot::{dot_i8_i16_prefix, dot_i8_prefix};
+pub use super::input::LayerInput;
+use super::precision::{Accumulator, Precision};
 use super::rows::{for_each_block, for_each_sum};
 use super::KernelError;
 #[cfg(target_arch = "x86_64")]
 use crate::quant::requantize_to_i8;
-use crate::quant::{dequantize_accumulator, requantize_valid, SHIFT_MAX, SHIFT_MIN};
-
-/// The input vector of a fully connected layer.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum LayerInput<'a> {
-    /// int8 codes (every hidden layer, and a first layer with int8 input).
-    Int8(&'a [i8]),
-    /// int16 codes of the 16-bit input plane (`model::mlp::InputPrecision::Int16`).
-    Int16(&'a [i16]),
-}
-
-impl LayerInput<'_> {
-    /// Number of input values.
-    pub fn len(&self) -> usize {
-        match self {
-            Self::Int8(values) => values.len(),
-            Self::Int16(values) => values.len(),
-        }
-    }
-
-    /// Whether there are no input values.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-}
 
 /// Weights and bias of one fully connected layer, borrowed (typically `&'static` baked data).
+/// `A` is the accumulator and bias type: `i32` (int8 activations, the default) or `i64` (int16
+/// activations, exact accumulation; see [`Accumulator`]).
 ///
 /// On Cortex-M cores with the DSP extension the two-row `SMLAD` kernel needs the rows to start on
 /// word boundaries: `weights` 4-byte aligned and `in_features` a multiple of 4 (baked modules and
@@ -72,39 +54,43 @@ impl LayerInput<'_> {
 /// assert_eq!(out, [2, 127]);
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct FullyConnected<'a> {
+pub struct FullyConnected<'a, A = i32> {
     /// Input width.
     pub in_features: usize,
     /// Output width.
     pub out_features: usize,
     /// `[out_features, in_features]` row-major int8 weights.
     pub weights: &'a [i8],
-    /// `[out_features]` int32 bias at scale `input_scale * weight_scale[o]`, input zero point folded.
-    pub bias: &'a [i32],
+    /// `[out_features]` bias (int32, or int64 for int16 activations) at scale
+    /// `input_scale * weight_scale[o]`, input zero point folded.
+    pub bias: &'a [A],
 }
 
-/// Per-output-channel requantization of a layer's accumulators to int8.
+/// Per-output-channel requantization of a layer's accumulators to `P` codes: int8 (the default)
+/// or int16 ([`Precision`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct FcRequant<'a> {
-    /// `[out_features]` Q31 multiplier mantissas (`quant::quantize_multiplier`), non-negative.
+pub struct FcRequant<'a, P = i8> {
+    /// `[out_features]` Q31 multiplier mantissas (`quant::quantize_multiplier`), non-negative
+    /// (int16 outputs use their Q15 reduction, `quant::reduce_multiplier`).
     pub multipliers: &'a [i32],
-    /// `[out_features]` shifts in `SHIFT_MIN..=SHIFT_MAX`; positive shifts left.
+    /// `[out_features]` shifts in `SHIFT_MIN..=SHIFT_MAX` (int16 outputs:
+    /// `SHIFT16_MIN..=SHIFT16_MAX`); positive shifts left.
     pub shifts: &'a [i32],
-    /// Output zero point in `[-128, 127]`.
+    /// Output zero point in `[-128, 127]` (int16 outputs: 0).
     pub output_zero_point: i32,
-    /// Lower clamp of the int8 output.
-    pub activation_min: i8,
-    /// Upper clamp of the int8 output.
-    pub activation_max: i8,
+    /// Lower clamp of the output.
+    pub activation_min: P,
+    /// Upper clamp of the output.
+    pub activation_max: P,
 }
 
-impl<'a> FullyConnected<'a> {
+impl<'a, A: Accumulator> FullyConnected<'a, A> {
     /// Unchecked constructor usable in `const` items; every forward call validates the shapes.
     pub const fn new(
         in_features: usize,
         out_features: usize,
         weights: &'a [i8],
-        bias: &'a [i32],
+        bias: &'a [A],
     ) -> Self {
         Self {
             in_features,
@@ -126,6 +112,29 @@ impl<'a> FullyConnected<'a> {
         Ok(())
     }
 
+    /// Checks what makes every accumulator the exact `bias + w . x` (O(weights), for a network
+    /// to run once when it is built): for `i64` accumulators no weight is -128, every
+    /// `|bias| <= quant::BIAS16_MAX` and `in_features <= quant::IN_FEATURES16_MAX`, so that every
+    /// 512-column partial sum fits in i32 and every accumulator in `2^47`. For `i32` accumulators
+    /// (wrapping by definition) there is nothing to check beyond [`Self::validate`].
+    pub fn validate_exact(&self) -> Result<(), KernelError> {
+        self.validate()?;
+        if A::WEIGHT_MIN > i8::MIN {
+            let low = self
+                .weights
+                .iter()
+                .fold(false, |bad, w| bad | (*w < A::WEIGHT_MIN));
+            if low {
+                return Err(KernelError::WeightRange);
+            }
+        }
+        let bad_bias = self.bias.iter().fold(false, |bad, b| bad | !b.bias_valid());
+        if bad_bias || self.in_features > A::MAX_COLUMNS {
+            return Err(KernelError::BiasRange);
+        }
+        Ok(())
+    }
+
     fn check_input(&self, input_len: usize) -> Result<(), KernelError> {
         self.validate()?;
         if input_len != self.in_features {
@@ -134,6 +143,176 @@ impl<'a> FullyConnected<'a> {
         Ok(())
     }
 
+    /// Raw accumulators `acc[o] = bias[o] + sum_i w[o][i] * input[i]` (as [`Accumulator`]
+    /// defines) for an int8 or int16 input, e.g. for a last layer whose output is dequantized to
+    /// f32 ([`dequantize_accumulators`]). Same kernels as the requantizing forward passes.
+    pub fn accumulate(&self, input: LayerInput<'_>, acc: &mut [A]) -> Result<(), KernelError> {
+        self.check_input(input.len())?;
+        if acc.len() != self.out_features {
+            return Err(KernelError::OutputLength);
+        }
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx2) = super::x86::Avx2::get() {
+            self.accumulate_avx2(avx2, input, acc);
+            return Ok(());
+        }
+        match input {
+            LayerInput::Int8(values) => self.copy_sums(values, acc),
+            LayerInput::Int16(values) => self.copy_sums(values, acc),
+        }
+        Ok(())
+    }
+
+    /// The portable (and DSP) accumulators of every row into `acc` (callers checked the shapes).
+    fn copy_sums<T: RowInput>(&self, input: &[T], acc: &mut [A]) {
+        for_each_block(input, self.weights, self.bias, |first, sums| {
+            if let Some(out) = acc.get_mut(first..first + sums.len()) {
+                out.copy_from_slice(sums);
+            }
+        });
+    }
+
+    /// [`Self::accumulate`] with the AVX2 row kernels (x86-64; callers checked the shapes):
+    /// eight rows per call, the last `out_features % 8` rows by the portable dot products.
+    #[cfg(target_arch = "x86_64")]
+    fn accumulate_avx2(&self, avx2: super::x86::Avx2, input: LayerInput<'_>, acc: &mut [A]) {
+        use super::x86::BLOCK_ROWS;
+        let width = self.in_features;
+        let Some(block_len) = width.checked_mul(BLOCK_ROWS) else {
+            return;
+        };
+        let mut row_blocks = self.weights.chunks_exact(block_len);
+        let (out_blocks, out_tail) = acc.as_chunks_mut::<BLOCK_ROWS>();
+        let (bias_blocks, bias_tail) = self.bias.as_chunks::<BLOCK_ROWS>();
+        for ((out, rows), bias) in out_blocks
+            .iter_mut()
+            .zip(row_blocks.by_ref())
+            .zip(bias_blocks)
+        {
+            A::block(bias, out, width, |columns, start, residues| {
+                let mut first = [0_i32; BLOCK_ROWS];
+                for (slot, s) in first.iter_mut().zip(start) {
+                    *slot = *s;
+                }
+                let sums = avx2.residues(rows, input, columns, &first);
+                for (residue, sum) in residues.iter_mut().zip(sums) {
+                    *residue = sum;
+                }
+            });
+        }
+        let tail = out_tail
+            .iter_mut()
+            .zip(row_blocks.remainder().chunks_exact(width))
+            .zip(bias_tail);
+        for ((out, row), bias) in tail {
+            use super::rows::for_each_accumulator;
+            let bias = core::slice::from_ref(bias);
+            match input {
+                LayerInput::Int8(values) => {
+                    for_each_accumulator(values, row, bias, |sum| *out = sum)
+                }
+                LayerInput::Int16(values) => {
+                    for_each_accumulator(values, row, bias, |sum| *out = sum)
+                }
+            }
+        }
+    }
+
+    /// Requantized output for any [`LayerInput`], with `activation` (if any) applied to every
+    /// requantized output: `output[o] = table(requantize(bias[o] + dot(w[o], input)))`, through
+    /// [`crate::quant::requantize_to_i8`] for int8 outputs and [`crate::quant::requantize_s64`]
+    /// for int16 outputs. Validates `requant` ([`FcRequant::validate`]) on every call.
+    pub fn forward_activated<P: Precision<Acc = A>>(
+        &self,
+        requant: &FcRequant<'_, P>,
+        activation: Option<&P::Table>,
+        input: LayerInput<'_>,
+        output: &mut [P],
+    ) -> Result<(), KernelError> {
+        requant.validate(self.out_features)?;
+        self.forward_validated(requant, activation, input, output)
+    }
+
+    /// [`Self::forward_activated`] for a `requant` that passed [`FcRequant::validate`] for this
+    /// layer (the per-channel checks are not repeated; the shapes are). With unvalidated
+    /// parameters the outputs are unspecified, never a panic.
+    pub(crate) fn forward_validated<P: Precision<Acc = A>>(
+        &self,
+        requant: &FcRequant<'_, P>,
+        activation: Option<&P::Table>,
+        input: LayerInput<'_>,
+        output: &mut [P],
+    ) -> Result<(), KernelError> {
+        self.check_input(input.len())?;
+        let channels = self.out_features;
+        if requant.multipliers.len() != channels || requant.shifts.len() != channels {
+            return Err(KernelError::RequantLength);
+        }
+        if output.len() != channels {
+            return Err(KernelError::OutputLength);
+        }
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx2) = super::x86::Avx2::get() {
+            P::forward_x86(self, avx2, requant, activation, input, output);
+            return Ok(());
+        }
+        #[cfg(frmd_arm_dsp)]
+        if P::forward_dsp(self, requant, activation, input, output) {
+            return Ok(());
+        }
+        match input {
+            LayerInput::Int8(values) => {
+                self.requantize_activated(requant, activation, values, output)
+            }
+            LayerInput::Int16(values) => {
+                self.requantize_activated(requant, activation, values, output)
+            }
+        }
+        Ok(())
+    }
+
+    /// [`Self::requantize_rows`] through `activation`'s table, or none.
+    #[inline(always)]
+    fn requantize_activated<T: RowInput, P: Precision<Acc = A>>(
+        &self,
+        requant: &FcRequant<'_, P>,
+        activation: Option<&P::Table>,
+        input: &[T],
+        output: &mut [P],
+    ) {
+        match activation {
+            Some(table) => self.requantize_rows(requant, input, output, |v| P::lookup(table, v)),
+            None => self.requantize_rows(requant, input, output, |v| v),
+        }
+    }
+
+    /// Requantizes `bias[o] + dot(w[o], input)` for every row into `output`, through `map`, two
+    /// rows per kernel call (callers checked the shapes; `requant` must be valid for the results
+    /// to equal [`Precision::requantize`]'s).
+    #[inline(always)]
+    fn requantize_rows<T: RowInput, P: Precision<Acc = A>>(
+        &self,
+        requant: &FcRequant<'_, P>,
+        input: &[T],
+        output: &mut [P],
+        map: impl Fn(P) -> P,
+    ) {
+        let Self { weights, bias, .. } = *self;
+        let (multipliers, shifts) = (requant.multipliers, requant.shifts);
+        for_each_block(input, weights, bias, |first, sums| {
+            let end = first + sums.len();
+            if let (Some(out), Some(m), Some(s)) = (
+                output.get_mut(first..end),
+                multipliers.get(first..end),
+                shifts.get(first..end),
+            ) {
+                requantize_block(sums, m, s, requant, out, &map);
+            }
+        });
+    }
+}
+
+impl<'a> FullyConnected<'a, i32> {
     /// Raw int32 accumulators `acc[o] = bias[o] + sum_i w[o][i] * input[i]` (wrapping), e.g. for the
     /// last layer, whose output is dequantized to f32 ([`dequantize_accumulators`]).
     pub fn forward_accumulators(&self, input: &[i8], acc: &mut [i32]) -> Result<(), KernelError> {
@@ -183,105 +362,17 @@ impl<'a> FullyConnected<'a> {
         self.forward_activated(requant, None, LayerInput::Int8(input), output)
     }
 
-    /// [`Self::forward`] for any [`LayerInput`], with `activation` (if any) applied to every
-    /// requantized output: `output[o] = lut(requantize_to_i8(...))`.
-    pub fn forward_activated(
-        &self,
-        requant: &FcRequant<'_>,
-        activation: Option<&LutTable>,
-        input: LayerInput<'_>,
-        output: &mut [i8],
-    ) -> Result<(), KernelError> {
-        requant.validate(self.out_features)?;
-        self.forward_validated(requant, activation, input, output)
-    }
-
-    /// [`Self::forward_activated`] for a `requant` that passed [`FcRequant::validate`] for this
-    /// layer (the per-channel checks are not repeated; the shapes are). With unvalidated
-    /// parameters the outputs are unspecified, never a panic.
-    pub(crate) fn forward_validated(
-        &self,
-        requant: &FcRequant<'_>,
-        activation: Option<&LutTable>,
-        input: LayerInput<'_>,
-        output: &mut [i8],
-    ) -> Result<(), KernelError> {
-        self.check_input(input.len())?;
-        let channels = self.out_features;
-        if requant.multipliers.len() != channels || requant.shifts.len() != channels {
-            return Err(KernelError::RequantLength);
-        }
-        if output.len() != channels {
-            return Err(KernelError::OutputLength);
-        }
-        match input {
-            LayerInput::Int8(values) => {
-                #[cfg(target_arch = "x86_64")]
-                if let Some(avx2) = super::x86::Avx2::get() {
-                    self.forward_avx2(avx2, requant, values, output);
-                    if let Some(table) = activation {
-                        lut::apply_in_place(table, output);
-                    }
-                    return Ok(());
-                }
-                self.requantize_activated(requant, activation, values, output);
-            }
-            LayerInput::Int16(values) => {
-                self.requantize_activated(requant, activation, values, output)
-            }
-        }
-        Ok(())
-    }
-
-    /// [`Self::requantize_rows`] through `activation`'s table, or none.
-    #[inline(always)]
-    fn requantize_activated<T: RowInput>(
-        &self,
-        requant: &FcRequant<'_>,
-        activation: Option<&LutTable>,
-        input: &[T],
-        output: &mut [i8],
-    ) {
-        match activation {
-            Some(table) => self.requantize_rows(requant, input, output, |v| lut::lookup(table, v)),
-            None => self.requantize_rows(requant, input, output, |v| v),
-        }
-    }
-
-    /// Requantizes `bias[o] + dot(w[o], input)` for every row into `output`, through `map`, two
-    /// rows per kernel call (callers checked the shapes; `requant` must be valid for the results
-    /// to equal [`requantize_to_i8`]'s).
-    #[inline(always)]
-    fn requantize_rows<T: RowInput>(
-        &self,
-        requant: &FcRequant<'_>,
-        input: &[T],
-        output: &mut [i8],
-        map: impl Fn(i8) -> i8,
-    ) {
-        let Self { weights, bias, .. } = *self;
-        let (multipliers, shifts) = (requant.multipliers, requant.shifts);
-        for_each_block(input, weights, bias, |first, sums| {
-            let end = first + sums.len();
-            if let (Some(out), Some(m), Some(s)) = (
-                output.get_mut(first..end),
-                multipliers.get(first..end),
-                shifts.get(first..end),
-            ) {
-                requantize_block(sums, m, s, requant, out, &map);
-            }
-        });
-    }
-
     /// [`Self::forward`] with the AVX2 kernels (x86-64; callers checked the shapes and
     /// `requant`): eight output channels per kernel call, requantized in registers; the last
-    /// `out_features % 8` channels one at a time. Same outputs as the portable loop.
+    /// `out_features % 8` channels one at a time. Same outputs as the portable loop. int16 inputs
+    /// (a 16-bit first-layer input plane) take the same kernels with the codes loaded as they
+    /// are instead of sign-extended.
     #[cfg(target_arch = "x86_64")]
-    fn forward_avx2(
+    pub(super) fn forward_avx2(
         &self,
         avx2: super::x86::Avx2,
         requant: &FcRequant<'_>,
-        input: &[i8],
+        input: LayerInput<'_>,
         output: &mut [i8],
     ) {
         use super::x86::{RequantBlock, BLOCK_ROWS};
@@ -307,7 +398,10 @@ impl<'a> FullyConnected<'a> {
                 zero_point,
                 bounds,
             };
-            *out = avx2.requantize_rows(rows, input, bias, block);
+            *out = match input {
+                LayerInput::Int8(values) => avx2.requantize_rows(rows, values, bias, block),
+                LayerInput::Int16(values) => avx2.requantize_rows_i16(rows, values, bias, block),
+            };
         }
         let tail = out_tail
             .iter_mut()
@@ -315,7 +409,11 @@ impl<'a> FullyConnected<'a> {
             .zip(bias_tail)
             .zip(multiplier_tail.iter().zip(shift_tail));
         for (((out, row), bias), (multiplier, shift)) in tail {
-            let acc = bias.wrapping_add(dot_i8_prefix(row, input));
+            let dot = match input {
+                LayerInput::Int8(values) => dot_i8_prefix(row, values),
+                LayerInput::Int16(values) => dot_i8_i16_prefix(row, values),
+            };
+            let acc = bias.wrapping_add(dot);
             *out = requantize_to_i8(acc, *multiplier, *shift, zero_point, bounds.0, bounds.1);
         }
     }
@@ -352,54 +450,48 @@ impl<'a> FullyConnected<'a> {
     }
 }
 
-/// `out[r] = map(requantize_valid(sums[r], multipliers[r], shifts[r], ...))` for one block of
-/// rows. Not inlined, so that its loop has the registers to itself; a full int8 clamp range (the
+/// `out[r] = map(P::requantize(sums[r], multipliers[r], shifts[r], ...))` for one block of
+/// rows. Not inlined, so that its loop has the registers to itself; a full clamp range (the
 /// common case) takes a loop without the two compares.
 #[inline(never)]
-fn requantize_block(
-    sums: &[i32],
+fn requantize_block<P: Precision>(
+    sums: &[P::Acc],
     multipliers: &[i32],
     shifts: &[i32],
-    requant: &FcRequant<'_>,
-    out: &mut [i8],
-    map: &impl Fn(i8) -> i8,
+    requant: &FcRequant<'_, P>,
+    out: &mut [P],
+    map: &impl Fn(P) -> P,
 ) {
     let zero_point = requant.output_zero_point;
     let channels = out.iter_mut().zip(sums).zip(multipliers.iter().zip(shifts));
-    if (requant.activation_min, requant.activation_max) == (i8::MIN, i8::MAX) {
+    if (requant.activation_min, requant.activation_max) == (P::MIN, P::MAX) {
         for ((out, sum), (multiplier, shift)) in channels {
-            *out = map(requantize_valid(
+            *out = map(P::requantize(
                 *sum,
                 *multiplier,
                 *shift,
                 zero_point,
-                i8::MIN,
-                i8::MAX,
+                P::MIN,
+                P::MAX,
             ));
         }
     } else {
         let (lo, hi) = (requant.activation_min, requant.activation_max);
         for ((out, sum), (multiplier, shift)) in channels {
-            *out = map(requantize_valid(
-                *sum,
-                *multiplier,
-                *shift,
-                zero_point,
-                lo,
-                hi,
-            ));
+            *out = map(P::requantize(*sum, *multiplier, *shift, zero_point, lo, hi));
         }
     }
 }
 
-impl FcRequant<'_> {
-    /// Checks lengths against `out_features`, the zero point, the clamp range, multiplier signs and
-    /// shift ranges.
+impl<P: Precision> FcRequant<'_, P> {
+    /// Checks lengths against `out_features`, the zero point (`[-128, 127]` for int8 outputs, 0
+    /// for int16), the clamp range, multiplier signs and shift ranges (`P::SHIFT_MIN..=
+    /// P::SHIFT_MAX`).
     pub fn validate(&self, out_features: usize) -> Result<(), KernelError> {
         if self.multipliers.len() != out_features || self.shifts.len() != out_features {
             return Err(KernelError::RequantLength);
         }
-        if !(-128..=127).contains(&self.output_zero_point) {
+        if !P::zero_point_valid(self.output_zero_point) {
             return Err(KernelError::ZeroPoint);
         }
         if self.activation_min > self.activation_max {
@@ -407,10 +499,9 @@ impl FcRequant<'_> {
         }
         // Folds without early exit: LLVM vectorizes them (this runs on every forward call).
         let bad_multiplier = self.multipliers.iter().fold(false, |bad, m| bad | (*m < 0));
-        let bad_shift = self
-            .shifts
-            .iter()
-            .fold(false, |bad, s| bad | !(SHIFT_MIN..=SHIFT_MAX).contains(s));
+        let bad_shift = self.shifts.iter().fold(false, |bad, s| {
+            bad | !(P::SHIFT_MIN..=P::SHIFT_MAX).contains(s)
+        });
         if bad_multiplier || bad_shift {
             return Err(KernelError::Multiplier);
         }
@@ -419,9 +510,10 @@ impl FcRequant<'_> {
 }
 
 /// `out[o] = acc[o] as f32 * scales[o]` where `scales[o] = input_scale * weight_scale[o]`
-/// (see [`crate::quant::dequantize_accumulator`]).
-pub fn dequantize_accumulators(
-    acc: &[i32],
+/// (see [`crate::quant::dequantize_accumulator`]; int64 accumulators:
+/// [`crate::quant::dequantize_wide`]).
+pub fn dequantize_accumulators<A: Accumulator>(
+    acc: &[A],
     scales: &[f32],
     out: &mut [f32],
 ) -> Result<(), KernelError> {
@@ -432,10 +524,12 @@ pub fn dequantize_accumulators(
         return Err(KernelError::OutputLength);
     }
     for ((a, s), o) in acc.iter().zip(scales).zip(out.iter_mut()) {
-        *o = dequantize_accumulator(*a, *s);
+        *o = a.dequantize(*s);
     }
     Ok(())
 }
 
+#[cfg(test)]
+mod int16_tests;
 #[cfg(test)]
 mod tests;

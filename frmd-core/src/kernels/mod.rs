@@ -2,15 +2,19 @@
 //!
 //! - [`dot`]: int8 x int8 -> int32 dot product (on Arm cores with the DSP extension, the
 //!   fully connected layer uses the `SMLAD` kernel of the private `dsp` module; see `build.rs`);
-//! - [`fc`]: int8 fully connected layer (requantized int8 output, or raw int32 accumulators);
+//! - [`fc`]: fully connected layer (requantized int8 or int16 output, or raw accumulators),
+//!   generic over the activation [`Precision`] (int8, or int16 with int64 accumulation);
 //! - [`lut`]: 256-entry int8 lookup-table activations and their builder;
+//! - [`lut16`]: interpolated 513-knot int16 activation tables and their builder;
+//! - [`precision`]: the [`Precision`] (`i8`, `i16`) and [`Accumulator`] (`i32`, `i64`) traits;
 //! - [`activation`]: the f32 SiLU / Mish / GELU (erf, tanh and sigmoid forms) definitions used
 //!   everywhere (LUT building, f32 reference paths, host models);
 //! - [`norm`]: f32 LayerNorm; [`softmax`]: numerically stable f32 softmax.
 //!
 //! Every kernel checks slice lengths and returns a [`KernelError`] instead of panicking. Integer
 //! kernels are bit-exact: int32 accumulation wraps (two's complement, like the Cortex-M
-//! `SMLAD`/`MLA` instructions), so the result does not depend on summation order.
+//! `SMLAD`/`MLA` instructions), so the result does not depend on summation order; int64
+//! accumulation adds the sign-extended int32 sums of fixed 512-column chunks.
 
 pub mod activation;
 pub mod dot;
@@ -19,8 +23,11 @@ mod dsp;
 #[cfg(frmd_arm_dsp)]
 mod dsp_asm;
 pub mod fc;
+mod input;
 pub mod lut;
+pub mod lut16;
 pub mod norm;
+pub mod precision;
 pub(crate) mod rows;
 pub mod softmax;
 #[cfg(target_arch = "x86_64")]
@@ -30,7 +37,9 @@ pub use activation::{gelu, gelu_sigmoid, gelu_tanh, mish, silu, softplus, Activa
 pub use dot::dot_i8;
 pub use fc::{dequantize_accumulators, FcRequant, FullyConnected, LayerInput};
 pub use lut::{Lut8, LutTable};
+pub use lut16::{Lut16, Lut16Table, LUT16_LEN};
 pub use norm::{layer_norm, layer_norm_in_place};
+pub use precision::{Accumulator, Precision};
 pub use softmax::softmax_in_place;
 
 /// Rows per block that the row kernels (`rows::for_each_block`) hand to their caller.
@@ -60,7 +69,7 @@ pub enum KernelError {
     Empty,
     /// `activation_min > activation_max`.
     ActivationRange,
-    /// The output zero point lies outside `[-128, 127]`.
+    /// The output zero point lies outside `[-128, 127]` (int8 outputs) or is not 0 (int16).
     ZeroPoint,
     /// A per-channel shift lies outside `SHIFT_MIN..=SHIFT_MAX`, or a multiplier is negative.
     Multiplier,
@@ -68,6 +77,11 @@ pub enum KernelError {
     NonFinite,
     /// LayerNorm epsilon is not a finite positive number.
     Epsilon,
+    /// A weight of -128 in a layer with int64 accumulation (exact only for `[-127, 127]`).
+    WeightRange,
+    /// An int64 bias beyond `quant::BIAS16_MAX`, or an input wider than
+    /// `quant::IN_FEATURES16_MAX`: accumulators could leave the exact domain.
+    BiasRange,
 }
 
 impl core::fmt::Display for KernelError {
@@ -83,10 +97,12 @@ impl core::fmt::Display for KernelError {
             Self::AffineLength => "layer norm gamma/beta length does not match the input",
             Self::Empty => "empty input",
             Self::ActivationRange => "activation_min > activation_max",
-            Self::ZeroPoint => "output zero point is outside [-128, 127]",
+            Self::ZeroPoint => "output zero point is outside [-128, 127] (int8) or not 0 (int16)",
             Self::Multiplier => "requantization multiplier negative or shift out of range",
             Self::NonFinite => "non-finite float input",
             Self::Epsilon => "layer norm epsilon is not finite and positive",
+            Self::WeightRange => "weight -128 in a layer with int64 accumulation",
+            Self::BiasRange => "int64 bias or input width beyond the exact accumulation range",
         };
         f.write_str(text)
     }

@@ -9,18 +9,28 @@
 //!   (`bias_q - input_zero_point * sum(w_q)`), so the kernels never see the input zero point;
 //! - requantization: `fixed_point` (Q31 multiplier and shift, TFLite double rounding).
 //!
+//! The 16x8 scheme (int16 symmetric activations, int8 weights, int64 bias; TFLite / CMSIS-NN
+//! `s16`) adds [`requantize_s64`] (Q15 multiplier, one rounding), [`dequantize_wide`],
+//! [`quantize_sym16`] and the int64 bias helpers ([`quantize_bias_i64`]).
+//!
 //! Rounding modes, stated once:
 //! - float -> integer ([`quantize`], weights, bias, multiplier mantissas): round half away from
 //!   zero (`libm::roundf` / `libm::round`, C `round`, as TFLite's `TfLiteRound`);
 //! - high multiply: round half up; divide by a power of two: round half away from zero.
 
 mod fixed_point;
+mod int16;
 mod params;
 
 pub use fixed_point::{
     multiply_by_quantized_multiplier, quantize_multiplier, requantize_to_i8, requantize_valid,
     rounding_divide_by_pot, saturating_rounding_doubling_high_mul, Q31_MANTISSA_MIN, SHIFT_MAX,
     SHIFT_MIN,
+};
+pub use int16::{
+    dequantize_sym16, dequantize_wide, fold_input_zero_point_i64, quantize_bias_i64,
+    quantize_sym16, reduce_multiplier, requantize_s64, symmetric_i16_scale, BIAS16_MAX, CHUNK16,
+    IN_FEATURES16_MAX, SHIFT16_MAX, SHIFT16_MIN,
 };
 pub use params::{
     combine_plane_accumulators, dequantize, dequantize_accumulator, dequantize_i16,
@@ -30,6 +40,8 @@ pub use params::{
     WEIGHT_MIN,
 };
 
+#[cfg(test)]
+mod int16_tests;
 #[cfg(any(test, feature = "reference"))]
 pub mod reference;
 #[cfg(test)]
@@ -65,7 +77,8 @@ pub enum QuantError {
     NonFiniteValue,
     /// Slice lengths disagree with the stated shape.
     LengthMismatch,
-    /// A quantized bias (or bias with the folded zero point) does not fit in i32.
+    /// A quantized bias (or bias with the folded zero point) does not fit in i32 (int8 layers),
+    /// or exceeds `BIAS16_MAX` in magnitude (int16-activation layers).
     BiasOverflow,
 }
 
@@ -82,7 +95,7 @@ impl core::fmt::Display for QuantError {
             Self::InvalidZeroPoint => "zero point is outside [-128, 127]",
             Self::NonFiniteValue => "value to quantize is not finite",
             Self::LengthMismatch => "slice length does not match the shape",
-            Self::BiasOverflow => "quantized bias does not fit in i32",
+            Self::BiasOverflow => "quantized bias does not fit its accumulator",
         };
         f.write_str(text)
     }

@@ -44,3 +44,93 @@ pub fn combine_planes(coarse: i32, fine: i32) -> i32 {
 fn saturate(value: i128) -> i32 {
     value.clamp(i128::from(i32::MIN), i128::from(i32::MAX)) as i32
 }
+
+// --- The 16x8 scheme (int16 activations, int8 weights, int64 accumulators) ---------------------
+//
+// Written from the definitions in `/work/notes/int16-design.md` section 3.8 with i128 arithmetic
+// and Euclidean divisions (residues by `rem_euclid`, quotients by `div_euclid`, the slope form of
+// the table lookup), sharing no code or formulation with `quant::int16` and `kernels::lut16`.
+
+/// The int64 accumulator of one row: `bias + sum over chunks c of sext32(sum_{i in c} w_i x_i mod
+/// 2^32)`, chunks of `chunk` consecutive columns from column 0 (`chunk = 0` is taken as one chunk
+/// for the whole row). Exact `bias + w . x` whenever every chunk's sum fits in i32.
+pub fn accumulate_chunked<T: Copy + Into<i128>>(
+    bias: i64,
+    row: &[i8],
+    input: &[T],
+    chunk: usize,
+) -> i128 {
+    let len = row.len().min(input.len());
+    let chunk = if chunk == 0 { len.max(1) } else { chunk };
+    let mut total = i128::from(bias);
+    let mut start = 0;
+    while start < len {
+        let end = start.saturating_add(chunk).min(len);
+        let mut sum = 0_i128;
+        for i in start..end {
+            let (Some(w), Some(x)) = (row.get(i), input.get(i)) else {
+                break;
+            };
+            sum += i128::from(*w) * (*x).into();
+        }
+        total += signed_residue(sum);
+        start = end;
+    }
+    total
+}
+
+/// `v mod 2^32` as a signed 32-bit value, in i128.
+fn signed_residue(v: i128) -> i128 {
+    let r = v.rem_euclid(1_i128 << 32);
+    if r >= 1_i128 << 31 {
+        r - (1_i128 << 32)
+    } else {
+        r
+    }
+}
+
+/// CMSIS-NN's `REDUCE_MULTIPLIER`: `0x7FFF` for `m >= 0x7FFF0000`, else `floor((m + 2^15) /
+/// 2^16)`; negative results (negative `m`) are taken as 0.
+pub fn reduce_multiplier16(m: i32) -> i32 {
+    let m = i128::from(m);
+    let reduced = if m >= 0x7FFF_0000 {
+        0x7FFF
+    } else {
+        (m + (1 << 15)).div_euclid(1 << 16)
+    };
+    reduced.clamp(0, 0x7FFF) as i32
+}
+
+/// `clamp(floor((acc * m15 + 2^(T - 1)) / 2^T), lo, hi)` with `T = 15 - shift` and `m15 =
+/// reduce_multiplier16(multiplier)`, exactly (for `shift` in `-31..=14`; `lo > hi` gives `hi`).
+pub fn requantize16(acc: i128, multiplier: i32, shift: i32, lo: i16, hi: i16) -> i16 {
+    let t = (15 - i64::from(shift)).clamp(1, 100) as u32;
+    let product = acc * i128::from(reduce_multiplier16(multiplier));
+    let rounded = (product + (1_i128 << (t - 1))).div_euclid(1_i128 << t);
+    rounded.max(i128::from(lo)).min(i128::from(hi)) as i16
+}
+
+/// The interpolated int16 table at code `x`, slope form: with `q = floor(x / 128) + 256` and
+/// `f = x mod 128`, `floor((128 t[q] + (t[q+1] - t[q]) f + 64) / 128)` (TFLite's lookup).
+/// Returns `None` if `table` is shorter than `q + 2` entries.
+pub fn lookup16(table: &[i16], x: i16) -> Option<i16> {
+    let x = i128::from(x);
+    let q = usize::try_from(x.div_euclid(128) + 256).ok()?;
+    let f = x.rem_euclid(128);
+    let left = i128::from(*table.get(q)?);
+    let right = i128::from(*table.get(q + 1)?);
+    let y = (128 * left + (right - left) * f + 64).div_euclid(128);
+    i16::try_from(y).ok()
+}
+
+/// The int64 accumulator's f32 value by the split of `quant::dequantize_wide`, with the parts
+/// from Euclidean division: `hi = floor((acc + 2^23) / 2^24)`, `lo = (acc + 2^23) mod 2^24 -
+/// 2^23`, then `hi * (scale * 2^24) + lo * scale` in f32 (for `|acc| < 2^48`).
+pub fn dequantize_wide(acc: i64, scale: f32) -> f32 {
+    let shifted = i128::from(acc) + (1 << 23);
+    let hi = shifted.div_euclid(1 << 24) as f32;
+    let lo = (shifted.rem_euclid(1 << 24) - (1 << 23)) as f32;
+    let high = hi * (scale * 16_777_216.0);
+    let low = lo * scale;
+    high + low
+}

@@ -1,38 +1,100 @@
 //! The measured workload of the kernel firmware: frmd-core's fully connected kernels on random
 //! shapes, so that every path of the Cortex-M DSP kernels (two-row pairs, the four-step loop
 //! entered at each remainder, column tails, an odd last row, inputs wider than the pair buffer,
-//! rows off word boundaries, int8 and int16 inputs, every clamp and shift) meets the host's
-//! portable (and AVX2) kernels on the same bytes.
+//! rows off word boundaries, int8 and int16 inputs, every clamp and shift; for int16 activations
+//! also the in-loop int16 unpacking, the 512-column int64 chunks, wrapping chunk sums, the Q15
+//! requantization and the interpolated tables) meets the host's portable (and AVX2) kernels on
+//! the same bytes.
 //!
 //! `core` + frmd-core only; the host test runs the same cases and must reproduce the digest.
 //!
-//! Case `c` draws from `Rng::new(SEED + c)`: the width (`1..=300`, every fifth case a multiple
-//! of 8, every seventh above 256), the rows (`1..=9`), the weights (every fourth case only
-//! `-127` and `127`), biases (24-bit), per-row requantization (shifts `-12..=3`, one case in six
-//! with a narrow clamp), the input (int8, or int16 for odd cases) and whether a table is applied;
-//! the weights start `c % 4` bytes into a word-aligned buffer. Digest per case: the requantized
-//! int8 outputs, then the raw accumulators (int8 inputs only) as little-endian i32.
+//! Cases `0..INT8_CASES`, int8 activations: case `c` draws from `Rng::new(SEED + c)`: the width
+//! (`1..=300`, every fifth case a multiple of 8, every seventh above 256), the rows (`1..=9`), the
+//! weights (every fourth case only `-127` and `127`), biases (24-bit), per-row requantization
+//! (shifts `-12..=3`, one case in six with a narrow clamp), the input (int8, or int16 for odd
+//! cases) and whether a table is applied; the weights start `c % 4` bytes into a word-aligned
+//! buffer. Digest per case: the requantized int8 outputs, then the raw accumulators (int8 inputs
+//! only) as little-endian i32. (These are the 48 cases of the int8-only workload, unchanged: their
+//! digest alone is [`INT8_DIGEST`].)
+//!
+//! Cases `INT8_CASES..CASES`, int16 activations (the 16x8 scheme: `FullyConnected<i64>`,
+//! `FcRequant<i16>`, `Lut16`): case `INT8_CASES + k` draws from `Rng::new(SEED16 + k)`: the width
+//! by `k % 6` (multiples of 8 up to 256, anything up to 256, 264..=511 with every remainder mod 8,
+//! 513..=1100, multiples of
+//! 8 in 520..=1096, and the boundaries 256/257/511/512/513/1024/1025/1100), up to 17 rows (a
+//! second 16-row block) within [`WEIGHT16_BYTES`], weights uniform in `[-127, 127]`, only
+//! `+-127`, uniform in `[-128, 127]`, or all `-128` against inputs all `-32768` (every full
+//! chunk's sum wraps to `-2^31`), inputs at the int16 ends or random, int64 biases from 0 to
+//! `+-2^46`, shifts around the accumulators' spread with cases at `-31` and `7`, full / ReLU / narrow / single-value
+//! clamps, a random interpolated table in two of three cases, weights off word boundaries in one
+//! case of eight and a misaligned int16 input in another, int8 codes as the input in one case of
+//! sixteen. Digest per case: the int16 outputs (LE i16), the int64 accumulators (LE i64) and their
+//! dequantized f32 values (LE bits).
 
 use frmd_core::hash::Fnv1a64;
-use frmd_core::kernels::{FcRequant, FullyConnected, KernelError, LayerInput, Lut8};
+use frmd_core::kernels::{
+    dequantize_accumulators, FcRequant, FullyConnected, KernelError, LayerInput, Lut16, Lut8,
+    LUT16_LEN,
+};
+use frmd_core::quant::{BIAS16_MAX, SHIFT16_MAX, SHIFT16_MIN};
 use frmd_core::rng::Rng;
 
 use crate::workload::Workload;
 
-/// Distinct cases.
-pub const CASES: usize = 48;
+/// Distinct cases: the int8 ones, then as many int16 ones.
+pub const CASES: usize = 2 * INT8_CASES;
+/// The int8-activation cases (case numbers `0..INT8_CASES`).
+pub const INT8_CASES: usize = 48;
 /// Seed of case 0; case `c` uses `SEED + c`.
 pub const SEED: u64 = 0x4652_4D44_4B45_524E;
-/// Widest input and most rows of a case.
+/// Seed of int16 case 0 (case `INT8_CASES`); int16 case `k` uses `SEED16 + k`.
+pub const SEED16: u64 = 0x4652_4D44_3136_4B45;
+/// Widest input and most rows of an int8 case.
 pub const MAX_WIDTH: usize = 300;
 pub const MAX_ROWS: usize = 9;
+/// Widest input and most rows of an int16 case; `rows * width <= WEIGHT16_BYTES`.
+pub const MAX_WIDTH16: usize = 1100;
+pub const MAX_ROWS16: usize = 17;
+/// Weight bytes of an int16 case (the buffer is shared with the int8 cases; the M0's 16 KiB of
+/// RAM bound it).
+pub const WEIGHT16_BYTES: usize = 5600;
+/// The digest of the int8 cases alone: the workload's digest before the int16 cases were added
+/// (main at `433216a`), which the host test checks so that the int8 kernels' bits are unchanged.
+pub const INT8_DIGEST: u64 = 0xea1b_1b95_c686_3eb2;
+
+const WEIGHT_BYTES: usize = if MAX_WIDTH * MAX_ROWS > WEIGHT16_BYTES {
+    MAX_WIDTH * MAX_ROWS
+} else {
+    WEIGHT16_BYTES
+};
 
 /// Word-aligned weight storage (a case starts 0..3 bytes into it).
 #[repr(C, align(4))]
-struct Weights([i8; MAX_WIDTH * MAX_ROWS + 4]);
+struct Weights([i8; WEIGHT_BYTES + 4]);
+
+/// Word-aligned int16 input storage (a case may start one halfword into it).
+#[repr(C, align(4))]
+struct Halves([i16; MAX_WIDTH16 + 2]);
+
+/// The data of one int16 case that the int8 cases do not have.
+struct Int16Case {
+    rows: usize,
+    input_offset: usize,
+    int8_input: bool,
+    clamp: (i16, i16),
+    bias: [i64; MAX_ROWS16],
+    multipliers: [i32; MAX_ROWS16],
+    shifts: [i32; MAX_ROWS16],
+    scales: [f32; MAX_ROWS16],
+    table: Lut16,
+    output: [i16; MAX_ROWS16],
+    accumulators: [i64; MAX_ROWS16],
+    dequantized: [f32; MAX_ROWS16],
+}
 
 /// One case's data and outputs.
 pub struct KernelWorkload {
+    case: usize,
     width: usize,
     rows: usize,
     offset: usize,
@@ -44,16 +106,18 @@ pub struct KernelWorkload {
     bias: [i32; MAX_ROWS],
     multipliers: [i32; MAX_ROWS],
     shifts: [i32; MAX_ROWS],
-    input: [i8; MAX_WIDTH],
-    input_wide: [i16; MAX_WIDTH],
+    input: [i8; MAX_WIDTH16],
+    input_wide: Halves,
     table: Lut8,
     output: [i8; MAX_ROWS],
     accumulators: [i32; MAX_ROWS],
+    int16: Int16Case,
 }
 
 impl KernelWorkload {
     pub fn new() -> Self {
         Self {
+            case: 0,
             width: 1,
             rows: 1,
             offset: 0,
@@ -61,15 +125,29 @@ impl KernelWorkload {
             with_table: false,
             clamp: (i8::MIN, i8::MAX),
             zero_point: 0,
-            weights: Weights([0; MAX_WIDTH * MAX_ROWS + 4]),
+            weights: Weights([0; WEIGHT_BYTES + 4]),
             bias: [0; MAX_ROWS],
             multipliers: [0; MAX_ROWS],
             shifts: [0; MAX_ROWS],
-            input: [0; MAX_WIDTH],
-            input_wide: [0; MAX_WIDTH],
+            input: [0; MAX_WIDTH16],
+            input_wide: Halves([0; MAX_WIDTH16 + 2]),
             table: Lut8::from_table([0; 256]),
             output: [0; MAX_ROWS],
             accumulators: [0; MAX_ROWS],
+            int16: Int16Case {
+                rows: 1,
+                input_offset: 0,
+                int8_input: false,
+                clamp: (i16::MIN, i16::MAX),
+                bias: [0; MAX_ROWS16],
+                multipliers: [0; MAX_ROWS16],
+                shifts: [0; MAX_ROWS16],
+                scales: [0.0; MAX_ROWS16],
+                table: Lut16::from_table([0; LUT16_LEN]),
+                output: [0; MAX_ROWS16],
+                accumulators: [0; MAX_ROWS16],
+                dequantized: [0.0; MAX_ROWS16],
+            },
         }
     }
 
@@ -81,9 +159,22 @@ impl KernelWorkload {
             .unwrap_or(&[]);
         FullyConnected::new(self.width, self.rows, weights, &self.bias[..self.rows])
     }
-}
 
-impl KernelWorkload {
+    fn layer16(&self) -> FullyConnected<'_, i64> {
+        let rows = self.int16.rows;
+        let weights = self
+            .weights
+            .0
+            .get(self.offset..self.offset + self.width * rows)
+            .unwrap_or(&[]);
+        FullyConnected::new(self.width, rows, weights, &self.int16.bias[..rows])
+    }
+
+    /// Whether the prepared case is an int16-activation case.
+    pub fn is_int16(&self) -> bool {
+        self.case >= INT8_CASES
+    }
+
     /// Input width of the prepared case.
     pub fn width(&self) -> usize {
         self.width
@@ -91,28 +182,43 @@ impl KernelWorkload {
 
     /// Output rows of the prepared case.
     pub fn rows(&self) -> usize {
-        self.rows
-    }
-}
-
-impl Default for KernelWorkload {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl Workload for KernelWorkload {
-    type Error = KernelError;
-
-    fn name(&self) -> &'static str {
-        "fully connected kernels on random shapes (int8 and int16 inputs)"
+        if self.is_int16() {
+            self.int16.rows
+        } else {
+            self.rows
+        }
     }
 
-    fn cases(&self) -> usize {
-        CASES
+    /// Whether the prepared int16 case's weights start on a word boundary and its input is
+    /// word-aligned (the DSP kernels' assembly paths; others take the portable rows).
+    pub fn aligned(&self) -> bool {
+        self.offset == 0 && self.int16.input_offset == 0
     }
 
-    fn prepare(&mut self, case: usize) -> Result<(), KernelError> {
+    /// The prepared case's weights.
+    pub fn weights(&self) -> &[i8] {
+        let rows = self.rows();
+        self.weights
+            .0
+            .get(self.offset..self.offset + self.width * rows)
+            .unwrap_or(&[])
+    }
+
+    /// The prepared int16 case's int16 input.
+    pub fn input16(&self) -> &[i16] {
+        let start = self.int16.input_offset;
+        self.input_wide
+            .0
+            .get(start..start + self.width)
+            .unwrap_or(&[])
+    }
+
+    /// The prepared int16 case's outputs (after [`Workload::run`]).
+    pub fn output16(&self) -> &[i16] {
+        &self.int16.output[..self.int16.rows]
+    }
+
+    fn prepare_int8(&mut self, case: usize) {
         let mut rng = Rng::new(SEED.wrapping_add(case as u64));
         let mut draw = |n: u32| (rng.next_u32() % n) as usize;
         self.width = match case {
@@ -131,7 +237,7 @@ impl Workload for KernelWorkload {
         };
         self.zero_point = draw(256) as i32 - 128;
         let extreme = case % 4 == 2;
-        for w in self.weights.0.iter_mut() {
+        for w in self.weights.0.iter_mut().take(MAX_WIDTH * MAX_ROWS + 4) {
             let bits = rng.next_u32();
             *w = match (extreme, bits & 1) {
                 (true, 0) => -127,
@@ -144,7 +250,10 @@ impl Workload for KernelWorkload {
             self.multipliers[o] = (1 << 30) + (rng.next_u32() >> 2) as i32;
             self.shifts[o] = (rng.next_u32() % 16) as i32 - 12;
         }
-        for (x, x_wide) in self.input.iter_mut().zip(self.input_wide.iter_mut()) {
+        for (x, x_wide) in self.input[..MAX_WIDTH]
+            .iter_mut()
+            .zip(self.input_wide.0.iter_mut())
+        {
             let bits = rng.next_u32();
             *x = bits as i8;
             *x_wide = (bits >> 16) as i16;
@@ -152,10 +261,93 @@ impl Workload for KernelWorkload {
         for (i, entry) in self.table.table.iter_mut().enumerate() {
             *entry = (i as i32 * 37 % 256 - 128) as i8;
         }
-        Ok(())
     }
 
-    fn run(&mut self) -> Result<(), KernelError> {
+    fn prepare_int16(&mut self, k: usize) {
+        const BOUNDARIES: [usize; 8] = [256, 257, 511, 512, 513, 1024, 1025, 1100];
+        let mut rng = Rng::new(SEED16.wrapping_add(k as u64));
+        let mut draw = |n: usize| (rng.next_u32() % n as u32) as usize;
+        self.width = match k % 6 {
+            0 => 8 * (1 + draw(32)),
+            1 => 1 + draw(256),
+            // 264..=511, every remainder mod 8 over the eight such cases.
+            2 => 264 + 8 * draw(31) + (k / 6) % 8,
+            3 => 513 + draw(MAX_WIDTH16 - 512),
+            4 => 8 * (65 + draw(73)),
+            _ => BOUNDARIES[(k / 6) % BOUNDARIES.len()],
+        };
+        let most_rows = (WEIGHT16_BYTES / self.width).clamp(1, MAX_ROWS16);
+        // Cases 0 and 1 mod 12 (at most 256 columns) fill 17 rows: a second 16-row block.
+        let rows = if k % 12 < 2 {
+            most_rows
+        } else {
+            1 + draw(most_rows)
+        };
+        self.offset = if k % 8 == 5 { 1 + k % 3 } else { 0 };
+        let case = &mut self.int16;
+        case.rows = rows;
+        case.input_offset = usize::from(k % 8 == 6);
+        case.int8_input = k % 16 == 15;
+        self.with_table = k % 3 != 0;
+        case.clamp = match k % 12 {
+            4 | 10 => (0, i16::MAX),
+            5 | 11 => (-1000, 5000),
+            7 => (7, 7),
+            _ => (i16::MIN, i16::MAX),
+        };
+        // 1: all -128 against all -32768 (wrapping chunk sums); 2, 6: +-127; 3: [-128, 127].
+        let kind = k % 8;
+        for w in self.weights.0.iter_mut().take(WEIGHT16_BYTES + 4) {
+            let bits = rng.next_u32();
+            *w = match kind {
+                1 => i8::MIN,
+                2 | 6 if bits & 1 == 0 => -127,
+                2 | 6 => 127,
+                3 => (bits >> 8) as i8,
+                _ => ((bits >> 8) as i8).max(-127),
+            };
+        }
+        for x in self.input_wide.0.iter_mut() {
+            let bits = rng.next_u32();
+            *x = match (kind, k % 3, bits & 3) {
+                (1, _, _) => i16::MIN,
+                (_, 0, 0) => i16::MIN,
+                (_, 0, 1) => i16::MAX,
+                (_, 1, _) => (bits >> 16) as i16 >> (bits % 12),
+                _ => (bits >> 16) as i16,
+            };
+        }
+        for (x, wide) in self.input.iter_mut().zip(self.input_wide.0.iter()) {
+            *x = (*wide >> 8) as i8;
+        }
+        let octaves = usize::BITS - self.width.leading_zeros();
+        for r in 0..MAX_ROWS16 {
+            let bits = rng.next_u32();
+            case.bias[r] = match (k + r) % 9 {
+                0 => BIAS16_MAX,
+                1 => -BIAS16_MAX,
+                2 => 0,
+                3 => (i64::from(bits as i32) << 15) >> (bits % 16),
+                _ => i64::from(bits as i32) >> 5,
+            };
+            case.multipliers[r] = (1 << 30) + (rng.next_u32() >> 2) as i32;
+            case.shifts[r] = match (k + r) % 10 {
+                8 => SHIFT16_MIN,
+                9 => SHIFT16_MAX,
+                // Around the accumulators' spread (about 2^21 sqrt(width)), so that outputs
+                // cover the int16 range and some saturate.
+                _ => -6 - (octaves / 2) as i32 - (rng.next_u32() % 7) as i32,
+            };
+            // Dequantization scales over many octaves.
+            let mantissa = 1.0 + (rng.next_u32() >> 9) as f32 / (1 << 23) as f32;
+            case.scales[r] = mantissa / (1_u64 << (20 + rng.next_u32() % 24)) as f32;
+        }
+        for t in case.table.table.iter_mut() {
+            *t = rng.next_u32() as i16;
+        }
+    }
+
+    fn run_int8(&mut self) -> Result<(), KernelError> {
         let requant = FcRequant {
             multipliers: &self.multipliers[..self.rows],
             shifts: &self.shifts[..self.rows],
@@ -170,7 +362,7 @@ impl Workload for KernelWorkload {
         };
         let layer = self.layer();
         let input = if self.wide {
-            LayerInput::Int16(&self.input_wide[..self.width])
+            LayerInput::Int16(&self.input_wide.0[..self.width])
         } else {
             LayerInput::Int8(&self.input[..self.width])
         };
@@ -186,7 +378,95 @@ impl Workload for KernelWorkload {
         Ok(())
     }
 
+    fn run_int16(&mut self) -> Result<(), KernelError> {
+        let case = &self.int16;
+        let rows = case.rows;
+        let requant = FcRequant::<i16> {
+            multipliers: &case.multipliers[..rows],
+            shifts: &case.shifts[..rows],
+            output_zero_point: 0,
+            activation_min: case.clamp.0,
+            activation_max: case.clamp.1,
+        };
+        let table = if self.with_table {
+            Some(&case.table.table)
+        } else {
+            None
+        };
+        let input = if case.int8_input {
+            LayerInput::Int8(&self.input[..self.width])
+        } else {
+            LayerInput::Int16(self.input16())
+        };
+        let layer = self.layer16();
+        let mut output = [0_i16; MAX_ROWS16];
+        layer.forward_activated(&requant, table, input, &mut output[..rows])?;
+        let mut accumulators = [0_i64; MAX_ROWS16];
+        layer.accumulate(input, &mut accumulators[..rows])?;
+        let mut dequantized = [0.0_f32; MAX_ROWS16];
+        dequantize_accumulators(
+            &accumulators[..rows],
+            &case.scales[..rows],
+            &mut dequantized[..rows],
+        )?;
+        let case = &mut self.int16;
+        case.output = output;
+        case.accumulators = accumulators;
+        case.dequantized = dequantized;
+        Ok(())
+    }
+}
+
+impl Default for KernelWorkload {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Workload for KernelWorkload {
+    type Error = KernelError;
+
+    fn name(&self) -> &'static str {
+        "fully connected kernels on random shapes (int8 and int16 activations, int8 and int16 inputs)"
+    }
+
+    fn cases(&self) -> usize {
+        CASES
+    }
+
+    fn prepare(&mut self, case: usize) -> Result<(), KernelError> {
+        self.case = case;
+        if case < INT8_CASES {
+            self.prepare_int8(case);
+        } else {
+            self.prepare_int16(case - INT8_CASES);
+        }
+        Ok(())
+    }
+
+    fn run(&mut self) -> Result<(), KernelError> {
+        if self.is_int16() {
+            self.run_int16()
+        } else {
+            self.run_int8()
+        }
+    }
+
     fn digest_outputs(&self, digest: &mut Fnv1a64) {
+        if self.is_int16() {
+            let case = &self.int16;
+            let rows = case.rows;
+            for value in &case.output[..rows] {
+                digest.bytes(&value.to_le_bytes());
+            }
+            for value in &case.accumulators[..rows] {
+                digest.bytes(&value.to_le_bytes());
+            }
+            for value in &case.dequantized[..rows] {
+                digest.bytes(&value.to_bits().to_le_bytes());
+            }
+            return;
+        }
         for value in &self.output[..self.rows] {
             digest.bytes(&value.to_le_bytes());
         }
@@ -195,5 +475,84 @@ impl Workload for KernelWorkload {
                 digest.bytes(&value.to_le_bytes());
             }
         }
+    }
+}
+
+/// What the int16 cases reach (for the host test's coverage checks).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Int16Coverage {
+    /// Rows whose accumulator differs from the exact `bias + w . x` (a chunk sum wrapped).
+    pub wrapped_rows: usize,
+    /// Outputs strictly inside the clamp range.
+    pub unclamped: usize,
+    /// Outputs at a clamp bound.
+    pub clamped: usize,
+}
+
+#[cfg(feature = "std")]
+impl KernelWorkload {
+    /// (Host) the prepared and run int16 case against frmd-core's wide-integer model
+    /// (`frmd_core::quant::reference`: chunk residues, i128 requantization, the slope-form
+    /// lookup, the Euclidean dequantization split); `Err` names the first difference.
+    pub fn int16_against_model(&self) -> Result<Int16Coverage, std::string::String> {
+        use frmd_core::quant::{reference, CHUNK16};
+        let case = &self.int16;
+        let mut coverage = Int16Coverage::default();
+        let rows = self.weights().chunks_exact(self.width).take(case.rows);
+        for (r, row) in rows.enumerate() {
+            let bias = case.bias[r];
+            let (acc, exact) = if case.int8_input {
+                let input = &self.input[..self.width];
+                let acc = reference::accumulate_chunked(bias, row, input, CHUNK16);
+                (
+                    acc,
+                    reference::accumulate_chunked(bias, row, input, usize::MAX),
+                )
+            } else {
+                let input = self.input16();
+                let acc = reference::accumulate_chunked(bias, row, input, CHUNK16);
+                let exact: i128 = i128::from(bias)
+                    + row
+                        .iter()
+                        .zip(input)
+                        .map(|(w, x)| i128::from(*w) * i128::from(*x))
+                        .sum::<i128>();
+                (acc, exact)
+            };
+            coverage.wrapped_rows += usize::from(acc != exact);
+            if i128::from(case.accumulators[r]) != acc {
+                return Err(std::format!(
+                    "row {r}: accumulator {} vs model {acc}",
+                    case.accumulators[r]
+                ));
+            }
+            let (lo, hi) = case.clamp;
+            let q = reference::requantize16(acc, case.multipliers[r], case.shifts[r], lo, hi);
+            if q == lo || q == hi {
+                coverage.clamped += 1;
+            } else {
+                coverage.unclamped += 1;
+            }
+            let want = if self.with_table {
+                reference::lookup16(&case.table.table, q).ok_or("table too short")?
+            } else {
+                q
+            };
+            if case.output[r] != want {
+                return Err(std::format!(
+                    "row {r}: output {} vs model {want}",
+                    case.output[r]
+                ));
+            }
+            let acc = i64::try_from(acc).map_err(|_| "accumulator beyond i64")?;
+            let value = reference::dequantize_wide(acc, case.scales[r]);
+            if case.dequantized[r].to_bits() != value.to_bits() {
+                return Err(std::format!(
+                    "row {r}: dequantized {} vs model {value}",
+                    case.dequantized[r]
+                ));
+            }
+        }
+        Ok(coverage)
     }
 }

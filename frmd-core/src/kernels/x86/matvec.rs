@@ -13,11 +13,18 @@
 //! most 32768 in magnitude) is exact in int32; `vpaddd` and `vphaddd` add modulo 2^32. Every row
 //! sum is the wrapping int32 sum of the same products as the portable kernel (wrapping addition
 //! does not depend on order), plus the bias with wrapping addition as in `FullyConnected`.
+//!
+//! int16 inputs (the 16-bit first-layer plane, int16-activation layers) run the same loop with
+//! the 16 codes loaded as they are instead of sign-extended (an int8 x int16 product is at most
+//! `2^22`, a pair sum `2^23`: exact), so they cost the same 25 instructions per 128 MACs; the
+//! [`Avx2::residues`] form sums a range of columns (one 512-column chunk of an int64
+//! accumulator, see `x86::wide`).
 #![allow(unsafe_code)]
 
 use super::requant::{load_i32, pack_i8, requantize_lanes, RequantBlock};
 use super::{Avx2, BLOCK_ROWS};
-use crate::kernels::dot::dot_i8_prefix;
+use crate::kernels::dot::{dot_i8_i16_prefix, dot_i8_prefix};
+use crate::kernels::LayerInput;
 use core::arch::x86_64::{
     __m128i, __m256i, _mm256_add_epi32, _mm256_cvtepi8_epi16, _mm256_dpbusd_avx_epi32,
     _mm256_hadd_epi32, _mm256_loadu_si256, _mm256_madd_epi16, _mm256_permute2x128_si256,
@@ -25,6 +32,7 @@ use core::arch::x86_64::{
     _mm256_xor_si256, _mm256_zextsi128_si256, _mm_cvtepi8_epi16, _mm_loadl_epi64, _mm_loadu_si128,
     _mm_madd_epi16,
 };
+use core::ops::Range;
 
 /// Columns per `vpmaddwd` step.
 const COLUMNS: usize = 16;
@@ -59,40 +67,98 @@ impl Avx2 {
         // SAFETY: an `Avx2` token exists only after `avx2_active()` returned true.
         unsafe { requantize_rows(self.vnni(), rows, input, bias, requant) }
     }
+
+    /// [`Self::requantize_rows`] for an int16 input (the 16-bit first-layer plane of an int8
+    /// network): the same kernel with the codes loaded as they are.
+    #[inline]
+    pub(crate) fn requantize_rows_i16(
+        self,
+        rows: &[i8],
+        input: &[i16],
+        bias: &[i32; BLOCK_ROWS],
+        requant: RequantBlock<'_>,
+    ) -> [i8; BLOCK_ROWS] {
+        // SAFETY: an `Avx2` token exists only after `avx2_active()` returned true.
+        unsafe { requantize_rows_i16(rows, input, bias, requant) }
+    }
+
+    /// `start[r] + sum over columns of row r times input` (int32, wrapping) for the eight rows
+    /// stored back to back in `rows` (`8 * input.len()` weights), int8 or int16 input; columns
+    /// outside the input are ignored. The whole row of an int8 input takes the VNNI kernel when
+    /// the token allows it (the same sums).
+    #[inline]
+    pub(crate) fn residues(
+        self,
+        rows: &[i8],
+        input: LayerInput<'_>,
+        columns: Range<usize>,
+        start: &[i32; BLOCK_ROWS],
+    ) -> [i32; BLOCK_ROWS] {
+        // SAFETY: an `Avx2` token exists only after `avx2_active()` returned true.
+        unsafe { residues(self.vnni(), rows, input, columns, start) }
+    }
 }
 
 #[target_feature(enable = "avx2")]
-fn accumulate_rows(
+fn requantize_rows_i16(
+    rows: &[i8],
+    input: &[i16],
+    bias: &[i32; BLOCK_ROWS],
+    requant: RequantBlock<'_>,
+) -> [i8; BLOCK_ROWS] {
+    let sums = row_sums_i16(split_rows(rows, input.len()), input, 0);
+    let acc = _mm256_add_epi32(sums, load_i32(bias));
+    pack_i8(requantize_lanes(acc, requant))
+}
+
+#[target_feature(enable = "avx2")]
+fn residues(
     vnni: bool,
     rows: &[i8],
-    input: &[i8],
-    bias: &[i32; BLOCK_ROWS],
+    input: LayerInput<'_>,
+    columns: Range<usize>,
+    start: &[i32; BLOCK_ROWS],
 ) -> [i32; BLOCK_ROWS] {
-    let sums = _mm256_add_epi32(row_sums(vnni, rows, input), load_i32(bias));
+    let (first, end) = (columns.start, columns.end);
+    let sums = match input {
+        LayerInput::Int8(values) if first == 0 && end >= values.len() => {
+            row_sums(vnni, rows, values)
+        }
+        LayerInput::Int8(values) => {
+            let upto = values.get(..end).unwrap_or(values);
+            row_sums_i8(split_rows(rows, values.len()), upto, first)
+        }
+        LayerInput::Int16(values) => {
+            let upto = values.get(..end).unwrap_or(values);
+            row_sums_i16(split_rows(rows, values.len()), upto, first)
+        }
+    };
+    let sums = _mm256_add_epi32(sums, load_i32(start));
     let mut out = [0_i32; BLOCK_ROWS];
     // SAFETY: the pointer comes from a `&mut [i32; 8]`: 32 writable bytes; no alignment needed.
     unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast::<__m256i>(), sums) };
     out
 }
 
-#[target_feature(enable = "avx2")]
-fn requantize_rows(
-    vnni: bool,
-    rows: &[i8],
-    input: &[i8],
-    bias: &[i32; BLOCK_ROWS],
-    requant: RequantBlock<'_>,
-) -> [i8; BLOCK_ROWS] {
-    let acc = _mm256_add_epi32(row_sums(vnni, rows, input), load_i32(bias));
-    pack_i8(requantize_lanes(acc, requant))
-}
-
 /// The end of both row-sum functions, expanded in each so that everything stays in registers (as
 /// a function, LLVM did not inline it and passed the eight accumulators through memory): adds
 /// columns `$start..` of the eight `$rows` times `$input` to the partial sums `$acc` (16-column
 /// `vpmaddwd` blocks, one 8-column step, then scalar) and reduces them to one vector of row sums.
+/// The input is loaded by `$load` (16 columns), `$load_half` (8) and its tail summed by `$dot`:
+/// int8 codes sign-extended by default, int16 codes as they are.
 macro_rules! finish_row_sums {
-    ($rows:expr, $input:expr, $acc:expr, $start:expr) => {{
+    ($rows:expr, $input:expr, $acc:expr, $start:expr) => {
+        finish_row_sums!(
+            $rows,
+            $input,
+            $acc,
+            $start,
+            widen,
+            widen_half,
+            dot_i8_prefix
+        )
+    };
+    ($rows:expr, $input:expr, $acc:expr, $start:expr, $load:ident, $load_half:ident, $dot:path) => {{
         let rows: [&[i8]; BLOCK_ROWS] = $rows;
         let start: usize = $start;
         let mut acc: [__m256i; BLOCK_ROWS] = $acc;
@@ -123,7 +189,7 @@ macro_rules! finish_row_sums {
             .zip(r6.as_chunks::<COLUMNS>().0)
             .zip(r7.as_chunks::<COLUMNS>().0);
         for ((((((((x, w0), w1), w2), w3), w4), w5), w6), w7) in blocks {
-            let x = widen(x);
+            let x = $load(x);
             let [a0, a1, a2, a3, a4, a5, a6, a7] = &mut acc;
             *a0 = _mm256_add_epi32(*a0, _mm256_madd_epi16(widen(w0), x));
             *a1 = _mm256_add_epi32(*a1, _mm256_madd_epi16(widen(w1), x));
@@ -138,7 +204,7 @@ macro_rules! finish_row_sums {
         // Eight more columns with 128-bit registers when at least eight are left.
         let mut column = input.len() - x_tail.len();
         if let Some((x_half, _)) = x_tail.split_first_chunk::<HALF>() {
-            let x = widen_half(x_half);
+            let x = $load_half(x_half);
             for (a, row) in acc.iter_mut().zip(rows) {
                 let weights = row
                     .get(column..)
@@ -162,7 +228,7 @@ macro_rules! finish_row_sums {
         };
         let mut tails = [0_i32; BLOCK_ROWS];
         for (tail, row) in tails.iter_mut().zip(rows) {
-            *tail = dot_i8_prefix(row.get(column..).unwrap_or(&[]), x_rest);
+            *tail = $dot(row.get(column..).unwrap_or(&[]), x_rest);
         }
         _mm256_add_epi32(sums, load_i32(&tails))
     }};
@@ -191,7 +257,7 @@ fn row_sums_avx2(rows: &[i8], input: &[i8]) -> __m256i {
 
 /// The eight rows of `rows` (`columns` weights each; missing rows are empty).
 #[inline]
-fn split_rows(rows: &[i8], columns: usize) -> [&[i8]; BLOCK_ROWS] {
+pub(super) fn split_rows(rows: &[i8], columns: usize) -> [&[i8]; BLOCK_ROWS] {
     if columns == 0 {
         return [&[]; BLOCK_ROWS];
     }
@@ -304,6 +370,73 @@ fn widen(block: &[i8; COLUMNS]) -> __m256i {
     // has no alignment requirement.
     let bytes = unsafe { _mm_loadu_si128(block.as_ptr().cast::<__m128i>()) };
     _mm256_cvtepi8_epi16(bytes)
+}
+
+/// Loads 16 int16 values.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn load_halves(block: &[i16; COLUMNS]) -> __m256i {
+    // SAFETY: the pointer comes from a `&[i16; 16]`: 32 initialized, readable bytes; `loadu` has
+    // no alignment requirement.
+    unsafe { _mm256_loadu_si256(block.as_ptr().cast::<__m256i>()) }
+}
+
+/// Loads 8 int16 values.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn load_halves_half(block: &[i16; HALF]) -> __m128i {
+    // SAFETY: the pointer comes from a `&[i16; 8]`: 16 initialized, readable bytes; `loadu` has
+    // no alignment requirement.
+    unsafe { _mm_loadu_si128(block.as_ptr().cast::<__m128i>()) }
+}
+
+/// Column sums `[dot(rows[r][start..], input[start..]) for r in 0..8]` of an int8 input (AVX2
+/// only; `input` ends where the columns end, `rows` are the whole rows).
+#[inline]
+#[target_feature(enable = "avx2")]
+pub(super) fn row_sums_i8(rows: [&[i8]; BLOCK_ROWS], input: &[i8], start: usize) -> __m256i {
+    finish_row_sums!(rows, input, [_mm256_setzero_si256(); BLOCK_ROWS], start)
+}
+
+/// [`row_sums_i8`] for an int16 input.
+#[inline]
+#[target_feature(enable = "avx2")]
+pub(super) fn row_sums_i16(rows: [&[i8]; BLOCK_ROWS], input: &[i16], start: usize) -> __m256i {
+    finish_row_sums!(
+        rows,
+        input,
+        [_mm256_setzero_si256(); BLOCK_ROWS],
+        start,
+        load_halves,
+        load_halves_half,
+        dot_i8_i16_prefix
+    )
+}
+
+#[target_feature(enable = "avx2")]
+fn accumulate_rows(
+    vnni: bool,
+    rows: &[i8],
+    input: &[i8],
+    bias: &[i32; BLOCK_ROWS],
+) -> [i32; BLOCK_ROWS] {
+    let sums = _mm256_add_epi32(row_sums(vnni, rows, input), load_i32(bias));
+    let mut out = [0_i32; BLOCK_ROWS];
+    // SAFETY: the pointer comes from a `&mut [i32; 8]`: 32 writable bytes; no alignment needed.
+    unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast::<__m256i>(), sums) };
+    out
+}
+
+#[target_feature(enable = "avx2")]
+fn requantize_rows(
+    vnni: bool,
+    rows: &[i8],
+    input: &[i8],
+    bias: &[i32; BLOCK_ROWS],
+    requant: RequantBlock<'_>,
+) -> [i8; BLOCK_ROWS] {
+    let acc = _mm256_add_epi32(row_sums(vnni, rows, input), load_i32(bias));
+    pack_i8(requantize_lanes(acc, requant))
 }
 
 #[cfg(test)]

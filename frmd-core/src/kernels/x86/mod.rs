@@ -4,7 +4,9 @@
 //!
 //! - `matvec`: eight rows of a fully connected layer at once (`vpmaddwd`, or `vpdpbusd` on
 //!   CPUs with AVX-VNNI), with the bias added and, for hidden layers, requantized in registers;
-//! - `requant`: requantization of eight accumulators at once.
+//! - `requant`: requantization of eight accumulators at once;
+//! - `wide`: the int16-activation layers (int64 accumulation from 512-column int32 chunk sums,
+//!   requantization to int16 and the interpolated table in registers).
 //!
 //! Detection is `no_std`: `CPUID` leaf 1 (AVX and OSXSAVE bits), `XGETBV` (the OS saves the SSE
 //! and AVX register state: XCR0 bits 1 and 2) and `CPUID` leaf 7 (AVX2 bit), cached in an
@@ -12,8 +14,8 @@
 //! [`set_avx_vnni_enabled`] turn the paths off (or back on, if the CPU has them) for A/B
 //! measurements.
 //!
-//! Safety audit: `unsafe` is allowed in this module and its two submodules only (and in
-//! `kernels::dsp`). There are three kinds of `unsafe` expression:
+//! Safety audit: `unsafe` is allowed in this module and its three submodules only (and in
+//! `kernels::dsp_asm`). There are four kinds of `unsafe` expression:
 //! - `_xgetbv(0)` here: requires the `XGETBV` instruction, which exists when `CPUID.1:ECX.OSXSAVE`
 //!   (bit 27) is set; it is called only after checking that bit.
 //! - calls of `#[target_feature(enable = "avx2")]` functions from the methods of the `Avx2`
@@ -22,15 +24,21 @@
 //!   "active" through `detect_avx2`. The `avx2,avxvnni` functions are called only when the
 //!   token's `vnni` flag is set, which [`avx_vnni_active`] sets only after `detect_avx_vnni`.
 //!   (Disabling a path later leaves existing tokens valid: the CPU still has the instructions.)
-//! - unaligned loads and stores (`_mm_loadu_si128`, `_mm256_loadu_si256`, `_mm256_storeu_si256`)
-//!   through pointers made from references to fixed-size arrays of exactly the accessed size
-//!   (`&[i8; 16]`, `&[i32; 8]`, `&mut [i32; 8]`): in bounds, initialized, no alignment needed.
+//! - unaligned loads and stores (`_mm_loadu_si128`, `_mm256_loadu_si256`, `_mm256_storeu_si256`,
+//!   `_mm_storeu_si128`) through pointers made from references to fixed-size arrays of exactly
+//!   the accessed size (`&[i8; 16]`, `&[i16; 16]`, `&[i16; 8]`, `&[i32; 8]`, `&[i64; 4]`,
+//!   `&mut [i32; 8]`, `&mut [i16; 8]`, `&mut [i64; 4]`): in bounds, initialized, no alignment
+//!   needed.
+//! - `_mm256_i32gather_epi32` in `wide::interpolate`: eight 4-byte reads from a `&[i16; 513]`
+//!   table at byte offsets `2 i` with every index `i` masked to `0..=511`, so each read
+//!   (`t[i]`, `t[i + 1]`) ends at byte 1026 at most, inside the table.
 //!
 //! No other memory is touched: slices are walked with `as_chunks` iterators.
 #![allow(unsafe_code)]
 
 mod matvec;
 mod requant;
+mod wide;
 
 /// Output channels (weight rows) per call of the row kernels, and lanes of a requantized block.
 pub(crate) const BLOCK_ROWS: usize = 8;
