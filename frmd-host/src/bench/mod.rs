@@ -6,8 +6,8 @@
 //! `... portable`).
 //!
 //! By default it times the checkpoints `frmd quickstart` wrote (`runs/quickstart/{student,
-//! teacher,dp}`): student 1 and 2 steps (candle, and frmd-core int8), teacher 10 Heun steps, DP 100 (DDPM) and 10 (DDIM) steps, all
-//! with the same backbone. [`BenchConfig::policies`] times other checkpoints instead, and
+//! teacher,dp}`): student 1 and 2 steps (candle, and frmd-core int8), teacher 10 Heun steps, DP
+//! 100 (DDPM) and 10 (DDIM) steps, all with the same backbone. [`BenchConfig::policies`] times other checkpoints instead, and
 //! [`BenchConfig::synthetic`] times randomly initialized networks of a given backbone (latency
 //! does not depend on the weights), which needs no checkpoint at all. [`fixtures`] builds such
 //! networks for the benchmarks and instruction counts.
@@ -209,42 +209,7 @@ struct CorePolicySet {
 /// one-step student of `--backbone` exported the same way). Returns the policies, or why there
 /// are none.
 fn core_policies(cfg: &BenchConfig) -> Result<CorePolicySet, String> {
-    let build =
-        || -> anyhow::Result<Result<(LabelledPolicies, BackboneConfig, PolicyDims), String>> {
-            if cfg.synthetic {
-                let dir = std::env::temp_dir().join(format!("frmd-bench-{}", std::process::id()));
-                let policies = fixtures::reach_student(&dir, &cfg.backbone, 7);
-                let _ = std::fs::remove_dir_all(&dir);
-                return Ok(policies?.core.map(|c| {
-                    let dims = c.int8.dims();
-                    (
-                        one_step_rows(c.int8, c.core_f32),
-                        cfg.backbone.clone(),
-                        dims,
-                    )
-                }));
-            }
-            let ckpt = cfg.dir.join("student");
-            let export = |steps| {
-                let config = ExportConfig {
-                    steps,
-                    ..ExportConfig::for_checkpoint(&ckpt)
-                };
-                export_student(&config, false)
-                    .with_context(|| format!("exporting {} with {steps} step(s)", ckpt.display()))
-            };
-            let student = export(1)?;
-            let backbone = student.meta().model.backbone.clone();
-            let blob = student.blob().to_vec();
-            let int8 = Int8Policy::from_blob(&blob, "int8")?;
-            let dims = int8.dims();
-            let mut labelled =
-                one_step_rows(int8, Int8Policy::f32_twin(&blob, student, "core-f32")?);
-            let two_step = Int8Policy::from_blob(export(2)?.blob(), "int8-2")?;
-            labelled.push(("frmd-core int8 2-step".to_string(), Box::new(two_step)));
-            Ok(Ok((labelled, backbone, dims)))
-        };
-    match build() {
+    match core_policy_rows(cfg) {
         Ok(Ok((policies, backbone, dims))) => Ok(CorePolicySet {
             backbone: backbone_label(&backbone),
             input: FixedInput::new(dims.obs_dim, dims.action_dim, dims.history),
@@ -253,6 +218,41 @@ fn core_policies(cfg: &BenchConfig) -> Result<CorePolicySet, String> {
         Ok(Err(reason)) => Err(format!("frmd-core policies unavailable: {reason}")),
         Err(e) => Err(format!("frmd-core policies unavailable: {e:#}")),
     }
+}
+
+/// The labelled frmd-core policies with their backbone and sizes; the inner error is the
+/// synthetic exporter's refusal (a reason to print, not a failure).
+type CoreRows = Result<(LabelledPolicies, BackboneConfig, PolicyDims), String>;
+
+fn core_policy_rows(cfg: &BenchConfig) -> anyhow::Result<CoreRows> {
+    if cfg.synthetic {
+        let dir = std::env::temp_dir().join(format!("frmd-bench-{}", std::process::id()));
+        let policies = fixtures::reach_student(&dir, &cfg.backbone, 7);
+        let _ = std::fs::remove_dir_all(&dir);
+        return Ok(policies?.core.map(|c| {
+            let dims = c.int8.dims();
+            let rows = one_step_rows(c.int8, c.core_f32);
+            (rows, cfg.backbone.clone(), dims)
+        }));
+    }
+    let ckpt = cfg.dir.join("student");
+    let export = |steps| {
+        let config = ExportConfig {
+            steps,
+            ..ExportConfig::for_checkpoint(&ckpt)
+        };
+        export_student(&config, false)
+            .with_context(|| format!("exporting {} with {steps} step(s)", ckpt.display()))
+    };
+    let student = export(1)?;
+    let backbone = student.meta().model.backbone.clone();
+    let blob = student.blob().to_vec();
+    let int8 = Int8Policy::from_blob(&blob, "int8")?;
+    let dims = int8.dims();
+    let mut rows = one_step_rows(int8, Int8Policy::f32_twin(&blob, student, "core-f32")?);
+    let two_step = Int8Policy::from_blob(export(2)?.blob(), "int8-2")?;
+    rows.push(("frmd-core int8 2-step".to_string(), Box::new(two_step)));
+    Ok(Ok((rows, backbone, dims)))
 }
 
 /// The one-step int8 policy and its f32 twin with their table labels.
