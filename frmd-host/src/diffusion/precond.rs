@@ -12,7 +12,7 @@
 use super::sigma_err;
 use crate::models::{Condition, Network, ProDmpOutput};
 use candle_core::{Device, Tensor};
-use frmd_core::sigma::{noise_embedding, SigmaConfig};
+use frmd_core::sigma::{noise_embedding, SigmaConfig, SigmaError};
 
 /// A [B, 1] f32 column from per-sample values.
 pub fn column(values: &[f64], device: &Device) -> anyhow::Result<Tensor> {
@@ -31,6 +31,19 @@ pub fn embedding(c_noise: &[f64], embed_dim: usize, device: &Device) -> anyhow::
     Ok(Tensor::from_vec(data, (c_noise.len(), embed_dim), device)?)
 }
 
+/// `coefficient` at every level of `sigmas`; the error names `what`.
+fn per_level(
+    sigmas: &[f64],
+    what: &str,
+    coefficient: impl Fn(f64) -> Result<f64, SigmaError>,
+) -> anyhow::Result<Vec<f64>> {
+    sigmas
+        .iter()
+        .map(|&s| coefficient(s))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(sigma_err(what))
+}
+
 /// Per-sample network inputs for noise levels `sigmas`: (c_in column, embedding).
 pub fn noise_inputs(
     sig: &SigmaConfig,
@@ -38,16 +51,8 @@ pub fn noise_inputs(
     embed_dim: usize,
     device: &Device,
 ) -> anyhow::Result<(Tensor, Tensor)> {
-    let c_in = sigmas
-        .iter()
-        .map(|&s| sig.c_in(s))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(sigma_err("c_in"))?;
-    let c_noise = sigmas
-        .iter()
-        .map(|&s| sig.c_noise(s))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(sigma_err("c_noise"))?;
+    let c_in = per_level(sigmas, "c_in", |s| sig.c_in(s))?;
+    let c_noise = per_level(sigmas, "c_noise", |s| sig.c_noise(s))?;
     Ok((
         column(&c_in, device)?,
         embedding(&c_noise, embed_dim, device)?,
@@ -95,16 +100,8 @@ pub fn teacher_denoise(
     let g = decoded(net, sig, x, cond, sigmas)?;
     match net.config().prodmp_output() {
         Some(ProDmpOutput::BoundarySkip) => {
-            let c_skip = sigmas
-                .iter()
-                .map(|&s| sig.edm_c_skip(s))
-                .collect::<Result<Vec<_>, _>>()
-                .map_err(sigma_err("c_skip"))?;
-            let c_out = sigmas
-                .iter()
-                .map(|&s| sig.edm_c_out(s))
-                .collect::<Result<Vec<_>, _>>()
-                .map_err(sigma_err("c_out"))?;
+            let c_skip = per_level(sigmas, "c_skip", |s| sig.edm_c_skip(s))?;
+            let c_out = per_level(sigmas, "c_out", |s| sig.edm_c_out(s))?;
             skip_combine(net, cond, x, &g, &c_skip, &c_out)
         }
         Some(ProDmpOutput::Direct) | None => Ok(g),
@@ -128,16 +125,8 @@ pub fn consistency(
     }
     if net.config().prodmp_output() == Some(ProDmpOutput::BoundarySkip) {
         let g = decoded(net, sig, x, cond, sigmas)?;
-        let c_skip = sigmas
-            .iter()
-            .map(|&s| sig.c_skip(s))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(sigma_err("c_skip"))?;
-        let c_out = sigmas
-            .iter()
-            .map(|&s| sig.c_out(s))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(sigma_err("c_out"))?;
+        let c_skip = per_level(sigmas, "c_skip", |s| sig.c_skip(s))?;
+        let c_out = per_level(sigmas, "c_out", |s| sig.c_out(s))?;
         return skip_combine(net, cond, x, &g, &c_skip, &c_out);
     }
     let at_boundary: Vec<f64> = sigmas

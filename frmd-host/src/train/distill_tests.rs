@@ -93,16 +93,19 @@ fn every_objective_trains_and_moves_the_student() {
         },
     ];
     let before = weights_of(&teacher);
-    for dcfg in variants {
-        let out = distill(
+    let run = |dcfg: &DistillConfig| {
+        distill(
             &teacher,
             &windows,
             &sig,
-            &dcfg,
+            dcfg,
             &LoopConfig::toy(40, 1),
             &mut |_: &Progress| Ok(()),
         )
-        .unwrap();
+        .unwrap()
+    };
+    for dcfg in variants {
+        let out = run(&dcfg);
         assert!(
             out.report.loss_curve.iter().all(|(_, l)| l.is_finite()),
             "{dcfg:?}"
@@ -112,15 +115,7 @@ fn every_objective_trains_and_moves_the_student() {
             before,
             "{dcfg:?}: nothing learned"
         );
-        let again = distill(
-            &teacher,
-            &windows,
-            &sig,
-            &dcfg,
-            &LoopConfig::toy(40, 1),
-            &mut |_: &Progress| Ok(()),
-        )
-        .unwrap();
+        let again = run(&dcfg);
         assert_eq!(
             out.report.loss_curve, again.report.loss_curve,
             "{dcfg:?}: not reproducible"
