@@ -220,8 +220,12 @@ pub enum ReadOutcome {
     },
     /// End of input at a frame boundary.
     Eof,
-    /// End of input inside a header, payload or skipped payload.
-    Truncated(ProtocolError),
+    /// End of input inside a header, payload or skipped payload; `request_type` is the type
+    /// byte of the frame whose header was read (0 inside a header).
+    Truncated {
+        error: ProtocolError,
+        request_type: u8,
+    },
 }
 
 /// Reads frames from a byte stream (the server side reads requests, a client replies).
@@ -229,6 +233,8 @@ pub struct FrameReader<R> {
     inner: R,
     requests: bool,
     skip: u64,
+    /// Type byte of the rejected frame whose payload `skip` counts.
+    skip_type: u8,
 }
 
 /// Reads until `buf` is full or end of input; returns the bytes read.
@@ -252,6 +258,7 @@ impl<R: Read> FrameReader<R> {
             inner,
             requests,
             skip: 0,
+            skip_type: 0,
         }
     }
 
@@ -260,10 +267,13 @@ impl<R: Read> FrameReader<R> {
             let wanted = std::mem::take(&mut self.skip);
             let skipped = io::copy(&mut (&mut self.inner).take(wanted), &mut io::sink())?;
             if skipped < wanted {
-                return Ok(ReadOutcome::Truncated(ProtocolError::new(
-                    ErrorCode::Truncated,
-                    format!("end of input after {skipped} of {wanted} bytes of a rejected frame's payload"),
-                )));
+                return Ok(ReadOutcome::Truncated {
+                    error: ProtocolError::new(
+                        ErrorCode::Truncated,
+                        format!("end of input after {skipped} of {wanted} bytes of a rejected frame's payload"),
+                    ),
+                    request_type: self.skip_type,
+                });
             }
         }
         let mut head = [0u8; HEADER_LEN];
@@ -272,30 +282,37 @@ impl<R: Read> FrameReader<R> {
             return Ok(ReadOutcome::Eof);
         }
         if got < HEADER_LEN {
-            return Ok(ReadOutcome::Truncated(ProtocolError::new(
-                ErrorCode::Truncated,
-                format!("end of input after {got} of {HEADER_LEN} header bytes"),
-            )));
+            return Ok(ReadOutcome::Truncated {
+                error: ProtocolError::new(
+                    ErrorCode::Truncated,
+                    format!("end of input after {got} of {HEADER_LEN} header bytes"),
+                ),
+                request_type: 0,
+            });
         }
         let header = Header::decode(&head);
         let msg_type = match header.check(self.requests) {
             Ok(t) => t,
             Err(error) => {
                 self.skip = u64::from(header.payload_len);
+                self.skip_type = header.msg_type;
                 return Ok(ReadOutcome::Rejected { header, error });
             }
         };
         let mut payload = vec![0u8; header.payload_len as usize];
         let got = read_full(&mut self.inner, &mut payload)?;
         if got < payload.len() {
-            return Ok(ReadOutcome::Truncated(ProtocolError::new(
-                ErrorCode::Truncated,
-                format!(
-                    "end of input after {got} of {} payload bytes of a {} frame",
-                    payload.len(),
-                    msg_type.name()
+            return Ok(ReadOutcome::Truncated {
+                error: ProtocolError::new(
+                    ErrorCode::Truncated,
+                    format!(
+                        "end of input after {got} of {} payload bytes of a {} frame",
+                        payload.len(),
+                        msg_type.name()
+                    ),
                 ),
-            )));
+                request_type: header.msg_type,
+            });
         }
         Ok(ReadOutcome::Frame { msg_type, payload })
     }

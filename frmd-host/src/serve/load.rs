@@ -165,8 +165,11 @@ fn short_name(name: String) -> String {
 }
 
 /// The control period of the checkpoint a baked directory or blob was exported from (via the
-/// `export.json` beside the blob), if any.
-fn exported_dt(dir: &Path) -> anyhow::Result<Option<f64>> {
+/// `export.json` beside the blob), if any. A relative `checkpoint` in `export.json` is tried
+/// against the export's own directory first, then against the working directory; when
+/// `export.json` exists but its checkpoint cannot be read, the server says so on stderr (unless
+/// `--dt` overrides the period) and announces `dt` = 0.
+fn exported_dt(dir: &Path, warn: bool) -> anyhow::Result<Option<f64>> {
     let path = dir.join(EXPORT_INFO_FILE);
     if !path.exists() {
         return Ok(None);
@@ -175,11 +178,29 @@ fn exported_dt(dir: &Path) -> anyhow::Result<Option<f64>> {
     if info.checkpoint.is_empty() {
         bail!("{}: field `checkpoint` is missing or empty (expected the exported checkpoint directory)", path.display());
     }
-    match frmd_formats::checkpoint::CheckpointMeta::read(Path::new(&info.checkpoint)) {
-        Ok(meta) => Ok(Some(meta.model.control_dt)),
-        // The checkpoint may have moved since the export; the blob alone still serves.
-        Err(_) => Ok(None),
+    let named = Path::new(&info.checkpoint);
+    let candidates = if named.is_absolute() {
+        vec![named.to_path_buf()]
+    } else {
+        vec![dir.join(named), named.to_path_buf()]
+    };
+    for candidate in &candidates {
+        if let Ok(meta) = frmd_formats::checkpoint::CheckpointMeta::read(candidate) {
+            return Ok(Some(meta.model.control_dt));
+        }
     }
+    // The checkpoint may have moved since the export; the blob alone still serves.
+    if warn {
+        let tried: Vec<String> = candidates.iter().map(|c| c.display().to_string()).collect();
+        eprintln!(
+            "warning: {}: field `checkpoint` names {}, which has no readable frmd.json (tried {}); \
+             HELLO_OK announces dt = 0 (pass --dt SECONDS to set it)",
+            path.display(),
+            info.checkpoint,
+            tried.join(", ")
+        );
+    }
+    Ok(None)
 }
 
 /// Loads the policy `source` names with the settings of `cfg`.
@@ -218,7 +239,7 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
             };
             let policy = Int8Policy::load(&path)?;
             let d = policy.dims();
-            let dt = exported_dt(&beside)?.unwrap_or(0.0);
+            let dt = exported_dt(&beside, cfg.dt.is_none())?.unwrap_or(0.0);
             (
                 Box::new(policy),
                 d.history,
@@ -235,7 +256,7 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
             let policy = crate::firmware::policy::FirmwarePolicy::start(&image)?;
             let i = policy.info().clone();
             let dt = match baked {
-                Some(dir) => exported_dt(dir)?.unwrap_or(0.0),
+                Some(dir) => exported_dt(dir, cfg.dt.is_none())?.unwrap_or(0.0),
                 None => 0.0,
             };
             (

@@ -31,8 +31,11 @@ pub fn serve_stream<R: Read, W: Write>(
     loop {
         let (reply, next) = match reader.next_frame()? {
             ReadOutcome::Eof => return Ok(StreamEnd::Eof),
-            ReadOutcome::Truncated(error) => {
-                let reply = Reply::Error(ErrorReply::from_error(&error, 0));
+            ReadOutcome::Truncated {
+                error,
+                request_type,
+            } => {
+                let reply = Reply::Error(ErrorReply::from_error(&error, request_type));
                 // Best effort: the client may already be gone.
                 let _ = output
                     .write_all(&reply.encode(float_type))

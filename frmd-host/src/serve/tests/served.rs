@@ -154,6 +154,17 @@ fn a_student_checkpoint_and_its_int8_export_serve_and_survive_bad_input() {
     // The bare blob finds the control period in the export.json beside it.
     let blob = load(&PolicySource::Blob(baked.join(BLOB_FILE)), &cfg).unwrap();
     assert_eq!(blob.info.dt, 0.05);
+    // A relative checkpoint path in export.json is found from the export's own directory,
+    // whatever the server's working directory; a missing one announces dt 0 (and warns).
+    for (checkpoint, dt) in [("../no-such-checkpoint", 0.0), ("..", 0.05)] {
+        std::fs::write(
+            baked.join(EXPORT_INFO_FILE),
+            serde_json::json!({ "checkpoint": checkpoint }).to_string(),
+        )
+        .unwrap();
+        let served = load(&PolicySource::Baked(baked.clone()), &cfg).unwrap();
+        assert_eq!(served.info.dt, dt, "checkpoint {checkpoint}");
+    }
     // float and int8 agree to quantization error on the same chunk.
     let (f, q) = (session_replies(&mut float), session_replies(&mut int8));
     let max_diff = chunk(&f[2])

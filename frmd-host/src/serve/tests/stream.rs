@@ -22,17 +22,22 @@ fn end_of_input() {
     .encode()
     .to_vec();
     big.extend_from_slice(&[0; 100]);
-    for (input, expect_errors, text) in [
-        (hello[..5].to_vec(), 1, "after 5 of 8 header bytes"),
+    // The ERROR's request_type is the type byte of the frame whose header was read (0 inside a
+    // header), as docs/serve-protocol.md says.
+    let hello_type = MsgType::Hello as u8;
+    for (input, expect_errors, text, request_type) in [
+        (hello[..5].to_vec(), 1, "after 5 of 8 header bytes", 0),
         (
             [hello.clone(), hello[..10].to_vec()].concat(),
             1,
             "after 2 of 4 payload bytes of a HELLO frame",
+            hello_type,
         ),
         (
             big,
             2,
             "after 100 of 1048586 bytes of a rejected frame's payload",
+            1,
         ),
     ] {
         let (replies, end) = run_server(&input, &mut session(ft), &mut Echo::default());
@@ -48,7 +53,7 @@ fn end_of_input() {
         let last = errors.last().unwrap();
         assert_eq!(
             (last.kind(), last.fatal, last.request_type),
-            (Some(ErrorCode::Truncated), true, 0)
+            (Some(ErrorCode::Truncated), true, request_type)
         );
         assert!(last.text.contains(text), "{last:?}");
     }
