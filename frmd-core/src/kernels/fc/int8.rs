@@ -1,0 +1,148 @@
+//! The int8-activation entry points of [`FullyConnected`] (int32 accumulators): raw
+//! accumulators, bias-free dot products, the requantized int8 forward pass and its AVX2 form.
+
+#[cfg(target_arch = "x86_64")]
+use crate::kernels::dot::{dot_i8_i16_prefix, dot_i8_prefix};
+use crate::kernels::rows::{for_each_block, for_each_sum};
+use crate::kernels::{FcRequant, FullyConnected, KernelError, LayerInput};
+#[cfg(target_arch = "x86_64")]
+use crate::quant::requantize_to_i8;
+
+impl<'a> FullyConnected<'a, i32> {
+    /// Raw int32 accumulators `acc[o] = bias[o] + sum_i w[o][i] * input[i]` (wrapping), e.g. for
+    /// the last layer, whose output is dequantized to f32
+    /// ([`crate::kernels::dequantize_accumulators`]).
+    pub fn forward_accumulators(&self, input: &[i8], acc: &mut [i32]) -> Result<(), KernelError> {
+        self.check_input(input.len())?;
+        if acc.len() != self.out_features {
+            return Err(KernelError::OutputLength);
+        }
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx2) = crate::kernels::x86::Avx2::get() {
+            let mut outputs = acc.iter_mut();
+            self.for_each_sum_avx2(avx2, input, true, |sum| {
+                if let Some(out) = outputs.next() {
+                    *out = sum;
+                }
+            });
+            return Ok(());
+        }
+        for_each_block(input, self.weights, self.bias, |first, sums| {
+            if let Some(out) = acc.get_mut(first..first + sums.len()) {
+                out.copy_from_slice(sums);
+            }
+        });
+        Ok(())
+    }
+
+    /// Calls `emit(dot(w[o], input))` (bias-free, wrapping) for `o = 0..out_features` in order,
+    /// e.g. for the fine plane of a two-plane input. Same kernels as [`Self::forward_accumulators`].
+    pub fn for_each_dot(&self, input: &[i8], mut emit: impl FnMut(i32)) -> Result<(), KernelError> {
+        self.check_input(input.len())?;
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx2) = crate::kernels::x86::Avx2::get() {
+            self.for_each_sum_avx2(avx2, input, false, emit);
+            return Ok(());
+        }
+        for_each_sum(input, self.weights, &[], &mut emit);
+        Ok(())
+    }
+
+    /// Requantized int8 output:
+    /// `output[o] = requantize_to_i8(bias[o] + dot(w[o], input), multiplier[o], shift[o], ...)`.
+    pub fn forward(
+        &self,
+        requant: &FcRequant<'_>,
+        input: &[i8],
+        output: &mut [i8],
+    ) -> Result<(), KernelError> {
+        self.forward_activated(requant, None, LayerInput::Int8(input), output)
+    }
+
+    /// [`Self::forward`] with the AVX2 kernels (x86-64; callers checked the shapes and
+    /// `requant`): eight output channels per kernel call, requantized in registers; the last
+    /// `out_features % 8` channels one at a time. Same outputs as the portable loop. int16 inputs
+    /// (a 16-bit first-layer input plane) take the same kernels with the codes loaded as they
+    /// are instead of sign-extended.
+    #[cfg(target_arch = "x86_64")]
+    pub(in crate::kernels) fn forward_avx2(
+        &self,
+        avx2: crate::kernels::x86::Avx2,
+        requant: &FcRequant<'_>,
+        input: LayerInput<'_>,
+        output: &mut [i8],
+    ) {
+        use crate::kernels::x86::{RequantBlock, BLOCK_ROWS};
+        let Some(block_len) = self.in_features.checked_mul(BLOCK_ROWS) else {
+            return;
+        };
+        let zero_point = requant.output_zero_point;
+        let bounds = (requant.activation_min, requant.activation_max);
+        let mut row_blocks = self.weights.chunks_exact(block_len);
+        let (out_blocks, out_tail) = output.as_chunks_mut::<BLOCK_ROWS>();
+        let (bias_blocks, bias_tail) = self.bias.as_chunks::<BLOCK_ROWS>();
+        let (multiplier_blocks, multiplier_tail) = requant.multipliers.as_chunks();
+        let (shift_blocks, shift_tail) = requant.shifts.as_chunks();
+        let blocks = out_blocks
+            .iter_mut()
+            .zip(row_blocks.by_ref())
+            .zip(bias_blocks)
+            .zip(multiplier_blocks.iter().zip(shift_blocks));
+        for (((out, rows), bias), (multipliers, shifts)) in blocks {
+            let block = RequantBlock {
+                multipliers,
+                shifts,
+                zero_point,
+                bounds,
+            };
+            *out = match input {
+                LayerInput::Int8(values) => avx2.requantize_rows(rows, values, bias, block),
+                LayerInput::Int16(values) => avx2.requantize_rows_i16(rows, values, bias, block),
+            };
+        }
+        let tail = out_tail
+            .iter_mut()
+            .zip(row_blocks.remainder().chunks_exact(self.in_features))
+            .zip(bias_tail)
+            .zip(multiplier_tail.iter().zip(shift_tail));
+        for (((out, row), bias), (multiplier, shift)) in tail {
+            let dot = match input {
+                LayerInput::Int8(values) => dot_i8_prefix(row, values),
+                LayerInput::Int16(values) => dot_i8_i16_prefix(row, values),
+            };
+            let acc = bias.wrapping_add(dot);
+            *out = requantize_to_i8(acc, *multiplier, *shift, zero_point, bounds.0, bounds.1);
+        }
+    }
+
+    /// Calls `emit(bias[o] + dot(w[o], input))` (or the bias-free dot when `with_bias` is false)
+    /// for `o = 0..out_features` in order with the AVX2 kernel, eight rows per call (x86-64;
+    /// callers checked the shapes). Same sums as the portable loop.
+    #[cfg(target_arch = "x86_64")]
+    fn for_each_sum_avx2(
+        &self,
+        avx2: crate::kernels::x86::Avx2,
+        input: &[i8],
+        with_bias: bool,
+        mut emit: impl FnMut(i32),
+    ) {
+        use crate::kernels::x86::BLOCK_ROWS;
+        let Some(block_len) = self.in_features.checked_mul(BLOCK_ROWS) else {
+            return;
+        };
+        let no_bias = [0_i32; BLOCK_ROWS];
+        let mut row_blocks = self.weights.chunks_exact(block_len);
+        let (bias_blocks, bias_tail) = self.bias.as_chunks::<BLOCK_ROWS>();
+        for (rows, bias) in row_blocks.by_ref().zip(bias_blocks) {
+            let bias = if with_bias { bias } else { &no_bias };
+            avx2.accumulate_rows(rows, input, bias)
+                .into_iter()
+                .for_each(&mut emit);
+        }
+        let rows = row_blocks.remainder().chunks_exact(self.in_features);
+        for (row, bias) in rows.zip(bias_tail) {
+            let bias = if with_bias { *bias } else { 0 };
+            emit(bias.wrapping_add(dot_i8_prefix(row, input)));
+        }
+    }
+}
