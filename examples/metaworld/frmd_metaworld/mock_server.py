@@ -16,9 +16,10 @@ import socket
 import sys
 
 from . import protocol as p
+from . import session as session_mod
 
 
-def make_session(args) -> p.Session:
+def make_session(args) -> session_mod.Session:
     float_type = p.F64 if args.float == "f64" else p.F32
     if args.policy == "expert":
         from .tasks import DT, OBS_DIM, ACTION_DIM, expert_policy
@@ -35,7 +36,7 @@ def make_session(args) -> p.Session:
         else:  # hold
             act = lambda obs, prev, rate: list(prev) * info.horizon
     info.validate()
-    return p.Session(info, policy_reset=lambda seed: None, policy_act=act)
+    return session_mod.Session(info, policy_reset=lambda seed: None, policy_act=act)
 
 
 def main(argv=None) -> int:
@@ -67,7 +68,7 @@ def main(argv=None) -> int:
         return write
 
     if args.socket is None:
-        end = p.serve_stream(lambda n: os.read(0, n), write_to(frames_fd), session)
+        end = session_mod.serve_stream(lambda n: os.read(0, n), write_to(frames_fd), session)
         return 1 if end == "truncated" else 0
     server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     server.bind(args.socket)
@@ -75,9 +76,9 @@ def main(argv=None) -> int:
     while True:
         conn, _ = server.accept()
         with conn:
-            fresh = p.Session(session.info, session.policy_reset, session.policy_act)
+            fresh = session_mod.Session(session.info, session.policy_reset, session.policy_act)
             try:
-                p.serve_stream(conn.recv, write_to(conn.fileno()), fresh)
+                session_mod.serve_stream(conn.recv, write_to(conn.fileno()), fresh)
             except OSError as e:
                 print(f"connection ended: {e}", file=sys.stderr)
 

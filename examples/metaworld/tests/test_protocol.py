@@ -14,6 +14,7 @@ import pytest
 
 from conftest import ROOT
 from frmd_metaworld import protocol as p
+from frmd_metaworld import session as session_mod
 
 DOC = os.path.join(ROOT, "..", "..", "docs", "serve-protocol.md")
 TOY = p.ModelInfo(obs_dim=3, action_dim=2, obs_history=2, horizon=3, exec_steps=2, float_type=p.F32, dt=0.0125,
@@ -54,10 +55,10 @@ def test_worked_examples_of_the_specification():
             p.encode_error("NON_FINITE", decoded[8][4], 0x03), p.encode_close(), p.encode_close_ok()] == blocks
     # The same session replayed against the mock session rules gives the document's ERROR frame.
     out = []
-    session = p.Session(TOY, lambda seed: None, lambda obs, prev, rate: [0.0] * 6)
+    session = session_mod.Session(TOY, lambda seed: None, lambda obs, prev, rate: [0.0] * 6)
     stream = iter([b"".join(blocks[i] for i in (0, 2, 5, 7))])
     buf = bytearray(next(stream))
-    p.serve_stream(lambda n: bytes([buf.pop(0) for _ in range(min(n, len(buf)))]), out.append, session)
+    session_mod.serve_stream(lambda n: bytes([buf.pop(0) for _ in range(min(n, len(buf)))]), out.append, session)
     assert out[-1] == blocks[8]
 
 
@@ -150,10 +151,10 @@ def test_every_error_frame_and_the_server_keeps_serving(server):
 
 
 def test_policy_failure_is_reported():
-    session = p.Session(TOY, lambda s: None, lambda obs, prev, rate: 1 / 0)
+    session = session_mod.Session(TOY, lambda s: None, lambda obs, prev, rate: 1 / 0)
     out = []
     data = bytearray(p.encode_hello() + p.encode_reset(1) + p.encode_act(0, OBS))
-    p.serve_stream(lambda n: bytes([data.pop(0) for _ in range(min(n, len(data)))]), out.append, session)
+    session_mod.serve_stream(lambda n: bytes([data.pop(0) for _ in range(min(n, len(data)))]), out.append, session)
     reply = p.decode_reply(p.ERROR, out[-1][8:], p.F32)
     assert reply[1] == p.ERROR_CODES["POLICY_FAILED"] and "division by zero" in reply[4]
 
@@ -215,8 +216,8 @@ def test_fuzz_session_rules():
                 if rng.random() < 0.2:
                     del data[i:]
         out = []
-        session = p.Session(TOY, lambda s: None, lambda obs, prev, rate: [0.0] * 6)
-        end = p.serve_stream(lambda n: bytes([data.pop(0) for _ in range(min(n, len(data)))]), out.append, session)
+        session = session_mod.Session(TOY, lambda s: None, lambda obs, prev, rate: [0.0] * 6)
+        end = session_mod.serve_stream(lambda n: bytes([data.pop(0) for _ in range(min(n, len(data)))]), out.append, session)
         assert end in ("closed", "eof", "truncated")
         for frame_bytes in out:
             msg_type, n = p.check_header(frame_bytes[:8], requests=False)
