@@ -145,20 +145,9 @@ pub fn quantize_bias_i64(
     input_scale: f32,
     weight_scale: f32,
 ) -> Result<i64, QuantError> {
-    if !bias.is_finite() {
-        return Err(QuantError::NonFiniteValue);
-    }
-    let bias_scale = f64::from(input_scale) * f64::from(weight_scale);
-    if !(bias_scale.is_finite() && bias_scale > 0.0) {
-        return Err(QuantError::InvalidScale);
-    }
-    let steps = libm::round(f64::from(bias) / bias_scale);
     // 2^46 is exact in f64.
     let limit = BIAS16_MAX as f64;
-    if !(-limit..=limit).contains(&steps) {
-        return Err(QuantError::BiasOverflow);
-    }
-    Ok(steps as i64)
+    Ok(super::params::bias_steps(bias, input_scale, weight_scale, (-limit, limit))? as i64)
 }
 
 /// [`super::fold_input_zero_point`] for an int64 bias:

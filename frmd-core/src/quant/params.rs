@@ -269,6 +269,18 @@ pub fn quantize_weights_per_channel(
 /// int32 bias with scale `input_scale * weight_scale`:
 /// `round_half_away_from_zero(bias / (input_scale * weight_scale))`, computed in f64.
 pub fn quantize_bias(bias: f32, input_scale: f32, weight_scale: f32) -> Result<i32, QuantError> {
+    let limits = (f64::from(i32::MIN), f64::from(i32::MAX));
+    Ok(bias_steps(bias, input_scale, weight_scale, limits)? as i32)
+}
+
+/// `round_half_away_from_zero(bias / (input_scale * weight_scale))` in f64, checked to lie in
+/// `limits` (both ends exact in f64): the rounding of every bias width.
+pub(crate) fn bias_steps(
+    bias: f32,
+    input_scale: f32,
+    weight_scale: f32,
+    limits: (f64, f64),
+) -> Result<f64, QuantError> {
     if !bias.is_finite() {
         return Err(QuantError::NonFiniteValue);
     }
@@ -277,10 +289,10 @@ pub fn quantize_bias(bias: f32, input_scale: f32, weight_scale: f32) -> Result<i
         return Err(QuantError::InvalidScale);
     }
     let steps = libm::round(f64::from(bias) / bias_scale);
-    if !(f64::from(i32::MIN)..=f64::from(i32::MAX)).contains(&steps) {
+    if !(limits.0..=limits.1).contains(&steps) {
         return Err(QuantError::BiasOverflow);
     }
-    Ok(steps as i32)
+    Ok(steps)
 }
 
 /// Folds the input zero point into a quantized bias: `bias_q - input_zero_point * sum(weight_row)`,
