@@ -387,6 +387,8 @@ pub fn dequantize_accumulators<A: Accumulator>(
     Ok(())
 }
 
+#[cfg(all(test, target_arch = "x86_64"))]
+mod int16_measure;
 #[cfg(test)]
 mod int16_tests;
 mod int8;
