@@ -4,12 +4,13 @@
 //!
 //! Any exported shape runs: the policy's buffers have the host capacities of
 //! [`frmd_export::host`] and the blob's descriptor gives the sizes at run time. The blob is owned
-//! next to its loaded view ([`self_cell`]), so nothing is leaked. The network and policy are built
-//! per chunk from the loaded blob (a few microseconds against a chunk of about a millisecond;
-//! every chunk starts a fresh episode anyway), with the scratch kept across chunks.
+//! next to its loaded view, and the policy next to both ([`self_cell`]), so nothing is leaked and
+//! nothing is rebuilt per chunk: the network is validated once, as on the firmware, and every
+//! chunk starts a fresh episode with [`frmd_core::policy::Policy::reset`]. The f32 twin, a
+//! comparison tool, builds its f32 network per chunk.
 use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
-use frmd_core::blob::{AlignedBlob, LoadedBlob};
+use frmd_core::blob::{AlignedBlob, BlobNetwork, LoadedBlob};
 use frmd_core::policy::{Network, Noise, PolicyDims};
 use frmd_core::rng::Rng;
 use frmd_export::host::{check_capacity, HostPolicy, HostScratch, MAX_WIDTH};
@@ -57,36 +58,72 @@ self_cell::self_cell!(
     }
 );
 
-/// A loaded blob, the scratch its network runs in, and optionally the export whose f32 network
-/// replaces the blob's int8 one ([`Int8Policy::f32_twin`]).
-struct Runner {
-    blob: Loaded,
-    scratch: Box<HostScratch>,
-    f32_twin: Option<Box<ExportedStudent>>,
+/// The firmware's policy over a loaded blob, with the host capacities.
+type BlobPolicy<'a> = HostPolicy<'a, BlobNetwork<'a, MAX_WIDTH, HostScratch>>;
+
+self_cell::self_cell!(
+    /// A loaded blob and the policy built over it once.
+    struct Ready {
+        owner: Loaded,
+        #[not_covariant]
+        dependent: BlobPolicy,
+    }
+);
+
+impl Ready {
+    fn blob(&self) -> &LoadedBlob<'_> {
+        self.borrow_owner().borrow_dependent()
+    }
+}
+
+/// What runs a chunk: the blob's int8 policy, or the blob's policy around the f32 network of the
+/// export it came from ([`Int8Policy::f32_twin`]).
+enum Runner {
+    Int8(Box<Ready>),
+    F32Twin {
+        blob: Loaded,
+        scratch: Box<HostScratch>,
+        student: Box<ExportedStudent>,
+    },
 }
 
 impl Runner {
-    fn run(&mut self, input: &PolicyInput<'_>, noise: Noise<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
-        let loaded = self.blob.borrow_dependent();
-        let scratch = &mut *self.scratch;
-        match &self.f32_twin {
-            None => {
-                let network = loaded.network::<MAX_WIDTH, _>(scratch)?;
-                run_chunk(
-                    &mut HostPolicy::new(loaded.config(), network)?,
-                    input,
-                    noise,
-                )
-            }
-            Some(student) => student.with_f32_network(scratch, |network| {
-                run_chunk(
-                    &mut HostPolicy::new(loaded.config(), network)?,
-                    input,
-                    noise,
-                )
-            }),
+    fn blob(&self) -> &LoadedBlob<'_> {
+        match self {
+            Self::Int8(ready) => ready.blob(),
+            Self::F32Twin { blob, .. } => blob.borrow_dependent(),
         }
     }
+
+    fn run(&mut self, input: &PolicyInput<'_>, noise: Noise<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
+        match self {
+            Self::Int8(ready) => {
+                ready.with_dependent_mut(|_, policy| run_chunk(policy, input, noise))
+            }
+            Self::F32Twin {
+                blob,
+                scratch,
+                student,
+            } => {
+                let loaded = blob.borrow_dependent();
+                student.with_f32_network(scratch, |network| {
+                    run_chunk(
+                        &mut HostPolicy::new(loaded.config(), network)?,
+                        input,
+                        noise,
+                    )
+                })
+            }
+        }
+    }
+}
+
+/// Loads `bytes` with frmd-core's loader, checking the shape against the host capacities.
+fn load(bytes: &[u8]) -> anyhow::Result<Loaded> {
+    let blob = Loaded::try_new(AlignedBlob::new(bytes), |b| LoadedBlob::load(b.bytes()))
+        .context("loading the blob")?;
+    check_capacity(&blob.borrow_dependent().dims())?;
+    Ok(blob)
 }
 
 /// The int8 student behind the evaluation [`Policy`] trait; noise from `frmd_core::rng::Rng`
@@ -100,27 +137,32 @@ pub struct Int8Policy {
 impl Int8Policy {
     /// The policy of an exported blob (MLP or transformer, by its magic).
     pub fn from_blob(bytes: &[u8], label: &str) -> anyhow::Result<Self> {
-        let blob = Loaded::try_new(AlignedBlob::new(bytes), |b| LoadedBlob::load(b.bytes()))
-            .context("loading the blob")?;
-        check_capacity(&blob.borrow_dependent().dims())?;
-        Ok(Int8Policy {
-            runner: Runner {
-                blob,
-                scratch: Box::new(HostScratch::new()),
-                f32_twin: None,
-            },
-            rng: Rng::new(0),
-            label: label.into(),
-        })
+        let ready = Ready::try_new(load(bytes)?, |loaded| -> anyhow::Result<_> {
+            let blob = loaded.borrow_dependent();
+            let network = blob.network::<MAX_WIDTH, _>(HostScratch::new())?;
+            Ok(HostPolicy::new(blob.config(), network)?)
+        })?;
+        Ok(Self::new(Runner::Int8(Box::new(ready)), label))
     }
 
     /// The same runtime policy as [`Self::from_blob`] with frmd-core's f32 network of `student`
     /// (the export the blob came from) in place of the int8 one: isolates quantization from
     /// everything else in closed-loop comparisons.
     pub fn f32_twin(bytes: &[u8], student: ExportedStudent, label: &str) -> anyhow::Result<Self> {
-        let mut policy = Self::from_blob(bytes, label)?;
-        policy.runner.f32_twin = Some(Box::new(student));
-        Ok(policy)
+        let runner = Runner::F32Twin {
+            blob: load(bytes)?,
+            scratch: Box::new(HostScratch::new()),
+            student: Box::new(student),
+        };
+        Ok(Self::new(runner, label))
+    }
+
+    fn new(runner: Runner, label: &str) -> Self {
+        Int8Policy {
+            runner,
+            rng: Rng::new(0),
+            label: label.into(),
+        }
     }
 
     /// Loads a blob file (MLP or transformer, by its magic).
@@ -131,7 +173,7 @@ impl Int8Policy {
 
     /// The policy's sizes (from the blob).
     pub fn dims(&self) -> PolicyDims {
-        self.runner.blob.borrow_dependent().dims()
+        self.runner.blob().dims()
     }
 
     /// Observation history the policy needs.
