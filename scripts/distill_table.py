@@ -12,16 +12,19 @@ def _load(path: Path) -> dict | None:
     return json.loads(path.read_text()) if path.exists() else None
 
 
-def _cells(runs: Path, name: str, tasks: list, seeds: list, steps: int) -> dict:
-    """(task, seed) -> summary of one method (`teacher` or a variant at `steps`)."""
+def _cells(runs: Path, reports: Path, name: str, tasks: list, seeds: list, steps: int) -> dict:
+    """(task, seed) -> summary of one method (`teacher` or a variant at `steps`): from the run
+    directory, else from the copy an earlier `table` committed under `reports` (so a table written
+    from a new run directory keeps the rows measured in another)."""
     out = {}
     for t in tasks:
         for s in seeds:
+            tag = "" if name == "teacher" else f"-{steps}"
             if name == "teacher":
                 path = runs / "teachers" / t / f"s{s}" / "eval-teacher.summary.json"
             else:
                 path = runs / "variants" / name / t / f"s{s}" / f"eval-{steps}.summary.json"
-            summary = _load(path)
+            summary = _load(path) or _load(reports / name / f"{t}-s{s}{tag}.json")
             if summary is not None:
                 out[(t, s)] = summary
     return out
@@ -74,12 +77,12 @@ def _fmt(x, digits=1, sign=False):
 def write_table(runs: Path, variants: list, tasks: list, seeds: list, out: Path) -> None:
     runs = runs.resolve()
     out.mkdir(parents=True, exist_ok=True)
-    teacher_cells = _cells(runs, "teacher", tasks, seeds, 0)
+    teacher_cells = _cells(runs, out / "reports", "teacher", tasks, seeds, 0)
     methods = [("teacher", "teacher", 0, teacher_cells, [], "the fixed teachers (reference)")]
     for v in variants:
         for steps in v.get("steps", [1]):
             label = v["name"] if steps == 1 else f"{v['name']} ({steps} steps)"
-            methods.append((label, v["name"], steps, _cells(runs, v["name"], tasks, seeds, steps),
+            methods.append((label, v["name"], steps, _cells(runs, out / "reports", v["name"], tasks, seeds, steps),
                             v.get("flags", []), v.get("note", "")))
     rows = []
     for label, name, steps, cells, flags, note in methods:
