@@ -4,7 +4,8 @@
 //! (docs/design.md section 5, with frmd-core's `quant` helpers).
 use anyhow::{bail, Context};
 use frmd_core::quant::{
-    fold_input_zero_point, quantize_bias, quantize_weights_per_channel, QuantParams,
+    fold_input_zero_point, fold_input_zero_point_i64, quantize_bias, quantize_bias_i64,
+    quantize_weights_per_channel, QuantParams,
 };
 use frmd_formats::calibration::CalibrationSet;
 
@@ -109,9 +110,11 @@ pub(crate) fn check_rows(set: &CalibrationSet, cond_dim: usize) -> anyhow::Resul
 }
 
 /// Per-channel symmetric int8 weights of a layer and their scales.
-pub(crate) struct QuantizedWeights {
-    pub(crate) weights: Vec<i8>,
-    pub(crate) scales: Vec<f32>,
+pub struct QuantizedWeights {
+    /// `[out, in]` row-major codes in `[-127, 127]`.
+    pub weights: Vec<i8>,
+    /// `[out]` scales.
+    pub scales: Vec<f32>,
 }
 
 /// `layer`'s weights quantized per output channel.
@@ -121,6 +124,29 @@ pub(crate) fn quantize_weights(layer: &FloatLayer) -> anyhow::Result<QuantizedWe
     quantize_weights_per_channel(&layer.weights, layer.in_features, &mut weights, &mut scales)
         .with_context(|| format!("weights [{} x {}]", layer.out_features, layer.in_features))?;
     Ok(QuantizedWeights { weights, scales })
+}
+
+/// `bias` as int64 at `input.scale * weight_scale` (int16 activations), with the input zero
+/// point folded in, each at most `frmd_core::quant::BIAS16_MAX` in magnitude.
+pub(crate) fn int_bias_i64(
+    bias: &[f32],
+    q: &QuantizedWeights,
+    input: QuantParams,
+    in_features: usize,
+) -> anyhow::Result<Vec<i64>> {
+    bias.iter()
+        .enumerate()
+        .map(|(o, &b)| {
+            let b = quantize_bias_i64(b, input.scale, q.scales[o])
+                .with_context(|| format!("bias {o}"))?;
+            fold_input_zero_point_i64(
+                b,
+                &q.weights[o * in_features..(o + 1) * in_features],
+                input.zero_point,
+            )
+            .with_context(|| format!("bias {o} with zero point"))
+        })
+        .collect()
 }
 
 /// `bias` as int32 at `input.scale * weight_scale`, with the input zero point folded in.

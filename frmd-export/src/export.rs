@@ -16,7 +16,7 @@ use crate::backbone::{ExportOptions, ExportedNetwork};
 use crate::fold::check_student;
 use crate::host::HostScratch;
 use crate::memory::MemoryFigures;
-use crate::mlp::MlpExport;
+use crate::mlp::{MlpExport, MlpExports};
 use crate::reference::KernelCheck;
 use crate::transformer::TransformerExport;
 
@@ -33,14 +33,14 @@ pub struct ExportedStudent {
 /// The exporter's result for each backbone.
 #[derive(Clone, Debug)]
 enum Backbone {
-    Mlp(MlpExport),
+    Mlp(MlpExports),
     Transformer(TransformerExport),
 }
 
 impl Backbone {
     fn get(&self) -> &dyn ExportedNetwork {
         match self {
-            Backbone::Mlp(mlp) => mlp,
+            Backbone::Mlp(mlp) => mlp.get(),
             Backbone::Transformer(transformer) => transformer,
         }
     }
@@ -85,6 +85,13 @@ pub fn export_checkpoint(
             crate::mlp::export(&checkpoint, options, &calibration, &norm).map(Backbone::Mlp)
         }
         BackboneConfig::Transformer { .. } => {
+            if options.activations != crate::Activations::Int8 {
+                anyhow::bail!(
+                    "{} activations are built for the MLP only; a transformer-lite student \
+                     exports with int8 activations",
+                    options.activations
+                );
+            }
             crate::transformer::export(&checkpoint, options, &calibration)
                 .map(Backbone::Transformer)
         }
@@ -194,11 +201,20 @@ impl ExportedStudent {
         result.context("the f32 network was not built")
     }
 
-    /// The MLP exporter's result, for tools that look inside an MLP (none for a transformer).
+    /// The MLP exporter's result with int8 activations, for tools that look inside an MLP (none
+    /// for a transformer or int16 activations).
     pub fn mlp(&self) -> Option<&MlpExport> {
         match &self.network {
-            Backbone::Mlp(mlp) => Some(mlp),
-            Backbone::Transformer(_) => None,
+            Backbone::Mlp(MlpExports::Int8(mlp)) => Some(mlp),
+            _ => None,
+        }
+    }
+
+    /// The MLP exporter's result with int16 activations (none otherwise).
+    pub fn mlp16(&self) -> Option<&MlpExport<i16>> {
+        match &self.network {
+            Backbone::Mlp(MlpExports::Int16(mlp)) => Some(mlp),
+            _ => None,
         }
     }
 

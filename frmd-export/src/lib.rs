@@ -40,6 +40,8 @@ pub mod mlp;
 pub mod reference;
 pub mod transformer;
 
-pub use backbone::{ExportOptions, DEFAULT_INPUT_HEADROOM};
+pub use backbone::{
+    Activations, ExportOptions, DEFAULT_ACTIVATION_HEADROOM, DEFAULT_INPUT_HEADROOM,
+};
 pub use export::{export, export_checkpoint, ExportedStudent};
 pub use frmd_formats as formats;

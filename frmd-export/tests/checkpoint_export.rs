@@ -238,7 +238,7 @@ fn blob_from_a_checkpoint_round_trips_and_matches_the_wide_model() {
         // inputs; 4.5 % without on this random net, while balancing halves the error of a
         // trained reach student).
         assert!(worst < 0.12, "relative int8 error {worst}");
-        let check = frmd_export::mlp::reference::check_network::<64>(policy, &[]).unwrap();
+        let check = frmd_export::mlp::reference::check_network::<_, 64>(policy, &[]).unwrap();
         assert!(check.passed(), "{check:?}");
     }
 }
@@ -367,7 +367,7 @@ fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
     assert_eq!(loaded_nets[1].input_precision(), InputPrecision::TwoPlane);
     let mut nets: Vec<_> = policies
         .iter()
-        .map(|policy| frmd_export::mlp::reference::int8_network::<64>(policy).unwrap())
+        .map(|policy| frmd_export::mlp::reference::quantized_network::<i8, 64>(policy).unwrap())
         .collect();
     let mut errors = [0f64; 3];
     for row in 0..set.rows() {
@@ -425,7 +425,7 @@ fn wide_inputs_follow_f32_beyond_the_calibrated_range() {
         "16-bit {error_wide} vs two-plane {error_two}"
     );
     for policy in &policies[..2] {
-        let check = frmd_export::mlp::reference::check_network::<64>(policy, &[]).unwrap();
+        let check = frmd_export::mlp::reference::check_network::<_, 64>(policy, &[]).unwrap();
         assert!(check.passed(), "{check:?}");
     }
 }

@@ -71,8 +71,8 @@ fn student_sixteen_bit_input_is_as_accurate_as_two_planes() {
     )
     .expect("calibration rows");
     let mut nets = [
-        frmd_export::mlp::reference::int8_network::<MLP_WIDTH>(&wide.policy).unwrap(),
-        frmd_export::mlp::reference::int8_network::<MLP_WIDTH>(&two.policy).unwrap(),
+        frmd_export::mlp::reference::quantized_network::<i8, MLP_WIDTH>(&wide.policy).unwrap(),
+        frmd_export::mlp::reference::quantized_network::<i8, MLP_WIDTH>(&two.policy).unwrap(),
     ];
     let traj = wide.policy.horizon * wide.policy.action_dim;
     let mut errors = [[0_f64; 2]; 2];

@@ -13,7 +13,7 @@ fn input_quantization_share_of_the_error() {
     let exported = student.mlp().expect("an MLP student");
     let set = student.calibration();
     let (folded, policy) = (&exported.folded, &exported.policy);
-    let mut net = frmd_export::mlp::reference::int8_network::<1024>(policy).unwrap();
+    let mut net = frmd_export::mlp::reference::quantized_network::<i8, 1024>(policy).unwrap();
     let (mut err_int8, mut err_input_only, mut n) = (0f64, 0f64, 0usize);
     for row in 0..set.rows() {
         let mut input = Vec::new();

@@ -158,6 +158,8 @@ struct Setup {
     norm: crate::data::Normalization,
     student: ExportedStudent,
     blob: Vec<u8>,
+    /// The exported activations (`int8`, `int16`), the label of the quantized policy's rows.
+    label: String,
 }
 
 fn setup(cfg: &EquivConfig) -> anyhow::Result<Setup> {
@@ -179,6 +181,7 @@ fn setup(cfg: &EquivConfig) -> anyhow::Result<Setup> {
         .clone()
         .context("checkpoint has no normalization")?;
     Ok(Setup {
+        label: info.activations.clone(),
         student: export_student(&info, false)?,
         meta,
         net,
@@ -290,7 +293,10 @@ fn open_loop(
         ),
         row(
             "b",
-            "core int8 vs candle float: max abs error (action units)",
+            &format!(
+                "core {} vs candle float: max abs error (action units)",
+                s.label
+            ),
             max_b,
             Some(cfg.max_int8_error_frac * range),
             format!(
@@ -300,7 +306,10 @@ fn open_loop(
         ),
         row(
             "b",
-            "core int8 vs candle float: mean abs error (action units)",
+            &format!(
+                "core {} vs candle float: mean abs error (action units)",
+                s.label
+            ),
             mean_b,
             Some(cfg.mean_int8_error_frac * range),
             format!(
@@ -338,8 +347,8 @@ fn closed_loop(
             "{task}, {} episodes: candle {:.1} %, core f32 (runtime policy, f32 network) {:.1} %", cfg.episodes, 100.0 * f.success_rate, 100.0 * t.success_rate
         )),
         row("b", "success-rate difference (points)", diff, Some(cfg.max_success_diff_points), format!(
-            "{task}, {} episodes: float {:.1} %, int8 {:.1} %; latency median float {:.1} us, int8 {:.1} us",
-            cfg.episodes, 100.0 * f.success_rate, 100.0 * i.success_rate, f.latency_us_median, i.latency_us_median
+            "{task}, {} episodes: float {:.1} %, {label} {:.1} %; latency median float {:.1} us, {label} {:.1} us",
+            cfg.episodes, 100.0 * f.success_rate, 100.0 * i.success_rate, f.latency_us_median, i.latency_us_median, label = s.label
         )),
     ])
 }
@@ -394,7 +403,7 @@ fn report(rows: Vec<EquivRow>) -> EquivReport {
 pub fn run(cfg: &EquivConfig) -> anyhow::Result<EquivReport> {
     let s = setup(cfg)?;
     let mut rows = vec![blob_row(&s.blob, s.student.blob(), cfg)];
-    let mut int8 = Int8Policy::from_blob(&s.blob, "int8")?;
+    let mut int8 = Int8Policy::from_blob(&s.blob, &s.label)?;
     let (open, network_inputs) = open_loop(cfg, &s, &mut int8)?;
     rows.extend(open);
     if cfg.episodes > 0 {

@@ -9,7 +9,7 @@ use crate::limits::{self, OptionError};
 use anyhow::{bail, Context};
 use frmd_core::model::mlp::InputPrecision;
 use frmd_export::calibrate::RangeMethod;
-use frmd_export::{ExportOptions, ExportedStudent};
+use frmd_export::{Activations, ExportOptions, ExportedStudent};
 use frmd_formats::artifact::write_atomic;
 use frmd_formats::calibration::CalibrationSet;
 use frmd_formats::checkpoint::{Checkpoint, CheckpointMeta, CALIBRATION_FILE};
@@ -39,6 +39,10 @@ pub struct ExportConfig {
     pub two_plane_input: bool,
     /// Input range widening with the 16-bit input (>= 1).
     pub input_headroom: f32,
+    /// Hidden activations: `int8` | `int16` (an older `export.json` without it: int8).
+    pub activations: String,
+    /// Activation range widening with int16 activations (>= 1).
+    pub activation_headroom: f32,
 }
 
 impl Default for ExportConfig {
@@ -55,6 +59,8 @@ impl Default for ExportConfig {
             balance_inputs: options.balance_inputs,
             two_plane_input: options.input_precision == InputPrecision::Int16,
             input_headroom: options.input_headroom,
+            activations: options.activations.to_string(),
+            activation_headroom: options.activation_headroom,
         }
     }
 }
@@ -91,6 +97,13 @@ impl ExportConfig {
                 "a finite factor >= 1",
             ));
         }
+        if !(self.activation_headroom.is_finite() && self.activation_headroom >= 1.0) {
+            return Err(limits::range(
+                "activation-headroom",
+                self.activation_headroom,
+                "a finite factor >= 1",
+            ));
+        }
         self.calibration.parse::<RangeMethod>().map_err(|e| {
             limits::range(
                 "calibration",
@@ -98,6 +111,17 @@ impl ExportConfig {
                 format!("minmax or percentile:P ({e})"),
             )
         })?;
+        let activations = self
+            .activations
+            .parse::<Activations>()
+            .map_err(|_| limits::range("activations", &self.activations, "int8 or int16"))?;
+        if activations == Activations::Int16 && !self.two_plane_input {
+            return Err(limits::range(
+                "activations",
+                &self.activations,
+                "int8 with --int8-input (int16 activations take the 16-bit input)",
+            ));
+        }
         Ok(())
     }
 
@@ -113,6 +137,8 @@ impl ExportConfig {
             balance_inputs: self.balance_inputs,
             input_precision,
             input_headroom: self.input_headroom,
+            activations: self.activations.parse()?,
+            activation_headroom: self.activation_headroom,
         })
     }
 }

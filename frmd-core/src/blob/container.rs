@@ -29,8 +29,11 @@ use super::{BlobError, SectionId};
 
 /// The format version this crate writes. Version 3 turned the MLP descriptor's two-plane flag
 /// into an input precision code (adding the 16-bit input plane); postcard encodes the old `bool`
-/// as the byte 0 or 1, which is the same code, so version 2 blobs read unchanged.
-pub const FORMAT_VERSION: u16 = 3;
+/// as the byte 0 or 1, which is the same code, so version 2 blobs read unchanged. Version 4 adds
+/// a trailer to the MLP descriptor (activation precision and int16 clamps, `blob::mlp`); a
+/// version 2 or 3 MLP blob has none and reads as int8 activations. Transformer blobs are the same
+/// in versions 2 to 4.
+pub const FORMAT_VERSION: u16 = 4;
 /// The oldest format version this crate reads.
 pub const MIN_FORMAT_VERSION: u16 = 2;
 /// Header length in bytes (the descriptor starts here).
@@ -151,9 +154,9 @@ fn read_u32(bytes: &[u8], at: usize) -> Result<u32, BlobError> {
     Ok(u32::from_le_bytes(word))
 }
 
-/// Checks the header and (with `check_crc`) the CRC; returns the descriptor bytes and the data
-/// area.
-fn split(bytes: &[u8], magic: [u8; 4], check_crc: bool) -> Result<(&[u8], &[u8]), BlobError> {
+/// Checks the header and (with `check_crc`) the CRC; returns the format version, the descriptor
+/// bytes and the data area.
+fn split(bytes: &[u8], magic: [u8; 4], check_crc: bool) -> Result<(u16, &[u8], &[u8]), BlobError> {
     if cfg!(target_endian = "big") {
         return Err(BlobError::BigEndianTarget);
     }
@@ -188,7 +191,7 @@ fn split(bytes: &[u8], magic: [u8; 4], check_crc: bool) -> Result<(&[u8], &[u8])
     }
     let descriptor = payload.get(..desc_len).ok_or(BlobError::InvalidLength)?;
     let data = blob.get(start..).ok_or(BlobError::InvalidLength)?;
-    Ok((descriptor, data))
+    Ok((version, descriptor, data))
 }
 
 /// Checks the header and (with `check_crc`) the CRC and decodes the descriptor, which must fill
@@ -198,13 +201,32 @@ pub(crate) fn parse<'a, D: Deserialize<'a>>(
     magic: [u8; 4],
     check_crc: bool,
 ) -> Result<(D, Data<'a>), BlobError> {
-    let (descriptor_bytes, data_bytes) = split(bytes, magic, check_crc)?;
+    let (descriptor, _, data) = parse_versioned::<D, ()>(bytes, magic, check_crc, u16::MAX)?;
+    Ok((descriptor, data))
+}
+
+/// [`parse`] for a descriptor that gained a trailer `T` in format version `trailer_since`: blobs
+/// of that version or later must carry it (`Some`), older ones must not (`None`).
+pub(crate) fn parse_versioned<'a, D: Deserialize<'a>, T: Deserialize<'a>>(
+    bytes: &'a [u8],
+    magic: [u8; 4],
+    check_crc: bool,
+    trailer_since: u16,
+) -> Result<(D, Option<T>, Data<'a>), BlobError> {
+    let (version, descriptor_bytes, data_bytes) = split(bytes, magic, check_crc)?;
     let (descriptor, rest) =
         postcard::take_from_bytes::<D>(descriptor_bytes).map_err(|_| BlobError::Descriptor)?;
+    let (trailer, rest) = if version >= trailer_since {
+        let (trailer, rest) =
+            postcard::take_from_bytes::<T>(rest).map_err(|_| BlobError::Descriptor)?;
+        (Some(trailer), rest)
+    } else {
+        (None, rest)
+    };
     if !rest.is_empty() {
         return Err(BlobError::Descriptor);
     }
-    Ok((descriptor, Data { bytes: data_bytes }))
+    Ok((descriptor, trailer, Data { bytes: data_bytes }))
 }
 
 // ----- emit side -----
@@ -234,18 +256,26 @@ impl<'b> SectionWriter<'b> {
         values: impl Iterator<Item = T> + Clone,
         to_bytes: impl Fn(T) -> [u8; B],
     ) -> Result<Section, BlobError> {
-        let len = values
-            .clone()
-            .count()
-            .checked_mul(B)
-            .ok_or(BlobError::TooLarge)?;
-        let offset = self.cursor;
-        let end = offset.checked_add(len).ok_or(BlobError::TooLarge)?;
-        if let Some(out) = self.out.as_deref_mut() {
-            let target = out.get_mut(offset..end).ok_or(BlobError::BufferTooSmall)?;
+        self.section(values.clone().count(), B, |target| {
             for (chunk, value) in target.chunks_exact_mut(B).zip(values) {
                 chunk.copy_from_slice(&to_bytes(value));
             }
+        })
+    }
+
+    /// The next section: `count` elements of `size` bytes, written by `write` into the section's
+    /// bytes (when writing rather than measuring).
+    fn section(
+        &mut self,
+        count: usize,
+        size: usize,
+        write: impl FnOnce(&mut [u8]),
+    ) -> Result<Section, BlobError> {
+        let len = count.checked_mul(size).ok_or(BlobError::TooLarge)?;
+        let offset = self.cursor;
+        let end = offset.checked_add(len).ok_or(BlobError::TooLarge)?;
+        if let Some(out) = self.out.as_deref_mut() {
+            write(out.get_mut(offset..end).ok_or(BlobError::BufferTooSmall)?);
         }
         self.end = end;
         self.cursor = align_up(end, SECTION_ALIGN).ok_or(BlobError::TooLarge)?;
@@ -266,6 +296,29 @@ impl<'b> SectionWriter<'b> {
     /// An i32 section.
     pub(crate) fn i32s(&mut self, values: &[i32]) -> Result<Section, BlobError> {
         self.put(values.iter().copied(), i32::to_le_bytes)
+    }
+
+    /// A section of integers, each little endian, as many per part of `parts` as it has (the
+    /// parts back to back). Written from the values' bytes, so it refuses to run on a big-endian
+    /// target ([`BlobError::BigEndianTarget`], as the loader does).
+    pub(crate) fn ints<'v, T: bytemuck::Pod>(
+        &mut self,
+        parts: impl Iterator<Item = &'v [T]> + Clone,
+    ) -> Result<Section, BlobError> {
+        if cfg!(target_endian = "big") {
+            return Err(BlobError::BigEndianTarget);
+        }
+        let count = parts.clone().map(<[T]>::len).sum();
+        self.section(count, core::mem::size_of::<T>(), |target| {
+            let mut at = 0;
+            for part in parts {
+                let bytes: &[u8] = bytemuck::cast_slice(part);
+                if let Some(slot) = target.get_mut(at..at + bytes.len()) {
+                    slot.copy_from_slice(bytes);
+                }
+                at += bytes.len();
+            }
+        })
     }
 
     /// An i8 section.

@@ -1,20 +1,26 @@
-//! A blob of either format, told apart by its magic ([`LoadedBlob`]), and the int8 network of
-//! either ([`BlobNetwork`]): what a program holds that runs whatever student it is given (the host
-//! tools, a firmware that takes policy updates of any backbone). A firmware built for one backbone
-//! uses its loader ([`LoadedMlp`], [`LoadedTransformer`]) directly.
+//! A blob of any format, told apart by its magic and (MLP) its activation precision
+//! ([`LoadedBlob`]), and the quantized network of any ([`BlobNetwork`]): what a program holds that
+//! runs whatever student it is given (the host tools, a firmware that takes policy updates of any
+//! backbone). A firmware built for one backbone and precision uses its loader ([`LoadedMlp`],
+//! [`LoadedTransformer`]) directly.
 
-use super::{BlobError, LoadedMlp, LoadedTransformer, MLP_MAGIC, TRANSFORMER_MAGIC};
+use super::{
+    activation_bits, BlobError, LoadedMlp, LoadedMlp16, LoadedTransformer, MLP_MAGIC,
+    TRANSFORMER_MAGIC,
+};
 use crate::policy::{
-    Int8MlpNetwork, Int8TransformerNetwork, Network, PolicyConfig, PolicyDims, PolicyError,
-    StepConstants, TransformerWork,
+    Int16MlpNetwork, Int8MlpNetwork, Int8TransformerNetwork, Network, PolicyConfig, PolicyDims,
+    PolicyError, StepConstants, TransformerWork,
 };
 
 /// A checked blob of either format, borrowing its bytes.
 // No allocator to box the larger variant: a program that takes either format reserves it.
 #[allow(clippy::large_enum_variant)]
 pub enum LoadedBlob<'a> {
-    /// An MLP blob (magic [`MLP_MAGIC`]).
+    /// An MLP blob (magic [`MLP_MAGIC`]) with int8 activations.
     Mlp(LoadedMlp<'a>),
+    /// An MLP blob with int16 activations.
+    Mlp16(LoadedMlp16<'a>),
     /// A transformer blob (magic [`TRANSFORMER_MAGIC`]).
     Transformer(LoadedTransformer<'a>),
 }
@@ -24,7 +30,10 @@ impl<'a> LoadedBlob<'a> {
     /// [`BlobError::BadMagic`] for any other magic, [`BlobError::Truncated`] below four bytes.
     pub fn load(bytes: &'a [u8]) -> Result<Self, BlobError> {
         match bytes.get(..4) {
-            Some(magic) if magic == MLP_MAGIC => LoadedMlp::load(bytes).map(Self::Mlp),
+            Some(magic) if magic == MLP_MAGIC => match activation_bits(bytes)? {
+                16 => LoadedMlp16::load(bytes).map(Self::Mlp16),
+                _ => LoadedMlp::load(bytes).map(Self::Mlp),
+            },
             Some(magic) if magic == TRANSFORMER_MAGIC => {
                 LoadedTransformer::load(bytes).map(Self::Transformer)
             }
@@ -37,6 +46,7 @@ impl<'a> LoadedBlob<'a> {
     pub fn dims(&self) -> PolicyDims {
         match self {
             Self::Mlp(blob) => blob.dims(),
+            Self::Mlp16(blob) => blob.dims(),
             Self::Transformer(blob) => blob.dims(),
         }
     }
@@ -45,6 +55,7 @@ impl<'a> LoadedBlob<'a> {
     pub fn check_dims(&self, expected: &PolicyDims) -> Result<(), BlobError> {
         match self {
             Self::Mlp(blob) => blob.check_dims(expected),
+            Self::Mlp16(blob) => blob.check_dims(expected),
             Self::Transformer(blob) => blob.check_dims(expected),
         }
     }
@@ -53,6 +64,7 @@ impl<'a> LoadedBlob<'a> {
     pub fn steps(&self) -> &[StepConstants] {
         match self {
             Self::Mlp(blob) => blob.steps(),
+            Self::Mlp16(blob) => blob.steps(),
             Self::Transformer(blob) => blob.steps(),
         }
     }
@@ -61,6 +73,7 @@ impl<'a> LoadedBlob<'a> {
     pub fn config(&self) -> PolicyConfig<'a> {
         match self {
             Self::Mlp(blob) => blob.config(),
+            Self::Mlp16(blob) => blob.config(),
             Self::Transformer(blob) => blob.config(),
         }
     }
@@ -73,17 +86,20 @@ impl<'a> LoadedBlob<'a> {
     ) -> Result<BlobNetwork<'_, WIDTH, S>, PolicyError> {
         Ok(match self {
             Self::Mlp(blob) => BlobNetwork::Mlp(blob.network::<WIDTH>()?),
+            Self::Mlp16(blob) => BlobNetwork::Mlp16(blob.network::<WIDTH>()?),
             Self::Transformer(blob) => BlobNetwork::Transformer(blob.network(scratch)?),
         })
     }
 }
 
-/// The int8 network of a [`LoadedBlob`].
+/// The quantized network of a [`LoadedBlob`].
 // As for `LoadedBlob`: the MLP network holds its scratch in place, no allocator to box it.
 #[allow(clippy::large_enum_variant)]
 pub enum BlobNetwork<'a, const WIDTH: usize, S> {
-    /// The MLP of an MLP blob.
+    /// The MLP of an int8-activation MLP blob.
     Mlp(Int8MlpNetwork<'a, WIDTH>),
+    /// The MLP of an int16-activation MLP blob.
+    Mlp16(Int16MlpNetwork<'a, WIDTH>),
     /// The transformer of a transformer blob.
     Transformer(Int8TransformerNetwork<'a, S>),
 }
@@ -92,6 +108,7 @@ impl<const WIDTH: usize, S: TransformerWork> Network for BlobNetwork<'_, WIDTH, 
     fn input_width(&self) -> usize {
         match self {
             Self::Mlp(net) => net.input_width(),
+            Self::Mlp16(net) => net.input_width(),
             Self::Transformer(net) => net.input_width(),
         }
     }
@@ -99,6 +116,7 @@ impl<const WIDTH: usize, S: TransformerWork> Network for BlobNetwork<'_, WIDTH, 
     fn output_width(&self) -> usize {
         match self {
             Self::Mlp(net) => net.output_width(),
+            Self::Mlp16(net) => net.output_width(),
             Self::Transformer(net) => net.output_width(),
         }
     }
@@ -106,6 +124,7 @@ impl<const WIDTH: usize, S: TransformerWork> Network for BlobNetwork<'_, WIDTH, 
     fn num_noise_variants(&self) -> usize {
         match self {
             Self::Mlp(net) => net.num_noise_variants(),
+            Self::Mlp16(net) => net.num_noise_variants(),
             Self::Transformer(net) => net.num_noise_variants(),
         }
     }
@@ -118,6 +137,7 @@ impl<const WIDTH: usize, S: TransformerWork> Network for BlobNetwork<'_, WIDTH, 
     ) -> Result<(), PolicyError> {
         match self {
             Self::Mlp(net) => net.forward(variant, input, output),
+            Self::Mlp16(net) => net.forward(variant, input, output),
             Self::Transformer(net) => net.forward(variant, input, output),
         }
     }

@@ -28,8 +28,9 @@ pub use aligned::AlignedBlob;
 pub use container::{Section, FORMAT_VERSION, HEADER_LEN, MIN_FORMAT_VERSION, SECTION_ALIGN};
 pub use loaded::{BlobNetwork, LoadedBlob};
 pub use mlp::{
-    encode_mlp, mlp_encoded_len, HiddenLayerDesc, LoadedMlp, MlpBlobParts, MlpDescriptor,
-    MlpSection, OutputLayerDesc, INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MLP_MAGIC,
+    activation_bits, encode_mlp, mlp_encoded_len, HiddenLayerDesc, LoadedMlp, LoadedMlp16,
+    LoadedQuantMlp, MlpActivations, MlpBlobParts, MlpDescriptor, MlpSection, OutputLayerDesc,
+    INPUT_INT16, INPUT_INT8, INPUT_TWO_PLANE, LUT_LEN, MLP_MAGIC,
 };
 pub use policy_tables::{PolicyHeader, PolicySection, PolicySections, STEP_WORDS};
 pub use transformer::{
@@ -165,6 +166,19 @@ pub enum BlobError {
         /// Offending layer.
         layer: u8,
     },
+    /// The blob's activations have `found` bits, not those of the loader it was given (an MLP
+    /// blob with int16 activations needs `LoadedMlp::<i16>`, or [`LoadedBlob`] for either).
+    ActivationBits {
+        /// Bits per activation code the blob states.
+        found: u8,
+    },
+    /// Layer `layer` (the output layer is `hidden.len()`) of an int16-activation blob has a
+    /// -128 weight or a bias beyond `quant::BIAS16_MAX`, where its int64 accumulation would not
+    /// be exact.
+    ExactRange {
+        /// Offending layer.
+        layer: u8,
+    },
     /// The loader runs on a big-endian target (the blob is little endian, read in place).
     BigEndianTarget,
     /// Writing: the output buffer is too small.
@@ -228,6 +242,13 @@ impl core::fmt::Display for BlobError {
                 write!(f, "layer {layer} has an invalid zero point or clamp range")
             }
             Self::LutIndex { layer } => write!(f, "layer {layer} refers to a missing LUT"),
+            Self::ActivationBits { found } => {
+                write!(f, "blob has {found}-bit activations, not the loader's")
+            }
+            Self::ExactRange { layer } => write!(
+                f,
+                "layer {layer} has a -128 weight or a bias beyond 2^46 (int16 activations)"
+            ),
             Self::BigEndianTarget => {
                 f.write_str("blobs are read in place on little-endian targets only")
             }

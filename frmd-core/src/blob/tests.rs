@@ -48,18 +48,39 @@ fn fix_crc(blob: &mut [u8]) {
 }
 
 fn descriptor_of(blob: &[u8]) -> MlpDescriptor {
+    descriptor_parts(blob).0
+}
+
+/// The descriptor and, if there are bytes after it, its trailer.
+fn descriptor_parts(blob: &[u8]) -> (MlpDescriptor, Option<MlpActivations>) {
     let len = u32::from_le_bytes(blob[16..20].try_into().unwrap()) as usize;
-    postcard::from_bytes(&blob[HEADER_LEN..HEADER_LEN + len]).unwrap()
+    let bytes = &blob[HEADER_LEN..HEADER_LEN + len];
+    let (d, rest) = postcard::take_from_bytes::<MlpDescriptor>(bytes).unwrap();
+    (
+        d,
+        (!rest.is_empty()).then(|| postcard::from_bytes(rest).unwrap()),
+    )
 }
 
 /// Rewrites the descriptor (the data area moves if the descriptor length changes alignment).
 fn with_descriptor(blob: &[u8], edit: impl FnOnce(&mut MlpDescriptor)) -> Vec<u8> {
+    with_descriptor_parts(blob, |d, _| edit(d))
+}
+
+/// Rewrites the descriptor and its trailer (`None`: written without one).
+fn with_descriptor_parts(
+    blob: &[u8],
+    edit: impl FnOnce(&mut MlpDescriptor, &mut Option<MlpActivations>),
+) -> Vec<u8> {
     let old_len = u32::from_le_bytes(blob[16..20].try_into().unwrap()) as usize;
     let old_start = container::data_start(old_len).unwrap();
-    let mut d = descriptor_of(blob);
-    edit(&mut d);
+    let (mut d, mut trailer) = descriptor_parts(blob);
+    edit(&mut d, &mut trailer);
     let mut scratch = [0_u8; 4096];
-    let encoded = postcard::to_slice(&d, &mut scratch).unwrap().to_vec();
+    let mut encoded = postcard::to_slice(&d, &mut scratch).unwrap().to_vec();
+    if let Some(trailer) = &trailer {
+        encoded.extend_from_slice(postcard::to_slice(trailer, &mut scratch).unwrap());
+    }
     let start = container::data_start(encoded.len()).unwrap();
     let mut out = vec![0_u8; start];
     out[..HEADER_LEN].copy_from_slice(&blob[..HEADER_LEN]);
@@ -154,11 +175,31 @@ fn header_damage_is_named() {
             Err(BlobError::UnsupportedVersion { found: version })
         );
     }
-    // Version 2 stored the input precision as a bool, which encodes as the same byte.
-    let mut old = blob.clone();
-    old[4..6].copy_from_slice(&MIN_FORMAT_VERSION.to_le_bytes());
+    // Versions 2 and 3 have no trailer (int8 activations, clamps in the layer descriptors);
+    // version 2 stored the input precision as a bool, which encodes as the same byte.
+    let untrailed = with_descriptor_parts(&blob, |_, trailer| *trailer = None);
     assert_eq!(MIN_FORMAT_VERSION, 2);
-    assert!(load_copy(&old).is_ok());
+    for version in MIN_FORMAT_VERSION..mlp::ACTIVATIONS_SINCE {
+        let mut old = untrailed.clone();
+        old[4..6].copy_from_slice(&version.to_le_bytes());
+        fix_crc(&mut old);
+        assert!(load_copy(&old).is_ok());
+        let mut with_trailer = blob.clone();
+        with_trailer[4..6].copy_from_slice(&version.to_le_bytes());
+        fix_crc(&mut with_trailer);
+        assert_eq!(load_copy(&with_trailer), Err(BlobError::Descriptor));
+    }
+    // From version 4 the trailer is required and names the precision and every layer's clamps.
+    assert_eq!(load_copy(&untrailed), Err(BlobError::Descriptor));
+    let sixteen = with_descriptor_parts(&blob, |_, t| t.as_mut().unwrap().bits = 16);
+    assert_eq!(
+        load_copy(&sixteen),
+        Err(BlobError::ActivationBits { found: 16 })
+    );
+    let short = with_descriptor_parts(&blob, |_, t| {
+        t.as_mut().unwrap().clamps.pop();
+    });
+    assert_eq!(load_copy(&short), Err(BlobError::Descriptor));
     let mut bad = blob.clone();
     bad[6] = 1;
     assert_eq!(load_copy(&bad), Err(BlobError::ReservedField));

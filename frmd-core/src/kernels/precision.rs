@@ -99,8 +99,19 @@ pub(crate) mod sealed {
 ///   checks the weights, `|bias| <=` [`BIAS16_MAX`] and the width, which bound every accumulator by
 ///   `2^47` (the domain of [`crate::quant::requantize_s64`]).
 pub trait Accumulator:
-    sealed::Accumulate + Copy + Default + Debug + PartialEq + Eq + Send + Sync + 'static
+    sealed::Accumulate
+    + bytemuck::Pod
+    + Into<i64>
+    + Default
+    + Debug
+    + PartialEq
+    + Eq
+    + Send
+    + Sync
+    + 'static
 {
+    /// Zero (usable in `const` items, e.g. to initialize scratch arrays).
+    const ZERO: Self;
     /// Columns per int32 partial sum.
     const CHUNK: usize;
     /// Smallest weight for which the accumulation is exact (`-128` for `i32`: wrapping is the
@@ -129,6 +140,7 @@ impl sealed::Accumulate for i32 {
 }
 
 impl Accumulator for i32 {
+    const ZERO: i32 = 0;
     const CHUNK: usize = usize::MAX;
     const WEIGHT_MIN: i8 = i8::MIN;
     const MAX_COLUMNS: usize = usize::MAX;
@@ -187,6 +199,7 @@ impl sealed::Accumulate for i64 {
 }
 
 impl Accumulator for i64 {
+    const ZERO: i64 = 0;
     const CHUNK: usize = CHUNK16;
     const WEIGHT_MIN: i8 = -127;
     const MAX_COLUMNS: usize = IN_FEATURES16_MAX;
@@ -205,12 +218,18 @@ impl Accumulator for i64 {
 /// Selects the layer's accumulator ([`Self::Acc`], also the bias type), its requantization, the
 /// valid shifts and zero points, and its activation table.
 pub trait Precision:
-    sealed::Quantize + Copy + Default + Debug + Ord + Send + Sync + 'static
+    sealed::Quantize + bytemuck::Pod + Default + Debug + Ord + Send + Sync + 'static
 {
+    /// The code of real value 0 at zero point 0 (usable in `const` items).
+    const ZERO: Self;
+    /// Bits of a code (8 or 16).
+    const BITS: u8;
+    /// Entries of an activation table (256 for [`LutTable`], [`super::LUT16_LEN`] for [`Lut16Table`]).
+    const TABLE_LEN: usize;
     /// Accumulator and bias type.
     type Acc: Accumulator;
     /// Activation table type ([`LutTable`] or [`Lut16Table`]).
-    type Table: Debug + 'static;
+    type Table: Copy + Debug + PartialEq + Eq + Send + Sync + 'static;
     /// Smallest code.
     const MIN: Self;
     /// Largest code.
@@ -235,6 +254,10 @@ pub trait Precision:
     fn lookup(table: &Self::Table, x: Self) -> Self;
     /// The codes as a layer input.
     fn layer_input(values: &[Self]) -> LayerInput<'_>;
+    /// `entries` as a table, if there are exactly [`Self::TABLE_LEN`] of them.
+    fn table(entries: &[Self]) -> Option<&Self::Table>;
+    /// The entries of `table`.
+    fn table_entries(table: &Self::Table) -> &[Self];
 }
 
 #[allow(private_interfaces)]
@@ -294,6 +317,9 @@ impl sealed::Quantize for i16 {
 }
 
 impl Precision for i8 {
+    const ZERO: i8 = 0;
+    const BITS: u8 = 8;
+    const TABLE_LEN: usize = 256;
     type Acc = i32;
     type Table = LutTable;
     const MIN: i8 = i8::MIN;
@@ -316,9 +342,18 @@ impl Precision for i8 {
     fn layer_input(values: &[i8]) -> LayerInput<'_> {
         LayerInput::Int8(values)
     }
+    fn table(entries: &[i8]) -> Option<&LutTable> {
+        entries.try_into().ok()
+    }
+    fn table_entries(table: &LutTable) -> &[i8] {
+        table
+    }
 }
 
 impl Precision for i16 {
+    const ZERO: i16 = 0;
+    const BITS: u8 = 16;
+    const TABLE_LEN: usize = super::lut16::LUT16_LEN;
     type Acc = i64;
     type Table = Lut16Table;
     const MIN: i16 = i16::MIN;
@@ -361,5 +396,11 @@ impl Precision for i16 {
     #[inline(always)]
     fn layer_input(values: &[i16]) -> LayerInput<'_> {
         LayerInput::Int16(values)
+    }
+    fn table(entries: &[i16]) -> Option<&Lut16Table> {
+        entries.try_into().ok()
+    }
+    fn table_entries(table: &Lut16Table) -> &[i16] {
+        table
     }
 }

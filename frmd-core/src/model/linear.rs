@@ -11,11 +11,16 @@
 //!   per channel straight to the next layer's input parameters (dequantize and quantize fused) and
 //!   an optional 256-entry table applies the activation.
 //!
+//! [`Int8Linear`] and [`RequantizedLinear`] are generic over the activation [`Precision`] (int8
+//! weights either way): with int16 activations (the 16x8 scheme) the bias and accumulators are
+//! int64, the requantization is [`crate::quant::requantize_s64`] and the table an interpolated
+//! [`crate::kernels::Lut16Table`]. The type parameters default to int8.
+//!
 //! Weights are row-major `[out_features, in_features]` (candle `Linear` layout) in every form.
 
 use crate::kernels::{
-    dequantize_accumulators, lut, Activation, FcRequant, FullyConnected, KernelError, LayerInput,
-    LutTable,
+    dequantize_accumulators, lut, Accumulator, Activation, FcRequant, FullyConnected, KernelError,
+    LayerInput, Precision,
 };
 use crate::quant::{combine_plane_accumulators, requantize_to_i8, QuantParams};
 
@@ -103,18 +108,19 @@ impl<'a> F32Linear<'a> {
     }
 }
 
-/// The int8 form with dequantized output: int8 codes in, f32 out,
-/// `output[o] = (bias[o] + w[o] . codes) * output_scales[o]`.
+/// The int8-weight form with dequantized output: codes in, f32 out,
+/// `output[o] = (bias[o] + w[o] . codes) * output_scales[o]`. `A` is the accumulator: `i32` for
+/// int8 codes in (the default), `i64` for int16 activations.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Int8Linear<'a> {
-    /// int8 weights `[out, in]` and int32 bias at scale `input_scale * weight_scale[o]`, input
-    /// zero point folded in.
-    pub fc: FullyConnected<'a>,
+pub struct Int8Linear<'a, A: Accumulator = i32> {
+    /// int8 weights `[out, in]` and bias at scale `input_scale * weight_scale[o]`, input zero
+    /// point folded in.
+    pub fc: FullyConnected<'a, A>,
     /// `[out]` dequantization scales `input_scale * weight_scale[o]`.
     pub output_scales: &'a [f32],
 }
 
-impl<'a> Int8Linear<'a> {
+impl<'a, A: Accumulator> Int8Linear<'a, A> {
     /// Checks the weights, bias and scale lengths against the shape.
     pub fn validate(&self) -> Result<(), KernelError> {
         self.fc.validate()?;
@@ -124,14 +130,15 @@ impl<'a> Int8Linear<'a> {
         Ok(())
     }
 
-    /// Codes to dequantized f32; `accumulators` and `output` are `out_features` long.
-    pub fn forward(
+    /// Codes of either width to dequantized f32; `accumulators` and `output` are `out_features`
+    /// long.
+    pub fn forward_input(
         &self,
-        codes: &[i8],
-        accumulators: &mut [i32],
+        input: LayerInput<'_>,
+        accumulators: &mut [A],
         output: &mut [f32],
     ) -> Result<(), KernelError> {
-        self.fc.forward_accumulators(codes, accumulators)?;
+        self.fc.accumulate(input, accumulators)?;
         dequantize_accumulators(accumulators, self.output_scales, output)
     }
 
@@ -148,6 +155,19 @@ impl<'a> Int8Linear<'a> {
             fc: FullyConnected::new(fc.in_features, count, weights, bias),
             output_scales,
         })
+    }
+}
+
+impl Int8Linear<'_> {
+    /// int8 codes to dequantized f32; `accumulators` and `output` are `out_features` long.
+    pub fn forward(
+        &self,
+        codes: &[i8],
+        accumulators: &mut [i32],
+        output: &mut [f32],
+    ) -> Result<(), KernelError> {
+        self.fc.forward_accumulators(codes, accumulators)?;
+        dequantize_accumulators(accumulators, self.output_scales, output)
     }
 }
 
@@ -194,22 +214,23 @@ impl QuantizedLinear<'_> {
     }
 }
 
-/// The int8 form with requantized output: int8 codes in, int8 codes out,
-/// `output[o] = activation(requantize(bias[o] + w[o] . codes))`.
+/// The form with requantized output: codes in, `P` codes out,
+/// `output[o] = activation(requantize(bias[o] + w[o] . codes))`; `P` is `i8` (the default) or
+/// `i16` (int16 activations, int64 bias).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct RequantizedLinear<'a> {
+pub struct RequantizedLinear<'a, P: Precision = i8> {
     /// Weights and bias (input zero point folded).
-    pub fc: FullyConnected<'a>,
+    pub fc: FullyConnected<'a, P::Acc>,
     /// Per-channel requantization to the pre-activation (or, without a table, the output) params.
-    pub requant: FcRequant<'a>,
+    pub requant: FcRequant<'a, P>,
     /// Activation table from pre-activation to output params; `None` for identity/clamp-only.
-    pub activation: Option<&'a LutTable>,
+    pub activation: Option<&'a P::Table>,
 }
 
-impl RequantizedLinear<'_> {
+impl<P: Precision> RequantizedLinear<'_, P> {
     /// The layer on `input`: fully connected, requantized, activation table applied, in one pass
     /// (`output` is `out_features` long).
-    pub fn forward(&self, input: LayerInput<'_>, output: &mut [i8]) -> Result<(), KernelError> {
+    pub fn forward(&self, input: LayerInput<'_>, output: &mut [P]) -> Result<(), KernelError> {
         self.fc
             .forward_activated(&self.requant, self.activation, input, output)
     }
@@ -221,12 +242,14 @@ impl RequantizedLinear<'_> {
     pub fn forward_prevalidated(
         &self,
         input: LayerInput<'_>,
-        output: &mut [i8],
+        output: &mut [P],
     ) -> Result<(), KernelError> {
         self.fc
             .forward_validated(&self.requant, self.activation, input, output)
     }
+}
 
+impl RequantizedLinear<'_> {
     /// First-layer accumulators of a two-plane input (`model::mlp::InputPrecision::TwoPlane`):
     /// `acc[o] = combine_plane_accumulators(bias[o] + w[o] . coarse, w[o] . fine)`.
     /// `coarse` and `fine` are `in_features` long, `acc` is `out_features` long.

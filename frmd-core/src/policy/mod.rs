@@ -109,7 +109,9 @@ pub use decoder::ProDmpTables;
 pub use dims::PolicyDims;
 pub use history::ObsHistory;
 pub use layout::{InputLayout, InputSegment, InputSources, MAX_INPUT_SEGMENTS};
-pub use network::mlp::{F32MlpNetwork, Int8MlpNetwork, MAX_HIDDEN_LAYERS};
+pub use network::mlp::{
+    F32MlpNetwork, Int16MlpNetwork, Int8MlpNetwork, QuantMlpNetwork, MAX_HIDDEN_LAYERS,
+};
 pub(crate) use network::transformer::STANDARD_SEGMENTS;
 pub use network::transformer::{
     F32TransformerNetwork, Int8TransformerNetwork, TransformerBackbone, TransformerNetwork,

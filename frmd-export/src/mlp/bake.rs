@@ -1,9 +1,9 @@
 //! The MLP's baked form (see [`crate::bake`] for what every baked module offers): a generated
 //! Rust module with `const`/`static` shapes, scales, requantization parameters, LUTs,
 //! normalization, ProDMP tables and step constants, plus an aligned `weights.bin` (int8 weights
-//! and int32 biases) that the module reads with `include_bytes!`. Besides the common items it
-//! exposes `mlp_parts()`, `network()`, `config()` and the RAM figures `SCRATCH_BYTES`,
-//! `POLICY_RAM_BYTES`.
+//! and int32 biases, int64 with int16 activations) that the module reads with `include_bytes!`.
+//! Besides the common items it exposes `mlp_parts()`, `network()`, `config()` and the RAM figures
+//! `SCRATCH_BYTES`, `POLICY_RAM_BYTES`.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -11,34 +11,31 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use frmd_core::policy::InputSegment;
 
+use super::precision::ExportPrecision;
 use super::quantized::QuantizedMlp;
 use crate::bake::{decoder_expression, float, list, write_files, MODULE_FILE, WEIGHTS_FILE};
 
+/// Little-endian bytes of biases (int32, or int64 with int16 activations).
+fn bias_bytes<A: Copy + Into<i64>>(values: &[A]) -> Vec<u8> {
+    let size = core::mem::size_of::<A>();
+    values
+        .iter()
+        .flat_map(|b| (*b).into().to_le_bytes().into_iter().take(size))
+        .collect()
+}
+
 /// The weight file bytes (little endian), laid out by [`QuantizedMlp::weight_file_layout`].
-pub fn weight_file(policy: &QuantizedMlp) -> Vec<u8> {
+pub fn weight_file<P: ExportPrecision>(policy: &QuantizedMlp<P>) -> Vec<u8> {
     let (entries, len) = policy.weight_file_layout();
     let mut bytes = vec![0_u8; len];
     let mut arrays: Vec<Vec<u8>> = Vec::new();
     for layer in &policy.hidden {
         arrays.push(layer.weights.iter().map(|w| *w as u8).collect());
-        arrays.push(layer.bias.iter().flat_map(|b| b.to_le_bytes()).collect());
+        arrays.push(bias_bytes(&layer.bias));
     }
-    arrays.push(
-        policy
-            .first_layer_biases
-            .iter()
-            .flat_map(|b| b.to_le_bytes())
-            .collect(),
-    );
+    arrays.push(bias_bytes(&policy.first_layer_biases));
     arrays.push(policy.output.weights.iter().map(|w| *w as u8).collect());
-    arrays.push(
-        policy
-            .output
-            .bias
-            .iter()
-            .flat_map(|b| b.to_le_bytes())
-            .collect(),
-    );
+    arrays.push(bias_bytes(&policy.output.bias));
     for (entry, array) in entries.iter().zip(&arrays) {
         bytes[entry.offset..entry.offset + array.len()].copy_from_slice(array);
     }
@@ -47,7 +44,7 @@ pub fn weight_file(policy: &QuantizedMlp) -> Vec<u8> {
 
 /// Checks what the generated code cannot: finite floats and consistent lengths (the blob writer's
 /// shape checks are reused by encoding once).
-fn check(policy: &QuantizedMlp) -> anyhow::Result<()> {
+fn check<P: ExportPrecision>(policy: &QuantizedMlp<P>) -> anyhow::Result<()> {
     policy.blob().context("inconsistent policy")?;
     let p = &policy.prodmp;
     let floats = policy
@@ -99,9 +96,16 @@ fn segment_name(segment: InputSegment) -> &'static str {
 }
 
 /// The generated module's source text.
-pub fn module_source(policy: &QuantizedMlp) -> anyhow::Result<String> {
+pub fn module_source<P: ExportPrecision>(policy: &QuantizedMlp<P>) -> anyhow::Result<String> {
     check(policy)?;
     let q = policy;
+    // Type names of the precision: codes, accumulators and biases, tables, network.
+    let code = format!("i{}", P::BITS);
+    let acc = format!("i{}", 8 * core::mem::size_of::<P::Acc>());
+    let (lut, network) = match P::BITS {
+        8 => ("Lut8", "Int8MlpNetwork"),
+        _ => ("Lut16", "Int16MlpNetwork"),
+    };
     let (entries, weights_len) = q.weight_file_layout();
     let memory = q.memory();
     let input_width = q.input_width().unwrap_or(0);
@@ -115,14 +119,15 @@ pub fn module_source(policy: &QuantizedMlp) -> anyhow::Result<String> {
         w,
         "// Needs `{WEIGHTS_FILE}` next to this file; only depends on frmd-core."
     )?;
-    w.push_str(
-        "\nuse frmd_core::kernels::{FcRequant, FullyConnected, Lut8};\n\
-         use frmd_core::model::linear::{Int8Linear, RequantizedLinear};\n\
+    writeln!(
+        w,
+        "\nuse frmd_core::kernels::{{FcRequant, FullyConnected, {lut}}};\n\
+         use frmd_core::model::linear::{{Int8Linear, RequantizedLinear}};\n\
          use frmd_core::model::mlp::InputPrecision;\n\
-         use frmd_core::policy::{\n    baked_slice, AlignedBytes, InputLayout, InputSegment, Int8MlpNetwork, Policy, PolicyConfig,\n    PolicyError, ProDmpTables, RangeNormalizer, Sampler, StepConstants, StepTable,\n};\n\
+         use frmd_core::policy::{{\n    baked_slice, AlignedBytes, InputLayout, InputSegment, {network}, Policy, PolicyConfig,\n    PolicyError, ProDmpTables, RangeNormalizer, Sampler, StepConstants, StepTable,\n}};\n\
          use frmd_core::prodmp::BakedProDmp;\n\
-         use frmd_core::quant::QuantParams;\n\n",
-    );
+         use frmd_core::quant::QuantParams;\n",
+    )?;
     let consts = [
         ("HISTORY", q.history, "Observation history length M."),
         ("OBS_DIM", q.obs_dim, "Observation dimension O."),
@@ -226,11 +231,12 @@ pub fn module_source(policy: &QuantizedMlp) -> anyhow::Result<String> {
         w,
         "/// Sampling step constants.\npub static STEPS: [StepConstants; NUM_STEPS] = {steps};"
     )?;
-    for (i, lut) in q.luts.iter().enumerate() {
+    for (i, table) in q.luts.iter().enumerate() {
         writeln!(
             w,
-            "/// Activation table {i}.\npub static LUT_{i}: Lut8 = Lut8::from_table({});",
-            list(lut, |v| v.to_string())
+            "/// Activation table {i}.\npub static LUT_{i}: {lut} = {lut}::from_table({});",
+            list(P::table_entries(table), |v| Into::<i16>::into(*v)
+                .to_string())
         )?;
     }
     for (i, layer) in q.hidden.iter().enumerate() {
@@ -259,7 +265,7 @@ pub fn module_source(policy: &QuantizedMlp) -> anyhow::Result<String> {
         "/// The hidden layers, the output layer and the first-layer bias variants over the baked\n\
          /// weights.\n\
          #[allow(clippy::type_complexity)]\n\
-         pub fn mlp_parts() -> Result<([RequantizedLinear<'static>; {layers}], Int8Linear<'static>, &'static [i32]), PolicyError> {{\n    let bytes = &WEIGHTS.0;\n    let hidden = ["
+         pub fn mlp_parts() -> Result<([RequantizedLinear<'static, {code}>; {layers}], Int8Linear<'static, {acc}>, &'static [{acc}]), PolicyError> {{\n    let bytes = &WEIGHTS.0;\n    let hidden = ["
     )?;
     for (i, layer) in q.hidden.iter().enumerate() {
         let (weights, bias) = (entries[2 * i], entries[2 * i + 1]);
@@ -277,8 +283,8 @@ pub fn module_source(policy: &QuantizedMlp) -> anyhow::Result<String> {
             bias.offset,
             bias.count,
             layer.output_zero_point,
-            layer.activation_min,
-            layer.activation_max
+            Into::<i16>::into(layer.activation_min),
+            Into::<i16>::into(layer.activation_max)
         )?;
     }
     let base = 2 * q.hidden.len();
@@ -286,8 +292,8 @@ pub fn module_source(policy: &QuantizedMlp) -> anyhow::Result<String> {
     writeln!(
         w,
         "    ];\n    let output = Int8Linear {{\n        fc: FullyConnected::new(\n            {},\n            {},\n            baked_slice(bytes, {}, {})?,\n            baked_slice(bytes, {}, {})?,\n        ),\n        output_scales: &OUTPUT_SCALES,\n    }};\n    Ok((hidden, output, baked_slice(bytes, {}, {})?))\n}}\n\n\
-         /// The int8 network over the baked weights (`WIDTH` >= `SCRATCH_WIDTH`).\n\
-         pub fn network<const WIDTH: usize>() -> Result<Int8MlpNetwork<'static, WIDTH>, PolicyError> {{\n    let (hidden, output, first_layer_biases) = mlp_parts()?;\n    Int8MlpNetwork::new(INPUT, INPUT_PRECISION, &hidden, output, first_layer_biases)\n}}\n",
+         /// The quantized network over the baked weights (`WIDTH` >= `SCRATCH_WIDTH`).\n\
+         pub fn network<const WIDTH: usize>() -> Result<{network}<'static, WIDTH>, PolicyError> {{\n    let (hidden, output, first_layer_biases) = mlp_parts()?;\n    {network}::new(INPUT, INPUT_PRECISION, &hidden, output, first_layer_biases)\n}}\n",
         q.output.in_features,
         q.output.out_features,
         out_weights.offset,
@@ -297,24 +303,28 @@ pub fn module_source(policy: &QuantizedMlp) -> anyhow::Result<String> {
         variants.offset,
         variants.count
     )?;
-    w.push_str(
+    writeln!(
+        w,
         "/// Normalization and sampler configuration.\n\
-         pub fn config() -> PolicyConfig<'static> {\n    PolicyConfig {\n        history: HISTORY,\n        obs_norm: OBS_NORM,\n        action_norm: ACTION_NORM,\n        sampler: Sampler {\n            steps: StepTable::new(&STEPS),\n            decoder: ProDmpTables::from_baked(&DECODER),\n            layout: LAYOUT,\n            control_dt: CONTROL_DT,\n        },\n    }\n}\n\n\
+         pub fn config() -> PolicyConfig<'static> {{\n    PolicyConfig {{\n        history: HISTORY,\n        obs_norm: OBS_NORM,\n        action_norm: ACTION_NORM,\n        sampler: Sampler {{\n            steps: StepTable::new(&STEPS),\n            decoder: ProDmpTables::from_baked(&DECODER),\n            layout: LAYOUT,\n            control_dt: CONTROL_DT,\n        }},\n    }}\n}}\n\n\
          /// The baked policy type.\n\
-         pub type BakedPolicy = Policy<\n    'static,\n    Int8MlpNetwork<'static, SCRATCH_WIDTH>,\n    HISTORY,\n    OBS_DIM,\n    ACTION_DIM,\n    HORIZON,\n    PARAMS_PER_DOF,\n    INPUT_WIDTH,\n>;\n\n\
+         pub type BakedPolicy = Policy<\n    'static,\n    {network}<'static, SCRATCH_WIDTH>,\n    HISTORY,\n    OBS_DIM,\n    ACTION_DIM,\n    HORIZON,\n    PARAMS_PER_DOF,\n    INPUT_WIDTH,\n>;\n\n\
          /// What the policy borrows besides this module's statics: nothing (the MLP network holds\n\
          /// its scratch); a type so that a firmware calls every baked module alike.\n\
          #[derive(Debug, Default)]\n\
          pub struct Storage;\n\n\
-         impl Storage {\n    /// The storage (`const`: it can be a `static`).\n    pub const fn new() -> Self {\n        Storage\n    }\n}\n\n\
+         impl Storage {{\n    /// The storage (`const`: it can be a `static`).\n    pub const fn new() -> Self {{\n        Storage\n    }}\n}}\n\n\
          /// A ready policy (validated); call `reset` before the first chunk.\n\
-         pub fn policy(_storage: &mut Storage) -> Result<BakedPolicy, PolicyError> {\n    Policy::new(config(), network::<SCRATCH_WIDTH>()?)\n}\n",
-    );
+         pub fn policy(_storage: &mut Storage) -> Result<BakedPolicy, PolicyError> {{\n    Policy::new(config(), network::<SCRATCH_WIDTH>()?)\n}}",
+    )?;
     Ok(s)
 }
 
 /// Writes `policy.rs` and `weights.bin` into `dir` (created if missing); returns their paths.
-pub fn write_module(policy: &QuantizedMlp, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+pub fn write_module<P: ExportPrecision>(
+    policy: &QuantizedMlp<P>,
+    dir: &Path,
+) -> anyhow::Result<Vec<PathBuf>> {
     let source = module_source(policy)?;
     write_files(
         dir,

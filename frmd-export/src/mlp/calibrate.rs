@@ -11,13 +11,15 @@
 //! [`crate::ExportOptions`]) the first layer's bias and multipliers are made for the
 //! fine input scale `input_scale / 2^8` (zero point `frmd_core::quant::wide_zero_point`); with a
 //! two-plane input (`TwoPlane`) only its multipliers are; for both the exporter widens the input
-//! range (see [`crate::ExportOptions::input_headroom`]).
+//! range (see [`crate::ExportOptions::input_headroom`]). With int16 activations
+//! ([`ExportPrecision`] `i16`) every hidden activation gets symmetric int16 parameters over its
+//! calibrated range widened by [`crate::ExportOptions::activation_headroom`], the biases are
+//! int64 and the tables interpolated; the input is the 16-bit plane.
 use super::fold::{FoldedMlp, InputGains};
+use super::precision::ExportPrecision;
 use super::quantized::{QuantizedLayer, QuantizedMlp, QuantizedOutput};
-use crate::calibrate::{check_rows, int_bias, quantize_weights, RangeMethod, Recorder};
+use crate::calibrate::{check_rows, quantize_weights, RangeMethod, Recorder};
 use anyhow::{bail, Context};
-use frmd_core::blob::LUT_LEN;
-use frmd_core::kernels::Lut8;
 use frmd_core::model::mlp::{InputPrecision, Probe};
 use frmd_core::quant::{
     requantization_multiplier, wide_scale, wide_zero_point, QuantParams, FINE_INPUT_BITS,
@@ -124,7 +126,7 @@ const INT16_BOUND: AccumulatorBound = |bias, weight_sum| bias + (weight_sum << 1
 fn check_accumulator_range(
     weights: &[i8],
     in_features: usize,
-    biases: &[i32],
+    biases: &[i64],
     bound: AccumulatorBound,
     what: &str,
 ) -> anyhow::Result<()> {
@@ -134,7 +136,7 @@ fn check_accumulator_range(
             .iter()
             .skip(o)
             .step_by(weights.len() / in_features)
-            .map(|b| i64::from(*b).abs())
+            .map(|b| b.abs())
             .max()
             .unwrap_or(0);
         let reach = bound(bias, weight_sum);
@@ -146,20 +148,31 @@ fn check_accumulator_range(
 }
 
 /// Quantizes `model` with the calibrated `ranges`, normalization and ProDMP tables into a
-/// [`QuantizedMlp`] whose first layer takes its input as `input_precision` says.
-pub fn quantize(
+/// [`QuantizedMlp`] with `P` activations, whose first layer takes its input as
+/// `input_precision` says; `headroom` widens the activation ranges where `P` affords it.
+pub fn quantize<P: ExportPrecision>(
     model: &FoldedMlp,
     ranges: &Ranges,
     norm: &Normalization,
     input_precision: InputPrecision,
-) -> anyhow::Result<QuantizedMlp> {
+    headroom: f32,
+) -> anyhow::Result<QuantizedMlp<P>> {
     let base = &model.base;
     let c = &base.config;
+    if !model.hidden.is_empty() && !P::accepts(input_precision) {
+        bail!(
+            "{}-bit activations take the 16-bit input only (not {input_precision:?})",
+            P::BITS
+        );
+    }
     let mut current = ranges.input;
     let mut hidden = Vec::new();
-    let mut luts: Vec<[i8; LUT_LEN]> = Vec::new();
+    let mut luts = Vec::new();
     let mut first_layer_biases = Vec::new();
     for (l, (layer, &(pre, out))) in model.hidden.iter().zip(&ranges.hidden).enumerate() {
+        let what = |part: &str| format!("hidden layer {l} {part}");
+        let pre = P::activation(pre, headroom).with_context(|| what("pre-activation"))?;
+        let out = P::activation(out, headroom).with_context(|| what("output"))?;
         let q = quantize_weights(layer).with_context(|| format!("hidden layer {l}"))?;
         // The 16-bit input's codes are on the fine grid: so are the first layer's biases.
         let bias_input = match (l, input_precision) {
@@ -169,14 +182,14 @@ pub fn quantize(
             },
             _ => current,
         };
-        let bias = int_bias(&layer.bias, &q, bias_input, layer.in_features)
+        let bias = P::bias(&layer.bias, &q, bias_input, layer.in_features)
             .with_context(|| format!("hidden layer {l}"))?;
         // The scale of the accumulators this layer requantizes.
         let mut accumulator_input_scale = bias_input.scale;
         if l == 0 {
             for variant in &model.first_layer_biases {
                 first_layer_biases.extend(
-                    int_bias(variant, &q, bias_input, layer.in_features)
+                    P::bias(variant, &q, bias_input, layer.in_features)
                         .context("first-layer bias variant")?,
                 );
             }
@@ -185,9 +198,10 @@ pub fn quantize(
                 InputPrecision::TwoPlane => Some((TWO_PLANE_BOUND, "two-plane input")),
                 InputPrecision::Int8 => None,
             };
-            if let Some((bound, what)) = bound {
+            if let Some((bound, what)) = bound.filter(|_| P::INT32_ACCUMULATORS) {
                 for biases in [&first_layer_biases, &bias] {
-                    check_accumulator_range(&q.weights, layer.in_features, biases, bound, what)?;
+                    let wide: Vec<i64> = biases.iter().map(|&b| b.into()).collect();
+                    check_accumulator_range(&q.weights, layer.in_features, &wide, bound, what)?;
                 }
             }
             if input_precision == InputPrecision::TwoPlane {
@@ -200,16 +214,22 @@ pub fn quantize(
                 .with_context(|| {
                     format!("hidden layer {l} channel {o}: requantization multiplier")
                 })?;
+            if !(P::SHIFT_MIN..=P::SHIFT_MAX).contains(&s) {
+                bail!(
+                    "hidden layer {l} channel {o}: requantization shift {s} outside {}..={} \
+                     (input scale {accumulator_input_scale:e}, weight scale {scale:e}, output \
+                     scale {:e})",
+                    P::SHIFT_MIN,
+                    P::SHIFT_MAX,
+                    pre.scale
+                );
+            }
             multipliers.push(m);
             shifts.push(s);
         }
         let activation = layer.activation;
-        let lut = Lut8::build(|x| activation.apply(x), pre, out)
+        let table = P::activation_table(|x| activation.apply(x), pre, out)
             .with_context(|| format!("hidden layer {l}: activation table"))?;
-        let mut table = [0i8; LUT_LEN];
-        for (i, slot) in table.iter_mut().enumerate() {
-            *slot = lut.lookup((i as i32 - 128) as i8);
-        }
         luts.push(table);
         hidden.push(QuantizedLayer {
             in_features: layer.in_features,
@@ -219,14 +239,14 @@ pub fn quantize(
             multipliers,
             shifts,
             output_zero_point: pre.zero_point,
-            activation_min: i8::MIN,
-            activation_max: i8::MAX,
+            activation_min: P::MIN,
+            activation_max: P::MAX,
             lut: Some(luts.len() - 1),
         });
         current = out;
     }
     let q = quantize_weights(&model.output).context("output layer")?;
-    let bias = int_bias(&model.output.bias, &q, current, model.output.in_features)
+    let bias = P::bias(&model.output.bias, &q, current, model.output.in_features)
         .context("output layer")?;
     let output = QuantizedOutput {
         in_features: model.output.in_features,

@@ -7,11 +7,13 @@
 pub mod bake;
 mod calibrate;
 mod fold;
+mod precision;
 mod quantized;
 pub mod reference;
 
 pub use calibrate::{calibrate, input_gains, quantize, Ranges};
 pub use fold::{FoldedMlp, InputGains};
+pub use precision::ExportPrecision;
 pub use quantized::{QuantizedLayer, QuantizedMlp, QuantizedOutput};
 
 use std::fmt;
@@ -24,24 +26,44 @@ use frmd_core::policy::{Network, PolicyDims};
 use frmd_formats::calibration::CalibrationSet;
 use frmd_formats::checkpoint::{Checkpoint, Normalization};
 
-use crate::backbone::{ExportOptions, ExportedNetwork};
+use crate::backbone::{Activations, ExportOptions, ExportedNetwork};
 use crate::bake::{write_files, BLOB_FILE};
 use crate::calibrate::widen;
 use crate::host::{HostScratch, MAX_WIDTH};
 use crate::memory::MemoryFigures;
 use crate::reference::KernelCheck;
 
-/// An exported MLP student: the folded f32 model, its calibrated ranges and the int8 policy.
+/// An exported MLP student: the folded f32 model, its calibrated ranges and the quantized policy
+/// with `P` activations.
 #[derive(Clone, Debug)]
-pub struct MlpExport {
+pub struct MlpExport<P: ExportPrecision = i8> {
     /// The folded f32 model (input gains applied).
     pub folded: FoldedMlp,
-    /// The calibrated activation ranges.
+    /// The calibrated (int8) activation ranges.
     pub ranges: Ranges,
-    /// The int8 policy.
-    pub policy: QuantizedMlp,
+    /// The quantized policy.
+    pub policy: QuantizedMlp<P>,
     /// The folded model's first-layer bias variants back to back (its f32 network's).
     f32_biases: Vec<f32>,
+}
+
+/// An exported MLP student of either activation precision.
+#[derive(Clone, Debug)]
+pub enum MlpExports {
+    /// int8 activations.
+    Int8(MlpExport<i8>),
+    /// int16 activations.
+    Int16(MlpExport<i16>),
+}
+
+impl MlpExports {
+    /// The one that is exported.
+    pub(crate) fn get(&self) -> &dyn ExportedNetwork {
+        match self {
+            MlpExports::Int8(mlp) => mlp,
+            MlpExports::Int16(mlp) => mlp,
+        }
+    }
 }
 
 /// Folds `checkpoint`, calibrates on `set` and quantizes as `options` say.
@@ -50,7 +72,20 @@ pub(crate) fn export(
     options: &ExportOptions,
     set: &CalibrationSet,
     norm: &Normalization,
-) -> anyhow::Result<MlpExport> {
+) -> anyhow::Result<MlpExports> {
+    Ok(match options.activations {
+        Activations::Int8 => MlpExports::Int8(export_as(checkpoint, options, set, norm)?),
+        Activations::Int16 => MlpExports::Int16(export_as(checkpoint, options, set, norm)?),
+    })
+}
+
+/// [`export`] with `P` activations.
+fn export_as<P: ExportPrecision>(
+    checkpoint: &Checkpoint,
+    options: &ExportOptions,
+    set: &CalibrationSet,
+    norm: &Normalization,
+) -> anyhow::Result<MlpExport<P>> {
     let folded = FoldedMlp::new(checkpoint, options.steps)?;
     let folded = if options.balance_inputs {
         folded.with_input_gains(input_gains(&folded, set)?)?
@@ -61,7 +96,13 @@ pub(crate) fn export(
     if options.input_precision != InputPrecision::Int8 {
         ranges.input = widen(ranges.input, options.input_headroom).context("input headroom")?;
     }
-    let policy = quantize(&folded, &ranges, norm, options.input_precision)?;
+    let policy = quantize::<P>(
+        &folded,
+        &ranges,
+        norm,
+        options.input_precision,
+        options.activation_headroom,
+    )?;
     Ok(MlpExport {
         f32_biases: folded.flat_first_layer_biases(),
         folded,
@@ -70,7 +111,7 @@ pub(crate) fn export(
     })
 }
 
-impl ExportedNetwork for MlpExport {
+impl<P: ExportPrecision> ExportedNetwork for MlpExport<P> {
     fn dims(&self) -> PolicyDims {
         self.policy.dims()
     }
@@ -107,7 +148,8 @@ impl ExportedNetwork for MlpExport {
             self.policy.input_precision,
             gains.traj_gain,
             gains.rate_gain
-        )
+        )?;
+        writeln!(f, "  hidden activations int{}", P::BITS)
     }
 
     fn sample_f32(
@@ -123,7 +165,7 @@ impl ExportedNetwork for MlpExport {
     }
 
     fn check_kernels(&self, inputs: &[Vec<f32>]) -> anyhow::Result<KernelCheck> {
-        reference::check_network::<MAX_WIDTH>(&self.policy, inputs)
+        reference::check_network::<P, MAX_WIDTH>(&self.policy, inputs)
     }
 
     fn with_f32_network(

@@ -1,28 +1,32 @@
 //! [`QuantizedMlp`]: the owned, target-independent result of quantizing an MLP student, from
-//! which both output forms (blob and baked module) are written.
+//! which both output forms (blob and baked module) are written; int8 weights with int8
+//! activations (the default type parameter) or int16 activations (`QuantizedMlp<i16>`: int64
+//! biases, interpolated int16 tables).
 
 use crate::fold::ProDmpTablesOwned;
 use crate::memory::{policy_table_bytes, state_bytes, MemoryFigures};
-use frmd_core::blob::{encode_mlp, mlp_encoded_len, BlobError, MlpBlobParts, LUT_LEN};
-use frmd_core::kernels::{FcRequant, FullyConnected};
+use frmd_core::blob::{encode_mlp, mlp_encoded_len, BlobError, MlpBlobParts};
+use frmd_core::kernels::{FcRequant, FullyConnected, Precision};
 use frmd_core::model::linear::{Int8Linear, RequantizedLinear};
-use frmd_core::model::mlp::{InputPrecision, Int8Mlp};
+use frmd_core::model::mlp::{InputPrecision, MlpPrecision, QuantMlp};
 use frmd_core::policy::{
     InputLayout, PolicyConfig, PolicyDims, RangeNormalizer, Sampler, StepConstants, StepTable,
 };
 use frmd_core::quant::QuantParams;
 
-/// One quantized hidden layer (int8 FC, per-channel requantization, optional LUT).
+/// One quantized hidden layer (int8-weight FC, per-channel requantization to `P` codes, optional
+/// table).
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct QuantizedLayer {
+pub struct QuantizedLayer<P: Precision = i8> {
     /// Input width.
     pub in_features: usize,
     /// Output width.
     pub out_features: usize,
     /// `[out, in]` int8 weights, symmetric per output channel.
     pub weights: Vec<i8>,
-    /// `[out]` int32 bias, input zero point folded (the first layer: step 0's variant).
-    pub bias: Vec<i32>,
+    /// `[out]` bias (int32, int64 with int16 activations), input zero point folded (the first
+    /// layer: step 0's variant).
+    pub bias: Vec<P::Acc>,
     /// `[out]` Q31 multipliers.
     pub multipliers: Vec<i32>,
     /// `[out]` shifts.
@@ -30,24 +34,25 @@ pub struct QuantizedLayer {
     /// Zero point of the requantized output.
     pub output_zero_point: i32,
     /// Lower output clamp.
-    pub activation_min: i8,
+    pub activation_min: P,
     /// Upper output clamp.
-    pub activation_max: i8,
+    pub activation_max: P,
     /// Index into [`QuantizedMlp::luts`] of the activation, if any.
     pub lut: Option<usize>,
 }
 
-/// The output layer: int8 FC whose accumulators are dequantized to f32 ProDMP parameters.
+/// The output layer: int8-weight FC whose accumulators (`A`: int32, or int64 with int16
+/// activations) are dequantized to f32 ProDMP parameters.
 #[derive(Clone, Debug, PartialEq)]
-pub struct QuantizedOutput {
+pub struct QuantizedOutput<A = i32> {
     /// Input width.
     pub in_features: usize,
     /// Output width (`K * P`).
     pub out_features: usize,
     /// `[out, in]` int8 weights.
     pub weights: Vec<i8>,
-    /// `[out]` int32 bias.
-    pub bias: Vec<i32>,
+    /// `[out]` bias.
+    pub bias: Vec<A>,
     /// `[out]` dequantization scales `input_scale * weight_scale[o]`.
     pub scales: Vec<f32>,
 }
@@ -64,9 +69,10 @@ pub struct WeightEntry {
     pub count: usize,
 }
 
-/// A calibrated, quantized student with everything the firmware needs besides code.
+/// A calibrated, quantized student with everything the firmware needs besides code; `P` is the
+/// activation precision.
 #[derive(Clone, Debug, PartialEq)]
-pub struct QuantizedMlp {
+pub struct QuantizedMlp<P: Precision = i8> {
     /// History length `M`.
     pub history: usize,
     /// Observation dimension `O`.
@@ -100,19 +106,19 @@ pub struct QuantizedMlp {
     /// Step constants, 1..=4.
     pub steps: Vec<StepConstants>,
     /// First-layer bias variants (noise embedding per step folded in), back to back.
-    pub first_layer_biases: Vec<i32>,
-    /// Activation LUTs.
-    pub luts: Vec<[i8; LUT_LEN]>,
+    pub first_layer_biases: Vec<P::Acc>,
+    /// Activation tables.
+    pub luts: Vec<P::Table>,
     /// Hidden layers.
-    pub hidden: Vec<QuantizedLayer>,
+    pub hidden: Vec<QuantizedLayer<P>>,
     /// Output layer.
-    pub output: QuantizedOutput,
+    pub output: QuantizedOutput<P::Acc>,
 }
 
-impl QuantizedMlp {
-    /// Where each array goes: per hidden layer (weights i8, bias i32), then the first-layer bias
-    /// variants (i32), the output weights (i8) and bias (i32). Returns the entries in that order and
-    /// the file length.
+impl<P: MlpPrecision + Into<i16>> QuantizedMlp<P> {
+    /// Where each array goes: per hidden layer (weights i8, bias), then the first-layer bias
+    /// variants, the output weights (i8) and bias (biases int32, or int64 with int16
+    /// activations). Returns the entries in that order and the file length.
     pub fn weight_file_layout(&self) -> (Vec<WeightEntry>, usize) {
         let mut entries = Vec::new();
         let mut cursor = 0;
@@ -124,13 +130,14 @@ impl QuantizedMlp {
             cursor = (cursor + count * size).div_ceil(ALIGN) * ALIGN;
             entries.push(entry);
         };
+        let bias_size = core::mem::size_of::<P::Acc>();
         for layer in &self.hidden {
             place(layer.weights.len(), 1);
-            place(layer.bias.len(), 4);
+            place(layer.bias.len(), bias_size);
         }
-        place(self.first_layer_biases.len(), 4);
+        place(self.first_layer_biases.len(), bias_size);
         place(self.output.weights.len(), 1);
-        place(self.output.bias.len(), 4);
+        place(self.output.bias.len(), bias_size);
         (entries, cursor)
     }
 
@@ -167,7 +174,7 @@ impl QuantizedMlp {
 
     /// The hidden layers as frmd-core views (tables from [`Self::luts`]; a layer naming a missing
     /// table gets none).
-    pub fn hidden_layers(&self) -> Vec<RequantizedLinear<'_>> {
+    pub fn hidden_layers(&self) -> Vec<RequantizedLinear<'_, P>> {
         self.hidden
             .iter()
             .map(|l| RequantizedLinear {
@@ -185,7 +192,7 @@ impl QuantizedMlp {
     }
 
     /// The output layer as a frmd-core view.
-    pub fn output_layer(&self) -> Int8Linear<'_> {
+    pub fn output_layer(&self) -> Int8Linear<'_, P::Acc> {
         let o = &self.output;
         Int8Linear {
             fc: FullyConnected::new(o.in_features, o.out_features, &o.weights, &o.bias),
@@ -194,11 +201,11 @@ impl QuantizedMlp {
     }
 
     /// Borrowed view for [`frmd_core::blob::encode_mlp`], given to `f`.
-    pub fn with_parts<R>(&self, f: impl FnOnce(&MlpBlobParts<'_>) -> R) -> R {
+    pub fn with_parts<R>(&self, f: impl FnOnce(&MlpBlobParts<'_, P>) -> R) -> R {
         let hidden = self.hidden_layers();
         let parts = MlpBlobParts {
             config: self.config(),
-            mlp: Int8Mlp {
+            mlp: QuantMlp {
                 input: self.input,
                 hidden: &hidden,
                 output: self.output_layer(),
@@ -237,13 +244,15 @@ impl QuantizedMlp {
         let width = self.scratch_width();
         let dims = self.dims();
         let channels: usize = self.hidden.iter().map(|l| l.out_features).sum();
+        let code = core::mem::size_of::<P>();
         MemoryFigures {
             scratch_width: width,
-            scratch_bytes: 6 * width,
+            // Two activation buffers and the accumulators.
+            scratch_bytes: (2 * code + core::mem::size_of::<P::Acc>()) * width,
             state_bytes: state_bytes(&dims, self.input_width().unwrap_or(0)),
             weights_bytes: self.weight_file_layout().1,
             table_bytes: 8 * channels
-                + LUT_LEN * self.luts.len()
+                + code * P::TABLE_LEN * self.luts.len()
                 + 4 * self.output.out_features
                 + policy_table_bytes(&dims, self.steps.len()),
         }

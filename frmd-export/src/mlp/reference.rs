@@ -1,31 +1,79 @@
-//! Check (d) for an exported MLP: the whole int8 network run by frmd-core against a
+//! Check (d) for an exported MLP: the whole quantized network run by frmd-core against a
 //! wide-integer model of it ([`wide_network`]), on the caller's inputs and edge inputs.
-use super::quantized::QuantizedMlp;
+use super::precision::ExportPrecision;
+use super::quantized::{QuantizedLayer, QuantizedMlp};
 use crate::reference::KernelCheck;
 use anyhow::Context;
 use frmd_core::model::mlp::InputPrecision;
-use frmd_core::policy::{Int8MlpNetwork, Network};
+use frmd_core::policy::{Network, QuantMlpNetwork};
 use frmd_core::quant::{reference, QuantParams, FINE_INPUT_BITS};
 
-/// frmd-core's [`Int8MlpNetwork`] over `policy`'s tensors (scratch `WIDTH`).
-pub fn int8_network<const WIDTH: usize>(
-    policy: &QuantizedMlp,
-) -> anyhow::Result<Int8MlpNetwork<'_, WIDTH>> {
+/// frmd-core's [`QuantMlpNetwork`] over `policy`'s tensors (scratch `WIDTH`).
+pub fn quantized_network<P: ExportPrecision, const WIDTH: usize>(
+    policy: &QuantizedMlp<P>,
+) -> anyhow::Result<QuantMlpNetwork<'_, P, WIDTH>> {
     let layers = policy.hidden_layers();
-    Int8MlpNetwork::new(
+    QuantMlpNetwork::new(
         policy.input,
         policy.input_precision,
         &layers,
         policy.output_layer(),
         &policy.first_layer_biases,
     )
-    .context("int8 network")
+    .with_context(|| format!("int{} network", P::BITS))
 }
 
-/// The wide-integer model of the whole int8 network: i64 dot products, the i128 requantization
-/// model, LUTs indexed directly; returns the output layer's accumulators. Errors if `policy` is
-/// inconsistent (widths, bias variants, LUT indices) or `input` has the wrong length.
-pub fn wide_network(policy: &QuantizedMlp, step: usize, input: &[f32]) -> anyhow::Result<Vec<i64>> {
+/// A hidden layer's requantization and table in the wide-integer model, per precision.
+pub trait WideModel: frmd_core::kernels::Precision {
+    /// Channel `o`'s output code for the exact accumulator `acc`.
+    fn output(layer: &QuantizedLayer<Self>, tables: &[Self::Table], o: usize, acc: i64) -> i64;
+}
+
+impl WideModel for i8 {
+    /// The i128 model of Q31 requantization (int32 accumulators wrap: the model takes the low
+    /// 32 bits, as the definition does), then the table indexed directly.
+    fn output(layer: &QuantizedLayer<i8>, tables: &[[i8; 256]], o: usize, acc: i64) -> i64 {
+        let q = reference::requantize(
+            acc as i32,
+            layer.multipliers[o],
+            layer.shifts[o],
+            layer.output_zero_point,
+            layer.activation_min,
+            layer.activation_max,
+        );
+        i64::from(match layer.lut {
+            Some(t) => tables[t][(i32::from(q) + 128) as usize],
+            None => q,
+        })
+    }
+}
+
+impl WideModel for i16 {
+    /// The i128 model of the Q15 requantization, then the slope form of the interpolation.
+    fn output(layer: &QuantizedLayer<i16>, tables: &[[i16; 513]], o: usize, acc: i64) -> i64 {
+        let q = reference::requantize16(
+            i128::from(acc),
+            layer.multipliers[o],
+            layer.shifts[o],
+            layer.activation_min,
+            layer.activation_max,
+        );
+        i64::from(match layer.lut {
+            Some(t) => reference::lookup16(&tables[t], q).unwrap_or(i16::MIN),
+            None => q,
+        })
+    }
+}
+
+/// The wide-integer model of the whole quantized network: i64 dot products, the i128
+/// requantization model, tables read directly; returns the output layer's accumulators. Errors
+/// if `policy` is inconsistent (widths, bias variants, table indices) or `input` has the wrong
+/// length.
+pub fn wide_network<P: ExportPrecision>(
+    policy: &QuantizedMlp<P>,
+    step: usize,
+    input: &[f32],
+) -> anyhow::Result<Vec<i64>> {
     policy
         .with_parts(|parts| frmd_core::blob::mlp_encoded_len(parts).map(|_| ()))
         .context("inconsistent policy")?;
@@ -82,7 +130,7 @@ pub fn wide_network(policy: &QuantizedMlp, step: usize, input: &[f32]) -> anyhow
         coarse
     };
     for (l, layer) in policy.hidden.iter().enumerate() {
-        let bias: &[i32] = if l == 0 && !policy.first_layer_biases.is_empty() {
+        let bias: &[P::Acc] = if l == 0 && !policy.first_layer_biases.is_empty() {
             &policy.first_layer_biases[step * layer.out_features..(step + 1) * layer.out_features]
         } else {
             &layer.bias
@@ -90,7 +138,7 @@ pub fn wide_network(policy: &QuantizedMlp, step: usize, input: &[f32]) -> anyhow
         x = (0..layer.out_features)
             .map(|o| {
                 let row = &layer.weights[o * layer.in_features..(o + 1) * layer.in_features];
-                let mut acc = i64::from(bias[o])
+                let mut acc = bias[o].into()
                     + row
                         .iter()
                         .zip(&x)
@@ -104,24 +152,12 @@ pub fn wide_network(policy: &QuantizedMlp, step: usize, input: &[f32]) -> anyhow
                         .sum::<i64>();
                     acc = i64::from(reference::combine_planes(acc as i32, fine_dot as i32));
                 }
-                let q = reference::requantize(
-                    acc as i32,
-                    layer.multipliers[o],
-                    layer.shifts[o],
-                    layer.output_zero_point,
-                    layer.activation_min,
-                    layer.activation_max,
-                );
-                let q = match layer.lut {
-                    Some(t) => policy.luts[t][(i32::from(q) + 128) as usize],
-                    None => q,
-                };
-                i64::from(q)
+                P::output(layer, &policy.luts, o, acc)
             })
             .collect();
     }
     let out = &policy.output;
-    let bias: &[i32] = if policy.hidden.is_empty() && !policy.first_layer_biases.is_empty() {
+    let bias: &[P::Acc] = if policy.hidden.is_empty() && !policy.first_layer_biases.is_empty() {
         &policy.first_layer_biases[step * out.out_features..(step + 1) * out.out_features]
     } else {
         &out.bias
@@ -129,12 +165,12 @@ pub fn wide_network(policy: &QuantizedMlp, step: usize, input: &[f32]) -> anyhow
     Ok((0..out.out_features)
         .map(|o| {
             let row = &out.weights[o * out.in_features..(o + 1) * out.in_features];
-            i64::from(bias[o])
-                + row
-                    .iter()
-                    .zip(&x)
-                    .map(|(w, v)| i64::from(*w) * v)
-                    .sum::<i64>()
+            let acc: i64 = bias[o].into();
+            acc + row
+                .iter()
+                .zip(&x)
+                .map(|(w, v)| i64::from(*w) * v)
+                .sum::<i64>()
         })
         .collect())
 }
@@ -142,12 +178,16 @@ pub fn wide_network(policy: &QuantizedMlp, step: usize, input: &[f32]) -> anyhow
 /// The policy's int8 network (frmd-core) vs [`wide_network`] on `inputs` (f32 model inputs) for
 /// every step, plus edge inputs: all values at the quantization range ends and beyond
 /// (saturation), all at the zero point, and alternating ends.
-pub fn check_network<const WIDTH: usize>(
-    policy: &QuantizedMlp,
+pub fn check_network<P: ExportPrecision, const WIDTH: usize>(
+    policy: &QuantizedMlp<P>,
     inputs: &[Vec<f32>],
 ) -> anyhow::Result<KernelCheck> {
-    let mut check = KernelCheck::new("int8 network accumulator mismatches vs wide model");
-    let mut net = int8_network::<WIDTH>(policy)?;
+    let mut check = KernelCheck::new(if P::BITS == 8 {
+        "int8 network accumulator mismatches vs wide model"
+    } else {
+        "int16-activation network accumulator mismatches vs wide model"
+    });
+    let mut net = quantized_network::<P, WIDTH>(policy)?;
     let width = net.input_width();
     let lo = policy.input.dequantize(i8::MIN);
     let hi = policy.input.dequantize(i8::MAX);
@@ -192,8 +232,9 @@ pub fn check_network<const WIDTH: usize>(
             );
         }
         for step in 0..policy.steps.len() {
-            net.forward(step, input, &mut out).context("int8 forward")?;
-            let got: Vec<i64> = net.accumulators().iter().map(|&a| i64::from(a)).collect();
+            net.forward(step, input, &mut out)
+                .context("quantized forward")?;
+            let got: Vec<i64> = net.accumulators().iter().map(|&a| a.into()).collect();
             let want = wide_network(policy, step, input)?;
             check.record(got == want, || {
                 format!(

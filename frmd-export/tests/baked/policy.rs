@@ -111,7 +111,7 @@ pub static WEIGHTS: AlignedBytes<WEIGHTS_BYTES> = AlignedBytes(*include_bytes!("
 /// The hidden layers, the output layer and the first-layer bias variants over the baked
 /// weights.
 #[allow(clippy::type_complexity)]
-pub fn mlp_parts() -> Result<([RequantizedLinear<'static>; 2], Int8Linear<'static>, &'static [i32]), PolicyError> {
+pub fn mlp_parts() -> Result<([RequantizedLinear<'static, i8>; 2], Int8Linear<'static, i32>, &'static [i32]), PolicyError> {
     let bytes = &WEIGHTS.0;
     let hidden = [
         RequantizedLinear {
@@ -159,7 +159,7 @@ pub fn mlp_parts() -> Result<([RequantizedLinear<'static>; 2], Int8Linear<'stati
     Ok((hidden, output, baked_slice(bytes, 1568, 72)?))
 }
 
-/// The int8 network over the baked weights (`WIDTH` >= `SCRATCH_WIDTH`).
+/// The quantized network over the baked weights (`WIDTH` >= `SCRATCH_WIDTH`).
 pub fn network<const WIDTH: usize>() -> Result<Int8MlpNetwork<'static, WIDTH>, PolicyError> {
     let (hidden, output, first_layer_biases) = mlp_parts()?;
     Int8MlpNetwork::new(INPUT, INPUT_PRECISION, &hidden, output, first_layer_biases)

@@ -148,9 +148,10 @@ fn main() -> anyhow::Result<()> {
         let sim = Sim::new(folded, &exported.ranges, src);
         run(label, Box::new(move |i, input| Ok(sim.forward(i, input))))?;
     }
-    let mut net = Box::new(frmd_export::mlp::reference::int8_network::<MAX_WIDTH>(
-        &exported.policy,
-    )?);
+    let mut net = Box::new(frmd_export::mlp::reference::quantized_network::<
+        i8,
+        MAX_WIDTH,
+    >(&exported.policy)?);
     run(
         "real int8 (frmd-core)",
         Box::new(move |i, input| {

@@ -5,6 +5,7 @@ use crate::export::{export_student, write_export, ExportConfig};
 use anyhow::bail;
 use clap::Args;
 use frmd_export::bake::BLOB_FILE;
+use frmd_export::Activations;
 use frmd_formats::artifact::{check_output_dir, check_output_file};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -38,6 +39,13 @@ pub struct ExportArgs {
     /// 16-bit input: widen the calibrated input range by this factor (>= 1).
     #[arg(long, default_value_t = ExportConfig::default().input_headroom)]
     pub input_headroom: f32,
+    /// MLP hidden activations: int8 (TFLite int8) or int16 (TFLite 16x8: int8 weights, int16
+    /// activations, int64 biases; needs the 16-bit input).
+    #[arg(long, default_value_t = frmd_export::ExportOptions::default().activations)]
+    pub activations: Activations,
+    /// int16 activations: widen every calibrated activation range by this factor (>= 1).
+    #[arg(long, default_value_t = ExportConfig::default().activation_headroom)]
+    pub activation_headroom: f32,
     /// With --data: also store the calibration rows as the checkpoint's calibration.safetensors.
     #[arg(long)]
     pub save_calibration: bool,
@@ -58,6 +66,8 @@ impl From<&ExportArgs> for ExportConfig {
             balance_inputs: defaults.balance_inputs && !a.no_balance_inputs,
             two_plane_input: defaults.two_plane_input && !a.int8_input,
             input_headroom: a.input_headroom,
+            activations: a.activations.to_string(),
+            activation_headroom: a.activation_headroom,
         }
     }
 }

@@ -22,18 +22,25 @@
 //! `SMLAD` takes the 16-bit codes as they are). Its bias is at the fine scale and its multipliers
 //! are made for the fine scale, as for two planes.
 //!
-//! Working memory is caller-owned: slices ([`Int8Buffers`], [`F32Buffers`]), or fixed arrays of a
-//! const `WIDTH` at least the widest layer ([`Int8Scratch`], [`F32Scratch`]); nothing is
+//! With int16 activations ([`Int16Mlp`], TFLite's 16x8 scheme) every hidden activation is a
+//! symmetric int16 code, the biases and accumulators are int64 and the activation tables are
+//! interpolated int16 tables; the input is the 16-bit plane as above. [`QuantMlp`] is written once
+//! for both precisions ([`MlpPrecision`]).
+//!
+//! Working memory is caller-owned: slices ([`QuantBuffers`], [`F32Buffers`]), or fixed arrays of a
+//! const `WIDTH` at least the widest layer ([`QuantScratch`], [`F32Scratch`]); nothing is
 //! allocated. The transformer's feed-forward is a one-hidden-layer MLP run on the transformer's
 //! own scratch.
 
 mod float;
-mod int8;
+mod quantized;
 #[cfg(test)]
 mod tests;
 
 pub use float::{F32Buffers, F32Mlp, F32Scratch};
-pub use int8::{Int8Buffers, Int8Mlp, Int8Scratch};
+pub use quantized::{
+    Int16Mlp, Int8Buffers, Int8Mlp, Int8Scratch, MlpPrecision, QuantBuffers, QuantMlp, QuantScratch,
+};
 
 use crate::kernels::KernelError;
 #[cfg(doc)]
@@ -62,6 +69,8 @@ pub enum ModelError {
     /// [`InputPrecision::TwoPlane`] and [`InputPrecision::Int16`] need a hidden first layer (the
     /// output layer's accumulators are dequantized at the int8 input scale).
     TwoPlaneWithoutHiddenLayer,
+    /// int16 activations take the 16-bit input plane only ([`InputPrecision::Int16`]).
+    InputPrecision,
 }
 
 impl From<KernelError> for ModelError {
@@ -86,6 +95,9 @@ impl core::fmt::Display for ModelError {
             Self::InputParams => f.write_str("input quantization parameters are invalid"),
             Self::TwoPlaneWithoutHiddenLayer => {
                 f.write_str("two-plane or 16-bit input quantization needs a hidden first layer")
+            }
+            Self::InputPrecision => {
+                f.write_str("int16 activations take the 16-bit input plane only")
             }
         }
     }

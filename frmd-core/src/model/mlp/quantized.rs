@@ -1,64 +1,77 @@
-//! The int8 MLP: input quantization, hidden [`RequantizedLinear`] layers, a dequantized
-//! [`Int8Linear`] output layer.
+//! The quantized MLP ([`QuantMlp`], int8 weights with int8 or int16 activations): input
+//! quantization, hidden [`RequantizedLinear`] layers, a dequantized [`Int8Linear`] output layer.
 
 use super::{
     check_lengths, check_widths, quantize_input_i16, quantize_input_two_plane, InputPrecision,
     ModelError,
 };
-use crate::kernels::LayerInput;
+use crate::kernels::{LayerInput, Precision};
 use crate::model::linear::{Int8Linear, RequantizedLinear};
 use crate::quant::QuantParams;
 
-/// int8 MLP: hidden [`RequantizedLinear`]s, then an [`Int8Linear`] output layer.
+/// Quantized MLP: hidden [`RequantizedLinear`]s, then an [`Int8Linear`] output layer, with int8
+/// weights and `P` activations (`i8`, the default, or `i16`: the 16x8 scheme, see
+/// [`MlpPrecision`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Int8Mlp<'a> {
+pub struct QuantMlp<'a, P: Precision = i8> {
     /// Quantization of the f32 input vector (first layer's input).
     pub input: QuantParams,
     /// Hidden layers in order (may be empty).
-    pub hidden: &'a [RequantizedLinear<'a>],
-    /// Output layer; its int32 accumulators are dequantized, not requantized.
-    pub output: Int8Linear<'a>,
+    pub hidden: &'a [RequantizedLinear<'a, P>],
+    /// Output layer; its accumulators are dequantized, not requantized.
+    pub output: Int8Linear<'a, P::Acc>,
 }
 
-/// Working memory of [`Int8Mlp`], borrowed: two int8 activation buffers (ping-pong) and the int32
+/// The int8-activation MLP.
+pub type Int8Mlp<'a> = QuantMlp<'a, i8>;
+/// The int16-activation MLP (int8 weights, int64 bias and accumulators).
+pub type Int16Mlp<'a> = QuantMlp<'a, i16>;
+
+/// Working memory of [`QuantMlp`], borrowed: two activation buffers (ping-pong) and the
 /// accumulators of the output layer (which also hold the 16-bit input codes of
 /// [`InputPrecision::Int16`]). Each must hold the widest layer it receives.
 #[derive(Debug)]
-pub struct Int8Buffers<'s> {
+pub struct QuantBuffers<'s, P: Precision = i8> {
     /// Input codes, then every other layer's output.
-    pub ping: &'s mut [i8],
+    pub ping: &'s mut [P],
     /// The other layers' outputs (and the fine plane of a two-plane input).
-    pub pong: &'s mut [i8],
+    pub pong: &'s mut [P],
     /// Accumulators (and 16-bit input codes).
-    pub accumulators: &'s mut [i32],
+    pub accumulators: &'s mut [P::Acc],
 }
 
-/// [`Int8Buffers`] as fixed arrays of `WIDTH` (at least the widest layer).
+/// The buffers of an [`Int8Mlp`].
+pub type Int8Buffers<'s> = QuantBuffers<'s, i8>;
+
+/// [`QuantBuffers`] as fixed arrays of `WIDTH` (at least the widest layer).
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Int8Scratch<const WIDTH: usize> {
-    ping: [i8; WIDTH],
-    pong: [i8; WIDTH],
-    accumulators: [i32; WIDTH],
+pub struct QuantScratch<P: Precision, const WIDTH: usize> {
+    ping: [P; WIDTH],
+    pong: [P; WIDTH],
+    accumulators: [P::Acc; WIDTH],
 }
 
-impl<const WIDTH: usize> Int8Scratch<WIDTH> {
+/// The scratch of an [`Int8Mlp`].
+pub type Int8Scratch<const WIDTH: usize> = QuantScratch<i8, WIDTH>;
+
+impl<P: Precision, const WIDTH: usize> QuantScratch<P, WIDTH> {
     /// Zeroed scratch.
     pub const fn new() -> Self {
         Self {
-            ping: [0; WIDTH],
-            pong: [0; WIDTH],
-            accumulators: [0; WIDTH],
+            ping: [P::ZERO; WIDTH],
+            pong: [P::ZERO; WIDTH],
+            accumulators: [<P::Acc as crate::kernels::Accumulator>::ZERO; WIDTH],
         }
     }
 
-    /// The output layer's int32 accumulators of the last forward pass (`out_features` long prefix).
-    pub fn accumulators(&self) -> &[i32; WIDTH] {
+    /// The output layer's accumulators of the last forward pass (`out_features` long prefix).
+    pub fn accumulators(&self) -> &[P::Acc; WIDTH] {
         &self.accumulators
     }
 
-    /// The arrays as [`Int8Buffers`].
-    pub fn buffers(&mut self) -> Int8Buffers<'_> {
-        Int8Buffers {
+    /// The arrays as [`QuantBuffers`].
+    pub fn buffers(&mut self) -> QuantBuffers<'_, P> {
+        QuantBuffers {
             ping: &mut self.ping,
             pong: &mut self.pong,
             accumulators: &mut self.accumulators,
@@ -66,13 +79,101 @@ impl<const WIDTH: usize> Int8Scratch<WIDTH> {
     }
 }
 
-impl<const WIDTH: usize> Default for Int8Scratch<WIDTH> {
+impl<P: Precision, const WIDTH: usize> Default for QuantScratch<P, WIDTH> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl Int8Mlp<'_> {
+/// The activation precisions an MLP runs in, and how each takes its input: int8 activations
+/// with any [`InputPrecision`]; int16 activations with the 16-bit input plane only
+/// ([`InputPrecision::Int16`], the first layer's input is then an int16 activation like any
+/// other, at the fine input scale).
+pub trait MlpPrecision: Precision {
+    /// Whether a network of this precision takes its input as `precision` says.
+    fn accepts(precision: InputPrecision) -> bool;
+    /// [`QuantMlp::forward_prevalidated`] for this precision.
+    fn forward(
+        mlp: &QuantMlp<'_, Self>,
+        precision: InputPrecision,
+        input: &[f32],
+        output: &mut [f32],
+        buffers: QuantBuffers<'_, Self>,
+    ) -> Result<(), ModelError>;
+}
+
+impl MlpPrecision for i8 {
+    fn accepts(_: InputPrecision) -> bool {
+        true
+    }
+    fn forward(
+        mlp: &Int8Mlp<'_>,
+        precision: InputPrecision,
+        input: &[f32],
+        output: &mut [f32],
+        buffers: Int8Buffers<'_>,
+    ) -> Result<(), ModelError> {
+        mlp.forward_int8(precision, input, output, buffers)
+    }
+}
+
+impl MlpPrecision for i16 {
+    fn accepts(precision: InputPrecision) -> bool {
+        precision == InputPrecision::Int16
+    }
+    fn forward(
+        mlp: &Int16Mlp<'_>,
+        precision: InputPrecision,
+        input: &[f32],
+        output: &mut [f32],
+        buffers: QuantBuffers<'_, i16>,
+    ) -> Result<(), ModelError> {
+        mlp.validate_input_precision(precision)?;
+        mlp.check_io(input.len(), output.len())?;
+        mlp.forward_wide_input(input, output, buffers)
+    }
+}
+
+impl<P: MlpPrecision> QuantMlp<'_, P> {
+    /// Runs the network on `input` (f32, `input_width()` long) with the input quantized as
+    /// `precision` says, and writes the dequantized last layer into `output` (`output_width()`
+    /// long).
+    pub fn forward_with_input<const WIDTH: usize>(
+        &self,
+        precision: InputPrecision,
+        input: &[f32],
+        output: &mut [f32],
+        scratch: &mut QuantScratch<P, WIDTH>,
+    ) -> Result<(), ModelError> {
+        self.validate_requantization()?;
+        self.forward_prevalidated(precision, input, output, scratch.buffers())
+    }
+
+    /// [`ModelError::InputPrecision`] unless this precision takes its input as `precision` says
+    /// ([`MlpPrecision::accepts`]).
+    pub fn validate_input_precision(&self, precision: InputPrecision) -> Result<(), ModelError> {
+        if P::accepts(precision) {
+            Ok(())
+        } else {
+            Err(ModelError::InputPrecision)
+        }
+    }
+
+    /// The forward pass on borrowed buffers for a network whose requantization passed
+    /// [`Self::validate_requantization`] before (the per-channel checks are not repeated; see
+    /// [`RequantizedLinear::forward_prevalidated`]); shapes are checked.
+    pub fn forward_prevalidated(
+        &self,
+        precision: InputPrecision,
+        input: &[f32],
+        output: &mut [f32],
+        buffers: QuantBuffers<'_, P>,
+    ) -> Result<(), ModelError> {
+        P::forward(self, precision, input, output, buffers)
+    }
+}
+
+impl<P: Precision> QuantMlp<'_, P> {
     /// Input width (first layer's `in_features`).
     pub fn input_width(&self) -> usize {
         self.hidden
@@ -102,14 +203,88 @@ impl Int8Mlp<'_> {
         check_widths(self.input_width(), widths, max_width)
     }
 
-    /// Checks every hidden layer's requantization parameters ([`crate::kernels::FcRequant::validate`]).
+    /// Checks every hidden layer's requantization parameters ([`crate::kernels::FcRequant::validate`])
+    /// and, for int64 accumulators, what keeps every accumulator exact (weights, bias bounds:
+    /// [`crate::kernels::FullyConnected::validate_exact`], O(weights); nothing more for int8).
     pub fn validate_requantization(&self) -> Result<(), ModelError> {
         for layer in self.hidden {
             layer.requant.validate(layer.fc.out_features)?;
+            layer.fc.validate_exact()?;
         }
+        self.output.fc.validate_exact()?;
         Ok(())
     }
 
+    fn check_io(&self, input_len: usize, output_len: usize) -> Result<(), ModelError> {
+        self.validate(usize::MAX)?;
+        check_lengths(
+            (input_len, output_len),
+            (self.input_width(), self.output_width()),
+        )
+    }
+
+    /// `hidden`, then the output layer, on the `width` codes in `current` (ping-pong with
+    /// `next`).
+    fn run<'s>(
+        &self,
+        mut current: &'s mut [P],
+        mut next: &'s mut [P],
+        mut width: usize,
+        hidden: &[RequantizedLinear<'_, P>],
+        accumulators: &mut [P::Acc],
+        output: &mut [f32],
+    ) -> Result<(), ModelError> {
+        for layer in hidden {
+            let out_width = layer.fc.out_features;
+            let layer_input = current.get(..width).ok_or(ModelError::ScratchTooSmall)?;
+            let layer_output = next
+                .get_mut(..out_width)
+                .ok_or(ModelError::ScratchTooSmall)?;
+            layer.forward_prevalidated(P::layer_input(layer_input), layer_output)?;
+            core::mem::swap(&mut current, &mut next);
+            width = out_width;
+        }
+        let last_input = current.get(..width).ok_or(ModelError::ScratchTooSmall)?;
+        let acc = accumulators
+            .get_mut(..self.output_width())
+            .ok_or(ModelError::ScratchTooSmall)?;
+        self.output
+            .forward_input(P::layer_input(last_input), acc, output)?;
+        Ok(())
+    }
+
+    /// The 16-bit input plane through the first hidden layer, then the rest ([`Self::run`]).
+    fn forward_wide_input(
+        &self,
+        input: &[f32],
+        output: &mut [f32],
+        buffers: QuantBuffers<'_, P>,
+    ) -> Result<(), ModelError> {
+        let QuantBuffers {
+            ping,
+            pong,
+            accumulators,
+        } = buffers;
+        let layer = self
+            .hidden
+            .first()
+            .ok_or(ModelError::TwoPlaneWithoutHiddenLayer)?;
+        // The accumulators are free until the output layer: they hold the 16-bit codes.
+        let codes = bytemuck::cast_slice_mut::<P::Acc, i16>(&mut *accumulators)
+            .get_mut(..input.len())
+            .ok_or(ModelError::ScratchTooSmall)?;
+        quantize_input_i16(input, self.input, codes);
+        let out_width = layer.fc.out_features;
+        let layer_output = pong
+            .get_mut(..out_width)
+            .ok_or(ModelError::ScratchTooSmall)?;
+        layer.forward_prevalidated(LayerInput::Int16(codes), layer_output)?;
+        let rest = self.hidden.get(1..).unwrap_or(&[]);
+        self.run(pong, ping, out_width, rest, accumulators, output)
+    }
+}
+
+impl Int8Mlp<'_> {
     /// Runs the network on `input` (f32, `input_width()` long) and writes the dequantized last
     /// layer into `output` (`output_width()` long); the input is quantized to int8
     /// ([`InputPrecision::Int8`]).
@@ -122,22 +297,8 @@ impl Int8Mlp<'_> {
         self.forward_with_input(InputPrecision::Int8, input, output, scratch)
     }
 
-    /// [`Self::forward`] with the input quantized as `precision` says.
-    pub fn forward_with_input<const WIDTH: usize>(
-        &self,
-        precision: InputPrecision,
-        input: &[f32],
-        output: &mut [f32],
-        scratch: &mut Int8Scratch<WIDTH>,
-    ) -> Result<(), ModelError> {
-        self.validate_requantization()?;
-        self.forward_prevalidated(precision, input, output, scratch.buffers())
-    }
-
-    /// The forward pass on borrowed buffers for a network whose requantization passed
-    /// [`Self::validate_requantization`] before (the per-channel checks are not repeated; see
-    /// [`RequantizedLinear::forward_prevalidated`]); shapes are checked.
-    pub fn forward_prevalidated(
+    /// [`MlpPrecision::forward`] of int8 activations: every [`InputPrecision`].
+    fn forward_int8(
         &self,
         precision: InputPrecision,
         input: &[f32],
@@ -145,6 +306,9 @@ impl Int8Mlp<'_> {
         buffers: Int8Buffers<'_>,
     ) -> Result<(), ModelError> {
         self.check_io(input.len(), output.len())?;
+        if precision == InputPrecision::Int16 {
+            return self.forward_wide_input(input, output, buffers);
+        }
         let Int8Buffers {
             ping,
             pong,
@@ -154,43 +318,29 @@ impl Int8Mlp<'_> {
         let first = ping
             .get_mut(..in_width)
             .ok_or(ModelError::ScratchTooSmall)?;
-        let layer = match precision {
-            InputPrecision::Int8 => {
-                for (q, x) in first.iter_mut().zip(input) {
-                    *q = self.input.quantize(*x);
-                }
-                return self.run(ping, pong, in_width, self.hidden, accumulators, output);
+        if precision == InputPrecision::Int8 {
+            for (q, x) in first.iter_mut().zip(input) {
+                *q = self.input.quantize(*x);
             }
-            InputPrecision::TwoPlane | InputPrecision::Int16 => self
-                .hidden
-                .first()
-                .ok_or(ModelError::TwoPlaneWithoutHiddenLayer)?,
-        };
-        let out_width = layer.fc.out_features;
-        if precision == InputPrecision::TwoPlane {
-            let fine = pong
-                .get_mut(..in_width)
-                .ok_or(ModelError::ScratchTooSmall)?;
-            quantize_input_two_plane(input, self.input, first, fine);
-            let acc = accumulators
-                .get_mut(..out_width)
-                .ok_or(ModelError::ScratchTooSmall)?;
-            layer.two_plane_accumulators(first, fine, acc)?;
-            let layer_output = pong
-                .get_mut(..out_width)
-                .ok_or(ModelError::ScratchTooSmall)?;
-            layer.requantize_and_activate(acc, layer_output)?;
-        } else {
-            // The accumulators are free until the output layer: they hold the 16-bit codes.
-            let codes = bytemuck::cast_slice_mut::<i32, i16>(&mut *accumulators)
-                .get_mut(..in_width)
-                .ok_or(ModelError::ScratchTooSmall)?;
-            quantize_input_i16(input, self.input, codes);
-            let layer_output = pong
-                .get_mut(..out_width)
-                .ok_or(ModelError::ScratchTooSmall)?;
-            layer.forward_prevalidated(LayerInput::Int16(codes), layer_output)?;
+            return self.run(ping, pong, in_width, self.hidden, accumulators, output);
         }
+        let layer = self
+            .hidden
+            .first()
+            .ok_or(ModelError::TwoPlaneWithoutHiddenLayer)?;
+        let out_width = layer.fc.out_features;
+        let fine = pong
+            .get_mut(..in_width)
+            .ok_or(ModelError::ScratchTooSmall)?;
+        quantize_input_two_plane(input, self.input, first, fine);
+        let acc = accumulators
+            .get_mut(..out_width)
+            .ok_or(ModelError::ScratchTooSmall)?;
+        layer.two_plane_accumulators(first, fine, acc)?;
+        let layer_output = pong
+            .get_mut(..out_width)
+            .ok_or(ModelError::ScratchTooSmall)?;
+        layer.requantize_and_activate(acc, layer_output)?;
         let rest = self.hidden.get(1..).unwrap_or(&[]);
         self.run(pong, ping, out_width, rest, accumulators, output)
     }
@@ -216,42 +366,5 @@ impl Int8Mlp<'_> {
             *q = self.input.quantize(*x);
         }
         self.run(ping, pong, values.len(), self.hidden, accumulators, values)
-    }
-
-    fn check_io(&self, input_len: usize, output_len: usize) -> Result<(), ModelError> {
-        self.validate(usize::MAX)?;
-        check_lengths(
-            (input_len, output_len),
-            (self.input_width(), self.output_width()),
-        )
-    }
-
-    /// `hidden`, then the output layer, on the `width` codes in `current` (ping-pong with
-    /// `next`).
-    fn run<'s>(
-        &self,
-        mut current: &'s mut [i8],
-        mut next: &'s mut [i8],
-        mut width: usize,
-        hidden: &[RequantizedLinear<'_>],
-        accumulators: &mut [i32],
-        output: &mut [f32],
-    ) -> Result<(), ModelError> {
-        for layer in hidden {
-            let out_width = layer.fc.out_features;
-            let layer_input = current.get(..width).ok_or(ModelError::ScratchTooSmall)?;
-            let layer_output = next
-                .get_mut(..out_width)
-                .ok_or(ModelError::ScratchTooSmall)?;
-            layer.forward_prevalidated(LayerInput::Int8(layer_input), layer_output)?;
-            core::mem::swap(&mut current, &mut next);
-            width = out_width;
-        }
-        let last_input = current.get(..width).ok_or(ModelError::ScratchTooSmall)?;
-        let acc = accumulators
-            .get_mut(..self.output_width())
-            .ok_or(ModelError::ScratchTooSmall)?;
-        self.output.forward(last_input, acc, output)?;
-        Ok(())
     }
 }

@@ -1,12 +1,16 @@
-//! MLP policy networks ([`Int8MlpNetwork`] and its f32 reference [`F32MlpNetwork`]): the noise
-//! embedding of each step is folded into the first layer's bias (the first hidden layer, or the
-//! output layer if there is none), one bias row per variant.
+//! MLP policy networks ([`QuantMlpNetwork`]: int8 weights with int8 or int16 activations, and
+//! its f32 reference [`F32MlpNetwork`]): the noise embedding of each step is folded into the
+//! first layer's bias (the first hidden layer, or the output layer if there is none), one bias
+//! row per variant.
 
 use heapless::Vec;
 
 use super::{Network, NoiseVariants};
+use crate::kernels::{Accumulator, KernelError, Precision};
 use crate::model::linear::{F32Linear, Int8Linear, RequantizedLinear};
-use crate::model::mlp::{F32Mlp, F32Scratch, InputPrecision, Int8Mlp, Int8Scratch, ModelError};
+use crate::model::mlp::{
+    F32Mlp, F32Scratch, InputPrecision, MlpPrecision, ModelError, QuantMlp, QuantScratch,
+};
 use crate::policy::PolicyError;
 use crate::quant::QuantParams;
 
@@ -20,22 +24,22 @@ trait BiasedLayer<'a> {
     fn set_bias(&mut self, bias: &'a [Self::Bias]);
 }
 
-impl<'a> BiasedLayer<'a> for RequantizedLinear<'a> {
-    type Bias = i32;
+impl<'a, P: Precision> BiasedLayer<'a> for RequantizedLinear<'a, P> {
+    type Bias = P::Acc;
     fn out_features(&self) -> usize {
         self.fc.out_features
     }
-    fn set_bias(&mut self, bias: &'a [i32]) {
+    fn set_bias(&mut self, bias: &'a [P::Acc]) {
         self.fc.bias = bias;
     }
 }
 
-impl<'a> BiasedLayer<'a> for Int8Linear<'a> {
-    type Bias = i32;
+impl<'a, A: Accumulator> BiasedLayer<'a> for Int8Linear<'a, A> {
+    type Bias = A;
     fn out_features(&self) -> usize {
         self.fc.out_features
     }
-    fn set_bias(&mut self, bias: &'a [i32]) {
+    fn set_bias(&mut self, bias: &'a [A]) {
         self.fc.bias = bias;
     }
 }
@@ -91,36 +95,42 @@ where
     }
 }
 
-/// [`Int8Mlp`] with per-step first-layer biases and its own scratch (`WIDTH` >= every layer
-/// width).
+/// [`QuantMlp`] with per-step first-layer biases and its own scratch (`WIDTH` >= every layer
+/// width); `P` is the activation precision.
 #[derive(Clone, Debug)]
-pub struct Int8MlpNetwork<'a, const WIDTH: usize> {
+pub struct QuantMlpNetwork<'a, P: MlpPrecision, const WIDTH: usize> {
     input: QuantParams,
     precision: InputPrecision,
-    layers: Layers<RequantizedLinear<'a>, Int8Linear<'a>>,
-    variants: NoiseVariants<'a, i32>,
-    scratch: Int8Scratch<WIDTH>,
+    layers: Layers<RequantizedLinear<'a, P>, Int8Linear<'a, P::Acc>>,
+    variants: NoiseVariants<'a, P::Acc>,
+    scratch: QuantScratch<P, WIDTH>,
 }
 
-impl<'a, const WIDTH: usize> Int8MlpNetwork<'a, WIDTH> {
-    /// The network of the int8 MLP `input`, `hidden` (copied, so their slice may be
+/// The int8-activation MLP network.
+pub type Int8MlpNetwork<'a, const WIDTH: usize> = QuantMlpNetwork<'a, i8, WIDTH>;
+/// The int16-activation MLP network.
+pub type Int16MlpNetwork<'a, const WIDTH: usize> = QuantMlpNetwork<'a, i16, WIDTH>;
+
+impl<'a, P: MlpPrecision, const WIDTH: usize> QuantMlpNetwork<'a, P, WIDTH> {
+    /// The network of the quantized MLP `input`, `hidden` (copied, so their slice may be
     /// short-lived), `output`, with its input quantized as `precision` says
     /// ([`InputPrecision::TwoPlane`] and [`InputPrecision::Int16`] need a hidden layer and a
-    /// first layer made for them, see [`crate::model::mlp`]). `noise_variants` holds the first
-    /// layer's bias variants back to back (int32, input zero point folded), `out_features` each,
-    /// or is empty to always use the layer's own bias.
+    /// first layer made for them, see [`crate::model::mlp`]; int16 activations take
+    /// [`InputPrecision::Int16`] only). `noise_variants` holds the first layer's bias variants
+    /// back to back (input zero point folded), `out_features` each, or is empty to always use
+    /// the layer's own bias.
     pub fn new(
         input: QuantParams,
         precision: InputPrecision,
-        hidden: &[RequantizedLinear<'a>],
-        output: Int8Linear<'a>,
-        noise_variants: &'a [i32],
+        hidden: &[RequantizedLinear<'a, P>],
+        output: Int8Linear<'a, P::Acc>,
+        noise_variants: &'a [P::Acc],
     ) -> Result<Self, PolicyError> {
         if precision != InputPrecision::Int8 && hidden.is_empty() {
             return Err(PolicyError::Model(ModelError::TwoPlaneWithoutHiddenLayer));
         }
         let layers = Layers::new(hidden, output)?;
-        let mlp = Int8Mlp {
+        let mlp = QuantMlp {
             input,
             hidden,
             output,
@@ -128,13 +138,21 @@ impl<'a, const WIDTH: usize> Int8MlpNetwork<'a, WIDTH> {
         mlp.validate(WIDTH).map_err(PolicyError::Model)?;
         // Once here, so that `forward` need not repeat the per-channel checks.
         mlp.validate_requantization().map_err(PolicyError::Model)?;
+        mlp.validate_input_precision(precision)
+            .map_err(PolicyError::Model)?;
+        // The variants replace the first layer's bias: the same bounds (int64 accumulators).
+        if noise_variants.iter().any(|b| !b.bias_valid()) {
+            return Err(PolicyError::Model(ModelError::Kernel(
+                KernelError::BiasRange,
+            )));
+        }
         let variants = NoiseVariants::new(noise_variants, layers.first_width())?;
         Ok(Self {
             input,
             precision,
             layers,
             variants,
-            scratch: Int8Scratch::new(),
+            scratch: QuantScratch::new(),
         })
     }
 
@@ -143,8 +161,8 @@ impl<'a, const WIDTH: usize> Int8MlpNetwork<'a, WIDTH> {
         self.precision
     }
 
-    /// The output layer's int32 accumulators of the last forward pass (for bit-exactness checks).
-    pub fn accumulators(&self) -> &[i32] {
+    /// The output layer's accumulators of the last forward pass (for bit-exactness checks).
+    pub fn accumulators(&self) -> &[P::Acc] {
         self.scratch
             .accumulators()
             .get(..self.layers.output.fc.out_features)
@@ -152,7 +170,7 @@ impl<'a, const WIDTH: usize> Int8MlpNetwork<'a, WIDTH> {
     }
 }
 
-impl<const WIDTH: usize> Network for Int8MlpNetwork<'_, WIDTH> {
+impl<P: MlpPrecision, const WIDTH: usize> Network for QuantMlpNetwork<'_, P, WIDTH> {
     fn input_width(&self) -> usize {
         self.layers
             .hidden
@@ -177,7 +195,7 @@ impl<const WIDTH: usize> Network for Int8MlpNetwork<'_, WIDTH> {
         output: &mut [f32],
     ) -> Result<(), PolicyError> {
         let layers = self.layers.with_variant(&self.variants, variant)?;
-        let mlp = Int8Mlp {
+        let mlp = QuantMlp {
             input: self.input,
             hidden: &layers.hidden,
             output: layers.output,
@@ -188,7 +206,7 @@ impl<const WIDTH: usize> Network for Int8MlpNetwork<'_, WIDTH> {
 }
 
 /// [`F32Mlp`] with per-step first-layer biases and its own scratch (the f32 reference of
-/// [`Int8MlpNetwork`]).
+/// [`QuantMlpNetwork`]).
 #[derive(Clone, Debug)]
 pub struct F32MlpNetwork<'a, const WIDTH: usize> {
     layers: Layers<F32Linear<'a>, F32Linear<'a>>,
@@ -198,7 +216,7 @@ pub struct F32MlpNetwork<'a, const WIDTH: usize> {
 
 impl<'a, const WIDTH: usize> F32MlpNetwork<'a, WIDTH> {
     /// The network of the f32 MLP `hidden` (copied), `output`; `noise_variants` as in
-    /// [`Int8MlpNetwork::new`], in f32.
+    /// [`QuantMlpNetwork::new`], in f32.
     pub fn new(
         hidden: &[F32Linear<'a>],
         output: F32Linear<'a>,
