@@ -22,7 +22,10 @@ from pathlib import Path
 from .tasks import GROUP_OF, TASKS, check_task
 
 # (label, what `frmd serve` gets besides the policy flag); the expert runs in process.
-METHODS = ["expert", "dp-ddpm-100", "dp-ddim-10", "teacher", "student-1", "student-2", "int8-student"]
+METHODS = ["expert", "dp-ddpm-100", "dp-ddim-10", "teacher", "student-1", "student-2", "int8-student",
+           "int16-student"]
+# Evaluated only with BenchConfig.int16 (`frmd export --activations int16`).
+OPTIONAL_METHODS = {"int16-student"}
 
 
 @dataclass
@@ -38,6 +41,8 @@ class BenchConfig:
     # Data options of `collect` (tasks.OBS_LAYOUTS; expert steps after the first success).
     obs: str = "raw"
     after_success: int = 0
+    # Also export the student with int16 activations and evaluate it ("int16-student").
+    int16: bool = False
     episodes: int = 50
     # None: `frmd train`'s default backbone (the recipe of issue 13: "the CLI's default").
     backbone: str | None = None
@@ -56,6 +61,10 @@ class BenchConfig:
         for key, value in overrides.items():
             setattr(cfg, key, value)
         return cfg
+
+    def methods(self) -> list:
+        """The methods this configuration evaluates, in table order."""
+        return [m for m in METHODS if m not in OPTIONAL_METHODS or self.int16]
 
     def runs(self):
         """(task, seed) pairs in run order: every task with the first seed, then the extra seeds."""
@@ -142,6 +151,10 @@ class Runner:
                  [f, "train", "dp", *common, *steps, "--out", str(run / "dp")])
         self.run(f"{task}-s{seed}-export", run / "baked" / "export.json",
                  [f, "export", "--ckpt", str(run / "student"), "--out", str(run / "baked")])
+        if self.cfg.int16:
+            self.run(f"{task}-s{seed}-export16", run / "baked16" / "export.json",
+                     [f, "export", "--ckpt", str(run / "student"), "--out", str(run / "baked16"),
+                      "--activations", "int16"])
         return run
 
     def server(self, method: str, run: Path) -> str | None:
@@ -154,10 +167,11 @@ class Runner:
             "student-1": f"{f} serve --ckpt {run / 'student'} --steps 1",
             "student-2": f"{f} serve --ckpt {run / 'student'} --steps 2",
             "int8-student": f"{f} serve --baked {run / 'baked'}",
+            "int16-student": f"{f} serve --baked {run / 'baked16'}",
         }[method]
 
     def evaluate(self, task: str, seed: int, run: Path) -> None:
-        for method in METHODS:
+        for method in self.cfg.methods():
             # The expert does not depend on the training seed: evaluated once per task.
             if method == "expert" and seed != self.cfg.seeds[0]:
                 continue

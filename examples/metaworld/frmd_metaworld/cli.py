@@ -120,6 +120,7 @@ def cmd_benchmark(args) -> int:
         "tasks": args.task, "demos": args.demos, "episodes": args.episodes, "backbone": args.backbone,
         "train_steps": args.train_steps, "student_steps": args.student_steps, "data_dir": args.data_dir,
         "out": args.out, "frmd": args.frmd, "obs": args.obs, "after_success": args.after_success,
+        "int16": True if args.int16 else None,
         "seeds": [int(s) for s in args.seeds.split(",")] if args.seeds else None,
         "multi_seed_tasks": ([] if args.multi_seed_tasks == "none" else _tasks(args.multi_seed_tasks))
         if args.multi_seed_tasks else None}.items() if v is not None}
@@ -222,6 +223,8 @@ def main(argv=None) -> int:
     m.add_argument("--obs", choices=OBS_LAYOUTS, help="observation layout of the collected data (default raw)")
     m.add_argument("--after-success", type=int, metavar="K", help="expert steps recorded after the first "
                    "success (default 0)")
+    m.add_argument("--int16", action="store_true", help="also export the student with int16 activations "
+                   "(frmd export --activations int16) and evaluate it as int16-student")
     m.add_argument("--train-steps", type=int, help="gradient steps of teacher and DP (default: frmd train's)")
     m.add_argument("--student-steps", type=int, help="gradient steps of the student (default: as --train-steps)")
     m.add_argument("--data-dir", help="demonstration files TASK.safetensors (collected if missing; default ./data)")

@@ -11,9 +11,14 @@ import subprocess
 from pathlib import Path
 
 from . import metrics
-from .benchmark import METHODS, BenchConfig
+from .benchmark import METHODS, OPTIONAL_METHODS, BenchConfig
 from .tasks import GROUP_OF, GROUPS, TASKS
 
+
+
+def methods_of(config: dict) -> list:
+    """The methods a run evaluated (its config's `int16` adds int16-student), in table order."""
+    return [m for m in METHODS if m not in OPTIONAL_METHODS or config.get("int16")]
 
 def commit() -> str:
     here = Path(__file__).resolve().parent
@@ -43,7 +48,7 @@ def summarize(results: dict) -> dict:
     tables = {}
     for group, tasks in list(GROUPS.items()) + [("overall", TASKS)]:
         tables[group] = {m: pooled([r for r in results["rows"] if r["method"] == m and r["task"] in tasks])
-                         for m in METHODS}
+                         for m in methods_of(results["config"])}
     return tables
 
 
@@ -51,7 +56,7 @@ def per_task(results: dict) -> dict:
     """task -> method -> mean success over the training seeds that have a report."""
     out = {}
     for task in TASKS:
-        for method in METHODS:
+        for method in methods_of(results["config"]):
             rates = [r["success_rate"] for r in results["rows"] if r["task"] == task and r["method"] == method]
             if rates:
                 out.setdefault(task, {})[method] = sum(rates) / len(rates)
@@ -62,7 +67,7 @@ def seed_spread(results: dict) -> list:
     """Per task trained with several seeds and per learned method: mean, min and max success."""
     out = []
     for task in TASKS:
-        for method in METHODS[1:]:
+        for method in methods_of(results["config"])[1:]:
             rates = [r["success_rate"] for r in results["rows"] if r["task"] == task and r["method"] == method]
             if len(rates) > 1:
                 out.append({"task": task, "method": method, "seeds": len(rates),
@@ -90,6 +95,10 @@ def targets(tables: dict, results: dict) -> list:
     if {"student-1", "int8-student"} <= pts.keys():
         d = pts["int8-student"] - pts["student-1"]
         checks.append(("int8 student within 1 point of the float student", f"{d:+.1f} points", abs(d) <= 1.0))
+    if {"student-1", "int16-student"} <= pts.keys():
+        d = pts["int16-student"] - pts["student-1"]
+        checks.append(("int16-activation student within 1 point of the float student", f"{d:+.1f} points",
+                       abs(d) <= 1.0))
     # Latency: per task and seed, the int8 student against DDPM-100 of the same run.
     ratios = []
     for r in results["rows"]:
@@ -124,17 +133,18 @@ def bar_chart(results: dict, path: Path) -> None:
     means = per_task(results)
     tasks = [t for t in TASKS if t in means]
     fig, ax = plt.subplots(figsize=(max(6, 1.4 * len(tasks) + 2), 4.5))
-    width = 0.8 / len(METHODS)
-    for i, method in enumerate(METHODS):
+    methods = methods_of(results["config"])
+    width = 0.8 / len(methods)
+    for i, method in enumerate(methods):
         values = [100 * means[t].get(method, 0.0) for t in tasks]
-        ax.bar([k + (i - (len(METHODS) - 1) / 2) * width for k in range(len(tasks))], values, width, label=method)
+        ax.bar([k + (i - (len(methods) - 1) / 2) * width for k in range(len(tasks))], values, width, label=method)
     ax.set_xticks(range(len(tasks)), tasks, rotation=30, ha="right")
     ax.set_ylabel(f"success, % of {results['config']['episodes']} episodes")
     ax.set_ylim(0, 105)
     seeds = results["config"]["seeds"]
     ax.set_title(f"MetaWorld success per task and method (mean over training seeds {seeds})", pad=28)
     # Above the axes, so no bar is hidden behind it.
-    ax.legend(fontsize=8, ncol=len(METHODS), loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False)
+    ax.legend(fontsize=8, ncol=len(methods), loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -191,18 +201,19 @@ def write(results: dict, md_path: Path, command: str, notes: list, instructions:
     for group, table in tables.items():
         lines += [f"## {group}", "", "| method | tasks | task-seeds | success % [95 % CI] | latency us/chunk | "
                   "non-smooth / episode | non-smooth / step |", "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
-        for m in METHODS:
+        for m in table:
             p = table[m]
             lines.append(f"| {m} | {p['tasks']} | {p['runs']} | {_pct(p)} | {_num(p['latency_us_median'])} | "
                          f"{_num(p['non_smooth_ee_mean'])} | {_num(p['non_smooth_per_step'], '{:.3f}')} |")
         lines.append("")
     mean_by_task = per_task(results)
+    methods = methods_of(results["config"])
     if mean_by_task:
         lines += ["## Per task (mean success % over training seeds)", "",
-                  "| task | group | " + " | ".join(METHODS) + " |", "| --- | --- | " + " | ".join("---:" for _ in METHODS) + " |"]
+                  "| task | group | " + " | ".join(methods) + " |", "| --- | --- | " + " | ".join("---:" for _ in methods) + " |"]
         for task, by_method in mean_by_task.items():
             lines.append(f"| {task} | {GROUP_OF[task]} | " + " | ".join(
-                f"{100 * by_method[m]:.1f}" if m in by_method else "-" for m in METHODS) + " |")
+                f"{100 * by_method[m]:.1f}" if m in by_method else "-" for m in methods) + " |")
         lines.append("")
     if spread:
         lines += ["## Spread over training seeds", "", "| task | method | seeds | mean success % | min | max |",
@@ -224,7 +235,7 @@ def write(results: dict, md_path: Path, command: str, notes: list, instructions:
 def quick_check(written: dict, md_path: Path) -> None:
     """--quick: every method has a valid report for every task, and the files parse."""
     cfg = written["config"]
-    expected = {(t, m) for t in cfg["tasks"] for m in METHODS}
+    expected = {(t, m) for t in cfg["tasks"] for m in methods_of(cfg)}
     got = {(r["task"], r["method"]) for r in written["rows"]}
     if expected - got:
         raise SystemExit(f"quick mode: missing reports {sorted(expected - got)}")
