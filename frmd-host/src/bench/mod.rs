@@ -236,22 +236,32 @@ fn core_policy_rows(cfg: &BenchConfig) -> anyhow::Result<CoreRows> {
         }));
     }
     let ckpt = cfg.dir.join("student");
-    let export = |steps| {
+    let export = |steps, activations: &str| {
         let config = ExportConfig {
             steps,
+            activations: activations.to_string(),
             ..ExportConfig::for_checkpoint(&ckpt)
         };
-        export_student(&config, false)
-            .with_context(|| format!("exporting {} with {steps} step(s)", ckpt.display()))
+        export_student(&config, false).with_context(|| {
+            format!(
+                "exporting {} with {steps} step(s), {activations} activations",
+                ckpt.display()
+            )
+        })
     };
-    let student = export(1)?;
+    let student = export(1, "int8")?;
     let backbone = student.meta().model.backbone.clone();
     let blob = student.blob().to_vec();
     let int8 = Int8Policy::from_blob(&blob, "int8")?;
     let dims = int8.dims();
     let mut rows = one_step_rows(int8, Int8Policy::f32_twin(&blob, student, "core-f32")?);
-    let two_step = Int8Policy::from_blob(export(2)?.blob(), "int8-2")?;
+    let two_step = Int8Policy::from_blob(export(2, "int8")?.blob(), "int8-2")?;
     rows.push(("frmd-core int8 2-step".to_string(), Box::new(two_step)));
+    // int16 activations exist for the MLP only.
+    if matches!(backbone, BackboneConfig::Mlp { .. }) {
+        let int16 = Int8Policy::from_blob(export(1, "int16")?.blob(), "int16")?;
+        rows.push(("frmd-core int16-act 1-step".to_string(), Box::new(int16)));
+    }
     Ok(Ok((rows, backbone, dims)))
 }
 
