@@ -7,7 +7,8 @@
 #   bash experiments/data_options.sh FRMD OUT [SEEDS]
 #
 # FRMD: the frmd binary; OUT: a directory for the data (OUT/data) and one run directory per
-# configuration (OUT/raw, OUT/relative-after20); SEEDS: training seeds (default 0).
+# configuration (OUT/raw, OUT/relative-after20); SEEDS: training seeds (default 0). TASKS in the
+# environment overrides the task order (default: the benchmark's 12, easy to hard).
 # Each run directory's results: `python -m frmd_metaworld benchmark --report-only --out OUT/CFG
 # --data-dir OUT/data [--obs relative --after-success 20] --seeds SEEDS`.
 set -euo pipefail
@@ -15,7 +16,7 @@ frmd="$(realpath "$1")"
 out="$(realpath -m "$2")"
 seeds="${3:-0}"
 python=.venv/bin/python
-tasks=$("$python" -c "from frmd_metaworld.tasks import TASKS; print(' '.join(TASKS))")
+tasks=${TASKS:-$("$python" -c "from frmd_metaworld.tasks import TASKS; print(' '.join(TASKS))")}
 mkdir -p "$out"
 for task in $tasks; do
     for cfg in raw relative-after20; do
