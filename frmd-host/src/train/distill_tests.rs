@@ -3,11 +3,11 @@
 use super::distill::{distill, DistillConfig};
 use super::teacher::{train_teacher, TeacherConfig};
 use super::{LoopConfig, Progress};
-use crate::data::toy::{bimodal_windows, positive_fraction, toy_condition, toy_config};
+use crate::data::toy::{bimodal_windows, positive_fraction, toy_condition, toy_prodmp_config};
 use crate::diffusion::consistency::{Distance, Jump, LevelSampling, LevelWeight};
 use crate::diffusion::loss::{LossWeight, SigmaSampling};
 use crate::diffusion::samplers::{gaussian, sample_consistency, sample_teacher, Solver};
-use crate::models::{HeadConfig, OwnedNetwork, ProDmpOutput};
+use crate::models::OwnedNetwork;
 use crate::rng::HostRng;
 use candle_core::Device;
 use frmd_core::sigma::SigmaConfig;
@@ -19,11 +19,7 @@ fn toy_teacher(
     crate::data::WindowSet,
     OwnedNetwork,
 ) {
-    let cfg = toy_config(HeadConfig::ProDmp {
-        num_basis: 4,
-        output: ProDmpOutput::Direct,
-        auto_scale_basis: false,
-    });
+    let cfg = toy_prodmp_config();
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
     let sampling = SigmaSampling {
         uniform_fraction: 0.2,

@@ -1,7 +1,6 @@
 //! The DP settings training records in a checkpoint are what `FloatPolicy::load` samples with.
 use crate::checkpoint::{self, CheckpointMeta, Role};
-use crate::data::toy::toy_config;
-use crate::data::{Normalization, Normalizer};
+use crate::data::toy::{toy_config, toy_normalization};
 use crate::diffusion::ddpm::{DpSampler, EpsParametrization};
 use crate::models::HeadConfig;
 use crate::models::OwnedNetwork;
@@ -17,16 +16,7 @@ use frmd_core::sigma::SigmaConfig;
 fn dp_parametrization_is_saved_and_loaded() {
     let cfg = toy_config(HeadConfig::Raw);
     let net = OwnedNetwork::new_seeded(&cfg, 5, &Device::Cpu).unwrap();
-    let norm = Normalization {
-        obs: Normalizer {
-            min: vec![-2.0],
-            max: vec![2.0],
-        },
-        action: Normalizer {
-            min: vec![10.0],
-            max: vec![20.0],
-        },
-    };
+    let norm = toy_normalization();
     let sampler = Sampler::Dp {
         sampler: DpSampler::Ddim,
         steps: 10,
