@@ -9,47 +9,25 @@ mod chunk_error {
     #[test]
     #[ignore]
     fn chunk_error_on_training_windows() {
-        let (Ok(ckpt), Ok(data)) = (std::env::var("FRMD_CKPT"), std::env::var("FRMD_DATA")) else {
+        let Some((ckpt, ds)) = diagnostic_inputs() else {
             return;
         };
-        let steps = std::env::var("FRMD_STEPS")
-            .ok()
-            .and_then(|s| s.parse().ok());
+        let steps = env_value("FRMD_STEPS");
         let solver = std::env::var("FRMD_SOLVER")
             .ok()
             .map(|s| Solver::parse(&s).unwrap());
         let mut policy = FloatPolicy::load(Path::new(&ckpt), steps, solver).unwrap();
         let cfg = policy.network().net.config().clone();
-        let ds = frmd_host::data::Dataset::load(Path::new(&data)).unwrap();
-        let (w, norm) = ds.windows(cfg.history, cfg.horizon).unwrap();
+        let (_, norm) = ds.windows(cfg.history, cfg.horizon).unwrap();
         assert_eq!(&norm, policy.normalization());
+        let w = Windows::new(&ds, &cfg);
         let (mut err, mut base, mut count) = (0.0f64, 0.0f64, 0usize);
-        let obs_w = cfg.history * cfg.obs_dim;
-        let (k, traj) = (cfg.action_dim, cfg.traj_dim());
-        for i in (0..w.len()).step_by(w.len() / 200 + 1) {
-            let out = policy
-                .sample_normalized(
-                    &w.obs[i * obs_w..(i + 1) * obs_w],
-                    &w.prev_action[i * k..(i + 1) * k],
-                    &w.prev_rate[i * k..(i + 1) * k],
-                )
-                .unwrap();
-            let truth = &w.actions[i * traj..(i + 1) * traj];
-            err += out
-                .iter()
-                .zip(truth)
-                .map(|(a, b)| (a - b).abs() as f64)
-                .sum::<f64>()
-                / traj as f64;
-            base += truth
-                .chunks_exact(k)
-                .flat_map(|row| {
-                    row.iter()
-                        .zip(&w.prev_action[i * k..(i + 1) * k])
-                        .map(|(a, b)| (a - b).abs() as f64)
-                })
-                .sum::<f64>()
-                / traj as f64;
+        for i in w.spread() {
+            let out = w.sample(&mut policy, i);
+            let truth = w.actions(i);
+            err += mean_abs_error(&out, truth);
+            let hold: Vec<f32> = w.prev_action(i).repeat(cfg.horizon);
+            base += mean_abs_error(truth, &hold);
             count += 1;
         }
         eprintln!(
@@ -67,19 +45,7 @@ mod chunk_error {
             let mut e = 0.0;
             for &s0 in &starts {
                 let i = s0 + offset;
-                let out = policy
-                    .sample_normalized(
-                        &w.obs[i * obs_w..(i + 1) * obs_w],
-                        &w.prev_action[i * k..(i + 1) * k],
-                        &w.prev_rate[i * k..(i + 1) * k],
-                    )
-                    .unwrap();
-                e += out
-                    .iter()
-                    .zip(&w.actions[i * traj..(i + 1) * traj])
-                    .map(|(a, b)| (a - b).abs() as f64)
-                    .sum::<f64>()
-                    / traj as f64;
+                e += mean_abs_error(&w.sample(&mut policy, i), w.actions(i));
             }
             eprintln!(
                 "  offset {offset}: mean abs error {:.4}",
@@ -108,17 +74,8 @@ mod chunk_error {
                     prev_rate: &rate,
                 })
                 .unwrap();
-            let e: f64 = chunk
-                .iter()
-                .enumerate()
-                .map(|(s, act)| {
-                    act.iter()
-                        .enumerate()
-                        .map(|(d, v)| (v - ds.action[(t + s) * a + d]).abs() as f64)
-                        .sum::<f64>()
-                })
-                .sum::<f64>()
-                / (cfg.horizon * a) as f64;
+            let truth = &ds.action[t * a..(t + cfg.horizon) * a];
+            let e = mean_abs_error(&chunk.concat(), truth);
             if n < 3 {
                 eprintln!(
                     "t {t}: chunk[0] {:?} truth {:?} prev {:?}",
@@ -136,34 +93,20 @@ mod chunk_error {
         );
         // Closed-loop trace of one episode.
         let mut task = frmd_host::tasks::make_task(&ds.task).unwrap();
-        task.reset(
-            std::env::var("FRMD_SEED")
-                .ok()
-                .and_then(|s| s.parse().ok())
-                .unwrap_or(frmd_host::eval::eval_seed(0, 0)),
-        );
+        task.reset(env_value("FRMD_SEED").unwrap_or(frmd_host::eval::eval_seed(0, 0)));
         policy.reset(1);
-        let mut hist = vec![task.observe(); cfg.history];
-        let mut prev: Vec<f32> = task.ee_position().iter().map(|&v| v as f32).collect();
-        let mut rate = vec![0f32; a];
+        let mut state = ClosedLoop::start(task.as_ref(), cfg.history, ds.dt);
         for q in 0..8 {
-            let chunk = policy
-                .act(&PolicyInput {
-                    obs_history: &hist,
-                    prev_action: &prev,
-                    prev_rate: &rate,
-                })
-                .unwrap();
-            eprintln!("query {q}: obs {:?}\n   prev {prev:?} rate {rate:?}\n   chunk first {:?} last {:?}", hist.last().unwrap(), chunk[0], chunk[chunk.len() - 1]);
-            for act in chunk.iter().take(8) {
-                task.step(act).unwrap();
-                for d in 0..a {
-                    rate[d] = (act[d] - prev[d]) / ds.dt;
-                    prev[d] = act[d];
-                }
-                hist.remove(0);
-                hist.push(task.observe());
-            }
+            let chunk = state.query(&mut policy);
+            eprintln!(
+                "query {q}: obs {:?}\n   prev {:?} rate {:?}\n   chunk first {:?} last {:?}",
+                state.hist.last().unwrap(),
+                state.prev,
+                state.rate,
+                chunk[0],
+                chunk[chunk.len() - 1]
+            );
+            state.execute(task.as_mut(), &chunk, 8);
         }
     }
 }
@@ -224,20 +167,13 @@ mod first_window {
             let mut policy =
                 FloatPolicy::load(Path::new(&ckpt), Some(steps), Some(solver)).unwrap();
             let cfg = policy.network().net.config().clone();
-            let (w, _) = ds.windows(cfg.history, cfg.horizon).unwrap();
-            let (obs_w, k, traj) = (cfg.history * cfg.obs_dim, cfg.action_dim, cfg.traj_dim());
-            let i = 0;
-            let truth = &w.actions[i * traj..(i + 1) * traj];
+            let w = Windows::new(&ds, &cfg);
+            let traj = w.traj;
+            let truth = w.actions(0);
             let mut lasts = Vec::new();
             for seed in 0..5 {
                 policy.reset(seed);
-                let out = policy
-                    .sample_normalized(
-                        &w.obs[i * obs_w..(i + 1) * obs_w],
-                        &w.prev_action[i * k..(i + 1) * k],
-                        &w.prev_rate[i * k..(i + 1) * k],
-                    )
-                    .unwrap();
+                let out = w.sample(&mut policy, 0);
                 lasts.push(format!("({:.3},{:.3})", out[traj - 2], out[traj - 1]));
             }
             eprintln!(
@@ -248,14 +184,8 @@ mod first_window {
                 lasts.join(" ")
             );
             if steps == 1 {
-                let cond = Condition::from_slices(
-                    &cfg,
-                    &w.obs[..obs_w],
-                    &w.prev_action[..k],
-                    &w.prev_rate[..k],
-                    &Device::Cpu,
-                )
-                .unwrap();
+                let (obs, prev, rate) = (w.obs(0), w.prev_action(0), w.prev_rate(0));
+                let cond = Condition::from_slices(&cfg, obs, prev, rate, &Device::Cpu).unwrap();
                 let x0 = candle_core::Tensor::from_slice(truth, (1, traj), &Device::Cpu).unwrap();
                 let mut rng = frmd_host::rng::HostRng::new(1);
                 for sigma in [0.02, 0.2, 1.0, 5.0, 80.0] {
