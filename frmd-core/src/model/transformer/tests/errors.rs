@@ -2,7 +2,7 @@
 
 extern crate std;
 
-use super::fixture::{big_scratch, calibrated, random_inputs};
+use super::fixture::{big_scratch, calibrated, random_inputs, BothForms};
 use super::SMALL;
 use crate::kernels::{Activation, KernelError};
 use crate::model::linear::QuantizedLinear;
@@ -16,7 +16,7 @@ fn validate_edited<'a, I, L, FF>(
     edit: impl FnOnce(&mut [Block<'a, L, FF>]),
 ) -> Result<(), TransformerError>
 where
-    I: InputLinear,
+    I: CheckedLinear,
     L: BlockLinear,
     FF: FeedForward,
 {
@@ -33,10 +33,8 @@ where
 fn named_errors_for_bad_shapes_weights_and_arguments() {
     let mut rng = Rng::new(22);
     let (model, quant) = calibrated(SMALL, 21, &mut rng, 10);
-    let blocks = model.f32_blocks();
-    let net = model.f32_view(&blocks);
-    let int8_blocks = quant.blocks(&model);
-    let int8 = quant.view(&model, &int8_blocks, false);
+    let forms = BothForms::new(&model, &quant);
+    let (net, int8) = forms.views(false);
     let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
     let mut out = [0.0_f32; 8];
     let mut scratch = big_scratch();
@@ -245,10 +243,8 @@ fn random_corruptions_return_errors_without_panicking() {
     use crate::model::linear::F32Linear;
     let mut rng = Rng::new(32);
     let (model, quant) = calibrated(SMALL, 31, &mut rng, 10);
-    let blocks = model.f32_blocks();
-    let net = model.f32_view(&blocks);
-    let int8_blocks = quant.blocks(&model);
-    let int8 = quant.view(&model, &int8_blocks, false);
+    let forms = BothForms::new(&model, &quant);
+    let (net, int8) = forms.views(false);
     let floats = std::vec![0.25_f32; 4096];
     let codes = std::vec![1_i8; 4096];
     let words = std::vec![0_i32; 4096];
@@ -258,7 +254,7 @@ fn random_corruptions_return_errors_without_panicking() {
     let mut pick = |n: usize| rng.next_u32() as usize % n;
     for _ in 0..3000 {
         let (mut f, mut q) = (net, int8);
-        let (mut f_blocks, mut q_blocks) = (blocks.clone(), int8_blocks.clone());
+        let (mut f_blocks, mut q_blocks) = (net.blocks.to_vec(), int8.blocks.to_vec());
         let size = pick(40);
         let layer = pick(2);
         match pick(14) {
