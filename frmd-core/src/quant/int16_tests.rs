@@ -54,6 +54,18 @@ const BOUNDS: [(i16, i16); 5] = [
     (-32768, -32000),
 ];
 
+/// Asserts that [`requantize_s64`] equals the wide model on one case; returns whether the result
+/// is inside `(lo, hi)` (not clamped).
+fn matches_the_wide_model(acc: i64, multiplier: i32, shift: i32, lo: i16, hi: i16) -> bool {
+    let got = requantize_s64(acc, multiplier, shift, lo, hi);
+    let want = reference::requantize16(i128::from(acc), multiplier, shift, lo, hi);
+    assert_eq!(
+        got, want,
+        "acc {acc} m {multiplier:#x} shift {shift} [{lo}, {hi}]"
+    );
+    got != lo && got != hi
+}
+
 #[test]
 fn requantize_s64_edges_match_the_wide_model() {
     let accumulators = edge_accumulators();
@@ -62,13 +74,8 @@ fn requantize_s64_edges_match_the_wide_model() {
         for &multiplier in &MULTIPLIERS {
             for &acc in &accumulators {
                 for (lo, hi) in BOUNDS {
-                    let got = requantize_s64(acc, multiplier, shift, lo, hi);
-                    let want = reference::requantize16(i128::from(acc), multiplier, shift, lo, hi);
-                    assert_eq!(
-                        got, want,
-                        "acc {acc} m {multiplier:#x} shift {shift} [{lo}, {hi}]"
-                    );
-                    unclamped += usize::from(got != lo && got != hi);
+                    unclamped +=
+                        usize::from(matches_the_wide_model(acc, multiplier, shift, lo, hi));
                 }
             }
         }
@@ -175,13 +182,7 @@ fn requantize_s64_one_million_random_inputs_match_the_wide_model() {
             let (a, b) = (rng.next_u64() as i16, rng.next_u64() as i16);
             (a.min(b), a.max(b))
         };
-        let got = requantize_s64(acc, multiplier, shift, lo, hi);
-        let want = reference::requantize16(i128::from(acc), multiplier, shift, lo, hi);
-        assert_eq!(
-            got, want,
-            "acc {acc} m {multiplier:#x} shift {shift} [{lo}, {hi}]"
-        );
-        unclamped += usize::from(got != lo && got != hi);
+        unclamped += usize::from(matches_the_wide_model(acc, multiplier, shift, lo, hi));
     }
     assert!(unclamped > 300_000, "{unclamped} unclamped outputs");
 }
