@@ -9,7 +9,7 @@ use frmd_core::policy::{F32TransformerNetwork, Int8TransformerNetwork, Network};
 use frmd_core::rng::Rng;
 use frmd_formats::calibration::CalibrationSet;
 use frmd_formats::checkpoint::{
-    BackboneConfig, Checkpoint, HeadConfig, ModelConfig, Normalization, ProDmpOutput, Role,
+    BackboneConfig, Checkpoint, HeadConfig, ModelConfig, Normalization, Role,
 };
 use frmd_test_support::checkpoint::{scratch_dir, unit_normalization, Init};
 use std::path::PathBuf;
@@ -23,11 +23,7 @@ fn lite_config() -> ModelConfig {
         control_dt: 0.05,
         embed_dim: 16,
         backbone: BackboneConfig::parse("transformer-lite").unwrap(),
-        head: HeadConfig::ProDmp {
-            num_basis: 4,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        },
+        head: HeadConfig::prodmp(4),
     }
 }
 

@@ -1,6 +1,6 @@
 use super::*;
 use crate::data::toy::{toy_config, toy_prodmp_config};
-use crate::models::{HeadConfig, OwnedNetwork, ProDmpOutput};
+use crate::models::{HeadConfig, OwnedNetwork};
 use frmd_core::sigma::SigmaConfig;
 
 fn temp_dir(tag: &str) -> std::path::PathBuf {
@@ -144,11 +144,7 @@ fn corrupted_or_mismatched_checkpoints_are_rejected_with_a_reason() {
 fn expected_tensors_match_the_candle_models() {
     use crate::models::{BackboneConfig, ModelConfig};
     for backbone in ["mlp:16,8:silu", "mlp:12", "transformer-lite"] {
-        let mut cfg: ModelConfig = toy_config(HeadConfig::ProDmp {
-            num_basis: 3,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        });
+        let mut cfg: ModelConfig = toy_config(HeadConfig::prodmp(3));
         cfg.backbone = BackboneConfig::parse(backbone).unwrap();
         if backbone.starts_with("transformer") {
             cfg.backbone = BackboneConfig::Transformer {

@@ -3,7 +3,7 @@
 //! with probability 1/2 — so the data distribution has exactly two modes.
 use super::windows::{Normalization, Normalizer, WindowSet};
 use crate::models::decoder::DecoderRows;
-use crate::models::{Activation, BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput};
+use crate::models::{Activation, BackboneConfig, HeadConfig, ModelConfig};
 use crate::rng::HostRng;
 
 /// Goal of the two modes (normalized units).
@@ -29,11 +29,7 @@ pub fn toy_config(head: HeadConfig) -> ModelConfig {
 /// [`toy_config`] with the ProDMP head the toy runs use: 4 basis functions, direct output, the
 /// basis unscaled.
 pub fn toy_prodmp_config() -> ModelConfig {
-    toy_config(HeadConfig::ProDmp {
-        num_basis: 4,
-        output: ProDmpOutput::Direct,
-        auto_scale_basis: false,
-    })
+    toy_config(HeadConfig::prodmp(4))
 }
 
 /// `count` windows, modes drawn from `seed`. Works for any head (the trajectories come from the
