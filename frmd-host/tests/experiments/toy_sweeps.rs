@@ -10,6 +10,7 @@ use frmd_host::data::toy::{bimodal_windows, last_step_error, positive_fraction, 
 use frmd_host::data::WindowSet;
 use frmd_host::diffusion::loss::LossWeight;
 use frmd_host::diffusion::samplers::{gaussian, sample_consistency, sample_teacher, Solver};
+use frmd_host::models::ModelConfig;
 use frmd_host::rng::HostRng;
 use frmd_host::train::distill::{distill, DistillConfig};
 use frmd_host::train::teacher::train_plain_teacher;
@@ -17,6 +18,13 @@ use frmd_host::train::{LoopConfig, Progress};
 
 /// Samples per measurement.
 const BATCH: usize = 400;
+
+/// The toy configuration and its 512 windows of seed 2.
+fn toy_data() -> (ModelConfig, WindowSet) {
+    let cfg = toy_prodmp_config();
+    let windows = bimodal_windows(&cfg, 512, 2).unwrap();
+    (cfg, windows)
+}
 
 /// `+frac` (fraction in the positive mode) and `err` (last-step error) of `samples`.
 fn mode_report(samples: &Tensor, windows: &WindowSet) -> String {
@@ -31,9 +39,7 @@ fn mode_report(samples: &Tensor, windows: &WindowSet) -> String {
 #[test]
 #[ignore]
 fn toy_teacher_weights_and_solvers() {
-    let cfg = toy_prodmp_config();
-    let windows = bimodal_windows(&cfg, 512, 2).unwrap();
-    let sig = SigmaConfig::default();
+    let ((cfg, windows), sig) = (toy_data(), SigmaConfig::default());
     for weight in [
         LossWeight::Edm,
         LossWeight::Uniform,
@@ -67,9 +73,7 @@ fn toy_teacher_weights_and_solvers() {
 #[test]
 #[ignore]
 fn toy_distill_settings() {
-    let cfg = toy_prodmp_config();
-    let windows = bimodal_windows(&cfg, 512, 2).unwrap();
-    let sig = SigmaConfig::default();
+    let ((cfg, windows), sig) = (toy_data(), SigmaConfig::default());
     let (teacher, _) =
         train_plain_teacher(&windows, &cfg, LossWeight::Edm, &LoopConfig::toy(4000, 4)).unwrap();
     let cond = toy_condition(BATCH).unwrap();

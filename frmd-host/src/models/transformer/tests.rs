@@ -86,6 +86,15 @@ fn random(shape: (usize, usize), rng: &mut HostRng) -> Tensor {
     Tensor::from_vec(values, shape, &Device::Cpu).unwrap()
 }
 
+/// A transformer of [`sizes`] under `transformer.` in a fresh `VarMap`, seeded with `seed`.
+fn seeded_model(seed: u64) -> anyhow::Result<(VarMap, Transformer)> {
+    let varmap = VarMap::new();
+    let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
+    let model = Transformer::new(&sizes(), vb.pp("transformer"))?;
+    init_seeded(&varmap, seed)?;
+    Ok((varmap, model))
+}
+
 /// The largest magnitude in `t`.
 fn max_abs(t: &Tensor) -> Result<f32> {
     t.abs()?.max_all()?.to_scalar::<f32>()
@@ -94,10 +103,7 @@ fn max_abs(t: &Tensor) -> Result<f32> {
 #[test]
 fn matches_the_broadcast_form_in_values_and_gradients() -> anyhow::Result<()> {
     let s = sizes();
-    let varmap = VarMap::new();
-    let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
-    let model = Transformer::new(&s, vb.pp("transformer"))?;
-    init_seeded(&varmap, 3)?;
+    let (varmap, model) = seeded_model(3)?;
     // Non-trivial biases, gains and offsets (the seeded init sets them to 0 and 1).
     let mut rng = HostRng::derive(9, "transformer-test");
     for (name, var) in sorted_vars(&varmap) {
@@ -154,10 +160,7 @@ fn matches_the_broadcast_form_in_values_and_gradients() -> anyhow::Result<()> {
 fn batch_rows_do_not_interact() -> anyhow::Result<()> {
     // Row b of a batch equals the same input run alone (the ones-matmuls must not mix rows).
     let s = sizes();
-    let varmap = VarMap::new();
-    let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
-    let model = Transformer::new(&s, vb.pp("transformer"))?;
-    init_seeded(&varmap, 5)?;
+    let (_varmap, model) = seeded_model(5)?;
     let mut rng = HostRng::derive(11, "rows");
     let x = random((3, s.horizon * s.action_dim), &mut rng);
     let cond = random((3, s.cond_dim), &mut rng);
