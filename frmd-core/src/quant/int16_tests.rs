@@ -162,10 +162,15 @@ fn random_accumulator(rng: &mut SplitMix64) -> i64 {
     }
 }
 
+/// A random shift of the int16 requantization's range.
+fn random_shift(rng: &mut SplitMix64) -> i32 {
+    let span = (SHIFT16_MAX - SHIFT16_MIN + 1) as u64;
+    SHIFT16_MIN + (rng.next_u64() % span) as i32
+}
+
 #[test]
 fn requantize_s64_one_million_random_inputs_match_the_wide_model() {
     let mut rng = SplitMix64::new(0x1616);
-    let span = (SHIFT16_MAX - SHIFT16_MIN + 1) as u64;
     let mut unclamped = 0_usize;
     for case in 0..1_000_000 {
         let acc = random_accumulator(&mut rng);
@@ -175,7 +180,7 @@ fn requantize_s64_one_million_random_inputs_match_the_wide_model() {
             2 => MULTIPLIERS[(rng.next_u64() % MULTIPLIERS.len() as u64) as usize],
             _ => rng.next_u64() as i32,
         };
-        let shift = SHIFT16_MIN + (rng.next_u64() % span) as i32;
+        let shift = random_shift(&mut rng);
         let (lo, hi) = if case % 3 == 0 {
             (i16::MIN, i16::MAX)
         } else {
@@ -192,12 +197,11 @@ fn requantize_s64_one_million_random_inputs_match_the_wide_model() {
 #[test]
 fn requantize_s64_matches_cmsis_where_its_intermediate_fits() {
     let mut rng = SplitMix64::new(0xC515);
-    let span = (SHIFT16_MAX - SHIFT16_MIN + 1) as u64;
     let mut compared = 0_usize;
     for _ in 0..500_000 {
         let acc = random_accumulator(&mut rng);
         let multiplier = (1 << 30) + (rng.next_u64() % (1 << 30)) as i32;
-        let shift = SHIFT16_MIN + (rng.next_u64() % span) as i32;
+        let shift = random_shift(&mut rng);
         let m15 = i64::from(reduce_multiplier(multiplier));
         let wide = (acc * m15) >> (14 - shift);
         let Ok(truncated) = i32::try_from(wide) else {

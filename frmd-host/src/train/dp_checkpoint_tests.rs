@@ -37,25 +37,13 @@ fn dp_parametrization_is_saved_and_loaded() {
         policy.act(&input).unwrap()
     };
     let loaded = chunk(&mut FloatPolicy::load(&dir, None, None).unwrap());
-    let pre = chunk(
-        &mut FloatPolicy::new(
-            net.duplicate(&Device::Cpu).unwrap(),
-            norm.clone(),
-            SigmaConfig::default(),
-            sampler,
-        )
-        .unwrap()
-        .with_dp_parametrization(EpsParametrization::Preconditioned),
-    );
-    let direct = chunk(
-        &mut FloatPolicy::new(
-            net.duplicate(&Device::Cpu).unwrap(),
-            norm.clone(),
-            SigmaConfig::default(),
-            sampler,
-        )
-        .unwrap(),
-    );
+    // The in-memory network as a policy with its default (direct) parametrization.
+    let in_memory = || {
+        let copy = net.duplicate(&Device::Cpu).unwrap();
+        FloatPolicy::new(copy, norm.clone(), SigmaConfig::default(), sampler).unwrap()
+    };
+    let pre = chunk(&mut in_memory().with_dp_parametrization(EpsParametrization::Preconditioned));
+    let direct = chunk(&mut in_memory());
     assert_eq!(loaded, pre);
     assert_ne!(loaded, direct);
     meta.training = serde_json::json!({ "steps": 1 });

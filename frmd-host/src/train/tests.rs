@@ -1,5 +1,5 @@
 //! Training tests on the toy bimodal set (kept to a few seconds each).
-use super::distill::{distill, DistillConfig};
+use super::distill::{distill_quietly, DistillConfig};
 use super::teacher::train_plain_teacher;
 use super::{LoopConfig, Progress};
 use crate::data::toy::{bimodal_windows, last_step_error, positive_fraction, toy_condition};
@@ -65,20 +65,16 @@ fn one_step_student_matches_teacher_on_bimodal_toy() -> anyhow::Result<()> {
     let teacher_flat = teacher_samples.flatten_all()?.to_vec1::<f32>()?;
     let teacher_fraction = positive_fraction(&teacher_flat, cfg.horizon);
 
-    let mut dcfg = LoopConfig::toy(2000, 6);
-    dcfg.optim.lr = 1e-3;
     let distill_cfg = DistillConfig {
         levels: 10,
         eval_ema: 0.99,
         ..DistillConfig::default()
     };
-    let distilled = distill(
+    let distilled = distill_quietly(
         &teacher,
         &windows,
-        &sig,
         &distill_cfg,
-        &dcfg,
-        &mut |_: &Progress| Ok(()),
+        &LoopConfig::toy(2000, 6).with_lr(1e-3),
     )?;
     let student = &distilled.eval_student.net;
     let student_samples = sample_consistency(student, &sig, &cond, &z, 1, &mut rng)?;

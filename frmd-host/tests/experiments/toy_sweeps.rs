@@ -12,9 +12,9 @@ use frmd_host::diffusion::loss::LossWeight;
 use frmd_host::diffusion::samplers::{gaussian, sample_consistency, sample_teacher, Solver};
 use frmd_host::models::ModelConfig;
 use frmd_host::rng::HostRng;
-use frmd_host::train::distill::{distill, DistillConfig};
+use frmd_host::train::distill::{distill_quietly, DistillConfig};
 use frmd_host::train::teacher::train_plain_teacher;
-use frmd_host::train::{LoopConfig, Progress};
+use frmd_host::train::LoopConfig;
 
 /// Samples per measurement.
 const BATCH: usize = 400;
@@ -46,8 +46,7 @@ fn toy_teacher_weights_and_solvers() {
         LossWeight::InvSigmaSquared,
     ] {
         for (steps, lr) in [(1500, 3e-3), (1500, 1e-3), (4000, 3e-3)] {
-            let mut lc = LoopConfig::toy(steps, 4);
-            lc.optim.lr = lr;
+            let lc = LoopConfig::toy(steps, 4).with_lr(lr);
             let (teacher, rep) = train_plain_teacher(&windows, &cfg, weight, &lc).unwrap();
             let cond = toy_condition(BATCH).unwrap();
             let mut rng = HostRng::new(11);
@@ -85,24 +84,15 @@ fn toy_distill_settings() {
         (10, 1e-3, 2000, Solver::Heun),
         (18, 1e-3, 2000, Solver::Euler),
     ] {
-        let mut dcfg = LoopConfig::toy(steps, 6);
-        dcfg.optim.lr = lr;
-        let t0 = std::time::Instant::now();
         let settings = DistillConfig {
             levels,
             solver,
             eval_ema: 0.99,
             ..DistillConfig::default()
         };
-        let d = distill(
-            &teacher,
-            &windows,
-            &sig,
-            &settings,
-            &dcfg,
-            &mut |_: &Progress| Ok(()),
-        )
-        .unwrap();
+        let t0 = std::time::Instant::now();
+        let loop_cfg = LoopConfig::toy(steps, 6).with_lr(lr);
+        let d = distill_quietly(&teacher, &windows, &settings, &loop_cfg).unwrap();
         let secs = t0.elapsed().as_secs_f64();
         let loss = d.report.final_loss().unwrap();
         for (name, net) in [("ema", &d.eval_student), ("raw", &d.student)] {

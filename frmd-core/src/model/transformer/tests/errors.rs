@@ -73,26 +73,20 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
         Err(E::Features { part: Part::CondIn })
     );
     // Weights.
-    let positions = F32Transformer {
+    let short_positions = F32Transformer {
         positions: &model.positions[1..],
         ..net
     };
-    assert_eq!(
-        positions.validate(),
-        Err(E::Features {
-            part: Part::Positions
-        })
-    );
-    let noise = F32Transformer {
+    let short_noise = F32Transformer {
         noise_token: &model.noise_token[1..],
         ..net
     };
-    assert_eq!(
-        noise.validate(),
-        Err(E::Features {
-            part: Part::NoiseToken
-        })
-    );
+    for (edited, part) in [
+        (short_positions, Part::Positions),
+        (short_noise, Part::NoiseToken),
+    ] {
+        assert_eq!(edited.validate(), Err(E::Features { part }));
+    }
     assert_eq!(
         validate_edited(&net, |b| {
             b[1].qkv.out_features = 47;
