@@ -76,37 +76,36 @@ fn check_f64(doc: &Value) -> (usize, f64) {
         );
         let mut table_max = vec![0.0; cfg.num_basis + 1];
         decoder.position_table_max(&mut table_max).unwrap();
-        let relative_1e9 =
-            |ours: f64, reference: f64| (ours - reference).abs() <= 1e-9 * reference.abs();
-        let derived_values: [(&str, &[f64], &str, &dyn Fn(f64, f64) -> bool); 4] = [
-            (
-                "centre",
-                decoder.centers_phase(),
-                "centers_phase",
-                &|ours, reference| scaled_err(ours, reference) < 1e-12,
-            ),
-            (
-                "bandwidth",
-                decoder.bandwidths(),
-                "bandwidth",
-                &|ours, reference| (ours - reference).abs() / reference < 1e-12,
-            ),
-            ("table max", &table_max, "pc_pos_basis_max", &relative_1e9),
-            (
-                "scale",
-                decoder.weights_goal_scale(),
-                "weights_goal_scale",
-                &relative_1e9,
-            ),
-        ];
-        for (what, values, key, close) in derived_values {
+        // Each derived value against the reference's, within `close`.
+        let check = |what: &str, values: &[f64], key: &str, close: &dyn Fn(f64, f64) -> bool| {
             for (ours, reference) in values.iter().zip(vec_f(&derived[key])) {
                 assert!(
                     close(*ours, reference),
                     "{name}: {what} {ours} vs {reference}"
                 );
             }
-        }
+        };
+        let relative_1e9 =
+            |ours: f64, reference: f64| (ours - reference).abs() <= 1e-9 * reference.abs();
+        check(
+            "centre",
+            decoder.centers_phase(),
+            "centers_phase",
+            &|ours, reference| scaled_err(ours, reference) < 1e-12,
+        );
+        check(
+            "bandwidth",
+            decoder.bandwidths(),
+            "bandwidth",
+            &|ours, reference| (ours - reference).abs() / reference < 1e-12,
+        );
+        check("table max", &table_max, "pc_pos_basis_max", &relative_1e9);
+        check(
+            "scale",
+            decoder.weights_goal_scale(),
+            "weights_goal_scale",
+            &relative_1e9,
+        );
         let inputs = &case["inputs"];
         let params = vec_f(&inputs["params"]);
         let init_time = f(&inputs["init_time"]);
