@@ -148,20 +148,13 @@ fn adapters_run_the_exported_model_behind_the_network_trait() {
     let int8_blocks = quantized.int8_blocks();
     let mut f32_scratch = Box::new(HostScratch::new());
     let mut int8_scratch = Box::new(HostScratch::new());
-    let mut f32_net = F32TransformerNetwork::new(
-        folded.view(&f32_blocks, 0).unwrap(),
-        &folded.base.layout,
-        &tokens,
-        &mut *f32_scratch,
-    )
-    .unwrap();
-    let mut int8_net = Int8TransformerNetwork::new(
-        quantized.view(&int8_blocks, 0).unwrap(),
-        &folded.base.layout,
-        &tokens,
-        &mut *int8_scratch,
-    )
-    .unwrap();
+    let layout = &folded.base.layout;
+    let f32_model = folded.view(&f32_blocks, 0).unwrap();
+    let mut f32_net =
+        F32TransformerNetwork::new(f32_model, layout, &tokens, &mut *f32_scratch).unwrap();
+    let int8_model = quantized.view(&int8_blocks, 0).unwrap();
+    let mut int8_net =
+        Int8TransformerNetwork::new(int8_model, layout, &tokens, &mut *int8_scratch).unwrap();
     assert_eq!(f32_net.num_noise_variants(), 2);
     assert_eq!(
         int8_net.input_width(),
