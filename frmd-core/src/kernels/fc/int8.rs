@@ -76,9 +76,8 @@ impl<'a> FullyConnected<'a, i32> {
         let zero_point = requant.output_zero_point;
         let bounds = (requant.activation_min, requant.activation_max);
         for_each_row_block(
-            self.in_features,
-            (self.weights, self.bias),
-            (requant.multipliers, requant.shifts),
+            self,
+            requant,
             output,
             |(out, rows, bias, multipliers, shifts)| {
                 let block = RequantBlock {

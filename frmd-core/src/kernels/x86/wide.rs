@@ -64,9 +64,8 @@ impl FullyConnected<'_, i64> {
     ) {
         let bounds = (requant.activation_min, requant.activation_max);
         for_each_row_block(
-            self.in_features,
-            (self.weights, self.bias),
-            (requant.multipliers, requant.shifts),
+            self,
+            requant,
             output,
             |(out, rows, bias, multipliers, shifts)| {
                 let block = RequantBlock16 {
