@@ -2,7 +2,7 @@
 
 extern crate std;
 
-use super::fixture::{big_scratch, calibrated, random_inputs, BothForms};
+use super::fixture::{big_scratch, calibrated, random_inputs, BothForms, FloatModel, QuantModel};
 use super::SMALL;
 use crate::kernels::{Activation, KernelError};
 use crate::model::linear::QuantizedLinear;
@@ -29,10 +29,17 @@ where
     .validate()
 }
 
+/// The [`SMALL`] model of `seed` calibrated on 10 inputs from `Rng::new(inputs)`, and that
+/// stream, which the test goes on drawing from.
+fn small_model(seed: u64, inputs: u64) -> (Rng, FloatModel, QuantModel) {
+    let mut rng = Rng::new(inputs);
+    let (model, quant) = calibrated(SMALL, seed, &mut rng, 10);
+    (rng, model, quant)
+}
+
 #[test]
 fn named_errors_for_bad_shapes_weights_and_arguments() {
-    let mut rng = Rng::new(22);
-    let (model, quant) = calibrated(SMALL, 21, &mut rng, 10);
+    let (mut rng, model, quant) = small_model(21, 22);
     let forms = BothForms::new(&model, &quant);
     let (net, int8) = forms.views(false);
     let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
@@ -235,8 +242,7 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
 #[test]
 fn random_corruptions_return_errors_without_panicking() {
     use crate::model::linear::F32Linear;
-    let mut rng = Rng::new(32);
-    let (model, quant) = calibrated(SMALL, 31, &mut rng, 10);
+    let (mut rng, model, quant) = small_model(31, 32);
     let forms = BothForms::new(&model, &quant);
     let (net, int8) = forms.views(false);
     let floats = std::vec![0.25_f32; 4096];
