@@ -202,38 +202,20 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
     // Noise-token folding.
     let mut token = [0.0_f32; 16];
     let noise_in = model.noise_in.view();
+    let fold = |embedding: &[f32], token: &mut [f32]| {
+        fold_noise_token(&SMALL, &noise_in, embedding, &model.positions, token)
+    };
     assert_eq!(
-        fold_noise_token(
-            &SMALL,
-            &noise_in,
-            &model.embedding[1..],
-            &model.positions,
-            &mut token
-        ),
+        fold(&model.embedding[1..], &mut token),
         Err(E::EmbeddingLength)
     );
     assert_eq!(
-        fold_noise_token(
-            &SMALL,
-            &noise_in,
-            &model.embedding,
-            &model.positions,
-            &mut token[1..]
-        ),
+        fold(&model.embedding, &mut token[1..]),
         Err(E::Features {
             part: Part::NoiseToken
         })
     );
-    assert_eq!(
-        fold_noise_token(
-            &SMALL,
-            &noise_in,
-            &model.embedding,
-            &model.positions,
-            &mut token
-        ),
-        Ok(())
-    );
+    assert_eq!(fold(&model.embedding, &mut token), Ok(()));
     assert_eq!(token.as_slice(), model.noise_token.as_slice());
 }
 
