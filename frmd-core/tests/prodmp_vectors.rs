@@ -74,44 +74,38 @@ fn check_f64(doc: &Value) -> (usize, f64) {
             decoder.num_grid_points() as u64,
             derived["num_pre_compute"].as_u64().unwrap()
         );
-        for (ours, reference) in decoder
-            .centers_phase()
-            .iter()
-            .zip(vec_f(&derived["centers_phase"]))
-        {
-            assert!(
-                scaled_err(*ours, reference) < 1e-12,
-                "{name}: centre {ours} vs {reference}"
-            );
-        }
-        for (ours, reference) in decoder
-            .bandwidths()
-            .iter()
-            .zip(vec_f(&derived["bandwidth"]))
-        {
-            assert!(
-                (ours - reference).abs() / reference < 1e-12,
-                "{name}: bandwidth {ours} vs {reference}"
-            );
-        }
         let mut table_max = vec![0.0; cfg.num_basis + 1];
         decoder.position_table_max(&mut table_max).unwrap();
-        for (ours, reference) in table_max.iter().zip(vec_f(&derived["pc_pos_basis_max"])) {
-            assert!(
-                (ours - reference).abs() <= 1e-9 * reference.abs(),
-                "{name}: table max {ours} vs {reference}"
-            );
-        }
-        for (ours, reference) in decoder
-            .weights_goal_scale()
-            .iter()
-            .zip(vec_f(&derived["weights_goal_scale"]))
-        {
-            assert!(
-                (ours - reference).abs() <= 1e-9 * reference.abs(),
-                "{name}: scale {ours} vs {reference}"
-            );
-        }
+        // Each derived value against the reference's, within `close`.
+        let check = |what: &str, values: &[f64], key: &str, close: &dyn Fn(f64, f64) -> bool| {
+            for (ours, reference) in values.iter().zip(vec_f(&derived[key])) {
+                assert!(
+                    close(*ours, reference),
+                    "{name}: {what} {ours} vs {reference}"
+                );
+            }
+        };
+        let relative_1e9 =
+            |ours: f64, reference: f64| (ours - reference).abs() <= 1e-9 * reference.abs();
+        check(
+            "centre",
+            decoder.centers_phase(),
+            "centers_phase",
+            &|ours, reference| scaled_err(ours, reference) < 1e-12,
+        );
+        check(
+            "bandwidth",
+            decoder.bandwidths(),
+            "bandwidth",
+            &|ours, reference| (ours - reference).abs() / reference < 1e-12,
+        );
+        check("table max", &table_max, "pc_pos_basis_max", &relative_1e9);
+        check(
+            "scale",
+            decoder.weights_goal_scale(),
+            "weights_goal_scale",
+            &relative_1e9,
+        );
         let inputs = &case["inputs"];
         let params = vec_f(&inputs["params"]);
         let init_time = f(&inputs["init_time"]);

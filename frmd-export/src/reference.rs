@@ -3,9 +3,10 @@
 //! arithmetic with floor divisions; i64 dot products in the per-backbone checks), on random and
 //! edge inputs. Here: the outcome type and the requantization check every backbone shares; the
 //! exported networks' checks are `mlp::reference` and `transformer::reference`.
+use frmd_core::quant::reference::{self, EDGE_ZERO_POINTS};
+use frmd_core::quant::reference::{edge_accumulators, EDGE_CLAMPS, EDGE_MULTIPLIERS};
 use frmd_core::quant::{
-    multiply_by_quantized_multiplier, reference, requantize_to_i8, Q31_MANTISSA_MIN, SHIFT_MAX,
-    SHIFT_MIN,
+    multiply_by_quantized_multiplier, requantize_to_i8, Q31_MANTISSA_MIN, SHIFT_MAX, SHIFT_MIN,
 };
 use frmd_core::rng::Rng;
 
@@ -48,47 +49,21 @@ impl KernelCheck {
     }
 }
 
-fn edge_accumulators() -> Vec<i32> {
-    let mut values = vec![i32::MIN, i32::MIN + 1, -1, 0, 1, i32::MAX - 1, i32::MAX];
-    for e in 0..31 {
-        let p = 1_i32 << e;
-        values.extend([p, p - 1, p + 1, -p, -p + 1, -p - 1]);
-    }
-    values
-}
-
 /// Requantization on all edge accumulators (INT32 ends, powers of two and neighbours) x edge
 /// multipliers x every shift x zero points at the range ends x clamps, then `random` random cases,
 /// and exact ties of the final rounding division.
 pub fn check_requantization(random: u64, seed: u64) -> KernelCheck {
     let mut check = KernelCheck::new("requantization (edges, ties, random) vs i128 model");
-    let multipliers = [
-        0,
-        1,
-        Q31_MANTISSA_MIN,
-        Q31_MANTISSA_MIN + 1,
-        1_518_500_250,
-        i32::MAX - 1,
-        i32::MAX,
-    ];
-    let zero_points = [-128, -127, -1, 0, 1, 126, 127];
-    let clamps = [
-        (-128_i8, 127_i8),
-        (0, 127),
-        (-128, -128),
-        (127, 127),
-        (-5, 6),
-    ];
     for &acc in &edge_accumulators() {
-        for &m in &multipliers {
+        for &m in &EDGE_MULTIPLIERS {
             for shift in SHIFT_MIN..=SHIFT_MAX {
                 let got = multiply_by_quantized_multiplier(acc, m, shift);
                 let want = reference::scale(acc, m, shift);
                 check.record(got == want, || {
                     format!("scale acc={acc} m={m} shift={shift}: {got} vs {want}")
                 });
-                for &zp in &zero_points {
-                    for &(lo, hi) in &clamps {
+                for &zp in &EDGE_ZERO_POINTS {
+                    for &(lo, hi) in &EDGE_CLAMPS {
                         let got = requantize_to_i8(acc, m, shift, zp, lo, hi);
                         let want = reference::requantize(acc, m, shift, zp, lo, hi);
                         check.record(got == want, || format!("acc={acc} m={m} shift={shift} zp={zp} clamp={lo}..={hi}: {got} vs {want}"));

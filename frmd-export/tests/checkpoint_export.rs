@@ -7,7 +7,7 @@ use frmd_export::calibrate::RangeMethod;
 use frmd_export::formats::calibration::{self, CalibrationSet};
 use frmd_export::formats::checkpoint::{
     Activation, BackboneConfig, CheckpointMeta, HeadConfig, ModelConfig, Normalization, Normalizer,
-    ProDmpOutput, Role, CALIBRATION_FILE, CONFIG_FILE,
+    Role, CALIBRATION_FILE, CONFIG_FILE,
 };
 use frmd_export::mlp::MlpExport;
 use frmd_export::ExportOptions;
@@ -23,11 +23,7 @@ fn model(backbone: BackboneConfig) -> ModelConfig {
         control_dt: 0.05,
         embed_dim: 4,
         backbone,
-        head: HeadConfig::ProDmp {
-            num_basis: 3,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        },
+        head: HeadConfig::prodmp(3),
     }
 }
 

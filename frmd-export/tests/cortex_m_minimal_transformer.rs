@@ -11,9 +11,7 @@ use frmd_core::rng::Rng;
 use frmd_export::host::HostScratch;
 use frmd_firmware_support::host::qemu;
 use frmd_formats::calibration;
-use frmd_formats::checkpoint::{
-    BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput, Role, CALIBRATION_FILE,
-};
+use frmd_formats::checkpoint::{BackboneConfig, HeadConfig, ModelConfig, Role, CALIBRATION_FILE};
 use frmd_test_support::checkpoint::{
     calibration_rows, scratch_dir, unit_normalization, write_checkpoint, Init,
 };
@@ -38,11 +36,7 @@ fn model() -> ModelConfig {
             heads: 2,
             width: 32,
         },
-        head: HeadConfig::ProDmp {
-            num_basis: PARAMS - 1,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        },
+        head: HeadConfig::prodmp(PARAMS - 1),
     }
 }
 

@@ -168,15 +168,6 @@ fn qemu_policy_digest_matches_host() {
     if !qemu::available("qemu_policy_digest_matches_host", &root) {
         return;
     }
-    let expected = format!("digest: {:016x}", host_digest());
-    for board in qemu::BOARDS {
-        let stdout = qemu::run(&root, board, "policy");
-        let digest_line = qemu::digest_line(&stdout);
-        assert_eq!(
-            digest_line,
-            Some(expected.as_str()),
-            "baked policy on {board} computed different bytes than the blob on the host:\n{stdout}"
-        );
-        eprintln!("policy {board}: {}", qemu::one_line(&stdout));
-    }
+    let what = "the blob on the host";
+    qemu::assert_digest_on(&root, &qemu::BOARDS, "policy", host_digest(), what);
 }

@@ -100,15 +100,12 @@ fn qemu_transformer_digest_matches_host() {
     if !qemu::available("qemu_transformer_digest_matches_host", &root) {
         return;
     }
-    let expected = format!("digest: {:016x}", host_digest().expect("host digest"));
-    for board in qemu::TRANSFORMER_BOARDS {
-        let stdout = qemu::run(&root, board, "transformer");
-        let digest_line = qemu::digest_line(&stdout);
-        assert_eq!(
-            digest_line,
-            Some(expected.as_str()),
-            "transformer policy on {board} computed different bytes than on the host:\n{stdout}"
-        );
-        eprintln!("transformer {board}: {}", qemu::one_line(&stdout));
-    }
+    let digest = host_digest().expect("host digest");
+    qemu::assert_digest_on(
+        &root,
+        &qemu::TRANSFORMER_BOARDS,
+        "transformer",
+        digest,
+        "the host",
+    );
 }

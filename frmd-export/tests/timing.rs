@@ -18,14 +18,7 @@ const P: usize = 21;
 #[ignore]
 fn int8_policy_act_time_on_host() {
     for steps in [1, 2, 4] {
-        let dims = Dims {
-            m: M,
-            o: O,
-            k: K,
-            n: N,
-            p: P,
-            hidden: vec![256, 256, 256],
-        };
+        let dims = Dims::new((M, O, K, N, P), vec![256, 256, 256]);
         let policy = random_policy(3, steps, &dims);
         let blob = frmd_core::blob::AlignedBlob::new(&policy.blob().unwrap());
         let bytes = blob.bytes();

@@ -8,7 +8,7 @@ use candle_core::Device;
 use frmd_core::sigma::SigmaConfig;
 use frmd_host::data::Dataset;
 use frmd_host::diffusion::loss::{teacher_loss, LossWeight, SigmaSampling};
-use frmd_host::models::{BackboneConfig, HeadConfig, ModelConfig, OwnedNetwork, ProDmpOutput};
+use frmd_host::models::{BackboneConfig, HeadConfig, ModelConfig, OwnedNetwork};
 use frmd_host::rng::HostRng;
 use frmd_host::train::batch::sample;
 use frmd_host::train::optim::{OptimConfig, ScheduledAdamW};
@@ -40,11 +40,7 @@ fn main() -> anyhow::Result<()> {
         control_dt: f64::from(dataset.dt),
         embed_dim: 16,
         backbone: BackboneConfig::parse(backbone)?,
-        head: HeadConfig::ProDmp {
-            num_basis: 20,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        },
+        head: HeadConfig::prodmp(20),
     };
     let device = Device::Cpu;
     let net = OwnedNetwork::new_seeded(&model, 1, &device)?;

@@ -69,32 +69,11 @@ fn run_shape(dims: Dims) {
 
 #[test]
 fn metaworld_shape_loads_and_runs_from_a_blob() {
-    run_shape(Dims {
-        m: 2,
-        o: 39,
-        k: 4,
-        n: 12,
-        p: 21,
-        hidden: vec![64, 64],
-    });
+    run_shape(Dims::new((2, 39, 4, 12, 21), vec![64, 64]));
 }
 
 #[test]
 fn other_shapes_load_and_run_from_a_blob() {
-    run_shape(Dims {
-        m: 3,
-        o: 5,
-        k: 3,
-        n: 8,
-        p: 5,
-        hidden: vec![24, 20],
-    });
-    run_shape(Dims {
-        m: 1,
-        o: 20,
-        k: 7,
-        n: 16,
-        p: 11,
-        hidden: vec![48],
-    });
+    run_shape(Dims::new((3, 5, 3, 8, 5), vec![24, 20]));
+    run_shape(Dims::new((1, 20, 7, 16, 11), vec![48]));
 }

@@ -3,348 +3,156 @@
 //! changed. Training, collection and the quick start are in `cli_bad_input_train.rs`.
 mod cli_support;
 
-use cli_support::{edited_checkpoint, fixture, frmd, frmd_ok, hash_tree, rejects, scratch};
+use cli_support::{edited_checkpoint, fixture, frmd_ok, hash_tree, rejects, scratch, words};
+use cli_support::{rejects_each, rejects_each_in};
 use serde_json::json;
 
 const U64_MAX: &str = "18446744073709551615";
 
 #[test]
-fn eval_counts_are_bounded() {
-    let f = fixture();
-    rejects(
-        f,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--blob",
-            "s.blob",
-            "--episodes",
-            U64_MAX,
-        ],
-        &["--episodes", U64_MAX, "1000000"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--episodes", "1000000000000"],
-        &["--episodes"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--episodes", "0"],
-        &["--episodes 0"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--ckpt", "t", "--steps", U64_MAX],
-        &["--steps", "1000"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--ckpt", "t", "--steps", "0"],
-        &["--steps 0"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--ckpt", "dp", "--steps", "0"],
-        &["--steps 0"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--ckpt", "s", "--steps", "5"],
-        &["--steps 5", "1 to 4"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--history", "0"],
-        &["--history 0"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--exec-steps", "0"],
-        &["--exec-steps 0"],
-    );
+fn eval_options_are_checked_before_the_run() {
+    rejects_each(&[
+        // Counts are bounded.
+        (
+            "eval --task reach --blob s.blob --episodes 18446744073709551615",
+            &["--episodes", U64_MAX, "1000000"],
+        ),
+        (
+            "eval --task reach --episodes 1000000000000",
+            &["--episodes"],
+        ),
+        ("eval --task reach --episodes 0", &["--episodes 0"]),
+        (
+            "eval --task reach --ckpt t --steps 18446744073709551615",
+            &["--steps", "1000"],
+        ),
+        ("eval --task reach --ckpt t --steps 0", &["--steps 0"]),
+        ("eval --task reach --ckpt dp --steps 0", &["--steps 0"]),
+        (
+            "eval --task reach --ckpt s --steps 5",
+            &["--steps 5", "1 to 4"],
+        ),
+        ("eval --task reach --history 0", &["--history 0"]),
+        ("eval --task reach --exec-steps 0", &["--exec-steps 0"]),
+        // Seeds stay in the evaluation stream; the last is one past the last start that fits 50
+        // episodes (2^63 - 50).
+        (
+            "eval --task reach --first-seed 9223372036854775808",
+            &["--first-seed", "2^63"],
+        ),
+        (
+            "eval --task reach --first-seed 18446744073709551615 --episodes 1",
+            &["--first-seed"],
+        ),
+        (
+            "eval --task reach --first-seed 9223372036854775759",
+            &["--first-seed"],
+        ),
+        // Executed steps are at most the horizon.
+        (
+            "eval --task reach --blob s.blob --exec-steps 100",
+            &["--exec-steps 100", "horizon 8"],
+        ),
+        (
+            "eval --task reach --ckpt s --exec-steps 9",
+            &["--exec-steps 9", "horizon 8"],
+        ),
+        (
+            "eval --task reach --baked baked --exec-steps 12",
+            &["--exec-steps 12"],
+        ),
+        // Conflicting options are named.
+        (
+            "eval --task reach --ckpt s --blob s.blob",
+            &["--ckpt", "--blob"],
+        ),
+        (
+            "eval --task reach --blob s.blob --baked baked",
+            &["--blob", "--baked"],
+        ),
+        (
+            "eval --task reach --policy expert --ckpt t",
+            &["--policy", "--ckpt"],
+        ),
+        (
+            "eval --task reach --blob s.blob --steps 2",
+            &["--steps", "--blob"],
+        ),
+        (
+            "eval --task reach --baked baked --solver heun",
+            &["--solver", "--baked"],
+        ),
+        (
+            "eval --task reach --ckpt s --solver heun",
+            &["--solver", "student"],
+        ),
+        (
+            "eval --task reach --ckpt dp --solver euler",
+            &["--solver", "dp"],
+        ),
+        ("eval --task reach --solver euler", &["--solver", "expert"]),
+        (
+            "eval --task reach --ckpt t --history 3",
+            &["--history", "--ckpt"],
+        ),
+        (
+            "eval --task reach --plot-episodes 3",
+            &["--plot-episodes", "--plot"],
+        ),
+        ("eval --task reach --policy nonsense", &["nonsense"]),
+        ("eval --task nosuchtask", &["nosuchtask"]),
+        // Outputs never replace a file without --force, nor an input even with it.
+        (
+            "eval --task reach --blob s.blob --json d.safetensors",
+            &["--json", "exists", "--force"],
+        ),
+        (
+            "eval --task reach --blob s.blob --json s.blob --force",
+            &["--json", "input"],
+        ),
+        (
+            "eval --task reach --ckpt s --json s/frmd.json --force",
+            &["--json", "input"],
+        ),
+        (
+            "eval --task reach --json d.safetensors/r.json",
+            &["--json", "not a directory"],
+        ),
+        (
+            "eval --task reach --plot d.safetensors/p.png",
+            &["--plot", "not a directory"],
+        ),
+        ("eval --task reach --plot t", &["--plot", "directory"]),
+        (
+            "eval --task reach --json /proc/frmd-no-such-dir/r.json",
+            &["--json", "not writable"],
+        ),
+    ]);
 }
 
 #[test]
-fn eval_seeds_stay_in_the_evaluation_stream() {
-    let f = fixture();
-    rejects(
-        f,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--first-seed",
-            "9223372036854775808",
-        ],
-        &["--first-seed", "2^63"],
-    );
-    rejects(
-        f,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--first-seed",
-            U64_MAX,
-            "--episodes",
-            "1",
-        ],
-        &["--first-seed"],
-    );
-    // One past the last start that fits 50 episodes (2^63 - 50).
-    rejects(
-        f,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--first-seed",
-            "9223372036854775759",
-        ],
-        &["--first-seed"],
-    );
-}
-
-#[test]
-fn eval_exec_steps_are_at_most_the_horizon() {
-    let f = fixture();
-    rejects(
-        f,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--blob",
-            "s.blob",
-            "--exec-steps",
-            "100",
-        ],
-        &["--exec-steps 100", "horizon 8"],
-    );
-    rejects(
-        f,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--ckpt",
-            "s",
-            "--exec-steps",
-            "9",
-        ],
-        &["--exec-steps 9", "horizon 8"],
-    );
-    rejects(
-        f,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--baked",
-            "baked",
-            "--exec-steps",
-            "12",
-        ],
-        &["--exec-steps 12"],
-    );
-}
-
-#[test]
-fn eval_conflicting_options_are_named() {
-    let f = fixture();
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--ckpt", "s", "--blob", "s.blob"],
-        &["--ckpt", "--blob"],
-    );
-    rejects(
-        f,
-        &[
-            "eval", "--task", "reach", "--blob", "s.blob", "--baked", "baked",
-        ],
-        &["--blob", "--baked"],
-    );
-    rejects(
-        f,
-        &[
-            "eval", "--task", "reach", "--policy", "expert", "--ckpt", "t",
-        ],
-        &["--policy", "--ckpt"],
-    );
-    rejects(
-        f,
-        &[
-            "eval", "--task", "reach", "--blob", "s.blob", "--steps", "2",
-        ],
-        &["--steps", "--blob"],
-    );
-    rejects(
-        f,
-        &[
-            "eval", "--task", "reach", "--baked", "baked", "--solver", "heun",
-        ],
-        &["--solver", "--baked"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--ckpt", "s", "--solver", "heun"],
-        &["--solver", "student"],
-    );
-    rejects(
-        f,
-        &[
-            "eval", "--task", "reach", "--ckpt", "dp", "--solver", "euler",
-        ],
-        &["--solver", "dp"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--solver", "euler"],
-        &["--solver", "expert"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--ckpt", "t", "--history", "3"],
-        &["--history", "--ckpt"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--plot-episodes", "3"],
-        &["--plot-episodes", "--plot"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--policy", "nonsense"],
-        &["nonsense"],
-    );
-    rejects(f, &["eval", "--task", "nosuchtask"], &["nosuchtask"]);
-}
-
-#[test]
-fn eval_outputs_are_checked_before_the_run_and_never_clobber() {
-    let f = fixture();
-    rejects(
-        f,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--blob",
-            "s.blob",
-            "--json",
-            "d.safetensors",
-        ],
-        &["--json", "exists", "--force"],
-    );
-    rejects(
-        f,
-        &[
-            "eval", "--task", "reach", "--blob", "s.blob", "--json", "s.blob", "--force",
-        ],
-        &["--json", "input"],
-    );
-    rejects(
-        f,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--ckpt",
-            "s",
-            "--json",
-            "s/frmd.json",
-            "--force",
-        ],
-        &["--json", "input"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--json", "d.safetensors/r.json"],
-        &["--json", "not a directory"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--plot", "d.safetensors/p.png"],
-        &["--plot", "not a directory"],
-    );
-    rejects(
-        f,
-        &["eval", "--task", "reach", "--plot", "t"],
-        &["--plot", "directory"],
-    );
-    rejects(
-        f,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--json",
-            "/proc/frmd-no-such-dir/r.json",
-        ],
-        &["--json", "not writable"],
-    );
+fn eval_creates_missing_directories_and_never_clobbers() {
     // A missing directory is created, and the written report is whole.
     let dir = scratch("eval-json");
     let blob = fixture().join("s.blob");
-    frmd_ok(
-        &dir,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--blob",
-            blob.to_str().unwrap(),
-            "--episodes",
-            "2",
-            "--json",
-            "new/sub/r.json",
-            "--plot",
-            "new/p.png",
-        ],
-    );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("new/sub/r.json")).unwrap())
-            .unwrap();
-    assert_eq!(report["episodes"], json!(2));
+    let eval = |episodes: u32, rest: &str| {
+        format!(
+            "eval --task reach --blob {} --episodes {episodes} --json new/sub/r.json {rest}",
+            blob.display()
+        )
+    };
+    let episodes_in_report = || {
+        let text = std::fs::read_to_string(dir.join("new/sub/r.json")).unwrap();
+        serde_json::from_str::<serde_json::Value>(&text).unwrap()["episodes"].clone()
+    };
+    frmd_ok(&dir, &words(&eval(2, "--plot new/p.png")));
+    assert_eq!(episodes_in_report(), json!(2));
     assert!(dir.join("new/p.png").exists());
     let before = hash_tree(&dir);
-    rejects(
-        &dir,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--blob",
-            blob.to_str().unwrap(),
-            "--episodes",
-            "2",
-            "--json",
-            "new/sub/r.json",
-        ],
-        &["exists"],
-    );
+    rejects(&dir, &words(&eval(2, "")), &["exists"]);
     assert_eq!(before, hash_tree(&dir));
-    frmd_ok(
-        &dir,
-        &[
-            "eval",
-            "--task",
-            "reach",
-            "--blob",
-            blob.to_str().unwrap(),
-            "--episodes",
-            "1",
-            "--json",
-            "new/sub/r.json",
-            "--force",
-        ],
-    );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("new/sub/r.json")).unwrap())
-            .unwrap();
-    assert_eq!(report["episodes"], json!(1));
+    frmd_ok(&dir, &words(&eval(1, "--force")));
+    assert_eq!(episodes_in_report(), json!(1));
     let leftovers: Vec<_> = std::fs::read_dir(dir.join("new/sub"))
         .unwrap()
         .map(|e| e.unwrap().file_name())
@@ -354,107 +162,42 @@ fn eval_outputs_are_checked_before_the_run_and_never_clobber() {
 
 #[test]
 fn export_refuses_existing_outputs_and_inputs() {
-    let f = fixture();
-    rejects(
-        f,
-        &["export", "--ckpt", "s", "--blob", "s.blob"],
-        &["--blob", "exists", "--force"],
-    );
-    rejects(
-        f,
-        &[
-            "export",
-            "--ckpt",
-            "s",
-            "--blob",
-            "s/model.safetensors",
-            "--force",
-        ],
-        &["--blob", "input"],
-    );
-    rejects(
-        f,
-        &[
-            "export",
-            "--ckpt",
-            "s",
-            "--blob",
-            "d.safetensors",
-            "--data",
-            "d.safetensors",
-            "--force",
-        ],
-        &["--blob", "input"],
-    );
-    rejects(
-        f,
-        &["export", "--ckpt", "s", "--out", "baked"],
-        &["--out", "not empty", "--force"],
-    );
-    rejects(
-        f,
-        &["export", "--ckpt", "s", "--out", "s", "--force"],
-        &["--out", "input"],
-    );
-    rejects(
-        f,
-        &["export", "--ckpt", "s", "--out", "s.blob"],
-        &["--out", "file"],
-    );
-    rejects(f, &["export", "--ckpt", "s"], &["nothing to write"]);
-    rejects(
-        f,
-        &["export", "--ckpt", "s", "--blob", "x.blob", "--steps", "0"],
-        &["--steps 0"],
-    );
-    rejects(
-        f,
-        &["export", "--ckpt", "s", "--blob", "x.blob", "--steps", "9"],
-        &["--steps 9"],
-    );
-    rejects(
-        f,
-        &[
-            "export",
-            "--ckpt",
-            "s",
-            "--blob",
-            "x.blob",
-            "--input-headroom",
-            "0.5",
-        ],
-        &["--input-headroom"],
-    );
-    rejects(
-        f,
-        &[
-            "export",
-            "--ckpt",
-            "s",
-            "--blob",
-            "x.blob",
-            "--calibration",
-            "median",
-        ],
-        &["--calibration"],
-    );
-    rejects(
-        f,
-        &[
-            "export",
-            "--ckpt",
-            "s",
-            "--blob",
-            "x.blob",
-            "--save-calibration",
-        ],
-        &["--save-calibration", "--data"],
-    );
-    rejects(
-        f,
-        &["export", "--ckpt", "t", "--blob", "x.blob"],
-        &["student", "teacher"],
-    );
+    rejects_each(&[
+        (
+            "export --ckpt s --blob s.blob",
+            &["--blob", "exists", "--force"],
+        ),
+        (
+            "export --ckpt s --blob s/model.safetensors --force",
+            &["--blob", "input"],
+        ),
+        (
+            "export --ckpt s --blob d.safetensors --data d.safetensors --force",
+            &["--blob", "input"],
+        ),
+        (
+            "export --ckpt s --out baked",
+            &["--out", "not empty", "--force"],
+        ),
+        ("export --ckpt s --out s --force", &["--out", "input"]),
+        ("export --ckpt s --out s.blob", &["--out", "file"]),
+        ("export --ckpt s", &["nothing to write"]),
+        ("export --ckpt s --blob x.blob --steps 0", &["--steps 0"]),
+        ("export --ckpt s --blob x.blob --steps 9", &["--steps 9"]),
+        (
+            "export --ckpt s --blob x.blob --input-headroom 0.5",
+            &["--input-headroom"],
+        ),
+        (
+            "export --ckpt s --blob x.blob --calibration median",
+            &["--calibration"],
+        ),
+        (
+            "export --ckpt s --blob x.blob --save-calibration",
+            &["--save-calibration", "--data"],
+        ),
+        ("export --ckpt t --blob x.blob", &["student", "teacher"]),
+    ]);
 }
 
 #[test]
@@ -497,234 +240,159 @@ fn export_with_force_replaces_atomically() {
     assert_eq!(names.len(), 2, "left behind: {names:?}");
 }
 
+/// Edits a checkpoint's `frmd.json`.
+type Edit = fn(&mut serde_json::Value);
+
 #[test]
 fn checkpoint_config_errors_name_the_field() {
     let f = fixture();
     let dir = scratch("bad-ckpt");
-    edited_checkpoint(&f.join("s"), &dir.join("minmax"), |j| {
-        j["normalization"]["obs"]["min"][0] = json!(5.0);
-        j["normalization"]["obs"]["max"][0] = json!(1.0);
-    });
-    rejects(
-        &dir,
-        &["eval", "--task", "reach", "--ckpt", "minmax"],
-        &[
+    // (checkpoint edited, name of the copy, the edit, what `eval --ckpt NAME` must name)
+    let cases: [(&str, &str, Edit, &[&str]); 11] = [
+        (
+            "s",
             "minmax",
-            "frmd.json",
-            "normalization.obs.min[0]",
-            "min <= max",
-        ],
-    );
-    rejects(
-        &dir,
-        &["export", "--ckpt", "minmax", "--blob", "m.blob"],
-        &["normalization.obs.min[0]"],
-    );
-    edited_checkpoint(&f.join("s"), &dir.join("short"), |j| {
-        j["normalization"]["action"]["max"] = json!([1.0]);
-    });
-    rejects(
-        &dir,
-        &["eval", "--task", "reach", "--ckpt", "short"],
-        &["normalization.action.max", "expected 2"],
-    );
-    edited_checkpoint(&f.join("t"), &dir.join("sigma"), |j| {
-        j["sigma"]["sigma_max"] = json!(1e38)
-    });
-    rejects(
-        &dir,
-        &["eval", "--task", "reach", "--ckpt", "sigma"],
-        &["frmd.json", "sigma.sigma_max"],
-    );
-    edited_checkpoint(&f.join("t"), &dir.join("sigmin"), |j| {
-        j["sigma"]["sigma_min"] = json!(-1.0)
-    });
-    rejects(
-        &dir,
-        &["eval", "--task", "reach", "--ckpt", "sigmin"],
-        &["sigma.sigma_min"],
-    );
-    edited_checkpoint(&f.join("t"), &dir.join("horizon"), |j| {
-        j["prodmp"]["tau"] = json!(9.0)
-    });
-    rejects(
-        &dir,
-        &["eval", "--task", "reach", "--ckpt", "horizon"],
-        &["frmd.json", "prodmp.tau", "expected"],
-    );
-    edited_checkpoint(&f.join("t"), &dir.join("dt"), |j| {
-        j["model"]["control_dt"] = json!(0.0)
-    });
-    rejects(
-        &dir,
-        &["eval", "--task", "reach", "--ckpt", "dt"],
-        &["model.control_dt"],
-    );
-    edited_checkpoint(&f.join("t"), &dir.join("huge"), |j| {
-        j["model"]["obs_dim"] = json!(1u64 << 40)
-    });
-    rejects(
-        &dir,
-        &["eval", "--task", "reach", "--ckpt", "huge"],
-        &["model.obs_dim"],
-    );
-    edited_checkpoint(&f.join("t"), &dir.join("tensors"), |j| {
-        j["tensors"][1]["shape"] = json!([3, 3])
-    });
-    rejects(
-        &dir,
-        &["eval", "--task", "reach", "--ckpt", "tensors"],
-        &["tensors[1]", "mlp.layers."],
-    );
-    edited_checkpoint(&f.join("t"), &dir.join("fewer"), |j| {
-        j["tensors"].as_array_mut().unwrap().pop();
-    });
-    rejects(
-        &dir,
-        &["eval", "--task", "reach", "--ckpt", "fewer"],
-        &["not listed", "mlp.layers."],
-    );
-    edited_checkpoint(&f.join("t"), &dir.join("missing"), |j| {
-        j["model"].as_object_mut().unwrap().remove("horizon");
-    });
-    rejects(
-        &dir,
-        &["eval", "--task", "reach", "--ckpt", "missing"],
-        &["frmd.json", "horizon"],
-    );
-    edited_checkpoint(&f.join("t"), &dir.join("version"), |j| {
-        j["format_version"] = json!(99)
-    });
-    rejects(
-        &dir,
-        &["eval", "--task", "reach", "--ckpt", "version"],
-        &["format_version 99"],
-    );
+            |j| {
+                j["normalization"]["obs"]["min"][0] = json!(5.0);
+                j["normalization"]["obs"]["max"][0] = json!(1.0);
+            },
+            &[
+                "minmax",
+                "frmd.json",
+                "normalization.obs.min[0]",
+                "min <= max",
+            ],
+        ),
+        (
+            "s",
+            "short",
+            |j| j["normalization"]["action"]["max"] = json!([1.0]),
+            &["normalization.action.max", "expected 2"],
+        ),
+        (
+            "t",
+            "sigma",
+            |j| j["sigma"]["sigma_max"] = json!(1e38),
+            &["frmd.json", "sigma.sigma_max"],
+        ),
+        (
+            "t",
+            "sigmin",
+            |j| j["sigma"]["sigma_min"] = json!(-1.0),
+            &["sigma.sigma_min"],
+        ),
+        (
+            "t",
+            "horizon",
+            |j| j["prodmp"]["tau"] = json!(9.0),
+            &["frmd.json", "prodmp.tau", "expected"],
+        ),
+        (
+            "t",
+            "dt",
+            |j| j["model"]["control_dt"] = json!(0.0),
+            &["model.control_dt"],
+        ),
+        (
+            "t",
+            "huge",
+            |j| j["model"]["obs_dim"] = json!(1u64 << 40),
+            &["model.obs_dim"],
+        ),
+        (
+            "t",
+            "tensors",
+            |j| j["tensors"][1]["shape"] = json!([3, 3]),
+            &["tensors[1]", "mlp.layers."],
+        ),
+        (
+            "t",
+            "fewer",
+            |j| {
+                j["tensors"].as_array_mut().unwrap().pop();
+            },
+            &["not listed", "mlp.layers."],
+        ),
+        (
+            "t",
+            "missing",
+            |j| {
+                j["model"].as_object_mut().unwrap().remove("horizon");
+            },
+            &["frmd.json", "horizon"],
+        ),
+        (
+            "t",
+            "version",
+            |j| j["format_version"] = json!(99),
+            &["format_version 99"],
+        ),
+    ];
+    for (from, name, edit, needles) in cases {
+        edited_checkpoint(&f.join(from), &dir.join(name), edit);
+        rejects(&dir, &["eval", "--task", "reach", "--ckpt", name], needles);
+    }
     std::fs::write(dir.join("garbage.blob"), b"FRMD not really a blob").unwrap();
-    rejects(
+    rejects_each_in(
         &dir,
-        &["eval", "--task", "reach", "--blob", "garbage.blob"],
-        &["garbage.blob"],
-    );
-    rejects(
-        &dir,
-        &["eval", "--task", "reach", "--ckpt", "nonexistent"],
-        &["nonexistent"],
+        &[
+            (
+                "export --ckpt minmax --blob m.blob",
+                &["normalization.obs.min[0]"],
+            ),
+            ("eval --task reach --blob garbage.blob", &["garbage.blob"]),
+            ("eval --task reach --ckpt nonexistent", &["nonexistent"]),
+        ],
     );
 }
 
 #[test]
 fn equiv_refuses_teachers_and_empty_checks() {
-    let f = fixture();
-    rejects(
-        f,
-        &["equiv", "--ckpt", "t", "--baked", "baked"],
-        &["this is a teacher, not a student"],
-    );
-    rejects(
-        f,
-        &["equiv", "--ckpt", "dp", "--baked", "baked"],
-        &["this is a dp, not a student"],
-    );
-    rejects(
-        f,
-        &[
-            "equiv",
-            "--ckpt",
-            "s",
-            "--baked",
-            "baked",
-            "--inputs",
-            "0",
-            "--random-requant",
-            "0",
-        ],
-        &["--inputs 0", "nothing"],
-    );
-    rejects(
-        f,
-        &[
-            "equiv",
-            "--ckpt",
-            "s",
-            "--baked",
-            "baked",
-            "--episodes",
-            "1000000000000",
-        ],
-        &["--episodes"],
-    );
-    rejects(
-        f,
-        &[
-            "equiv",
-            "--ckpt",
-            "s",
-            "--baked",
-            "baked",
-            "--max-f32-error",
-            "nan",
-        ],
-        &["--max-f32-error"],
-    );
-    rejects(
-        f,
-        &[
-            "equiv",
-            "--ckpt",
-            "s",
-            "--baked",
-            "baked",
-            "--json",
-            "d.safetensors",
-        ],
-        &["--json", "exists"],
-    );
-    rejects(
-        f,
-        &[
-            "equiv",
-            "--ckpt",
-            "s",
-            "--baked",
-            "baked",
-            "--json",
-            "baked/policy.blob",
-            "--force",
-        ],
-        &["--json", "input"],
-    );
+    rejects_each(&[
+        (
+            "equiv --ckpt t --baked baked",
+            &["this is a teacher, not a student"],
+        ),
+        (
+            "equiv --ckpt dp --baked baked",
+            &["this is a dp, not a student"],
+        ),
+        (
+            "equiv --ckpt s --baked baked --inputs 0 --random-requant 0",
+            &["--inputs 0", "nothing"],
+        ),
+        (
+            "equiv --ckpt s --baked baked --episodes 1000000000000",
+            &["--episodes"],
+        ),
+        (
+            "equiv --ckpt s --baked baked --max-f32-error nan",
+            &["--max-f32-error"],
+        ),
+        (
+            "equiv --ckpt s --baked baked --json d.safetensors",
+            &["--json", "exists"],
+        ),
+        (
+            "equiv --ckpt s --baked baked --json baked/policy.blob --force",
+            &["--json", "input"],
+        ),
+    ]);
 }
 
 #[test]
 fn bench_labels_the_core_rows_with_their_own_student() {
-    let f = fixture();
-    rejects(f, &["bench", "--dir", ".", "--calls", "0"], &["--calls 0"]);
-    rejects(
-        f,
-        &[
-            "bench",
-            "--dir",
-            ".",
-            "--policy",
-            "dp:10",
-            "--json",
-            "d.safetensors",
-        ],
-        &["--json", "exists"],
+    rejects_each(&[
+        ("bench --dir . --calls 0", &["--calls 0"]),
+        (
+            "bench --dir . --policy dp:10 --json d.safetensors",
+            &["--json", "exists"],
+        ),
+    ]);
+    let table = frmd_ok(
+        fixture(),
+        &words("bench --dir . --policy dp:10 --calls 3 --warmup 0"),
     );
-    let out = frmd(
-        f,
-        &[
-            "bench", "--dir", ".", "--policy", "dp:10", "--calls", "3", "--warmup", "0",
-        ],
-    );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let table = String::from_utf8_lossy(&out.stdout);
     let core: Vec<&str> = table
         .lines()
         .filter(|l| l.starts_with("frmd-core"))

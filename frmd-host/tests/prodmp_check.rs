@@ -16,6 +16,11 @@ fn parse(value: &Value) -> Result<prodmp_vectors::VectorsFile, VectorsError> {
     prodmp_vectors::parse(&value.to_string(), Path::new("test.json"))
 }
 
+/// Moves one reference value by 1e-6.
+fn nudge(value: &mut Value) {
+    *value = (value.as_f64().unwrap() + 1e-6).into();
+}
+
 fn frmd_check(path: &Path) -> (i32, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_frmd"))
         .args(["prodmp", "check", "--vectors"])
@@ -42,10 +47,7 @@ fn all_reference_cases_pass() {
 #[test]
 fn corrupted_reference_fails() {
     let mut json = vectors_json();
-    let value = json["cases"][3]["queries"][1]["vel"][17][4]
-        .as_f64()
-        .unwrap();
-    json["cases"][3]["queries"][1]["vel"][17][4] = (value + 1e-6).into();
+    nudge(&mut json["cases"][3]["queries"][1]["vel"][17][4]);
     let file = parse(&json).unwrap();
     let tol = Tolerances::default();
     let report = check_case(&file.cases[3], 3, &tol);
@@ -170,10 +172,7 @@ fn invalid_config_or_time_is_a_failing_case_not_a_crash() {
 #[test]
 fn float32_reference_uses_the_f32_tolerance() {
     let mut json = vectors_json();
-    let value = json["cases"][4]["queries"][0]["pos"][6][1]
-        .as_f64()
-        .unwrap();
-    json["cases"][4]["queries"][0]["pos"][6][1] = (value + 1e-6).into();
+    nudge(&mut json["cases"][4]["queries"][0]["pos"][6][1]);
     let tol = Tolerances::default();
     assert!(!check_case(&parse(&json).unwrap().cases[4], 4, &tol).pass());
     json["cases"][4]["config"]["dtype"] = "float32".into();

@@ -7,7 +7,7 @@ use frmd_core::rng::Rng;
 use frmd_core::sigma::SigmaConfig;
 use frmd_formats::checkpoint::{expected_tensors, CheckpointMeta, Role};
 use frmd_host::data::{ActionBeforeStart, Dataset, Normalization, Normalizer};
-use frmd_host::models::{BackboneConfig, HeadConfig, ModelConfig, ProDmpOutput};
+use frmd_host::models::{BackboneConfig, HeadConfig, ModelConfig};
 use serde_json::{json, Value};
 
 /// Index below `n` (n > 0).
@@ -102,11 +102,7 @@ fn valid_meta(transformer: bool) -> CheckpointMeta {
         control_dt: 0.1,
         embed_dim: 4,
         backbone,
-        head: HeadConfig::ProDmp {
-            num_basis: 3,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        },
+        head: HeadConfig::prodmp(3),
     };
     let mut meta = CheckpointMeta::describe(Role::Student, &model, SigmaConfig::default());
     meta.normalization = Some(Normalization {

@@ -8,20 +8,23 @@ use frmd_firmware_support::shape::{
     DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
 };
 
+use crate::memory::StackProbe;
 use crate::report::exit_failure;
 use crate::{baked_student as student, baked_synthetic_policy, baked_transformer};
 
-/// The baked student's workload (`Policy::act` of the trained one-step MLP).
-pub type StudentWorkload = PolicyWorkload<
-    'static,
-    Int8MlpNetwork<'static, { student::SCRATCH_WIDTH }>,
-    { student::HISTORY },
-    { student::OBS_DIM },
-    { student::ACTION_DIM },
-    { student::HORIZON },
-    { student::PARAMS_PER_DOF },
-    { student::INPUT_WIDTH },
->;
+/// The baked student's workload (`Policy::act` of the trained one-step MLP, or of another network
+/// `Net` with the student's sizes).
+pub type StudentWorkload<Net = Int8MlpNetwork<'static, { student::SCRATCH_WIDTH }>> =
+    PolicyWorkload<
+        'static,
+        Net,
+        { student::HISTORY },
+        { student::OBS_DIM },
+        { student::ACTION_DIM },
+        { student::HORIZON },
+        { student::PARAMS_PER_DOF },
+        { student::INPUT_WIDTH },
+    >;
 
 /// The baked student's policy as a workload that states its multiply-accumulates.
 pub fn student_workload() -> StudentWorkload {
@@ -54,6 +57,10 @@ pub type TransformerNetwork<'a> = Int8TransformerNetwork<'a, &'a mut Scratch>;
 /// A policy over `Net` with the synthetic policy's sizes.
 pub type TransformerPolicy<'a, Net> =
     Policy<'a, Net, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>;
+
+/// [`TransformerPolicy`] as a workload.
+pub type TransformerWorkload<'a, Net> =
+    PolicyWorkload<'a, Net, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>;
 
 /// The synthetic transformer's blocks (firmware failure if the baked data does not fit).
 pub fn transformer_blocks(
@@ -93,4 +100,23 @@ pub fn transformer_policy<'a, Net: Network>(network: Net) -> TransformerPolicy<'
         Ok(policy) => policy,
         Err(error) => exit_failure(&error),
     }
+}
+
+/// [`transformer_policy`] as the transformer images' workload.
+pub fn transformer_workload<'a, Net: Network>(network: Net) -> TransformerWorkload<'a, Net> {
+    PolicyWorkload::with_name(transformer_policy(network), TRANSFORMER_NAME)
+}
+
+/// The start of both transformer images: paints the stack, builds the synthetic transformer
+/// policy's workload (its blocks and scratch in this frame, which is `main`'s: inlined) and hands
+/// the workload and the stack probe to `measure`.
+#[inline(always)]
+pub fn transformer_image(
+    measure: fn(&mut TransformerWorkload<'_, TransformerNetwork<'_>>, StackProbe) -> !,
+) -> ! {
+    let stack = crate::bench::start();
+    let blocks = transformer_blocks();
+    let mut scratch = Scratch::new();
+    let mut workload = transformer_workload(transformer_network(&blocks, &mut scratch));
+    measure(&mut workload, stack)
 }

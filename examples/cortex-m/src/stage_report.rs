@@ -51,6 +51,36 @@ fn elapsed(start: u32, end: u32) -> u64 {
     u64::from(TickCounter::elapsed(start, end))
 }
 
+/// SysTick readings around one `run` of a workload, and the first and last mark its network took.
+struct TimedRun {
+    start: u32,
+    entry: u32,
+    exit: u32,
+    end: u32,
+}
+
+impl TimedRun {
+    /// Runs `workload` once; `marks` reads the network's marks of that run from it.
+    fn of<W: Workload<Error = PolicyError>>(
+        workload: &mut W,
+        marks: impl Fn(&W) -> &[u32],
+    ) -> Result<Self, PolicyError> {
+        let start = systick();
+        workload.run()?;
+        let end = systick();
+        let marks = marks(workload);
+        let (Some(&entry), Some(&exit)) = (marks.first(), marks.last()) else {
+            return Err(PolicyError::OutputWidth);
+        };
+        Ok(Self {
+            start,
+            entry,
+            exit,
+            end,
+        })
+    }
+}
+
 /// The stages of every policy breakdown outside its network: `noise` and `input` before it,
 /// `decode`, `output_stage` and `denormalize` after it.
 #[derive(Clone, Copy)]
@@ -268,20 +298,15 @@ pub fn mlp_policy<
     for case in 0..CASES {
         workload.prepare(case)?;
         for _ in 0..REPEATS {
-            let start = systick();
-            workload.run()?;
-            let end = systick();
+            let run = TimedRun::of(workload, |w| w.policy().network().marks().ticks())?;
+            stages.add(outer.input, elapsed(run.start, run.entry));
             let marks = workload.policy().network().marks().ticks();
-            let (Some(entry), Some(exit)) = (marks.first(), marks.last()) else {
-                return Err(PolicyError::OutputWidth);
-            };
-            stages.add(outer.input, elapsed(start, *entry));
             for (index, pair) in marks.windows(2).enumerate() {
                 if let [from, to] = pair {
                     stages.add(quantize + index, elapsed(*from, *to));
                 }
             }
-            stages.add(outer.output_stage, elapsed(*exit, end));
+            stages.add(outer.output_stage, elapsed(run.exit, run.end));
         }
         workload.digest_outputs(&mut digest);
         stages.split_standalone(

@@ -235,32 +235,28 @@ fn dimension_mismatches_are_named() {
     let expect = |dims: crate::policy::PolicyDims| load(bytes).unwrap().check_dims(&dims).err();
     assert_eq!(load(bytes).unwrap().dims(), DIMS);
     assert_eq!(load(bytes).unwrap().check_dims(&DIMS), Ok(()));
-    assert_eq!(
-        expect(crate::policy::PolicyDims { obs_dim: 4, ..DIMS }),
-        Some(BlobError::DimensionMismatch(Dimension::ObsDim))
-    );
-    assert_eq!(
-        expect(crate::policy::PolicyDims { history: 3, ..DIMS }),
-        Some(BlobError::DimensionMismatch(Dimension::History))
-    );
-    assert_eq!(
-        expect(crate::policy::PolicyDims {
-            action_dim: 3,
-            ..DIMS
-        }),
-        Some(BlobError::DimensionMismatch(Dimension::ActionDim))
-    );
-    assert_eq!(
-        expect(crate::policy::PolicyDims { horizon: 5, ..DIMS }),
-        Some(BlobError::DimensionMismatch(Dimension::Horizon))
-    );
-    assert_eq!(
-        expect(crate::policy::PolicyDims {
-            params_per_dof: 5,
-            ..DIMS
-        }),
-        Some(BlobError::DimensionMismatch(Dimension::ParamsPerDof))
-    );
+    use crate::policy::PolicyDims;
+    for (dims, dimension) in [
+        (PolicyDims { obs_dim: 4, ..DIMS }, Dimension::ObsDim),
+        (PolicyDims { history: 3, ..DIMS }, Dimension::History),
+        (
+            PolicyDims {
+                action_dim: 3,
+                ..DIMS
+            },
+            Dimension::ActionDim,
+        ),
+        (PolicyDims { horizon: 5, ..DIMS }, Dimension::Horizon),
+        (
+            PolicyDims {
+                params_per_dof: 5,
+                ..DIMS
+            },
+            Dimension::ParamsPerDof,
+        ),
+    ] {
+        assert_eq!(expect(dims), Some(BlobError::DimensionMismatch(dimension)));
+    }
     // Scratch or input buffer too small for the blob's network: named by the policy.
     let loaded = load(bytes).unwrap();
     assert_eq!(

@@ -2,7 +2,7 @@
 //! flattened, a blob section, or the exporter's owned tables) with run-time horizon `n` and
 //! parameters per DoF `p`, decoded with [`apply_row_f32`] (the rounding every decode shares).
 
-use super::dims::{fixed_row_pairs, fixed_rows};
+use super::dims::{all_finite, fixed_row_pairs, fixed_rows};
 use super::PolicyError;
 use crate::prodmp::{apply_row_f32, BakedProDmp, BoundaryRow, ProDmpError};
 
@@ -164,11 +164,7 @@ impl<'p> ProDmpTables<'p> {
             );
             self.decode_rows(pos_rows, vel_rows, thetas, y0, v0, outputs);
         }
-        let finite = positions
-            .iter()
-            .chain(velocities.iter())
-            .all(|v| v.is_finite());
-        if finite {
+        if all_finite(positions, velocities) {
             Ok(())
         } else {
             Err(ProDmpError::NonFiniteResult)

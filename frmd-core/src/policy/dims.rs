@@ -59,6 +59,15 @@ pub(crate) fn fixed_rows<const N: usize, const L: usize>(
     Some(table.iter().map(|row| &row[..]))
 }
 
+/// Whether every value of a chunk's positions and velocities is finite.
+#[inline(always)]
+pub(crate) fn all_finite(positions: &[f32], velocities: &[f32]) -> bool {
+    positions
+        .iter()
+        .chain(velocities.iter())
+        .all(|v| v.is_finite())
+}
+
 /// Rows of two buffers, side by side (see [`fixed_rows`]).
 pub(crate) fn fixed_row_pairs<'a, const N: usize, const L: usize>(
     a: &'a mut [f32],

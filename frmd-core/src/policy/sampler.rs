@@ -18,7 +18,7 @@
 use crate::rng::Rng;
 
 use super::decoder::ProDmpTables;
-use super::dims::{fixed_row_pairs, fixed_rows};
+use super::dims::{all_finite, fixed_row_pairs, fixed_rows};
 use super::layout::{InputLayout, InputSources};
 use super::network::Network;
 use super::steps::{StepConstants, StepTable};
@@ -326,11 +326,7 @@ impl Sampler<'_> {
                 self.combine(step, noisy.chunks_exact(k), conditioning, decoded, outputs);
             }
         }
-        let finite = positions
-            .iter()
-            .chain(velocities.iter())
-            .all(|v| v.is_finite());
-        if finite {
+        if all_finite(positions, velocities) {
             Ok(())
         } else {
             Err(PolicyError::NonFiniteOutput)

@@ -54,6 +54,18 @@ const BOUNDS: [(i16, i16); 5] = [
     (-32768, -32000),
 ];
 
+/// Asserts that [`requantize_s64`] equals the wide model on one case; returns whether the result
+/// is inside `(lo, hi)` (not clamped).
+fn matches_the_wide_model(acc: i64, multiplier: i32, shift: i32, lo: i16, hi: i16) -> bool {
+    let got = requantize_s64(acc, multiplier, shift, lo, hi);
+    let want = reference::requantize16(i128::from(acc), multiplier, shift, lo, hi);
+    assert_eq!(
+        got, want,
+        "acc {acc} m {multiplier:#x} shift {shift} [{lo}, {hi}]"
+    );
+    got != lo && got != hi
+}
+
 #[test]
 fn requantize_s64_edges_match_the_wide_model() {
     let accumulators = edge_accumulators();
@@ -62,13 +74,8 @@ fn requantize_s64_edges_match_the_wide_model() {
         for &multiplier in &MULTIPLIERS {
             for &acc in &accumulators {
                 for (lo, hi) in BOUNDS {
-                    let got = requantize_s64(acc, multiplier, shift, lo, hi);
-                    let want = reference::requantize16(i128::from(acc), multiplier, shift, lo, hi);
-                    assert_eq!(
-                        got, want,
-                        "acc {acc} m {multiplier:#x} shift {shift} [{lo}, {hi}]"
-                    );
-                    unclamped += usize::from(got != lo && got != hi);
+                    unclamped +=
+                        usize::from(matches_the_wide_model(acc, multiplier, shift, lo, hi));
                 }
             }
         }
@@ -155,10 +162,15 @@ fn random_accumulator(rng: &mut SplitMix64) -> i64 {
     }
 }
 
+/// A random shift of the int16 requantization's range.
+fn random_shift(rng: &mut SplitMix64) -> i32 {
+    let span = (SHIFT16_MAX - SHIFT16_MIN + 1) as u64;
+    SHIFT16_MIN + (rng.next_u64() % span) as i32
+}
+
 #[test]
 fn requantize_s64_one_million_random_inputs_match_the_wide_model() {
     let mut rng = SplitMix64::new(0x1616);
-    let span = (SHIFT16_MAX - SHIFT16_MIN + 1) as u64;
     let mut unclamped = 0_usize;
     for case in 0..1_000_000 {
         let acc = random_accumulator(&mut rng);
@@ -168,20 +180,14 @@ fn requantize_s64_one_million_random_inputs_match_the_wide_model() {
             2 => MULTIPLIERS[(rng.next_u64() % MULTIPLIERS.len() as u64) as usize],
             _ => rng.next_u64() as i32,
         };
-        let shift = SHIFT16_MIN + (rng.next_u64() % span) as i32;
+        let shift = random_shift(&mut rng);
         let (lo, hi) = if case % 3 == 0 {
             (i16::MIN, i16::MAX)
         } else {
             let (a, b) = (rng.next_u64() as i16, rng.next_u64() as i16);
             (a.min(b), a.max(b))
         };
-        let got = requantize_s64(acc, multiplier, shift, lo, hi);
-        let want = reference::requantize16(i128::from(acc), multiplier, shift, lo, hi);
-        assert_eq!(
-            got, want,
-            "acc {acc} m {multiplier:#x} shift {shift} [{lo}, {hi}]"
-        );
-        unclamped += usize::from(got != lo && got != hi);
+        unclamped += usize::from(matches_the_wide_model(acc, multiplier, shift, lo, hi));
     }
     assert!(unclamped > 300_000, "{unclamped} unclamped outputs");
 }
@@ -191,12 +197,11 @@ fn requantize_s64_one_million_random_inputs_match_the_wide_model() {
 #[test]
 fn requantize_s64_matches_cmsis_where_its_intermediate_fits() {
     let mut rng = SplitMix64::new(0xC515);
-    let span = (SHIFT16_MAX - SHIFT16_MIN + 1) as u64;
     let mut compared = 0_usize;
     for _ in 0..500_000 {
         let acc = random_accumulator(&mut rng);
         let multiplier = (1 << 30) + (rng.next_u64() % (1 << 30)) as i32;
-        let shift = SHIFT16_MIN + (rng.next_u64() % span) as i32;
+        let shift = random_shift(&mut rng);
         let m15 = i64::from(reduce_multiplier(multiplier));
         let wide = (acc * m15) >> (14 - shift);
         let Ok(truncated) = i32::try_from(wide) else {

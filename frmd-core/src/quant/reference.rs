@@ -2,6 +2,40 @@
 //! `quant::fixed_point` with i128 arithmetic and floor divisions (no masks, no nudges), so it
 //! shares no code path with the implementation.
 
+/// Edge multipliers of the requantization checks: zero, one, the ends of the normalized Q31
+/// mantissa range and a value inside it.
+pub const EDGE_MULTIPLIERS: [i32; 7] = [
+    0,
+    1,
+    super::Q31_MANTISSA_MIN,
+    super::Q31_MANTISSA_MIN + 1,
+    1_518_500_250,
+    i32::MAX - 1,
+    i32::MAX,
+];
+
+/// Output zero points at and next to the ends of the int8 range and around zero.
+pub const EDGE_ZERO_POINTS: [i32; 7] = [-128, -127, -1, 0, 1, 126, 127];
+
+/// Activation clamps: the full range, ReLU, single values at both ends, a narrow window.
+pub const EDGE_CLAMPS: [(i8, i8); 5] = [(-128, 127), (0, 127), (-128, -128), (127, 127), (-5, 6)];
+
+/// Number of [`edge_accumulators`].
+pub const EDGE_ACCUMULATORS: usize = 7 + 31 * 6;
+
+/// Interesting accumulators: the ends of the range, then the values around each power of two.
+pub fn edge_accumulators() -> [i32; EDGE_ACCUMULATORS] {
+    let mut values = [0; EDGE_ACCUMULATORS];
+    let ends = [i32::MIN, i32::MIN + 1, -1, 0, 1, i32::MAX - 1, i32::MAX];
+    let (head, powers) = values.split_at_mut(ends.len());
+    head.copy_from_slice(&ends);
+    for (e, slot) in powers.chunks_exact_mut(6).enumerate() {
+        let p = 1_i32 << e;
+        slot.copy_from_slice(&[p, p - 1, p + 1, -p, -p + 1, -p - 1]);
+    }
+    values
+}
+
 /// `floor((a * b + 2^30) / 2^31)` saturated to i32: round half up of `a * b / 2^31`.
 pub fn high_mul(a: i32, b: i32) -> i32 {
     let product = i128::from(a) * i128::from(b);

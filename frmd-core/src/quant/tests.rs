@@ -10,17 +10,7 @@ use std::vec::Vec;
 
 const Q31_MAX: i32 = i32::MAX;
 
-/// Interesting accumulators: the ends of the range and values around powers of two.
-fn edge_accumulators() -> Vec<i32> {
-    let mut values = std::vec![i32::MIN, i32::MIN + 1, -1, 0, 1, i32::MAX - 1, i32::MAX];
-    for e in 0..31 {
-        let p = 1_i32 << e;
-        for v in [p, p - 1, p + 1, -p, -p + 1, -p - 1] {
-            values.push(v);
-        }
-    }
-    values
-}
+use reference::{edge_accumulators, EDGE_CLAMPS, EDGE_MULTIPLIERS, EDGE_ZERO_POINTS};
 
 #[test]
 fn high_mul_matches_model_and_rounds_half_up() {
@@ -106,26 +96,9 @@ fn divide_by_pot_matches_model_and_rounds_half_away() {
 
 #[test]
 fn requantization_edges_match_model() {
-    let multipliers = [
-        0,
-        1,
-        Q31_MANTISSA_MIN,
-        Q31_MANTISSA_MIN + 1,
-        1_518_500_250,
-        Q31_MAX - 1,
-        Q31_MAX,
-    ];
-    let zero_points = [-128, -127, -1, 0, 1, 126, 127];
-    let clamps = [
-        (-128_i8, 127_i8),
-        (0, 127),
-        (-128, -128),
-        (127, 127),
-        (-5, 6),
-    ];
     let mut checked = 0_u64;
     for &acc in &edge_accumulators() {
-        for &m in &multipliers {
+        for &m in &EDGE_MULTIPLIERS {
             for shift in SHIFT_MIN..=SHIFT_MAX {
                 let want_scaled = reference::scale(acc, m, shift);
                 assert_eq!(
@@ -133,8 +106,8 @@ fn requantization_edges_match_model() {
                     want_scaled,
                     "acc={acc} m={m} shift={shift}"
                 );
-                for &zp in &zero_points {
-                    for &(lo, hi) in &clamps {
+                for &zp in &EDGE_ZERO_POINTS {
+                    for &(lo, hi) in &EDGE_CLAMPS {
                         let got = requantize_to_i8(acc, m, shift, zp, lo, hi);
                         let want = reference::requantize(acc, m, shift, zp, lo, hi);
                         assert_eq!(

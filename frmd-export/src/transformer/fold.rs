@@ -16,8 +16,8 @@ use anyhow::{bail, Context};
 use frmd_core::kernels::Activation;
 use frmd_core::model::linear::F32Linear;
 use frmd_core::model::transformer::{
-    fold_noise_token, F32Block, F32FeedForward, F32Transformer, LayerNormWeights, TransformerProbe,
-    TransformerShape,
+    fold_noise_token, F32Block, F32FeedForward, F32Transformer, LayerNormWeights, TransformerError,
+    TransformerProbe, TransformerShape,
 };
 use frmd_core::policy::{PolicyConfig, RangeNormalizer, Sampler, StepTable};
 use frmd_formats::checkpoint::{BackboneConfig, Checkpoint, Normalization};
@@ -284,21 +284,12 @@ impl FoldedTransformer {
     ) -> anyhow::Result<Vec<f32>> {
         let blocks = self.f32_blocks();
         let model = self.view(&blocks, step)?;
-        let (condition, trajectory) =
-            input
-                .split_at_checked(self.shape.cond_dim)
-                .with_context(|| {
-                    format!(
-                        "model input of {} values is shorter than the condition",
-                        input.len()
-                    )
-                })?;
-        let mut scratch = Box::new(HostScratch::new());
-        let mut out = vec![0.0; self.shape.output];
-        model
-            .forward_observed(trajectory, condition, &mut out, &mut scratch, observe)
-            .context("f32 transformer forward")?;
-        Ok(out)
+        run_on_input(
+            &model.shape,
+            input,
+            "f32 transformer forward",
+            |t, c, out, scratch| model.forward_observed(t, c, out, scratch, observe),
+        )
     }
 
     /// The f32 consistency sampler ([`StudentBase::sample`]), calling
@@ -313,4 +304,25 @@ impl FoldedTransformer {
             self.forward_observed(i, input, |p, v| observe(i, p, v))
         })
     }
+}
+
+/// Runs one pass of a transformer of `shape` on the standard-layout model `input` (the
+/// condition, then the trajectory) with a host scratch: `forward(trajectory, condition, output,
+/// scratch)` fills the returned `shape.output` values; `what` names the pass in its error.
+pub(super) fn run_on_input(
+    shape: &TransformerShape,
+    input: &[f32],
+    what: &str,
+    forward: impl FnOnce(&[f32], &[f32], &mut [f32], &mut HostScratch) -> Result<(), TransformerError>,
+) -> anyhow::Result<Vec<f32>> {
+    let (condition, trajectory) = input.split_at_checked(shape.cond_dim).with_context(|| {
+        format!(
+            "model input of {} values is shorter than the condition",
+            input.len()
+        )
+    })?;
+    let mut scratch = Box::new(HostScratch::new());
+    let mut out = vec![0.0; shape.output];
+    forward(trajectory, condition, &mut out, &mut scratch).with_context(|| what.to_string())?;
+    Ok(out)
 }

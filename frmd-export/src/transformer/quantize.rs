@@ -10,10 +10,9 @@
 //! range, GELU is a 256-entry table from the `Fc1` to the `Gelu` parameters; the residual stream,
 //! LayerNorms, attention and noise tokens stay f32.
 
-use super::fold::{FloatNorm, FoldedTransformer};
+use super::fold::{run_on_input, FloatNorm, FoldedTransformer};
 use crate::calibrate::{check_rows, int_bias, quantize_weights, RangeMethod, Recorder};
 use crate::fold::FloatLayer;
-use crate::host::HostScratch;
 use anyhow::Context;
 use frmd_core::blob::{
     encode_transformer, transformer_encoded_len, BlobError, TransformerBlobParts,
@@ -311,21 +310,12 @@ impl QuantizedTransformer {
     pub fn forward(&self, step: usize, input: &[f32]) -> anyhow::Result<Vec<f32>> {
         let blocks = self.int8_blocks();
         let model = self.view(&blocks, step)?;
-        let (condition, trajectory) =
-            input
-                .split_at_checked(model.shape.cond_dim)
-                .with_context(|| {
-                    format!(
-                        "model input of {} values is shorter than the condition",
-                        input.len()
-                    )
-                })?;
-        let mut scratch = Box::new(HostScratch::new());
-        let mut out = vec![0.0; model.shape.output];
-        model
-            .forward(trajectory, condition, &mut out, &mut scratch)
-            .context("int8 transformer forward")?;
-        Ok(out)
+        run_on_input(
+            &model.shape,
+            input,
+            "int8 transformer forward",
+            |t, c, out, scratch| model.forward(t, c, out, scratch),
+        )
     }
 
     /// The int8 consistency sampler (same steps and decode as [`FoldedTransformer::sample`]).

@@ -9,7 +9,7 @@ use frmd_core::policy::{F32TransformerNetwork, Int8TransformerNetwork, Network};
 use frmd_core::rng::Rng;
 use frmd_formats::calibration::CalibrationSet;
 use frmd_formats::checkpoint::{
-    BackboneConfig, Checkpoint, HeadConfig, ModelConfig, Normalization, ProDmpOutput, Role,
+    BackboneConfig, Checkpoint, HeadConfig, ModelConfig, Normalization, Role,
 };
 use frmd_test_support::checkpoint::{scratch_dir, unit_normalization, Init};
 use std::path::PathBuf;
@@ -23,11 +23,7 @@ fn lite_config() -> ModelConfig {
         control_dt: 0.05,
         embed_dim: 16,
         backbone: BackboneConfig::parse("transformer-lite").unwrap(),
-        head: HeadConfig::ProDmp {
-            num_basis: 4,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        },
+        head: HeadConfig::prodmp(4),
     }
 }
 
@@ -51,25 +47,65 @@ fn calibration_set(config: &ModelConfig, rows: usize, seed: u64) -> CalibrationS
     frmd_test_support::checkpoint::calibration_rows(config, rows, seed, seed)
 }
 
-/// Max and mean absolute int8-vs-f32 chunk error (normalized action units) over the rows of
-/// `set`, and the spread of the f32 chunks.
-fn chunk_error(quantized: &QuantizedTransformer, set: &CalibrationSet) -> (f32, f32, f32) {
+/// Absolute int8-vs-f32 chunk errors and the spread of the f32 chunks.
+struct ChunkError {
+    max: f32,
+    sum: f64,
+    count: usize,
+    lo: f32,
+    hi: f32,
+}
+
+impl ChunkError {
+    fn new() -> Self {
+        ChunkError {
+            max: 0.0,
+            sum: 0.0,
+            count: 0,
+            lo: f32::MAX,
+            hi: f32::MIN,
+        }
+    }
+
+    fn add(&mut self, got: f32, want: f32) {
+        self.max = self.max.max((got - want).abs());
+        self.sum += f64::from((got - want).abs());
+        self.count += 1;
+        self.lo = self.lo.min(want);
+        self.hi = self.hi.max(want);
+    }
+
+    /// Prints the errors of `what` (in `units`) and asserts the int8 chunks track the f32 ones:
+    /// max error within 2.5 % and mean error within 0.75 % of the f32 spread.
+    fn assert_tracks(&self, what: &str, units: &str) {
+        let (max, spread) = (self.max, self.hi - self.lo);
+        let mean = (self.sum / self.count as f64) as f32;
+        println!("{what}: int8 vs f32 chunk max {max:.5}, mean {mean:.5}, f32 spread {spread:.3} ({units})");
+        assert!(spread > 0.1, "f32 chunks are degenerate (spread {spread})");
+        assert!(
+            max <= 0.025 * spread,
+            "max error {max} exceeds 2.5% of the f32 spread {spread}"
+        );
+        assert!(
+            mean <= 0.0075 * spread,
+            "mean error {mean} exceeds 0.75% of the f32 spread {spread}"
+        );
+    }
+}
+
+/// The int8-vs-f32 chunk errors (normalized action units) over the rows of `set`.
+fn chunk_error(quantized: &QuantizedTransformer, set: &CalibrationSet) -> ChunkError {
     let f = &quantized.folded;
-    let (mut max, mut sum, mut count) = (0.0f32, 0.0f64, 0usize);
-    let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+    let mut error = ChunkError::new();
     for row in 0..set.rows() {
         let noise = set.noise(row, f.base.steps.len(), f.base.config.traj_dim());
         let want = f.sample(set.row(row), &noise, |_, _, _| {}).unwrap();
         let got = quantized.sample(set.row(row), &noise).unwrap();
         for (g, w) in got.iter().zip(&want) {
-            max = max.max((g - w).abs());
-            sum += f64::from((g - w).abs());
-            count += 1;
-            lo = lo.min(*w);
-            hi = hi.max(*w);
+            error.add(*g, *w);
         }
     }
-    (max, (sum / count as f64) as f32, hi - lo)
+    error
 }
 
 #[test]
@@ -86,16 +122,9 @@ fn transformer_lite_checkpoint_exports_and_int8_chunk_tracks_f32() {
         assert_eq!(ranges.rows, 32);
         let quantized = quantize(&folded, &ranges).unwrap();
         let held_out = calibration_set(&config, 16, 99);
-        let (max, mean, spread) = chunk_error(&quantized, &held_out);
-        println!("transformer-lite, {steps} step(s): int8 vs f32 chunk max {max:.5}, mean {mean:.5}, f32 spread {spread:.3} (normalized units)");
-        assert!(spread > 0.1, "f32 chunks are degenerate (spread {spread})");
-        assert!(
-            max <= 0.025 * spread,
-            "max error {max} exceeds 2.5% of the f32 spread {spread}"
-        );
-        assert!(
-            mean <= 0.0075 * spread,
-            "mean error {mean} exceeds 0.75% of the f32 spread {spread}"
+        chunk_error(&quantized, &held_out).assert_tracks(
+            &format!("transformer-lite, {steps} step(s)"),
+            "normalized units",
         );
     }
     std::fs::remove_dir_all(&dir).unwrap();
@@ -119,20 +148,13 @@ fn adapters_run_the_exported_model_behind_the_network_trait() {
     let int8_blocks = quantized.int8_blocks();
     let mut f32_scratch = Box::new(HostScratch::new());
     let mut int8_scratch = Box::new(HostScratch::new());
-    let mut f32_net = F32TransformerNetwork::new(
-        folded.view(&f32_blocks, 0).unwrap(),
-        &folded.base.layout,
-        &tokens,
-        &mut *f32_scratch,
-    )
-    .unwrap();
-    let mut int8_net = Int8TransformerNetwork::new(
-        quantized.view(&int8_blocks, 0).unwrap(),
-        &folded.base.layout,
-        &tokens,
-        &mut *int8_scratch,
-    )
-    .unwrap();
+    let layout = &folded.base.layout;
+    let f32_model = folded.view(&f32_blocks, 0).unwrap();
+    let mut f32_net =
+        F32TransformerNetwork::new(f32_model, layout, &tokens, &mut *f32_scratch).unwrap();
+    let int8_model = quantized.view(&int8_blocks, 0).unwrap();
+    let mut int8_net =
+        Int8TransformerNetwork::new(int8_model, layout, &tokens, &mut *int8_scratch).unwrap();
     assert_eq!(f32_net.num_noise_variants(), 2);
     assert_eq!(
         int8_net.input_width(),
@@ -348,7 +370,7 @@ fn core_policy_int8_blob_chunk_tracks_f32_policy_chunk() {
     .unwrap();
     let mut float = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), f32_net).unwrap();
     let mut rng = Rng::new(17);
-    let (mut max, mut sum, mut count, mut lo, mut hi) = (0f32, 0f64, 0usize, f32::MAX, f32::MIN);
+    let mut error = ChunkError::new();
     for episode in 0..8 {
         let start: [f32; 3] = std::array::from_fn(|_| 0.5 * rng.gaussian());
         int8.reset(&start).unwrap();
@@ -363,24 +385,10 @@ fn core_policy_int8_blob_chunk_tracks_f32_policy_chunk() {
         let want = float.act(Noise::Given(&noise)).unwrap().positions;
         for (g, w) in got.iter().flatten().zip(want.iter().flatten()) {
             assert!(g.is_finite(), "episode {episode}");
-            max = max.max((g - w).abs());
-            sum += f64::from((g - w).abs());
-            count += 1;
-            lo = lo.min(*w);
-            hi = hi.max(*w);
+            error.add(*g, *w);
         }
     }
-    let (mean, spread) = ((sum / count as f64) as f32, hi - lo);
-    println!("core Policy, blob int8 vs f32 transformer-lite chunk (robot units): max {max:.5}, mean {mean:.5}, f32 spread {spread:.3}");
-    assert!(spread > 0.1, "f32 chunks are degenerate (spread {spread})");
-    assert!(
-        max <= 0.025 * spread,
-        "max error {max} exceeds 2.5% of the f32 spread {spread}"
-    );
-    assert!(
-        mean <= 0.0075 * spread,
-        "mean error {mean} exceeds 0.75% of the f32 spread {spread}"
-    );
+    error.assert_tracks("core Policy, blob, transformer-lite", "robot units");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -7,7 +7,7 @@
 use crate::checkpoint::{self, CheckpointMeta, Role, CALIBRATION_FILE};
 use crate::data::{Normalization, Normalizer};
 use crate::diffusion::samplers::Solver;
-use crate::models::{BackboneConfig, HeadConfig, ModelConfig, OwnedNetwork, ProDmpOutput};
+use crate::models::{BackboneConfig, HeadConfig, ModelConfig, OwnedNetwork};
 use crate::policy::float::{FloatPolicy, Sampler};
 use crate::policy::int8::Int8Policy;
 use crate::train::recipe::TrainConfig;
@@ -32,11 +32,7 @@ fn task_sized_model(
     let recipe = TrainConfig::default();
     let head = match role {
         Role::Dp => HeadConfig::Raw,
-        Role::Teacher | Role::Student => HeadConfig::ProDmp {
-            num_basis: recipe.num_basis,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        },
+        Role::Teacher | Role::Student => HeadConfig::prodmp(recipe.num_basis),
     };
     ModelConfig {
         obs_dim,

@@ -1,6 +1,6 @@
 use super::*;
-use crate::data::toy::toy_config;
-use crate::models::{HeadConfig, OwnedNetwork, ProDmpOutput};
+use crate::data::toy::{toy_config, toy_prodmp_config};
+use crate::models::{HeadConfig, OwnedNetwork};
 use frmd_core::sigma::SigmaConfig;
 
 fn temp_dir(tag: &str) -> std::path::PathBuf {
@@ -10,11 +10,7 @@ fn temp_dir(tag: &str) -> std::path::PathBuf {
 }
 
 fn saved(tag: &str) -> (std::path::PathBuf, CheckpointMeta, OwnedNetwork) {
-    let cfg = toy_config(HeadConfig::ProDmp {
-        num_basis: 4,
-        output: ProDmpOutput::Direct,
-        auto_scale_basis: false,
-    });
+    let cfg = toy_prodmp_config();
     let net = OwnedNetwork::new_seeded(&cfg, 21, &Device::Cpu).unwrap();
     let meta = CheckpointMeta::describe(Role::Student, net.net.config(), SigmaConfig::default());
     let dir = temp_dir(tag);
@@ -32,22 +28,11 @@ fn round_trip_is_bit_identical() {
         .zip(sorted_vars(&net2.varmap).iter())
     {
         assert_eq!(n1, n2);
-        let a: Vec<u32> = v1
-            .flatten_all()
-            .unwrap()
-            .to_vec1::<f32>()
-            .unwrap()
-            .iter()
-            .map(|v| v.to_bits())
-            .collect();
-        let b: Vec<u32> = v2
-            .flatten_all()
-            .unwrap()
-            .to_vec1::<f32>()
-            .unwrap()
-            .iter()
-            .map(|v| v.to_bits())
-            .collect();
+        let bits = |v: &candle_core::Var| -> Vec<u32> {
+            let values = v.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+            values.iter().map(|v| v.to_bits()).collect()
+        };
+        let (a, b) = (bits(v1), bits(v2));
         assert_eq!(a, b, "{n1}");
     }
     let dir2 = temp_dir("roundtrip2");
@@ -159,11 +144,7 @@ fn corrupted_or_mismatched_checkpoints_are_rejected_with_a_reason() {
 fn expected_tensors_match_the_candle_models() {
     use crate::models::{BackboneConfig, ModelConfig};
     for backbone in ["mlp:16,8:silu", "mlp:12", "transformer-lite"] {
-        let mut cfg: ModelConfig = toy_config(HeadConfig::ProDmp {
-            num_basis: 3,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        });
+        let mut cfg: ModelConfig = toy_config(HeadConfig::prodmp(3));
         cfg.backbone = BackboneConfig::parse(backbone).unwrap();
         if backbone.starts_with("transformer") {
             cfg.backbone = BackboneConfig::Transformer {

@@ -105,6 +105,28 @@ fn metadata<'m>(meta: &'m Option<HashMap<String, String>>, key: &str) -> anyhow:
 }
 
 impl Dataset {
+    /// Hand-made demonstrations of the `toy` task for unit tests: `obs` and `action` row-major,
+    /// control period 0.1 s.
+    #[cfg(test)]
+    pub(crate) fn handmade(
+        obs: Vec<f32>,
+        action: Vec<f32>,
+        episode_ends: Vec<i64>,
+        (obs_dim, action_dim): (usize, usize),
+    ) -> Dataset {
+        Dataset {
+            obs,
+            action,
+            episode_ends,
+            obs_dim,
+            action_dim,
+            task: "toy".into(),
+            dt: 0.1,
+            source: "test".into(),
+            action_before_start: Default::default(),
+        }
+    }
+
     /// Number of steps T.
     pub fn len(&self) -> usize {
         self.action.len().checked_div(self.action_dim).unwrap_or(0)

@@ -27,8 +27,11 @@ fn small() -> Dataset {
     }
 }
 
+/// One tensor of a file: name, dtype, shape, little-endian bytes.
+type RawTensor = (&'static str, Dtype, Vec<usize>, Vec<u8>);
+
 /// Serializes tensors without any validation, to build corrupt files.
-fn raw(tensors: Vec<(&str, Dtype, Vec<usize>, Vec<u8>)>, meta: &[(&str, &str)]) -> Vec<u8> {
+fn raw(tensors: Vec<RawTensor>, meta: &[(&str, &str)]) -> Vec<u8> {
     let views: Vec<(&str, TensorView<'_>)> = tensors
         .iter()
         .map(|(n, d, s, b)| (*n, TensorView::new(*d, s.clone(), b).unwrap()))
@@ -46,6 +49,33 @@ fn f32s(v: &[f32]) -> Vec<u8> {
 
 fn i64s(v: &[i64]) -> Vec<u8> {
     v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// The tensors of [`small`].
+fn small_tensors() -> Vec<RawTensor> {
+    vec![
+        (
+            "obs",
+            Dtype::F32,
+            vec![5, 1],
+            f32s(&[0.0, 1.0, 2.0, 3.0, 4.0]),
+        ),
+        (
+            "action",
+            Dtype::F32,
+            vec![5, 1],
+            f32s(&[10.0, 20.0, 30.0, 40.0, 50.0]),
+        ),
+        ("episode_ends", Dtype::I64, vec![2], i64s(&[3, 5])),
+    ]
+}
+
+/// [`small_tensors`] with `tensor` in place of the one of its name.
+fn with(tensor: RawTensor) -> Vec<RawTensor> {
+    small_tensors()
+        .into_iter()
+        .map(|t| if t.0 == tensor.0 { tensor.clone() } else { t })
+        .collect()
 }
 
 const META: &[(&str, &str)] = &[("task", "handmade"), ("dt", "0.5"), ("source", "test")];
@@ -83,138 +113,86 @@ fn reader_rejects_corrupt_files_with_the_reason() {
     assert!(message.contains("truncated"), "{message}");
     let message = error_of(&good[..5]);
     assert!(message.contains("truncated"), "{message}");
-    // Wrong dtype.
-    let ends = i64s(&[3, 5]);
+    // Each case: `small`'s tensors with one replaced or dropped, or its metadata changed.
     let obs64: Vec<u8> = [0.0f64, 1.0, 2.0, 3.0, 4.0]
         .iter()
         .flat_map(|x| x.to_le_bytes())
         .collect();
-    let actions = f32s(&[10.0, 20.0, 30.0, 40.0, 50.0]);
-    let bytes = raw(
-        vec![
-            ("obs", Dtype::F64, vec![5, 1], obs64),
-            ("action", Dtype::F32, vec![5, 1], actions.clone()),
-            ("episode_ends", Dtype::I64, vec![2], ends.clone()),
-        ],
-        META,
-    );
-    let message = error_of(&bytes);
-    assert!(
-        message.contains("`obs` has dtype F64, expected F32"),
-        "{message}"
-    );
     let ends32: Vec<u8> = [3i32, 5].iter().flat_map(|x| x.to_le_bytes()).collect();
-    let obs = f32s(&[0.0, 1.0, 2.0, 3.0, 4.0]);
-    let bytes = raw(
-        vec![
-            ("obs", Dtype::F32, vec![5, 1], obs.clone()),
-            ("action", Dtype::F32, vec![5, 1], actions.clone()),
-            ("episode_ends", Dtype::I32, vec![2], ends32),
-        ],
-        META,
+    let nan_obs = f32s(&[0.0, 1.0, 2.0, f32::NAN, 4.0]);
+    let (short_obs, last) = (
+        f32s(&[0.0, 1.0, 2.0, 3.0]),
+        [META, &[("action_before_start", "last")]].concat(),
     );
-    let message = error_of(&bytes);
-    assert!(
-        message.contains("`episode_ends` has dtype I32, expected I64"),
-        "{message}"
+    let cases: [(Vec<RawTensor>, &[(&str, &str)], &[&str]); 11] = [
+        // Wrong dtype.
+        (
+            with(("obs", Dtype::F64, vec![5, 1], obs64)),
+            META,
+            &["`obs` has dtype F64, expected F32"],
+        ),
+        (
+            with(("episode_ends", Dtype::I32, vec![2], ends32)),
+            META,
+            &["`episode_ends` has dtype I32, expected I64"],
+        ),
+        // Decreasing episode ends; episode ends not covering the data.
+        (
+            with(("episode_ends", Dtype::I64, vec![3], i64s(&[3, 2, 5]))),
+            META,
+            &["not strictly increasing: entry 1 is 2 after 3"],
+        ),
+        (
+            with(("episode_ends", Dtype::I64, vec![2], i64s(&[3, 4]))),
+            META,
+            &["last episode end is 4 but the dataset has 5 steps"],
+        ),
+        // NaN.
+        (
+            with(("obs", Dtype::F32, vec![5, 1], nan_obs)),
+            META,
+            &["`obs` has a non-finite value NaN at row 3, column 0"],
+        ),
+        // Row mismatch, missing tensor, missing or bad metadata.
+        (
+            with(("obs", Dtype::F32, vec![4, 1], short_obs)),
+            META,
+            &["obs has 4 rows but action has 5 rows"],
+        ),
+        (
+            small_tensors()
+                .into_iter()
+                .filter(|t| t.0 != "action")
+                .collect(),
+            META,
+            &["missing tensor `action`"],
+        ),
+        (
+            small_tensors(),
+            &[("task", "t"), ("source", "s")],
+            &["missing metadata `dt`"],
+        ),
+        (small_tensors(), &last, &["action_before_start", "\"zero\""]),
+        (
+            small_tensors(),
+            &[("task", "t"), ("dt", "fast"), ("source", "s")],
+            &["metadata `dt` is \"fast\""],
+        ),
+        (
+            small_tensors(),
+            &[("task", "t"), ("dt", "-0.1"), ("source", "s")],
+            &["dt is -0.1"],
+        ),
+    ];
+    // The unchanged tensors and metadata are `small` itself.
+    assert_eq!(
+        Dataset::from_bytes(&raw(small_tensors(), META)).unwrap(),
+        small()
     );
-    // Decreasing episode ends.
-    let bytes = raw(
-        vec![
-            ("obs", Dtype::F32, vec![5, 1], obs.clone()),
-            ("action", Dtype::F32, vec![5, 1], actions.clone()),
-            ("episode_ends", Dtype::I64, vec![3], i64s(&[3, 2, 5])),
-        ],
-        META,
-    );
-    let message = error_of(&bytes);
-    assert!(
-        message.contains("not strictly increasing: entry 1 is 2 after 3"),
-        "{message}"
-    );
-    // Episode ends not covering the data.
-    let bytes = raw(
-        vec![
-            ("obs", Dtype::F32, vec![5, 1], obs.clone()),
-            ("action", Dtype::F32, vec![5, 1], actions.clone()),
-            ("episode_ends", Dtype::I64, vec![2], i64s(&[3, 4])),
-        ],
-        META,
-    );
-    let message = error_of(&bytes);
-    assert!(
-        message.contains("last episode end is 4 but the dataset has 5 steps"),
-        "{message}"
-    );
-    // NaN.
-    let bytes = raw(
-        vec![
-            (
-                "obs",
-                Dtype::F32,
-                vec![5, 1],
-                f32s(&[0.0, 1.0, 2.0, f32::NAN, 4.0]),
-            ),
-            ("action", Dtype::F32, vec![5, 1], actions.clone()),
-            ("episode_ends", Dtype::I64, vec![2], ends.clone()),
-        ],
-        META,
-    );
-    let message = error_of(&bytes);
-    assert!(
-        message.contains("`obs` has a non-finite value NaN at row 3, column 0"),
-        "{message}"
-    );
-    // Row mismatch, missing tensor, missing or bad metadata.
-    let bytes = raw(
-        vec![
-            ("obs", Dtype::F32, vec![4, 1], f32s(&[0.0, 1.0, 2.0, 3.0])),
-            ("action", Dtype::F32, vec![5, 1], actions.clone()),
-            ("episode_ends", Dtype::I64, vec![2], ends.clone()),
-        ],
-        META,
-    );
-    let message = error_of(&bytes);
-    assert!(
-        message.contains("obs has 4 rows but action has 5 rows"),
-        "{message}"
-    );
-    let bytes = raw(
-        vec![
-            ("obs", Dtype::F32, vec![5, 1], obs.clone()),
-            ("episode_ends", Dtype::I64, vec![2], ends.clone()),
-        ],
-        META,
-    );
-    let message = error_of(&bytes);
-    assert!(message.contains("missing tensor `action`"), "{message}");
-    let full = || {
-        vec![
-            ("obs", Dtype::F32, vec![5, 1], obs.clone()),
-            ("action", Dtype::F32, vec![5, 1], actions.clone()),
-            ("episode_ends", Dtype::I64, vec![2], ends.clone()),
-        ]
-    };
-    let message = error_of(&raw(full(), &[("task", "t"), ("source", "s")]));
-    assert!(message.contains("missing metadata `dt`"), "{message}");
-    let message = error_of(&raw(
-        full(),
-        &[META, &[("action_before_start", "last")]].concat(),
-    ));
-    assert!(
-        message.contains("action_before_start") && message.contains("\"zero\""),
-        "{message}"
-    );
-    let message = error_of(&raw(
-        full(),
-        &[("task", "t"), ("dt", "fast"), ("source", "s")],
-    ));
-    assert!(message.contains("metadata `dt` is \"fast\""), "{message}");
-    let message = error_of(&raw(
-        full(),
-        &[("task", "t"), ("dt", "-0.1"), ("source", "s")],
-    ));
-    assert!(message.contains("dt is -0.1"), "{message}");
+    for (tensors, meta, needles) in cases {
+        let message = error_of(&raw(tensors, meta));
+        assert!(needles.iter().all(|n| message.contains(n)), "{message}");
+    }
     // Loading a missing file names it.
     let message = format!("{:#}", Dataset::load(&temp_path("missing")).unwrap_err());
     assert!(

@@ -1,7 +1,7 @@
 //! A toy 1-D bimodal data set for tests and experiments: one DoF, a constant observation, y0 =
 //! v0 = 0, and every trajectory is the ProDMP decode of goal +0.5 or -0.5 (zero weights), each
 //! with probability 1/2 — so the data distribution has exactly two modes.
-use super::windows::WindowSet;
+use super::windows::{Normalization, Normalizer, WindowSet};
 use crate::models::decoder::DecoderRows;
 use crate::models::{Activation, BackboneConfig, HeadConfig, ModelConfig};
 use crate::rng::HostRng;
@@ -24,6 +24,12 @@ pub fn toy_config(head: HeadConfig) -> ModelConfig {
         },
         head,
     }
+}
+
+/// [`toy_config`] with the ProDMP head the toy runs use: 4 basis functions, direct output, the
+/// basis unscaled.
+pub fn toy_prodmp_config() -> ModelConfig {
+    toy_config(HeadConfig::prodmp(4))
 }
 
 /// `count` windows, modes drawn from `seed`. Works for any head (the trajectories come from the
@@ -65,6 +71,31 @@ pub fn positive_fraction(traj: &[f32], horizon: usize) -> f64 {
         .filter(|row| row.last().copied().unwrap_or(0.0) > 0.0)
         .count();
     positive as f64 / rows.max(1) as f64
+}
+
+/// A normalization of the toy sizes' raw units: observation in [-2, 2], action in [10, 20].
+pub fn toy_normalization() -> Normalization {
+    Normalization {
+        obs: Normalizer {
+            min: vec![-2.0],
+            max: vec![2.0],
+        },
+        action: Normalizer {
+            min: vec![10.0],
+            max: vec![20.0],
+        },
+    }
+}
+
+/// Mean distance of the last step of each trajectory (rows of `traj`, [B, n]) to the nearest
+/// mode's last step, which is the magnitude of the last action of `windows`' first window.
+pub fn last_step_error(traj: &[f32], windows: &WindowSet) -> f64 {
+    let goal_end = windows.actions[windows.horizon - 1].abs() as f64;
+    let rows = traj.len() / windows.horizon.max(1);
+    traj.chunks_exact(windows.horizon)
+        .map(|r| ((*r.last().unwrap() as f64).abs() - goal_end).abs())
+        .sum::<f64>()
+        / rows as f64
 }
 
 /// The condition of `batch` toy samples: zero observation, y0 and v0.

@@ -175,8 +175,25 @@ pub enum DpSampler {
     Ddim,
 }
 
+/// The forward process at `abar`: `x_t = sqrt(abar) x0 + sqrt(1 - abar) eps`.
+pub fn noised(x0: &Tensor, eps: &Tensor, abar: f64) -> candle_core::Result<Tensor> {
+    (x0 * abar.sqrt())? + (eps * (1.0 - abar).sqrt())?
+}
+
+/// The clean trajectory that `x_t` and the noise `eps` imply at `abar` (not clipped).
+pub fn implied_clean(x: &Tensor, eps: &Tensor, abar: f64) -> candle_core::Result<Tensor> {
+    (x - (eps * (1.0 - abar).sqrt())?)? / abar.sqrt()
+}
+
+/// One deterministic DDIM step of `x` from `abar` to `abar_prev` towards the clean estimate
+/// `x0`; the direction is recomputed from `x0` (as diffusers does after clipping it).
+pub fn ddim_step(x: &Tensor, x0: Tensor, abar: f64, abar_prev: f64) -> candle_core::Result<Tensor> {
+    let eps = ((x - (&x0 * abar.sqrt())?)? / (1.0 - abar).sqrt())?;
+    (x0 * abar_prev.sqrt())? + (eps * (1.0 - abar_prev).sqrt())?
+}
+
 fn clean_estimate(x: &Tensor, eps: &Tensor, abar: f64) -> anyhow::Result<Tensor> {
-    Ok(((x - (eps * (1.0 - abar).sqrt())?)? / abar.sqrt())?.clamp(-1f32, 1f32)?)
+    Ok(implied_clean(x, eps, abar)?.clamp(-1f32, 1f32)?)
 }
 
 /// Samples the DP baseline from standard-normal `x` [B, n k]. DDPM uses all T steps (`steps`
@@ -230,9 +247,7 @@ pub fn sample_dp(
                     1.0
                 };
                 let x0 = clean_estimate(&x, &eps, abar)?;
-                // Direction recomputed from the clipped x0 (as diffusers does after clipping).
-                let eps = ((&x - (&x0 * abar.sqrt())?)? / (1.0 - abar).sqrt())?;
-                x = ((x0 * abar_prev.sqrt())? + (eps * (1.0 - abar_prev).sqrt())?)?;
+                x = ddim_step(&x, x0, abar, abar_prev)?;
             }
         }
     }
@@ -264,55 +279,34 @@ mod tests {
     /// is 1 - (1 - abar) / s2 at every timestep, while the direct form with F = 0 predicts 0
     /// (error 1). Checks the coefficients and that the skip term is wired to x_t.
     #[test]
-    fn preconditioned_skip_is_the_gaussian_posterior_noise() {
+    fn preconditioned_skip_is_the_gaussian_posterior_noise() -> anyhow::Result<()> {
         let net = zero_network();
         let sched =
             DdpmSchedule::cosine(100).with_parametrization(EpsParametrization::Preconditioned);
+        let direct_sched = sched
+            .clone()
+            .with_parametrization(EpsParametrization::Direct);
         let sigma_data = SigmaConfig::default().sigma_data;
         let (batch, dim) = (4000, 4);
         let mut rng = HostRng::new(3);
         for t in [0usize, 10, 50, 90, 99] {
             let abar = sched.alpha_bars[t];
-            let x0 = (gaussian(&mut rng, batch, dim, &Device::Cpu).unwrap() * sigma_data).unwrap();
-            let eps = gaussian(&mut rng, batch, dim, &Device::Cpu).unwrap();
-            let x = ((&x0 * abar.sqrt()).unwrap() + (&eps * (1.0 - abar).sqrt()).unwrap()).unwrap();
-            let predicted =
-                predict_noise(&net.net, &sched, &x, &toy_cond(batch), &vec![t; batch]).unwrap();
-            let mse = (&predicted - &eps)
-                .unwrap()
-                .sqr()
-                .unwrap()
-                .mean_all()
-                .unwrap()
-                .to_scalar::<f32>()
-                .unwrap() as f64;
+            let x0 = (gaussian(&mut rng, batch, dim, &Device::Cpu)? * sigma_data)?;
+            let eps = gaussian(&mut rng, batch, dim, &Device::Cpu)?;
+            let x = noised(&x0, &eps, abar)?;
+            let timesteps = vec![t; batch];
+            let predicted = predict_noise(&net.net, &sched, &x, &toy_cond(batch), &timesteps)?;
+            let mse = (&predicted - &eps)?.sqr()?.mean_all()?.to_scalar::<f32>()? as f64;
             let s2 = (1.0 - abar) + abar * sigma_data * sigma_data;
             let expected = 1.0 - (1.0 - abar) / s2;
             assert!(
                 (mse - expected).abs() < 0.03 + 0.05 * expected,
                 "t {t}: mse {mse} vs {expected}"
             );
-            let direct = predict_noise(
-                &net.net,
-                &sched
-                    .clone()
-                    .with_parametrization(EpsParametrization::Direct),
-                &x,
-                &toy_cond(batch),
-                &vec![t; batch],
-            )
-            .unwrap();
-            assert_eq!(
-                direct
-                    .abs()
-                    .unwrap()
-                    .max_all()
-                    .unwrap()
-                    .to_scalar::<f32>()
-                    .unwrap(),
-                0.0
-            );
+            let direct = predict_noise(&net.net, &direct_sched, &x, &toy_cond(batch), &timesteps)?;
+            assert_eq!(direct.abs()?.max_all()?.to_scalar::<f32>()?, 0.0);
         }
+        Ok(())
     }
 
     #[test]

@@ -39,6 +39,11 @@ pub struct SigmaSampling {
 }
 
 impl SigmaSampling {
+    /// The log-normal levels alone (no log-uniform draws).
+    pub const LOG_NORMAL: SigmaSampling = SigmaSampling {
+        uniform_fraction: 0.0,
+    };
+
     pub fn draw(&self, sig: &SigmaConfig, rng: &mut HostRng) -> f64 {
         if self.uniform_fraction > 0.0 && rng.uniform() < self.uniform_fraction {
             let (lo, hi) = (sig.sigma_min.ln(), sig.sigma_max.ln());

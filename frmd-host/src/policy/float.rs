@@ -320,65 +320,35 @@ pub fn boxed(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::toy::toy_config;
-    use crate::data::Normalizer;
-    use crate::models::{HeadConfig, ProDmpOutput};
+    use crate::data::toy::{toy_config, toy_normalization, toy_prodmp_config};
+    use crate::models::{HeadConfig, ModelConfig};
 
-    fn toy_policy(head: HeadConfig, sampler: Sampler) -> anyhow::Result<FloatPolicy> {
-        let cfg = toy_config(head);
+    fn toy_policy(cfg: ModelConfig, sampler: Sampler) -> anyhow::Result<FloatPolicy> {
         let net = OwnedNetwork::new_seeded(&cfg, 2, &Device::Cpu)?;
-        let norm = Normalization {
-            obs: Normalizer {
-                min: vec![-2.0],
-                max: vec![2.0],
-            },
-            action: Normalizer {
-                min: vec![10.0],
-                max: vec![20.0],
-            },
-        };
-        FloatPolicy::new(net, norm, SigmaConfig::default(), sampler)
+        FloatPolicy::new(net, toy_normalization(), SigmaConfig::default(), sampler)
     }
 
     #[test]
     fn chunks_have_the_model_shape_and_are_reproducible_per_seed() {
-        for (head, sampler) in [
+        for (cfg, sampler) in [
+            (toy_prodmp_config(), Sampler::Student { steps: 1 }),
+            (toy_prodmp_config(), Sampler::Student { steps: 3 }),
             (
-                HeadConfig::ProDmp {
-                    num_basis: 4,
-                    output: ProDmpOutput::Direct,
-                    auto_scale_basis: false,
-                },
-                Sampler::Student { steps: 1 },
-            ),
-            (
-                HeadConfig::ProDmp {
-                    num_basis: 4,
-                    output: ProDmpOutput::Direct,
-                    auto_scale_basis: false,
-                },
-                Sampler::Student { steps: 3 },
-            ),
-            (
-                HeadConfig::ProDmp {
-                    num_basis: 4,
-                    output: ProDmpOutput::Direct,
-                    auto_scale_basis: false,
-                },
+                toy_prodmp_config(),
                 Sampler::Teacher {
                     solver: Solver::DpmPp2m,
                     steps: 4,
                 },
             ),
             (
-                HeadConfig::Raw,
+                toy_config(HeadConfig::Raw),
                 Sampler::Dp {
                     sampler: DpSampler::Ddim,
                     steps: 10,
                 },
             ),
         ] {
-            let mut policy = toy_policy(head, sampler).unwrap();
+            let mut policy = toy_policy(cfg, sampler).unwrap();
             let obs = vec![vec![0.5f32]];
             let input = PolicyInput {
                 obs_history: &obs,
@@ -403,6 +373,6 @@ mod tests {
                 .is_err());
         }
         assert!(Sampler::for_role(Role::Student, Some(5), None).is_err());
-        assert!(toy_policy(HeadConfig::Raw, Sampler::Student { steps: 1 }).is_err());
+        assert!(toy_policy(toy_config(HeadConfig::Raw), Sampler::Student { steps: 1 }).is_err());
     }
 }

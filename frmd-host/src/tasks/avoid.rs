@@ -41,32 +41,13 @@ pub const EE_RADIUS: f64 = 0.05;
 /// Clearance the expert keeps between the end effector and the obstacle at the apex, metres.
 const EXPERT_MARGIN: f64 = 0.25;
 
+#[derive(Default)]
 pub struct Avoid {
     ee: PointMass,
     goal: V2,
     obstacle: V2,
     radius: f64,
     collided: bool,
-}
-
-impl Avoid {
-    pub fn new() -> Self {
-        let mut task = Self {
-            ee: PointMass::default(),
-            goal: V2::ZERO,
-            obstacle: V2::ZERO,
-            radius: 0.0,
-            collided: false,
-        };
-        task.reset(0);
-        task
-    }
-}
-
-impl Default for Avoid {
-    fn default() -> Self {
-        Self::new()
-    }
 }
 
 impl Task for Avoid {

@@ -53,6 +53,7 @@ const INSERT_TOLERANCE: f64 = 0.02;
 /// Wall thickness drawn in plots, metres.
 const WALL_THICKNESS: f64 = 0.4;
 
+#[derive(Default)]
 pub struct Insert {
     tip: PointMass,
     slot_x: f64,
@@ -61,17 +62,6 @@ pub struct Insert {
 }
 
 impl Insert {
-    pub fn new() -> Self {
-        let mut task = Self {
-            tip: PointMass::default(),
-            slot_x: 0.0,
-            wall_y: 0.0,
-            contact: false,
-        };
-        task.reset(0);
-        task
-    }
-
     /// One substep toward `target` with contacts; returns whether the peg touched the wall.
     fn substep(&mut self, target: V2, h: f64) -> bool {
         let before = self.tip.pos;
@@ -113,12 +103,6 @@ impl Insert {
         self.tip.pos = pos;
         self.tip.vel = vel;
         touched
-    }
-}
-
-impl Default for Insert {
-    fn default() -> Self {
-        Self::new()
     }
 }
 

@@ -130,13 +130,17 @@ pub trait Task {
     fn layout(&self) -> Vec<LayoutItem>;
 }
 
-/// Creates a task by name.
+/// Creates a task by name, at the layout of seed 0.
 pub fn make_task(name: &str) -> anyhow::Result<Box<dyn Task>> {
+    fn at_seed_zero(mut task: impl Task + 'static) -> Box<dyn Task> {
+        task.reset(0);
+        Box::new(task)
+    }
     Ok(match name {
-        "reach" => Box::new(reach::Reach::new()),
-        "avoid" => Box::new(avoid::Avoid::new()),
-        "push" => Box::new(push::Push::new()),
-        "insert" => Box::new(insert::Insert::new()),
+        "reach" => at_seed_zero(reach::Reach::default()),
+        "avoid" => at_seed_zero(avoid::Avoid::default()),
+        "push" => at_seed_zero(push::Push::default()),
+        "insert" => at_seed_zero(insert::Insert::default()),
         other => anyhow::bail!(
             "unknown task {other:?}; known tasks: {}",
             TASK_NAMES.join(", ")

@@ -63,22 +63,23 @@ pub struct Push {
     target: V2,
 }
 
-impl Push {
-    pub fn new() -> Self {
+impl Default for Push {
+    /// Placeholder bodies in an empty world until [`Task::reset`] builds the layout.
+    fn default() -> Self {
         let mut world = PhysicsWorld::default();
         let pusher = world.insert_body(RigidBodyBuilder::fixed());
         let puck = world.insert_body(RigidBodyBuilder::fixed());
-        let mut task = Self {
+        Self {
             world,
             pusher,
             puck,
             ee: PointMass::default(),
             target: V2::ZERO,
-        };
-        task.reset(0);
-        task
+        }
     }
+}
 
+impl Push {
     fn puck_state(&self) -> (V2, V2) {
         let body = &self.world.bodies[self.puck];
         let (p, v) = (body.translation(), body.linvel());
@@ -86,12 +87,6 @@ impl Push {
             V2::new(f64::from(p.x), f64::from(p.y)),
             V2::new(f64::from(v.x), f64::from(v.y)),
         )
-    }
-}
-
-impl Default for Push {
-    fn default() -> Self {
-        Self::new()
     }
 }
 

@@ -31,26 +31,10 @@ const SPEED_TOLERANCE: f64 = 0.1;
 const HALF_EXTENT: f64 = 1.6;
 const MIN_DISTANCE: f64 = 1.0;
 
+#[derive(Default)]
 pub struct Reach {
     ee: PointMass,
     goal: V2,
-}
-
-impl Reach {
-    pub fn new() -> Self {
-        let mut task = Self {
-            ee: PointMass::default(),
-            goal: V2::ZERO,
-        };
-        task.reset(0);
-        task
-    }
-}
-
-impl Default for Reach {
-    fn default() -> Self {
-        Self::new()
-    }
 }
 
 impl Task for Reach {

@@ -185,8 +185,7 @@ pub fn sample_augmented(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::toy::{bimodal_windows, toy_config};
-    use crate::models::{HeadConfig, ProDmpOutput};
+    use crate::data::toy::{bimodal_windows, toy_prodmp_config};
 
     fn rows(t: &Tensor) -> Vec<f32> {
         t.flatten_all().unwrap().to_vec1::<f32>().unwrap()
@@ -194,11 +193,7 @@ mod tests {
 
     #[test]
     fn augmentation_perturbs_only_the_initial_condition() {
-        let cfg = toy_config(HeadConfig::ProDmp {
-            num_basis: 4,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        });
+        let cfg = toy_prodmp_config();
         let windows = bimodal_windows(&cfg, 64, 5).unwrap();
         let device = Device::Cpu;
         // Inactive augmentation draws exactly what `sample` draws.
@@ -265,11 +260,7 @@ mod tests {
     #[test]
     fn observation_offsets_are_shared_by_the_frames_of_a_window() {
         let device = Device::Cpu;
-        let mut cfg = toy_config(HeadConfig::ProDmp {
-            num_basis: 4,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        });
+        let mut cfg = toy_prodmp_config();
         let mut windows = bimodal_windows(&cfg, 64, 1).unwrap();
         // Two frames of two observations per window, all zero.
         cfg.history = 2;

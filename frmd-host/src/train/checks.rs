@@ -177,20 +177,8 @@ impl StudentRun {
         } = &self.shape;
         let teacher_basis = teacher.prodmp().map(|p| p.num_basis);
         let differs: [(&'static str, Option<String>, String); 5] = [
-            (
-                "history",
-                history
-                    .filter(|&h| h != teacher.history)
-                    .map(|h| h.to_string()),
-                teacher.history.to_string(),
-            ),
-            (
-                "horizon",
-                horizon
-                    .filter(|&h| h != teacher.horizon)
-                    .map(|h| h.to_string()),
-                teacher.horizon.to_string(),
-            ),
+            differing("history", *history, teacher.history),
+            differing("horizon", *horizon, teacher.horizon),
             (
                 "num-basis",
                 num_basis
@@ -198,27 +186,24 @@ impl StudentRun {
                     .map(|b| b.to_string()),
                 teacher_basis.map(|b| b.to_string()).unwrap_or_default(),
             ),
-            (
-                "backbone",
-                backbone
-                    .as_ref()
-                    .filter(|b| **b != teacher.backbone)
-                    .map(|b| b.to_string()),
-                teacher.backbone.to_string(),
-            ),
-            (
-                "embed-dim",
-                embed_dim
-                    .filter(|&e| e != teacher.embed_dim)
-                    .map(|e| e.to_string()),
-                teacher.embed_dim.to_string(),
-            ),
+            differing("backbone", backbone.as_ref(), &teacher.backbone),
+            differing("embed-dim", *embed_dim, teacher.embed_dim),
         ];
         if let Some((option, Some(given), theirs)) = differs.into_iter().find(|d| d.1.is_some()) {
             return Err(conflict(option, "--teacher", format!("the student takes the teacher's model shape ({option} {theirs}), {given} would be ignored; drop --{option}")));
         }
         self.train.validate_exec(teacher.horizon)
     }
+}
+
+/// `(option, the student's value if given and not the teacher's, the teacher's value)`.
+fn differing<T: PartialEq + std::fmt::Display>(
+    option: &'static str,
+    given: Option<T>,
+    teacher: T,
+) -> (&'static str, Option<String>, String) {
+    let given = given.filter(|g| *g != teacher).map(|g| g.to_string());
+    (option, given, teacher.to_string())
 }
 
 impl ProbeConfig {

@@ -21,22 +21,20 @@ pub fn plot_learning_curve(
     loss: &[(usize, f64)],
     success: &[(usize, f64)],
 ) -> anyhow::Result<()> {
-    frmd_formats::artifact::write_atomic_with(out, |tmp| draw_curve(tmp, task, role, loss, success))
+    let title = format!("{task}: {role} training");
+    frmd_formats::artifact::write_atomic_with(out, |tmp| draw_curve(tmp, &title, loss, success))
 }
 
 fn draw_curve(
     out: &Path,
-    task: &str,
-    role: Role,
+    title: &str,
     loss: &[(usize, f64)],
     success: &[(usize, f64)],
 ) -> anyhow::Result<()> {
     register_font()?;
     let root = BitMapBackend::new(out, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(plot_err)?;
-    let root = root
-        .titled(&format!("{task}: {role} training"), (FONT, 22))
-        .map_err(plot_err)?;
+    let root = root.titled(title, (FONT, 22)).map_err(plot_err)?;
     let (top, bottom) = root.split_vertically(330);
     let max_step = loss
         .iter()

@@ -340,3 +340,22 @@ pub fn distill(
         report,
     })
 }
+
+/// [`distill`] with the default noise schedule and no progress reports (the toy tests and
+/// sweeps).
+pub fn distill_quietly(
+    teacher: &OwnedNetwork,
+    windows: &WindowSet,
+    dcfg: &DistillConfig,
+    cfg: &LoopConfig,
+) -> anyhow::Result<Distilled> {
+    let sig = SigmaConfig::default();
+    distill(
+        teacher,
+        windows,
+        &sig,
+        dcfg,
+        cfg,
+        &mut |_: &super::Progress<'_>| Ok(()),
+    )
+}

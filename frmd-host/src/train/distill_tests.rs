@@ -1,13 +1,13 @@
 //! The distillation objectives of `DistillConfig` on the toy bimodal set: each trains, and the
 //! ODE-map student reproduces its teacher's one-step map.
-use super::distill::{distill, DistillConfig};
+use super::distill::{distill_quietly, DistillConfig};
 use super::teacher::{train_teacher, TeacherConfig};
 use super::{LoopConfig, Progress};
-use crate::data::toy::{bimodal_windows, positive_fraction, toy_condition, toy_config};
+use crate::data::toy::{bimodal_windows, positive_fraction, toy_condition, toy_prodmp_config};
 use crate::diffusion::consistency::{Distance, Jump, LevelSampling, LevelWeight};
 use crate::diffusion::loss::{LossWeight, SigmaSampling};
 use crate::diffusion::samplers::{gaussian, sample_consistency, sample_teacher, Solver};
-use crate::models::{HeadConfig, OwnedNetwork, ProDmpOutput};
+use crate::models::OwnedNetwork;
 use crate::rng::HostRng;
 use candle_core::Device;
 use frmd_core::sigma::SigmaConfig;
@@ -19,11 +19,7 @@ fn toy_teacher(
     crate::data::WindowSet,
     OwnedNetwork,
 ) {
-    let cfg = toy_config(HeadConfig::ProDmp {
-        num_basis: 4,
-        output: ProDmpOutput::Direct,
-        auto_scale_basis: false,
-    });
+    let cfg = toy_prodmp_config();
     let windows = bimodal_windows(&cfg, 512, 2).unwrap();
     let sampling = SigmaSampling {
         uniform_fraction: 0.2,
@@ -56,7 +52,6 @@ fn weights_of(net: &OwnedNetwork) -> Vec<f32> {
 #[test]
 fn every_objective_trains_and_moves_the_student() {
     let (_, windows, teacher) = toy_teacher(200);
-    let sig = SigmaConfig::default();
     let base = DistillConfig {
         levels: 10,
         ..DistillConfig::default()
@@ -94,15 +89,7 @@ fn every_objective_trains_and_moves_the_student() {
     ];
     let before = weights_of(&teacher);
     let run = |dcfg: &DistillConfig| {
-        distill(
-            &teacher,
-            &windows,
-            &sig,
-            dcfg,
-            &LoopConfig::toy(40, 1),
-            &mut |_: &Progress| Ok(()),
-        )
-        .unwrap()
+        distill_quietly(&teacher, &windows, dcfg, &LoopConfig::toy(40, 1)).unwrap()
     };
     for dcfg in variants {
         let out = run(&dcfg);
@@ -129,22 +116,13 @@ fn every_objective_trains_and_moves_the_student() {
 fn ode_map_student_keeps_the_teachers_modes() {
     let (cfg, windows, teacher) = toy_teacher(3000);
     let sig = SigmaConfig::default();
-    let mut loop_cfg = LoopConfig::toy(600, 6);
-    loop_cfg.optim.lr = 1e-3;
     let dcfg = DistillConfig {
         consistency_weight: 0.0,
         map_weight: 1.0,
         ..DistillConfig::default()
     };
-    let out = distill(
-        &teacher,
-        &windows,
-        &sig,
-        &dcfg,
-        &loop_cfg,
-        &mut |_: &Progress| Ok(()),
-    )
-    .unwrap();
+    let loop_cfg = LoopConfig::toy(600, 6).with_lr(1e-3);
+    let out = distill_quietly(&teacher, &windows, &dcfg, &loop_cfg).unwrap();
     let first = out.report.loss_curve.first().unwrap().1;
     let last = out.report.final_loss().unwrap();
     assert!(last < 0.5 * first, "map loss {first} -> {last}");

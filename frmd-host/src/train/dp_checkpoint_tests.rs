@@ -1,7 +1,6 @@
 //! The DP settings training records in a checkpoint are what `FloatPolicy::load` samples with.
 use crate::checkpoint::{self, CheckpointMeta, Role};
-use crate::data::toy::toy_config;
-use crate::data::{Normalization, Normalizer};
+use crate::data::toy::{toy_config, toy_normalization};
 use crate::diffusion::ddpm::{DpSampler, EpsParametrization};
 use crate::models::HeadConfig;
 use crate::models::OwnedNetwork;
@@ -17,16 +16,7 @@ use frmd_core::sigma::SigmaConfig;
 fn dp_parametrization_is_saved_and_loaded() {
     let cfg = toy_config(HeadConfig::Raw);
     let net = OwnedNetwork::new_seeded(&cfg, 5, &Device::Cpu).unwrap();
-    let norm = Normalization {
-        obs: Normalizer {
-            min: vec![-2.0],
-            max: vec![2.0],
-        },
-        action: Normalizer {
-            min: vec![10.0],
-            max: vec![20.0],
-        },
-    };
+    let norm = toy_normalization();
     let sampler = Sampler::Dp {
         sampler: DpSampler::Ddim,
         steps: 10,
@@ -47,25 +37,13 @@ fn dp_parametrization_is_saved_and_loaded() {
         policy.act(&input).unwrap()
     };
     let loaded = chunk(&mut FloatPolicy::load(&dir, None, None).unwrap());
-    let pre = chunk(
-        &mut FloatPolicy::new(
-            net.duplicate(&Device::Cpu).unwrap(),
-            norm.clone(),
-            SigmaConfig::default(),
-            sampler,
-        )
-        .unwrap()
-        .with_dp_parametrization(EpsParametrization::Preconditioned),
-    );
-    let direct = chunk(
-        &mut FloatPolicy::new(
-            net.duplicate(&Device::Cpu).unwrap(),
-            norm.clone(),
-            SigmaConfig::default(),
-            sampler,
-        )
-        .unwrap(),
-    );
+    // The in-memory network as a policy with its default (direct) parametrization.
+    let in_memory = || {
+        let copy = net.duplicate(&Device::Cpu).unwrap();
+        FloatPolicy::new(copy, norm.clone(), SigmaConfig::default(), sampler).unwrap()
+    };
+    let pre = chunk(&mut in_memory().with_dp_parametrization(EpsParametrization::Preconditioned));
+    let direct = chunk(&mut in_memory());
     assert_eq!(loaded, pre);
     assert_ne!(loaded, direct);
     meta.training = serde_json::json!({ "steps": 1 });

@@ -201,8 +201,8 @@ pub fn generalization(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::toy::{bimodal_windows, toy_config};
-    use crate::models::{HeadConfig, OwnedNetwork, ProDmpOutput};
+    use crate::data::toy::{bimodal_windows, toy_prodmp_config};
+    use crate::models::OwnedNetwork;
 
     fn dataset(offset: f32) -> Dataset {
         // Two episodes of a 2-D action and 3-D observation; `offset` shifts every value.
@@ -213,17 +213,7 @@ mod tests {
         let action: Vec<f32> = (0..steps * 2)
             .map(|i| offset + (i as f32 * 0.21).cos() * (2 + i % 2) as f32)
             .collect();
-        Dataset {
-            obs,
-            action,
-            episode_ends: vec![4, 9],
-            obs_dim: 3,
-            action_dim: 2,
-            task: "toy".into(),
-            dt: 0.1,
-            source: "test".into(),
-            action_before_start: Default::default(),
-        }
+        Dataset::handmade(obs, action, vec![4, 9], (3, 2))
     }
 
     #[test]
@@ -267,11 +257,7 @@ mod tests {
 
     #[test]
     fn chunk_error_reports_the_hold_baseline_and_rejects_bad_input() {
-        let cfg = toy_config(HeadConfig::ProDmp {
-            num_basis: 4,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        });
+        let cfg = toy_prodmp_config();
         let windows = bimodal_windows(&cfg, 40, 2).unwrap();
         let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
         let sig = SigmaConfig::default();

@@ -57,6 +57,12 @@ impl LoopConfig {
         cfg.log_every = 50;
         cfg
     }
+
+    /// The same settings with peak learning rate `lr`.
+    pub fn with_lr(mut self, lr: f64) -> Self {
+        self.optim.lr = lr;
+        self
+    }
 }
 
 /// What a trainer reports to its caller while running.

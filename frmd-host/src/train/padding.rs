@@ -58,17 +58,7 @@ mod tests {
     fn data() -> Dataset {
         let obs: Vec<f32> = (0..7).map(|i| i as f32).collect();
         let action: Vec<f32> = (0..14).map(|i| 10.0 + i as f32 * 0.5).collect();
-        Dataset {
-            obs,
-            action,
-            episode_ends: vec![3, 7],
-            obs_dim: 1,
-            action_dim: 2,
-            task: "toy".into(),
-            dt: 0.1,
-            source: "test".into(),
-            action_before_start: Default::default(),
-        }
+        Dataset::handmade(obs, action, vec![3, 7], (1, 2))
     }
 
     #[test]

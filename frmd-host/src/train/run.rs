@@ -23,7 +23,7 @@ use crate::policy::float::{Sampler, DP_TRAINING_KEY};
 use anyhow::Context;
 use frmd_core::sigma::SigmaConfig;
 use serde_json::json;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// What a finished run reports.
 #[derive(Clone, Debug)]
@@ -352,18 +352,10 @@ pub fn run_probe(cfg: &ProbeConfig) -> anyhow::Result<(ChunkSampler, Generalizat
             anyhow::bail!("probe measures ProDMP teachers and students, not the DP baseline")
         }
     };
-    let train = windows_in(
-        &Dataset::load(&cfg.data)?,
-        model.history,
-        model.horizon,
-        &norm,
-    )?;
-    let held_out = windows_in(
-        &Dataset::load(&cfg.holdout)?,
-        model.history,
-        model.horizon,
-        &norm,
-    )?;
+    let windows = |path: &Path| -> anyhow::Result<WindowSet> {
+        windows_in(&Dataset::load(path)?, model.history, model.horizon, &norm)
+    };
+    let (train, held_out) = (windows(&cfg.data)?, windows(&cfg.holdout)?);
     let report = generalization(
         &net.net,
         &meta.sigma,

@@ -106,3 +106,21 @@ pub fn train_teacher(
     )?;
     Ok((averaged.unwrap_or(net), report))
 }
+
+/// [`train_teacher`] with the default noise schedule, the log-normal levels alone, no
+/// augmentation, no EMA and no progress reports: the plain teacher of the toy tests and sweeps.
+pub fn train_plain_teacher(
+    windows: &WindowSet,
+    model: &ModelConfig,
+    weight: LossWeight,
+    cfg: &LoopConfig,
+) -> anyhow::Result<(OwnedNetwork, TrainReport)> {
+    train_teacher(
+        windows,
+        model,
+        &SigmaConfig::default(),
+        &TeacherConfig::plain(weight, SigmaSampling::LOG_NORMAL),
+        cfg,
+        &mut |_: &super::Progress<'_>| Ok(()),
+    )
+}

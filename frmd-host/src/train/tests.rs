@@ -1,62 +1,34 @@
 //! Training tests on the toy bimodal set (kept to a few seconds each).
-use super::distill::{distill, DistillConfig};
-use super::{
-    teacher::{train_teacher, TeacherConfig},
-    LoopConfig, Progress,
-};
-use crate::data::toy::{bimodal_windows, positive_fraction, toy_condition, toy_config, MODE_GOAL};
+use super::distill::{distill_quietly, DistillConfig};
+use super::teacher::train_plain_teacher;
+use super::{LoopConfig, Progress};
+use crate::data::toy::{bimodal_windows, last_step_error, positive_fraction, toy_condition};
+use crate::data::toy::{toy_config, toy_prodmp_config, MODE_GOAL};
 use crate::diffusion::loss::{LossWeight, SigmaSampling};
-const LOGNORMAL: SigmaSampling = SigmaSampling {
-    uniform_fraction: 0.0,
-};
 use crate::diffusion::precond::consistency;
 use crate::diffusion::samplers::{gaussian, sample_consistency, sample_teacher, Solver};
-use crate::models::{HeadConfig, OwnedNetwork, ProDmpOutput};
+use crate::models::{HeadConfig, OwnedNetwork};
 use crate::rng::HostRng;
 use candle_core::{Device, Tensor};
 use frmd_core::sigma::SigmaConfig;
 
 #[test]
 fn teacher_loss_decreases_on_fixed_seed() {
-    let cfg = toy_config(HeadConfig::ProDmp {
-        num_basis: 4,
-        output: ProDmpOutput::Direct,
-        auto_scale_basis: false,
-    });
+    let cfg = toy_prodmp_config();
     let windows = bimodal_windows(&cfg, 256, 1).unwrap();
-    let sig = SigmaConfig::default();
-    let (_, report) = train_teacher(
-        &windows,
-        &cfg,
-        &sig,
-        &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL),
-        &LoopConfig::toy(300, 3),
-        &mut |_: &Progress| Ok(()),
-    )
-    .unwrap();
+    let train = || train_plain_teacher(&windows, &cfg, LossWeight::Edm, &LoopConfig::toy(300, 3));
+    let (_, report) = train().unwrap();
     let first = report.loss_curve.first().unwrap().1;
     let last = report.final_loss().unwrap();
     assert!(last < 0.5 * first, "loss {first} -> {last}");
     // Same seed, same curve.
-    let (_, again) = train_teacher(
-        &windows,
-        &cfg,
-        &sig,
-        &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL),
-        &LoopConfig::toy(300, 3),
-        &mut |_: &Progress| Ok(()),
-    )
-    .unwrap();
+    let (_, again) = train().unwrap();
     assert_eq!(report.loss_curve, again.loss_curve);
 }
 
 #[test]
 fn consistency_boundary_is_identity() {
-    let cfg = toy_config(HeadConfig::ProDmp {
-        num_basis: 4,
-        output: ProDmpOutput::Direct,
-        auto_scale_basis: false,
-    });
+    let cfg = toy_prodmp_config();
     let net = OwnedNetwork::new_seeded(&cfg, 5, &Device::Cpu).unwrap();
     let sig = SigmaConfig::default();
     let mut rng = HostRng::new(9);
@@ -78,75 +50,38 @@ fn consistency_boundary_is_identity() {
 /// The one-step student reproduces the teacher's multi-step samples on a bimodal set: both modes
 /// present, mode weights within 10 points of the data's 50 %, samples near the modes.
 #[test]
-fn one_step_student_matches_teacher_on_bimodal_toy() {
-    let cfg = toy_config(HeadConfig::ProDmp {
-        num_basis: 4,
-        output: ProDmpOutput::Direct,
-        auto_scale_basis: false,
-    });
-    let windows = bimodal_windows(&cfg, 512, 2).unwrap();
+fn one_step_student_matches_teacher_on_bimodal_toy() -> anyhow::Result<()> {
+    let cfg = toy_prodmp_config();
+    let windows = bimodal_windows(&cfg, 512, 2)?;
     let sig = SigmaConfig::default();
-    let (teacher, _) = train_teacher(
-        &windows,
-        &cfg,
-        &sig,
-        &TeacherConfig::plain(LossWeight::Edm, LOGNORMAL),
-        &LoopConfig::toy(4000, 4),
-        &mut |_: &Progress| Ok(()),
-    )
-    .unwrap();
+    let (teacher, _) =
+        train_plain_teacher(&windows, &cfg, LossWeight::Edm, &LoopConfig::toy(4000, 4))?;
     let batch = 400;
-    let cond = toy_condition(batch).unwrap();
+    let cond = toy_condition(batch)?;
     let mut rng = HostRng::new(11);
-    let z = gaussian(&mut rng, batch, cfg.traj_dim(), &Device::Cpu).unwrap();
-    let teacher_samples = sample_teacher(
-        &teacher.net,
-        &sig,
-        &cond,
-        (&z * sig.sigma_max).unwrap(),
-        10,
-        Solver::Heun,
-    )
-    .unwrap();
-    let teacher_flat = teacher_samples
-        .flatten_all()
-        .unwrap()
-        .to_vec1::<f32>()
-        .unwrap();
+    let z = gaussian(&mut rng, batch, cfg.traj_dim(), &Device::Cpu)?;
+    let noise = (&z * sig.sigma_max)?;
+    let teacher_samples = sample_teacher(&teacher.net, &sig, &cond, noise, 10, Solver::Heun)?;
+    let teacher_flat = teacher_samples.flatten_all()?.to_vec1::<f32>()?;
     let teacher_fraction = positive_fraction(&teacher_flat, cfg.horizon);
 
-    let mut dcfg = LoopConfig::toy(2000, 6);
-    dcfg.optim.lr = 1e-3;
-    let distilled = distill(
+    let distill_cfg = DistillConfig {
+        levels: 10,
+        eval_ema: 0.99,
+        ..DistillConfig::default()
+    };
+    let distilled = distill_quietly(
         &teacher,
         &windows,
-        &sig,
-        &DistillConfig {
-            levels: 10,
-            eval_ema: 0.99,
-            ..DistillConfig::default()
-        },
-        &dcfg,
-        &mut |_: &Progress| Ok(()),
-    )
-    .unwrap();
-    let student_samples =
-        sample_consistency(&distilled.eval_student.net, &sig, &cond, &z, 1, &mut rng).unwrap();
-    let student_flat = student_samples
-        .flatten_all()
-        .unwrap()
-        .to_vec1::<f32>()
-        .unwrap();
+        &distill_cfg,
+        &LoopConfig::toy(2000, 6).with_lr(1e-3),
+    )?;
+    let student = &distilled.eval_student.net;
+    let student_samples = sample_consistency(student, &sig, &cond, &z, 1, &mut rng)?;
+    let student_flat = student_samples.flatten_all()?.to_vec1::<f32>()?;
     let student_fraction = positive_fraction(&student_flat, cfg.horizon);
-    let last_steps = |flat: &[f32]| -> f64 {
-        // mean distance of the final step to the nearest mode's final value
-        let goal_end = windows.actions[cfg.horizon - 1].abs() as f64;
-        flat.chunks_exact(cfg.horizon)
-            .map(|r| ((*r.last().unwrap() as f64).abs() - goal_end).abs())
-            .sum::<f64>()
-            / batch as f64
-    };
-    let (teacher_err, student_err) = (last_steps(&teacher_flat), last_steps(&student_flat));
+    let teacher_err = last_step_error(&teacher_flat, &windows);
+    let student_err = last_step_error(&student_flat, &windows);
     eprintln!("teacher +fraction {teacher_fraction:.3} err {teacher_err:.4}; student +fraction {student_fraction:.3} err {student_err:.4} (mode goal {MODE_GOAL})");
     assert!(
         (teacher_fraction - 0.5).abs() <= 0.10,
@@ -163,62 +98,52 @@ fn one_step_student_matches_teacher_on_bimodal_toy() {
         teacher_err < 0.06 && student_err < 0.2,
         "distance to modes: teacher {teacher_err}, student {student_err}"
     );
+    Ok(())
 }
 
 #[test]
-fn every_parameter_gets_a_gradient() {
+fn every_parameter_gets_a_gradient() -> anyhow::Result<()> {
     use crate::models::BackboneConfig;
     for backbone in [
-        BackboneConfig::parse("mlp:16,16:mish").unwrap(),
+        BackboneConfig::parse("mlp:16,16:mish")?,
         BackboneConfig::Transformer {
             layers: 1,
             heads: 2,
             width: 8,
         },
     ] {
-        let mut cfg = toy_config(HeadConfig::ProDmp {
-            num_basis: 4,
-            output: ProDmpOutput::Direct,
-            auto_scale_basis: false,
-        });
+        let mut cfg = toy_prodmp_config();
         cfg.backbone = backbone.clone();
-        let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
-        let mut windows = bimodal_windows(&cfg, 16, 1).unwrap();
+        let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu)?;
+        let mut windows = bimodal_windows(&cfg, 16, 1)?;
         let mut rng = HostRng::new(4);
         windows.obs = rng.normal_vec(16);
         windows.prev_action = rng.normal_vec(16);
         windows.prev_rate = rng.normal_vec(16);
-        let batch =
-            super::batch::gather(&windows, &cfg, &(0..16).collect::<Vec<_>>(), &Device::Cpu)
-                .unwrap();
+        let rows: Vec<usize> = (0..16).collect();
+        let batch = super::batch::gather(&windows, &cfg, &rows, &Device::Cpu)?;
         let loss = crate::diffusion::loss::teacher_loss(
             &net.net,
             &SigmaConfig::default(),
             &batch.x0,
             &batch.cond,
             LossWeight::Edm,
-            LOGNORMAL,
+            SigmaSampling::LOG_NORMAL,
             &mut HostRng::new(1),
-        )
-        .unwrap();
-        let grads = loss.backward().unwrap();
+        )?;
+        let grads = loss.backward()?;
         for (name, var) in crate::models::init::sorted_vars(&net.varmap) {
             let grad = grads
                 .get(var.as_tensor())
                 .unwrap_or_else(|| panic!("{backbone:?}: no gradient for {name}"));
-            let norm = grad
-                .sqr()
-                .unwrap()
-                .sum_all()
-                .unwrap()
-                .to_scalar::<f32>()
-                .unwrap();
+            let norm = grad.sqr()?.sum_all()?.to_scalar::<f32>()?;
             assert!(
                 norm.is_finite() && norm > 0.0,
                 "{backbone:?}: zero gradient for {name}"
             );
         }
     }
+    Ok(())
 }
 
 /// The DP baseline learns the toy bimodal set: DDPM (100 steps) and DDIM (10 steps) both produce
@@ -286,11 +211,7 @@ fn transformer_backbones_have_the_documented_sizes() {
             width: 256
         }
     );
-    let mut cfg = toy_config(HeadConfig::ProDmp {
-        num_basis: 4,
-        output: ProDmpOutput::Direct,
-        auto_scale_basis: false,
-    });
+    let mut cfg = toy_prodmp_config();
     cfg.backbone = lite;
     let net = OwnedNetwork::new_seeded(&cfg, 1, &Device::Cpu).unwrap();
     let names: Vec<String> = crate::models::init::sorted_vars(&net.varmap)

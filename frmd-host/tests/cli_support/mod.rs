@@ -9,20 +9,13 @@ use std::process::{Command, Output};
 use std::sync::OnceLock;
 
 /// Tiny model sizes shared by every fixture model.
-pub const TINY: &[&str] = &[
-    "--batch",
-    "8",
-    "--warmup",
-    "1",
-    "--eval-episodes",
-    "0",
-    "--horizon",
-    "8",
-    "--num-basis",
-    "4",
-    "--embed-dim",
-    "4",
-];
+pub const TINY: &str =
+    "--batch 8 --warmup 1 --eval-episodes 0 --horizon 8 --num-basis 4 --embed-dim 4";
+
+/// The words of a command line, split at white space (the tests' paths have none).
+pub fn words(line: &str) -> Vec<&str> {
+    line.split_whitespace().collect()
+}
 
 /// Runs `frmd args` in `cwd` with one candle thread.
 pub fn frmd(cwd: &Path, args: &[&str]) -> Output {
@@ -55,78 +48,17 @@ pub fn fixture() -> &'static Path {
             std::env::temp_dir().join(format!("frmd-cli-bad-{}-{}", std::process::id(), exe_tag()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        frmd_ok(
-            &dir,
-            &[
-                "collect",
-                "--task",
-                "reach",
-                "--episodes",
-                "3",
-                "--out",
-                "d.safetensors",
-            ],
-        );
-        fn with_tiny(args: &[&'static str]) -> Vec<&'static str> {
-            [args, TINY].concat()
+        for line in [
+            "collect --task reach --episodes 3 --out d.safetensors".to_string(),
+            format!("train teacher --data d.safetensors --out t --steps 5 --backbone mlp:16 {TINY}"),
+            "train student --data d.safetensors --out s --teacher t --steps 5 --batch 8 --warmup 1 \
+             --eval-episodes 0"
+                .to_string(),
+            format!("train dp --data d.safetensors --out dp --steps 5 --backbone mlp:8 {TINY}"),
+            "export --ckpt s --out baked --blob s.blob".to_string(),
+        ] {
+            frmd_ok(&dir, &words(&line));
         }
-        frmd_ok(
-            &dir,
-            &with_tiny(&[
-                "train",
-                "teacher",
-                "--data",
-                "d.safetensors",
-                "--out",
-                "t",
-                "--steps",
-                "5",
-                "--backbone",
-                "mlp:16",
-            ]),
-        );
-        frmd_ok(
-            &dir,
-            &[
-                "train",
-                "student",
-                "--data",
-                "d.safetensors",
-                "--out",
-                "s",
-                "--teacher",
-                "t",
-                "--steps",
-                "5",
-                "--batch",
-                "8",
-                "--warmup",
-                "1",
-                "--eval-episodes",
-                "0",
-            ],
-        );
-        frmd_ok(
-            &dir,
-            &with_tiny(&[
-                "train",
-                "dp",
-                "--data",
-                "d.safetensors",
-                "--out",
-                "dp",
-                "--steps",
-                "5",
-                "--backbone",
-                "mlp:8",
-            ]),
-        );
-        frmd_ok(
-            &dir,
-            &[
-                "export", "--ckpt", "s", "--out", "baked", "--blob", "s.blob",
-            ],
-        );
         copy_dir(&dir.join("s"), &dir.join("student"));
         dir
     })
@@ -227,6 +159,18 @@ pub fn rejects(cwd: &Path, args: &[&str], needles: &[&str]) {
         "frmd {args:?} changed files in {}",
         cwd.display()
     );
+}
+
+/// [`rejects`] for each `(command line, needles)` case in turn, all in `cwd`.
+pub fn rejects_each_in(cwd: &Path, cases: &[(&str, &[&str])]) {
+    for (line, needles) in cases {
+        rejects(cwd, &words(line), needles);
+    }
+}
+
+/// [`rejects_each_in`] the [`fixture`] directory.
+pub fn rejects_each(cases: &[(&str, &[&str])]) {
+    rejects_each_in(fixture(), cases);
 }
 
 /// Writes a copy of checkpoint `from` to `to` with `frmd.json` edited by `edit`.

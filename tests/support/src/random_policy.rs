@@ -58,16 +58,24 @@ pub struct Dims {
     pub hidden: Vec<usize>,
 }
 
+impl Dims {
+    /// History `m`, observation `o`, DoFs `k`, horizon `n`, parameters per DoF `p`, and the
+    /// hidden widths.
+    pub fn new((m, o, k, n, p): (usize, usize, usize, usize, usize), hidden: Vec<usize>) -> Self {
+        Dims {
+            m,
+            o,
+            k,
+            n,
+            p,
+            hidden,
+        }
+    }
+}
+
 /// Two hidden layers (SiLU LUT on the first, none on the second), `steps` sampling steps.
 pub fn sample_policy(seed: u64, steps: usize) -> QuantizedMlp {
-    let dims = Dims {
-        m: M,
-        o: O,
-        k: K,
-        n: N,
-        p: P,
-        hidden: vec![24, 20],
-    };
+    let dims = Dims::new((M, O, K, N, P), vec![24, 20]);
     let mut policy = random_policy(seed, steps, &dims);
     policy.obs_min = vec![-1.0, 0.0, 0.5, -3.0];
     policy.obs_max = vec![1.0, 2.0, 0.5, 3.0];

@@ -40,16 +40,6 @@ fn main() -> ! {
         Ok(policy) => policy,
         Err(error) => exit_failure(&error),
     };
-    Server::<
-        _,
-        { baked::HISTORY },
-        { baked::OBS_DIM },
-        { baked::ACTION_DIM },
-        { baked::HORIZON },
-        { baked::PARAMS_PER_DOF },
-        { baked::INPUT_WIDTH },
-        REQUEST,
-        REPLY,
-    >::new(policy)
-    .run()
+    // The policy's sizes come from its type; the frame capacities are this image's.
+    Server::<_, _, _, _, _, _, _, REQUEST, REPLY>::new(policy).run()
 }

@@ -12,9 +12,10 @@ use cortex_m_rt::entry;
 use frmd_core::model::mlp::InputPrecision;
 use frmd_core::policy::{Policy, PolicyError};
 use frmd_cortex_m::baked_student as baked;
+use frmd_cortex_m::images::{self, StudentWorkload};
 use frmd_cortex_m::report::exit_failure;
 use frmd_cortex_m::timer::Calibration;
-use frmd_cortex_m::{bench, images, stage_report};
+use frmd_cortex_m::{bench, stage_report};
 use frmd_firmware_support::policy_workload::{PolicyWorkload, CASES, STUDENT_NAME};
 use frmd_firmware_support::stages::{mlp_marks, StagedMlpNetwork};
 
@@ -51,15 +52,7 @@ fn breakdown(calibration: &Calibration, digest: u64) -> Result<(), PolicyError> 
         stage_report::systick,
     )?
     .with_input_precision(baked::INPUT_PRECISION);
-    let policy = Policy::<
-        _,
-        { baked::HISTORY },
-        { baked::OBS_DIM },
-        { baked::ACTION_DIM },
-        { baked::HORIZON },
-        { baked::PARAMS_PER_DOF },
-        { baked::INPUT_WIDTH },
-    >::new(baked::config(), network)?;
-    let mut staged = PolicyWorkload::with_name(policy, STUDENT_NAME);
+    let policy = Policy::new(baked::config(), network)?;
+    let mut staged: StudentWorkload<_> = PolicyWorkload::with_name(policy, STUDENT_NAME);
     stage_report::mlp_policy(&mut staged, &layer_macs, output_macs, calibration, digest)
 }

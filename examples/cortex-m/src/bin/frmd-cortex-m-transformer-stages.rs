@@ -9,28 +9,23 @@
 use cortex_m_rt::entry;
 use frmd_core::model::transformer::Int8Transformer;
 use frmd_core::policy::PolicyError;
-use frmd_cortex_m::images::{self, Scratch, TRANSFORMER_NAME};
+use frmd_cortex_m::images::{self, Scratch};
 use frmd_cortex_m::report::exit_failure;
 use frmd_cortex_m::timer::Calibration;
 use frmd_cortex_m::{bench, stage_report};
-use frmd_firmware_support::policy_workload::{PolicyWorkload, CASES};
-use frmd_firmware_support::shape::{
-    DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SHAPE,
-};
+use frmd_firmware_support::policy_workload::CASES;
+use frmd_firmware_support::shape::TRANSFORMER_SHAPE;
 use frmd_firmware_support::stages::MarkedNetwork;
 
 #[entry]
 fn main() -> ! {
-    let stack = bench::start();
-    let blocks = images::transformer_blocks();
-    let mut scratch = Scratch::new();
-    let policy = images::transformer_policy(images::transformer_network(&blocks, &mut scratch));
-    let mut workload = PolicyWorkload::with_name(policy, TRANSFORMER_NAME);
-    bench::run_then::<_, { CASES }>(&mut workload, stack, |workload, calibration, digest| {
-        let model = *workload.policy().network().model();
-        if let Err(error) = breakdown(model, calibration, digest) {
-            exit_failure(&error);
-        }
+    images::transformer_image(|workload, stack| {
+        bench::run_then::<_, { CASES }>(workload, stack, |workload, calibration, digest| {
+            let model = *workload.policy().network().model();
+            if let Err(error) = breakdown(model, calibration, digest) {
+                exit_failure(&error);
+            }
+        })
     })
 }
 
@@ -47,9 +42,9 @@ fn breakdown(
         images::network_of(model, &mut policy_scratch),
         stage_report::systick,
     );
-    let policy = images::transformer_policy(network);
-    let mut staged = PolicyWorkload::with_name(policy, TRANSFORMER_NAME);
+    let mut staged = images::transformer_workload(network);
     let mut scratch = Scratch::new();
+    // The token, width and output sizes are not in the arguments' types; the rest is inferred.
     stage_report::transformer_policy::<
         _,
         _,
@@ -57,11 +52,11 @@ fn breakdown(
         { TRANSFORMER_SHAPE.token_values() },
         { TRANSFORMER_SHAPE.width },
         { TRANSFORMER_SHAPE.output },
-        POLICY_HISTORY,
-        POLICY_OBS_DIM,
-        DOF,
-        HORIZON,
-        PARAMS,
-        POLICY_INPUT,
+        _,
+        _,
+        _,
+        _,
+        _,
+        _,
     >(&mut staged, &mut scratch, calibration, digest)
 }

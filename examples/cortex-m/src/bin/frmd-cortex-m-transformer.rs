@@ -9,15 +9,10 @@
 
 use cortex_m_rt::entry;
 use frmd_cortex_m::bench;
-use frmd_cortex_m::images::{self, Scratch, TRANSFORMER_NAME};
-use frmd_firmware_support::policy_workload::{PolicyWorkload, CASES};
+use frmd_cortex_m::images;
+use frmd_firmware_support::policy_workload::CASES;
 
 #[entry]
 fn main() -> ! {
-    let stack = bench::start();
-    let blocks = images::transformer_blocks();
-    let mut scratch = Scratch::new();
-    let policy = images::transformer_policy(images::transformer_network(&blocks, &mut scratch));
-    let mut workload = PolicyWorkload::with_name(policy, TRANSFORMER_NAME);
-    bench::run::<_, { CASES }>(&mut workload, stack)
+    images::transformer_image(|workload, stack| bench::run::<_, { CASES }>(workload, stack))
 }

@@ -174,16 +174,13 @@ pub fn transformer_policy<
     let mut network_ticks = 0;
     for case in 0..CASES {
         workload.prepare(case)?;
-        let start = systick();
-        workload.run()?;
-        let end = systick();
-        let marks = workload.policy().network().marks().ticks();
-        let (Some(entry), Some(exit)) = (marks.first(), marks.last()) else {
-            return Err(PolicyError::OutputWidth);
-        };
-        stages.add(outer.input, elapsed(start, *entry) * REPEATS as u64);
-        network_ticks += elapsed(*entry, *exit) * REPEATS as u64;
-        stages.add(outer.output_stage, elapsed(*exit, end) * REPEATS as u64);
+        let run = TimedRun::of(workload, |w| w.policy().network().marks().ticks())?;
+        stages.add(outer.input, elapsed(run.start, run.entry) * REPEATS as u64);
+        network_ticks += elapsed(run.entry, run.exit) * REPEATS as u64;
+        stages.add(
+            outer.output_stage,
+            elapsed(run.exit, run.end) * REPEATS as u64,
+        );
         workload.digest_outputs(&mut digest);
         stages.split_standalone(
             outer,

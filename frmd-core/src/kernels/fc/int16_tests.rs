@@ -297,15 +297,13 @@ fn chunk_sums_that_wrap_do_so_identically_on_every_path() {
             .collect();
         let exact: Vec<i64> = bias.iter().map(|b| b + width as i64 * (1 << 22)).collect();
         assert_ne!(want, exact);
-        let multipliers = vec![1 << 30; rows];
-        let shifts = vec![-20; rows];
         let case = Case {
             width,
             rows,
             weights,
             bias,
-            multipliers,
-            shifts,
+            multipliers: vec![1 << 30; rows],
+            shifts: vec![-20; rows],
             clamp: (i16::MIN, i16::MAX),
             input,
             bytes: vec![i8::MIN; width],

@@ -72,47 +72,36 @@ impl<'a> FullyConnected<'a, i32> {
         input: LayerInput<'_>,
         output: &mut [i8],
     ) {
-        use crate::kernels::x86::{RequantBlock, BLOCK_ROWS};
-        let Some(block_len) = self.in_features.checked_mul(BLOCK_ROWS) else {
-            return;
-        };
+        use crate::kernels::x86::{for_each_row_block, RequantBlock};
         let zero_point = requant.output_zero_point;
         let bounds = (requant.activation_min, requant.activation_max);
-        let mut row_blocks = self.weights.chunks_exact(block_len);
-        let (out_blocks, out_tail) = output.as_chunks_mut::<BLOCK_ROWS>();
-        let (bias_blocks, bias_tail) = self.bias.as_chunks::<BLOCK_ROWS>();
-        let (multiplier_blocks, multiplier_tail) = requant.multipliers.as_chunks();
-        let (shift_blocks, shift_tail) = requant.shifts.as_chunks();
-        let blocks = out_blocks
-            .iter_mut()
-            .zip(row_blocks.by_ref())
-            .zip(bias_blocks)
-            .zip(multiplier_blocks.iter().zip(shift_blocks));
-        for (((out, rows), bias), (multipliers, shifts)) in blocks {
-            let block = RequantBlock {
-                multipliers,
-                shifts,
-                zero_point,
-                bounds,
-            };
-            *out = match input {
-                LayerInput::Int8(values) => avx2.requantize_rows(rows, values, bias, block),
-                LayerInput::Int16(values) => avx2.requantize_rows_i16(rows, values, bias, block),
-            };
-        }
-        let tail = out_tail
-            .iter_mut()
-            .zip(row_blocks.remainder().chunks_exact(self.in_features))
-            .zip(bias_tail)
-            .zip(multiplier_tail.iter().zip(shift_tail));
-        for (((out, row), bias), (multiplier, shift)) in tail {
-            let dot = match input {
-                LayerInput::Int8(values) => dot_i8_prefix(row, values),
-                LayerInput::Int16(values) => dot_i8_i16_prefix(row, values),
-            };
-            let acc = bias.wrapping_add(dot);
-            *out = requantize_to_i8(acc, *multiplier, *shift, zero_point, bounds.0, bounds.1);
-        }
+        for_each_row_block(
+            self,
+            requant,
+            output,
+            |(out, rows, bias, multipliers, shifts)| {
+                let block = RequantBlock {
+                    multipliers,
+                    shifts,
+                    zero_point,
+                    bounds,
+                };
+                *out = match input {
+                    LayerInput::Int8(values) => avx2.requantize_rows(rows, values, bias, block),
+                    LayerInput::Int16(values) => {
+                        avx2.requantize_rows_i16(rows, values, bias, block)
+                    }
+                };
+            },
+            |(out, row, bias, multiplier, shift)| {
+                let dot = match input {
+                    LayerInput::Int8(values) => dot_i8_prefix(row, values),
+                    LayerInput::Int16(values) => dot_i8_i16_prefix(row, values),
+                };
+                let acc = bias.wrapping_add(dot);
+                *out = requantize_to_i8(acc, multiplier, shift, zero_point, bounds.0, bounds.1);
+            },
+        );
     }
 
     /// Calls `emit(bias[o] + dot(w[o], input))` (or the bias-free dot when `with_bias` is false)

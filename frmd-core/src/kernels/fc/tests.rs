@@ -179,49 +179,47 @@ fn length_and_parameter_errors() {
         bad_bias.forward_accumulators(&[1, 2, 3], &mut acc),
         Err(KernelError::BiasLength)
     );
-    let short = FcRequant {
-        multipliers: &m[..1],
-        ..good
-    };
-    assert_eq!(
-        layer.forward(&short, &[1, 2, 3], &mut out),
-        Err(KernelError::RequantLength)
-    );
-    let zp = FcRequant {
-        output_zero_point: 128,
-        ..good
-    };
-    assert_eq!(
-        layer.forward(&zp, &[1, 2, 3], &mut out),
-        Err(KernelError::ZeroPoint)
-    );
-    let range = FcRequant {
-        activation_min: 5,
-        activation_max: 4,
-        ..good
-    };
-    assert_eq!(
-        layer.forward(&range, &[1, 2, 3], &mut out),
-        Err(KernelError::ActivationRange)
-    );
-    let shift = [-3, 31];
-    let bad_shift = FcRequant {
-        shifts: &shift,
-        ..good
-    };
-    assert_eq!(
-        layer.forward(&bad_shift, &[1, 2, 3], &mut out),
-        Err(KernelError::Multiplier)
-    );
-    let neg = [1 << 30, -1];
-    let bad_mult = FcRequant {
-        multipliers: &neg,
-        ..good
-    };
-    assert_eq!(
-        layer.forward(&bad_mult, &[1, 2, 3], &mut out),
-        Err(KernelError::Multiplier)
-    );
+    let (shift, neg) = ([-3, 31], [1 << 30, -1]);
+    for (requant, error) in [
+        (
+            FcRequant {
+                multipliers: &m[..1],
+                ..good
+            },
+            KernelError::RequantLength,
+        ),
+        (
+            FcRequant {
+                output_zero_point: 128,
+                ..good
+            },
+            KernelError::ZeroPoint,
+        ),
+        (
+            FcRequant {
+                activation_min: 5,
+                activation_max: 4,
+                ..good
+            },
+            KernelError::ActivationRange,
+        ),
+        (
+            FcRequant {
+                shifts: &shift,
+                ..good
+            },
+            KernelError::Multiplier,
+        ),
+        (
+            FcRequant {
+                multipliers: &neg,
+                ..good
+            },
+            KernelError::Multiplier,
+        ),
+    ] {
+        assert_eq!(layer.forward(&requant, &[1, 2, 3], &mut out), Err(error));
+    }
 }
 
 #[test]

@@ -44,6 +44,59 @@ mod wide;
 pub(crate) const BLOCK_ROWS: usize = 8;
 pub(crate) use requant::RequantBlock;
 
+use super::{FcRequant, FullyConnected};
+
+/// One output channel of a layer: its output, weight row, bias, multiplier and shift.
+pub(crate) type RowOf<'a, O, B> = (&'a mut O, &'a [i8], &'a B, i32, i32);
+
+/// A block of [`BLOCK_ROWS`] channels: outputs, weight rows (`BLOCK_ROWS * width` weights),
+/// biases, multipliers and shifts.
+pub(crate) type BlockOf<'a, O, B> = (
+    &'a mut [O; BLOCK_ROWS],
+    &'a [i8],
+    &'a [B; BLOCK_ROWS],
+    &'a [i32; BLOCK_ROWS],
+    &'a [i32; BLOCK_ROWS],
+);
+
+/// Walks the output channels of `layer` requantized by `requant` in blocks of [`BLOCK_ROWS`]
+/// for `block`, then the remaining channels one at a time for `row`. Calls nothing when
+/// `in_features * BLOCK_ROWS` overflows (callers checked the lengths).
+#[inline(always)]
+pub(crate) fn for_each_row_block<O, B>(
+    layer: &FullyConnected<'_, B>,
+    requant: &FcRequant<'_, O>,
+    output: &mut [O],
+    mut block: impl FnMut(BlockOf<'_, O, B>),
+    mut row: impl FnMut(RowOf<'_, O, B>),
+) {
+    let width = layer.in_features;
+    let Some(block_len) = width.checked_mul(BLOCK_ROWS) else {
+        return;
+    };
+    let mut row_blocks = layer.weights.chunks_exact(block_len);
+    let (out_blocks, out_tail) = output.as_chunks_mut::<BLOCK_ROWS>();
+    let (bias_blocks, bias_tail) = layer.bias.as_chunks::<BLOCK_ROWS>();
+    let (multiplier_blocks, multiplier_tail) = requant.multipliers.as_chunks();
+    let (shift_blocks, shift_tail) = requant.shifts.as_chunks();
+    let blocks = out_blocks
+        .iter_mut()
+        .zip(row_blocks.by_ref())
+        .zip(bias_blocks)
+        .zip(multiplier_blocks.iter().zip(shift_blocks));
+    for (((out, rows), bias), (multipliers, shifts)) in blocks {
+        block((out, rows, bias, multipliers, shifts));
+    }
+    let tail = out_tail
+        .iter_mut()
+        .zip(row_blocks.remainder().chunks_exact(width))
+        .zip(bias_tail)
+        .zip(multiplier_tail.iter().zip(shift_tail));
+    for (((out, weights), bias), (multiplier, shift)) in tail {
+        row((out, weights, bias, *multiplier, *shift));
+    }
+}
+
 use core::arch::x86_64::{__cpuid, __cpuid_count, _xgetbv};
 use core::sync::atomic::{AtomicU8, Ordering};
 

@@ -21,8 +21,8 @@
 
 use super::matvec::{row_sums_i16, row_sums_i8, split_rows};
 use super::requant::load_i32;
-use super::Avx2;
 use super::BLOCK_ROWS;
+use super::{for_each_row_block, Avx2};
 use crate::kernels::lut16::{self, Lut16Table};
 use crate::kernels::rows::for_each_accumulator;
 use crate::kernels::{FcRequant, FullyConnected, LayerInput};
@@ -62,51 +62,37 @@ impl FullyConnected<'_, i64> {
         input: LayerInput<'_>,
         output: &mut [i16],
     ) {
-        let width = self.in_features;
-        let Some(block_len) = width.checked_mul(BLOCK_ROWS) else {
-            return;
-        };
         let bounds = (requant.activation_min, requant.activation_max);
-        let mut row_blocks = self.weights.chunks_exact(block_len);
-        let (out_blocks, out_tail) = output.as_chunks_mut::<BLOCK_ROWS>();
-        let (bias_blocks, bias_tail) = self.bias.as_chunks::<BLOCK_ROWS>();
-        let (multiplier_blocks, multiplier_tail) = requant.multipliers.as_chunks();
-        let (shift_blocks, shift_tail) = requant.shifts.as_chunks();
-        let blocks = out_blocks
-            .iter_mut()
-            .zip(row_blocks.by_ref())
-            .zip(bias_blocks)
-            .zip(multiplier_blocks.iter().zip(shift_blocks));
-        for (((out, rows), bias), (multipliers, shifts)) in blocks {
-            let block = RequantBlock16 {
-                multipliers,
-                shifts,
-                bounds,
-            };
-            *out = avx2.requantize_rows_wide(rows, input, bias, block, table);
-        }
-        let tail = out_tail
-            .iter_mut()
-            .zip(row_blocks.remainder().chunks_exact(width))
-            .zip(bias_tail)
-            .zip(multiplier_tail.iter().zip(shift_tail));
-        for (((out, row), bias), (multiplier, shift)) in tail {
-            let mut acc = 0_i64;
-            let bias = core::slice::from_ref(bias);
-            match input {
-                LayerInput::Int8(values) => {
-                    for_each_accumulator(values, row, bias, |sum| acc = sum)
+        for_each_row_block(
+            self,
+            requant,
+            output,
+            |(out, rows, bias, multipliers, shifts)| {
+                let block = RequantBlock16 {
+                    multipliers,
+                    shifts,
+                    bounds,
+                };
+                *out = avx2.requantize_rows_wide(rows, input, bias, block, table);
+            },
+            |(out, row, bias, multiplier, shift)| {
+                let mut acc = 0_i64;
+                let bias = core::slice::from_ref(bias);
+                match input {
+                    LayerInput::Int8(values) => {
+                        for_each_accumulator(values, row, bias, |sum| acc = sum)
+                    }
+                    LayerInput::Int16(values) => {
+                        for_each_accumulator(values, row, bias, |sum| acc = sum)
+                    }
                 }
-                LayerInput::Int16(values) => {
-                    for_each_accumulator(values, row, bias, |sum| acc = sum)
-                }
-            }
-            let y = requantize_s64(acc, *multiplier, *shift, bounds.0, bounds.1);
-            *out = match table {
-                Some(table) => lut16::lookup(table, y),
-                None => y,
-            };
-        }
+                let y = requantize_s64(acc, multiplier, shift, bounds.0, bounds.1);
+                *out = match table {
+                    Some(table) => lut16::lookup(table, y),
+                    None => y,
+                };
+            },
+        );
     }
 }
 

@@ -5,7 +5,7 @@ use super::block::{add_assign, attend, embed_tokens, finish, run_blocks, BlockWo
 use super::block::{FeedForwardSteps, LinearSteps};
 use super::shape::{prefix, take};
 use super::{
-    check_io, BlockLinear, F32Transformer, FeedForward, InputLinear, Part, ScratchBuffer,
+    check_io, BlockLinear, CheckedLinear, F32Transformer, FeedForward, Part, ScratchBuffer,
     TransformerBuffers, TransformerError, TransformerScratch, TransformerShape,
 };
 use crate::kernels::{Activation, KernelError};
@@ -52,9 +52,7 @@ fn check_linear(
     Ok(())
 }
 
-impl BlockLinear for F32Linear<'_> {
-    type Code = f32;
-
+impl CheckedLinear for F32Linear<'_> {
     fn check(
         &self,
         in_features: usize,
@@ -65,15 +63,8 @@ impl BlockLinear for F32Linear<'_> {
     }
 }
 
-impl InputLinear for F32Linear<'_> {
-    fn check(
-        &self,
-        in_features: usize,
-        out_features: usize,
-        part: Part,
-    ) -> Result<(), TransformerError> {
-        check_linear(self, in_features, out_features, Activation::Identity, part)
-    }
+impl BlockLinear for F32Linear<'_> {
+    type Code = f32;
 }
 
 impl FeedForward for F32FeedForward<'_> {

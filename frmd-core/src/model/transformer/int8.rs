@@ -6,7 +6,7 @@ use super::block::{FeedForwardSteps, LinearSteps};
 use super::float::feed_forward_error;
 use super::shape::{prefix, take};
 use super::{
-    check_io, BlockLinear, FeedForward, InputLinear, Int8Transformer, Part, ScratchBuffer,
+    check_io, BlockLinear, CheckedLinear, FeedForward, Int8Transformer, Part, ScratchBuffer,
     TransformerBuffers, TransformerError, TransformerProbe, TransformerScratch,
 };
 use crate::kernels::KernelError;
@@ -100,9 +100,7 @@ fn check_quantized(
     Ok(())
 }
 
-impl BlockLinear for QuantizedLinear<'_> {
-    type Code = i8;
-
+impl CheckedLinear for QuantizedLinear<'_> {
     fn check(
         &self,
         in_features: usize,
@@ -113,7 +111,11 @@ impl BlockLinear for QuantizedLinear<'_> {
     }
 }
 
-impl InputLinear for TokenLinear<'_> {
+impl BlockLinear for QuantizedLinear<'_> {
+    type Code = i8;
+}
+
+impl CheckedLinear for TokenLinear<'_> {
     fn check(
         &self,
         in_features: usize,
@@ -121,7 +123,9 @@ impl InputLinear for TokenLinear<'_> {
         part: Part,
     ) -> Result<(), TransformerError> {
         match self {
-            TokenLinear::Float(layer) => InputLinear::check(layer, in_features, out_features, part),
+            TokenLinear::Float(layer) => {
+                CheckedLinear::check(layer, in_features, out_features, part)
+            }
             TokenLinear::Int8(layer) => check_quantized(layer, in_features, out_features, part),
         }
     }

@@ -108,13 +108,9 @@ impl LayerNormWeights<'_> {
     }
 }
 
-/// A linear layer of a block (`qkv`, `proj`) or the head, in one precision ([`F32Linear`] or
-/// [`QuantizedLinear`]).
-pub trait BlockLinear: Copy {
-    /// Element of the normalized tokens and attention outputs that feed the layer: `f32`, or an
-    /// int8 code.
-    type Code: Copy;
-
+/// A linear layer the backbone checks against its shape: a token input layer (`traj_in`,
+/// `cond_in`: [`F32Linear`] or [`TokenLinear`]) or a [`BlockLinear`].
+pub trait CheckedLinear: Copy {
     /// Checks consistent slices and `in_features -> out_features`.
     fn check(
         &self,
@@ -124,15 +120,12 @@ pub trait BlockLinear: Copy {
     ) -> Result<(), TransformerError>;
 }
 
-/// A token input layer (`traj_in`, `cond_in`): [`F32Linear`] or [`TokenLinear`].
-pub trait InputLinear: Copy {
-    /// Checks consistent slices and `in_features -> out_features`.
-    fn check(
-        &self,
-        in_features: usize,
-        out_features: usize,
-        part: Part,
-    ) -> Result<(), TransformerError>;
+/// A linear layer of a block (`qkv`, `proj`) or the head, in one precision ([`F32Linear`] or
+/// [`QuantizedLinear`]).
+pub trait BlockLinear: CheckedLinear {
+    /// Element of the normalized tokens and attention outputs that feed the layer: `f32`, or an
+    /// int8 code.
+    type Code: Copy;
 }
 
 /// A feed-forward `fc2(gelu(fc1(x)))`: [`F32FeedForward`] or [`Int8FeedForward`].
@@ -204,7 +197,7 @@ impl<L: BlockLinear, FF: FeedForward> Block<'_, L, FF> {
     }
 }
 
-impl<'a, I: InputLinear, L: BlockLinear, FF: FeedForward> Transformer<'a, I, L, FF> {
+impl<'a, I: CheckedLinear, L: BlockLinear, FF: FeedForward> Transformer<'a, I, L, FF> {
     /// Checks every part against the shape (including quantization parameters).
     pub fn validate(&self) -> Result<(), TransformerError> {
         let shape = &self.shape;

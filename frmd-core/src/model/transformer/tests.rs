@@ -9,7 +9,7 @@ mod fixture;
 use super::*;
 use crate::kernels::KernelError;
 use crate::rng::Rng;
-use fixture::{big_scratch, calibrated, random_inputs, FloatModel};
+use fixture::{big_scratch, calibrated, random_inputs, BothForms, FloatModel};
 use std::{vec, vec::Vec};
 
 const SMALL: TransformerShape = TransformerShape {
@@ -123,10 +123,8 @@ fn int8_error(
 ) -> Comparison {
     let mut rng = Rng::new(seed ^ 0xCA11);
     let (model, quant) = calibrated(shape, seed, &mut rng, runs.0);
-    let f32_blocks = model.f32_blocks();
-    let float_net = model.f32_view(&f32_blocks);
-    let int8_blocks = quant.blocks(&model);
-    let net = quant.view(&model, &int8_blocks, float_inputs);
+    let forms = BothForms::new(&model, &quant);
+    let (float_net, net) = forms.views(float_inputs);
     let mut scratch = big_scratch();
     let (mut max_error, mut lo, mut hi) = (0.0_f32, f32::MAX, f32::MIN);
     let (mut sum_sq, mut count) = (0.0_f64, 0_usize);
@@ -216,10 +214,8 @@ fn float_input_layers_are_supported_in_the_int8_path() {
 fn deterministic_and_independent_of_scratch_contents() {
     let mut rng = Rng::new(6);
     let (model, quant) = calibrated(SMALL, 5, &mut rng, 50);
-    let f32_blocks = model.f32_blocks();
-    let float_net = model.f32_view(&f32_blocks);
-    let int8_blocks = quant.blocks(&model);
-    let net = quant.view(&model, &int8_blocks, false);
+    let forms = BothForms::new(&model, &quant);
+    let (float_net, net) = forms.views(false);
     let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
     let run = |dirty: bool| {
         let mut scratch = big_scratch();
@@ -256,10 +252,8 @@ fn exact_scratch_sizes_suffice_and_one_less_fails() {
     const Q: ScratchLens = SMALL.int8_scratch();
     let mut rng = Rng::new(9);
     let (model, quant) = calibrated(SMALL, 8, &mut rng, 20);
-    let f32_blocks = model.f32_blocks();
-    let float_net = model.f32_view(&f32_blocks);
-    let int8_blocks = quant.blocks(&model);
-    let net = quant.view(&model, &int8_blocks, false);
+    let forms = BothForms::new(&model, &quant);
+    let (float_net, net) = forms.views(false);
     let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
     let mut out = [0.0_f32; 8];
     let mut exact = TransformerScratch::<{ F.floats }, 0, 0>::new();

@@ -225,6 +225,18 @@ pub enum HeadConfig {
     Raw,
 }
 
+impl HeadConfig {
+    /// A ProDMP head of `num_basis` basis functions per DoF with direct output and the basis
+    /// unscaled (what a checkpoint without the two newer fields reads as).
+    pub fn prodmp(num_basis: usize) -> Self {
+        HeadConfig::ProDmp {
+            num_basis,
+            output: ProDmpOutput::Direct,
+            auto_scale_basis: false,
+        }
+    }
+}
+
 /// Everything that fixes the network's variables and its input/output layout.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelConfig {

@@ -5,8 +5,9 @@ use crate::train::recipe::{DpRun, StudentRun, TeacherRun, TrainConfig};
 use clap::Parser;
 use std::path::PathBuf;
 
-fn parse(args: &[&str]) -> TrainCommand {
-    match Cli::try_parse_from(args)
+/// The train command of a command line (words split at white space).
+fn parse(line: &str) -> TrainCommand {
+    match Cli::try_parse_from(line.split_whitespace())
         .expect("valid command line")
         .command
     {
@@ -22,9 +23,7 @@ fn paths(mut cfg: TrainConfig, data: &str, out: &str) -> TrainConfig {
 
 #[test]
 fn bare_teacher_command_is_the_teacher_recipe() {
-    let TrainCommand::Teacher(args) =
-        parse(&["frmd", "train", "teacher", "--data", "d", "--out", "o"])
-    else {
+    let TrainCommand::Teacher(args) = parse("frmd train teacher --data d --out o") else {
         panic!("teacher")
     };
     let run = TeacherRun::from(args);
@@ -42,17 +41,8 @@ fn bare_teacher_command_is_the_teacher_recipe() {
 
 #[test]
 fn bare_student_and_dp_commands_are_their_recipes() {
-    let TrainCommand::Student(args) = parse(&[
-        "frmd",
-        "train",
-        "student",
-        "--teacher",
-        "t",
-        "--data",
-        "d",
-        "--out",
-        "o",
-    ]) else {
+    let TrainCommand::Student(args) = parse("frmd train student --teacher t --data d --out o")
+    else {
         panic!("student")
     };
     let run = StudentRun::from(args);
@@ -69,8 +59,7 @@ fn bare_student_and_dp_commands_are_their_recipes() {
         (3_000, 1e-4, 100)
     );
 
-    let TrainCommand::Dp(args) = parse(&["frmd", "train", "dp", "--data", "d", "--out", "o"])
-    else {
+    let TrainCommand::Dp(args) = parse("frmd train dp --data d --out o") else {
         panic!("dp")
     };
     let run = DpRun::from(args);
@@ -85,23 +74,7 @@ fn bare_student_and_dp_commands_are_their_recipes() {
 
 #[test]
 fn schedule_flags_override_the_recipe() {
-    let TrainCommand::Teacher(args) = parse(&[
-        "frmd",
-        "train",
-        "teacher",
-        "--data",
-        "d",
-        "--out",
-        "o",
-        "--steps",
-        "7",
-        "--lr",
-        "0.5",
-        "--warmup",
-        "2",
-        "--auto-scale-basis",
-        "false",
-    ]) else {
+    let TrainCommand::Teacher(args) = parse("frmd train teacher --data d --out o --steps 7 --lr 0.5 --warmup 2 --auto-scale-basis false") else {
         panic!("teacher")
     };
     let run = TeacherRun::from(args);

@@ -108,23 +108,14 @@ fn boundary_skip_student_is_the_identity_at_sigma_min() {
 }
 
 #[test]
-fn direct_output_is_the_decoded_trajectory() {
+fn direct_output_is_the_decoded_trajectory() -> anyhow::Result<()> {
     let (net, _, cond, _, x) = setup(ProDmpOutput::Direct);
     let sig = SigmaConfig::default();
     let sigmas = [0.7; BATCH];
-    let g = decoded(&net.net, &sig, &x, &cond, &sigmas).unwrap();
-    assert_eq!(
-        teacher_denoise(&net.net, &sig, &x, &cond, &sigmas)
-            .unwrap()
-            .to_vec2::<f32>()
-            .unwrap(),
-        g.to_vec2::<f32>().unwrap()
-    );
-    assert_eq!(
-        consistency(&net.net, &sig, &x, &cond, &sigmas)
-            .unwrap()
-            .to_vec2::<f32>()
-            .unwrap(),
-        g.to_vec2::<f32>().unwrap()
-    );
+    let g = decoded(&net.net, &sig, &x, &cond, &sigmas)?.to_vec2::<f32>()?;
+    let denoised = teacher_denoise(&net.net, &sig, &x, &cond, &sigmas)?;
+    assert_eq!(denoised.to_vec2::<f32>()?, g);
+    let consistent = consistency(&net.net, &sig, &x, &cond, &sigmas)?;
+    assert_eq!(consistent.to_vec2::<f32>()?, g);
+    Ok(())
 }

@@ -86,13 +86,24 @@ fn random(shape: (usize, usize), rng: &mut HostRng) -> Tensor {
     Tensor::from_vec(values, shape, &Device::Cpu).unwrap()
 }
 
-#[test]
-fn matches_the_broadcast_form_in_values_and_gradients() {
-    let s = sizes();
+/// A transformer of [`sizes`] under `transformer.` in a fresh `VarMap`, seeded with `seed`.
+fn seeded_model(seed: u64) -> anyhow::Result<(VarMap, Transformer)> {
     let varmap = VarMap::new();
     let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
-    let model = Transformer::new(&s, vb.pp("transformer")).unwrap();
-    init_seeded(&varmap, 3).unwrap();
+    let model = Transformer::new(&sizes(), vb.pp("transformer"))?;
+    init_seeded(&varmap, seed)?;
+    Ok((varmap, model))
+}
+
+/// The largest magnitude in `t`.
+fn max_abs(t: &Tensor) -> Result<f32> {
+    t.abs()?.max_all()?.to_scalar::<f32>()
+}
+
+#[test]
+fn matches_the_broadcast_form_in_values_and_gradients() -> anyhow::Result<()> {
+    let s = sizes();
+    let (varmap, model) = seeded_model(3)?;
     // Non-trivial biases, gains and offsets (the seeded init sets them to 0 and 1).
     let mut rng = HostRng::derive(9, "transformer-test");
     for (name, var) in sorted_vars(&varmap) {
@@ -100,8 +111,7 @@ fn matches_the_broadcast_form_in_values_and_gradients() {
             let n = var.dims()[0];
             let offset = if name.ends_with(".weight") { 1.0 } else { 0.0 };
             let values: Vec<f32> = (0..n).map(|_| offset + 0.3 * rng.normal() as f32).collect();
-            var.set(&Tensor::from_vec(values, n, &Device::Cpu).unwrap())
-                .unwrap();
+            var.set(&Tensor::from_vec(values, n, &Device::Cpu)?)?;
         }
     }
     let batch = 4;
@@ -109,36 +119,23 @@ fn matches_the_broadcast_form_in_values_and_gradients() {
     let cond = random((batch, s.cond_dim), &mut rng);
     let emb = random((batch, s.embed_dim), &mut rng);
     let target = random((batch, s.output), &mut rng);
-    let ours = model.forward(&x, &cond, &emb).unwrap();
+    let ours = model.forward(&x, &cond, &emb)?;
     let tensors: HashMap<String, Tensor> = sorted_vars(&varmap)
         .into_iter()
         .map(|(n, v)| (n, v.as_tensor().clone()))
         .collect();
-    let reference = reference_forward(&tensors, &s, &x, &cond, &emb).unwrap();
-    let value_error = (&ours - &reference)
-        .unwrap()
-        .abs()
-        .unwrap()
-        .max_all()
-        .unwrap()
-        .to_scalar::<f32>()
-        .unwrap();
-    let scale = reference
-        .abs()
-        .unwrap()
-        .max_all()
-        .unwrap()
-        .to_scalar::<f32>()
-        .unwrap();
+    let reference = reference_forward(&tensors, &s, &x, &cond, &emb)?;
+    let value_error = max_abs(&(&ours - &reference)?)?;
+    let scale = max_abs(&reference)?;
     assert!(scale > 0.1, "degenerate output (max |y| = {scale})");
     assert!(
         value_error <= 2e-5 * scale,
         "forward differs by {value_error} (output scale {scale})"
     );
 
-    let loss = |y: &Tensor| (y - &target).unwrap().sqr().unwrap().sum_all().unwrap();
-    let ours_grads = loss(&ours).backward().unwrap();
-    let reference_grads = loss(&reference).backward().unwrap();
+    let loss = |y: &Tensor| (y - &target)?.sqr()?.sum_all();
+    let ours_grads = loss(&ours)?.backward()?;
+    let reference_grads = loss(&reference)?.backward()?;
     let vars = sorted_vars(&varmap);
     assert_eq!(vars.len(), 5 * 2 + 2 * s.layers * 6 + 1, "variable count");
     for (name, var) in vars {
@@ -148,61 +145,35 @@ fn matches_the_broadcast_form_in_values_and_gradients() {
         let r = reference_grads
             .get(var.as_tensor())
             .unwrap_or_else(|| panic!("reference: no gradient for `{name}`"));
-        let norm = r
-            .abs()
-            .unwrap()
-            .max_all()
-            .unwrap()
-            .to_scalar::<f32>()
-            .unwrap();
-        let diff = (g - r)
-            .unwrap()
-            .abs()
-            .unwrap()
-            .max_all()
-            .unwrap()
-            .to_scalar::<f32>()
-            .unwrap();
+        let norm = max_abs(r)?;
+        let diff = max_abs(&(g - r)?)?;
         assert!(norm > 0.0, "`{name}` has an all-zero gradient");
         assert!(
             diff <= 1e-4 * norm,
             "`{name}`: gradient differs by {diff} (max |grad| {norm})"
         );
     }
+    Ok(())
 }
 
 #[test]
-fn batch_rows_do_not_interact() {
+fn batch_rows_do_not_interact() -> anyhow::Result<()> {
     // Row b of a batch equals the same input run alone (the ones-matmuls must not mix rows).
     let s = sizes();
-    let varmap = VarMap::new();
-    let model = Transformer::new(
-        &s,
-        VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu).pp("transformer"),
-    )
-    .unwrap();
-    init_seeded(&varmap, 5).unwrap();
+    let (_varmap, model) = seeded_model(5)?;
     let mut rng = HostRng::derive(11, "rows");
     let x = random((3, s.horizon * s.action_dim), &mut rng);
     let cond = random((3, s.cond_dim), &mut rng);
     let emb = random((3, s.embed_dim), &mut rng);
-    let all = model.forward(&x, &cond, &emb).unwrap();
+    let all = model.forward(&x, &cond, &emb)?;
     for b in 0..3 {
-        let one = model
-            .forward(
-                &x.narrow(0, b, 1).unwrap(),
-                &cond.narrow(0, b, 1).unwrap(),
-                &emb.narrow(0, b, 1).unwrap(),
-            )
-            .unwrap();
-        let diff = (one - all.narrow(0, b, 1).unwrap())
-            .unwrap()
-            .abs()
-            .unwrap()
-            .max_all()
-            .unwrap()
-            .to_scalar::<f32>()
-            .unwrap();
+        let one = model.forward(
+            &x.narrow(0, b, 1)?,
+            &cond.narrow(0, b, 1)?,
+            &emb.narrow(0, b, 1)?,
+        )?;
+        let diff = max_abs(&(one - all.narrow(0, b, 1)?)?)?;
         assert!(diff < 1e-5, "row {b} differs by {diff}");
     }
+    Ok(())
 }

@@ -88,6 +88,21 @@ pub fn line_value<'a>(stdout: &'a str, key: &str) -> Option<&'a str> {
         .find_map(|line| line.strip_prefix(prefix.as_str()))
 }
 
+/// Runs `image` on each of `boards` and asserts that it prints `digest: ` with `host_digest`
+/// (the bytes the host computed; `what` names them in the failure); logs every run on one line.
+pub fn assert_digest_on(root: &Path, boards: &[&str], image: &str, host_digest: u64, what: &str) {
+    let expected = format!("digest: {host_digest:016x}");
+    for board in boards {
+        let stdout = run(root, board, image);
+        assert_eq!(
+            digest_line(&stdout),
+            Some(expected.as_str()),
+            "{image} firmware on {board} computed different bytes than {what}:\n{stdout}"
+        );
+        eprintln!("{image} {board}: {}", one_line(&stdout));
+    }
+}
+
 /// All output lines joined by ` | `, for one-line logging.
 pub fn one_line(stdout: &str) -> String {
     stdout.lines().collect::<Vec<_>>().join(" | ")

@@ -2,7 +2,7 @@
 
 extern crate std;
 
-use super::fixture::{big_scratch, calibrated, random_inputs};
+use super::fixture::{big_scratch, calibrated, random_inputs, BothForms, FloatModel, QuantModel};
 use super::SMALL;
 use crate::kernels::{Activation, KernelError};
 use crate::model::linear::QuantizedLinear;
@@ -16,7 +16,7 @@ fn validate_edited<'a, I, L, FF>(
     edit: impl FnOnce(&mut [Block<'a, L, FF>]),
 ) -> Result<(), TransformerError>
 where
-    I: InputLinear,
+    I: CheckedLinear,
     L: BlockLinear,
     FF: FeedForward,
 {
@@ -29,14 +29,19 @@ where
     .validate()
 }
 
+/// The [`SMALL`] model of `seed` calibrated on 10 inputs from `Rng::new(inputs)`, and that
+/// stream, which the test goes on drawing from.
+fn small_model(seed: u64, inputs: u64) -> (Rng, FloatModel, QuantModel) {
+    let mut rng = Rng::new(inputs);
+    let (model, quant) = calibrated(SMALL, seed, &mut rng, 10);
+    (rng, model, quant)
+}
+
 #[test]
 fn named_errors_for_bad_shapes_weights_and_arguments() {
-    let mut rng = Rng::new(22);
-    let (model, quant) = calibrated(SMALL, 21, &mut rng, 10);
-    let blocks = model.f32_blocks();
-    let net = model.f32_view(&blocks);
-    let int8_blocks = quant.blocks(&model);
-    let int8 = quant.view(&model, &int8_blocks, false);
+    let (mut rng, model, quant) = small_model(21, 22);
+    let forms = BothForms::new(&model, &quant);
+    let (net, int8) = forms.views(false);
     let (trajectory, condition) = random_inputs(&mut rng, &SMALL);
     let mut out = [0.0_f32; 8];
     let mut scratch = big_scratch();
@@ -75,26 +80,20 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
         Err(E::Features { part: Part::CondIn })
     );
     // Weights.
-    let positions = F32Transformer {
+    let short_positions = F32Transformer {
         positions: &model.positions[1..],
         ..net
     };
-    assert_eq!(
-        positions.validate(),
-        Err(E::Features {
-            part: Part::Positions
-        })
-    );
-    let noise = F32Transformer {
+    let short_noise = F32Transformer {
         noise_token: &model.noise_token[1..],
         ..net
     };
-    assert_eq!(
-        noise.validate(),
-        Err(E::Features {
-            part: Part::NoiseToken
-        })
-    );
+    for (edited, part) in [
+        (short_positions, Part::Positions),
+        (short_noise, Part::NoiseToken),
+    ] {
+        assert_eq!(edited.validate(), Err(E::Features { part }));
+    }
     assert_eq!(
         validate_edited(&net, |b| {
             b[1].qkv.out_features = 47;
@@ -203,38 +202,20 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
     // Noise-token folding.
     let mut token = [0.0_f32; 16];
     let noise_in = model.noise_in.view();
+    let fold = |embedding: &[f32], token: &mut [f32]| {
+        fold_noise_token(&SMALL, &noise_in, embedding, &model.positions, token)
+    };
     assert_eq!(
-        fold_noise_token(
-            &SMALL,
-            &noise_in,
-            &model.embedding[1..],
-            &model.positions,
-            &mut token
-        ),
+        fold(&model.embedding[1..], &mut token),
         Err(E::EmbeddingLength)
     );
     assert_eq!(
-        fold_noise_token(
-            &SMALL,
-            &noise_in,
-            &model.embedding,
-            &model.positions,
-            &mut token[1..]
-        ),
+        fold(&model.embedding, &mut token[1..]),
         Err(E::Features {
             part: Part::NoiseToken
         })
     );
-    assert_eq!(
-        fold_noise_token(
-            &SMALL,
-            &noise_in,
-            &model.embedding,
-            &model.positions,
-            &mut token
-        ),
-        Ok(())
-    );
+    assert_eq!(fold(&model.embedding, &mut token), Ok(()));
     assert_eq!(token.as_slice(), model.noise_token.as_slice());
 }
 
@@ -243,12 +224,9 @@ fn named_errors_for_bad_shapes_weights_and_arguments() {
 #[test]
 fn random_corruptions_return_errors_without_panicking() {
     use crate::model::linear::F32Linear;
-    let mut rng = Rng::new(32);
-    let (model, quant) = calibrated(SMALL, 31, &mut rng, 10);
-    let blocks = model.f32_blocks();
-    let net = model.f32_view(&blocks);
-    let int8_blocks = quant.blocks(&model);
-    let int8 = quant.view(&model, &int8_blocks, false);
+    let (mut rng, model, quant) = small_model(31, 32);
+    let forms = BothForms::new(&model, &quant);
+    let (net, int8) = forms.views(false);
     let floats = std::vec![0.25_f32; 4096];
     let codes = std::vec![1_i8; 4096];
     let words = std::vec![0_i32; 4096];
@@ -258,7 +236,7 @@ fn random_corruptions_return_errors_without_panicking() {
     let mut pick = |n: usize| rng.next_u32() as usize % n;
     for _ in 0..3000 {
         let (mut f, mut q) = (net, int8);
-        let (mut f_blocks, mut q_blocks) = (blocks.clone(), int8_blocks.clone());
+        let (mut f_blocks, mut q_blocks) = (net.blocks.to_vec(), int8.blocks.to_vec());
         let size = pick(40);
         let layer = pick(2);
         match pick(14) {

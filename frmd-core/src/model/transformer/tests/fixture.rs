@@ -265,6 +265,32 @@ pub fn calibrated(
     (model, quant)
 }
 
+/// The blocks of a calibrated model in both forms, which the two transformers borrow.
+pub struct BothForms<'a> {
+    model: &'a FloatModel,
+    quant: &'a QuantModel,
+    f32_blocks: Vec<F32Block<'a>>,
+    int8_blocks: Vec<Int8Block<'a>>,
+}
+
+impl<'a> BothForms<'a> {
+    pub fn new(model: &'a FloatModel, quant: &'a QuantModel) -> Self {
+        Self {
+            model,
+            quant,
+            f32_blocks: model.f32_blocks(),
+            int8_blocks: quant.blocks(model),
+        }
+    }
+
+    /// The f32 transformer and the int8 one (`float_inputs` as in [`QuantModel::view`]).
+    pub fn views(&'a self, float_inputs: bool) -> (F32Transformer<'a>, Int8Transformer<'a>) {
+        let float = self.model.f32_view(&self.f32_blocks);
+        let int8 = self.quant.view(self.model, &self.int8_blocks, float_inputs);
+        (float, int8)
+    }
+}
+
 /// A linear layer quantized for input parameters `input` (exporter recipe).
 pub struct QLin {
     pub input: QuantParams,
