@@ -2,15 +2,22 @@
 //! `-stages` twin (which measures the same policy first, then breaks it down).
 
 use frmd_core::model::transformer::{Int8Transformer, TransformerScratch};
-use frmd_core::policy::{Int8MlpNetwork, Int8TransformerNetwork, Network, Policy};
-use frmd_firmware_support::policy_workload::{policy_act_macs, PolicyWorkload, STUDENT_NAME};
+use frmd_core::policy::{
+    Int16MlpNetwork, Int8MlpNetwork, Int8TransformerNetwork, Network, Policy, PolicyError,
+};
+use frmd_firmware_support::policy_workload::{
+    policy_act_macs, PolicyWorkload, STUDENT16_NAME, STUDENT_NAME,
+};
 use frmd_firmware_support::shape::{
     DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
 };
 
 use crate::memory::StackProbe;
 use crate::report::exit_failure;
-use crate::{baked_student as student, baked_synthetic_policy, baked_transformer};
+use crate::{
+    baked_student as student, baked_student16 as student16, baked_synthetic_policy,
+    baked_transformer,
+};
 
 /// The baked student's workload (`Policy::act` of the trained one-step MLP, or of another network
 /// `Net` with the student's sizes).
@@ -28,7 +35,37 @@ pub type StudentWorkload<Net = Int8MlpNetwork<'static, { student::SCRATCH_WIDTH 
 
 /// The baked student's policy as a workload that states its multiply-accumulates.
 pub fn student_workload() -> StudentWorkload {
-    let policy = match student::policy(&mut student::Storage::new()) {
+    baked_student_workload(student::policy(&mut student::Storage::new()), STUDENT_NAME)
+}
+
+/// The same student exported with int16 activations (the `policy16` image).
+pub fn student16_workload(
+) -> StudentWorkload<Int16MlpNetwork<'static, { student16::SCRATCH_WIDTH }>> {
+    baked_student_workload(
+        student16::policy(&mut student16::Storage::new()),
+        STUDENT16_NAME,
+    )
+}
+
+/// A baked policy of the student's sizes as a workload named `name` (firmware failure if the
+/// policy did not build).
+fn baked_student_workload<Net: Network>(
+    policy: Result<
+        Policy<
+            'static,
+            Net,
+            { student::HISTORY },
+            { student::OBS_DIM },
+            { student::ACTION_DIM },
+            { student::HORIZON },
+            { student::PARAMS_PER_DOF },
+            { student::INPUT_WIDTH },
+        >,
+        PolicyError,
+    >,
+    name: &'static str,
+) -> StudentWorkload<Net> {
+    let policy = match policy {
         Ok(policy) => policy,
         Err(error) => exit_failure(&error),
     };
@@ -38,7 +75,7 @@ pub fn student_workload() -> StudentWorkload {
         student::ACTION_DIM,
         student::PARAMS_PER_DOF,
     );
-    PolicyWorkload::with_name(policy, STUDENT_NAME).with_macs(macs)
+    PolicyWorkload::with_name(policy, name).with_macs(macs)
 }
 
 /// Printed as the transformer images' `workload:` line.
