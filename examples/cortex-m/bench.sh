@@ -29,7 +29,7 @@ mkdir -p "$out_dir"
 
 staged=()
 for image in "${images[@]}"; do
-    case "$image" in policy|transformer) staged+=("$image") ;; esac
+    case "$image" in policy|policy16|transformer) staged+=("$image") ;; esac
 done
 fits() { # image core -> whether the image fits the core's board
     case "$1-$2" in

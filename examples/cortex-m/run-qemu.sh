@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds the FRMD firmware (release) for a core and runs it under QEMU with instruction counting:
 #
-#   bash examples/cortex-m/run-qemu.sh m4|m7|m33|m0|m55 [prodmp|mlp|policy|policy16|transformer|policy-stages|transformer-stages|kernels|minimal] [extra cargo build args]
+#   bash examples/cortex-m/run-qemu.sh m4|m7|m33|m0|m55 [prodmp|mlp|policy|policy16|transformer|policy-stages|policy16-stages|transformer-stages|kernels|minimal] [extra cargo build args]
 #
 #   m4:  thumbv7em-none-eabihf,     -machine mps2-an386  -cpu cortex-m4  (Cortex-M4F)
 #   m7:  thumbv7em-none-eabihf,     -machine mps2-an500  -cpu cortex-m7  (Cortex-M7, same ELF)
@@ -45,7 +45,7 @@ case "$board" in
     m33) machine=mps2-an505; cpu=cortex-m33; target=thumbv8m.main-none-eabihf ;;
     m0) machine=microbit; cpu=cortex-m0; target=thumbv6m-none-eabi ;;
     m55) machine=mps3-an547; cpu=cortex-m55; target=thumbv8m.main-none-eabihf; memory_map=an547 ;;
-    *) echo "usage: $0 m4|m7|m33|m0|m55 [prodmp|mlp|policy|policy16|transformer|policy-stages|transformer-stages|kernels|minimal] [extra cargo build args]" >&2; exit 2 ;;
+    *) echo "usage: $0 m4|m7|m33|m0|m55 [prodmp|mlp|policy|policy16|transformer|policy-stages|policy16-stages|transformer-stages|kernels|minimal] [extra cargo build args]" >&2; exit 2 ;;
 esac
 shift
 bin=frmd-cortex-m
@@ -56,6 +56,7 @@ case "${1:-}" in
     policy16) bin=frmd-cortex-m-policy16; shift ;;
     transformer) bin=frmd-cortex-m-transformer; shift ;;
     policy-stages) bin=frmd-cortex-m-policy-stages; shift ;;
+    policy16-stages) bin=frmd-cortex-m-policy16-stages; shift ;;
     kernels) bin=frmd-cortex-m-kernels; shift ;;
     minimal) bin=frmd-minimal; shift ;;
     transformer-stages) bin=frmd-cortex-m-transformer-stages; shift ;;

@@ -1,13 +1,18 @@
 //! The policies the `policy` and `transformer` images measure, shared by each image and its
 //! `-stages` twin (which measures the same policy first, then breaks it down).
 
+use frmd_core::model::mlp::{InputPrecision, MlpPrecision};
 use frmd_core::model::transformer::{Int8Transformer, TransformerScratch};
 use frmd_core::policy::{
     Int16MlpNetwork, Int8MlpNetwork, Int8TransformerNetwork, Network, Policy, PolicyError,
+    QuantMlpNetwork, MAX_HIDDEN_LAYERS,
 };
 use frmd_firmware_support::policy_workload::{
-    policy_act_macs, PolicyWorkload, STUDENT16_NAME, STUDENT_NAME,
+    policy_act_macs, PolicyWorkload, CASES, STUDENT16_NAME, STUDENT_NAME,
 };
+use frmd_firmware_support::stages::{mlp_marks, StagedMlpNetwork};
+
+use crate::timer::Calibration;
 use frmd_firmware_support::shape::{
     DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
 };
@@ -44,6 +49,60 @@ pub fn student16_workload(
     baked_student_workload(
         student16::policy(&mut student16::Storage::new()),
         STUDENT16_NAME,
+    )
+}
+
+/// A stages image: measures `workload` as its policy image does (same report lines and digest),
+/// then breaks the same student down by stage, `network` (the baked module's) running frmd-core's
+/// staged forward pass with the SysTick clock (`stage` lines, src/stage_report.rs).
+pub fn student_stages<P: MlpPrecision, const W: usize>(
+    workload: impl FnOnce() -> StudentWorkload<QuantMlpNetwork<'static, P, W>>,
+    network: impl FnOnce() -> Result<QuantMlpNetwork<'static, P, W>, PolicyError>,
+    name: &'static str,
+) -> ! {
+    let stack = crate::bench::start();
+    let mut workload = workload();
+    crate::bench::run_then::<_, { CASES * 5 }>(&mut workload, stack, |_, calibration, digest| {
+        // Not inlined into the measurement: its frame (a second policy) stays out of its stack.
+        if let Err(error) = student_breakdown(network(), name, calibration, digest) {
+            exit_failure(&error);
+        }
+    })
+}
+
+/// The per-stage breakdown of a baked student's `network` (see [`student_stages`]).
+#[inline(never)]
+fn student_breakdown<P: MlpPrecision, const W: usize>(
+    network: Result<QuantMlpNetwork<'static, P, W>, PolicyError>,
+    name: &'static str,
+    calibration: &Calibration,
+    digest: u64,
+) -> Result<(), PolicyError> {
+    let network = network?;
+    let mut macs: [u64; MAX_HIDDEN_LAYERS + 1] = [0; MAX_HIDDEN_LAYERS + 1];
+    let mut layers = 0;
+    for (slot, (inputs, outputs)) in macs.iter_mut().zip(network.layer_shapes()) {
+        *slot = (inputs * outputs) as u64;
+        layers += 1;
+    }
+    if network.input_precision() == InputPrecision::TwoPlane {
+        // The first layer's kernel runs on both input planes.
+        macs[0] *= 2;
+    }
+    let hidden = layers - 1;
+    let output_macs = macs[hidden];
+    let staged = StagedMlpNetwork::<P, { mlp_marks(MAX_HIDDEN_LAYERS) }, W>::new(
+        network,
+        crate::stage_report::systick,
+    )?;
+    let policy = Policy::new(student::config(), staged)?;
+    let mut staged: StudentWorkload<_> = PolicyWorkload::with_name(policy, name);
+    crate::stage_report::mlp_policy(
+        &mut staged,
+        &macs[..hidden],
+        output_macs,
+        calibration,
+        digest,
     )
 }
 
