@@ -154,7 +154,8 @@ class Runner:
             self.run(f"{task}-s{seed}-dp", run / "dp" / "frmd.json",
                      [f, "train", "dp", *common, *steps, "--out", str(run / "dp")])
         self.run(f"{task}-s{seed}-export", run / "baked" / "export.json",
-                 [f, "export", "--ckpt", str(run / "student"), "--out", str(run / "baked")])
+                 [f, "export", "--ckpt", str(run / "student"), "--out", str(run / "baked"),
+                  "--activations", "int8"])
         if self.cfg.int16:
             self.run(f"{task}-s{seed}-export16", run / "baked16" / "export.json",
                      [f, "export", "--ckpt", str(run / "student"), "--out", str(run / "baked16"),

@@ -122,7 +122,7 @@ pub fn reach_student(
         },
     )?;
     let int16 = ExportOptions {
-        activations: Activations::Int16,
+        activations: Some(Activations::Int16),
         ..ExportOptions::default()
     };
     let int16 = match backbone {
@@ -132,7 +132,11 @@ pub fn reach_student(
         }
         _ => None,
     };
-    let core = match frmd_export::export(dir, &ExportOptions::default(), None) {
+    let int8 = ExportOptions {
+        activations: Some(Activations::Int8),
+        ..ExportOptions::default()
+    };
+    let core = match frmd_export::export(dir, &int8, None) {
         Ok(student) => {
             let blob = student.blob().to_vec();
             Ok(CorePolicies {
