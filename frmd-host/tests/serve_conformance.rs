@@ -43,7 +43,11 @@ struct Stdio1 {
 
 impl Stdio1 {
     fn start(args: &[&str], float_type: FloatType) -> Self {
-        let mut child = serve_command(args)
+        Self::spawn(&mut serve_command(args), float_type)
+    }
+
+    fn spawn(command: &mut Command, float_type: FloatType) -> Self {
+        let mut child = command
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .spawn()
@@ -370,4 +374,27 @@ fn dt_is_an_f32_widened_and_f64_values_beyond_f32_are_policy_failures() {
         assert_eq!(server.request(&Request::Close), Reply::CloseOk);
         assert_eq!(server.close_input_and_wait().code(), Some(0));
     }
+}
+
+#[test]
+fn an_export_finds_its_checkpoint_from_any_working_directory() {
+    // The fixture ran `frmd export --ckpt s --out baked` in its directory: export.json names the
+    // checkpoint relative to baked/, so a server started elsewhere still announces its dt.
+    let info: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(fixture().join("baked/export.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(info["checkpoint"], "../s");
+    let baked = fixture().join("baked");
+    let mut command = serve_command(&["--baked", baked.to_str().unwrap()]);
+    let mut server = Stdio1::spawn(
+        command.current_dir(scratch("serve-elsewhere")),
+        FloatType::F32,
+    );
+    let Reply::HelloOk(hello) = server.request(&Request::Hello) else {
+        panic!("no HELLO_OK")
+    };
+    assert!(hello.dt > 0.0, "{hello:?}");
+    assert_eq!(server.request(&Request::Close), Reply::CloseOk);
+    assert_eq!(server.close_input_and_wait().code(), Some(0));
 }
