@@ -95,7 +95,9 @@ struct Loaded {
 impl Loaded {
     fn load(py: Python<'_>, n: usize, source: PolicySource, cfg: ServeConfig) -> PyResult<Self> {
         if n == 0 {
-            return Err(PyValueError::new_err("n must be at least 1"));
+            return Err(PyValueError::new_err(
+                "batch must be at least 1 (batch=1: one episode)",
+            ));
         }
         let policies = py
             .detach(|| {
@@ -318,6 +320,12 @@ impl Policy {
     #[getter]
     fn exec_steps(&self) -> u16 {
         self.0.info.exec_steps
+    }
+    /// Whether values are handled as f64 (`float64=True`, `frmd serve --float f64`); otherwise
+    /// observations are rounded to f32 as the f32 wire would carry them.
+    #[getter]
+    fn float64(&self) -> bool {
+        self.0.info.float_type == FloatType::F64
     }
     /// Control period in seconds (0: unknown; the previous action's rate is then 0).
     #[getter]

@@ -2,6 +2,7 @@
 //! wire, for bindings (the Python package `frmd-host/python`) and programs that link frmd-host.
 //! Same policy, same seed, same `executed` sequence: the same chunks as the server, bit for bit.
 use super::error::ProtocolError;
+use super::frame::FloatType;
 use super::load::{load, PolicySource, ServeConfig, Served};
 use super::reply::{Chunk, ModelInfo};
 use super::session::Session;
@@ -65,6 +66,7 @@ impl LocalPolicy {
     /// Starts an episode (RESET): noise seeded by `seed`, `init_action` as the previous action
     /// (empty: the default).
     pub fn reset(&mut self, seed: u64, init_action: Vec<f64>) -> Result<(), ProtocolError> {
+        let init_action = self.on_wire(init_action);
         self.session
             .reset(seed, init_action, &mut self.served.policy)
     }
@@ -76,6 +78,19 @@ impl LocalPolicy {
 
     /// The next chunk (ACT) after `executed` actions of the last one were commanded.
     pub fn act(&mut self, executed: u32, obs: Vec<f64>) -> Result<Chunk, ProtocolError> {
+        let obs = self.on_wire(obs);
         self.session.act(executed, obs, &mut self.served.policy)
+    }
+
+    /// `values` as the wire would carry them: rounded to f32 when the announced float type is
+    /// f32, so a value beyond f32's range becomes infinite and is refused as NON_FINITE, as the
+    /// server refuses it.
+    fn on_wire(&self, mut values: Vec<f64>) -> Vec<f64> {
+        if self.served.info.float_type == FloatType::F32 {
+            for v in &mut values {
+                *v = f64::from(*v as f32);
+            }
+        }
+        values
     }
 }
