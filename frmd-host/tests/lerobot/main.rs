@@ -321,3 +321,35 @@ fn an_imported_dataset_trains_and_evaluates_through_the_cli() {
     assert_eq!(json["episodes"], 2);
     let _ = std::fs::remove_dir_all(Path::new(&dir));
 }
+
+/// The datasets of frmd-host/tests/data/lerobot/ were written by pyarrow (LeRobot's own writer)
+/// with frmd-host/python/tests/lerobot_writer.py from `frmd collect --task reach --episodes 3
+/// --seed 5`: both layouts import to exactly those demonstrations.
+#[test]
+fn datasets_written_by_pyarrow_import_exactly() {
+    let dir = scratch("lerobot-pyarrow");
+    frmd_ok(
+        &dir,
+        &words("collect --task reach --episodes 3 --seed 5 --out demos.safetensors"),
+    );
+    let demos = Dataset::load(&dir.join("demos.safetensors")).unwrap();
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/lerobot");
+    for (version, layout) in [("v2.1", Layout::V2), ("v3.0", Layout::V3)] {
+        let cfg = ImportConfig {
+            task: Some("reach".into()),
+            ..ImportConfig::default()
+        };
+        let imported = import(&data.join(format!("reach-{version}")), &cfg).unwrap();
+        let d = &imported.dataset;
+        assert_eq!(
+            (imported.layout, imported.version.as_str()),
+            (layout, version)
+        );
+        assert_eq!(
+            (&d.obs, &d.action, &d.episode_ends),
+            (&demos.obs, &demos.action, &demos.episode_ends)
+        );
+        assert_eq!((d.dt, d.task.as_str()), (demos.dt, "reach"));
+        assert_eq!(imported.ignored, ["observation.images.front (video)"]);
+    }
+}
