@@ -36,11 +36,12 @@ def nonsmooth_per_success(rep):
     return statistics.mean(vals) if vals else float("nan")
 
 
-def int8_vs_float(equiv):
-    """(float rate, int8 rate, episodes) from `frmd equiv --json`'s closed-loop row (b)."""
+def quantized_vs_float(equiv, label="int8"):
+    """(float rate, quantized rate, episodes) from `frmd equiv --json`'s closed-loop row (b) of
+    an export with `label` activations (int8, int16)."""
     for row in equiv.get("rows", []):
         if row.get("check") == "b" and row.get("metric", "").startswith("success-rate"):
-            m = re.search(r"(\d+) episodes: float ([\d.]+) %, int8 ([\d.]+) %", row.get("note", ""))
+            m = re.search(r"(\d+) episodes: float ([\d.]+) %, " + label + r" ([\d.]+) %", row.get("note", ""))
             if m:
                 return float(m.group(2)) / 100, float(m.group(3)) / 100, int(m.group(1))
     return None
@@ -62,7 +63,8 @@ def cell(values):
     return f"{m:.1f} [{100 * min(values):.1f}-{100 * max(values):.1f}] ({len(values)} seeds)"
 
 
-REPORTS = [rel for _, rel in METHODS] + ["int8/equiv2000.json", "int8/export.json"]
+QUANTIZED = ["int8", "int16"]
+REPORTS = [rel for _, rel in METHODS] + [f"{q}/{f}" for q in QUANTIZED for f in ("equiv2000.json", "export.json")]
 
 
 def copy_reports(root, dest):
@@ -120,19 +122,30 @@ def main():
             cells.append(f"{statistics.mean(ns):.1f}" if ns else "-")
         print(f"| {task} | " + " | ".join(cells) + " |")
     print()
-    print("| task, seed | float student | int8 student | difference (points) | episodes |")
-    print("| --- | ---: | ---: | ---: | ---: |")
+    print("| task, seed | float student | int8 student | int8 - float | int16 student | int16 - float | episodes |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for task in TASKS:
         for s in seeds_of(root, task):
-            eq = load(os.path.join(root, task, s, "int8", "equiv2000.json"))
-            if not eq:
+            cells, floats, episodes = [], [], set()
+            for q in QUANTIZED:
+                eq = load(os.path.join(root, task, s, q, "equiv2000.json"))
+                parsed = quantized_vs_float(eq, q) if eq else None
+                if parsed is None:
+                    cells.append(None)
+                    continue
+                f, rate, n = parsed
+                floats.append(f)
+                episodes.add(n)
+                summary[task].setdefault(q, {})[s] = {"float": f, q: rate, "episodes": n}
+                cells.append((f, rate))
+            if not floats:
                 continue
-            parsed = int8_vs_float(eq)
-            if parsed is None:
-                continue
-            f, q, n = parsed
-            summary[task].setdefault("int8", {})[s] = {"float": f, "int8": q, "episodes": n}
-            print(f"| {task} {s} | {100*f:.1f} | {100*q:.1f} | {100*(q-f):+.1f} | {n} |")
+            # Each equiv run evaluates the float student itself (same seeds): the first one shown.
+            f = floats[0]
+            text = lambda c: ("-", "-") if c is None else (f"{100*c[1]:.1f}", f"{100*(c[1]-c[0]):+.1f}")
+            (q8, d8), (q16, d16) = text(cells[0]), text(cells[1])
+            n = "/".join(str(e) for e in sorted(episodes))
+            print(f"| {task} {s} | {100*f:.1f} | {q8} | {d8} | {q16} | {d16} | {n} |")
     if "--json" in sys.argv:
         with open(sys.argv[sys.argv.index("--json") + 1], "w") as f:
             json.dump(summary, f, indent=1)

@@ -24,7 +24,7 @@ use std::{
 use frmd_core::prodmp::BakedProDmp;
 use frmd_export::fold::ProDmpTablesOwned;
 use frmd_export::mlp::QuantizedMlp;
-use frmd_firmware_support::host::student::student_export;
+use frmd_firmware_support::host::student::{student_export, student_export_as};
 use frmd_firmware_support::shape;
 use frmd_firmware_support::synthetic;
 
@@ -69,6 +69,19 @@ fn bake_student(out: &Path) {
          pub const NETWORK_MACS: u64 = {network_macs};\n"
     );
     fs::write(out.join("student/network_macs.rs"), code).expect("write network_macs.rs");
+}
+
+/// The same student exported with int16 activations, baked into `$OUT_DIR/student16/` for the
+/// `policy16` image (same network, so the same multiply-accumulates).
+fn bake_student16(out: &Path) {
+    student_export_as(frmd_export::Activations::Int16)
+        .write_module(&out.join("student16"))
+        .unwrap_or_else(|error| panic!("baking the int16 student failed: {error:#}"));
+    fs::copy(
+        out.join("student/network_macs.rs"),
+        out.join("student16/network_macs.rs"),
+    )
+    .expect("copy network_macs.rs");
 }
 
 /// The second (fine-plane) product of a two-plane first layer.
@@ -126,6 +139,7 @@ fn main() {
         .expect("write synthetic_mlp.bin");
     fs::write(out.join("synthetic_mlp.rs"), model.rust_source()).expect("write synthetic_mlp.rs");
     bake_student(&out);
+    bake_student16(&out);
     bake_pil(&out);
     frmd_export::mlp::bake::write_module(
         &synthetic::policy::generate(),

@@ -11,9 +11,9 @@
 //! (unless FRMD_REQUIRE_QEMU is set, as in CI: then it fails).
 
 use frmd_core::blob::AlignedBlob;
-use frmd_core::blob::LoadedMlp;
+use frmd_core::blob::{LoadedMlp, LoadedMlp16};
 use frmd_firmware_support::host::qemu;
-use frmd_firmware_support::host::student::student;
+use frmd_firmware_support::host::student::{student, student_export_as};
 use frmd_firmware_support::policy_workload::PolicyWorkload;
 use frmd_firmware_support::shape::{
     DOF, HORIZON, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM,
@@ -23,6 +23,19 @@ use frmd_firmware_support::workload::digest_all;
 fn host_digest() -> u64 {
     let blob = AlignedBlob::new(&student().blob().expect("write the blob"));
     let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
+    let policy = loaded
+        .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>(
+        )
+        .expect("policy from the blob");
+    let mut workload = PolicyWorkload::new(policy);
+    digest_all(&mut workload).expect("run the fixed cases")
+}
+
+/// The host digest of the `policy16` image: the student exported with int16 activations.
+fn host_digest16() -> u64 {
+    let exported = student_export_as(frmd_export::Activations::Int16);
+    let blob = AlignedBlob::new(exported.blob());
+    let loaded = LoadedMlp16::load(blob.bytes()).expect("load the int16 blob");
     let policy = loaded
         .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>(
         )
@@ -170,4 +183,19 @@ fn qemu_policy_digest_matches_host() {
     }
     let what = "the blob on the host";
     qemu::assert_digest_on(&root, &qemu::BOARDS, "policy", host_digest(), what);
+}
+
+/// The int16-activation student: the same digest on every core as its blob on the host (and
+/// not the int8 student's).
+#[test]
+fn qemu_policy16_digest_matches_host() {
+    let host = host_digest16();
+    assert_ne!(host, host_digest());
+    assert_eq!(host, host_digest16());
+    let root = qemu::repo_root();
+    if !qemu::available("qemu_policy16_digest_matches_host", &root) {
+        return;
+    }
+    let what = "the int16 blob on the host";
+    qemu::assert_digest_on(&root, &qemu::BOARDS, "policy16", host, what);
 }

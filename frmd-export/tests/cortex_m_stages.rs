@@ -1,24 +1,22 @@
 //! The per-stage breakdown of the Cortex-M policy firmware measures the real computation.
 //!
-//! `examples/cortex-m` (binary `frmd-cortex-m-policy-stages`) times each layer by running the baked MLP
-//! through `stages::StagedMlpNetwork`, which re-composes `Int8Mlp::forward` from frmd-core's
-//! kernels with a clock reading between layers. The firmware itself checks that the staged chunks
-//! hash to the measured policy's digest; this host test checks the same without QEMU: the staged
-//! network behind `Policy` gives bit-identical chunks to frmd-core's `Int8Network` (the blob form of
-//! the same policy: the checked-in trained student `examples/cortex-m/policy/reach/`, exported
-//! as the firmware's build.rs exports it, 16-bit first-layer input included), and records one clock
-//! reading per stage boundary.
+//! `examples/cortex-m` (binaries `frmd-cortex-m-policy-stages`, `-policy16-stages`) times each
+//! layer by running the baked network through `stages::StagedMlpNetwork`, which drives
+//! frmd-core's own staged forward pass (`QuantMlpNetwork::forward_staged`) with a clock reading
+//! at every stage boundary. The firmware itself checks that the staged chunks hash to the measured
+//! policy's digest; this host test checks the same without QEMU for both activation precisions:
+//! the staged network behind `Policy` gives bit-identical chunks to the blob form of the same
+//! policy (the checked-in trained student `examples/cortex-m/policy/reach/`, exported as the
+//! firmware's build.rs exports it), and records one clock reading per stage boundary.
 
 use std::sync::atomic::{AtomicU32, Ordering};
 
-use frmd_core::blob::AlignedBlob;
-use frmd_core::blob::LoadedMlp;
-use frmd_core::model::linear::RequantizedLinear;
-use frmd_core::model::mlp::InputPrecision;
-use frmd_core::policy::Policy;
-use frmd_export::mlp::QuantizedMlp;
+use frmd_core::blob::{AlignedBlob, LoadedBlob};
+use frmd_core::policy::{Policy, QuantMlpNetwork};
+use frmd_export::mlp::{ExportPrecision, QuantizedMlp};
+use frmd_export::Activations;
 use frmd_firmware_support::host::qemu::{self, line_value};
-use frmd_firmware_support::host::student::student;
+use frmd_firmware_support::host::student::student_export_as;
 use frmd_firmware_support::policy_workload::PolicyWorkload;
 use frmd_firmware_support::shape::{
     DOF, HORIZON, MLP_HIDDEN, MLP_WIDTH, PARAMS, STUDENT_HISTORY, STUDENT_INPUT, STUDENT_OBS_DIM,
@@ -28,48 +26,37 @@ use frmd_firmware_support::workload::digest_all;
 
 const LAYERS: usize = MLP_HIDDEN.len();
 
+/// The student's policy type over `Net`.
+type StudentPolicy<'a, Net> =
+    Policy<'a, Net, STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT>;
+
 /// A clock that advances by one per reading.
 static TICKS: AtomicU32 = AtomicU32::new(0);
 fn counting_clock() -> u32 {
     TICKS.fetch_add(1, Ordering::Relaxed)
 }
 
-/// The hidden layers of `quantized` as frmd-core layers over its own arrays.
-fn hidden_layers(quantized: &QuantizedMlp) -> [RequantizedLinear<'_>; LAYERS] {
-    let layers = quantized.hidden_layers();
-    std::array::from_fn(|i| layers[i])
+fn network_of<P: ExportPrecision>(policy: &QuantizedMlp<P>) -> QuantMlpNetwork<'_, P, MLP_WIDTH> {
+    frmd_export::mlp::reference::quantized_network::<P, MLP_WIDTH>(policy).expect("network")
 }
 
-#[test]
-fn staged_mlp_network_matches_int8_network() {
-    let quantized = student();
-    // The firmware's breakdown must cover the exporter's default 16-bit first-layer input.
-    assert_eq!(quantized.input_precision, InputPrecision::Int16);
-    assert_eq!(quantized.hidden.len(), LAYERS);
-    let blob = AlignedBlob::new(&quantized.blob().expect("write the blob"));
-    let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
-    let reference = loaded
-        .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>(
-        )
-        .expect("policy from the blob");
-    let mut reference = PolicyWorkload::new(reference);
-    let expected = digest_all(&mut reference).expect("reference chunks");
-
-    let network = StagedMlpNetwork::<LAYERS, { mlp_marks(LAYERS) }, MLP_WIDTH>::new(
-        quantized.input,
-        hidden_layers(&quantized),
-        quantized.output_layer(),
-        &quantized.first_layer_biases,
+/// The staged network of the student exported with `P` activations gives the chunks of its blob
+/// and one reading per stage boundary.
+fn staged_matches_blob<P: ExportPrecision>(policy: &QuantizedMlp<P>) {
+    let blob = AlignedBlob::new(&policy.blob().expect("write the blob"));
+    let loaded = LoadedBlob::load(blob.bytes()).expect("load the blob");
+    let mut scratch = Box::new(frmd_export::host::HostScratch::new());
+    let network = loaded
+        .network::<MLP_WIDTH, _>(&mut *scratch)
+        .expect("the blob's network");
+    let reference = StudentPolicy::new(loaded.config(), network).expect("policy from the blob");
+    let expected = digest_all(&mut PolicyWorkload::new(reference)).expect("reference chunks");
+    let staged = StagedMlpNetwork::<P, { mlp_marks(LAYERS) }, MLP_WIDTH>::new(
+        network_of(policy),
         counting_clock,
     )
-    .expect("staged network")
-    .with_input_precision(quantized.input_precision);
-    let policy =
-        Policy::<_, STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT>::new(
-            loaded.config(),
-            network,
-        )
-        .expect("staged policy");
+    .expect("staged network");
+    let policy = StudentPolicy::new(loaded.config(), staged).expect("staged policy");
     let mut staged = PolicyWorkload::new(policy);
     assert_eq!(digest_all(&mut staged).expect("staged chunks"), expected);
     let marks = staged.policy().network().marks().ticks();
@@ -81,29 +68,31 @@ fn staged_mlp_network_matches_int8_network() {
 }
 
 #[test]
-fn staged_mlp_network_refuses_small_scratch() {
-    let quantized = student();
-    // WIDTH 128 is narrower than the 256-wide hidden layers.
-    let result = StagedMlpNetwork::<LAYERS, { mlp_marks(LAYERS) }, 128>::new(
-        quantized.input,
-        hidden_layers(&quantized),
-        quantized.output_layer(),
-        &[],
+fn staged_mlp_network_matches_the_blob_for_both_precisions() {
+    let int8 = student_export_as(Activations::Int8);
+    staged_matches_blob(&int8.mlp().expect("an int8 MLP").policy);
+    let int16 = student_export_as(Activations::Int16);
+    staged_matches_blob(&int16.mlp16().expect("an int16 MLP").policy);
+}
+
+#[test]
+fn staged_mlp_network_refuses_too_few_readings() {
+    let int8 = student_export_as(Activations::Int8);
+    let policy = &int8.mlp().expect("an int8 MLP").policy;
+    let result = StagedMlpNetwork::<i8, { mlp_marks(LAYERS) - 1 }, MLP_WIDTH>::new(
+        network_of(policy),
         counting_clock,
     );
     assert!(result.is_err());
 }
 
-/// Runs both breakdown images on the Cortex-M4F board: each must print stage lines whose sum is
-/// within 2 % of its measured `instructions:` and a `stage_digest` equal to its `digest` (the
-/// firmware also refuses to finish otherwise). Skips like the other QEMU tests.
 #[test]
 fn qemu_stage_breakdowns_add_up() {
     let root = qemu::repo_root();
     if !qemu::available("qemu_stage_breakdowns_add_up", &root) {
         return;
     }
-    for image in ["policy-stages", "transformer-stages"] {
+    for image in ["policy-stages", "policy16-stages", "transformer-stages"] {
         let stdout = qemu::run(&root, "m4", image);
         assert_eq!(
             line_value(&stdout, "stage_digest"),

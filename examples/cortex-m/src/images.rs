@@ -1,16 +1,28 @@
 //! The policies the `policy` and `transformer` images measure, shared by each image and its
 //! `-stages` twin (which measures the same policy first, then breaks it down).
 
+use frmd_core::model::mlp::{InputPrecision, MlpPrecision};
 use frmd_core::model::transformer::{Int8Transformer, TransformerScratch};
-use frmd_core::policy::{Int8MlpNetwork, Int8TransformerNetwork, Network, Policy};
-use frmd_firmware_support::policy_workload::{policy_act_macs, PolicyWorkload, STUDENT_NAME};
+use frmd_core::policy::{
+    Int16MlpNetwork, Int8MlpNetwork, Int8TransformerNetwork, Network, Policy, PolicyError,
+    QuantMlpNetwork, MAX_HIDDEN_LAYERS,
+};
+use frmd_firmware_support::policy_workload::{
+    policy_act_macs, PolicyWorkload, CASES, STUDENT16_NAME, STUDENT_NAME,
+};
+use frmd_firmware_support::stages::{mlp_marks, StagedMlpNetwork};
+
+use crate::timer::Calibration;
 use frmd_firmware_support::shape::{
     DOF, HORIZON, PARAMS, POLICY_HISTORY, POLICY_INPUT, POLICY_OBS_DIM, TRANSFORMER_SCRATCH,
 };
 
 use crate::memory::StackProbe;
 use crate::report::exit_failure;
-use crate::{baked_student as student, baked_synthetic_policy, baked_transformer};
+use crate::{
+    baked_student as student, baked_student16 as student16, baked_synthetic_policy,
+    baked_transformer,
+};
 
 /// The baked student's workload (`Policy::act` of the trained one-step MLP, or of another network
 /// `Net` with the student's sizes).
@@ -28,7 +40,91 @@ pub type StudentWorkload<Net = Int8MlpNetwork<'static, { student::SCRATCH_WIDTH 
 
 /// The baked student's policy as a workload that states its multiply-accumulates.
 pub fn student_workload() -> StudentWorkload {
-    let policy = match student::policy(&mut student::Storage::new()) {
+    baked_student_workload(student::policy(&mut student::Storage::new()), STUDENT_NAME)
+}
+
+/// The same student exported with int16 activations (the `policy16` image).
+pub fn student16_workload(
+) -> StudentWorkload<Int16MlpNetwork<'static, { student16::SCRATCH_WIDTH }>> {
+    baked_student_workload(
+        student16::policy(&mut student16::Storage::new()),
+        STUDENT16_NAME,
+    )
+}
+
+/// A stages image: measures `workload` as its policy image does (same report lines and digest),
+/// then breaks the same student down by stage, `network` (the baked module's) running frmd-core's
+/// staged forward pass with the SysTick clock (`stage` lines, src/stage_report.rs).
+pub fn student_stages<P: MlpPrecision, const W: usize>(
+    workload: impl FnOnce() -> StudentWorkload<QuantMlpNetwork<'static, P, W>>,
+    network: impl FnOnce() -> Result<QuantMlpNetwork<'static, P, W>, PolicyError>,
+    name: &'static str,
+) -> ! {
+    let stack = crate::bench::start();
+    let mut workload = workload();
+    crate::bench::run_then::<_, { CASES * 5 }>(&mut workload, stack, |_, calibration, digest| {
+        // Not inlined into the measurement: its frame (a second policy) stays out of its stack.
+        if let Err(error) = student_breakdown(network(), name, calibration, digest) {
+            exit_failure(&error);
+        }
+    })
+}
+
+/// The per-stage breakdown of a baked student's `network` (see [`student_stages`]).
+#[inline(never)]
+fn student_breakdown<P: MlpPrecision, const W: usize>(
+    network: Result<QuantMlpNetwork<'static, P, W>, PolicyError>,
+    name: &'static str,
+    calibration: &Calibration,
+    digest: u64,
+) -> Result<(), PolicyError> {
+    let network = network?;
+    let mut macs: [u64; MAX_HIDDEN_LAYERS + 1] = [0; MAX_HIDDEN_LAYERS + 1];
+    let mut layers = 0;
+    for (slot, (inputs, outputs)) in macs.iter_mut().zip(network.layer_shapes()) {
+        *slot = (inputs * outputs) as u64;
+        layers += 1;
+    }
+    if network.input_precision() == InputPrecision::TwoPlane {
+        // The first layer's kernel runs on both input planes.
+        macs[0] *= 2;
+    }
+    let hidden = layers - 1;
+    let output_macs = macs[hidden];
+    let staged = StagedMlpNetwork::<P, { mlp_marks(MAX_HIDDEN_LAYERS) }, W>::new(
+        network,
+        crate::stage_report::systick,
+    )?;
+    let policy = Policy::new(student::config(), staged)?;
+    let mut staged: StudentWorkload<_> = PolicyWorkload::with_name(policy, name);
+    crate::stage_report::mlp_policy(
+        &mut staged,
+        &macs[..hidden],
+        output_macs,
+        calibration,
+        digest,
+    )
+}
+
+/// A baked policy of the student's sizes as a workload named `name` (firmware failure if the
+/// policy did not build).
+fn baked_student_workload<Net: Network>(
+    policy: Result<
+        Policy<
+            'static,
+            Net,
+            { student::HISTORY },
+            { student::OBS_DIM },
+            { student::ACTION_DIM },
+            { student::HORIZON },
+            { student::PARAMS_PER_DOF },
+            { student::INPUT_WIDTH },
+        >,
+        PolicyError,
+    >,
+    name: &'static str,
+) -> StudentWorkload<Net> {
+    let policy = match policy {
         Ok(policy) => policy,
         Err(error) => exit_failure(&error),
     };
@@ -38,7 +134,7 @@ pub fn student_workload() -> StudentWorkload {
         student::ACTION_DIM,
         student::PARAMS_PER_DOF,
     );
-    PolicyWorkload::with_name(policy, STUDENT_NAME).with_macs(macs)
+    PolicyWorkload::with_name(policy, name).with_macs(macs)
 }
 
 /// Printed as the transformer images' `workload:` line.

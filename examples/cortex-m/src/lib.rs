@@ -55,6 +55,13 @@ pub mod baked_student {
     include!(concat!(env!("OUT_DIR"), "/student/network_macs.rs"));
 }
 
+/// The same student exported with int16 activations (`OUT_DIR/student16`): the `policy16` image.
+#[allow(dead_code)]
+pub mod baked_student16 {
+    include!(concat!(env!("OUT_DIR"), "/student16/policy.rs"));
+    include!(concat!(env!("OUT_DIR"), "/student16/network_macs.rs"));
+}
+
 /// The module frmd-export generated for the synthetic MLP policy
 /// (`frmd_firmware_support::synthetic::policy`): the `transformer` images use its `config()`
 /// (the MLP weights are not referenced, so the linker drops them).

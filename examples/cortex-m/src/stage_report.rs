@@ -31,6 +31,7 @@ use frmd_core::rng::Rng;
 use crate::report::{self, exit_failure, report};
 use crate::timer::{Calibration, TickCounter};
 use frmd_core::hash::Fnv1a64;
+use frmd_core::model::mlp::MlpPrecision;
 use frmd_firmware_support::policy_workload::{PolicyWorkload, CASES, NOISE_SEED};
 use frmd_firmware_support::stages::{MarkedNetwork, StagedMlpNetwork};
 use frmd_firmware_support::workload::{prodmp_decode_macs, Workload};
@@ -264,7 +265,7 @@ fn check_digest(digest: Fnv1a64, expected: u64) {
 /// Breakdown of the MLP policy: `workload` runs a [`StagedMlpNetwork`] whose clock is [`systick`];
 /// its chunks must reproduce `expected_digest` (the main measurement's).
 pub fn mlp_policy<
-    const L: usize,
+    Pr: MlpPrecision,
     const S: usize,
     const W: usize,
     const M: usize,
@@ -274,8 +275,8 @@ pub fn mlp_policy<
     const P: usize,
     const I: usize,
 >(
-    workload: &mut PolicyWorkload<'_, StagedMlpNetwork<'_, L, S, W>, M, O, K, N, P, I>,
-    layer_macs: &[u64; L],
+    workload: &mut PolicyWorkload<'_, StagedMlpNetwork<'_, Pr, S, W>, M, O, K, N, P, I>,
+    layer_macs: &[u64],
     output_macs: u64,
     calibration: &Calibration,
     expected_digest: u64,

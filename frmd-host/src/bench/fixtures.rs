@@ -14,7 +14,7 @@ use crate::train::recipe::TrainConfig;
 use candle_core::Device;
 use frmd_core::rng::Rng;
 use frmd_core::sigma::SigmaConfig;
-use frmd_export::ExportOptions;
+use frmd_export::{Activations, ExportOptions};
 use frmd_formats::calibration::CalibrationSet;
 use std::path::Path;
 
@@ -84,10 +84,12 @@ pub struct BenchPolicies {
     pub core: Result<CorePolicies, String>,
 }
 
-/// frmd-core's int8 policy and its f32 twin.
+/// frmd-core's int8 policy and its f32 twin (and, for an MLP, the int16-activation export).
 pub struct CorePolicies {
     pub core_f32: Int8Policy,
     pub int8: Int8Policy,
+    /// The same student exported with int16 activations (MLP students only).
+    pub int16: Option<Int8Policy>,
     /// Flash bytes (weights + tables) of the int8 policy.
     pub flash_bytes: usize,
 }
@@ -119,12 +121,24 @@ pub fn reach_student(
             seed,
         },
     )?;
+    let int16 = ExportOptions {
+        activations: Activations::Int16,
+        ..ExportOptions::default()
+    };
+    let int16 = match backbone {
+        BackboneConfig::Mlp { .. } => {
+            let student = frmd_export::export(dir, &int16, None)?;
+            Some(Int8Policy::from_blob(student.blob(), "int16")?)
+        }
+        _ => None,
+    };
     let core = match frmd_export::export(dir, &ExportOptions::default(), None) {
         Ok(student) => {
             let blob = student.blob().to_vec();
             Ok(CorePolicies {
                 flash_bytes: student.memory().flash_bytes(),
                 int8: Int8Policy::from_blob(&blob, "int8")?,
+                int16,
                 core_f32: Int8Policy::f32_twin(&blob, student, "core-f32")?,
             })
         }

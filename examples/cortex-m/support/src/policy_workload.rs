@@ -22,6 +22,9 @@ pub const NAME: &str = "policy act: one-step int8 policy + decode";
 /// The `workload:` line of the `policy` and `policy-stages` images (the same baked student).
 pub const STUDENT_NAME: &str =
     "policy act: trained one-step int8 MLP student (reach, policy/reach) + decode";
+/// The `workload:` line of the same student exported with int16 activations.
+pub const STUDENT16_NAME: &str =
+    "policy act: trained one-step MLP student, int16 activations (reach, policy/reach) + decode";
 /// Distinct inputs.
 pub const CASES: usize = 8;
 pub const OBS_SEED: u64 = 0x4652_4D44_4F42_5301;

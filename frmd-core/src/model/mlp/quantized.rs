@@ -5,7 +5,7 @@ use super::{
     check_lengths, check_widths, quantize_input_i16, quantize_input_two_plane, InputPrecision,
     ModelError,
 };
-use crate::kernels::{LayerInput, Precision};
+use crate::kernels::{dequantize_accumulators, LayerInput, Precision};
 use crate::model::linear::{Int8Linear, RequantizedLinear};
 use crate::quant::QuantParams;
 
@@ -92,13 +92,14 @@ impl<P: Precision, const WIDTH: usize> Default for QuantScratch<P, WIDTH> {
 pub trait MlpPrecision: Precision {
     /// Whether a network of this precision takes its input as `precision` says.
     fn accepts(precision: InputPrecision) -> bool;
-    /// [`QuantMlp::forward_prevalidated`] for this precision.
+    /// [`QuantMlp::forward_staged`] for this precision.
     fn forward(
         mlp: &QuantMlp<'_, Self>,
         precision: InputPrecision,
         input: &[f32],
         output: &mut [f32],
         buffers: QuantBuffers<'_, Self>,
+        stage: &mut impl FnMut(),
     ) -> Result<(), ModelError>;
 }
 
@@ -112,8 +113,9 @@ impl MlpPrecision for i8 {
         input: &[f32],
         output: &mut [f32],
         buffers: Int8Buffers<'_>,
+        stage: &mut impl FnMut(),
     ) -> Result<(), ModelError> {
-        mlp.forward_int8(precision, input, output, buffers)
+        mlp.forward_int8(precision, input, output, buffers, stage)
     }
 }
 
@@ -127,10 +129,11 @@ impl MlpPrecision for i16 {
         input: &[f32],
         output: &mut [f32],
         buffers: QuantBuffers<'_, i16>,
+        stage: &mut impl FnMut(),
     ) -> Result<(), ModelError> {
         mlp.validate_input_precision(precision)?;
         mlp.check_io(input.len(), output.len())?;
-        mlp.forward_wide_input(input, output, buffers)
+        mlp.forward_wide_input(input, output, buffers, stage)
     }
 }
 
@@ -169,7 +172,22 @@ impl<P: MlpPrecision> QuantMlp<'_, P> {
         output: &mut [f32],
         buffers: QuantBuffers<'_, P>,
     ) -> Result<(), ModelError> {
-        P::forward(self, precision, input, output, buffers)
+        P::forward(self, precision, input, output, buffers, &mut || {})
+    }
+
+    /// [`Self::forward_prevalidated`] calling `stage` at every stage boundary: after the input
+    /// is quantized, after each hidden layer, after the output layer's accumulators and after
+    /// their dequantization (the hidden layers plus 3 calls; a firmware's per-stage timing). The
+    /// same kernels in the same order, so the same outputs.
+    pub fn forward_staged(
+        &self,
+        precision: InputPrecision,
+        input: &[f32],
+        output: &mut [f32],
+        buffers: QuantBuffers<'_, P>,
+        stage: &mut impl FnMut(),
+    ) -> Result<(), ModelError> {
+        P::forward(self, precision, input, output, buffers, stage)
     }
 }
 
@@ -224,7 +242,9 @@ impl<P: Precision> QuantMlp<'_, P> {
     }
 
     /// `hidden`, then the output layer, on the `width` codes in `current` (ping-pong with
-    /// `next`).
+    /// `next`), calling `stage` after each hidden layer, the output accumulators and their
+    /// dequantization.
+    #[allow(clippy::too_many_arguments)]
     fn run<'s>(
         &self,
         mut current: &'s mut [P],
@@ -233,6 +253,7 @@ impl<P: Precision> QuantMlp<'_, P> {
         hidden: &[RequantizedLinear<'_, P>],
         accumulators: &mut [P::Acc],
         output: &mut [f32],
+        stage: &mut impl FnMut(),
     ) -> Result<(), ModelError> {
         for layer in hidden {
             let out_width = layer.fc.out_features;
@@ -243,13 +264,16 @@ impl<P: Precision> QuantMlp<'_, P> {
             layer.forward_prevalidated(P::layer_input(layer_input), layer_output)?;
             core::mem::swap(&mut current, &mut next);
             width = out_width;
+            stage();
         }
         let last_input = current.get(..width).ok_or(ModelError::ScratchTooSmall)?;
         let acc = accumulators
             .get_mut(..self.output_width())
             .ok_or(ModelError::ScratchTooSmall)?;
-        self.output
-            .forward_input(P::layer_input(last_input), acc, output)?;
+        self.output.fc.accumulate(P::layer_input(last_input), acc)?;
+        stage();
+        dequantize_accumulators(acc, self.output.output_scales, output)?;
+        stage();
         Ok(())
     }
 
@@ -259,6 +283,7 @@ impl<P: Precision> QuantMlp<'_, P> {
         input: &[f32],
         output: &mut [f32],
         buffers: QuantBuffers<'_, P>,
+        stage: &mut impl FnMut(),
     ) -> Result<(), ModelError> {
         let QuantBuffers {
             ping,
@@ -274,13 +299,15 @@ impl<P: Precision> QuantMlp<'_, P> {
             .get_mut(..input.len())
             .ok_or(ModelError::ScratchTooSmall)?;
         quantize_input_i16(input, self.input, codes);
+        stage();
         let out_width = layer.fc.out_features;
         let layer_output = pong
             .get_mut(..out_width)
             .ok_or(ModelError::ScratchTooSmall)?;
         layer.forward_prevalidated(LayerInput::Int16(codes), layer_output)?;
+        stage();
         let rest = self.hidden.get(1..).unwrap_or(&[]);
-        self.run(pong, ping, out_width, rest, accumulators, output)
+        self.run(pong, ping, out_width, rest, accumulators, output, stage)
     }
 }
 
@@ -304,10 +331,11 @@ impl Int8Mlp<'_> {
         input: &[f32],
         output: &mut [f32],
         buffers: Int8Buffers<'_>,
+        stage: &mut impl FnMut(),
     ) -> Result<(), ModelError> {
         self.check_io(input.len(), output.len())?;
         if precision == InputPrecision::Int16 {
-            return self.forward_wide_input(input, output, buffers);
+            return self.forward_wide_input(input, output, buffers, stage);
         }
         let Int8Buffers {
             ping,
@@ -322,7 +350,16 @@ impl Int8Mlp<'_> {
             for (q, x) in first.iter_mut().zip(input) {
                 *q = self.input.quantize(*x);
             }
-            return self.run(ping, pong, in_width, self.hidden, accumulators, output);
+            stage();
+            return self.run(
+                ping,
+                pong,
+                in_width,
+                self.hidden,
+                accumulators,
+                output,
+                stage,
+            );
         }
         let layer = self
             .hidden
@@ -333,6 +370,7 @@ impl Int8Mlp<'_> {
             .get_mut(..in_width)
             .ok_or(ModelError::ScratchTooSmall)?;
         quantize_input_two_plane(input, self.input, first, fine);
+        stage();
         let acc = accumulators
             .get_mut(..out_width)
             .ok_or(ModelError::ScratchTooSmall)?;
@@ -341,8 +379,9 @@ impl Int8Mlp<'_> {
             .get_mut(..out_width)
             .ok_or(ModelError::ScratchTooSmall)?;
         layer.requantize_and_activate(acc, layer_output)?;
+        stage();
         let rest = self.hidden.get(1..).unwrap_or(&[]);
-        self.run(pong, ping, out_width, rest, accumulators, output)
+        self.run(pong, ping, out_width, rest, accumulators, output, stage)
     }
 
     /// The network on `values` with int8 input ([`InputPrecision::Int8`]), writing its output
@@ -365,6 +404,15 @@ impl Int8Mlp<'_> {
         for (q, x) in first.iter_mut().zip(values.iter()) {
             *q = self.input.quantize(*x);
         }
-        self.run(ping, pong, values.len(), self.hidden, accumulators, values)
+        let no_stages = &mut || {};
+        self.run(
+            ping,
+            pong,
+            values.len(),
+            self.hidden,
+            accumulators,
+            values,
+            no_stages,
+        )
     }
 }

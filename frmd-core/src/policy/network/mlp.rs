@@ -161,6 +161,41 @@ impl<'a, P: MlpPrecision, const WIDTH: usize> QuantMlpNetwork<'a, P, WIDTH> {
         self.precision
     }
 
+    /// Hidden layers (the stages of [`Self::forward_staged`] are these plus the input
+    /// quantization, the output accumulators and their dequantization).
+    pub fn hidden_layers(&self) -> usize {
+        self.layers.hidden.len()
+    }
+
+    /// `(in_features, out_features)` of every layer, the output layer last.
+    pub fn layer_shapes(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        let output = &self.layers.output.fc;
+        self.layers
+            .hidden
+            .iter()
+            .map(|layer| (layer.fc.in_features, layer.fc.out_features))
+            .chain([(output.in_features, output.out_features)])
+    }
+
+    /// [`Network::forward`] calling `stage` at every stage boundary of the MLP
+    /// ([`QuantMlp::forward_staged`]): a firmware's per-stage timing of the very same pass.
+    pub fn forward_staged(
+        &mut self,
+        variant: usize,
+        input: &[f32],
+        output: &mut [f32],
+        stage: &mut impl FnMut(),
+    ) -> Result<(), PolicyError> {
+        let layers = self.layers.with_variant(&self.variants, variant)?;
+        let mlp = QuantMlp {
+            input: self.input,
+            hidden: &layers.hidden,
+            output: layers.output,
+        };
+        mlp.forward_staged(self.precision, input, output, self.scratch.buffers(), stage)
+            .map_err(PolicyError::Model)
+    }
+
     /// The output layer's accumulators of the last forward pass (for bit-exactness checks).
     pub fn accumulators(&self) -> &[P::Acc] {
         self.scratch
@@ -194,14 +229,7 @@ impl<P: MlpPrecision, const WIDTH: usize> Network for QuantMlpNetwork<'_, P, WID
         input: &[f32],
         output: &mut [f32],
     ) -> Result<(), PolicyError> {
-        let layers = self.layers.with_variant(&self.variants, variant)?;
-        let mlp = QuantMlp {
-            input: self.input,
-            hidden: &layers.hidden,
-            output: layers.output,
-        };
-        mlp.forward_prevalidated(self.precision, input, output, self.scratch.buffers())
-            .map_err(PolicyError::Model)
+        self.forward_staged(variant, input, output, &mut || {})
     }
 }
 

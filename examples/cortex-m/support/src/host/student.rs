@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use frmd_export::mlp::QuantizedMlp;
-use frmd_export::{ExportOptions, ExportedStudent};
+use frmd_export::{Activations, ExportOptions, ExportedStudent};
 
 use crate::shape::{DOF, HORIZON, PARAMS, STUDENT_HISTORY, STUDENT_OBS_DIM};
 
@@ -19,8 +19,18 @@ pub fn student_dir() -> PathBuf {
 /// with the exporter's message if the checkpoint cannot be exported (build script and test
 /// helper).
 pub fn student_export() -> ExportedStudent {
+    student_export_as(Activations::Int8)
+}
+
+/// [`student_export`] with the hidden activations in `activations` (the `policy16` image bakes
+/// it with int16 activations).
+pub fn student_export_as(activations: Activations) -> ExportedStudent {
     let dir = student_dir();
-    frmd_export::export(&dir, &ExportOptions::default(), None)
+    let options = ExportOptions {
+        activations,
+        ..ExportOptions::default()
+    };
+    frmd_export::export(&dir, &options, None)
         .unwrap_or_else(|error| panic!("exporting the student {} failed: {error:#}", dir.display()))
 }
 
