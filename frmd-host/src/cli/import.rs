@@ -60,11 +60,12 @@ pub fn run(cmd: ImportCommand) -> anyhow::Result<ExitCode> {
     imported.dataset.save(&args.out)?;
     let d = &imported.dataset;
     println!(
-        "wrote {}: LeRobot {} ({} files), {} episodes, {} steps, obs_dim {} (`{}`), action_dim {} \
+        "wrote {}: LeRobot {} ({} data file{}), {} episodes, {} steps, obs_dim {} (`{}`), action_dim {} \
          (`{}`), fps {}, task {:?}",
         args.out.display(),
         imported.version,
         imported.files,
+        if imported.files == 1 { "" } else { "s" },
         d.num_episodes(),
         d.len(),
         d.obs_dim,
