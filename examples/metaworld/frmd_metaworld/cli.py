@@ -19,6 +19,15 @@ def _progress(task: str, total: int):
     return lambda n, *_: print(f"\r{task}: {n}/{total}", end="", file=sys.stderr, flush=True)
 
 
+def _methods(text: str) -> list:
+    from .benchmark import METHODS
+    methods = [m for m in text.split(",") if m]
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown or not methods:
+        raise SystemExit(f"--methods: unknown {unknown} (choose from {', '.join(METHODS)})")
+    return methods
+
+
 def _tasks(value: str) -> list[str]:
     if value == "all":
         return list(TASKS)
@@ -126,6 +135,7 @@ def cmd_benchmark(args) -> int:
         "out": args.out, "frmd": args.frmd, "obs": args.obs, "after_success": args.after_success,
         "int16": True if args.int16 else None,
         "in_process": True if args.in_process else None,
+        "only": _methods(args.methods) if args.methods else None,
         "seeds": [int(s) for s in args.seeds.split(",")] if args.seeds else None,
         "multi_seed_tasks": ([] if args.multi_seed_tasks == "none" else _tasks(args.multi_seed_tasks))
         if args.multi_seed_tasks else None}.items() if v is not None}
@@ -231,6 +241,8 @@ def main(argv=None) -> int:
     m.add_argument("--obs", choices=OBS_LAYOUTS, help="observation layout of the collected data (default raw)")
     m.add_argument("--after-success", type=int, metavar="K", help="expert steps recorded after the first "
                    "success (default 0)")
+    m.add_argument("--methods", help="comma-separated methods to run (default: all); models none of them "
+                   "needs are not trained (e.g. no DP without dp-ddpm-100 and dp-ddim-10)")
     m.add_argument("--int16", action="store_true", help="also export the student with int16 activations "
                    "(frmd export --activations int16) and evaluate it as int16-student")
     m.add_argument("--in-process", action="store_true", help="evaluate the trained policies in this process "
