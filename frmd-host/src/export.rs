@@ -190,6 +190,34 @@ pub fn export_student(
     frmd_export::export_checkpoint(checkpoint, &options, rows)
 }
 
+/// The checkpoint path `checkpoint` as `export.json` in `dir` records it: relative to `dir`
+/// (`frmd serve --baked` resolves it from there, whatever its working directory, and a run
+/// directory moved as a whole keeps working), or as given when either path cannot be resolved
+/// (an absolute path stays absolute).
+fn checkpoint_from(dir: &Path, checkpoint: &str) -> String {
+    let given = Path::new(checkpoint);
+    if given.is_absolute() || checkpoint.is_empty() {
+        return checkpoint.to_string();
+    }
+    let (Ok(from), Ok(to)) = (dir.canonicalize(), given.canonicalize()) else {
+        return checkpoint.to_string();
+    };
+    let common = from
+        .components()
+        .zip(to.components())
+        .take_while(|(a, b)| a == b)
+        .count();
+    let mut relative = PathBuf::new();
+    for _ in common..from.components().count() {
+        relative.push("..");
+    }
+    relative.extend(to.components().skip(common));
+    if relative.as_os_str().is_empty() {
+        relative.push(".");
+    }
+    relative.display().to_string()
+}
+
 /// Writes the module directory `dir` (the baked module, `policy.blob` and `export.json`) and/or
 /// the blob alone at `blob_path`; returns the files written.
 pub fn write_export(
@@ -202,9 +230,11 @@ pub fn write_export(
     if let Some(dir) = dir {
         written.extend(student.write_module(dir)?);
         let info = dir.join(EXPORT_INFO_FILE);
-        // The precision exported, whether asked for or the backbone's default.
+        // The precision exported (asked for or the backbone's default), and the checkpoint as
+        // seen from the export directory.
         let recorded = ExportConfig {
             activations: Some(student.activations().to_string()),
+            checkpoint: checkpoint_from(dir, &cfg.checkpoint),
             ..cfg.clone()
         };
         write_atomic(&info, serde_json::to_string_pretty(&recorded)?.as_bytes())?;

@@ -43,6 +43,8 @@ class BenchConfig:
     after_success: int = 0
     # Also export the student with int16 activations and evaluate it ("int16-student").
     int16: bool = False
+    # Evaluate through the frmd wheel in process (`eval --in-process`) instead of `frmd serve`.
+    in_process: bool = False
     # Only these methods (None: all); models no selected method needs are not trained.
     only: list | None = None
     episodes: int = 50
@@ -182,7 +184,8 @@ class Runner:
                 continue
             report = (self.out / task / "expert.json") if method == "expert" else run / "eval" / f"{method}.json"
             report.parent.mkdir(parents=True, exist_ok=True)
-            how = ["--expert"] if method == "expert" else ["--server", self.server(method, run)]
+            how = ["--expert"] if method == "expert" else ["--server", self.server(method, run)] + (
+                ["--in-process"] if self.cfg.in_process else [])
             self.run(f"{task}-s{seed}-eval-{method}", report,
                      [self.python, "-m", "frmd_metaworld", "eval", "--task", task, "--episodes",
                       str(self.cfg.episodes), *how, "--json", str(report)])
