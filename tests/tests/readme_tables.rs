@@ -1,42 +1,50 @@
-//! The documents that claim to mirror something: the recipe table of `docs/status.md` is
-//! generated from the committed reports (the block between the `recipe-table` markers must equal
-//! what `scripts/recipe_table.py docs/results/recipe` prints, so a hand-edited number or a report
-//! added without regenerating the table fails here), and README's layout tree is the tracked tree.
+//! The documents that claim to mirror something: the recipe tables of `docs/status.md` are
+//! generated from the committed reports (each block between `recipe-table` markers must equal
+//! what `scripts/recipe_table.py DIR` prints for the directory its marker names, so a hand-edited
+//! number or a report added without regenerating the table fails here), and README's layout tree
+//! is the tracked tree.
 use std::collections::BTreeSet;
 use std::path::Path;
 use std::process::Command;
 
 #[test]
-fn status_recipe_table_matches_the_committed_reports() {
+fn status_recipe_tables_match_the_committed_reports() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let readme = std::fs::read_to_string(root.join("docs/status.md")).expect("docs/status.md");
-    let open = "<!-- recipe-table: python3 scripts/recipe_table.py docs/results/recipe -->\n";
-    let start = readme
-        .find(open)
-        .expect("docs/status.md has the recipe-table start marker")
-        + open.len();
-    let end = readme[start..]
-        .find("<!-- /recipe-table -->")
-        .expect("README has the end marker")
-        + start;
-    let in_readme = readme[start..end].trim();
-
-    let output = Command::new("python3")
-        .arg("scripts/recipe_table.py")
-        .arg("docs/results/recipe")
-        .current_dir(&root)
-        .output()
-        .expect("python3 runs (CI installs it)");
+    let status = std::fs::read_to_string(root.join("docs/status.md")).expect("docs/status.md");
+    let open = "<!-- recipe-table: python3 scripts/recipe_table.py ";
+    let mut checked = Vec::new();
+    let mut rest = status.as_str();
+    while let Some(at) = rest.find(open) {
+        let after = &rest[at + open.len()..];
+        let (reports, block) = after
+            .split_once(" -->\n")
+            .expect("a recipe-table marker names its reports directory and ends with -->");
+        let end = block
+            .find("<!-- /recipe-table -->")
+            .expect("every recipe-table block has its end marker");
+        let output = Command::new("python3")
+            .arg("scripts/recipe_table.py")
+            .arg(reports)
+            .current_dir(&root)
+            .output()
+            .expect("python3 runs (CI installs it)");
+        assert!(
+            output.status.success(),
+            "recipe_table.py {reports} failed: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let generated = String::from_utf8(output.stdout).expect("UTF-8 table");
+        assert_eq!(
+            block[..end].trim(),
+            generated.trim(),
+            "the recipe table of docs/status.md for {reports} differs from the reports; regenerate it"
+        );
+        checked.push(reports.to_string());
+        rest = &block[end..];
+    }
     assert!(
-        output.status.success(),
-        "recipe_table.py failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let generated = String::from_utf8(output.stdout).expect("UTF-8 table");
-    assert_eq!(
-        in_readme,
-        generated.trim(),
-        "the recipe table of docs/status.md differs from the reports; regenerate it"
+        checked.iter().any(|r| r == "docs/results/recipe"),
+        "docs/status.md has the recipe table of docs/results/recipe (found {checked:?})"
     );
 }
 
