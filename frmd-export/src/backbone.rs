@@ -13,6 +13,7 @@ use crate::calibrate::RangeMethod;
 use crate::host::HostScratch;
 use crate::memory::MemoryFigures;
 use crate::reference::KernelCheck;
+use crate::rounding::WeightRounding;
 
 /// Export settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,6 +42,9 @@ pub struct ExportOptions {
     /// (>= 1) before it becomes a symmetric int16 scale, so closed-loop activations beyond the
     /// calibration states are not clipped. Ignored for int8 activations.
     pub activation_headroom: f32,
+    /// MLP: how weights are rounded to their int8 codes ([`WeightRounding`]); transformer-lite
+    /// rounds to nearest and refuses the others.
+    pub weight_rounding: WeightRounding,
 }
 
 /// The precision of a network's hidden activations.
@@ -110,6 +114,7 @@ impl Default for ExportOptions {
             input_headroom: DEFAULT_INPUT_HEADROOM,
             activations: None,
             activation_headroom: DEFAULT_ACTIVATION_HEADROOM,
+            weight_rounding: WeightRounding::default(),
         }
     }
 }

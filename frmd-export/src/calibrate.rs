@@ -110,6 +110,7 @@ pub(crate) fn check_rows(set: &CalibrationSet, cond_dim: usize) -> anyhow::Resul
 }
 
 /// Per-channel symmetric int8 weights of a layer and their scales.
+#[derive(Clone, Debug, PartialEq)]
 pub struct QuantizedWeights {
     /// `[out, in]` row-major codes in `[-127, 127]`.
     pub weights: Vec<i8>,

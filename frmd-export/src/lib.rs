@@ -38,6 +38,7 @@ pub mod host;
 pub mod memory;
 pub mod mlp;
 pub mod reference;
+pub mod rounding;
 pub mod transformer;
 
 pub use backbone::{
@@ -45,3 +46,4 @@ pub use backbone::{
 };
 pub use export::{export, export_checkpoint, ExportedStudent};
 pub use frmd_formats as formats;
+pub use rounding::WeightRounding;

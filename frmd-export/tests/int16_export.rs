@@ -1,6 +1,7 @@
 //! int16 activations (`ExportOptions::activations`): the exported network equals the
 //! wide-integer model, its blob loads as an int16 MLP, and it follows the f32 network more
-//! closely than the int8 export of the same checkpoint.
+//! closely than the int8 export of the same checkpoint; GPTQ weight rounding
+//! (`ExportOptions::weight_rounding`) keeps both exact and brings them closer still.
 use frmd_core::blob::{AlignedBlob, LoadedBlob, LoadedMlp};
 use frmd_core::model::mlp::InputPrecision;
 use frmd_core::policy::Network;
@@ -10,9 +11,9 @@ use frmd_export::formats::checkpoint::{
     ProDmpOutput, Role,
 };
 use frmd_export::host::{HostScratch, MAX_WIDTH};
-use frmd_export::{Activations, ExportOptions, ExportedStudent};
+use frmd_export::{Activations, ExportOptions, ExportedStudent, WeightRounding};
 use frmd_test_support::checkpoint::{scratch_dir, write_meta, write_weights, Init};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 fn model() -> ModelConfig {
     ModelConfig {
@@ -53,10 +54,20 @@ fn student(tag: &str) -> PathBuf {
 }
 
 fn export(dir: &PathBuf, activations: Activations, steps: usize) -> ExportedStudent {
+    export_with(dir, activations, steps, WeightRounding::Nearest)
+}
+
+fn export_with(
+    dir: &Path,
+    activations: Activations,
+    steps: usize,
+    weight_rounding: WeightRounding,
+) -> ExportedStudent {
     let set = frmd_test_support::checkpoint::calibration_rows(&model(), 24, 5, 29);
     let options = ExportOptions {
         steps,
         activations: Some(activations),
+        weight_rounding,
         ..Default::default()
     };
     frmd_export::export(dir, &options, Some(set)).unwrap()
@@ -179,4 +190,19 @@ fn int16_activations_need_the_16_bit_input() {
         frmd_export::export(&dir, &options, Some(set)).unwrap_err()
     );
     assert!(err.contains("headroom"), "{err}");
+}
+
+#[test]
+fn gptq_rounding_stays_exact_and_follows_the_float_network_closer() {
+    let dir = student("gptq");
+    for activations in [Activations::Int8, Activations::Int16] {
+        let nearest = export_with(&dir, activations, 1, WeightRounding::Nearest);
+        let gptq = export_with(&dir, activations, 1, WeightRounding::Gptq);
+        let check = gptq.check_kernels(&[]).unwrap();
+        assert!(check.passed(), "{check:?}");
+        assert_ne!(nearest.blob(), gptq.blob(), "{activations}: other codes");
+        let errors = [&nearest, &gptq].map(|s| worst_relative_error(s, 1.0));
+        eprintln!("{activations}: worst relative output error nearest / gptq {errors:?}");
+        assert!(errors[1] < errors[0], "{activations}: {errors:?}");
+    }
 }

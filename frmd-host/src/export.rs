@@ -9,7 +9,7 @@ use crate::limits::{self, OptionError};
 use anyhow::{bail, Context};
 use frmd_core::model::mlp::InputPrecision;
 use frmd_export::calibrate::RangeMethod;
-use frmd_export::{Activations, ExportOptions, ExportedStudent};
+use frmd_export::{Activations, ExportOptions, ExportedStudent, WeightRounding};
 use frmd_formats::artifact::write_atomic;
 use frmd_formats::calibration::CalibrationSet;
 use frmd_formats::checkpoint::{Checkpoint, CheckpointMeta, CALIBRATION_FILE};
@@ -19,6 +19,10 @@ use std::path::{Path, PathBuf};
 /// `export.json` files written before the `activations` field: int8 exports.
 fn int8_before_the_field() -> Option<String> {
     Some("int8".into())
+}
+
+fn nearest_before_the_field() -> String {
+    WeightRounding::Nearest.to_string()
 }
 
 /// Export settings written beside a baked module.
@@ -51,6 +55,10 @@ pub struct ExportConfig {
     pub activations: Option<String>,
     /// Activation range widening with int16 activations (>= 1).
     pub activation_headroom: f32,
+    /// Weight rounding: `nearest` | `gptq` ([`WeightRounding`]); an `export.json` written before
+    /// the option existed has no such field and means nearest.
+    #[serde(default = "nearest_before_the_field")]
+    pub weight_rounding: String,
 }
 
 impl Default for ExportConfig {
@@ -69,6 +77,7 @@ impl Default for ExportConfig {
             input_headroom: options.input_headroom,
             activations: options.activations.map(|a| a.to_string()),
             activation_headroom: options.activation_headroom,
+            weight_rounding: options.weight_rounding.to_string(),
         }
     }
 }
@@ -119,6 +128,11 @@ impl ExportConfig {
                 format!("minmax or percentile:P ({e})"),
             )
         })?;
+        self.weight_rounding
+            .parse::<WeightRounding>()
+            .map_err(|_| {
+                limits::range("weight-rounding", &self.weight_rounding, "nearest or gptq")
+            })?;
         if let Some(text) = &self.activations {
             let activations = text
                 .parse::<Activations>()
@@ -148,6 +162,7 @@ impl ExportConfig {
             input_headroom: self.input_headroom,
             activations: self.activations.as_deref().map(str::parse).transpose()?,
             activation_headroom: self.activation_headroom,
+            weight_rounding: self.weight_rounding.parse()?,
         })
     }
 }

@@ -18,7 +18,8 @@
 use super::fold::{FoldedMlp, InputGains};
 use super::precision::ExportPrecision;
 use super::quantized::{QuantizedLayer, QuantizedMlp, QuantizedOutput};
-use crate::calibrate::{check_rows, quantize_weights, RangeMethod, Recorder};
+use crate::calibrate::{check_rows, RangeMethod, Recorder};
+use crate::rounding::{round_weights, InputMoments, WeightRounding};
 use anyhow::{bail, Context};
 use frmd_core::model::mlp::{InputPrecision, Probe};
 use frmd_core::quant::{
@@ -76,6 +77,37 @@ pub fn calibrate(
         hidden,
         rows: set.rows(),
     })
+}
+
+/// The second moments of every layer's inputs (the hidden layers', then the output layer's)
+/// over the f32 sampler's calls on `set`, for [`WeightRounding::Gptq`].
+pub fn input_moments(model: &FoldedMlp, set: &CalibrationSet) -> anyhow::Result<Vec<InputMoments>> {
+    let c = &model.base.config;
+    check_rows(set, c.cond_dim())?;
+    let mut moments: Vec<InputMoments> = model
+        .hidden
+        .iter()
+        .chain([&model.output])
+        .map(|layer| InputMoments::new(layer.in_features))
+        .collect();
+    let mut failed = None;
+    for row in 0..set.rows() {
+        let noise = set.noise(row, model.base.steps.len(), c.traj_dim());
+        model.sample(set.row(row), &noise, |_, probe, values| {
+            let layer = match probe {
+                Probe::Input => 0,
+                Probe::Output(l) => l + 1,
+                _ => return,
+            };
+            if let Err(error) = moments[layer].add(values) {
+                failed.get_or_insert(error.context(format!("inputs of layer {layer}")));
+            }
+        })?;
+    }
+    match failed {
+        Some(error) => Err(error),
+        None => Ok(moments),
+    }
 }
 
 /// Gains that bring the trajectory and rate input segments to the absolute range of the
@@ -149,14 +181,19 @@ fn check_accumulator_range(
 
 /// Quantizes `model` with the calibrated `ranges`, normalization and ProDMP tables into a
 /// [`QuantizedMlp`] with `P` activations, whose first layer takes its input as
-/// `input_precision` says; `headroom` widens the activation ranges where `P` affords it.
+/// `input_precision` says; `headroom` widens the activation ranges where `P` affords it;
+/// `rounding` says how weights are rounded, with every layer's input moments ([`input_moments`])
+/// for [`WeightRounding::Gptq`].
 pub fn quantize<P: ExportPrecision>(
     model: &FoldedMlp,
     ranges: &Ranges,
     norm: &Normalization,
     input_precision: InputPrecision,
     headroom: f32,
+    rounding: (WeightRounding, Option<&[InputMoments]>),
 ) -> anyhow::Result<QuantizedMlp<P>> {
+    let weights =
+        |l: usize, layer| round_weights(layer, rounding.0, rounding.1.and_then(|m| m.get(l)));
     let base = &model.base;
     let c = &base.config;
     if !model.hidden.is_empty() && !P::accepts(input_precision) {
@@ -173,7 +210,7 @@ pub fn quantize<P: ExportPrecision>(
         let what = |part: &str| format!("hidden layer {l} {part}");
         let pre = P::activation(pre, headroom).with_context(|| what("pre-activation"))?;
         let out = P::activation(out, headroom).with_context(|| what("output"))?;
-        let q = quantize_weights(layer).with_context(|| format!("hidden layer {l}"))?;
+        let q = weights(l, layer).with_context(|| format!("hidden layer {l}"))?;
         // The 16-bit input's codes are on the fine grid: so are the first layer's biases.
         let bias_input = match (l, input_precision) {
             (0, InputPrecision::Int16) => QuantParams {
@@ -245,7 +282,7 @@ pub fn quantize<P: ExportPrecision>(
         });
         current = out;
     }
-    let q = quantize_weights(&model.output).context("output layer")?;
+    let q = weights(model.hidden.len(), &model.output).context("output layer")?;
     let bias = P::bias(&model.output.bias, &q, current, model.output.in_features)
         .context("output layer")?;
     let output = QuantizedOutput {

@@ -11,7 +11,7 @@ mod precision;
 mod quantized;
 pub mod reference;
 
-pub use calibrate::{calibrate, input_gains, quantize, Ranges};
+pub use calibrate::{calibrate, input_gains, input_moments, quantize, Ranges};
 pub use fold::{FoldedMlp, InputGains};
 pub use precision::{ExportPrecision, WideModel};
 pub use quantized::{QuantizedLayer, QuantizedMlp, QuantizedOutput};
@@ -32,6 +32,7 @@ use crate::calibrate::widen;
 use crate::host::{HostScratch, MAX_WIDTH};
 use crate::memory::MemoryFigures;
 use crate::reference::KernelCheck;
+use crate::rounding::WeightRounding;
 
 /// An exported MLP student: the folded f32 model, its calibrated ranges and the quantized policy
 /// with `P` activations.
@@ -97,12 +98,17 @@ fn export_as<P: ExportPrecision>(
     if options.input_precision != InputPrecision::Int8 {
         ranges.input = widen(ranges.input, options.input_headroom).context("input headroom")?;
     }
+    let moments = match options.weight_rounding {
+        WeightRounding::Nearest => None,
+        WeightRounding::Gptq => Some(input_moments(&folded, set)?),
+    };
     let policy = quantize::<P>(
         &folded,
         &ranges,
         norm,
         options.input_precision,
         options.activation_headroom,
+        (options.weight_rounding, moments.as_deref()),
     )?;
     Ok(MlpExport {
         f32_biases: folded.flat_first_layer_biases(),

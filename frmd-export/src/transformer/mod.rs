@@ -23,6 +23,7 @@ pub use quantize::{
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use anyhow::bail;
 use frmd_core::blob::BlobError;
 use frmd_core::policy::{F32TransformerNetwork, Network, PolicyDims};
 use frmd_formats::calibration::CalibrationSet;
@@ -32,6 +33,7 @@ use crate::backbone::{ExportOptions, ExportedNetwork};
 use crate::host::HostScratch;
 use crate::memory::MemoryFigures;
 use crate::reference::KernelCheck;
+use crate::rounding::WeightRounding;
 
 /// Random input rows per layer of the exported transformer's check (d), besides its edge rows.
 const CHECK_ROWS: usize = 16;
@@ -58,6 +60,12 @@ pub(crate) fn export(
     options: &ExportOptions,
     set: &CalibrationSet,
 ) -> anyhow::Result<TransformerExport> {
+    if options.weight_rounding != WeightRounding::Nearest {
+        bail!(
+            "weight rounding {}: transformer-lite rounds its weights to nearest only",
+            options.weight_rounding
+        );
+    }
     let folded = FoldedTransformer::new(checkpoint, options.steps)?;
     let ranges = calibrate(&folded, set, options.ranges)?;
     let model = quantize(&folded, &ranges)?;

@@ -408,3 +408,22 @@ fn layer_check_passes_on_the_export_and_detects_accumulator_overflow() {
     assert!(check.first_mismatch.unwrap().starts_with("head"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn transformer_lite_refuses_gptq_rounding_by_name() {
+    let config = lite_config();
+    let dir = write_checkpoint("lite-gptq", &config, 11);
+    let options = crate::ExportOptions {
+        weight_rounding: crate::WeightRounding::Gptq,
+        ..Default::default()
+    };
+    let calibration = calibration_set(&config, 4, 5);
+    let error = super::export(&Checkpoint::read(&dir).unwrap(), &options, &calibration)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.contains("gptq") && error.contains("nearest"),
+        "{error}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
