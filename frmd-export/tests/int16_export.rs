@@ -53,7 +53,7 @@ fn student(tag: &str) -> PathBuf {
     dir
 }
 
-fn export(dir: &PathBuf, activations: Activations, steps: usize) -> ExportedStudent {
+fn export(dir: &Path, activations: Activations, steps: usize) -> ExportedStudent {
     export_with(dir, activations, steps, WeightRounding::Nearest)
 }
 
