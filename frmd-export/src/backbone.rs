@@ -42,9 +42,10 @@ pub struct ExportOptions {
     /// (>= 1) before it becomes a symmetric int16 scale, so closed-loop activations beyond the
     /// calibration states are not clipped. Ignored for int8 activations.
     pub activation_headroom: f32,
-    /// MLP: how weights are rounded to their int8 codes ([`WeightRounding`]); transformer-lite
-    /// rounds to nearest and refuses the others.
-    pub weight_rounding: WeightRounding,
+    /// How weights are rounded to their int8 codes; `None`: the backbone's default
+    /// ([`WeightRounding::recipe`]: GPTQ for the MLP, nearest for transformer-lite, which has
+    /// no other).
+    pub weight_rounding: Option<WeightRounding>,
 }
 
 /// The precision of a network's hidden activations.
@@ -114,7 +115,7 @@ impl Default for ExportOptions {
             input_headroom: DEFAULT_INPUT_HEADROOM,
             activations: None,
             activation_headroom: DEFAULT_ACTIVATION_HEADROOM,
-            weight_rounding: WeightRounding::default(),
+            weight_rounding: None,
         }
     }
 }

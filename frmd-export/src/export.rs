@@ -18,6 +18,7 @@ use crate::host::HostScratch;
 use crate::memory::MemoryFigures;
 use crate::mlp::{MlpExport, MlpExports};
 use crate::reference::KernelCheck;
+use crate::rounding::WeightRounding;
 use crate::transformer::TransformerExport;
 
 /// A student checkpoint exported by the exporter of its backbone, its blob checked.
@@ -81,6 +82,11 @@ pub fn export_checkpoint(
         .clone()
         .with_context(|| format!("{dir}: checkpoint has no normalization"))?;
     let activations = Activations::resolve(options.activations, &meta.model.backbone);
+    let rounding = WeightRounding::resolve(options.weight_rounding, &meta.model.backbone);
+    let options = &ExportOptions {
+        weight_rounding: Some(rounding),
+        ..*options
+    };
     let network = match meta.model.backbone {
         BackboneConfig::Mlp { .. } => {
             crate::mlp::export(&checkpoint, options, activations, &calibration, &norm)
@@ -123,6 +129,13 @@ impl ExportedStudent {
     /// The settings it was exported with.
     pub fn options(&self) -> &ExportOptions {
         &self.options
+    }
+
+    /// How its weights were rounded (the options' or the backbone's default).
+    pub fn weight_rounding(&self) -> WeightRounding {
+        self.options
+            .weight_rounding
+            .unwrap_or_else(|| WeightRounding::recipe(&self.meta.model.backbone))
     }
 
     /// The precision of its hidden activations (the options' or the backbone's default).

@@ -12,18 +12,36 @@ use std::str::FromStr;
 
 use anyhow::{bail, Context};
 use frmd_core::quant::quantize_weight;
+use frmd_formats::checkpoint::BackboneConfig;
 
 use crate::calibrate::{quantize_weights, QuantizedWeights};
 use crate::fold::FloatLayer;
 
 /// How weights are rounded to their int8 codes (see the module docs).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum WeightRounding {
     /// Each weight to its nearest code.
-    #[default]
     Nearest,
     /// Column by column with error feedback over the calibration inputs' second moments.
     Gptq,
+}
+
+impl WeightRounding {
+    /// The default of a backbone: GPTQ for the MLP (on the recipe's insert and avoid students,
+    /// 2,000 episodes each, it brought the int16 export from -4.1 / -1.4 / -0.1 points of the
+    /// float student to +0.2 / -0.8 / +1.0; docs/experiments.md, "Int8 student"), nearest for
+    /// transformer-lite (no GPTQ path).
+    pub fn recipe(backbone: &BackboneConfig) -> Self {
+        match backbone {
+            BackboneConfig::Mlp { .. } => Self::Gptq,
+            BackboneConfig::Transformer { .. } => Self::Nearest,
+        }
+    }
+
+    /// `requested`, or the backbone's default ([`Self::recipe`]).
+    pub fn resolve(requested: Option<Self>, backbone: &BackboneConfig) -> Self {
+        requested.unwrap_or_else(|| Self::recipe(backbone))
+    }
 }
 
 impl FromStr for WeightRounding {

@@ -67,7 +67,7 @@ fn export_with(
     let options = ExportOptions {
         steps,
         activations: Some(activations),
-        weight_rounding,
+        weight_rounding: Some(weight_rounding),
         ..Default::default()
     };
     frmd_export::export(dir, &options, Some(set)).unwrap()

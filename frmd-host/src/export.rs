@@ -21,8 +21,8 @@ fn int8_before_the_field() -> Option<String> {
     Some("int8".into())
 }
 
-fn nearest_before_the_field() -> String {
-    WeightRounding::Nearest.to_string()
+fn nearest_before_the_field() -> Option<String> {
+    Some(WeightRounding::Nearest.to_string())
 }
 
 /// Export settings written beside a baked module.
@@ -55,10 +55,11 @@ pub struct ExportConfig {
     pub activations: Option<String>,
     /// Activation range widening with int16 activations (>= 1).
     pub activation_headroom: f32,
-    /// Weight rounding: `nearest` | `gptq` ([`WeightRounding`]); an `export.json` written before
+    /// Weight rounding: `nearest` | `gptq`; `None`: the backbone's default
+    /// ([`WeightRounding::recipe`]). `export.json` records the rounding done; one written before
     /// the option existed has no such field and means nearest.
     #[serde(default = "nearest_before_the_field")]
-    pub weight_rounding: String,
+    pub weight_rounding: Option<String>,
 }
 
 impl Default for ExportConfig {
@@ -77,7 +78,7 @@ impl Default for ExportConfig {
             input_headroom: options.input_headroom,
             activations: options.activations.map(|a| a.to_string()),
             activation_headroom: options.activation_headroom,
-            weight_rounding: options.weight_rounding.to_string(),
+            weight_rounding: options.weight_rounding.map(|r| r.to_string()),
         }
     }
 }
@@ -128,11 +129,10 @@ impl ExportConfig {
                 format!("minmax or percentile:P ({e})"),
             )
         })?;
-        self.weight_rounding
-            .parse::<WeightRounding>()
-            .map_err(|_| {
-                limits::range("weight-rounding", &self.weight_rounding, "nearest or gptq")
-            })?;
+        if let Some(text) = &self.weight_rounding {
+            text.parse::<WeightRounding>()
+                .map_err(|_| limits::range("weight-rounding", text, "nearest or gptq"))?;
+        }
         if let Some(text) = &self.activations {
             let activations = text
                 .parse::<Activations>()
@@ -162,7 +162,11 @@ impl ExportConfig {
             input_headroom: self.input_headroom,
             activations: self.activations.as_deref().map(str::parse).transpose()?,
             activation_headroom: self.activation_headroom,
-            weight_rounding: self.weight_rounding.parse()?,
+            weight_rounding: self
+                .weight_rounding
+                .as_deref()
+                .map(str::parse)
+                .transpose()?,
         })
     }
 }
@@ -249,6 +253,7 @@ pub fn write_export(
         // seen from the export directory.
         let recorded = ExportConfig {
             activations: Some(student.activations().to_string()),
+            weight_rounding: Some(student.weight_rounding().to_string()),
             checkpoint: checkpoint_from(dir, &cfg.checkpoint),
             ..cfg.clone()
         };

@@ -98,7 +98,9 @@ fn export_as<P: ExportPrecision>(
     if options.input_precision != InputPrecision::Int8 {
         ranges.input = widen(ranges.input, options.input_headroom).context("input headroom")?;
     }
-    let moments = match options.weight_rounding {
+    let rounding =
+        WeightRounding::resolve(options.weight_rounding, &checkpoint.meta.model.backbone);
+    let moments = match rounding {
         WeightRounding::Nearest => None,
         WeightRounding::Gptq => Some(input_moments(&folded, set)?),
     };
@@ -108,7 +110,7 @@ fn export_as<P: ExportPrecision>(
         norm,
         options.input_precision,
         options.activation_headroom,
-        (options.weight_rounding, moments.as_deref()),
+        (rounding, moments.as_deref()),
     )?;
     Ok(MlpExport {
         f32_biases: folded.flat_first_layer_biases(),

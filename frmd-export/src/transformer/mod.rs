@@ -60,11 +60,11 @@ pub(crate) fn export(
     options: &ExportOptions,
     set: &CalibrationSet,
 ) -> anyhow::Result<TransformerExport> {
-    if options.weight_rounding != WeightRounding::Nearest {
-        bail!(
-            "weight rounding {}: transformer-lite rounds its weights to nearest only",
-            options.weight_rounding
-        );
+    if let Some(rounding) = options
+        .weight_rounding
+        .filter(|r| *r != WeightRounding::Nearest)
+    {
+        bail!("weight rounding {rounding}: transformer-lite rounds its weights to nearest only");
     }
     let folded = FoldedTransformer::new(checkpoint, options.steps)?;
     let ranges = calibrate(&folded, set, options.ranges)?;

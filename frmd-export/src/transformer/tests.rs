@@ -414,7 +414,7 @@ fn transformer_lite_refuses_gptq_rounding_by_name() {
     let config = lite_config();
     let dir = write_checkpoint("lite-gptq", &config, 11);
     let options = crate::ExportOptions {
-        weight_rounding: crate::WeightRounding::Gptq,
+        weight_rounding: Some(crate::WeightRounding::Gptq),
         ..Default::default()
     };
     let calibration = calibration_set(&config, 4, 5);

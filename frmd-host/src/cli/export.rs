@@ -5,7 +5,7 @@ use crate::export::{export_student, write_export, ExportConfig};
 use anyhow::bail;
 use clap::Args;
 use frmd_export::bake::BLOB_FILE;
-use frmd_export::{Activations, ExportOptions, WeightRounding};
+use frmd_export::{Activations, WeightRounding};
 use frmd_formats::artifact::{check_output_dir, check_output_file};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -49,9 +49,9 @@ pub struct ExportArgs {
     pub activation_headroom: f32,
     /// How int8 weights are rounded: nearest (each weight on its own) or gptq (column by column,
     /// each rounding error moved onto the columns not yet rounded, weighted by the calibration
-    /// inputs; MLP only).
-    #[arg(long, default_value_t = ExportOptions::default().weight_rounding)]
-    pub weight_rounding: WeightRounding,
+    /// inputs; MLP only) [default: gptq for an MLP, nearest for transformer-lite]
+    #[arg(long)]
+    pub weight_rounding: Option<WeightRounding>,
     /// With --data: also store the calibration rows as the checkpoint's calibration.safetensors.
     #[arg(long)]
     pub save_calibration: bool,
@@ -74,7 +74,7 @@ impl From<&ExportArgs> for ExportConfig {
             input_headroom: a.input_headroom,
             activations: a.activations.map(|a| a.to_string()),
             activation_headroom: a.activation_headroom,
-            weight_rounding: a.weight_rounding.to_string(),
+            weight_rounding: a.weight_rounding.map(|r| r.to_string()),
         }
     }
 }
