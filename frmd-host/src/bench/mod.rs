@@ -27,6 +27,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 pub mod fixtures;
+pub mod stages;
 #[cfg(test)]
 mod tests;
 
