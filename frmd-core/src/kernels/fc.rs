@@ -168,38 +168,23 @@ impl<'a, A: Accumulator> FullyConnected<'a, A> {
         });
     }
 
-    /// [`Self::accumulate`] with the AVX2 row kernels (x86-64; callers checked the shapes):
-    /// eight rows per call, the last `out_features % 8` rows by the portable dot products.
+    /// [`Self::accumulate`] with the x86 kernels (callers checked the shapes): the whole blocks
+    /// of eight rows by `x86::layer` (the accumulator type's loop), the last `out_features % 8`
+    /// rows by the portable dot products.
     #[cfg(target_arch = "x86_64")]
     fn accumulate_avx2(&self, avx2: super::x86::Avx2, input: LayerInput<'_>, acc: &mut [A]) {
         use super::x86::BLOCK_ROWS;
-        let width = self.in_features;
-        let Some(block_len) = width.checked_mul(BLOCK_ROWS) else {
+        A::accumulate_x86(self, avx2, input, acc);
+        let Some(block_len) = self.in_features.checked_mul(BLOCK_ROWS) else {
             return;
         };
-        let mut row_blocks = self.weights.chunks_exact(block_len);
-        let (out_blocks, out_tail) = acc.as_chunks_mut::<BLOCK_ROWS>();
-        let (bias_blocks, bias_tail) = self.bias.as_chunks::<BLOCK_ROWS>();
-        for ((out, rows), bias) in out_blocks
+        let rows = self.weights.chunks_exact(block_len).remainder();
+        let tail = acc
+            .as_chunks_mut::<BLOCK_ROWS>()
+            .1
             .iter_mut()
-            .zip(row_blocks.by_ref())
-            .zip(bias_blocks)
-        {
-            A::block(bias, out, width, |columns, start, residues| {
-                let mut first = [0_i32; BLOCK_ROWS];
-                for (slot, s) in first.iter_mut().zip(start) {
-                    *slot = *s;
-                }
-                let sums = avx2.residues(rows, input, columns, &first);
-                for (residue, sum) in residues.iter_mut().zip(sums) {
-                    *residue = sum;
-                }
-            });
-        }
-        let tail = out_tail
-            .iter_mut()
-            .zip(row_blocks.remainder().chunks_exact(width))
-            .zip(bias_tail);
+            .zip(rows.chunks_exact(self.in_features))
+            .zip(self.bias.as_chunks::<BLOCK_ROWS>().1);
         for ((out, row), bias) in tail {
             use super::rows::for_each_accumulator;
             let bias = core::slice::from_ref(bias);

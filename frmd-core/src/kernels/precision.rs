@@ -48,6 +48,16 @@ pub(crate) mod sealed {
             width: usize,
             kernel: impl FnMut(Range<usize>, &[i32], &mut [i32]),
         );
+
+        /// The accumulators of the whole blocks of eight rows of `fc` with the x86 kernels
+        /// (`x86::layer`; the caller checked the shapes and does the remaining rows).
+        #[cfg(target_arch = "x86_64")]
+        fn accumulate_x86(
+            fc: &crate::kernels::FullyConnected<'_, Self>,
+            avx2: crate::kernels::x86::Avx2,
+            input: crate::kernels::LayerInput<'_>,
+            acc: &mut [Self],
+        );
     }
 
     /// The x86-64 requantizing kernels of a precision, and the DSP cores' fused int16 path.
@@ -71,7 +81,7 @@ pub(crate) mod sealed {
             false
         }
 
-        /// `FullyConnected::forward_validated` with the AVX2 kernels (the caller checked every
+        /// `FullyConnected::forward_validated` with the x86 kernels (the caller checked every
         /// length).
         #[cfg(target_arch = "x86_64")]
         fn forward_x86(
@@ -126,6 +136,7 @@ pub trait Accumulator:
     fn dequantize(self, scale: f32) -> f32;
 }
 
+#[allow(private_interfaces)]
 impl sealed::Accumulate for i32 {
     /// One kernel call over the whole row, started at the bias: the int8 kernels as they were.
     #[inline(always)]
@@ -136,6 +147,17 @@ impl sealed::Accumulate for i32 {
         mut kernel: impl FnMut(Range<usize>, &[i32], &mut [i32]),
     ) {
         kernel(0..width, bias, sums);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline]
+    fn accumulate_x86(
+        fc: &super::FullyConnected<'_, i32>,
+        avx2: super::x86::Avx2,
+        input: LayerInput<'_>,
+        acc: &mut [i32],
+    ) {
+        avx2.accumulate_blocks(fc, input, true, acc);
     }
 }
 
@@ -154,6 +176,7 @@ impl Accumulator for i32 {
     }
 }
 
+#[allow(private_interfaces)]
 impl sealed::Accumulate for i64 {
     /// One kernel call per 512-column chunk, started at 0; each int32 result is sign-extended and
     /// added to the row's int64 sum (the first chunk's to the bias).
@@ -195,6 +218,17 @@ impl sealed::Accumulate for i64 {
             }
             start = end;
         }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline]
+    fn accumulate_x86(
+        fc: &super::FullyConnected<'_, i64>,
+        avx2: super::x86::Avx2,
+        input: LayerInput<'_>,
+        acc: &mut [i64],
+    ) {
+        avx2.accumulate_blocks_wide(fc, input, acc);
     }
 }
 

@@ -371,14 +371,15 @@ impl<P: MlpPrecision + TryFrom<i16>> Stages for Work<'_, '_, '_, P> {
     }
 }
 
-/// Median wall time (ns) of stage `index` per call: `batches` batches of `per_batch` calls after
-/// a warm-up, each batch timed as a whole.
+/// Median and smallest wall time (ns) of stage `index` per call: `batches` batches of
+/// `per_batch` calls after a warm-up, each batch timed as a whole (on a loaded machine the
+/// smallest batch is the one least disturbed).
 pub fn time_stage(
     stages: &mut dyn Stages,
     index: usize,
     batches: usize,
     per_batch: usize,
-) -> anyhow::Result<f64> {
+) -> anyhow::Result<(f64, f64)> {
     for _ in 0..per_batch.max(10) {
         stages.run(index)?;
     }
@@ -390,7 +391,8 @@ pub fn time_stage(
         }
         times.push(start.elapsed().as_secs_f64() * 1e9 / per_batch.max(1) as f64);
     }
-    Ok(crate::eval::metrics::quantile(&times, 0.5))
+    let least = times.iter().copied().fold(f64::INFINITY, f64::min);
+    Ok((crate::eval::metrics::quantile(&times, 0.5), least))
 }
 
 /// The breakdown as rows `(stage, median ns)` plus `other` (the chunk minus the stages).
@@ -400,7 +402,7 @@ pub fn stage_times(stages: &mut dyn Stages, batches: usize) -> anyhow::Result<Ve
     let mut rows: Vec<(String, f64)> = Vec::new();
     let mut cumulative = 0.0;
     for (index, name) in names.iter().enumerate() {
-        let ns = time_stage(stages, index, batches, 20)?;
+        let (ns, _) = time_stage(stages, index, batches, 20)?;
         // Layer parts are reported as increments over the part before.
         let part = name.rsplit(' ').next().unwrap_or("");
         let reported = match part {
