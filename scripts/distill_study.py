@@ -245,10 +245,13 @@ if __name__ == "__main__":
     if unknown:
         sys.exit(f"--tasks: {unknown} are not in the development set {DEV_TASKS}")
     variants = load_variants(Path(a.variants), a.only)
+    # The table always has every variant of the file (--only selects what runs), over the whole
+    # development set: rows measured in other run directories come from the committed reports.
+    every = load_variants(Path(a.variants), None)
     if a.command == "run":
         if any(is_mw(t) for t in a.tasks) and not Path(Study(a).python).exists():
             sys.exit("MetaWorld needs its venv: bash examples/metaworld/setup.sh")
         status = Study(a).run(variants, max(1, a.jobs))
-        write_table(Path(a.runs), variants, a.tasks, a.seeds, Path(a.out))
+        write_table(Path(a.runs), every, DEV_TASKS, SEEDS, Path(a.out))
         sys.exit(status)
-    write_table(Path(a.runs), variants, a.tasks, a.seeds, Path(a.out))
+    write_table(Path(a.runs), every, DEV_TASKS, SEEDS, Path(a.out))

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use frmd_core::blob::BlobError;
 use frmd_core::model::mlp::InputPrecision;
 use frmd_core::policy::{Network, PolicyDims};
-use frmd_formats::checkpoint::Normalization;
+use frmd_formats::checkpoint::{BackboneConfig, Normalization};
 
 use crate::calibrate::RangeMethod;
 use crate::host::HostScratch;
@@ -34,23 +34,41 @@ pub struct ExportOptions {
     /// demonstrations never visited) reach the network instead of saturating; the fine grid keeps
     /// the resolution (`range / 2^16`). Ignored for plain int8 input.
     pub input_headroom: f32,
-    /// MLP: the precision of the hidden activations (int8 weights either way).
-    pub activations: Activations,
+    /// The precision of the hidden activations (int8 weights either way); `None`: the best
+    /// measured one the backbone has ([`Activations::recipe`]).
+    pub activations: Option<Activations>,
     /// MLP with int16 activations: every calibrated activation range is widened by this factor
     /// (>= 1) before it becomes a symmetric int16 scale, so closed-loop activations beyond the
     /// calibration states are not clipped. Ignored for int8 activations.
     pub activation_headroom: f32,
 }
 
-/// The precision of an MLP's hidden activations.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// The precision of a network's hidden activations.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Activations {
     /// TFLite's int8 scheme: asymmetric int8 codes, int32 biases, 256-entry tables.
-    #[default]
     Int8,
     /// TFLite's 16x8 scheme: symmetric int16 codes, int64 biases, interpolated int16 tables;
     /// the first layer takes the 16-bit input.
     Int16,
+}
+
+impl Activations {
+    /// The default of a backbone: int16 for the MLP (the int8 export lost up to 17 points of
+    /// closed-loop success to its float student, the int16 one within 0.2 on the same episodes,
+    /// at 1.03x the Cortex-M4 instructions: docs/design.md section 7), int8 for transformer-lite
+    /// (no int16 path yet).
+    pub fn recipe(backbone: &BackboneConfig) -> Self {
+        match backbone {
+            BackboneConfig::Mlp { .. } => Activations::Int16,
+            BackboneConfig::Transformer { .. } => Activations::Int8,
+        }
+    }
+
+    /// `requested`, or the backbone's default ([`Self::recipe`]).
+    pub fn resolve(requested: Option<Self>, backbone: &BackboneConfig) -> Self {
+        requested.unwrap_or_else(|| Self::recipe(backbone))
+    }
 }
 
 impl std::str::FromStr for Activations {
@@ -90,7 +108,7 @@ impl Default for ExportOptions {
             balance_inputs: true,
             input_precision: InputPrecision::Int16,
             input_headroom: DEFAULT_INPUT_HEADROOM,
-            activations: Activations::default(),
+            activations: None,
             activation_headroom: DEFAULT_ACTIVATION_HEADROOM,
         }
     }

@@ -12,7 +12,7 @@ use frmd_formats::checkpoint::{
     BackboneConfig, Checkpoint, CheckpointMeta, Normalization, CALIBRATION_FILE,
 };
 
-use crate::backbone::{ExportOptions, ExportedNetwork};
+use crate::backbone::{Activations, ExportOptions, ExportedNetwork};
 use crate::fold::check_student;
 use crate::host::HostScratch;
 use crate::memory::MemoryFigures;
@@ -80,16 +80,17 @@ pub fn export_checkpoint(
         .normalization
         .clone()
         .with_context(|| format!("{dir}: checkpoint has no normalization"))?;
+    let activations = Activations::resolve(options.activations, &meta.model.backbone);
     let network = match meta.model.backbone {
         BackboneConfig::Mlp { .. } => {
-            crate::mlp::export(&checkpoint, options, &calibration, &norm).map(Backbone::Mlp)
+            crate::mlp::export(&checkpoint, options, activations, &calibration, &norm)
+                .map(Backbone::Mlp)
         }
         BackboneConfig::Transformer { .. } => {
-            if options.activations != crate::Activations::Int8 {
+            if activations != Activations::Int8 {
                 anyhow::bail!(
-                    "{} activations are built for the MLP only; a transformer-lite student \
-                     exports with int8 activations",
-                    options.activations
+                    "{activations} activations are built for the MLP only; a transformer-lite \
+                     student exports with int8 activations"
                 );
             }
             crate::transformer::export(&checkpoint, options, &calibration)
@@ -122,6 +123,14 @@ impl ExportedStudent {
     /// The settings it was exported with.
     pub fn options(&self) -> &ExportOptions {
         &self.options
+    }
+
+    /// The precision of its hidden activations (the options' or the backbone's default).
+    pub fn activations(&self) -> Activations {
+        match &self.network {
+            Backbone::Mlp(MlpExports::Int16(_)) => Activations::Int16,
+            _ => Activations::Int8,
+        }
     }
 
     /// The rows it was calibrated on.

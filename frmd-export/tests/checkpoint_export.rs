@@ -58,6 +58,11 @@ fn calibration(rows: usize) -> CalibrationSet {
 
 /// The MLP export of `dir` with `options` on `set` (the checkpoint's own file when `None`).
 fn export_mlp(dir: &Path, options: ExportOptions, set: Option<CalibrationSet>) -> MlpExport {
+    // These tests look inside the int8 MLP export.
+    let options = ExportOptions {
+        activations: options.activations.or(Some(frmd_export::Activations::Int8)),
+        ..options
+    };
     let student = frmd_export::export(dir, &options, set).unwrap();
     student.mlp().expect("an MLP student").clone()
 }

@@ -69,6 +69,7 @@ fn student_sixteen_bit_input_is_as_accurate_as_two_planes() {
     let export = |input_precision| {
         let options = ExportOptions {
             input_precision,
+            activations: Some(frmd_export::Activations::Int8),
             ..Default::default()
         };
         let student = frmd_export::export(&dir, &options, None).expect("export the student");
@@ -143,12 +144,26 @@ fn qemu_minimal_example_acts_like_the_host() {
     if !qemu::available("qemu_minimal_example_acts_like_the_host", &root) {
         return;
     }
-    let blob = AlignedBlob::new(&student().blob().expect("write the blob"));
-    let loaded = LoadedMlp::load(blob.bytes()).expect("load the blob");
-    let mut policy = loaded
-        .policy::<STUDENT_HISTORY, STUDENT_OBS_DIM, DOF, HORIZON, PARAMS, STUDENT_INPUT, MLP_WIDTH>(
-        )
-        .expect("policy from the blob");
+    // The minimal example bakes the student as `frmd export` does by default.
+    let dir = frmd_firmware_support::host::student::student_dir();
+    let exported = frmd_export::export(&dir, &frmd_export::ExportOptions::default(), None)
+        .expect("export the student");
+    let blob = AlignedBlob::new(exported.blob());
+    let loaded = frmd_core::blob::LoadedBlob::load(blob.bytes()).expect("load the blob");
+    let mut scratch = Box::new(frmd_export::host::HostScratch::new());
+    let network = loaded
+        .network::<MLP_WIDTH, _>(&mut *scratch)
+        .expect("network from the blob");
+    let mut policy = frmd_core::policy::Policy::<
+        _,
+        STUDENT_HISTORY,
+        STUDENT_OBS_DIM,
+        DOF,
+        HORIZON,
+        PARAMS,
+        STUDENT_INPUT,
+    >::new(loaded.config(), network)
+    .expect("policy from the blob");
     policy.reset(&[0.05; DOF]).unwrap();
     for step in 0..STUDENT_HISTORY {
         policy

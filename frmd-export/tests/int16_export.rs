@@ -56,7 +56,7 @@ fn export(dir: &PathBuf, activations: Activations, steps: usize) -> ExportedStud
     let set = frmd_test_support::checkpoint::calibration_rows(&model(), 24, 5, 29);
     let options = ExportOptions {
         steps,
-        activations,
+        activations: Some(activations),
         ..Default::default()
     };
     frmd_export::export(dir, &options, Some(set)).unwrap()
@@ -159,7 +159,7 @@ fn int16_activations_need_the_16_bit_input() {
     let set = frmd_test_support::checkpoint::calibration_rows(&model(), 8, 5, 29);
     for input_precision in [InputPrecision::Int8, InputPrecision::TwoPlane] {
         let options = ExportOptions {
-            activations: Activations::Int16,
+            activations: Some(Activations::Int16),
             input_precision,
             ..Default::default()
         };
@@ -170,7 +170,7 @@ fn int16_activations_need_the_16_bit_input() {
         assert!(err.contains("16-bit input"), "{err}");
     }
     let options = ExportOptions {
-        activations: Activations::Int16,
+        activations: Some(Activations::Int16),
         activation_headroom: 0.5,
         ..Default::default()
     };

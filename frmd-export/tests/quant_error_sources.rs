@@ -8,8 +8,11 @@ fn input_quantization_share_of_the_error() {
     let Ok(dir) = std::env::var("FRMD_CKPT") else {
         return;
     };
-    let student =
-        frmd_export::export(std::path::Path::new(&dir), &Default::default(), None).unwrap();
+    let options = frmd_export::ExportOptions {
+        activations: Some(frmd_export::Activations::Int8),
+        ..Default::default()
+    };
+    let student = frmd_export::export(std::path::Path::new(&dir), &options, None).unwrap();
     let exported = student.mlp().expect("an MLP student");
     let set = student.calibration();
     let (folded, policy) = (&exported.folded, &exported.policy);

@@ -181,7 +181,7 @@ fn setup(cfg: &EquivConfig) -> anyhow::Result<Setup> {
         .clone()
         .context("checkpoint has no normalization")?;
     Ok(Setup {
-        label: info.activations.clone(),
+        label: info.activations.clone().unwrap_or_else(|| "int8".into()),
         student: export_student(&info, false)?,
         meta,
         net,

@@ -16,6 +16,11 @@ use frmd_formats::checkpoint::{Checkpoint, CheckpointMeta, CALIBRATION_FILE};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+/// `export.json` files written before the `activations` field: int8 exports.
+fn int8_before_the_field() -> Option<String> {
+    Some("int8".into())
+}
+
 /// Export settings written beside a baked module.
 pub const EXPORT_INFO_FILE: &str = "export.json";
 
@@ -39,8 +44,11 @@ pub struct ExportConfig {
     pub two_plane_input: bool,
     /// Input range widening with the 16-bit input (>= 1).
     pub input_headroom: f32,
-    /// Hidden activations: `int8` | `int16` (an older `export.json` without it: int8).
-    pub activations: String,
+    /// Hidden activations: `int8` | `int16`; `None`: the backbone's default
+    /// ([`frmd_export::Activations::recipe`]). `export.json` records the precision exported; one
+    /// written before int16 activations existed has no such field and means int8.
+    #[serde(default = "int8_before_the_field")]
+    pub activations: Option<String>,
     /// Activation range widening with int16 activations (>= 1).
     pub activation_headroom: f32,
 }
@@ -59,7 +67,7 @@ impl Default for ExportConfig {
             balance_inputs: options.balance_inputs,
             two_plane_input: options.input_precision == InputPrecision::Int16,
             input_headroom: options.input_headroom,
-            activations: options.activations.to_string(),
+            activations: options.activations.map(|a| a.to_string()),
             activation_headroom: options.activation_headroom,
         }
     }
@@ -111,16 +119,17 @@ impl ExportConfig {
                 format!("minmax or percentile:P ({e})"),
             )
         })?;
-        let activations = self
-            .activations
-            .parse::<Activations>()
-            .map_err(|_| limits::range("activations", &self.activations, "int8 or int16"))?;
-        if activations == Activations::Int16 && !self.two_plane_input {
-            return Err(limits::range(
-                "activations",
-                &self.activations,
-                "int8 with --int8-input (int16 activations take the 16-bit input)",
-            ));
+        if let Some(text) = &self.activations {
+            let activations = text
+                .parse::<Activations>()
+                .map_err(|_| limits::range("activations", text, "int8 or int16"))?;
+            if activations == Activations::Int16 && !self.two_plane_input {
+                return Err(limits::range(
+                    "activations",
+                    text,
+                    "int8 with --int8-input (int16 activations take the 16-bit input)",
+                ));
+            }
         }
         Ok(())
     }
@@ -137,7 +146,7 @@ impl ExportConfig {
             balance_inputs: self.balance_inputs,
             input_precision,
             input_headroom: self.input_headroom,
-            activations: self.activations.parse()?,
+            activations: self.activations.as_deref().map(str::parse).transpose()?,
             activation_headroom: self.activation_headroom,
         })
     }
@@ -181,6 +190,34 @@ pub fn export_student(
     frmd_export::export_checkpoint(checkpoint, &options, rows)
 }
 
+/// The checkpoint path `checkpoint` as `export.json` in `dir` records it: relative to `dir`
+/// (`frmd serve --baked` resolves it from there, whatever its working directory, and a run
+/// directory moved as a whole keeps working), or as given when either path cannot be resolved
+/// (an absolute path stays absolute).
+fn checkpoint_from(dir: &Path, checkpoint: &str) -> String {
+    let given = Path::new(checkpoint);
+    if given.is_absolute() || checkpoint.is_empty() {
+        return checkpoint.to_string();
+    }
+    let (Ok(from), Ok(to)) = (dir.canonicalize(), given.canonicalize()) else {
+        return checkpoint.to_string();
+    };
+    let common = from
+        .components()
+        .zip(to.components())
+        .take_while(|(a, b)| a == b)
+        .count();
+    let mut relative = PathBuf::new();
+    for _ in common..from.components().count() {
+        relative.push("..");
+    }
+    relative.extend(to.components().skip(common));
+    if relative.as_os_str().is_empty() {
+        relative.push(".");
+    }
+    relative.display().to_string()
+}
+
 /// Writes the module directory `dir` (the baked module, `policy.blob` and `export.json`) and/or
 /// the blob alone at `blob_path`; returns the files written.
 pub fn write_export(
@@ -193,7 +230,14 @@ pub fn write_export(
     if let Some(dir) = dir {
         written.extend(student.write_module(dir)?);
         let info = dir.join(EXPORT_INFO_FILE);
-        write_atomic(&info, serde_json::to_string_pretty(cfg)?.as_bytes())?;
+        // The precision exported (asked for or the backbone's default), and the checkpoint as
+        // seen from the export directory.
+        let recorded = ExportConfig {
+            activations: Some(student.activations().to_string()),
+            checkpoint: checkpoint_from(dir, &cfg.checkpoint),
+            ..cfg.clone()
+        };
+        write_atomic(&info, serde_json::to_string_pretty(&recorded)?.as_bytes())?;
         written.push(info);
     }
     if let Some(path) = blob_path {

@@ -160,6 +160,7 @@ fn dataset_reader_mutations_never_panic() {
         dt: 0.1,
         source: "test".into(),
         action_before_start: ActionBeforeStart::Zero,
+        extra: Default::default(),
     };
     let bytes = data.to_bytes().unwrap();
     assert_eq!(Dataset::from_bytes(&bytes).unwrap(), data);

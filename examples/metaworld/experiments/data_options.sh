@@ -22,10 +22,12 @@ for task in $tasks; do
     for cfg in raw relative-after20; do
         case "$cfg" in
             raw) opts=() ;;
-            relative-after20) opts=(--obs relative --after-success 20) ;;
+            # The data options are for the learned ProDMP policies: no DP on this data here.
+            relative-after20) opts=(--obs relative --after-success 20
+                                    --methods teacher,student-1,student-2,int8-student,int16-student) ;;
         esac
         echo "== $task $cfg (seeds $seeds)"
-        "$python" -m frmd_metaworld benchmark --task "$task" --seeds "$seeds" --multi-seed-tasks none \
+        "$python" -m frmd_metaworld benchmark --task "$task" --seeds "$seeds" --multi-seed-tasks none --int16 \
             --frmd "$frmd" --data-dir "$out/data" --out "$out/$cfg" "${opts[@]}"
     done
 done

@@ -43,6 +43,10 @@ class BenchConfig:
     after_success: int = 0
     # Also export the student with int16 activations and evaluate it ("int16-student").
     int16: bool = False
+    # Evaluate through the frmd wheel in process (`eval --in-process`) instead of `frmd serve`.
+    in_process: bool = False
+    # Only these methods (None: all); models no selected method needs are not trained.
+    only: list | None = None
     episodes: int = 50
     # None: `frmd train`'s default backbone (the recipe of issue 13: "the CLI's default").
     backbone: str | None = None
@@ -64,7 +68,8 @@ class BenchConfig:
 
     def methods(self) -> list:
         """The methods this configuration evaluates, in table order."""
-        return [m for m in METHODS if m not in OPTIONAL_METHODS or self.int16]
+        return [m for m in METHODS if (m not in OPTIONAL_METHODS or self.int16)
+                and (self.only is None or m in self.only)]
 
     def runs(self):
         """(task, seed) pairs in run order: every task with the first seed, then the extra seeds."""
@@ -147,10 +152,12 @@ class Runner:
         self.run(f"{task}-s{seed}-student", run / "student" / "frmd.json",
                  [f, "train", "student", "--teacher", str(run / "teacher"), "--data", str(data), "--seed", str(seed),
                   *sstep, "--out", str(run / "student")])
-        self.run(f"{task}-s{seed}-dp", run / "dp" / "frmd.json",
-                 [f, "train", "dp", *common, *steps, "--out", str(run / "dp")])
+        if any(m.startswith("dp-") for m in self.cfg.methods()):
+            self.run(f"{task}-s{seed}-dp", run / "dp" / "frmd.json",
+                     [f, "train", "dp", *common, *steps, "--out", str(run / "dp")])
         self.run(f"{task}-s{seed}-export", run / "baked" / "export.json",
-                 [f, "export", "--ckpt", str(run / "student"), "--out", str(run / "baked")])
+                 [f, "export", "--ckpt", str(run / "student"), "--out", str(run / "baked"),
+                  "--activations", "int8"])
         if self.cfg.int16:
             self.run(f"{task}-s{seed}-export16", run / "baked16" / "export.json",
                      [f, "export", "--ckpt", str(run / "student"), "--out", str(run / "baked16"),
@@ -177,7 +184,8 @@ class Runner:
                 continue
             report = (self.out / task / "expert.json") if method == "expert" else run / "eval" / f"{method}.json"
             report.parent.mkdir(parents=True, exist_ok=True)
-            how = ["--expert"] if method == "expert" else ["--server", self.server(method, run)]
+            how = ["--expert"] if method == "expert" else ["--server", self.server(method, run)] + (
+                ["--in-process"] if self.cfg.in_process else [])
             self.run(f"{task}-s{seed}-eval-{method}", report,
                      [self.python, "-m", "frmd_metaworld", "eval", "--task", task, "--episodes",
                       str(self.cfg.episodes), *how, "--json", str(report)])

@@ -19,6 +19,15 @@ def _progress(task: str, total: int):
     return lambda n, *_: print(f"\r{task}: {n}/{total}", end="", file=sys.stderr, flush=True)
 
 
+def _methods(text: str) -> list:
+    from .benchmark import METHODS
+    methods = [m for m in text.split(",") if m]
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown or not methods:
+        raise SystemExit(f"--methods: unknown {unknown} (choose from {', '.join(METHODS)})")
+    return methods
+
+
 def _tasks(value: str) -> list[str]:
     if value == "all":
         return list(TASKS)
@@ -58,13 +67,17 @@ def cmd_collect(args) -> int:
 
 
 def cmd_eval(args) -> int:
-    from .evaluate import ExpertPolicy, ServedPolicy, evaluate
+    from .evaluate import ExpertPolicy, evaluate
+    from .policy_client import open_policy
+    from .tasks import DT
     if (args.server is None) == (not args.expert):
         sys.exit("give exactly one of --expert and --server CMD")
+    if args.in_process and not args.server:
+        sys.exit("--in-process runs the policy of --server CMD in this process; give --server")
     if len(args.task) > 1 and args.json:
         sys.exit("--json names one file; use --json-dir for several tasks")
     for task in args.task:
-        policy = ExpertPolicy(task) if args.expert else ServedPolicy(args.server)
+        policy = ExpertPolicy(task) if args.expert else open_policy(args.server, args.in_process, dt=DT)
         started = time.perf_counter()
         try:
             report = evaluate(task, policy, args.episodes, args.first_seed, args.exec_steps,
@@ -121,6 +134,8 @@ def cmd_benchmark(args) -> int:
         "train_steps": args.train_steps, "student_steps": args.student_steps, "data_dir": args.data_dir,
         "out": args.out, "frmd": args.frmd, "obs": args.obs, "after_success": args.after_success,
         "int16": True if args.int16 else None,
+        "in_process": True if args.in_process else None,
+        "only": _methods(args.methods) if args.methods else None,
         "seeds": [int(s) for s in args.seeds.split(",")] if args.seeds else None,
         "multi_seed_tasks": ([] if args.multi_seed_tasks == "none" else _tasks(args.multi_seed_tasks))
         if args.multi_seed_tasks else None}.items() if v is not None}
@@ -188,6 +203,9 @@ def main(argv=None) -> int:
     e.add_argument("--first-seed", type=int, default=0, help="index of the first seed in the evaluation stream")
     e.add_argument("--expert", action="store_true", help="MetaWorld's scripted expert, in this process")
     e.add_argument("--server", metavar="CMD", help="policy server command, e.g. 'frmd serve --ckpt DIR'")
+    e.add_argument("--in-process", action="store_true", help="run the policy of --server's `frmd serve` command "
+                   "in this process through the frmd wheel (pip install ./frmd-host/python) instead of over "
+                   "the protocol: the same chunks, without the pipe")
     e.add_argument("--exec-steps", type=int, help="actions executed per chunk (default: the server's)")
     e.add_argument("--json", help="write the report here (one task)")
     e.add_argument("--json-dir", help="write TASK-LABEL.json per task here")
@@ -223,8 +241,12 @@ def main(argv=None) -> int:
     m.add_argument("--obs", choices=OBS_LAYOUTS, help="observation layout of the collected data (default raw)")
     m.add_argument("--after-success", type=int, metavar="K", help="expert steps recorded after the first "
                    "success (default 0)")
+    m.add_argument("--methods", help="comma-separated methods to run (default: all); models none of them "
+                   "needs are not trained (e.g. no DP without dp-ddpm-100 and dp-ddim-10)")
     m.add_argument("--int16", action="store_true", help="also export the student with int16 activations "
                    "(frmd export --activations int16) and evaluate it as int16-student")
+    m.add_argument("--in-process", action="store_true", help="evaluate the trained policies in this process "
+                   "through the frmd wheel (eval --in-process) instead of over the protocol")
     m.add_argument("--train-steps", type=int, help="gradient steps of teacher and DP (default: frmd train's)")
     m.add_argument("--student-steps", type=int, help="gradient steps of the student (default: as --train-steps)")
     m.add_argument("--data-dir", help="demonstration files TASK.safetensors (collected if missing; default ./data)")

@@ -1,8 +1,9 @@
 """Closed-loop evaluation on MetaWorld with the report fields of `frmd eval --json`
 (frmd-host/src/eval/mod.rs: EvalReport) and the metrics of docs/design.md section 6.
 
-A policy is either MetaWorld's scripted expert in this process or any policy server speaking
-docs/serve-protocol.md (`frmd serve ...`, the mock server). Per episode: reset the environment
+A policy is either MetaWorld's scripted expert in this process, any policy server speaking
+docs/serve-protocol.md (`frmd serve ...`, the mock server), or the policy of a `frmd serve`
+command run in this process by the `frmd` wheel (`policy_client`). Per episode: reset the environment
 and the policy with the episode's seed (EVAL_SEED_OFFSET + first_seed + i), then repeatedly send
 the last M observations, execute up to E actions of the returned chunk (stopping at the first
 success or after 500 steps), and report how many were executed with the next request. Success =
@@ -18,12 +19,9 @@ from __future__ import annotations
 
 import os
 import time
-from collections import deque
-
-import numpy as np
 
 from . import metrics
-from .protocol import F64, Client
+from .policy_client import Episode, ServedPolicy  # noqa: F401 (ServedPolicy: this module's name before)
 from .tasks import (DT, MAX_STEPS, SeededEnv, check_task, eval_seed, expert_policy, layout_dim, layout_of_dim,
                     observe, package_versions)
 
@@ -50,50 +48,21 @@ class ExpertPolicy:
         pass
 
 
-class ServedPolicy:
-    """A policy behind `frmd serve` (or any server of the protocol), started as a child process."""
-
-    def __init__(self, command: str, stderr=None):
-        self.client = Client(command, stderr=stderr)
-        info = self.client.hello()
-        self.name = info.name or command
-        self.history, self.horizon, self.exec_steps = info.obs_history, info.horizon, info.exec_steps
-        self.float_type = "f64" if info.float_type == F64 else "f32"
-        self.obs_dim = info.obs_dim
-        if abs(info.dt - DT) > 1e-9 and info.dt != 0:
-            raise ValueError(f"the server's policy was trained at dt {info.dt} s, MetaWorld steps {DT} s")
-        self.info = info
-
-    def reset(self, seed: int) -> None:
-        self.client.reset(seed)
-
-    def act(self, observations, executed: int):
-        chunk = self.client.act(executed, [np.asarray(o, dtype=np.float64).tolist() for o in observations])
-        return chunk, self.client.last_policy_ns * 1e-9
-
-    def close(self) -> None:
-        self.client.close()
-
-
 def rollout(env: SeededEnv, policy, seed: int, exec_steps: int, timings: dict, obs_layout: str = "raw") -> dict:
     obs = env.reset(seed)
-    policy.reset(seed)
-    history = deque([observe(obs, obs_layout)] * policy.history, maxlen=policy.history)
+    episode = Episode(policy, seed, observe(obs, obs_layout))
     ee_path, cmd_path = [obs[:3].copy()], [env.commanded_position()]
-    steps, executed, success, failed = 0, 0, False, False
+    steps, success, failed = 0, False, False
     while steps < MAX_STEPS and not success:
-        t0 = time.perf_counter()
-        chunk, policy_seconds = policy.act(list(history), executed)
-        timings["roundtrip"].append(time.perf_counter() - t0)
+        chunk, policy_seconds, roundtrip = episode.chunk()
+        timings["roundtrip"].append(roundtrip)
         timings["policy"].append(policy_seconds)
-        executed = 0
         for action in chunk[:exec_steps]:
             t0 = time.perf_counter()
             obs, success, truncated = env.step(action)
             timings["step"].append(time.perf_counter() - t0)
             steps += 1
-            executed += 1
-            history.append(observe(obs, obs_layout))
+            episode.executed_action(observe(obs, obs_layout))
             ee_path.append(obs[:3].copy())
             cmd_path.append(env.commanded_position())
             failed = failed or env.unstable()

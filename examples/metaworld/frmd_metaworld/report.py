@@ -17,8 +17,11 @@ from .tasks import GROUP_OF, GROUPS, TASKS
 
 
 def methods_of(config: dict) -> list:
-    """The methods a run evaluated (its config's `int16` adds int16-student), in table order."""
-    return [m for m in METHODS if m not in OPTIONAL_METHODS or config.get("int16")]
+    """The methods a run evaluated (its config's `int16` adds int16-student, `only` selects), in
+    table order."""
+    only = config.get("only")
+    return [m for m in METHODS if (m not in OPTIONAL_METHODS or config.get("int16"))
+            and (only is None or m in only)]
 
 def commit() -> str:
     here = Path(__file__).resolve().parent

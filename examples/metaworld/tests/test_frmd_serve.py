@@ -110,3 +110,32 @@ def test_truncated_input_and_socket(models):
     finally:
         if server.poll() is None:
             server.kill()
+
+
+def _wheel():
+    """The frmd wheel, or a skip (a failure with FRMD_REQUIRE_WHEEL=1, as in CI)."""
+    if os.environ.get("FRMD_REQUIRE_WHEEL") == "1":
+        import frmd
+        return frmd
+    return pytest.importorskip("frmd", reason="the frmd wheel is not installed (pip install ./frmd-host/python)")
+
+
+@pytest.mark.parametrize("which", ["ckpt", "baked"])
+def test_in_process_and_over_the_protocol_give_the_same_episodes(models, which):
+    from frmd_metaworld.evaluate import evaluate
+    from frmd_metaworld.policy_client import InProcessPolicy, open_policy
+    from frmd_metaworld.tasks import DT
+    _wheel()
+    command = f"{FRMD} serve --{which} {os.path.join(models, 'student' if which == 'ckpt' else 'baked')} --exec-steps 6"
+    reports = []
+    for in_process in (False, True):
+        policy = open_policy(command, in_process=in_process, dt=DT)
+        assert isinstance(policy, InProcessPolicy) == in_process
+        try:
+            reports.append(evaluate("reach-v3", policy, episodes=2, warmup_calls=1))
+        finally:
+            policy.close()
+    served, local = reports
+    assert local["per_episode"] == served["per_episode"]
+    assert (local["exec_steps"], local["history"], local["horizon"]) == (6, 2, 12)
+    assert local["chunk_calls"] == served["chunk_calls"] and local["latency_us_median"] > 0

@@ -13,7 +13,7 @@ pub mod reference;
 
 pub use calibrate::{calibrate, input_gains, quantize, Ranges};
 pub use fold::{FoldedMlp, InputGains};
-pub use precision::ExportPrecision;
+pub use precision::{ExportPrecision, WideModel};
 pub use quantized::{QuantizedLayer, QuantizedMlp, QuantizedOutput};
 
 use std::fmt;
@@ -66,14 +66,15 @@ impl MlpExports {
     }
 }
 
-/// Folds `checkpoint`, calibrates on `set` and quantizes as `options` say.
+/// Folds `checkpoint`, calibrates on `set` and quantizes as `options` say, with `activations`.
 pub(crate) fn export(
     checkpoint: &Checkpoint,
     options: &ExportOptions,
+    activations: Activations,
     set: &CalibrationSet,
     norm: &Normalization,
 ) -> anyhow::Result<MlpExports> {
-    Ok(match options.activations {
+    Ok(match activations {
         Activations::Int8 => MlpExports::Int8(export_as(checkpoint, options, set, norm)?),
         Activations::Int16 => MlpExports::Int16(export_as(checkpoint, options, set, norm)?),
     })

@@ -5,9 +5,9 @@
 use anyhow::{bail, Context};
 use frmd_core::kernels::{Lut16, Lut16Table, Lut8, LutTable};
 use frmd_core::model::mlp::MlpPrecision;
-use frmd_core::quant::{symmetric_i16_scale, QuantParams};
+use frmd_core::quant::{reference, symmetric_i16_scale, QuantParams};
 
-use super::reference::WideModel;
+use super::quantized::QuantizedLayer;
 use crate::calibrate::{int_bias, int_bias_i64, QuantizedWeights};
 
 /// An activation precision the MLP exporter writes.
@@ -107,4 +107,46 @@ impl ExportPrecision for i16 {
     }
 
     const INT32_ACCUMULATORS: bool = false;
+}
+
+/// A hidden layer's requantization and table in the wide-integer model, per precision.
+pub trait WideModel: frmd_core::kernels::Precision {
+    /// Channel `o`'s output code for the exact accumulator `acc`.
+    fn output(layer: &QuantizedLayer<Self>, tables: &[Self::Table], o: usize, acc: i64) -> i64;
+}
+
+impl WideModel for i8 {
+    /// The i128 model of Q31 requantization (int32 accumulators wrap: the model takes the low
+    /// 32 bits, as the definition does), then the table indexed directly.
+    fn output(layer: &QuantizedLayer<i8>, tables: &[[i8; 256]], o: usize, acc: i64) -> i64 {
+        let q = reference::requantize(
+            acc as i32,
+            layer.multipliers[o],
+            layer.shifts[o],
+            layer.output_zero_point,
+            layer.activation_min,
+            layer.activation_max,
+        );
+        i64::from(match layer.lut {
+            Some(t) => tables[t][(i32::from(q) + 128) as usize],
+            None => q,
+        })
+    }
+}
+
+impl WideModel for i16 {
+    /// The i128 model of the Q15 requantization, then the slope form of the interpolation.
+    fn output(layer: &QuantizedLayer<i16>, tables: &[[i16; 513]], o: usize, acc: i64) -> i64 {
+        let q = reference::requantize16(
+            i128::from(acc),
+            layer.multipliers[o],
+            layer.shifts[o],
+            layer.activation_min,
+            layer.activation_max,
+        );
+        i64::from(match layer.lut {
+            Some(t) => reference::lookup16(&tables[t], q).unwrap_or(i16::MIN),
+            None => q,
+        })
+    }
 }

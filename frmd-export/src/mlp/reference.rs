@@ -1,7 +1,7 @@
 //! Check (d) for an exported MLP: the whole quantized network run by frmd-core against a
 //! wide-integer model of it ([`wide_network`]), on the caller's inputs and edge inputs.
 use super::precision::ExportPrecision;
-use super::quantized::{QuantizedLayer, QuantizedMlp};
+use super::quantized::QuantizedMlp;
 use crate::reference::KernelCheck;
 use anyhow::Context;
 use frmd_core::model::mlp::InputPrecision;
@@ -21,48 +21,6 @@ pub fn quantized_network<P: ExportPrecision, const WIDTH: usize>(
         &policy.first_layer_biases,
     )
     .with_context(|| format!("int{} network", P::BITS))
-}
-
-/// A hidden layer's requantization and table in the wide-integer model, per precision.
-pub trait WideModel: frmd_core::kernels::Precision {
-    /// Channel `o`'s output code for the exact accumulator `acc`.
-    fn output(layer: &QuantizedLayer<Self>, tables: &[Self::Table], o: usize, acc: i64) -> i64;
-}
-
-impl WideModel for i8 {
-    /// The i128 model of Q31 requantization (int32 accumulators wrap: the model takes the low
-    /// 32 bits, as the definition does), then the table indexed directly.
-    fn output(layer: &QuantizedLayer<i8>, tables: &[[i8; 256]], o: usize, acc: i64) -> i64 {
-        let q = reference::requantize(
-            acc as i32,
-            layer.multipliers[o],
-            layer.shifts[o],
-            layer.output_zero_point,
-            layer.activation_min,
-            layer.activation_max,
-        );
-        i64::from(match layer.lut {
-            Some(t) => tables[t][(i32::from(q) + 128) as usize],
-            None => q,
-        })
-    }
-}
-
-impl WideModel for i16 {
-    /// The i128 model of the Q15 requantization, then the slope form of the interpolation.
-    fn output(layer: &QuantizedLayer<i16>, tables: &[[i16; 513]], o: usize, acc: i64) -> i64 {
-        let q = reference::requantize16(
-            i128::from(acc),
-            layer.multipliers[o],
-            layer.shifts[o],
-            layer.activation_min,
-            layer.activation_max,
-        );
-        i64::from(match layer.lut {
-            Some(t) => reference::lookup16(&tables[t], q).unwrap_or(i16::MIN),
-            None => q,
-        })
-    }
 }
 
 /// The wide-integer model of the whole quantized network: i64 dot products, the i128

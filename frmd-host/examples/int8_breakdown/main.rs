@@ -52,6 +52,7 @@ fn main() -> anyhow::Result<()> {
                 .ok()
                 .and_then(|h| h.parse().ok())
                 .unwrap_or(frmd_export::DEFAULT_INPUT_HEADROOM),
+            activations: Some(frmd_export::Activations::Int8),
             ..ExportOptions::default()
         },
         Some(set.clone()),

@@ -125,7 +125,7 @@ pub fn reach_student(
         },
     )?;
     let int16 = ExportOptions {
-        activations: Activations::Int16,
+        activations: Some(Activations::Int16),
         ..ExportOptions::default()
     };
     let int16_blob = match backbone {
@@ -136,7 +136,11 @@ pub fn reach_student(
         .as_deref()
         .map(|blob| Int8Policy::from_blob(blob, "int16"))
         .transpose()?;
-    let core = match frmd_export::export(dir, &ExportOptions::default(), None) {
+    let int8 = ExportOptions {
+        activations: Some(Activations::Int8),
+        ..ExportOptions::default()
+    };
+    let core = match frmd_export::export(dir, &int8, None) {
         Ok(student) => {
             let blob = student.blob().to_vec();
             Ok(CorePolicies {

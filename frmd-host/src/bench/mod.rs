@@ -240,7 +240,7 @@ fn core_policy_rows(cfg: &BenchConfig) -> anyhow::Result<CoreRows> {
     let export = |steps, activations: &str| {
         let config = ExportConfig {
             steps,
-            activations: activations.to_string(),
+            activations: Some(activations.to_string()),
             ..ExportConfig::for_checkpoint(&ckpt)
         };
         export_student(&config, false).with_context(|| {

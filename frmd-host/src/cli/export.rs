@@ -39,10 +39,11 @@ pub struct ExportArgs {
     /// 16-bit input: widen the calibrated input range by this factor (>= 1).
     #[arg(long, default_value_t = ExportConfig::default().input_headroom)]
     pub input_headroom: f32,
-    /// MLP hidden activations: int8 (TFLite int8) or int16 (TFLite 16x8: int8 weights, int16
-    /// activations, int64 biases; needs the 16-bit input).
-    #[arg(long, default_value_t = frmd_export::ExportOptions::default().activations)]
-    pub activations: Activations,
+    /// Hidden activations: int8 (TFLite int8) or int16 (TFLite 16x8: int8 weights, int16
+    /// activations, int64 biases; MLP only, needs the 16-bit input) [default: int16 for an MLP,
+    /// int8 for transformer-lite]
+    #[arg(long)]
+    pub activations: Option<Activations>,
     /// int16 activations: widen every calibrated activation range by this factor (>= 1).
     #[arg(long, default_value_t = ExportConfig::default().activation_headroom)]
     pub activation_headroom: f32,
@@ -66,7 +67,7 @@ impl From<&ExportArgs> for ExportConfig {
             balance_inputs: defaults.balance_inputs && !a.no_balance_inputs,
             two_plane_input: defaults.two_plane_input && !a.int8_input,
             input_headroom: a.input_headroom,
-            activations: a.activations.to_string(),
+            activations: a.activations.map(|a| a.to_string()),
             activation_headroom: a.activation_headroom,
         }
     }

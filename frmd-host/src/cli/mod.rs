@@ -10,6 +10,7 @@ pub(crate) mod equiv;
 pub(crate) mod eval;
 pub(crate) mod eval_firmware;
 pub(crate) mod export;
+pub(crate) mod import;
 pub(crate) mod prodmp;
 pub(crate) mod quickstart;
 pub(crate) mod serve;
@@ -30,6 +31,9 @@ pub enum Command {
     Prodmp(prodmp::ProdmpCommand),
     /// Run a task's scripted expert and write a demonstration dataset (safetensors).
     Collect(collect::CollectArgs),
+    /// Convert demonstrations from another format (a LeRobot dataset) into a dataset file.
+    #[command(subcommand)]
+    Import(import::ImportCommand),
     /// Closed-loop evaluation of a policy on a task.
     Eval(eval::EvalArgs),
     /// Train a teacher, distill a student, or train the DP baseline.
@@ -55,6 +59,7 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Command::Prodmp(cmd) => prodmp::run(cmd),
         Command::Collect(args) => collect::run(args),
+        Command::Import(cmd) => import::run(cmd),
         Command::Eval(args) => eval::run(args),
         Command::Train(cmd) => train::run(cmd),
         Command::Bench(args) => bench::run(args),

@@ -177,6 +177,7 @@ pub fn collect_demos(
         dt: task.dt() as f32,
         source: format!("frmd collect: scripted expert, seeds from {seed}"),
         action_before_start: ActionBeforeStart::First,
+        extra: Default::default(),
     };
     let mut stats = CollectStats::default();
     let (mut step_time, mut steps) = (0.0, 0usize);

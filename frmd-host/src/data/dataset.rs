@@ -2,8 +2,9 @@
 //!
 //! A dataset is a safetensors file with `obs` [T, O] f32, `action` [T, A] f32 and `episode_ends`
 //! [E] i64 (cumulative exclusive ends, strictly increasing, the last equal to T), plus string
-//! metadata `task`, `dt` (control period, seconds) and `source` (who produced it), and optionally
-//! `action_before_start` ([`ActionBeforeStart`]).
+//! metadata `task`, `dt` (control period, seconds) and `source` (who produced it), optionally
+//! `action_before_start` ([`ActionBeforeStart`]), and any further string metadata an importer
+//! records (kept as [`Dataset::extra`]).
 use anyhow::Context;
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 use std::collections::{BTreeMap, HashMap};
@@ -26,7 +27,13 @@ pub struct Dataset {
     pub source: String,
     /// The command in force before each episode's first step (the training windows' a_{-1}).
     pub action_before_start: ActionBeforeStart,
+    /// Further metadata, written and read back as is (e.g. `frmd import lerobot`'s source
+    /// dataset, fps and episode count). Keys must not be one of the fields above.
+    pub extra: BTreeMap<String, String>,
 }
+
+/// The metadata keys of the fields of [`Dataset`] (not allowed in [`Dataset::extra`]).
+const KNOWN_METADATA: [&str; 4] = ["task", "dt", "source", "action_before_start"];
 
 /// What was commanded before an episode began: what the training windows use as a_{-1} and
 /// a_{-2}, and what a deployed policy is reset with. Metadata `action_before_start`.
@@ -124,6 +131,7 @@ impl Dataset {
             dt: 0.1,
             source: "test".into(),
             action_before_start: Default::default(),
+            extra: BTreeMap::new(),
         }
     }
 
@@ -208,6 +216,13 @@ impl Dataset {
             self.dt
         );
         anyhow::ensure!(!self.task.is_empty(), "task name is empty");
+        if let Some(key) = self
+            .extra
+            .keys()
+            .find(|k| KNOWN_METADATA.contains(&k.as_str()))
+        {
+            anyhow::bail!("extra metadata `{key}` would replace the field of the same name");
+        }
         Ok(())
     }
 
@@ -234,7 +249,8 @@ impl Dataset {
                 TensorView::new(Dtype::I64, vec![self.episode_ends.len()], &ends)?,
             ),
         ];
-        let mut meta = BTreeMap::from([
+        let mut meta = self.extra.clone();
+        meta.extend([
             ("task".to_string(), self.task.clone()),
             ("dt".to_string(), self.dt.to_string()),
             ("source".to_string(), self.source.clone()),
@@ -291,6 +307,12 @@ impl Dataset {
                 Some(text) => ActionBeforeStart::parse(text)?,
                 None => ActionBeforeStart::default(),
             },
+            extra: meta
+                .iter()
+                .flatten()
+                .filter(|(k, _)| !KNOWN_METADATA.contains(&k.as_str()))
+                .map(|(k, v)| (k.clone(), v.clone()))
+                .collect(),
         };
         dataset.validate()?;
         Ok(dataset)

@@ -2,6 +2,7 @@
 //! windows and [-1, 1] normalization.
 pub mod collect;
 pub(crate) mod dataset;
+pub mod lerobot;
 pub(crate) mod perturb;
 pub mod toy;
 pub(crate) mod windows;

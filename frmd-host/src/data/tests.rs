@@ -24,6 +24,7 @@ fn small() -> Dataset {
         dt: 0.5,
         source: "test".into(),
         action_before_start: Default::default(),
+        extra: Default::default(),
     }
 }
 
@@ -234,6 +235,7 @@ fn windows_follow_the_padding_and_rate_conventions() {
 fn zero_action_before_start_pads_with_the_normalized_zero_action() {
     let data = Dataset {
         action_before_start: ActionBeforeStart::Zero,
+        extra: Default::default(),
         ..small()
     };
     let (set, _) = data.windows(2, 3).unwrap();
@@ -370,4 +372,17 @@ fn evaluation_seeds_are_disjoint_from_collection_seeds() {
     // Collection refuses seeds that would reach into the evaluation stream.
     assert!(collect_demos("reach", 1, EVAL_SEED_OFFSET - 3, None, &mut |_| {}).is_err());
     assert!(collect_demos("reach", 1, 0, None, &mut |_| {}).is_ok());
+}
+
+#[test]
+fn extra_metadata_round_trips_and_cannot_shadow_a_field() {
+    let mut d = small();
+    d.extra.insert("fps".into(), "30".into());
+    d.extra
+        .insert("lerobot_dataset".into(), "/data/cube".into());
+    let back = Dataset::from_bytes(&d.to_bytes().unwrap()).unwrap();
+    assert_eq!(back, d);
+    d.extra.insert("dt".into(), "1".into());
+    let err = d.to_bytes().unwrap_err().to_string();
+    assert!(err.contains("extra metadata `dt`"), "{err}");
 }

@@ -1,32 +1,36 @@
-//! Stage 5 of quickstart: int8 export of the student ([`crate::export`] with its defaults), its
-//! frmd-core `Policy` adapter for closed-loop evaluation, and the int8-vs-float error of
-//! docs/design.md section 6 (b) from the bit-accuracy harness ([`crate::equiv`], open-loop part).
+//! Stage 5 of quickstart: the quantized export of the student ([`crate::export`] with its
+//! defaults: int16 activations for an MLP), its frmd-core `Policy` adapter for closed-loop
+//! evaluation, and the quantized-vs-float error of docs/design.md section 6 (b) from the
+//! bit-accuracy harness ([`crate::equiv`], open-loop part).
 use crate::equiv::{run as run_equiv, EquivConfig};
 use crate::export::{export_student, write_export, ExportConfig};
 use crate::policy::int8::Int8Policy;
 use crate::tasks::Policy;
 use std::path::{Path, PathBuf};
 
-/// The exported int8 student, ready for closed-loop evaluation.
-pub struct Int8Export {
-    /// frmd-core running the exported int8 weights.
+/// The exported student, ready for closed-loop evaluation.
+pub struct QuantizedExport {
+    /// The table's name of the policy, by its activations (`int16-student-1`).
+    pub label: String,
+    /// frmd-core running the exported weights.
     pub policy: Box<dyn Policy>,
     /// Observation history the policy expects.
     pub history: usize,
-    /// int8-vs-float error of the exported policy against the float student (docs/design.md 6b).
+    /// Error of the exported policy against the float student (docs/design.md 6b).
     pub float_error: String,
     /// (what, path) of the exported files.
     pub artifacts: Vec<(String, PathBuf)>,
 }
 
-fn export_inner(student_dir: &Path, out: &Path) -> anyhow::Result<Int8Export> {
-    let baked = out.join("int8");
+fn export_inner(student_dir: &Path, out: &Path) -> anyhow::Result<QuantizedExport> {
+    let baked = out.join("quantized");
     std::fs::create_dir_all(&baked)?;
     // The default export (1 step, min-max calibration on the rows saved beside the student).
     let cfg = ExportConfig::for_checkpoint(student_dir);
     let exported = export_student(&cfg, false)?;
     write_export(&cfg, &exported, Some(&baked), None)?;
-    let policy = Int8Policy::from_blob(exported.blob(), "int8-student-1")?;
+    let label = format!("{}-student-1", exported.activations());
+    let policy = Int8Policy::from_blob(exported.blob(), &label)?;
     let history = policy.history();
     // Open-loop error only (the harness's default inputs): the closed-loop rows of the table are
     // the success comparison.
@@ -51,22 +55,24 @@ fn export_inner(student_dir: &Path, out: &Path) -> anyhow::Result<Int8Export> {
         &out.join("eval").join("equiv.json"),
         serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;
-    Ok(Int8Export {
+    let what = format!("{} baked module + blob", exported.activations());
+    Ok(QuantizedExport {
+        label,
         policy: Box::new(policy),
         history,
         float_error,
         artifacts: vec![
-            ("int8 baked module + blob".into(), baked),
+            (what, baked),
             (
-                "int8 vs float report".into(),
+                "quantized vs float report".into(),
                 out.join("eval").join("equiv.json"),
             ),
         ],
     })
 }
 
-/// Exports the student checkpoint in `student_dir` into `out/int8` and wraps it as a policy,
-/// or returns why that failed.
-pub fn export_int8(student_dir: &Path, out: &Path) -> Result<Int8Export, String> {
-    export_inner(student_dir, out).map_err(|e| format!("int8 export failed: {e:#}"))
+/// Exports the student checkpoint in `student_dir` into `out/quantized` and wraps it as a
+/// policy, or returns why that failed.
+pub fn export_quantized(student_dir: &Path, out: &Path) -> Result<QuantizedExport, String> {
+    export_inner(student_dir, out).map_err(|e| format!("export failed: {e:#}"))
 }

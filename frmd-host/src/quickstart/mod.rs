@@ -6,8 +6,8 @@
 //! 3. distill the one-step consistency student ([`crate::train::run::run_student`]),
 //! 4. train the action-space DP baseline ([`crate::train::run::run_dp`]; skipped without
 //!    [`QuickstartConfig::baseline`]),
-//! 5. export the int8 student ([`crate::export`]),
-//! 6. evaluate expert, DP (DDPM 100 / DDIM 10), teacher (Heun 10), student (1 step) and the int8
+//! 5. export the quantized student ([`crate::export`]: int16 activations for an MLP),
+//! 6. evaluate expert, DP (DDPM 100 / DDIM 10), teacher (Heun 10), student (1 step) and the quantized
 //!    student in closed loop with the metrics of docs/design.md section 6,
 //!
 //! then returns one table ([`render`]) and the paths of plots and artifacts (all under
@@ -184,8 +184,8 @@ pub struct MethodRow {
     pub report: Option<EvalReport>,
     /// Why the method was not evaluated.
     pub missing: Option<String>,
-    /// int8-vs-float error (int8 rows only), e.g. `max 0.004 / mean 0.001 m`.
-    pub int8_error: Option<String>,
+    /// Quantized-vs-float error (the quantized row only), e.g. `max 0.004 / mean 0.001 m`.
+    pub quantized_error: Option<String>,
 }
 
 /// Everything a quickstart run produced.
@@ -269,7 +269,7 @@ fn evaluate(
         method: method.to_string(),
         report: Some(report),
         missing: None,
-        int8_error: None,
+        quantized_error: None,
     })
 }
 
@@ -352,8 +352,8 @@ pub fn run_pipeline(a: &QuickstartConfig) -> anyhow::Result<QuickstartSummary> {
         }
     }
 
-    stages.begin("export the int8 student");
-    let int8 = export_stage::export_int8(&student, &a.out);
+    stages.begin("export the quantized student");
+    let quantized = export_stage::export_quantized(&student, &a.out);
 
     stages.begin(&format!("evaluate every method on {} episodes", a.episodes));
     let mut rows = Vec::new();
@@ -377,24 +377,24 @@ pub fn run_pipeline(a: &QuickstartConfig) -> anyhow::Result<QuickstartSummary> {
         &mut artifacts,
     )?);
     rows.push(float_row(a, &student, 1, None, &mut artifacts)?);
-    match int8 {
+    match quantized {
         Ok(mut export) => {
             artifacts.append(&mut export.artifacts);
             let mut row = evaluate(
                 a,
-                "int8-student-1",
+                &export.label,
                 export.policy.as_mut(),
                 export.history,
                 &mut artifacts,
             )?;
-            row.int8_error = Some(export.float_error);
+            row.quantized_error = Some(export.float_error);
             rows.push(row);
         }
         Err(reason) => rows.push(MethodRow {
-            method: "int8-student-1".into(),
+            method: "quantized-student-1".into(),
             report: None,
             missing: Some(reason),
-            int8_error: None,
+            quantized_error: None,
         }),
     }
     stages.end();

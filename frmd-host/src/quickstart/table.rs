@@ -14,7 +14,7 @@ pub fn render(s: &QuickstartSummary) -> String {
         "latency us med / p99",
         "non-smooth",
         "RMS jerk",
-        "int8 vs float"
+        "quantized vs float"
     );
     for row in &s.rows {
         match (&row.report, &row.missing) {
@@ -34,7 +34,7 @@ pub fn render(s: &QuickstartSummary) -> String {
                     latency,
                     r.non_smooth_ee_mean,
                     r.rms_jerk_mean,
-                    row.int8_error.as_deref().unwrap_or("-")
+                    row.quantized_error.as_deref().unwrap_or("-")
                 );
             }
             (None, missing) => {

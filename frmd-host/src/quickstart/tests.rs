@@ -22,7 +22,7 @@ fn tiny_quickstart_runs_every_stage_and_writes_its_artifacts() {
             "dp-ddim-10",
             "teacher-heun-10",
             "student-1",
-            "int8-student-1"
+            "int16-student-1"
         ]
     );
     let expert = summary.rows[0].report.as_ref().unwrap();
@@ -55,11 +55,11 @@ fn tiny_quickstart_runs_every_stage_and_writes_its_artifacts() {
             row.method
         );
     }
-    let int8 = summary.rows.last().unwrap();
-    let error = int8.int8_error.as_deref().unwrap();
+    let quantized = summary.rows.last().unwrap();
+    let error = quantized.quantized_error.as_deref().unwrap();
     assert!(
         error.starts_with("max ") && !error.contains("NaN"),
-        "int8 error {error}"
+        "quantized error {error}"
     );
     for path in [
         "reach-demos.safetensors",
@@ -71,8 +71,8 @@ fn tiny_quickstart_runs_every_stage_and_writes_its_artifacts() {
         "plots/student-1.png",
         "eval/expert.json",
         "eval/equiv.json",
-        "int8/policy.blob",
-        "plots/int8-student-1.png",
+        "quantized/policy.blob",
+        "plots/int16-student-1.png",
         "summary.json",
         "summary.txt",
     ] {

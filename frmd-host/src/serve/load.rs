@@ -92,7 +92,7 @@ impl Served {
 
 /// An evaluation [`Policy`] as a [`ServedPolicy`]: f64 wire values to f32 model inputs and back.
 pub struct Adapter {
-    policy: Box<dyn Policy>,
+    policy: Box<dyn Policy + Send>,
     history: usize,
     obs_dim: usize,
     chunk_len: usize,
@@ -101,7 +101,7 @@ pub struct Adapter {
 
 impl Adapter {
     pub fn new(
-        policy: Box<dyn Policy>,
+        policy: Box<dyn Policy + Send>,
         history: usize,
         obs_dim: usize,
         chunk_len: usize,
@@ -207,7 +207,7 @@ fn exported_dt(dir: &Path, warn: bool) -> anyhow::Result<Option<f64>> {
 pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> {
     // (policy, history, obs_dim, action_dim, horizon, dt, name)
     let (policy, history, obs_dim, action_dim, horizon, dt, name): (
-        Box<dyn Policy>,
+        Box<dyn Policy + Send>,
         usize,
         usize,
         usize,

@@ -9,12 +9,14 @@
 //!   holds the shared payload helpers);
 //! - `session`: order and `executed` rules, timing; `server`: the loop over a byte stream,
 //!   stdin/stdout and a Unix socket;
-//! - [`load`]: the policy behind the server (checkpoint, baked module, blob) and its HELLO_OK.
+//! - [`load`]: the policy behind the server (checkpoint, baked module, blob) and its HELLO_OK;
+//!   [`LocalPolicy`]: the same policy and session rules called in process.
 pub(crate) mod error;
 mod fields;
 mod firmware;
 pub(crate) mod frame;
 pub(crate) mod load;
+mod local;
 pub(crate) mod reply;
 pub(crate) mod request;
 pub(crate) mod server;
@@ -26,6 +28,7 @@ pub use frame::{
     MAX_TEXT, VERSION,
 };
 pub use load::{load, PolicySource, ServeConfig, Served};
+pub use local::LocalPolicy;
 pub use reply::{decode_reply, Chunk, ErrorReply, ModelInfo, Reply};
 pub use request::{decode_request, Request};
 #[cfg(unix)]

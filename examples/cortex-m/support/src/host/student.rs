@@ -15,9 +15,10 @@ pub fn student_dir() -> PathBuf {
 }
 
 /// The student exported as `frmd export` does by default (one step, min/max ranges over its
-/// calibration file, balanced inputs, the 16-bit input): what the `policy` images bake. Panics
-/// with the exporter's message if the checkpoint cannot be exported (build script and test
-/// helper).
+/// calibration file, balanced inputs, the 16-bit input) but with int8 activations: what the
+/// `policy` images bake (the `policy16` images bake the int16 default, [`student_export_as`]).
+/// Panics with the exporter's message if the checkpoint cannot be exported (build script and
+/// test helper).
 pub fn student_export() -> ExportedStudent {
     student_export_as(Activations::Int8)
 }
@@ -27,7 +28,7 @@ pub fn student_export() -> ExportedStudent {
 pub fn student_export_as(activations: Activations) -> ExportedStudent {
     let dir = student_dir();
     let options = ExportOptions {
-        activations,
+        activations: Some(activations),
         ..ExportOptions::default()
     };
     frmd_export::export(&dir, &options, None)
