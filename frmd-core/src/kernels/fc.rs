@@ -152,20 +152,22 @@ impl<'a, A: Accumulator> FullyConnected<'a, A> {
             self.accumulate_avx2(avx2, input, acc);
             return Ok(());
         }
-        match input {
-            LayerInput::Int8(values) => self.copy_sums(values, acc),
-            LayerInput::Int16(values) => self.copy_sums(values, acc),
-        }
+        A::accumulate_portable(self, input, acc);
         Ok(())
     }
 
     /// The portable (and DSP) accumulators of every row into `acc` (callers checked the shapes).
-    fn copy_sums<T: RowInput>(&self, input: &[T], acc: &mut [A]) {
-        for_each_block(input, self.weights, self.bias, |first, sums| {
+    #[inline(always)]
+    pub(super) fn copy_sums(&self, input: LayerInput<'_>, acc: &mut [A]) {
+        let mut copy = |first: usize, sums: &[A]| {
             if let Some(out) = acc.get_mut(first..first + sums.len()) {
                 out.copy_from_slice(sums);
             }
-        });
+        };
+        match input {
+            LayerInput::Int8(values) => for_each_block(values, self.weights, self.bias, &mut copy),
+            LayerInput::Int16(values) => for_each_block(values, self.weights, self.bias, &mut copy),
+        }
     }
 
     /// [`Self::accumulate`] with the x86 kernels (callers checked the shapes): the whole blocks
@@ -241,29 +243,29 @@ impl<'a, A: Accumulator> FullyConnected<'a, A> {
         if P::forward_dsp(self, requant, activation, input, output) {
             return Ok(());
         }
-        match input {
-            LayerInput::Int8(values) => {
-                self.requantize_activated(requant, activation, values, output)
-            }
-            LayerInput::Int16(values) => {
-                self.requantize_activated(requant, activation, values, output)
-            }
-        }
+        P::forward_portable(self, requant, activation, input, output);
         Ok(())
     }
 
-    /// [`Self::requantize_rows`] through `activation`'s table, or none.
+    /// [`Self::requantize_rows`] through `activation`'s table, or none (the portable loops of
+    /// [`Self::forward_validated`]).
     #[inline(always)]
-    fn requantize_activated<T: RowInput, P: Precision<Acc = A>>(
+    pub(super) fn requantize_activated<P: Precision<Acc = A>>(
         &self,
         requant: &FcRequant<'_, P>,
         activation: Option<&P::Table>,
-        input: &[T],
+        input: LayerInput<'_>,
         output: &mut [P],
     ) {
-        match activation {
-            Some(table) => self.requantize_rows(requant, input, output, |v| P::lookup(table, v)),
-            None => self.requantize_rows(requant, input, output, |v| v),
+        match (activation, input) {
+            (Some(table), LayerInput::Int8(x)) => {
+                self.requantize_rows(requant, x, output, |v| P::lookup(table, v))
+            }
+            (Some(table), LayerInput::Int16(x)) => {
+                self.requantize_rows(requant, x, output, |v| P::lookup(table, v))
+            }
+            (None, LayerInput::Int8(x)) => self.requantize_rows(requant, x, output, |v| v),
+            (None, LayerInput::Int16(x)) => self.requantize_rows(requant, x, output, |v| v),
         }
     }
 
