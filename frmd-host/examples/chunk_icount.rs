@@ -3,8 +3,9 @@
 //! int16: the MLP exported with int16 activations) of a
 //! randomly initialized student at the reach shape with backbone argument 3 (default `mlp`;
 //! `transformer-lite` runs frmd-core's int8 transformer policy). Per-chunk Ir = (Ir(101 chunks) -
-//! Ir(1 chunk)) / 100. `int8-avx2` / `int8-portable` run the int8 policy with frmd-core's AVX-VNNI
-//! / AVX2 kernels turned off (x86-64; callgrind's virtual CPU reports no AVX-VNNI anyway).
+//! Ir(1 chunk)) / 100. `int8-avx2` / `int8-portable` run the int8 policy with frmd-core's AVX-512 and
+//! AVX-VNNI / AVX2 kernels turned off (x86-64; callgrind's virtual CPU reports neither VNNI kind
+//! anyway).
 use frmd_host::bench::fixtures::{reach_input, reach_student};
 use frmd_host::tasks::{Policy, PolicyInput};
 
@@ -19,7 +20,10 @@ fn main() -> anyhow::Result<()> {
     #[cfg(target_arch = "x86_64")]
     match which {
         "int8-portable" => drop(frmd_core::kernels::x86::set_avx2_enabled(false)),
-        "int8-avx2" => drop(frmd_core::kernels::x86::set_avx_vnni_enabled(false)),
+        "int8-avx2" => {
+            frmd_core::kernels::x86::set_avx512_enabled(false);
+            frmd_core::kernels::x86::set_avx_vnni_enabled(false);
+        }
         _ => {}
     }
     let which_policy = if which.starts_with("int8") {

@@ -152,54 +152,41 @@ impl<'a, A: Accumulator> FullyConnected<'a, A> {
             self.accumulate_avx2(avx2, input, acc);
             return Ok(());
         }
-        match input {
-            LayerInput::Int8(values) => self.copy_sums(values, acc),
-            LayerInput::Int16(values) => self.copy_sums(values, acc),
-        }
+        A::accumulate_portable(self, input, acc);
         Ok(())
     }
 
     /// The portable (and DSP) accumulators of every row into `acc` (callers checked the shapes).
-    fn copy_sums<T: RowInput>(&self, input: &[T], acc: &mut [A]) {
-        for_each_block(input, self.weights, self.bias, |first, sums| {
+    #[inline(always)]
+    pub(super) fn copy_sums(&self, input: LayerInput<'_>, acc: &mut [A]) {
+        let mut copy = |first: usize, sums: &[A]| {
             if let Some(out) = acc.get_mut(first..first + sums.len()) {
                 out.copy_from_slice(sums);
             }
-        });
+        };
+        match input {
+            LayerInput::Int8(values) => for_each_block(values, self.weights, self.bias, &mut copy),
+            LayerInput::Int16(values) => for_each_block(values, self.weights, self.bias, &mut copy),
+        }
     }
 
-    /// [`Self::accumulate`] with the AVX2 row kernels (x86-64; callers checked the shapes):
-    /// eight rows per call, the last `out_features % 8` rows by the portable dot products.
+    /// [`Self::accumulate`] with the x86 kernels (callers checked the shapes): the whole blocks
+    /// of eight rows by `x86::layer` (the accumulator type's loop), the last `out_features % 8`
+    /// rows by the portable dot products.
     #[cfg(target_arch = "x86_64")]
     fn accumulate_avx2(&self, avx2: super::x86::Avx2, input: LayerInput<'_>, acc: &mut [A]) {
         use super::x86::BLOCK_ROWS;
-        let width = self.in_features;
-        let Some(block_len) = width.checked_mul(BLOCK_ROWS) else {
+        A::accumulate_x86(self, avx2, input, acc);
+        let Some(block_len) = self.in_features.checked_mul(BLOCK_ROWS) else {
             return;
         };
-        let mut row_blocks = self.weights.chunks_exact(block_len);
-        let (out_blocks, out_tail) = acc.as_chunks_mut::<BLOCK_ROWS>();
-        let (bias_blocks, bias_tail) = self.bias.as_chunks::<BLOCK_ROWS>();
-        for ((out, rows), bias) in out_blocks
+        let rows = self.weights.chunks_exact(block_len).remainder();
+        let tail = acc
+            .as_chunks_mut::<BLOCK_ROWS>()
+            .1
             .iter_mut()
-            .zip(row_blocks.by_ref())
-            .zip(bias_blocks)
-        {
-            A::block(bias, out, width, |columns, start, residues| {
-                let mut first = [0_i32; BLOCK_ROWS];
-                for (slot, s) in first.iter_mut().zip(start) {
-                    *slot = *s;
-                }
-                let sums = avx2.residues(rows, input, columns, &first);
-                for (residue, sum) in residues.iter_mut().zip(sums) {
-                    *residue = sum;
-                }
-            });
-        }
-        let tail = out_tail
-            .iter_mut()
-            .zip(row_blocks.remainder().chunks_exact(width))
-            .zip(bias_tail);
+            .zip(rows.chunks_exact(self.in_features))
+            .zip(self.bias.as_chunks::<BLOCK_ROWS>().1);
         for ((out, row), bias) in tail {
             use super::rows::for_each_accumulator;
             let bias = core::slice::from_ref(bias);
@@ -256,29 +243,29 @@ impl<'a, A: Accumulator> FullyConnected<'a, A> {
         if P::forward_dsp(self, requant, activation, input, output) {
             return Ok(());
         }
-        match input {
-            LayerInput::Int8(values) => {
-                self.requantize_activated(requant, activation, values, output)
-            }
-            LayerInput::Int16(values) => {
-                self.requantize_activated(requant, activation, values, output)
-            }
-        }
+        P::forward_portable(self, requant, activation, input, output);
         Ok(())
     }
 
-    /// [`Self::requantize_rows`] through `activation`'s table, or none.
+    /// [`Self::requantize_rows`] through `activation`'s table, or none (the portable loops of
+    /// [`Self::forward_validated`]).
     #[inline(always)]
-    fn requantize_activated<T: RowInput, P: Precision<Acc = A>>(
+    pub(super) fn requantize_activated<P: Precision<Acc = A>>(
         &self,
         requant: &FcRequant<'_, P>,
         activation: Option<&P::Table>,
-        input: &[T],
+        input: LayerInput<'_>,
         output: &mut [P],
     ) {
-        match activation {
-            Some(table) => self.requantize_rows(requant, input, output, |v| P::lookup(table, v)),
-            None => self.requantize_rows(requant, input, output, |v| v),
+        match (activation, input) {
+            (Some(table), LayerInput::Int8(x)) => {
+                self.requantize_rows(requant, x, output, |v| P::lookup(table, v))
+            }
+            (Some(table), LayerInput::Int16(x)) => {
+                self.requantize_rows(requant, x, output, |v| P::lookup(table, v))
+            }
+            (None, LayerInput::Int8(x)) => self.requantize_rows(requant, x, output, |v| v),
+            (None, LayerInput::Int16(x)) => self.requantize_rows(requant, x, output, |v| v),
         }
     }
 

@@ -29,6 +29,8 @@ use crate::quant::{
     IN_FEATURES16_MAX, SHIFT16_MAX, SHIFT16_MIN, SHIFT_MAX, SHIFT_MIN,
 };
 
+mod quantize;
+
 /// The crate-private parts of the two traits (a public trait in a crate-private module: nameable
 /// inside the crate only, so nobody else can implement [`Accumulator`] or [`Precision`]). Its
 /// hooks take crate-private types (the AVX2 token), which nobody outside can name or call.
@@ -47,6 +49,25 @@ pub(crate) mod sealed {
             sums: &mut [Self],
             width: usize,
             kernel: impl FnMut(Range<usize>, &[i32], &mut [i32]),
+        );
+
+        /// `FullyConnected::accumulate` with the portable loops (the caller checked the shapes).
+        /// Implemented per type without `#[inline]` on hosts, so that it is compiled in
+        /// frmd-core with frmd-core's optimization whoever instantiates the generic callers.
+        fn accumulate_portable(
+            fc: &crate::kernels::FullyConnected<'_, Self>,
+            input: crate::kernels::LayerInput<'_>,
+            acc: &mut [Self],
+        );
+
+        /// The accumulators of the whole blocks of eight rows of `fc` with the x86 kernels
+        /// (`x86::layer`; the caller checked the shapes and does the remaining rows).
+        #[cfg(target_arch = "x86_64")]
+        fn accumulate_x86(
+            fc: &crate::kernels::FullyConnected<'_, Self>,
+            avx2: crate::kernels::x86::Avx2,
+            input: crate::kernels::LayerInput<'_>,
+            acc: &mut [Self],
         );
     }
 
@@ -71,7 +92,18 @@ pub(crate) mod sealed {
             false
         }
 
-        /// `FullyConnected::forward_validated` with the AVX2 kernels (the caller checked every
+        /// `FullyConnected::forward_validated` with the portable loops (the caller checked every
+        /// length), compiled in frmd-core as [`Accumulate::accumulate_portable`] is.
+        fn forward_portable(
+            fc: &crate::kernels::FullyConnected<'_, <Self as super::Precision>::Acc>,
+            requant: &crate::kernels::FcRequant<'_, Self>,
+            table: Option<&<Self as super::Precision>::Table>,
+            input: crate::kernels::LayerInput<'_>,
+            output: &mut [Self],
+        ) where
+            Self: super::Precision;
+
+        /// `FullyConnected::forward_validated` with the x86 kernels (the caller checked every
         /// length).
         #[cfg(target_arch = "x86_64")]
         fn forward_x86(
@@ -126,6 +158,7 @@ pub trait Accumulator:
     fn dequantize(self, scale: f32) -> f32;
 }
 
+#[allow(private_interfaces)]
 impl sealed::Accumulate for i32 {
     /// One kernel call over the whole row, started at the bias: the int8 kernels as they were.
     #[inline(always)]
@@ -136,6 +169,26 @@ impl sealed::Accumulate for i32 {
         mut kernel: impl FnMut(Range<usize>, &[i32], &mut [i32]),
     ) {
         kernel(0..width, bias, sums);
+    }
+
+    #[cfg_attr(target_os = "none", inline(always))]
+    fn accumulate_portable(
+        fc: &super::FullyConnected<'_, i32>,
+        input: LayerInput<'_>,
+        acc: &mut [i32],
+    ) {
+        fc.copy_sums(input, acc);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline]
+    fn accumulate_x86(
+        fc: &super::FullyConnected<'_, i32>,
+        avx2: super::x86::Avx2,
+        input: LayerInput<'_>,
+        acc: &mut [i32],
+    ) {
+        avx2.accumulate_blocks(fc, input, true, acc);
     }
 }
 
@@ -154,6 +207,7 @@ impl Accumulator for i32 {
     }
 }
 
+#[allow(private_interfaces)]
 impl sealed::Accumulate for i64 {
     /// One kernel call per 512-column chunk, started at 0; each int32 result is sign-extended and
     /// added to the row's int64 sum (the first chunk's to the bias).
@@ -195,6 +249,26 @@ impl sealed::Accumulate for i64 {
             }
             start = end;
         }
+    }
+
+    #[cfg_attr(target_os = "none", inline(always))]
+    fn accumulate_portable(
+        fc: &super::FullyConnected<'_, i64>,
+        input: LayerInput<'_>,
+        acc: &mut [i64],
+    ) {
+        fc.copy_sums(input, acc);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline]
+    fn accumulate_x86(
+        fc: &super::FullyConnected<'_, i64>,
+        avx2: super::x86::Avx2,
+        input: LayerInput<'_>,
+        acc: &mut [i64],
+    ) {
+        avx2.accumulate_blocks_wide(fc, input, acc);
     }
 }
 
@@ -258,62 +332,6 @@ pub trait Precision:
     fn table(entries: &[Self]) -> Option<&Self::Table>;
     /// The entries of `table`.
     fn table_entries(table: &Self::Table) -> &[Self];
-}
-
-#[allow(private_interfaces)]
-impl sealed::Quantize for i8 {
-    /// The int8 AVX2 kernels (requantized in registers), then the table.
-    #[cfg(target_arch = "x86_64")]
-    #[inline]
-    fn forward_x86(
-        fc: &super::FullyConnected<'_, i32>,
-        avx2: super::x86::Avx2,
-        requant: &super::FcRequant<'_, i8>,
-        table: Option<&LutTable>,
-        input: LayerInput<'_>,
-        output: &mut [i8],
-    ) {
-        fc.forward_avx2(avx2, requant, input, output);
-        if let Some(table) = table {
-            lut::apply_in_place(table, output);
-        }
-    }
-}
-
-#[allow(private_interfaces)]
-impl sealed::Quantize for i16 {
-    /// The int64-accumulating AVX2 kernels with requantization and table in registers.
-    #[cfg(target_arch = "x86_64")]
-    #[inline]
-    fn forward_x86(
-        fc: &super::FullyConnected<'_, i64>,
-        avx2: super::x86::Avx2,
-        requant: &super::FcRequant<'_, i16>,
-        table: Option<&Lut16Table>,
-        input: LayerInput<'_>,
-        output: &mut [i16],
-    ) {
-        fc.forward_avx2_wide(avx2, requant, table, input, output);
-    }
-
-    #[cfg(frmd_arm_dsp)]
-    #[inline(always)]
-    fn forward_dsp(
-        fc: &super::FullyConnected<'_, i64>,
-        requant: &super::FcRequant<'_, i16>,
-        table: Option<&Lut16Table>,
-        input: LayerInput<'_>,
-        output: &mut [i16],
-    ) -> bool {
-        match input {
-            LayerInput::Int8(values) => {
-                super::dsp::requantize_rows_wide(fc, requant, table, values, output)
-            }
-            LayerInput::Int16(values) => {
-                super::dsp::requantize_rows_wide(fc, requant, table, values, output)
-            }
-        }
-    }
 }
 
 impl Precision for i8 {

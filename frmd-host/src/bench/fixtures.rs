@@ -90,6 +90,9 @@ pub struct CorePolicies {
     pub int8: Int8Policy,
     /// The same student exported with int16 activations (MLP students only).
     pub int16: Option<Int8Policy>,
+    /// The blobs of `int8` and `int16` (for the stage breakdown, [`super::stages`]).
+    pub int8_blob: Vec<u8>,
+    pub int16_blob: Option<Vec<u8>>,
     /// Flash bytes (weights + tables) of the int8 policy.
     pub flash_bytes: usize,
 }
@@ -125,13 +128,14 @@ pub fn reach_student(
         activations: Some(Activations::Int16),
         ..ExportOptions::default()
     };
-    let int16 = match backbone {
-        BackboneConfig::Mlp { .. } => {
-            let student = frmd_export::export(dir, &int16, None)?;
-            Some(Int8Policy::from_blob(student.blob(), "int16")?)
-        }
+    let int16_blob = match backbone {
+        BackboneConfig::Mlp { .. } => Some(frmd_export::export(dir, &int16, None)?.blob().to_vec()),
         _ => None,
     };
+    let int16 = int16_blob
+        .as_deref()
+        .map(|blob| Int8Policy::from_blob(blob, "int16"))
+        .transpose()?;
     let int8 = ExportOptions {
         activations: Some(Activations::Int8),
         ..ExportOptions::default()
@@ -142,7 +146,9 @@ pub fn reach_student(
             Ok(CorePolicies {
                 flash_bytes: student.memory().flash_bytes(),
                 int8: Int8Policy::from_blob(&blob, "int8")?,
+                int8_blob: blob.clone(),
                 int16,
+                int16_blob,
                 core_f32: Int8Policy::f32_twin(&blob, student, "core-f32")?,
             })
         }

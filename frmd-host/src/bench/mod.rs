@@ -27,6 +27,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 pub mod fixtures;
+pub mod stages;
 #[cfg(test)]
 mod tests;
 
@@ -231,7 +232,10 @@ fn core_policy_rows(cfg: &BenchConfig) -> anyhow::Result<CoreRows> {
         let _ = std::fs::remove_dir_all(&dir);
         return Ok(policies?.core.map(|c| {
             let dims = c.int8.dims();
-            let rows = one_step_rows(c.int8, c.core_f32);
+            let mut rows = one_step_rows(c.int8, c.core_f32);
+            if let Some(int16) = c.int16 {
+                rows.push(("frmd-core int16-act 1-step".to_string(), Box::new(int16)));
+            }
             (rows, cfg.backbone.clone(), dims)
         }));
     }
@@ -339,9 +343,10 @@ pub fn bench_rows(cfg: &BenchConfig) -> anyhow::Result<(Vec<BenchRow>, Option<St
     Ok((rows, note))
 }
 
-/// On x86-64 CPUs where frmd-core's int8 kernels use AVX2 (and AVX-VNNI): the same policy timed
-/// again with the lower kernel levels, which give identical outputs (what CPUs without those
-/// instructions run): `avx2` (without AVX-VNNI, if it was active) and `portable` (SSE2).
+/// On x86-64 CPUs where frmd-core's int8 kernels use AVX2 (and AVX-512 VNNI or AVX-VNNI): the
+/// same policy timed again with the lower kernel levels, which give identical outputs (what CPUs
+/// without those instructions run): `avx-vnni` (without AVX-512, if both were active), `avx2`
+/// (neither) and `portable` (SSE2).
 #[cfg(target_arch = "x86_64")]
 fn time_kernel_levels(
     policy: &mut dyn Policy,
@@ -350,21 +355,30 @@ fn time_kernel_levels(
 ) -> anyhow::Result<Vec<(&'static str, f64, f64)>> {
     use frmd_core::kernels::x86;
     let mut rows = Vec::new();
-    if !policy.name().contains("int8") || !x86::avx2_active() {
+    let name = policy.name();
+    if !(name.contains("int8") || name.contains("int16")) || !x86::avx2_active() {
         return Ok(rows);
     }
-    if x86::avx_vnni_active() {
-        x86::set_avx_vnni_enabled(false);
-        let timed = time_policy(policy, input, cfg.warmup, cfg.calls);
-        x86::set_avx_vnni_enabled(true);
-        let (median, p99) = timed?;
-        rows.push(("avx2", median, p99));
+    let (avx512, vnni) = (x86::avx512_active(), x86::avx_vnni_active());
+    let mut levels = Vec::new();
+    if avx512 && vnni {
+        levels.push(("avx-vnni", false, true, true));
     }
-    x86::set_avx2_enabled(false);
-    let timed = time_policy(policy, input, cfg.warmup, cfg.calls);
-    x86::set_avx2_enabled(true);
-    let (median, p99) = timed?;
-    rows.push(("portable", median, p99));
+    if avx512 || vnni {
+        levels.push(("avx2", false, false, true));
+    }
+    levels.push(("portable", false, false, false));
+    for (label, wide, dot, avx2) in levels {
+        x86::set_avx512_enabled(wide);
+        x86::set_avx_vnni_enabled(dot);
+        x86::set_avx2_enabled(avx2);
+        let timed = time_policy(policy, input, cfg.warmup, cfg.calls);
+        x86::set_avx2_enabled(true);
+        x86::set_avx_vnni_enabled(vnni);
+        x86::set_avx512_enabled(avx512);
+        let (median, p99) = timed?;
+        rows.push((label, median, p99));
+    }
     Ok(rows)
 }
 

@@ -23,3 +23,45 @@ fn synthetic_transformer_student_gets_its_frmd_core_rows() {
     }
     assert_eq!(rows[0].label, "frmd-core int8 1-step");
 }
+
+/// The stage breakdown of an MLP student's chunk (both activation precisions) recombines into
+/// the policy's own chunk bit for bit, and names every layer's parts.
+#[test]
+fn mlp_chunk_stages_recombine_into_the_policy_chunk() {
+    use crate::tasks::PolicyInput;
+    let dir = std::env::temp_dir().join(format!("frmd-stages-test-{}", std::process::id()));
+    let policies = fixtures::reach_student(&dir, &"mlp:32,24".parse().unwrap(), 3);
+    let _ = std::fs::remove_dir_all(&dir);
+    let core = policies.unwrap().core.unwrap();
+    let (history, prev, rate) = fixtures::reach_input();
+    let input = PolicyInput {
+        obs_history: &history,
+        prev_action: &prev,
+        prev_rate: &rate,
+    };
+    let int16 = (core.int16.unwrap(), core.int16_blob.unwrap());
+    for (mut policy, blob) in [(core.int8, core.int8_blob), int16] {
+        let names = stages::with_stages(&blob, &mut policy, &input, |stages| {
+            stages.check()?;
+            for index in 0..stages.names().len() {
+                stages.run(index)?;
+            }
+            Ok(stages.names())
+        })
+        .unwrap();
+        for name in [
+            "noise",
+            "input",
+            "L0 rows",
+            "L1 requant",
+            "L1 table",
+            "decode",
+        ] {
+            assert!(
+                names.iter().any(|n| n == name),
+                "no stage {name} in {names:?}"
+            );
+        }
+        assert_eq!(names.last().map(String::as_str), Some("chunk"));
+    }
+}

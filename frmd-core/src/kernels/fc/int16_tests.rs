@@ -185,16 +185,10 @@ fn check_paths(case: &Case, input: LayerInput<'_>, want_acc: &[i64]) -> Vec<i16>
 
     // Portable (on Cortex-M: the DSP kernels; here the portable loop).
     let mut acc = vec![0_i64; rows];
-    match input {
-        LayerInput::Int8(values) => layer.copy_sums(values, &mut acc),
-        LayerInput::Int16(values) => layer.copy_sums(values, &mut acc),
-    }
+    layer.copy_sums(input, &mut acc);
     assert_eq!(acc, want_acc, "portable accumulators, {}", what());
     let mut out = vec![0_i16; rows];
-    match input {
-        LayerInput::Int8(values) => layer.requantize_activated(&requant, table, values, &mut out),
-        LayerInput::Int16(values) => layer.requantize_activated(&requant, table, values, &mut out),
-    }
+    layer.requantize_activated(&requant, table, input, &mut out);
     assert_eq!(out, want, "portable outputs, {}", what());
 
     // The public entry points (AVX2 where the CPU has it).
@@ -340,7 +334,7 @@ fn int16_layers_on_unaligned_weights_match_the_model() {
                 .unwrap();
             assert_eq!(out, want, "width {width} offset {offset}");
             let mut acc = vec![0_i64; case.rows];
-            layer.copy_sums(&case.input, &mut acc);
+            layer.copy_sums(LayerInput::Int16(&case.input), &mut acc);
             assert_eq!(acc, want_acc);
         }
     }
@@ -395,7 +389,7 @@ fn int8_layers_with_int16_inputs_match_on_every_path() {
             })
             .collect();
         let mut out = vec![0_i8; rows];
-        layer.requantize_activated(&requant, None, &input, &mut out);
+        layer.requantize_activated(&requant, None, LayerInput::Int16(&input), &mut out);
         assert_eq!(out, want, "portable, width {width}");
         let mut out = vec![0_i8; rows];
         layer
@@ -549,7 +543,12 @@ fn unvalidated_int16_parameters_agree_across_paths() {
         let table: Lut16Table = core::array::from_fn(|_| rng.next_u64() as i16);
         let layer = FullyConnected::new(width, rows, &weights, &bias);
         let mut portable = vec![0_i16; rows];
-        layer.requantize_activated(&requant, Some(&table), &input, &mut portable);
+        layer.requantize_activated(
+            &requant,
+            Some(&table),
+            LayerInput::Int16(&input),
+            &mut portable,
+        );
         let mut public = vec![0_i16; rows];
         layer
             .forward_validated(

@@ -59,11 +59,11 @@ impl<'a> FullyConnected<'a, i32> {
         self.forward_activated(requant, None, LayerInput::Int8(input), output)
     }
 
-    /// [`Self::forward`] with the AVX2 kernels (x86-64; callers checked the shapes and
-    /// `requant`): eight output channels per kernel call, requantized in registers; the last
-    /// `out_features % 8` channels one at a time. Same outputs as the portable loop. int16 inputs
-    /// (a 16-bit first-layer input plane) take the same kernels with the codes loaded as they
-    /// are instead of sign-extended.
+    /// [`Self::forward`] with the x86 kernels (callers checked the shapes and `requant`): the
+    /// whole blocks of eight output channels by `x86::layer` (requantized in registers), the
+    /// last `out_features % 8` channels one at a time. Same outputs as the portable loop. int16
+    /// inputs (a 16-bit first-layer input plane) take the same kernels with the codes loaded as
+    /// they are instead of sign-extended.
     #[cfg(target_arch = "x86_64")]
     pub(in crate::kernels) fn forward_avx2(
         &self,
@@ -72,41 +72,24 @@ impl<'a> FullyConnected<'a, i32> {
         input: LayerInput<'_>,
         output: &mut [i8],
     ) {
-        use crate::kernels::x86::{for_each_row_block, RequantBlock};
+        avx2.requantize_blocks(self, requant, input, output);
         let zero_point = requant.output_zero_point;
         let bounds = (requant.activation_min, requant.activation_max);
-        for_each_row_block(
-            self,
-            requant,
-            output,
-            |(out, rows, bias, multipliers, shifts)| {
-                let block = RequantBlock {
-                    multipliers,
-                    shifts,
-                    zero_point,
-                    bounds,
-                };
-                *out = match input {
-                    LayerInput::Int8(values) => avx2.requantize_rows(rows, values, bias, block),
-                    LayerInput::Int16(values) => {
-                        avx2.requantize_rows_i16(rows, values, bias, block)
-                    }
-                };
-            },
-            |(out, row, bias, multiplier, shift)| {
+        let tail =
+            |(out, row, bias, multiplier, shift): crate::kernels::x86::RowOf<'_, i8, i32>| {
                 let dot = match input {
                     LayerInput::Int8(values) => dot_i8_prefix(row, values),
                     LayerInput::Int16(values) => dot_i8_i16_prefix(row, values),
                 };
                 let acc = bias.wrapping_add(dot);
                 *out = requantize_to_i8(acc, multiplier, shift, zero_point, bounds.0, bounds.1);
-            },
-        );
+            };
+        crate::kernels::x86::for_each_tail_row(self, requant, output, tail);
     }
 
     /// Calls `emit(bias[o] + dot(w[o], input))` (or the bias-free dot when `with_bias` is false)
-    /// for `o = 0..out_features` in order with the AVX2 kernel, eight rows per call (x86-64;
-    /// callers checked the shapes). Same sums as the portable loop.
+    /// for `o = 0..out_features` in order with the x86 kernels (callers checked the shapes). Same
+    /// sums as the portable loop.
     #[cfg(target_arch = "x86_64")]
     fn for_each_sum_avx2(
         &self,
@@ -116,22 +99,32 @@ impl<'a> FullyConnected<'a, i32> {
         mut emit: impl FnMut(i32),
     ) {
         use crate::kernels::x86::BLOCK_ROWS;
-        let Some(block_len) = self.in_features.checked_mul(BLOCK_ROWS) else {
+        const CHUNK_ROWS: usize = 8 * BLOCK_ROWS;
+        let width = self.in_features;
+        let Some(chunk_len) = width.checked_mul(CHUNK_ROWS) else {
             return;
         };
-        let no_bias = [0_i32; BLOCK_ROWS];
-        let mut row_blocks = self.weights.chunks_exact(block_len);
-        let (bias_blocks, bias_tail) = self.bias.as_chunks::<BLOCK_ROWS>();
-        for (rows, bias) in row_blocks.by_ref().zip(bias_blocks) {
-            let bias = if with_bias { bias } else { &no_bias };
-            avx2.accumulate_rows(rows, input, bias)
-                .into_iter()
-                .for_each(&mut emit);
-        }
-        let rows = row_blocks.remainder().chunks_exact(self.in_features);
-        for (row, bias) in rows.zip(bias_tail) {
-            let bias = if with_bias { *bias } else { 0 };
-            emit(bias.wrapping_add(dot_i8_prefix(row, input)));
+        // Up to 64 rows at a time through a stack buffer: the whole blocks of eight by the
+        // kernels, the rest (in the last chunk only) one by one.
+        let mut buffer = [0_i32; CHUNK_ROWS];
+        let chunks = self
+            .weights
+            .chunks(chunk_len)
+            .zip(self.bias.chunks(CHUNK_ROWS));
+        for (weights, bias) in chunks {
+            let Some(sums) = buffer.get_mut(..bias.len()) else {
+                return;
+            };
+            let layer = FullyConnected::new(width, bias.len(), weights, bias);
+            avx2.accumulate_blocks(&layer, LayerInput::Int8(input), with_bias, sums);
+            let (_, rest) = sums.as_chunks_mut::<BLOCK_ROWS>();
+            let done = bias.len() - rest.len();
+            let rows = weights.chunks_exact(width).skip(done);
+            for ((slot, row), bias) in rest.iter_mut().zip(rows).zip(bias.iter().skip(done)) {
+                let bias = if with_bias { *bias } else { 0 };
+                *slot = bias.wrapping_add(dot_i8_prefix(row, input));
+            }
+            sums.iter().copied().for_each(&mut emit);
         }
     }
 }

@@ -2,9 +2,14 @@
 //! (`kernels::rows::for_each_block`, SSE2 through LLVM, and `quant::requantize_to_i8`) are the
 //! fallback and the definition: the tests compare both on random and extreme inputs.
 //!
-//! - `matvec`: eight rows of a fully connected layer at once (`vpmaddwd`, or `vpdpbusd` on
-//!   CPUs with AVX-VNNI), with the bias added and, for hidden layers, requantized in registers;
+//! - `matvec`: eight rows of a fully connected layer at once (`vpmaddwd`, or a `vpdpbusd` /
+//!   `vpdpwssd` front from `vnni` on CPUs with AVX-VNNI or AVX-512 VNNI);
+//! - `layer`: the loops over a whole layer's blocks of eight rows, one per kernel level, with
+//!   the bias added and, for hidden layers, requantized (and the int16 table applied) in
+//!   registers;
 //! - `requant`: requantization of eight accumulators at once;
+//! - `vnni`: the fronts of the row sums with `vpdpbusd`/`vpdpwssd`, VEX-encoded on 256 bits
+//!   (AVX-VNNI) or EVEX-encoded on 512 bits (AVX-512 F/BW/VNNI, checked with [`avx512_active`]);
 //! - `wide`: the int16-activation layers (int64 accumulation from 512-column int32 chunk sums,
 //!   requantization to int16 and the interpolated table in registers).
 //!
@@ -14,7 +19,7 @@
 //! [`set_avx_vnni_enabled`] turn the paths off (or back on, if the CPU has them) for A/B
 //! measurements.
 //!
-//! Safety audit: `unsafe` is allowed in this module and its three submodules only (and in
+//! Safety audit: `unsafe` is allowed in this module and its four submodules only (and in
 //! `kernels::dsp_asm`). There are four kinds of `unsafe` expression:
 //! - `_xgetbv(0)` here: requires the `XGETBV` instruction, which exists when `CPUID.1:ECX.OSXSAVE`
 //!   (bit 27) is set; it is called only after checking that bit.
@@ -22,11 +27,14 @@
 //!   token: sound when the CPU supports AVX2 and the OS enabled the AVX state. A token is made
 //!   only by `Avx2::get` after [`avx2_active`] returned true, and that state only becomes
 //!   "active" through `detect_avx2`. The `avx2,avxvnni` functions are called only when the
-//!   token's `vnni` flag is set, which [`avx_vnni_active`] sets only after `detect_avx_vnni`.
+//!   token's `vnni` flag is set, which [`avx_vnni_active`] sets only after `detect_avx_vnni`;
+//!   the `avx512f,avx512bw,avx512vnni` functions only when its `avx512` flag is set, which
+//!   [`avx512_active`] sets only after `detect_avx512` (CPUID bits and the ZMM state in XCR0).
 //!   (Disabling a path later leaves existing tokens valid: the CPU still has the instructions.)
 //! - unaligned loads and stores (`_mm_loadu_si128`, `_mm256_loadu_si256`, `_mm256_storeu_si256`,
 //!   `_mm_storeu_si128`) through pointers made from references to fixed-size arrays of exactly
-//!   the accessed size (`&[i8; 16]`, `&[i16; 16]`, `&[i16; 8]`, `&[i32; 8]`, `&[i64; 4]`,
+//!   the accessed size (`&[i8; 16]`, `&[i8; 32]`, `&[i8; 64]` (`_mm512_loadu_si512`), `&[i16; 32]`,
+//!   `&[i16; 16]`, `&[i16; 8]`, `&[i32; 8]`, `&[i64; 4]`,
 //!   `&mut [i32; 8]`, `&mut [i16; 8]`, `&mut [i64; 4]`): in bounds, initialized, no alignment
 //!   needed.
 //! - `_mm256_i32gather_epi32` in `wide::interpolate`: eight 4-byte reads from a `&[i16; 513]`
@@ -36,67 +44,56 @@
 //! No other memory is touched: slices are walked with `as_chunks` iterators.
 #![allow(unsafe_code)]
 
+mod layer;
 mod matvec;
 mod requant;
+mod vnni;
 mod wide;
 
 /// Output channels (weight rows) per call of the row kernels, and lanes of a requantized block.
 pub(crate) const BLOCK_ROWS: usize = 8;
-pub(crate) use requant::RequantBlock;
 
 use super::{FcRequant, FullyConnected};
 
 /// One output channel of a layer: its output, weight row, bias, multiplier and shift.
 pub(crate) type RowOf<'a, O, B> = (&'a mut O, &'a [i8], &'a B, i32, i32);
 
-/// A block of [`BLOCK_ROWS`] channels: outputs, weight rows (`BLOCK_ROWS * width` weights),
-/// biases, multipliers and shifts.
-pub(crate) type BlockOf<'a, O, B> = (
-    &'a mut [O; BLOCK_ROWS],
-    &'a [i8],
-    &'a [B; BLOCK_ROWS],
-    &'a [i32; BLOCK_ROWS],
-    &'a [i32; BLOCK_ROWS],
-);
-
-/// Walks the output channels of `layer` requantized by `requant` in blocks of [`BLOCK_ROWS`]
-/// for `block`, then the remaining channels one at a time for `row`. Calls nothing when
-/// `in_features * BLOCK_ROWS` overflows (callers checked the lengths).
+/// Calls `row` for every output channel of `layer` after its last whole block of
+/// [`BLOCK_ROWS`] (the channels the block kernels of `x86::layer` leave to the portable code).
+/// Calls nothing when `in_features * BLOCK_ROWS` overflows (callers checked the lengths).
 #[inline(always)]
-pub(crate) fn for_each_row_block<O, B>(
+pub(crate) fn for_each_tail_row<O, B>(
     layer: &FullyConnected<'_, B>,
     requant: &FcRequant<'_, O>,
     output: &mut [O],
-    mut block: impl FnMut(BlockOf<'_, O, B>),
     mut row: impl FnMut(RowOf<'_, O, B>),
 ) {
     let width = layer.in_features;
     let Some(block_len) = width.checked_mul(BLOCK_ROWS) else {
         return;
     };
-    let mut row_blocks = layer.weights.chunks_exact(block_len);
-    let (out_blocks, out_tail) = output.as_chunks_mut::<BLOCK_ROWS>();
-    let (bias_blocks, bias_tail) = layer.bias.as_chunks::<BLOCK_ROWS>();
-    let (multiplier_blocks, multiplier_tail) = requant.multipliers.as_chunks();
-    let (shift_blocks, shift_tail) = requant.shifts.as_chunks();
-    let blocks = out_blocks
+    let rows = layer.weights.chunks_exact(block_len).remainder();
+    let tail = output
+        .as_chunks_mut::<BLOCK_ROWS>()
+        .1
         .iter_mut()
-        .zip(row_blocks.by_ref())
-        .zip(bias_blocks)
-        .zip(multiplier_blocks.iter().zip(shift_blocks));
-    for (((out, rows), bias), (multipliers, shifts)) in blocks {
-        block((out, rows, bias, multipliers, shifts));
-    }
-    let tail = out_tail
-        .iter_mut()
-        .zip(row_blocks.remainder().chunks_exact(width))
-        .zip(bias_tail)
-        .zip(multiplier_tail.iter().zip(shift_tail));
+        .zip(rows.chunks_exact(width))
+        .zip(layer.bias.as_chunks::<BLOCK_ROWS>().1)
+        .zip(
+            requant
+                .multipliers
+                .as_chunks::<BLOCK_ROWS>()
+                .1
+                .iter()
+                .zip(requant.shifts.as_chunks::<BLOCK_ROWS>().1),
+        );
     for (((out, weights), bias), (multiplier, shift)) in tail {
         row((out, weights, bias, *multiplier, *shift));
     }
 }
 
+#[cfg(test)]
+use alloc::vec::Vec;
 use core::arch::x86_64::{__cpuid, __cpuid_count, _xgetbv};
 use core::sync::atomic::{AtomicU8, Ordering};
 
@@ -111,10 +108,12 @@ static AVX2_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
 
 /// Proof that the AVX2 kernels may run: `Avx2::get` hands one out only while [`avx2_active`]
 /// is true. The kernels are methods of this token (`matvec`, `requant`). `vnni` records whether
-/// the AVX-VNNI variant of the matrix-vector kernel may run too ([`avx_vnni_active`]).
+/// the AVX-VNNI variant of the matrix-vector kernel may run too ([`avx_vnni_active`]), `avx512`
+/// whether the AVX-512 VNNI one may ([`avx512_active`]; it takes precedence).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Avx2 {
     vnni: bool,
+    avx512: bool,
 }
 
 impl Avx2 {
@@ -123,6 +122,7 @@ impl Avx2 {
     pub(crate) fn get() -> Option<Self> {
         avx2_active().then(|| Self {
             vnni: avx_vnni_active(),
+            avx512: avx512_active(),
         })
     }
 
@@ -131,6 +131,102 @@ impl Avx2 {
     pub(crate) fn vnni(self) -> bool {
         self.vnni
     }
+
+    /// Whether the AVX-512 F/BW/VNNI instructions may be used.
+    #[inline]
+    pub(crate) fn avx512(self) -> bool {
+        self.avx512
+    }
+}
+
+/// (Tests) every kernel level this CPU runs: AVX2 alone, with AVX-VNNI, with AVX-512 VNNI.
+#[cfg(test)]
+pub(crate) fn test_tokens() -> Vec<Avx2> {
+    extern crate std;
+    let Some(detected) = Avx2::get() else {
+        std::eprintln!("no AVX2 on this CPU: only the portable kernels are exercised");
+        return Vec::new();
+    };
+    let plain = Avx2 {
+        vnni: false,
+        avx512: false,
+    };
+    let mut tokens = std::vec![plain];
+    for (present, token, name) in [
+        (
+            detected.vnni,
+            Avx2 {
+                vnni: true,
+                ..plain
+            },
+            "AVX-VNNI",
+        ),
+        (
+            detected.avx512,
+            Avx2 {
+                avx512: true,
+                ..plain
+            },
+            "AVX-512 VNNI",
+        ),
+    ] {
+        if present {
+            tokens.push(token);
+        } else {
+            std::eprintln!("no {name} on this CPU: its kernels are not exercised");
+        }
+    }
+    tokens
+}
+
+/// Same states as `AVX2_STATE`, for AVX-512 (only consulted while AVX2 is active).
+static AVX512_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
+
+/// Whether the CPU and OS support AVX-512 F, BW and VNNI (with the ZMM register state saved).
+pub fn avx512_supported() -> bool {
+    detect_avx2() && detect_avx512()
+}
+
+/// Whether the int8 and int16 row kernels currently use their AVX-512 VNNI variant.
+#[inline]
+pub fn avx512_active() -> bool {
+    if !avx2_active() {
+        return false;
+    }
+    match AVX512_STATE.load(Ordering::Relaxed) {
+        ACTIVE => true,
+        INACTIVE => false,
+        _ => {
+            let supported = detect_avx512();
+            AVX512_STATE.store(if supported { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
+            supported
+        }
+    }
+}
+
+/// Enables (if supported) or disables the AVX-512 variant, process-wide; returns whether it is
+/// active afterwards. All variants give identical results (for A/B measurements).
+pub fn set_avx512_enabled(enabled: bool) -> bool {
+    let active = enabled && avx512_supported();
+    AVX512_STATE.store(if active { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
+    active && avx2_active()
+}
+
+/// `CPUID.(7,0)`: AVX512F (EBX bit 16), AVX512BW (EBX bit 30), AVX512_VNNI (ECX bit 11); `XGETBV`:
+/// the OS saves the opmask and both ZMM state components (XCR0 bits 5, 6, 7) besides SSE/AVX.
+fn detect_avx512() -> bool {
+    const F: u32 = 1 << 16;
+    const BW: u32 = 1 << 30;
+    const VNNI: u32 = 1 << 11;
+    const OSXSAVE: u32 = 1 << 27;
+    const XCR0_ZMM: u64 = 0b1110_0110;
+    if __cpuid(0).eax < 7 || __cpuid(1).ecx & OSXSAVE == 0 {
+        return false;
+    }
+    // SAFETY: CPUID.1:ECX.OSXSAVE is set (checked above), so XGETBV is available and XCR0 readable.
+    let xcr0 = unsafe { _xgetbv(0) };
+    let leaf = __cpuid_count(7, 0);
+    xcr0 & XCR0_ZMM == XCR0_ZMM && leaf.ebx & (F | BW) == F | BW && leaf.ecx & VNNI != 0
 }
 
 /// Same states as `AVX2_STATE`, for AVX-VNNI (only consulted while AVX2 is active).

@@ -3,11 +3,10 @@
 //! the interpolated table, all in registers. The portable kernels (`kernels::rows`,
 //! `quant::requantize_s64`, `kernels::lut16::lookup`) are the definition; the tests compare.
 //!
-//! 1. Accumulation: for each 512-column chunk, `x86::matvec`'s eight-row loop (the same 25
-//!    instructions per 128 MACs for int16 inputs as for int8) gives eight int32 chunk sums; they
-//!    are sign-extended (`vpmovsxdq`) and added to two vectors of four int64 lanes that start at
-//!    the bias. (The VNNI byte split of the design is not built: this machine has no AVX-VNNI to
-//!    test it on, see the design's implementation notes.)
+//! 1. Accumulation (`x86::layer`): for each 512-column chunk, the eight-row sums of the token's
+//!    level (`x86::matvec`: 25 AVX2 instructions per 128 MACs for int16 inputs as for int8, or
+//!    the AVX-512 `vpdpwssd` front) give eight int32 chunk sums; they are sign-extended
+//!    (`vpmovsxdq`) and added to two vectors of four int64 lanes that start at the bias.
 //! 2. Requantization, per 64-bit lane, the steps of `quant::requantize_s64`:
 //!    `m15 = clamp((M >> 16) + bit15(M), 0, 0x7FFF)` (int32 lanes);
 //!    `p = acc * m15` as `lo32(acc) * m15 + (hi32(acc) * m15) << 32` (`vpmuludq`, `vpmuldq`;
@@ -19,19 +18,18 @@
 //!    `t[i] (128 - f) + t[i+1] f`, then `+ 64` and `>> 7`: `lut16::lookup` exactly.
 #![allow(unsafe_code)]
 
-use super::matvec::{row_sums_i16, row_sums_i8, split_rows};
 use super::requant::load_i32;
 use super::BLOCK_ROWS;
-use super::{for_each_row_block, Avx2};
+use super::{for_each_tail_row, Avx2};
 use crate::kernels::lut16::{self, Lut16Table};
 use crate::kernels::rows::for_each_accumulator;
 use crate::kernels::{FcRequant, FullyConnected, LayerInput};
-use crate::quant::{requantize_s64, CHUNK16};
+use crate::quant::requantize_s64;
 use core::arch::x86_64::{
     __m128i, __m256i, _mm256_add_epi32, _mm256_add_epi64, _mm256_and_si256, _mm256_blendv_epi8,
-    _mm256_castsi256_si128, _mm256_cmpgt_epi64, _mm256_cvtepi32_epi64, _mm256_cvtepu32_epi64,
-    _mm256_extracti128_si256, _mm256_i32gather_epi32, _mm256_loadu_si256, _mm256_madd_epi16,
-    _mm256_max_epi32, _mm256_min_epi32, _mm256_mul_epi32, _mm256_mul_epu32, _mm256_or_si256,
+    _mm256_castsi256_si128, _mm256_cmpgt_epi64, _mm256_cvtepu32_epi64, _mm256_extracti128_si256,
+    _mm256_i32gather_epi32, _mm256_loadu_si256, _mm256_madd_epi16, _mm256_max_epi32,
+    _mm256_min_epi32, _mm256_mul_epi32, _mm256_mul_epu32, _mm256_or_si256,
     _mm256_permute2x128_si256, _mm256_permutevar8x32_epi32, _mm256_set1_epi32, _mm256_set1_epi64x,
     _mm256_setr_epi32, _mm256_setzero_si256, _mm256_slli_epi32, _mm256_slli_epi64,
     _mm256_srai_epi32, _mm256_srli_epi32, _mm256_srli_epi64, _mm256_srlv_epi64, _mm256_sub_epi32,
@@ -51,9 +49,10 @@ pub(crate) struct RequantBlock16<'a> {
 }
 
 impl FullyConnected<'_, i64> {
-    /// `FullyConnected::forward_validated` for int16 outputs with the AVX2 kernels (callers
-    /// checked every length): eight channels per kernel call, the last `out_features % 8` by the
-    /// portable accumulation and `requantize_s64`. Same outputs as the portable loop.
+    /// `FullyConnected::forward_validated` for int16 outputs with the x86 kernels (callers
+    /// checked every length): the whole blocks of eight channels by `x86::layer`, the last
+    /// `out_features % 8` by the portable accumulation and `requantize_s64`. Same outputs as the
+    /// portable loop.
     pub(crate) fn forward_avx2_wide(
         &self,
         avx2: Avx2,
@@ -62,19 +61,12 @@ impl FullyConnected<'_, i64> {
         input: LayerInput<'_>,
         output: &mut [i16],
     ) {
+        avx2.requantize_blocks_wide(self, requant, table, input, output);
         let bounds = (requant.activation_min, requant.activation_max);
-        for_each_row_block(
+        for_each_tail_row(
             self,
             requant,
             output,
-            |(out, rows, bias, multipliers, shifts)| {
-                let block = RequantBlock16 {
-                    multipliers,
-                    shifts,
-                    bounds,
-                };
-                *out = avx2.requantize_rows_wide(rows, input, bias, block, table);
-            },
             |(out, row, bias, multiplier, shift)| {
                 let mut acc = 0_i64;
                 let bias = core::slice::from_ref(bias);
@@ -96,37 +88,23 @@ impl FullyConnected<'_, i64> {
     }
 }
 
+#[cfg(test)]
 impl Avx2 {
-    /// `lookup(requantize_s64(acc_r, ...))` of the int64 accumulators `acc_r` of the eight rows
-    /// of `rows` (`8 * input.len()` weights); `requant` must satisfy `FcRequant::validate` for
-    /// the outputs to be the rounded values (they equal the portable kernel's for any values).
-    #[inline]
-    pub(crate) fn requantize_rows_wide(
-        self,
-        rows: &[i8],
-        input: LayerInput<'_>,
-        bias: &[i64; BLOCK_ROWS],
-        requant: RequantBlock16<'_>,
-        table: Option<&Lut16Table>,
-    ) -> [i16; BLOCK_ROWS] {
-        // SAFETY: an `Avx2` token exists only after `avx2_active()` returned true.
-        unsafe { requantize_rows_wide(rows, input, bias, requant, table) }
-    }
-
-    /// (Tests) the eight accumulators' int64 sums as the kernel forms them.
-    #[cfg(test)]
+    /// (Tests) the eight accumulators' int64 sums as the kernel forms them (`rows` holds eight
+    /// rows of `input.len()` weights).
     pub(crate) fn accumulate_rows_wide(
         self,
         rows: &[i8],
         input: LayerInput<'_>,
         bias: &[i64; BLOCK_ROWS],
     ) -> [i64; BLOCK_ROWS] {
-        // SAFETY: an `Avx2` token exists only after `avx2_active()` returned true.
-        unsafe { accumulate_rows_wide(rows, input, bias) }
+        let layer = FullyConnected::new(input.len(), BLOCK_ROWS, rows, bias);
+        let mut out = [0_i64; BLOCK_ROWS];
+        self.accumulate_blocks_wide(&layer, input, &mut out);
+        out
     }
 
     /// (Tests) requantization and table of eight given accumulators, in registers.
-    #[cfg(test)]
     pub(crate) fn requantize_wide(
         self,
         acc: &[i64; BLOCK_ROWS],
@@ -136,23 +114,6 @@ impl Avx2 {
         // SAFETY: an `Avx2` token exists only after `avx2_active()` returned true.
         unsafe { requantize_loaded(acc, requant, table) }
     }
-}
-
-#[cfg(test)]
-#[target_feature(enable = "avx2")]
-fn accumulate_rows_wide(
-    rows: &[i8],
-    input: LayerInput<'_>,
-    bias: &[i64; BLOCK_ROWS],
-) -> [i64; BLOCK_ROWS] {
-    let (low, high) = wide_sums(rows, input, bias);
-    let mut out = [0_i64; BLOCK_ROWS];
-    let (halves, _) = out.as_chunks_mut::<4>();
-    if let [first, second] = halves {
-        store_i64x4(first, low);
-        store_i64x4(second, high);
-    }
-    out
 }
 
 #[cfg(test)]
@@ -167,26 +128,14 @@ fn requantize_loaded(
         [first, second] => (load_i64x4(first), load_i64x4(second)),
         _ => (_mm256_setzero_si256(), _mm256_setzero_si256()),
     };
-    pack_i16(finish(low, high, requant, table))
-}
-
-#[target_feature(enable = "avx2")]
-fn requantize_rows_wide(
-    rows: &[i8],
-    input: LayerInput<'_>,
-    bias: &[i64; BLOCK_ROWS],
-    requant: RequantBlock16<'_>,
-    table: Option<&Lut16Table>,
-) -> [i16; BLOCK_ROWS] {
-    let (low, high) = wide_sums(rows, input, bias);
-    pack_i16(finish(low, high, requant, table))
+    pack_i16(finish_wide(low, high, requant, table))
 }
 
 /// Requantization, clamp and table of the eight lanes `low` (rows 0..4), `high` (rows 4..8):
 /// eight int32 lanes holding int16 values.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn finish(
+pub(super) fn finish_wide(
     low: __m256i,
     high: __m256i,
     requant: RequantBlock16<'_>,
@@ -197,37 +146,6 @@ fn finish(
         Some(table) => interpolate(y, table),
         None => y,
     }
-}
-
-/// The int64 accumulators of the eight rows: the bias plus every 512-column chunk's int32 sum,
-/// sign-extended; as two vectors of four lanes (rows 0..4, 4..8).
-#[inline]
-#[target_feature(enable = "avx2")]
-fn wide_sums(rows: &[i8], input: LayerInput<'_>, bias: &[i64; BLOCK_ROWS]) -> (__m256i, __m256i) {
-    let width = input.len();
-    let rows = split_rows(rows, width);
-    let (halves, _) = bias.as_chunks::<4>();
-    let (mut low, mut high) = match halves {
-        [first, second] => (load_i64x4(first), load_i64x4(second)),
-        _ => (_mm256_setzero_si256(), _mm256_setzero_si256()),
-    };
-    let mut start = 0;
-    while start < width {
-        let end = start.saturating_add(CHUNK16).min(width);
-        let sums = match input {
-            LayerInput::Int8(values) => row_sums_i8(rows, values.get(..end).unwrap_or(&[]), start),
-            LayerInput::Int16(values) => {
-                row_sums_i16(rows, values.get(..end).unwrap_or(&[]), start)
-            }
-        };
-        low = _mm256_add_epi64(low, _mm256_cvtepi32_epi64(_mm256_castsi256_si128(sums)));
-        high = _mm256_add_epi64(
-            high,
-            _mm256_cvtepi32_epi64(_mm256_extracti128_si256::<1>(sums)),
-        );
-        start = end;
-    }
-    (low, high)
 }
 
 /// `requantize_s64` of eight int64 lanes (see the module documentation), as eight int32 lanes.
@@ -318,7 +236,7 @@ fn interpolate(y: __m256i, table: &Lut16Table) -> __m256i {
 /// Eight int32 lanes holding int16 values as int16 (the saturating pack is exact).
 #[inline]
 #[target_feature(enable = "avx2")]
-fn pack_i16(lanes: __m256i) -> [i16; BLOCK_ROWS] {
+pub(super) fn pack_i16(lanes: __m256i) -> [i16; BLOCK_ROWS] {
     let packed = _mm_packs_epi32(
         _mm256_castsi256_si128(lanes),
         _mm256_extracti128_si256::<1>(lanes),
@@ -332,19 +250,10 @@ fn pack_i16(lanes: __m256i) -> [i16; BLOCK_ROWS] {
 /// Loads four int64 lanes.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn load_i64x4(values: &[i64; 4]) -> __m256i {
+pub(super) fn load_i64x4(values: &[i64; 4]) -> __m256i {
     // SAFETY: the pointer comes from a `&[i64; 4]`: 32 initialized, readable bytes; `loadu` has
     // no alignment requirement.
     unsafe { _mm256_loadu_si256(values.as_ptr().cast::<__m256i>()) }
-}
-
-/// Stores four int64 lanes.
-#[cfg(test)]
-#[inline]
-#[target_feature(enable = "avx2")]
-fn store_i64x4(out: &mut [i64; 4], lanes: __m256i) {
-    // SAFETY: the pointer comes from a `&mut [i64; 4]`: 32 writable bytes; no alignment needed.
-    unsafe { core::arch::x86_64::_mm256_storeu_si256(out.as_mut_ptr().cast::<__m256i>(), lanes) };
 }
 
 #[cfg(test)]

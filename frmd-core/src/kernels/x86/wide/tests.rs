@@ -120,9 +120,12 @@ fn requantization_lanes_match_scalar() {
 
 #[test]
 fn wide_accumulation_matches_the_model() {
-    let Some(avx2) = Avx2::get() else {
-        return;
-    };
+    for avx2 in crate::kernels::x86::test_tokens() {
+        wide_accumulation_matches(avx2);
+    }
+}
+
+fn wide_accumulation_matches(avx2: Avx2) {
     let mut rng = SplitMix64::new(0x0ACC_0016);
     for case in 0..300 {
         let width = match case % 6 {
@@ -152,7 +155,11 @@ fn wide_accumulation_matches_the_model() {
             })
         };
         let got = avx2.accumulate_rows_wide(&weights, LayerInput::Int16(&input), &bias);
-        assert_eq!(got, want(&|i| i128::from(input[i])), "width {width}");
+        assert_eq!(
+            got,
+            want(&|i| i128::from(input[i])),
+            "{avx2:?} width {width}"
+        );
         let got = avx2.accumulate_rows_wide(&weights, LayerInput::Int8(&bytes), &bias);
         assert_eq!(
             got,

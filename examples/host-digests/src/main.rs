@@ -1,0 +1,115 @@
+//! Digests of what a host computes, one `name digest` line each: the Cortex-M firmware's
+//! workloads (`frmd-firmware-support`: ProDMP decode, the firmware-size int8 MLP with its decode,
+//! the fully connected kernel cases with int8 and int16 activations) and chunks of the sample
+//! policy blob (loader, sampler with the integer Gaussian, decode). The same bytes on every host:
+//! on x86-64 every kernel level this CPU runs (portable, AVX2, AVX-VNNI, AVX-512 VNNI) is checked
+//! to agree before printing; `scripts/aarch64.sh` runs this example natively and under
+//! `qemu-aarch64` and compares the lines.
+//!
+//! `frmd-host-digests mlp N` runs the MLP workload's first case `N` times instead (for instruction
+//! counts per chunk: the difference of two `N` divided by their difference).
+//!
+//! Run with `cargo run --release --manifest-path examples/host-digests/Cargo.toml`.
+use frmd_core::blob::LoadedMlp;
+use frmd_core::hash::Fnv1a64;
+use frmd_core::policy::{AlignedBytes, Noise};
+use frmd_core::rng::Rng;
+use frmd_firmware_support::synthetic::mlp as synthetic_mlp;
+use frmd_firmware_support::workload::{digest_all, Workload};
+use frmd_firmware_support::{kernel_workload, mlp_workload, prodmp_workload, shape};
+
+macro_rules! sample {
+    () => {
+        include_bytes!(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../frmd-core/tests/data/sample_policy.blob"
+        ))
+    };
+}
+static BLOB: AlignedBytes<{ sample!().len() }> = AlignedBytes(*sample!());
+
+fn baked() -> prodmp_workload::Baked {
+    prodmp_workload::Baked::from_config(&shape::config()).expect("bake the policy decoder")
+}
+
+/// 50 chunks of the sample policy from fresh episodes with varying observations.
+fn policy_digest() -> u64 {
+    let loaded = LoadedMlp::load(&BLOB.0).expect("sample blob");
+    let mut policy = loaded.policy::<2, 3, 2, 6, 4, 32, 40>().expect("policy");
+    let mut rng = Rng::new(7);
+    let mut digest = Fnv1a64::new();
+    for chunk in 0..50 {
+        let x = chunk as f32 / 50.0 - 0.5;
+        policy.reset(&[x, -x]).expect("reset");
+        policy.observe(&[x, 0.3 * x, -0.2]).expect("observe");
+        policy.observe(&[0.5 * x, x, 0.1]).expect("observe");
+        let trajectory = policy.act(Noise::Rng(&mut rng)).expect("act");
+        digest.f32s(trajectory.positions.as_flattened());
+        digest.f32s(trajectory.velocities.as_flattened());
+    }
+    digest.finish()
+}
+
+fn digests() -> Vec<(&'static str, u64)> {
+    let baked = baked();
+    let model = synthetic_mlp::generate();
+    let hidden = model.hidden_layers();
+    let mut mlp = mlp_workload::MlpWorkload::new(model.mlp(&hidden), &baked);
+    let mut prodmp = prodmp_workload::ProDmpWorkload::new(&baked);
+    let mut kernels = kernel_workload::KernelWorkload::new();
+    vec![
+        ("prodmp", digest_all(&mut prodmp).expect("decode")),
+        ("mlp", digest_all(&mut mlp).expect("mlp")),
+        ("kernels", digest_all(&mut kernels).expect("kernels")),
+        ("policy", policy_digest()),
+    ]
+}
+
+/// The digests at every kernel level of this CPU, which must agree.
+#[cfg(target_arch = "x86_64")]
+fn checked_digests() -> Vec<(&'static str, u64)> {
+    use frmd_core::kernels::x86;
+    let best = digests();
+    let (avx512, vnni) = (x86::avx512_active(), x86::avx_vnni_active());
+    for (level, wide, dot, avx2) in [
+        ("avx-vnni", false, vnni, true),
+        ("avx2", false, false, true),
+        ("portable", false, false, false),
+    ] {
+        x86::set_avx512_enabled(wide);
+        x86::set_avx_vnni_enabled(dot);
+        x86::set_avx2_enabled(avx2);
+        assert_eq!(digests(), best, "the {level} kernels differ");
+    }
+    x86::set_avx2_enabled(true);
+    x86::set_avx_vnni_enabled(vnni);
+    x86::set_avx512_enabled(avx512);
+    best
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+fn checked_digests() -> Vec<(&'static str, u64)> {
+    digests()
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    if args.get(1).map(String::as_str) == Some("mlp") {
+        let runs: usize = args.get(2).and_then(|n| n.parse().ok()).unwrap_or(1);
+        let baked = baked();
+        let model = synthetic_mlp::generate();
+        let hidden = model.hidden_layers();
+        let mut mlp = mlp_workload::MlpWorkload::new(model.mlp(&hidden), &baked);
+        mlp.prepare(0).expect("prepare");
+        let mut digest = Fnv1a64::new();
+        for _ in 0..runs {
+            mlp.run().expect("run");
+        }
+        mlp.digest_outputs(&mut digest);
+        println!("mlp x{runs} {:016x}", digest.finish());
+        return;
+    }
+    for (name, digest) in checked_digests() {
+        println!("{name} {digest:016x}");
+    }
+}
