@@ -6,7 +6,9 @@ A simulator package supplies an environment object with
 - `step(action) -> (obs, success, truncated)`: one control step;
 - `ee_position() -> [x, y, z]`: where the end effector is (the path the smoothness metrics read);
 - `commanded_position() -> [x, y, z]`: where the actions drive it (`non_smooth_action`);
-- `unstable() -> bool`: whether the simulator broke down in this episode (reported, not judged).
+- `unstable() -> bool`: whether the simulator broke down in this episode (reported, not judged);
+- optionally `init_action() -> list | None`: the command that holds the robot where the episode
+  starts (absolute position targets), sent with RESET; without it the server's default (zeros).
 
 Per episode: reset the environment and the policy with the episode's seed, then repeatedly send
 the last M observations, execute up to E actions of the returned chunk (stopping at the first
@@ -43,7 +45,8 @@ def rollout(env, policy, seed: int, exec_steps: int, max_steps: int, dt: float, 
             observe: Callable = lambda obs: obs) -> dict:
     """One episode; `observe` turns the simulator's observation into the policy's."""
     obs = env.reset(seed)
-    episode = Episode(policy, seed, observe(obs))
+    init = env.init_action() if hasattr(env, "init_action") else None
+    episode = Episode(policy, seed, observe(obs), init)
     ee_path, cmd_path = [env.ee_position()], [env.commanded_position()]
     steps, success, failed, truncated = 0, False, False, False
     while steps < max_steps and not success and not truncated:
@@ -77,10 +80,13 @@ def check_exec_steps(policy, exec_steps: int | None, episodes: int) -> int:
     return exec_steps
 
 
-def warm_up(policy, seed: int, first_obs, calls: int) -> None:
+def warm_up(policy, seed: int, first_obs, calls: int, init_action=None) -> None:
     """`calls` untimed chunks on the first evaluation observation (caches, page faults)."""
     if calls:
-        policy.reset(seed)
+        if init_action is None:
+            policy.reset(seed)
+        else:
+            policy.reset(seed, init_action)
         for _ in range(calls):
             policy.act([first_obs] * policy.history, 0)
 

@@ -32,8 +32,10 @@ class ServedPolicy:
         check_dt(self.dt, dt, "the server's policy")
         self.info = info
 
-    def reset(self, seed: int) -> None:
-        self.client.reset(seed)
+    def reset(self, seed: int, init_action=None) -> None:
+        """Starts an episode; `init_action`: the last commanded action before it (None: the
+        server's default)."""
+        self.client.reset(seed, [float(v) for v in init_action] if init_action is not None else ())
 
     def act(self, observations, executed: int):
         """(chunk [N][K], the policy's own seconds)."""
@@ -90,8 +92,11 @@ class InProcessPolicy:
         self.obs_dim, self.action_dim, self.dt = p.obs_dim, p.action_dim, p.dt
         check_dt(self.dt, dt, "the policy")
 
-    def reset(self, seed: int) -> None:
-        self.policy.reset(seed)
+    def reset(self, seed: int, init_action=None) -> None:
+        if init_action is None:
+            self.policy.reset(seed)
+        else:
+            self.policy.reset(seed, init_action=[float(v) for v in init_action])
 
     def act(self, observations, executed: int):
         chunk = self.policy.act(np.asarray(observations, dtype=np.float64), executed=executed)
@@ -115,10 +120,15 @@ def open_policy(command: str, in_process: bool = False, dt: float | None = None,
 
 class Episode:
     """The client's side of an episode: the last M observations (oldest first; the first one
-    repeated M times at the start) and the actions executed since the last chunk."""
+    repeated M times at the start) and the actions executed since the last chunk. `init_action`:
+    the command that holds the robot where the episode starts, sent with RESET (None: the
+    server's default, zeros)."""
 
-    def __init__(self, policy, seed: int, first_obs: Sequence[float]):
-        policy.reset(seed)
+    def __init__(self, policy, seed: int, first_obs: Sequence[float], init_action=None):
+        if init_action is None:
+            policy.reset(seed)
+        else:
+            policy.reset(seed, init_action)
         self.policy = policy
         self.history = deque([first_obs] * policy.history, maxlen=policy.history)
         self.executed = 0
