@@ -5,7 +5,9 @@
 #   defaults: runs/recipe "reach avoid push insert" "0 1 2"
 #
 # Every step is the plain CLI with its defaults (only --backbone mlp-paper and --seed are given;
-# --eval-episodes 0 skips the 20-episode check at the end of training, the table evaluates on 200).
+# --eval-episodes 0 skips the 20-episode check at the end of training, the table evaluates on 200);
+# the student is exported with int8 and with int16 activations (the default) and each export is
+# compared with the float student over 2,000 episodes (`frmd equiv`).
 # A step whose output exists is skipped, so the script resumes after an interruption. Logs go to
 # OUT_DIR/logs. Needs `frmd` on the PATH (`cargo install --path frmd-host`) or FRMD=/path/to/frmd.
 # DP=0 skips the DP baseline (when only the teacher or student recipe changed, its reports in
@@ -39,8 +41,10 @@ for s in $SEEDS; do
         step "$t-s$s-student" "$r/student/frmd.json" "$FRMD" train student --teacher "$r/teacher" --data "$d" --out "$r/student" --seed "$s" --eval-episodes 0
         step "$t-s$s-eval-student" "$r/student/eval-1.json" "$FRMD" eval --task "$t" --ckpt "$r/student" --steps 1 --episodes 200 --json "$r/student/eval-1.json"
         step "$t-s$s-eval-student2" "$r/student/eval-2.json" "$FRMD" eval --task "$t" --ckpt "$r/student" --steps 2 --episodes 200 --json "$r/student/eval-2.json"
-        step "$t-s$s-export" "$r/int8/export.json" "$FRMD" export --ckpt "$r/student" --out "$r/int8"
-        step "$t-s$s-equiv" "$r/int8/equiv2000.json" "$FRMD" equiv --ckpt "$r/student" --baked "$r/int8" --episodes 2000 --json "$r/int8/equiv2000.json"
+        for q in int8 int16; do
+            step "$t-s$s-export-$q" "$r/$q/export.json" "$FRMD" export --ckpt "$r/student" --out "$r/$q" --activations "$q"
+            step "$t-s$s-equiv-$q" "$r/$q/equiv2000.json" "$FRMD" equiv --ckpt "$r/student" --baked "$r/$q" --episodes 2000 --json "$r/$q/equiv2000.json"
+        done
         if [ "$DP" != 0 ]; then
             step "$t-s$s-dp" "$r/dp/frmd.json" "$FRMD" train dp --data "$d" --out "$r/dp" --backbone mlp-paper --seed "$s" --eval-episodes 0
             step "$t-s$s-eval-dp100" "$r/dp/eval-ddpm100.json" "$FRMD" eval --task "$t" --ckpt "$r/dp" --steps 100 --episodes 200 --json "$r/dp/eval-ddpm100.json"
