@@ -12,12 +12,11 @@ from frmd_client import report as shared
 from .benchmark import METHODS, BenchConfig  # noqa: F401
 from .tasks import GROUP_OF, GROUPS, ISSUE_TASKS, TASKS
 
-# The paper (arXiv 2503.02048) trained on RGB images, on a GPU: its numbers are context, not a
-# like-for-like comparison. Per group, as issue 23 quotes them (success %): MPD = the ProDMP
-# diffusion teacher, FRMD = the one-step student.
+# The paper trained on RGB images: its numbers are context, not a like-for-like comparison.
+# Success %, as issue 23 quotes the hard group (MPD = the ProDMP diffusion teacher, FRMD = the
+# one-step student) and issue 13 the overall row of its 12 MetaWorld and ManiSkill tasks together.
 PAPER_GROUP = {"hard": {"teacher": 28.6, "student-1": 29.0}}
-# Over the paper's 12 MetaWorld and ManiSkill tasks together: success % and ms per chunk (RTX 4090).
-PAPER_OVERALL = {"student-1": (64.8, 17.2), "teacher": (64.1, 168.6), "dp-ddpm-100": (50.1, 119.7)}
+PAPER_OVERALL = {"student-1": 64.8, "teacher": 64.1, "dp-ddpm-100": 50.1}
 
 
 def methods_of(config: dict) -> list:
@@ -59,18 +58,17 @@ def targets(tables: dict, results: dict) -> list:
 
 def paper_md(tables: dict) -> list:
     lines = ["## Beside the paper", "",
-             "The paper trained on RGB images (and ran on an RTX 4090); these runs observe ManiSkill's state vector "
-             "and run on 2 CPU cores, so success here is expected higher and latency differs: compare methods "
-             "within a column, not the columns. The paper's per-task ManiSkill numbers were not available to this "
-             "run; issue 23 quotes its hard group, and the overall row is the paper's 12 MetaWorld and ManiSkill "
-             "tasks together.", "",
+             "The paper trained on RGB images; these runs observe ManiSkill's state vector on 2 CPU cores, so "
+             "compare methods within a column, not the columns. The paper's per-task ManiSkill numbers were not "
+             "available to this run: issue 23 quotes its hard group, issue 13 its overall row (the paper's 12 "
+             "MetaWorld and ManiSkill tasks together).", "",
              "| group | method | ours: success % | paper: success % |", "| --- | --- | ---: | ---: |"]
     for group, by_method in PAPER_GROUP.items():
         for m, paper in by_method.items():
             lines.append(f"| {group} | {m} | {shared.pct(tables[group][m])} | {paper:.1f} |")
-    for m, (paper, ms) in PAPER_OVERALL.items():
+    for m, paper in PAPER_OVERALL.items():
         if m in tables["overall"]:
-            lines.append(f"| overall | {m} | {shared.pct(tables['overall'][m])} | {paper:.1f} ({ms} ms/chunk) |")
+            lines.append(f"| overall | {m} | {shared.pct(tables['overall'][m])} | {paper:.1f} |")
     return lines + [""]
 
 
