@@ -1,4 +1,4 @@
-"""Command line: python -m frmd_maniskill {tasks,check,demos,info,eval,benchmark} ... (--help on each)."""
+"""Command line: python -m frmd_maniskill {tasks,check,demos,info,demo-metrics,eval,benchmark} ... (--help on each)."""
 from __future__ import annotations
 
 import argparse
@@ -85,6 +85,13 @@ def cmd_info(args) -> int:
                           "max_length": int(lengths.max()), "action_before_start": d.extra.get("action_before_start"),
                           "action_min": d.action.min(axis=0).round(3).tolist(),
                           "action_max": d.action.max(axis=0).round(3).tolist()}))
+    return 0
+
+
+def cmd_demo_metrics(args) -> int:
+    from .evaluate import demo_metrics
+    for path in args.files:
+        print(json.dumps(demo_metrics(path, args.episodes)), flush=True)
     return 0
 
 
@@ -193,6 +200,12 @@ def main(argv=None) -> int:
     i = sub.add_parser("info", help="summarize dataset files")
     i.add_argument("files", nargs="+")
     i.set_defaults(run=cmd_info)
+
+    dm = sub.add_parser("demo-metrics", help="the evaluation's end-effector metrics (non-smooth transitions, RMS "
+                        "jerk) on a dataset's demonstrations, replayed open loop from their seeds")
+    dm.add_argument("files", nargs="+")
+    dm.add_argument("--episodes", type=int, help="the first N episodes of each file (default: all)")
+    dm.set_defaults(run=cmd_demo_metrics)
 
     e = sub.add_parser("eval", help="closed-loop evaluation of a policy server (frmd serve ...)")
     e.add_argument("--task", type=_tasks, required=True, help="a task, a comma-separated list, or all")

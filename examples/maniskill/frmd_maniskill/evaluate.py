@@ -13,9 +13,13 @@ commanded path (`non_smooth_action`): where the arm's joint targets put it (forw
 """
 from __future__ import annotations
 
+import json
 import time
 
-from frmd_client import evaluation
+import numpy as np
+
+from frmd_client import evaluation, metrics
+from frmd_client.dataset import Dataset
 
 from .tasks import DT, SeededEnv, check_task, eval_seed, package_versions
 
@@ -68,3 +72,32 @@ def evaluate(task: str, policy, episodes: int = 50, first_seed: int = 0, exec_st
                              extra_after={"seed_stream": "episode i runs on seed 2**31 + first_seed + i; "
                                                          "demonstrations use seeds < 2**31",
                                           "versions": package_versions()})
+
+
+def demo_metrics(path, episodes: int | None = None) -> dict:
+    """The evaluation's end-effector metrics on a dataset's own demonstrations: each episode's
+    actions replayed open loop from its seed (the reference the policies' numbers sit beside)."""
+    data = Dataset.load(path)
+    for key in ("maniskill_task", "controller", "episode_seeds"):
+        if key not in data.extra:
+            raise ValueError(f"{path}: metadata field {key!r} is missing (not written by frmd_maniskill demos)")
+    seeds = json.loads(data.extra["episode_seeds"])
+    env = SeededEnv(data.extra["maniskill_task"], data.extra["controller"])
+    non_smooth, steps, jerk, successes = 0, 0, [], 0
+    try:
+        for seed, rows in list(zip(seeds, data.episodes()))[:episodes]:
+            env.reset(seed)
+            ee, success = [env.ee_position()], False
+            for action in data.action[rows]:
+                _, success, _ = env.step(action)
+                ee.append(env.ee_position())
+            successes += success
+            non_smooth += metrics.non_smooth_transitions(ee)
+            steps += len(ee) - 1
+            jerk.append(metrics.rms_jerk(ee, DT))
+    finally:
+        env.close()
+    n = len(jerk)
+    return {"path": str(path), "controller": data.extra["controller"], "episodes": n,
+            "success_at_last_row": successes, "non_smooth_ee_mean": non_smooth / n,
+            "non_smooth_per_step": non_smooth / steps, "rms_jerk_mean": float(np.mean(jerk)), "steps": steps}

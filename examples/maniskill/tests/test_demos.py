@@ -64,3 +64,15 @@ def test_evaluation_layouts_differ_from_demonstration_layouts():
 def test_collection_refuses_the_evaluation_seed_stream():
     with pytest.raises(ValueError, match="2\\*\\*31"):
         collect("PickCube-v1", episodes=2, seed=EVAL_SEED_OFFSET - 1)
+
+
+def test_demo_metrics_replays_the_file_and_names_missing_metadata(pick, tmp_path):
+    from frmd_maniskill.evaluate import demo_metrics
+    data, stats, path = pick
+    m = demo_metrics(path)
+    assert m["episodes"] == 2 and m["success_at_last_row"] == 2 and m["steps"] == stats["steps"]
+    assert 0.0 < m["non_smooth_per_step"] < 1.0 and m["rms_jerk_mean"] > 0.0
+    bare = tmp_path / "bare.safetensors"
+    Dataset(data.obs, data.action, data.episode_ends, data.task, data.dt, data.source, {}).save(bare)
+    with pytest.raises(ValueError, match="bare.safetensors: metadata field 'maniskill_task'"):
+        demo_metrics(bare)
