@@ -21,8 +21,8 @@ import numpy as np
 
 import frmd
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "metaworld"))
-from frmd_metaworld.protocol import Client  # noqa: E402  (the pure-Python pipe client)
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "frmd_client"))
+from frmd_client.protocol import Client  # noqa: E402  (the pure-Python pipe client)
 
 
 def serve_args(path):

@@ -11,14 +11,12 @@ training, and a validity check of every report (no success threshold).
 from __future__ import annotations
 
 import json
-import os
-import shlex
-import subprocess
 import sys
-import time
 from dataclasses import dataclass, field, asdict
 from pathlib import Path
 
+from frmd_client.report import row_of
+from frmd_client.runner import StepFailed, StepRunner, check_report  # noqa: F401 (check_report: this module's name before)
 from .tasks import GROUP_OF, TASKS, check_task
 
 # (label, what `frmd serve` gets besides the policy flag); the expert runs in process.
@@ -90,42 +88,12 @@ def data_file_name(task: str, obs: str, after_success: int) -> str:
     return f"{task}{suffix}.safetensors"
 
 
-class StepFailed(Exception):
-    pass
-
-
-class Runner:
+class Runner(StepRunner):
     def __init__(self, cfg: BenchConfig):
         self.cfg = cfg
-        self.out = Path(cfg.out)
-        self.logs = self.out / "logs"
-        self.logs.mkdir(parents=True, exist_ok=True)
         self.python = sys.executable
         self.package_root = str(Path(__file__).resolve().parent.parent)
-        self.started = time.perf_counter()
-
-    def say(self, text: str) -> None:
-        print(f"[{time.perf_counter() - self.started:7.0f} s] {text}", flush=True)
-
-    def run(self, name: str, done: Path, argv: list, env_extra: dict | None = None) -> None:
-        """Runs `argv` unless `done` exists; output to logs/NAME.log; fails on a non-zero status."""
-        if done.exists():
-            self.say(f"{name}: done earlier ({done})")
-            return
-        log = self.logs / f"{name}.log"
-        env = {**os.environ, "RAYON_NUM_THREADS": os.environ.get("RAYON_NUM_THREADS", "1"),
-               "PYTHONPATH": self.package_root, **(env_extra or {})}
-        self.say(f"{name}: running (log {log})")
-        t0 = time.perf_counter()
-        with open(log, "w") as f:
-            f.write("$ " + shlex.join(argv) + "\n")
-            f.flush()
-            status = subprocess.call(argv, stdout=f, stderr=subprocess.STDOUT, env=env)
-        if status != 0:
-            raise StepFailed(f"{name} failed with status {status}; see {log}")
-        if not done.exists():
-            raise StepFailed(f"{name} finished but {done} is missing; see {log}")
-        self.say(f"{name}: finished in {time.perf_counter() - t0:.0f} s")
+        super().__init__(cfg.out, [self.package_root])
 
     def data(self, task: str) -> Path:
         path = Path(self.cfg.data_dir) / data_file_name(task, self.cfg.obs, self.cfg.after_success)
@@ -202,35 +170,6 @@ class Runner:
         return collect_results(self.cfg)
 
 
-def check_report(path: Path, task: str, episodes: int) -> dict:
-    """The fields and ranges `frmd eval --json` promises; raises on anything else."""
-    from .evaluate import EPISODE_FIELDS, FRMD_EVAL_FIELDS
-    report = json.loads(path.read_text())
-    missing = [k for k in FRMD_EVAL_FIELDS if k not in report]
-    problems = []
-    if missing:
-        problems.append(f"missing fields {missing}")
-    if report.get("task") != task:
-        problems.append(f"task {report.get('task')!r}, expected {task!r}")
-    if report.get("episodes") != episodes or len(report.get("per_episode", [])) != episodes:
-        problems.append(f"episodes {report.get('episodes')}, expected {episodes}")
-    rate = report.get("success_rate")
-    if not (isinstance(rate, (int, float)) and 0 <= rate <= 1):
-        problems.append(f"success_rate {rate!r} outside [0, 1]")
-    lo, hi = report.get("success_ci95", [None, None])
-    if not (isinstance(lo, (int, float)) and 0 <= lo <= (rate or 0) <= hi <= 1):
-        problems.append(f"success_ci95 {[lo, hi]} does not bracket {rate}")
-    if not report.get("latency_us_median", -1) >= 0:
-        problems.append("latency_us_median is not a non-negative number")
-    for i, ep in enumerate(report.get("per_episode", [])):
-        if [k for k in EPISODE_FIELDS if k not in ep]:
-            problems.append(f"episode {i} lacks fields")
-            break
-    if problems:
-        raise StepFailed(f"{path}: invalid report: {'; '.join(problems)}")
-    return report
-
-
 def collect_results(cfg: BenchConfig) -> dict:
     """Every finished report of the run, keyed by task, seed and method."""
     out = Path(cfg.out)
@@ -245,13 +184,6 @@ def collect_results(cfg: BenchConfig) -> dict:
                 path = out / task / f"seed{seed}" / "eval" / f"{method}.json"
             if not path.exists():
                 continue
-            r = json.loads(path.read_text())
-            rows.append({"task": task, "group": GROUP_OF[task], "seed": None if method == "expert" else seed,
-                         "method": method, "episodes": r["episodes"], "successes": r["successes"],
-                         "success_rate": r["success_rate"], "success_ci95": r["success_ci95"],
-                         "latency_us_median": r["latency_us_median"], "latency_us_p99": r["latency_us_p99"],
-                         "roundtrip_us_median": r.get("roundtrip_us_median"),
-                         "non_smooth_ee_mean": r["non_smooth_ee_mean"],
-                         "non_smooth_action_mean": r["non_smooth_action_mean"], "rms_jerk_mean": r["rms_jerk_mean"],
-                         "mean_length": r["mean_length"], "report": str(path)})
+            rows.append(row_of(json.loads(path.read_text()), task, GROUP_OF[task],
+                               None if method == "expert" else seed, method, path))
     return {"config": asdict(cfg), "rows": rows}

@@ -67,8 +67,9 @@ def cmd_collect(args) -> int:
 
 
 def cmd_eval(args) -> int:
+    from frmd_client.evaluation import summary_line
     from .evaluate import ExpertPolicy, evaluate
-    from .policy_client import open_policy
+    from frmd_client.policy_client import open_policy
     from .tasks import DT
     if (args.server is None) == (not args.expert):
         sys.exit("give exactly one of --expert and --server CMD")
@@ -86,12 +87,7 @@ def cmd_eval(args) -> int:
         finally:
             policy.close()
         report["wall_seconds"] = time.perf_counter() - started
-        lo, hi = report["success_ci95"]
-        print(f"{task} {report['policy']}: success {100 * report['success_rate']:.1f} % [{100 * lo:.1f}, {100 * hi:.1f}] "
-              f"over {report['episodes']} episodes, mean length {report['mean_length']:.1f}, latency "
-              f"{report['latency_us_median']:.1f} us (round trip {report['roundtrip_us_median']:.1f}), non-smooth "
-              f"{report['non_smooth_ee_mean']:.2f}/episode, RMS jerk {report['rms_jerk_mean']:.2f} m/s^3, "
-              f"{report['wall_seconds']:.1f} s", flush=True)
+        print(summary_line(report), flush=True)
         path = Path(args.json) if args.json else (Path(args.json_dir) / f"{task}-{args.label}.json" if args.json_dir else None)
         if path:
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -101,7 +97,7 @@ def cmd_eval(args) -> int:
 
 def cmd_info(args) -> int:
     import numpy as np
-    from .dataset import Dataset
+    from frmd_client.dataset import Dataset
     for path in args.files:
         d = Dataset.load(path)
         lengths = np.diff(np.concatenate([[0], d.episode_ends]))

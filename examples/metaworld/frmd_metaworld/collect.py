@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from .dataset import Dataset
+from frmd_client.dataset import Dataset
 from .tasks import (ACTION_DIM, DT, EVAL_SEED_OFFSET, MAX_STEPS, SeededEnv, check_task, expert_policy,
                     layout_dim, observe, package_versions)
 

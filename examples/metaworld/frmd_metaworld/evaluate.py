@@ -17,11 +17,11 @@ time from sending ACT to holding the CHUNK, and the difference is the protocol's
 """
 from __future__ import annotations
 
-import os
 import time
 
-from . import metrics
-from .policy_client import Episode, ServedPolicy  # noqa: F401 (ServedPolicy: this module's name before)
+from frmd_client import evaluation
+from frmd_client.evaluation import EPISODE_FIELDS, FRMD_EVAL_FIELDS  # noqa: F401 (this module's names before)
+from frmd_client.policy_client import ServedPolicy  # noqa: F401 (this module's name before)
 from .tasks import (DT, MAX_STEPS, SeededEnv, check_task, eval_seed, expert_policy, layout_dim, layout_of_dim,
                     observe, package_versions)
 
@@ -49,29 +49,9 @@ class ExpertPolicy:
 
 
 def rollout(env: SeededEnv, policy, seed: int, exec_steps: int, timings: dict, obs_layout: str = "raw") -> dict:
-    obs = env.reset(seed)
-    episode = Episode(policy, seed, observe(obs, obs_layout))
-    ee_path, cmd_path = [obs[:3].copy()], [env.commanded_position()]
-    steps, success, failed = 0, False, False
-    while steps < MAX_STEPS and not success:
-        chunk, policy_seconds, roundtrip = episode.chunk()
-        timings["roundtrip"].append(roundtrip)
-        timings["policy"].append(policy_seconds)
-        for action in chunk[:exec_steps]:
-            t0 = time.perf_counter()
-            obs, success, truncated = env.step(action)
-            timings["step"].append(time.perf_counter() - t0)
-            steps += 1
-            episode.executed_action(observe(obs, obs_layout))
-            ee_path.append(obs[:3].copy())
-            cmd_path.append(env.commanded_position())
-            failed = failed or env.unstable()
-            if success or truncated or steps >= MAX_STEPS:
-                break
-    return {"seed": seed, "success": success, "failed": failed, "length": steps,
-            "non_smooth_ee": metrics.non_smooth_transitions(ee_path),
-            "non_smooth_action": metrics.non_smooth_transitions(cmd_path),
-            "rms_jerk": metrics.rms_jerk(ee_path, DT)}
+    """One episode (frmd_client.evaluation.rollout with MetaWorld's step limit and period)."""
+    return evaluation.rollout(env, policy, seed, exec_steps, MAX_STEPS, DT, timings,
+                              observe=lambda obs: observe(obs, obs_layout))
 
 
 def evaluate(task: str, policy, episodes: int = 50, first_seed: int = 0, exec_steps: int | None = None,
@@ -85,63 +65,19 @@ def evaluate(task: str, policy, episodes: int = 50, first_seed: int = 0, exec_st
     elif layout_dim(obs_layout) != policy.obs_dim:
         raise ValueError(f"the policy observes {policy.obs_dim} floats, the {obs_layout!r} layout has "
                          f"{layout_dim(obs_layout)}")
-    if episodes < 1:
-        raise ValueError("at least one evaluation episode is needed")
-    exec_steps = exec_steps or policy.exec_steps
-    if not 1 <= exec_steps <= policy.horizon:
-        raise ValueError(f"exec_steps {exec_steps} is outside 1..={policy.horizon}")
+    exec_steps = evaluation.check_exec_steps(policy, exec_steps, episodes)
     env = SeededEnv(task)
     if warmup_calls:
         seed = eval_seed(first_seed, 0)
-        obs = env.reset(seed)
-        policy.reset(seed)
-        for _ in range(warmup_calls):
-            policy.act([observe(obs, obs_layout)] * policy.history, 0)
-    timings = {"roundtrip": [], "policy": [], "step": []}
+        evaluation.warm_up(policy, seed, observe(env.reset(seed), obs_layout), warmup_calls)
+    timings = evaluation.new_timings()
     records = []
     for index in range(episodes):
         records.append(rollout(env, policy, eval_seed(first_seed, index), exec_steps, timings, obs_layout))
         if progress:
             progress(index + 1, records[-1])
-    successes = sum(r["success"] for r in records)
-    micros = {k: [v * 1e6 for v in vs] for k, vs in timings.items()}
-    overhead = [r - p for r, p in zip(micros["roundtrip"], micros["policy"])]
-    return {
-        "task": task,
-        "policy": policy.name,
-        "episodes": len(records),
-        "successes": successes,
-        "success_rate": successes / len(records),
-        "success_ci95": metrics.wilson_interval(successes, len(records)),
-        "mean_length": metrics.mean([r["length"] for r in records]),
-        "mean_length_success": metrics.mean([r["length"] for r in records if r["success"]]),
-        "exec_steps": exec_steps,
-        "history": policy.history,
-        "obs_layout": obs_layout,
-        "first_seed": first_seed,
-        "chunk_calls": len(micros["policy"]),
-        "latency_us_median": metrics.quantile(micros["policy"], 0.5),
-        "latency_us_p99": metrics.quantile(micros["policy"], 0.99),
-        "sim_step_us": metrics.mean(micros["step"]),
-        "non_smooth_ee_mean": metrics.mean([r["non_smooth_ee"] for r in records]),
-        "non_smooth_action_mean": metrics.mean([r["non_smooth_action"] for r in records]),
-        "rms_jerk_mean": metrics.mean([r["rms_jerk"] for r in records]),
-        "threads": os.environ.get("RAYON_NUM_THREADS", "unset"),
-        "per_episode": records,
-        # Beyond frmd eval's fields:
-        "horizon": policy.horizon,
-        "float_type": policy.float_type,
-        "roundtrip_us_median": metrics.quantile(micros["roundtrip"], 0.5),
-        "roundtrip_us_p99": metrics.quantile(micros["roundtrip"], 0.99),
-        "overhead_us_median": metrics.quantile(overhead, 0.5),
-        "seed_stream": "episode i runs on seed 2**63 + first_seed + i; demonstrations use seeds < 2**63",
-        "versions": package_versions(),
-    }
-
-
-# The fields `frmd eval --json` writes (frmd-host EvalReport), checked by the tests.
-FRMD_EVAL_FIELDS = ["task", "policy", "episodes", "successes", "success_rate", "success_ci95", "mean_length",
-                    "mean_length_success", "exec_steps", "history", "first_seed", "chunk_calls", "latency_us_median",
-                    "latency_us_p99", "sim_step_us", "non_smooth_ee_mean", "non_smooth_action_mean", "rms_jerk_mean",
-                    "threads", "per_episode"]
-EPISODE_FIELDS = ["seed", "success", "failed", "length", "non_smooth_ee", "non_smooth_action", "rms_jerk"]
+    return evaluation.report(task, policy, records, timings, exec_steps, first_seed,
+                             extra_before={"obs_layout": obs_layout},
+                             extra_after={"seed_stream": "episode i runs on seed 2**63 + first_seed + i; "
+                                                         "demonstrations use seeds < 2**63",
+                                          "versions": package_versions()})

@@ -1,86 +1,30 @@
-"""A small policy server speaking the `frmd serve` protocol, for tests and overhead measurements.
+"""The mock policy server of frmd_client with MetaWorld's scripted expert as `--policy expert`.
 
     python -m frmd_metaworld.mock_server --policy zeros [--horizon 12 --exec-steps 8 ...]
     python -m frmd_metaworld.mock_server --policy expert --task push-v3 [--float f32]
 
-Policies: `zeros` (a chunk of zeros: measures the protocol alone), `hold` (repeats the last
-commanded action: shows the server's `executed` bookkeeping), `expert` (MetaWorld's scripted
-expert, horizon 1; f64 by default because the experts act on float64 observations). The server
-keeps standard output for frames only (anything a library prints goes to standard error).
+`expert`: horizon 1, f64 by default because the experts act on float64 observations.
 """
 from __future__ import annotations
 
-import argparse
-import os
-import socket
 import sys
 
-from . import protocol as p
-from . import session as session_mod
+from frmd_client import mock_server
+from frmd_client import protocol as p
 
 
-def make_session(args) -> session_mod.Session:
-    float_type = p.F64 if args.float == "f64" else p.F32
-    if args.policy == "expert":
-        from .tasks import DT, OBS_DIM, ACTION_DIM, expert_policy
-        expert = expert_policy(args.task)
-        info = p.ModelInfo(OBS_DIM, ACTION_DIM, 1, 1, 1, float_type, DT, f"metaworld expert {args.task} ({args.float})")
-        import numpy as np
-        act = lambda obs, prev, rate: expert(np.asarray(obs[-1], dtype=np.float64))
-    else:
-        info = p.ModelInfo(args.obs_dim, args.action_dim, args.history, args.horizon, args.exec_steps, float_type,
-                           args.dt, f"mock {args.policy}")
-        if args.policy == "zeros":
-            zeros = [0.0] * (info.horizon * info.action_dim)
-            act = lambda obs, prev, rate: zeros
-        else:  # hold
-            act = lambda obs, prev, rate: list(prev) * info.horizon
-    info.validate()
-    return session_mod.Session(info, policy_reset=lambda seed: None, policy_act=act)
+def expert_session(args, float_type):
+    """(ModelInfo, act) of MetaWorld's expert for args.task."""
+    import numpy as np
+    from .tasks import ACTION_DIM, DT, OBS_DIM, expert_policy
+    expert = expert_policy(args.task)
+    info = p.ModelInfo(OBS_DIM, ACTION_DIM, 1, 1, 1, float_type, DT, f"metaworld expert {args.task} ({args.float})")
+    return info, lambda obs, prev, rate: expert(np.asarray(obs[-1], dtype=np.float64))
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--policy", choices=["zeros", "hold", "expert"], default="zeros")
-    ap.add_argument("--task", default="reach-v3", help="MetaWorld task of --policy expert")
-    ap.add_argument("--float", choices=["f32", "f64"], default=None, help="value type (default: f64 for the expert, else f32)")
-    ap.add_argument("--obs-dim", type=int, default=39)
-    ap.add_argument("--action-dim", type=int, default=4)
-    ap.add_argument("--history", type=int, default=2)
-    ap.add_argument("--horizon", type=int, default=12)
-    ap.add_argument("--exec-steps", type=int, default=8)
-    ap.add_argument("--dt", type=float, default=0.0125)
-    ap.add_argument("--socket", help="serve on this Unix socket path instead of stdin/stdout")
-    args = ap.parse_args(argv)
-    if args.float is None:
-        args.float = "f64" if args.policy == "expert" else "f32"
-    # Frames go to the original standard output; stray prints of libraries go to standard error.
-    frames_fd = os.dup(1)
-    os.dup2(2, 1)
-    sys.stdout = sys.stderr
-    session = make_session(args)
-
-    def write_to(fd):
-        def write(data: bytes) -> None:
-            view = memoryview(data)
-            while view:
-                view = view[os.write(fd, view):]
-        return write
-
-    if args.socket is None:
-        end = session_mod.serve_stream(lambda n: os.read(0, n), write_to(frames_fd), session)
-        return 1 if end == "truncated" else 0
-    server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    server.bind(args.socket)
-    server.listen(1)
-    while True:
-        conn, _ = server.accept()
-        with conn:
-            fresh = session_mod.Session(session.info, session.policy_reset, session.policy_act)
-            try:
-                session_mod.serve_stream(conn.recv, write_to(conn.fileno()), fresh)
-            except OSError as e:
-                print(f"connection ended: {e}", file=sys.stderr)
+    return mock_server.main(argv, expert=expert_session, default_task="reach-v3",
+                            prog="python -m frmd_metaworld.mock_server")
 
 
 if __name__ == "__main__":

@@ -90,12 +90,18 @@ class SeededEnv:
     def reset(self, seed: int) -> np.ndarray:
         self.env.seed(seed)
         obs, _ = self.env.reset()
+        self.last_obs = obs
         return obs
 
     def step(self, action) -> tuple[np.ndarray, bool, bool]:
         """(observation, success, truncated) after one control step."""
         obs, _, _, truncated, info = self.env.step(np.asarray(action, dtype=np.float64))
+        self.last_obs = obs
         return obs, bool(info["success"]), bool(truncated)
+
+    def ee_position(self) -> np.ndarray:
+        """The hand position of the last observation, obs[0:3] (the evaluation's end-effector path)."""
+        return self.last_obs[:3].copy()
 
     def unstable(self) -> bool:
         """True once the simulator became unstable in this episode (MetaWorld then freezes it)."""

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from frmd_metaworld.collect import collect
-from frmd_metaworld.dataset import Dataset
+from frmd_client.dataset import Dataset
 from frmd_metaworld.tasks import EVAL_SEED_OFFSET, SeededEnv
 
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from frmd_metaworld import protocol as p
+from frmd_client import protocol as p
 from frmd_metaworld.collect import collect
 
 FRMD = os.environ.get("FRMD_BIN") or os.path.join(ROOT, "..", "..", "target", "debug", "frmd")
@@ -123,7 +123,7 @@ def _wheel():
 @pytest.mark.parametrize("which", ["ckpt", "baked"])
 def test_in_process_and_over_the_protocol_give_the_same_episodes(models, which):
     from frmd_metaworld.evaluate import evaluate
-    from frmd_metaworld.policy_client import InProcessPolicy, open_policy
+    from frmd_client.policy_client import InProcessPolicy, open_policy
     from frmd_metaworld.tasks import DT
     _wheel()
     command = f"{FRMD} serve --{which} {os.path.join(models, 'student' if which == 'ckpt' else 'baked')} --exec-steps 6"

@@ -1,6 +1,6 @@
 """Shared fixtures of the `frmd` module's tests: a tiny reach policy (demonstrations, teacher,
 student, DP, their int8 export) trained in seconds with the `frmd` binary, and the pipe client
-of the serve protocol (examples/metaworld/frmd_metaworld/protocol.py, pure Python) to compare
+of the serve protocol (examples/frmd_client/frmd_client/protocol.py, pure Python) to compare
 with.
 
 The binary is $FRMD_BIN or target/debug/frmd of this checkout (`cargo build -p frmd-host`).
@@ -12,7 +12,7 @@ import sys
 import pytest
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
-sys.path.insert(0, os.path.join(ROOT, "examples", "metaworld"))
+sys.path.insert(0, os.path.join(ROOT, "examples", "frmd_client"))
 FRMD = os.environ.get("FRMD_BIN") or os.path.join(ROOT, "target", "debug", "frmd")
 ENV = {**os.environ, "RAYON_NUM_THREADS": "1"}
 TINY = "--batch 8 --warmup 1 --eval-episodes 0 --horizon 8 --num-basis 4 --embed-dim 4".split()

@@ -11,7 +11,7 @@ import pytest
 
 import frmd
 from conftest import ENV
-from frmd_metaworld import protocol as p
+from frmd_client import protocol as p
 
 KINDS = {  # name -> (Policy.load path, frmd serve arguments), relative to the models directory
     "blob": ("s.blob", ["--blob", "s.blob"]),

@@ -13,14 +13,14 @@ import time
 import pytest
 
 from conftest import ROOT
-from frmd_metaworld import protocol as p
-from frmd_metaworld import session as session_mod
+from frmd_client import protocol as p
+from frmd_client import session as session_mod
 
 DOC = os.path.join(ROOT, "..", "..", "docs", "serve-protocol.md")
 TOY = p.ModelInfo(obs_dim=3, action_dim=2, obs_history=2, horizon=3, exec_steps=2, float_type=p.F32, dt=0.0125,
                   name="toy")
 OBS = [[0.5, -1.0, 2.0], [0.5, -1.0, 2.0]]
-MOCK = [sys.executable, "-m", "frmd_metaworld.mock_server"]
+MOCK = [sys.executable, "-m", "frmd_client.mock_server"]
 ENV = {**os.environ, "PYTHONPATH": ROOT}
 
 

@@ -1,7 +1,7 @@
 """`frmd serve` command lines as in-process load options, and the dt check (no wheel needed)."""
 import pytest
 
-from frmd_metaworld.policy_client import check_dt, load_options
+from frmd_client.policy_client import check_dt, load_options
 
 
 def test_serve_commands_become_load_options():

@@ -2,7 +2,7 @@ import math
 
 import numpy as np
 
-from frmd_metaworld import metrics as m
+from frmd_client import metrics as m
 
 
 def polyline(corners, step):

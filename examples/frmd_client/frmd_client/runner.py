@@ -1,0 +1,88 @@
+"""Resumable benchmark steps: each step is a command whose output file marks it done, so a
+rerun of the same benchmark skips what exists and continues where it stopped. Each command's
+output goes to OUT/logs/NAME.log; the console gets one progress line per step. `check_report`
+validates an evaluation report before the step counts as done."""
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import subprocess
+import time
+from pathlib import Path
+
+from .evaluation import EPISODE_FIELDS, FRMD_EVAL_FIELDS
+
+SHARED_ROOT = str(Path(__file__).resolve().parent.parent)  # the directory that holds frmd_client
+
+
+class StepFailed(Exception):
+    pass
+
+
+class StepRunner:
+    """Runs benchmark steps under `out` with logs; `python_path`: directories the steps' Python
+    processes import from (this package's is added)."""
+
+    def __init__(self, out, python_path: list | None = None):
+        self.out = Path(out)
+        self.logs = self.out / "logs"
+        self.logs.mkdir(parents=True, exist_ok=True)
+        self.python_path = os.pathsep.join(list(python_path or []) + [SHARED_ROOT])
+        self.started = time.perf_counter()
+
+    def say(self, text: str) -> None:
+        print(f"[{time.perf_counter() - self.started:7.0f} s] {text}", flush=True)
+
+    def run(self, name: str, done: Path, argv: list, env_extra: dict | None = None) -> None:
+        """Runs `argv` unless `done` exists; output to logs/NAME.log; fails on a non-zero status
+        or when the command did not write `done`."""
+        if done.exists():
+            self.say(f"{name}: done earlier ({done})")
+            return
+        log = self.logs / f"{name}.log"
+        env = {**os.environ, "RAYON_NUM_THREADS": os.environ.get("RAYON_NUM_THREADS", "1"),
+               "PYTHONPATH": self.python_path, **(env_extra or {})}
+        self.say(f"{name}: running (log {log})")
+        t0 = time.perf_counter()
+        with open(log, "w") as f:
+            f.write("$ " + shlex.join(argv) + "\n")
+            f.flush()
+            status = subprocess.call(argv, stdout=f, stderr=subprocess.STDOUT, env=env)
+        if status != 0:
+            raise StepFailed(f"{name} failed with status {status}; see {log}")
+        if not done.exists():
+            raise StepFailed(f"{name} finished but {done} is missing; see {log}")
+        self.say(f"{name}: finished in {time.perf_counter() - t0:.0f} s")
+
+
+def check_report(path: Path, task: str, episodes: int) -> dict:
+    """The fields and ranges `frmd eval --json` promises; raises StepFailed naming the file and
+    every problem otherwise."""
+    try:
+        report = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as e:
+        raise StepFailed(f"{path}: unreadable report: {e}") from None
+    missing = [k for k in FRMD_EVAL_FIELDS if k not in report]
+    problems = []
+    if missing:
+        problems.append(f"missing fields {missing}")
+    if report.get("task") != task:
+        problems.append(f"task {report.get('task')!r}, expected {task!r}")
+    if report.get("episodes") != episodes or len(report.get("per_episode", [])) != episodes:
+        problems.append(f"episodes {report.get('episodes')}, expected {episodes}")
+    rate = report.get("success_rate")
+    if not (isinstance(rate, (int, float)) and 0 <= rate <= 1):
+        problems.append(f"success_rate {rate!r} outside [0, 1]")
+    lo, hi = report.get("success_ci95", [None, None])
+    if not (isinstance(lo, (int, float)) and 0 <= lo <= (rate or 0) <= hi <= 1):
+        problems.append(f"success_ci95 {[lo, hi]} does not bracket {rate}")
+    if not report.get("latency_us_median", -1) >= 0:
+        problems.append("latency_us_median is not a non-negative number")
+    for i, ep in enumerate(report.get("per_episode", [])):
+        if [k for k in EPISODE_FIELDS if k not in ep]:
+            problems.append(f"episode {i} lacks fields")
+            break
+    if problems:
+        raise StepFailed(f"{path}: invalid report: {'; '.join(problems)}")
+    return report
