@@ -27,9 +27,9 @@ pub enum WeightRounding {
 }
 
 impl WeightRounding {
-    /// The default of a backbone: GPTQ for the MLP (on the recipe's insert and avoid students,
-    /// 2,000 episodes each, it brought the int16 export from -4.1 / -1.4 / -0.1 points of the
-    /// float student to +0.2 / -0.8 / +1.0; docs/experiments.md, "Int8 student"), nearest for
+    /// The default of a backbone: GPTQ for the MLP (on four avoid and insert students of the
+    /// recipe, 2,000 episodes each, it brought the int16 export from -7.1..-0.1 points of the
+    /// float student to -0.8..+1.0; docs/experiments.md, "Weight rounding"), nearest for
     /// transformer-lite (no GPTQ path).
     pub fn recipe(backbone: &BackboneConfig) -> Self {
         match backbone {
