@@ -165,10 +165,18 @@ impl Int8Policy {
         }
     }
 
-    /// Loads a blob file (MLP or transformer, by its magic).
+    /// Loads a blob file (MLP or transformer, by its magic), named by its activations' precision
+    /// (`int8` or `int16`).
     pub fn load(path: &Path) -> anyhow::Result<Self> {
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-        Self::from_blob(&bytes, "int8").with_context(|| format!("loading {}", path.display()))
+        let mut policy =
+            Self::from_blob(&bytes, "").with_context(|| format!("loading {}", path.display()))?;
+        policy.label = match policy.runner.blob() {
+            LoadedBlob::Mlp16(_) => "int16",
+            LoadedBlob::Mlp(_) | LoadedBlob::Transformer(_) => "int8",
+        }
+        .into();
+        Ok(policy)
     }
 
     /// The policy's sizes (from the blob).

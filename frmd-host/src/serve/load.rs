@@ -238,7 +238,7 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
                 ),
             };
             let policy = Int8Policy::load(&path)?;
-            let d = policy.dims();
+            let (d, name) = (policy.dims(), policy.name());
             let dt = exported_dt(&beside, cfg.dt.is_none())?.unwrap_or(0.0);
             (
                 Box::new(policy),
@@ -247,7 +247,7 @@ pub fn load(source: &PolicySource, cfg: &ServeConfig) -> anyhow::Result<Served> 
                 d.action_dim,
                 d.horizon,
                 dt,
-                format!("int8 {}", path.display()),
+                format!("{name} {}", path.display()),
             )
         }
         PolicySource::Firmware { board, baked } => {
