@@ -218,16 +218,12 @@ pub(crate) fn round_weights(
 mod tests {
     use super::*;
     use frmd_core::kernels::Activation;
+    use frmd_core::rng::SplitMix64;
 
     /// A seeded layer and inputs whose columns are strongly correlated.
     fn layer_and_inputs(out: usize, n: usize, rows: usize) -> (FloatLayer, Vec<Vec<f32>>) {
-        let mut state = 0x9e37_79b9_u64;
-        let mut next = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 33) as f32 / (1u64 << 31) as f32) - 0.5
-        };
+        let mut rng = SplitMix64::new(0x9e37_79b9);
+        let mut next = move || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32 - 0.5;
         let weights = (0..out * n).map(|_| next()).collect();
         let inputs = (0..rows)
             .map(|_| {

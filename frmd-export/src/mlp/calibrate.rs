@@ -39,27 +39,41 @@ pub struct Ranges {
     pub rows: usize,
 }
 
+/// Runs the f32 sampler (every sampling step) over every row of `set` with the row's seeded
+/// noise, handing each probed tensor to `observe`: the one pass calibration, GPTQ's input moments
+/// and the input gains all read.
+fn observe_calibration(
+    model: &FoldedMlp,
+    set: &CalibrationSet,
+    mut observe: impl FnMut(Probe, &[f32]),
+) -> anyhow::Result<()> {
+    let c = &model.base.config;
+    check_rows(set, c.cond_dim())?;
+    for row in 0..set.rows() {
+        let noise = set.noise(row, model.base.steps.len(), c.traj_dim());
+        model.sample(set.row(row), &noise, |_, probe, values| {
+            observe(probe, values)
+        })?;
+    }
+    Ok(())
+}
+
 /// Runs the f32 sampler over `set` and derives the activation parameters.
 pub fn calibrate(
     model: &FoldedMlp,
     set: &CalibrationSet,
     method: RangeMethod,
 ) -> anyhow::Result<Ranges> {
-    let c = &model.base.config;
-    check_rows(set, c.cond_dim())?;
     let layers = model.hidden.len();
     let mut input = Recorder::default();
     let mut pre: Vec<Recorder> = (0..layers).map(|_| Recorder::default()).collect();
     let mut out: Vec<Recorder> = (0..layers).map(|_| Recorder::default()).collect();
-    for row in 0..set.rows() {
-        let noise = set.noise(row, model.base.steps.len(), c.traj_dim());
-        model.sample(set.row(row), &noise, |_, probe, values| match probe {
-            Probe::Input => input.values.extend_from_slice(values),
-            Probe::PreActivation(l) => pre[l].values.extend_from_slice(values),
-            Probe::Output(l) => out[l].values.extend_from_slice(values),
-            Probe::Final => {}
-        })?;
-    }
+    observe_calibration(model, set, |probe, values| match probe {
+        Probe::Input => input.values.extend_from_slice(values),
+        Probe::PreActivation(l) => pre[l].values.extend_from_slice(values),
+        Probe::Output(l) => out[l].values.extend_from_slice(values),
+        Probe::Final => {}
+    })?;
     let input = input.params(method, "the model input")?;
     let hidden = pre
         .iter_mut()
@@ -82,8 +96,6 @@ pub fn calibrate(
 /// The second moments of every layer's inputs (the hidden layers', then the output layer's)
 /// over the f32 sampler's calls on `set`, for [`WeightRounding::Gptq`].
 pub fn input_moments(model: &FoldedMlp, set: &CalibrationSet) -> anyhow::Result<Vec<InputMoments>> {
-    let c = &model.base.config;
-    check_rows(set, c.cond_dim())?;
     let mut moments: Vec<InputMoments> = model
         .hidden
         .iter()
@@ -91,19 +103,16 @@ pub fn input_moments(model: &FoldedMlp, set: &CalibrationSet) -> anyhow::Result<
         .map(|layer| InputMoments::new(layer.in_features))
         .collect();
     let mut failed = None;
-    for row in 0..set.rows() {
-        let noise = set.noise(row, model.base.steps.len(), c.traj_dim());
-        model.sample(set.row(row), &noise, |_, probe, values| {
-            let layer = match probe {
-                Probe::Input => 0,
-                Probe::Output(l) => l + 1,
-                _ => return,
-            };
-            if let Err(error) = moments[layer].add(values) {
-                failed.get_or_insert(error.context(format!("inputs of layer {layer}")));
-            }
-        })?;
-    }
+    observe_calibration(model, set, |probe, values| {
+        let layer = match probe {
+            Probe::Input => 0,
+            Probe::Output(l) => l + 1,
+            _ => return,
+        };
+        if let Err(error) = moments[layer].add(values) {
+            failed.get_or_insert(error.context(format!("inputs of layer {layer}")));
+        }
+    })?;
     match failed {
         Some(error) => Err(error),
         None => Ok(moments),
@@ -117,23 +126,20 @@ pub fn input_gains(model: &FoldedMlp, set: &CalibrationSet) -> anyhow::Result<In
     let c = &model.base.config;
     let (obs_len, k) = (c.history * c.obs_dim, c.action_dim);
     let (mut fixed, mut rate, mut traj) = (1f32, 0f32, 0f32);
-    for row in 0..set.rows() {
-        let noise = set.noise(row, model.base.steps.len(), c.traj_dim());
-        model.sample(set.row(row), &noise, |_, probe, values| {
-            if probe == Probe::Input {
-                for (i, v) in values.iter().enumerate() {
-                    let a = v.abs();
-                    if i < obs_len + k {
-                        fixed = fixed.max(a);
-                    } else if i < obs_len + 2 * k {
-                        rate = rate.max(a);
-                    } else {
-                        traj = traj.max(a);
-                    }
+    observe_calibration(model, set, |probe, values| {
+        if probe == Probe::Input {
+            for (i, v) in values.iter().enumerate() {
+                let a = v.abs();
+                if i < obs_len + k {
+                    fixed = fixed.max(a);
+                } else if i < obs_len + 2 * k {
+                    rate = rate.max(a);
+                } else {
+                    traj = traj.max(a);
                 }
             }
-        })?;
-    }
+        }
+    })?;
     let gain = |range: f32| if range > 0.0 { fixed / range } else { 1.0 };
     Ok(InputGains {
         traj_gain: gain(traj),

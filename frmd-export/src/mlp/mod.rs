@@ -98,8 +98,8 @@ fn export_as<P: ExportPrecision>(
     if options.input_precision != InputPrecision::Int8 {
         ranges.input = widen(ranges.input, options.input_headroom).context("input headroom")?;
     }
-    let rounding =
-        WeightRounding::resolve(options.weight_rounding, &checkpoint.meta.model.backbone);
+    // `export_checkpoint` resolved the backbone's default already.
+    let rounding = options.weight_rounding.unwrap_or(WeightRounding::Gptq);
     let moments = match rounding {
         WeightRounding::Nearest => None,
         WeightRounding::Gptq => Some(input_moments(&folded, set)?),
