@@ -86,3 +86,37 @@ def check_report(path: Path, task: str, episodes: int) -> dict:
     if problems:
         raise StepFailed(f"{path}: invalid report: {'; '.join(problems)}")
     return report
+
+
+def run_and_report(runner, cfg, collect_results, write_report, quick_check, md: Path, command: str,
+                   notes: list, report_only: bool = False, quick: bool = False) -> int:
+    """A simulator package's `benchmark` command after its options: runs every step (unless
+    `report_only`), then writes the report of whatever exists, noting an early stop and the task-seeds
+    without reports; the quick mode checks the written reports. 1 if a step failed, else 0.
+    `write_report(results, md, command, notes)` returns what `quick_check(written, md)` checks."""
+    import sys
+    failed = None
+    if report_only:
+        results = collect_results(cfg)
+    else:
+        try:
+            results = runner.all()
+        except StepFailed as e:
+            failed = str(e)
+            print(f"benchmark stopped: {failed}", file=sys.stderr, flush=True)
+            results = collect_results(cfg)
+    notes = list(notes)
+    if failed:
+        notes.append(f"The run stopped early: {failed}")
+    missing = sorted({(task, seed) for task, seed in cfg.runs()}
+                     - {(r["task"], r["seed"]) for r in results["rows"] if r["seed"] is not None})
+    if missing:
+        notes.append("INCOMPLETE: no trained-model reports for " + ", ".join(f"{t} seed {s}" for t, s in missing)
+                     + "; the group and overall rows cover only the tasks that have them. The same "
+                     "command without --report-only resumes the run.")
+    written = write_report(results, md, command, notes)
+    runner.say(f"wrote {md}, {md.with_suffix('.json')}, {md.with_suffix('.png')} ({len(results['rows'])} reports)")
+    if quick and not failed:
+        quick_check(written, md)
+        runner.say("quick mode: every report is valid")
+    return 1 if failed else 0

@@ -129,7 +129,7 @@ def cmd_eval(args) -> int:
 def cmd_benchmark(args) -> int:
     from . import report
     from .benchmark import METHODS, BenchConfig, Runner, collect_results
-    from frmd_client.runner import StepFailed
+    from frmd_client.runner import run_and_report
     only = None
     if args.methods:
         only = [m for m in args.methods.split(",") if m]
@@ -147,33 +147,10 @@ def cmd_benchmark(args) -> int:
     cfg = BenchConfig.quick_config(**overrides) if args.quick else BenchConfig(**overrides)
     md = Path(args.results) if args.results else Path(cfg.out) / "results.md"
     md.parent.mkdir(parents=True, exist_ok=True)
-    runner = Runner(cfg)
-    failed = None
-    if args.report_only:
-        results = collect_results(cfg)
-    else:
-        try:
-            results = runner.all()
-        except StepFailed as e:
-            failed = str(e)
-            print(f"benchmark stopped: {failed}", file=sys.stderr, flush=True)
-            results = collect_results(cfg)
     command = "cd examples/maniskill && .venv/bin/python -m frmd_maniskill " + " ".join(
         shlex.quote(a) for a in args.argv if a != "--report-only")
-    notes = list(args.note or [])
-    if failed:
-        notes.append(f"The run stopped early: {failed}")
-    missing = [f"{t} seed {s}" for t, s in cfg.runs()
-               if not any(r["task"] == t and r["seed"] == s for r in results["rows"])]
-    if missing:
-        notes.append("INCOMPLETE: no reports yet for " + ", ".join(missing) + "; the group and overall rows cover only "
-                     "what exists. The same command without --report-only resumes the run.")
-    written = report.write(results, md, command, notes)
-    runner.say(f"wrote {md}, {md.with_suffix('.json')}, {md.with_suffix('.png')} ({len(results['rows'])} reports)")
-    if args.quick and not failed:
-        report.quick_check(written, md)
-        runner.say("quick mode: every report is valid")
-    return 1 if failed else 0
+    return run_and_report(Runner(cfg), cfg, collect_results, report.write, report.quick_check, md, command,
+                          args.note or [], report_only=args.report_only, quick=args.quick)
 
 
 def main(argv=None) -> int:

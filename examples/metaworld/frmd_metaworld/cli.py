@@ -123,7 +123,8 @@ def cmd_bench(args) -> int:
 
 
 def cmd_benchmark(args) -> int:
-    from .benchmark import BenchConfig, Runner, StepFailed
+    from .benchmark import BenchConfig, Runner, collect_results
+    from frmd_client.runner import run_and_report
     from . import report
     overrides = {k: v for k, v in {
         "tasks": args.task, "demos": args.demos, "episodes": args.episodes, "backbone": args.backbone,
@@ -138,36 +139,13 @@ def cmd_benchmark(args) -> int:
     cfg = BenchConfig.quick_config(**overrides) if args.quick else BenchConfig(**overrides)
     md = Path(args.results) if args.results else Path(cfg.out) / "results.md"
     md.parent.mkdir(parents=True, exist_ok=True)
-    runner = Runner(cfg)
-    failed = None
-    from .benchmark import collect_results
-    if args.report_only:
-        results = collect_results(cfg)
-    else:
-        try:
-            results = runner.all()
-        except StepFailed as e:
-            failed = str(e)
-            print(f"benchmark stopped: {failed}", file=sys.stderr, flush=True)
-            results = collect_results(cfg)
+    instructions = json.loads(Path(args.instructions).read_text()) if args.instructions else None
     command = "cd examples/metaworld && .venv/bin/python -m frmd_metaworld " + " ".join(
         shlex.quote(a) for a in argv_of(args) if a != "--report-only")
-    notes = list(args.note or [])
-    if failed:
-        notes.append(f"The run stopped early: {failed}")
-    missing = sorted({(task, seed) for task, seed in cfg.runs()}
-                     - {(r["task"], r["seed"]) for r in results["rows"] if r["seed"] is not None})
-    if missing:
-        notes.append("INCOMPLETE: no trained-model reports for " + ", ".join(f"{t} seed {s}" for t, s in missing)
-                     + "; the group and overall rows cover only the tasks that have them. The same "
-                     "command without --report-only resumes the run.")
-    instructions = json.loads(Path(args.instructions).read_text()) if args.instructions else None
-    written = report.write(results, md, command, notes, instructions)
-    runner.say(f"wrote {md}, {md.with_suffix('.json')}, {md.with_suffix('.png')} ({len(results['rows'])} reports)")
-    if args.quick and not failed:
-        report.quick_check(written, md)
-        runner.say("quick mode: every report is valid")
-    return 1 if failed else 0
+    return run_and_report(Runner(cfg), cfg, collect_results,
+                          lambda results, md, command, notes: report.write(results, md, command, notes, instructions),
+                          report.quick_check, md, command, args.note or [],
+                          report_only=args.report_only, quick=args.quick)
 
 
 def argv_of(args) -> list:
