@@ -11,13 +11,15 @@
 # A step whose output exists is skipped, so the script resumes after an interruption. Logs go to
 # OUT_DIR/logs. Needs `frmd` on the PATH (`cargo install --path frmd-host`) or FRMD=/path/to/frmd.
 # DP=0 skips the DP baseline (when only the teacher or student recipe changed, its reports in
-# docs/results/recipe still hold). Summary: python3 scripts/recipe_table.py OUT_DIR
+# docs/results/recipe still hold). COLLECT_ARGS adds options to `frmd collect` (a data variant,
+# e.g. COLLECT_ARGS="--after-success 20"). Summary: python3 scripts/recipe_table.py OUT_DIR
 set -euo pipefail
 OUT=${1:-runs/recipe}
 TASKS=${2:-"reach avoid push insert"}
 SEEDS=${3:-"0 1 2"}
 FRMD=${FRMD:-frmd}
 DP=${DP:-1}
+read -r -a collect_args <<< "${COLLECT_ARGS:-}"
 export RAYON_NUM_THREADS=${RAYON_NUM_THREADS:-1}
 mkdir -p "$OUT/data" "$OUT/logs"
 
@@ -31,7 +33,7 @@ step() { # step NAME DONE_FILE CMD...
 }
 
 for t in $TASKS; do
-    step "collect-$t" "$OUT/data/$t.safetensors" "$FRMD" collect --task "$t" --out "$OUT/data/$t.safetensors"
+    step "collect-$t" "$OUT/data/$t.safetensors" "$FRMD" collect --task "$t" --out "$OUT/data/$t.safetensors" "${collect_args[@]}"
 done
 for s in $SEEDS; do
     for t in $TASKS; do

@@ -31,6 +31,10 @@ pub struct CollectArgs {
     /// Correlation time of the perturbation, seconds.
     #[arg(long, default_value_t = CollectConfig::default().noise.correlation_time)]
     pub perturb_time: f64,
+    /// Record this many more expert steps after each episode's first success (0: a
+    /// demonstration ends at it), so the data shows the expert settling at the goal.
+    #[arg(long, default_value_t = CollectConfig::default().after_success)]
+    pub after_success: usize,
 }
 
 pub fn run(args: CollectArgs) -> anyhow::Result<ExitCode> {
@@ -45,6 +49,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<ExitCode> {
         out: args.out,
         force: args.force,
         noise,
+        after_success: args.after_success,
     };
     let c = collect_to_file(&cfg)?;
     println!(

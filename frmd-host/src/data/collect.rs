@@ -21,12 +21,18 @@ pub struct CollectConfig {
     /// Replace an existing `out`.
     pub force: bool,
     pub noise: ActionNoise,
+    /// Expert steps recorded after each episode's first success (0: the demonstration ends
+    /// there), so the data shows the expert settling at the goal.
+    pub after_success: usize,
 }
 
 /// The recipe's perturbation of the executed actions during collection, metres (DART; teacher
 /// success with plain -> perturbed demonstrations: avoid 60 -> 73 %, insert 38.5 -> 83.5 %,
 /// docs/design.md section 4).
 pub const RECIPE_PERTURB_STD: f64 = 0.02;
+
+/// Most steps `--after-success` may add to an episode.
+pub const MAX_AFTER_SUCCESS: usize = 1000;
 
 impl CollectConfig {
     /// The counts, the seeds (below the evaluation stream) and the noise, before any work.
@@ -41,6 +47,7 @@ impl CollectConfig {
                 format!("at most {last} (collection seeds stay below 2^63, the evaluation stream)"),
             ));
         }
+        limits::count("after-success", self.after_success, 0, MAX_AFTER_SUCCESS)?;
         limits::non_negative("perturb-std", self.noise.std)?;
         limits::positive("perturb-time", self.noise.correlation_time)
     }
@@ -61,6 +68,7 @@ impl Default for CollectConfig {
             out: PathBuf::new(),
             force: false,
             noise,
+            after_success: 0,
         }
     }
 }
@@ -94,6 +102,7 @@ pub fn collect_to_file(cfg: &CollectConfig) -> anyhow::Result<Collected> {
         cfg.episodes,
         cfg.seed,
         Some(cfg.noise),
+        cfg.after_success,
         &mut |done| progress.update(done as u64, ""),
     )?;
     progress.finish();
@@ -140,12 +149,14 @@ fn max_attempts(episodes: usize, perturbed: bool) -> usize {
 /// Failed expert episodes are skipped; at most `episodes + 10 + episodes / 5` seeds are tried,
 /// three times as many with `noise` (see `super::perturb`: the executed actions are perturbed,
 /// the recorded ones are the expert's). Seeds must stay below the evaluation stream
-/// ([`EVAL_SEED_OFFSET`]).
+/// ([`EVAL_SEED_OFFSET`]). Each episode goes on for `after_success` expert steps after its
+/// first success (an episode that fails in them is skipped too).
 pub fn collect_demos(
     task_name: &str,
     episodes: usize,
     seed: u64,
     noise: Option<ActionNoise>,
+    after_success: usize,
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<(Dataset, CollectStats)> {
     anyhow::ensure!(episodes >= 1, "at least one episode must be collected");
@@ -197,6 +208,7 @@ pub fn collect_demos(
             episode_seed,
             1,
             1,
+            after_success,
             &mut |o, executed| {
                 obs.extend_from_slice(o);
                 match &clean_action {
@@ -207,7 +219,7 @@ pub fn collect_demos(
         )?;
         step_time += run.step_time;
         steps += run.steps;
-        if !run.success {
+        if !run.success || run.failed {
             stats.failed += 1;
             continue;
         }
@@ -229,8 +241,13 @@ pub fn collect_demos(
         ),
         None => String::new(),
     };
+    let settling = if after_success > 0 {
+        format!(", {after_success} steps recorded after the first success")
+    } else {
+        String::new()
+    };
     data.source = format!(
-        "frmd collect: scripted expert, seeds {seed}..{} ({} failed episodes skipped){perturbation}",
+        "frmd collect: scripted expert, seeds {seed}..{} ({} failed episodes skipped){perturbation}{settling}",
         seed + stats.attempted as u64,
         stats.failed
     );

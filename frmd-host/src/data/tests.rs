@@ -90,7 +90,7 @@ fn error_of(bytes: &[u8]) -> String {
 
 #[test]
 fn collected_dataset_round_trips_through_a_file() {
-    let (data, stats) = collect_demos("avoid", 3, 17, None, &mut |_| {}).unwrap();
+    let (data, stats) = collect_demos("avoid", 3, 17, None, 0, &mut |_| {}).unwrap();
     assert_eq!(stats.failed, 0);
     assert_eq!(data.num_episodes(), 3);
     assert_eq!(data.obs_dim, 9);
@@ -103,6 +103,38 @@ fn collected_dataset_round_trips_through_a_file() {
     assert_eq!(
         Dataset::from_bytes(&small().to_bytes().unwrap()).unwrap(),
         small()
+    );
+}
+
+#[test]
+fn after_success_extends_each_episode_by_the_settling_steps() {
+    let (plain, _) = collect_demos("avoid", 3, 17, None, 0, &mut |_| {}).unwrap();
+    let (settled, _) = collect_demos("avoid", 3, 17, None, 15, &mut |_| {}).unwrap();
+    let lengths =
+        |d: &Dataset| -> Vec<usize> { d.episode_ranges().iter().map(|r| r.len()).collect() };
+    let (short, long) = (lengths(&plain), lengths(&settled));
+    assert_eq!(long, short.iter().map(|l| l + 15).collect::<Vec<_>>());
+    // The shared part is the same expert run; the added rows stay near the goal (observation
+    // columns 4 and 5 are goal - ee), closer at the end than at the first success.
+    let o = plain.obs_dim;
+    for (p, s) in plain.episode_ranges().iter().zip(settled.episode_ranges()) {
+        assert_eq!(
+            plain.obs[p.start * o..p.end * o],
+            settled.obs[s.start * o..(s.start + p.len()) * o]
+        );
+        let gap = |row: usize| f32::hypot(settled.obs[row * o + 4], settled.obs[row * o + 5]);
+        let (at_success, last) = (gap(s.start + p.len() - 1), gap(s.end - 1));
+        assert!(
+            at_success < 0.03 && last <= at_success,
+            "{at_success} -> {last}"
+        );
+    }
+    assert!(
+        settled
+            .source
+            .contains("15 steps recorded after the first success"),
+        "{}",
+        settled.source
     );
 }
 
@@ -258,7 +290,7 @@ fn zero_action_before_start_pads_with_the_normalized_zero_action() {
 
 #[test]
 fn windows_of_collected_demos_are_normalized() {
-    let (data, _) = collect_demos("push", 2, 0, None, &mut |_| {}).unwrap();
+    let (data, _) = collect_demos("push", 2, 0, None, 0, &mut |_| {}).unwrap();
     let (set, norm) = data.windows(2, 12).unwrap();
     assert_eq!(set.len(), data.len());
     assert_eq!(set.obs.len(), set.len() * 2 * data.obs_dim);
@@ -300,9 +332,9 @@ fn perturbed_demonstrations_record_the_experts_clean_actions() {
         correlation_time: 0.5,
     };
     for task in ["avoid", "push", "insert"] {
-        let (plain, _) = collect_demos(task, 3, 5, None, &mut |_| {}).unwrap();
-        let (noisy, stats) = collect_demos(task, 3, 5, Some(noise), &mut |_| {}).unwrap();
-        let (again, _) = collect_demos(task, 3, 5, Some(noise), &mut |_| {}).unwrap();
+        let (plain, _) = collect_demos(task, 3, 5, None, 0, &mut |_| {}).unwrap();
+        let (noisy, stats) = collect_demos(task, 3, 5, Some(noise), 0, &mut |_| {}).unwrap();
+        let (again, _) = collect_demos(task, 3, 5, Some(noise), 0, &mut |_| {}).unwrap();
         assert_eq!(
             noisy, again,
             "{task}: perturbed collection is deterministic"
@@ -332,16 +364,18 @@ fn perturbed_demonstrations_record_the_experts_clean_actions() {
     }
     let zero = ActionNoise { std: 0.0, ..noise };
     assert_eq!(
-        collect_demos("insert", 2, 5, Some(zero), &mut |_| {})
+        collect_demos("insert", 2, 5, Some(zero), 0, &mut |_| {})
             .unwrap()
             .0,
-        collect_demos("insert", 2, 5, None, &mut |_| {}).unwrap().0
+        collect_demos("insert", 2, 5, None, 0, &mut |_| {})
+            .unwrap()
+            .0
     );
     let bad = ActionNoise {
         std: f64::NAN,
         ..noise
     };
-    let err = collect_demos("reach", 1, 0, Some(bad), &mut |_| {}).unwrap_err();
+    let err = collect_demos("reach", 1, 0, Some(bad), 0, &mut |_| {}).unwrap_err();
     assert!(format!("{err:#}").contains("std"), "{err:#}");
 }
 
@@ -370,8 +404,8 @@ fn evaluation_seeds_are_disjoint_from_collection_seeds() {
         assert!(eval_seed(12345, index) >= EVAL_SEED_OFFSET);
     }
     // Collection refuses seeds that would reach into the evaluation stream.
-    assert!(collect_demos("reach", 1, EVAL_SEED_OFFSET - 3, None, &mut |_| {}).is_err());
-    assert!(collect_demos("reach", 1, 0, None, &mut |_| {}).is_ok());
+    assert!(collect_demos("reach", 1, EVAL_SEED_OFFSET - 3, None, 0, &mut |_| {}).is_err());
+    assert!(collect_demos("reach", 1, 0, None, 0, &mut |_| {}).is_ok());
 }
 
 #[test]

@@ -200,12 +200,16 @@ pub struct Rollout {
 
 /// Runs one episode of `task` on `seed` with `policy`, executing up to `exec_steps` actions of
 /// each chunk. `on_step(obs, action)` sees every observation and the action then executed.
+/// The episode ends at a failure, at the task's step limit, or `after_success` steps after the
+/// first success (0: at it; demonstration collection records the expert settling at the goal
+/// with more); `success` says whether the success test held at some step.
 pub fn rollout(
     task: &mut dyn Task,
     policy: &mut dyn Policy,
     seed: u64,
     exec_steps: usize,
     history: usize,
+    after_success: usize,
     on_step: &mut dyn FnMut(&[f32], &[f32]),
 ) -> anyhow::Result<Rollout> {
     anyhow::ensure!(exec_steps >= 1, "exec_steps must be at least 1");
@@ -230,7 +234,8 @@ pub fn rollout(
         steps: 0,
     };
     let max_steps = task.max_steps();
-    'episode: while out.steps < max_steps {
+    let mut first_success: Option<usize> = None;
+    'episode: while out.steps < max_steps || first_success.is_some() {
         let hist: Vec<Vec<f32>> = obs_history.iter().cloned().collect();
         let input = PolicyInput {
             obs_history: &hist,
@@ -274,9 +279,16 @@ pub fn rollout(
             }
             obs_history.pop_front();
             obs_history.push_back(task.observe());
-            out.success = task.success();
+            if first_success.is_none() && task.success() {
+                first_success = Some(out.steps);
+            }
+            out.success = first_success.is_some();
             out.failed = task.failed();
-            if out.success || out.failed || out.steps >= max_steps {
+            let done = match first_success {
+                Some(at) => out.steps >= at + after_success,
+                None => out.steps >= max_steps,
+            };
+            if out.failed || done {
                 break 'episode;
             }
         }
@@ -355,6 +367,7 @@ pub fn run_episodes_with_progress(
             seed,
             cfg.exec_steps,
             cfg.history,
+            0,
             &mut |_, _| {},
         )?;
         latencies.extend_from_slice(&run.latencies);
