@@ -41,10 +41,18 @@ fn layouts_and_rollouts_are_deterministic_given_the_seed() {
         let mut expert = task.expert();
         let mut record = |seed| {
             let mut obs = Vec::new();
-            rollout(task.as_mut(), expert.as_mut(), seed, 1, 1, &mut |o, a| {
-                obs.extend_from_slice(o);
-                obs.extend_from_slice(a);
-            })
+            rollout(
+                task.as_mut(),
+                expert.as_mut(),
+                seed,
+                1,
+                1,
+                0,
+                &mut |o, a| {
+                    obs.extend_from_slice(o);
+                    obs.extend_from_slice(a);
+                },
+            )
             .unwrap();
             obs
         };
@@ -220,7 +228,7 @@ fn demonstrations_start_at_the_end_effector_position() {
     // padding a_{-1} = a_0 agrees with the evaluator's prev_action at episode start.
     for &name in TASK_NAMES {
         let (data, _) =
-            frmd_host::data::collect::collect_demos(name, 3, 40, None, &mut |_| {}).unwrap();
+            frmd_host::data::collect::collect_demos(name, 3, 40, None, 0, &mut |_| {}).unwrap();
         for range in data.episode_ranges() {
             let obs = &data.obs[range.start * data.obs_dim..][..2];
             let action = &data.action[range.start * data.action_dim..][..2];
@@ -315,7 +323,7 @@ fn insert_expert_realigns_instead_of_jamming() {
             steps: 90,
             step: 0,
         };
-        let run = rollout(task.as_mut(), &mut shifted, seed, 1, 1, &mut |_, _| {}).unwrap();
+        let run = rollout(task.as_mut(), &mut shifted, seed, 1, 1, 0, &mut |_, _| {}).unwrap();
         assert!(run.success, "seed {seed}: tip at {:?}", task.ee_position());
         assert!(run.steps > 90, "seed {seed}: inserted while disturbed");
     }
@@ -333,7 +341,7 @@ fn push_expert_pushes_again_when_the_puck_stops_short() {
             steps: 60,
             step: 0,
         };
-        let run = rollout(task.as_mut(), &mut shifted, seed, 1, 1, &mut |_, _| {}).unwrap();
+        let run = rollout(task.as_mut(), &mut shifted, seed, 1, 1, 0, &mut |_, _| {}).unwrap();
         assert!(run.success, "seed {seed}: {:?}", task.observe());
     }
 }

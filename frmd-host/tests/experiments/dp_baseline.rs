@@ -227,6 +227,7 @@ fn reach_endings() {
             frmd_host::eval::eval_seed(0, i),
             8,
             history,
+            0,
             &mut |obs, _| {
                 let dist = ((obs[0] - obs[4]).powi(2) + (obs[1] - obs[5]).powi(2)).sqrt();
                 let speed = (obs[2].powi(2) + obs[3].powi(2)).sqrt();

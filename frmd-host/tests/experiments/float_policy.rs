@@ -132,6 +132,7 @@ fn train_vs_eval_seeds() {
                 base + i,
                 8,
                 history,
+                0,
                 &mut |_, _| {},
             )
             .unwrap();

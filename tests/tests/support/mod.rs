@@ -121,7 +121,7 @@ pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let data = dir.join("reach.safetensors");
-    let (dataset, _) = collect_demos("reach", 12, 7, None, &mut |_| {}).unwrap();
+    let (dataset, _) = collect_demos("reach", 12, 7, None, 0, &mut |_| {}).unwrap();
     dataset.save(&data).unwrap();
 
     let (teacher, student, baked) = (dir.join("teacher"), dir.join("student"), dir.join("baked"));
