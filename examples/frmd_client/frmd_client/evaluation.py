@@ -42,8 +42,9 @@ def new_timings() -> dict:
 
 
 def rollout(env, policy, seed: int, exec_steps: int, max_steps: int, dt: float, timings: dict,
-            observe: Callable = lambda obs: obs) -> dict:
-    """One episode; `observe` turns the simulator's observation into the policy's."""
+            observe: Callable = lambda obs: obs, record: Callable | None = None) -> dict:
+    """One episode; `observe` turns the simulator's observation into the policy's; `record(obs,
+    action)`, if given, sees each step's policy observation and the action then executed."""
     obs = env.reset(seed)
     init = env.init_action() if hasattr(env, "init_action") else None
     episode = Episode(policy, seed, observe(obs), init)
@@ -54,6 +55,8 @@ def rollout(env, policy, seed: int, exec_steps: int, max_steps: int, dt: float, 
         timings["roundtrip"].append(roundtrip)
         timings["policy"].append(policy_seconds)
         for action in chunk[:exec_steps]:
+            if record:
+                record(episode.history[-1], action)
             t0 = time.perf_counter()
             obs, success, truncated = env.step(action)
             timings["step"].append(time.perf_counter() - t0)

@@ -56,8 +56,19 @@ def cmd_collect(args) -> int:
         if path.exists() and not args.force:
             print(f"{task}: {path} exists, skipped (--force to redo)", flush=True)
             continue
-        data, stats = collect(task, args.episodes, args.seed, progress=_progress(task, args.episodes),
-                              obs_layout=args.obs, after_success=args.after_success)
+        if args.policy_server:
+            from frmd_client.policy_client import open_policy
+            from .collect import record_policy
+            from .tasks import DT
+            policy = open_policy(args.policy_server, False, dt=DT)
+            try:
+                data, stats = record_policy(task, policy, args.episodes, args.seed,
+                                            progress=_progress(task, args.episodes))
+            finally:
+                policy.close()
+        else:
+            data, stats = collect(task, args.episodes, args.seed, progress=_progress(task, args.episodes),
+                                  obs_layout=args.obs, after_success=args.after_success)
         tmp = path.with_name(path.name + ".partial")
         data.save(tmp)
         os.replace(tmp, path)
@@ -160,11 +171,15 @@ def main(argv=None) -> int:
 
     c = sub.add_parser("collect", help="collect expert demonstrations into FRMD's dataset format")
     c.add_argument("--task", type=_tasks, required=True, help="a task, a comma-separated list, or all")
-    c.add_argument("--episodes", type=int, default=100, help="successful demonstrations per task")
+    c.add_argument("--episodes", type=int, default=100, help="successful demonstrations per task (with "
+                   "--policy-server: episodes recorded)")
     c.add_argument("--seed", type=int, default=0, help="first episode seed (below 2**63)")
     c.add_argument("--out", help="output file (one task)")
     c.add_argument("--out-dir", help="output directory: TASK.safetensors per task; existing files are skipped")
     c.add_argument("--force", action="store_true", help="overwrite existing files")
+    c.add_argument("--policy-server", metavar="CMD", help="record this served policy's rollouts instead of the "
+                   "expert's demonstrations, every episode kept (e.g. 'frmd serve --ckpt STUDENT'; on-policy "
+                   "states for frmd train student --on-policy-data)")
     c.add_argument("--obs", choices=OBS_LAYOUTS, default="raw", help="observation layout: raw (MetaWorld's 39 "
                    "floats) or relative (those and goal - hand, object - hand, goal - object)")
     c.add_argument("--after-success", type=int, default=0, metavar="K",

@@ -106,3 +106,51 @@ def collect(task: str, episodes: int, seed: int = 0, max_attempts: int | None = 
              "steps": int(len(data.obs)), "mean_length": float(np.mean(lengths)),
              "seconds": time.perf_counter() - started, "us_per_step": step_time / max(steps, 1) * 1e6}
     return data, stats
+
+
+def record_policy(task: str, policy, episodes: int, seed: int, progress=None, obs_layout: str | None = None):
+    """(Dataset, stats): `episodes` rollouts of a served `policy` (frmd_client.policy_client) on
+    collection seeds `seed, seed + 1, ...`, every episode kept, successful or not, with the
+    actions executed (clipped to [-1, 1] as the demonstrations are): on-policy states for
+    `frmd train student --on-policy-data`, where the teacher labels them."""
+    from frmd_client import evaluation
+    from .tasks import layout_of_dim
+    check_task(task)
+    if episodes < 1:
+        raise ValueError("at least one episode must be recorded")
+    if seed < 0 or seed + episodes > EVAL_SEED_OFFSET:
+        raise ValueError(f"collection seeds must lie in [0, 2**63) (the evaluation stream starts at 2**63); seed {seed}")
+    obs_layout = obs_layout or layout_of_dim(policy.obs_dim)
+    started = time.perf_counter()
+    env = SeededEnv(task)
+    obs_rows, action_rows, ends, successes = [], [], [], 0
+    for index in range(episodes):
+        rows = []
+        record = evaluation.rollout(env, policy, seed + index, policy.exec_steps, MAX_STEPS, DT,
+                                    evaluation.new_timings(), observe=lambda obs: observe(obs, obs_layout),
+                                    record=lambda o, a: rows.append((o, a)))
+        successes += bool(record["success"])
+        obs_rows.append(np.array([o for o, _ in rows], dtype=np.float32))
+        action_rows.append(np.clip(np.array([a for _, a in rows], dtype=np.float32), -1.0, 1.0))
+        ends.append((ends[-1] if ends else 0) + len(rows))
+        if progress:
+            progress(index + 1)
+    data = Dataset(
+        obs=np.concatenate(obs_rows), action=np.concatenate(action_rows), episode_ends=np.array(ends, dtype=np.int64),
+        task=f"metaworld/{task}", dt=DT,
+        source=(f"frmd_metaworld collect --policy-server: {policy.name}, seeds {seed}..{seed + episodes}, "
+                f"{successes} of {episodes} episodes successful, every episode kept"),
+        extra={
+            "action_before_start": "zero",
+            "metaworld_task": task,
+            "obs_layout": obs_layout,
+            "versions": json.dumps(package_versions()),
+            "action_note": "the policy's executed action clipped to [-1, 1]",
+            "eval_seeds": "evaluation uses seeds 2**63 + i, disjoint from these",
+        },
+    )
+    data.validate()
+    stats = {"task": task, "episodes": episodes, "successes": successes, "steps": int(len(data.obs)),
+             "seconds": time.perf_counter() - started}
+    return data, stats
+

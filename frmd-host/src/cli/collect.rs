@@ -1,6 +1,6 @@
 //! `frmd collect`: runs a task's scripted expert and writes a demonstration dataset
 //! ([`crate::data::collect::collect_to_file`]).
-use crate::data::collect::{collect_to_file, CollectConfig};
+use crate::data::collect::{collect_to_file, CollectConfig, PolicySource};
 use crate::data::perturb::ActionNoise;
 use clap::Args;
 use std::path::PathBuf;
@@ -11,7 +11,7 @@ pub struct CollectArgs {
     /// Task name (reach, avoid, push, insert).
     #[arg(long)]
     pub task: String,
-    /// Number of successful demonstrations to write.
+    /// Number of successful demonstrations to write (with --policy: episodes to record).
     #[arg(long, default_value_t = CollectConfig::default().episodes)]
     pub episodes: usize,
     /// First collection seed (must be below 2^63; evaluation uses seeds from 2^63 on).
@@ -35,6 +35,14 @@ pub struct CollectArgs {
     /// demonstration ends at it), so the data shows the expert settling at the goal.
     #[arg(long, default_value_t = CollectConfig::default().after_success)]
     pub after_success: usize,
+    /// Record this trained policy's rollouts instead of the expert's demonstrations: every
+    /// episode is kept, with the executed actions (on-policy states for `frmd train student
+    /// --on-policy-data`). The perturbation options do not apply.
+    #[arg(long, value_name = "CKPT")]
+    pub policy: Option<PathBuf>,
+    /// Sampling steps of --policy (default: its role's, one for a student).
+    #[arg(long, requires = "policy")]
+    pub policy_steps: Option<usize>,
 }
 
 pub fn run(args: CollectArgs) -> anyhow::Result<ExitCode> {
@@ -50,11 +58,26 @@ pub fn run(args: CollectArgs) -> anyhow::Result<ExitCode> {
         force: args.force,
         noise,
         after_success: args.after_success,
+        policy: args.policy.map(|ckpt| PolicySource {
+            ckpt,
+            steps: args.policy_steps,
+        }),
     };
     let c = collect_to_file(&cfg)?;
+    let outcome = if cfg.policy.is_some() {
+        format!(
+            "policy successes: {} of {} (every episode kept)",
+            c.stats.attempted - c.stats.failed,
+            c.stats.attempted
+        )
+    } else {
+        format!(
+            "expert failures skipped: {} of {}; sim step {:.2} us",
+            c.stats.failed, c.stats.attempted, c.stats.sim_step_us
+        )
+    };
     println!(
-        "wrote {}: {} episodes, {} steps (mean length {:.1}), obs_dim {}, action_dim {}, {} bytes; \
-         expert failures skipped: {} of {}; sim step {:.2} us",
+        "wrote {}: {} episodes, {} steps (mean length {:.1}), obs_dim {}, action_dim {}, {} bytes; {outcome}",
         cfg.out.display(),
         c.episodes,
         c.steps,
@@ -62,9 +85,6 @@ pub fn run(args: CollectArgs) -> anyhow::Result<ExitCode> {
         c.obs_dim,
         c.action_dim,
         c.bytes,
-        c.stats.failed,
-        c.stats.attempted,
-        c.stats.sim_step_us
     );
     Ok(ExitCode::SUCCESS)
 }

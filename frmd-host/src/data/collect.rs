@@ -1,8 +1,10 @@
 //! Demonstration collection: runs a task's scripted expert and gathers successful episodes.
 use super::perturb::{ActionNoise, PerturbedExpert};
+use super::policy_rollouts::record_policy_rollouts;
 use super::{ActionBeforeStart, Dataset};
 use crate::eval::{rollout, EVAL_SEED_OFFSET};
 use crate::limits::{self, OptionError};
+use crate::policy::float::FloatPolicy;
 use crate::progress::Progress;
 use crate::tasks::make_task;
 use crate::tasks::Policy;
@@ -24,6 +26,19 @@ pub struct CollectConfig {
     /// Expert steps recorded after each episode's first success (0: the demonstration ends
     /// there), so the data shows the expert settling at the goal.
     pub after_success: usize,
+    /// Roll out this trained policy instead of the scripted expert and record every episode
+    /// (on-policy states for `frmd train student --on-policy-data`); the perturbation and
+    /// `after_success` do not apply.
+    pub policy: Option<PolicySource>,
+}
+
+/// A trained policy to record rollouts of (`frmd collect --policy`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PolicySource {
+    /// Checkpoint directory.
+    pub ckpt: PathBuf,
+    /// Sampling steps (`None`: the checkpoint role's default, one for a student).
+    pub steps: Option<usize>,
 }
 
 /// The recipe's perturbation of the executed actions during collection, metres (DART; teacher
@@ -48,6 +63,13 @@ impl CollectConfig {
             ));
         }
         limits::count("after-success", self.after_success, 0, MAX_AFTER_SUCCESS)?;
+        if self.policy.is_some() && self.after_success > 0 {
+            return Err(limits::range(
+                "after-success",
+                self.after_success,
+                "0 with --policy (a recorded policy episode ends at its first success)",
+            ));
+        }
         limits::non_negative("perturb-std", self.noise.std)?;
         limits::positive("perturb-time", self.noise.correlation_time)
     }
@@ -70,6 +92,7 @@ impl Default for CollectConfig {
             force: false,
             noise,
             after_success: 0,
+            policy: None,
         }
     }
 }
@@ -92,6 +115,9 @@ pub fn collect_to_file(cfg: &CollectConfig) -> anyhow::Result<Collected> {
     cfg.validate()?;
     make_task(&cfg.task)?;
     frmd_formats::artifact::check_output_file(&cfg.out, "--out", cfg.force, &[])?;
+    if let Some(source) = &cfg.policy {
+        return record_to_file(cfg, source);
+    }
     let mut progress = Progress::new(
         &format!("collect {}", cfg.task),
         cfg.episodes as u64,
@@ -107,6 +133,51 @@ pub fn collect_to_file(cfg: &CollectConfig) -> anyhow::Result<Collected> {
         &mut |done| progress.update(done as u64, ""),
     )?;
     progress.finish();
+    summarize(cfg, &data, stats)
+}
+
+/// Rolls out the policy of `source` for `cfg` and writes the recording.
+fn record_to_file(cfg: &CollectConfig, source: &PolicySource) -> anyhow::Result<Collected> {
+    let meta = crate::checkpoint::CheckpointMeta::read(&source.ckpt)?;
+    if meta.dataset.task != cfg.task {
+        anyhow::bail!(
+            "--policy {}: the checkpoint was trained on task `{}`, not `{}`",
+            source.ckpt.display(),
+            meta.dataset.task,
+            cfg.task
+        );
+    }
+    let mut policy = FloatPolicy::load(&source.ckpt, source.steps, None)?;
+    let history = policy.input_sizes().2;
+    let mut progress = Progress::new(
+        &format!("record {} ({})", cfg.task, source.ckpt.display()),
+        cfg.episodes as u64,
+        "episode",
+    );
+    let (data, rollouts) = record_policy_rollouts(
+        &cfg.task,
+        &mut policy,
+        history,
+        cfg.episodes,
+        cfg.seed,
+        &format!("{} {}", meta.role, source.ckpt.display()),
+        &mut |done| progress.update(done as u64, ""),
+    )?;
+    progress.finish();
+    let stats = CollectStats {
+        attempted: cfg.episodes,
+        failed: cfg.episodes - rollouts.successes,
+        sim_step_us: 0.0,
+    };
+    summarize(cfg, &data, stats)
+}
+
+/// Writes `data` to `cfg.out` and counts what was written.
+fn summarize(
+    cfg: &CollectConfig,
+    data: &Dataset,
+    stats: CollectStats,
+) -> anyhow::Result<Collected> {
     data.save(&cfg.out)?;
     let lengths: Vec<f64> = data
         .episode_ranges()

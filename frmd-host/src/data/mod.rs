@@ -4,6 +4,7 @@ pub mod collect;
 pub(crate) mod dataset;
 pub mod lerobot;
 pub(crate) mod perturb;
+pub mod policy_rollouts;
 pub mod toy;
 pub(crate) mod windows;
 

@@ -420,3 +420,54 @@ fn extra_metadata_round_trips_and_cannot_shadow_a_field() {
     let err = d.to_bytes().unwrap_err().to_string();
     assert!(err.contains("extra metadata `dt`"), "{err}");
 }
+
+/// `frmd collect --policy`: a trained student's rollouts, every episode kept with the executed
+/// actions, reproducible per seed; a checkpoint of another task and settling steps are refused.
+#[test]
+fn policy_rollouts_are_recorded_as_a_dataset() {
+    use super::collect::{collect_to_file, CollectConfig, PolicySource};
+    let ckpt =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/cortex-m/policy/reach");
+    let cfg = |task: &str, out: PathBuf| CollectConfig {
+        task: task.into(),
+        episodes: 4,
+        seed: 1_000_000,
+        out,
+        policy: Some(PolicySource {
+            ckpt: ckpt.clone(),
+            steps: None,
+        }),
+        ..CollectConfig::default()
+    };
+    let (a, b) = (temp_path("rollouts-a"), temp_path("rollouts-b"));
+    let written = collect_to_file(&cfg("reach", a.clone())).unwrap();
+    collect_to_file(&cfg("reach", b.clone())).unwrap();
+    let (first, again) = (Dataset::load(&a).unwrap(), Dataset::load(&b).unwrap());
+    std::fs::remove_file(&a).ok();
+    std::fs::remove_file(&b).ok();
+    assert_eq!(first, again);
+    assert_eq!(first.num_episodes(), 4);
+    assert_eq!(written.stats.attempted, 4);
+    assert_eq!(first.task, "reach");
+    assert!(
+        first.source.contains("every episode kept"),
+        "{}",
+        first.source
+    );
+    // A student executes 8 actions of each chunk, so its actions are not all equal.
+    assert!(first.action.windows(2).any(|w| w[0] != w[1]));
+
+    let err = collect_to_file(&cfg("avoid", temp_path("rollouts-c")))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("trained on task `reach`, not `avoid`"),
+        "{err}"
+    );
+    let settle = CollectConfig {
+        after_success: 5,
+        ..cfg("reach", temp_path("rollouts-d"))
+    };
+    let err = collect_to_file(&settle).unwrap_err().to_string();
+    assert!(err.contains("after-success"), "{err}");
+}

@@ -48,6 +48,30 @@ impl WindowSet {
         self.len() == 0
     }
 
+    /// Appends `other`'s windows (same shapes and period, else an error).
+    pub fn append(&mut self, other: &WindowSet) -> anyhow::Result<()> {
+        let shape = |w: &WindowSet| {
+            (
+                w.obs_dim,
+                w.action_dim,
+                w.history,
+                w.horizon,
+                w.dt.to_bits(),
+            )
+        };
+        anyhow::ensure!(
+            shape(self) == shape(other),
+            "window sets differ in shape or period: (obs, action, history, horizon, dt bits) {:?} against {:?}",
+            shape(self),
+            shape(other)
+        );
+        self.obs.extend_from_slice(&other.obs);
+        self.prev_action.extend_from_slice(&other.prev_action);
+        self.prev_rate.extend_from_slice(&other.prev_rate);
+        self.actions.extend_from_slice(&other.actions);
+        Ok(())
+    }
+
     /// Up to `rows` evenly spaced window conditions `[obs history, y0, v0]` (normalized) as
     /// calibration rows for the exporter, with a noise seed derived from `seed`. Training
     /// writes `CALIBRATION_ROWS` of them beside a student checkpoint

@@ -152,6 +152,7 @@ impl StudentRun {
         non_negative("consistency-weight", d.consistency_weight)?;
         non_negative("map-weight", d.map_weight)?;
         non_negative("dsm-weight", d.dsm_weight)?;
+        non_negative("on-policy-weight", d.on_policy_weight)?;
         positive("dsm-max-sigma", d.dsm_max_sigma)?;
         count("map-steps", d.map_steps, 1, limits::MAX_SAMPLER_STEPS)?;
         count("map-only-steps", d.map_only_steps, 0, self.train.steps)?;

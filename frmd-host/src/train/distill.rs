@@ -73,6 +73,10 @@ pub struct DistillConfig {
     pub dsm_weight: f64,
     /// Highest level of the denoising term (log-uniform from sigma_min).
     pub dsm_max_sigma: f64,
+    /// Weight of the ODE-map term on a second batch drawn from on-policy windows (states the
+    /// student itself visits, recorded with `frmd collect --policy`; the teacher labels them).
+    /// Used only when such windows are given.
+    pub on_policy_weight: f64,
 }
 
 impl Default for DistillConfig {
@@ -104,6 +108,7 @@ impl Default for DistillConfig {
             map_only_steps: 0,
             dsm_weight: 0.0,
             dsm_max_sigma: 1.0,
+            on_policy_weight: 1.0,
         }
     }
 }
@@ -252,10 +257,13 @@ impl Nets<'_> {
     }
 }
 
-/// Distills `teacher` into a consistency student.
+/// Distills `teacher` into a consistency student. `on_policy`: windows of states a policy
+/// visited (recorded rollouts), where the ODE-map term also applies (weighted by
+/// `DistillConfig::on_policy_weight`).
 pub fn distill(
     teacher: &OwnedNetwork,
     windows: &WindowSet,
+    on_policy: Option<&WindowSet>,
     sig: &SigmaConfig,
     dcfg: &DistillConfig,
     cfg: &LoopConfig,
@@ -266,6 +274,9 @@ pub fn distill(
         *output = wanted;
     }
     check_windows(windows, &model)?;
+    if let Some(w) = on_policy {
+        check_windows(w, &model)?;
+    }
     let device = Device::Cpu;
     let curriculum = LevelCurriculum {
         start: dcfg.levels_start.unwrap_or(dcfg.levels),
@@ -282,6 +293,7 @@ pub fn distill(
     let mut rng = HostRng::derive(cfg.seed, "distill-batches");
     let mut map_rng = HostRng::derive(cfg.seed, "distill-map");
     let mut dsm_rng = HostRng::derive(cfg.seed, "distill-dsm");
+    let mut on_policy_rng = HostRng::derive(cfg.seed, "distill-on-policy");
     let report = run_loop(
         cfg,
         |step| {
@@ -318,6 +330,18 @@ pub fn distill(
                 let w = if map_only { 1.0 } else { dcfg.map_weight };
                 terms.push((nets.map_term(&batch, &mut map_rng)? * w)?);
             }
+            if let Some(w) = on_policy.filter(|_| dcfg.on_policy_weight > 0.0) {
+                let visited = sample_augmented(
+                    w,
+                    &model,
+                    cfg.batch_size,
+                    &CondAugment::NONE,
+                    &mut on_policy_rng,
+                    &device,
+                )?;
+                let term = nets.map_term(&visited, &mut on_policy_rng)?;
+                terms.push((term * dcfg.on_policy_weight)?);
+            }
             if !map_only && dcfg.dsm_weight > 0.0 {
                 terms.push((nets.dsm_term(&batch, &mut dsm_rng)? * dcfg.dsm_weight)?);
             }
@@ -353,6 +377,7 @@ pub fn distill_quietly(
     distill(
         teacher,
         windows,
+        None,
         &sig,
         dcfg,
         cfg,

@@ -110,6 +110,42 @@ fn every_objective_trains_and_moves_the_student() {
     }
 }
 
+/// On-policy windows add the ODE-map term on their states: the run is reproducible, differs
+/// from the run without them, and a zero weight gives that run back bit for bit.
+#[test]
+fn on_policy_windows_add_a_map_term_on_their_states() {
+    let (cfg, windows, teacher) = toy_teacher(200);
+    let visited = bimodal_windows(&cfg, 64, 9).unwrap();
+    let sig = SigmaConfig::default();
+    let run = |on_policy: Option<&crate::data::WindowSet>, weight: f64| {
+        let dcfg = DistillConfig {
+            levels: 10,
+            on_policy_weight: weight,
+            ..DistillConfig::default()
+        };
+        super::distill::distill(
+            &teacher,
+            &windows,
+            on_policy,
+            &sig,
+            &dcfg,
+            &LoopConfig::toy(30, 1),
+            &mut |_: &Progress| Ok(()),
+        )
+        .unwrap()
+    };
+    let plain = run(None, 1.0);
+    let with = run(Some(&visited), 1.0);
+    assert_eq!(
+        with.report.loss_curve,
+        run(Some(&visited), 1.0).report.loss_curve
+    );
+    assert_ne!(weights_of(&with.student), weights_of(&plain.student));
+    assert!(with.report.loss_curve.iter().all(|(_, l)| l.is_finite()));
+    let off = run(Some(&visited), 0.0);
+    assert_eq!(weights_of(&off.student), weights_of(&plain.student));
+}
+
 /// Regressing one student step on the teacher's DPM-Solver++(2M) solution keeps both modes of
 /// the bimodal set in the teacher's proportion.
 #[test]

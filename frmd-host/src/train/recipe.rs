@@ -191,6 +191,9 @@ pub struct StudentRun {
     pub distill: DistillConfig,
     /// Model options given for the student (they must equal the teacher's).
     pub shape: StudentShape,
+    /// Recorded rollouts (`frmd collect --policy`) whose states the ODE-map term also labels
+    /// with the teacher (empty: the demonstrations only).
+    pub on_policy_data: Vec<PathBuf>,
 }
 
 /// Model-shape options given for a student run. The student takes its shape from the teacher
@@ -213,6 +216,7 @@ impl Default for StudentRun {
             teacher: PathBuf::new(),
             distill: DistillConfig::default(),
             shape: StudentShape::default(),
+            on_policy_data: Vec::new(),
         }
     }
 }

@@ -237,7 +237,9 @@ pub fn run_teacher(run: &TeacherRun) -> anyhow::Result<RunOutcome> {
 pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
     run.validate()?;
     let c = &run.train;
-    c.check_paths(&[&run.teacher])?;
+    let mut inputs: Vec<&Path> = vec![&run.teacher];
+    inputs.extend(run.on_policy_data.iter().map(|p| p.as_path()));
+    c.check_paths(&inputs)?;
     let sigma = SigmaConfig::default();
     let (tmeta, teacher) = checkpoint::load(&run.teacher)
         .with_context(|| format!("loading teacher {}", run.teacher.display()))?;
@@ -264,6 +266,23 @@ pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
             );
         }
     }
+    let mut on_policy: Option<WindowSet> = None;
+    for path in &run.on_policy_data {
+        let visited = Dataset::load(path)?;
+        anyhow::ensure!(
+            visited.task == data.task,
+            "--on-policy-data {}: rollouts of task `{}`, the demonstrations are of `{}`",
+            path.display(),
+            visited.task,
+            data.task
+        );
+        let windows = windows_in(&visited, tcfg.history, tcfg.horizon, &prepared.norm)
+            .with_context(|| format!("--on-policy-data {}", path.display()))?;
+        match &mut on_policy {
+            Some(all) => all.append(&windows)?,
+            None => on_policy = Some(windows),
+        }
+    }
     let sampler = Sampler::for_role(Role::Student, c.eval_steps, None)?;
     let mut mon = Monitor::new(
         c,
@@ -285,12 +304,18 @@ pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
     let distilled = distill(
         &teacher,
         &prepared.windows,
+        on_policy.as_ref(),
         &sigma,
         &run.distill,
         &c.loop_config(),
         &mut |p: &Progress| mon.on_progress(p),
     )?;
-    let extra = json!({ "distill": run.distill, "teacher": run.teacher.display().to_string(), "teacher_digest": tmeta.dataset.digest });
+    let on_policy_data: Vec<String> = run
+        .on_policy_data
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect();
+    let extra = json!({ "distill": run.distill, "teacher": run.teacher.display().to_string(), "teacher_digest": tmeta.dataset.digest, "on_policy_data": on_policy_data });
     finish(
         Role::Student,
         &distilled.eval_student,

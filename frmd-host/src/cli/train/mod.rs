@@ -264,6 +264,13 @@ pub struct StudentArgs {
     pub augment: AugmentArgs,
     #[command(flatten)]
     pub objective: ObjectiveArgs,
+    /// Recorded rollouts of a policy on this task (`frmd collect --policy`): the ODE-map term
+    /// also runs on their states, labelled by the teacher (on-policy distillation). Repeatable.
+    #[arg(long, value_name = "FILE")]
+    pub on_policy_data: Vec<PathBuf>,
+    /// Weight of the ODE-map term on the --on-policy-data states.
+    #[arg(long, default_value_t = DistillConfig::default().on_policy_weight, requires = "on_policy_data")]
+    pub on_policy_weight: f64,
 }
 
 /// The distillation objective (`train::distill::DistillConfig`, `diffusion::consistency`).
@@ -346,7 +353,9 @@ impl From<StudentArgs> for StudentRun {
                 map_only_steps: o.map_only_steps,
                 dsm_weight: o.dsm_weight,
                 dsm_max_sigma: o.dsm_max_sigma,
+                on_policy_weight: a.on_policy_weight,
             },
+            on_policy_data: a.on_policy_data,
         }
     }
 }
