@@ -265,3 +265,58 @@ fn probe_options_are_checked() {
         (&format!("{probe} --steps 0"), &["--steps 0"]),
     ]);
 }
+
+/// On-policy distillation through the CLI: its counts are checked before training, a round
+/// inside `train student` records the student's rollouts and says so in frmd.json, and
+/// `collect --policy` writes rollouts that `--on-policy-data` takes.
+#[test]
+fn on_policy_rounds_and_recorded_rollouts_train_a_student() {
+    rejects_train(&[
+        ("student", "--on-policy-rounds 6", &["--on-policy-rounds 6"]),
+        (
+            "student",
+            "--on-policy-episodes 0",
+            &["--on-policy-episodes 0"],
+        ),
+        ("student", "--on-policy-weight=-1", &["--on-policy-weight"]),
+        (
+            "student",
+            "--on-policy-data missing.safetensors",
+            &["missing.safetensors"],
+        ),
+    ]);
+    let dir = scratch("on-policy");
+    let teacher = fixture().join("t");
+    let student = |out: &str, extra: &str| {
+        let line = format!(
+            "train student --data {} --teacher {} --out {out} --steps 3 --batch 8 --warmup 1 \
+             --eval-episodes 0 {extra}",
+            fixture().join("d.safetensors").display(),
+            teacher.display()
+        );
+        frmd_ok(&dir, &words(&line));
+        let meta: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.join(out).join("frmd.json")).unwrap(),
+        )
+        .unwrap();
+        meta["training"].clone()
+    };
+    let rounds = student("s1", "--on-policy-rounds 1 --on-policy-episodes 2");
+    assert_eq!(rounds["on_policy_rounds"], 1, "{rounds}");
+    let recorded = frmd_ok(
+        &dir,
+        &words("collect --task reach --policy s1 --episodes 2 --seed 7 --out r.safetensors"),
+    );
+    assert!(recorded.contains("every episode kept"), "{recorded}");
+    assert_eq!(
+        Dataset::load(&dir.join("r.safetensors"))
+            .unwrap()
+            .num_episodes(),
+        2
+    );
+    let from_file = student("s2", "--on-policy-data r.safetensors");
+    assert_eq!(
+        from_file["on_policy_data"][0], "r.safetensors",
+        "{from_file}"
+    );
+}

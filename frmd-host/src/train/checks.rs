@@ -132,6 +132,18 @@ impl StudentRun {
         decay("target-ema", self.distill.target_ema)?;
         decay("eval-ema", self.distill.eval_ema)?;
         validate_augment(&self.distill.augment)?;
+        count(
+            "on-policy-rounds",
+            self.on_policy_rounds,
+            0,
+            super::on_policy::MAX_ON_POLICY_ROUNDS,
+        )?;
+        count(
+            "on-policy-episodes",
+            self.on_policy_episodes,
+            1,
+            limits::MAX_EPISODES,
+        )?;
         self.validate_objective()
     }
 

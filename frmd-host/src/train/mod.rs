@@ -13,6 +13,7 @@ pub mod dp;
 mod dp_checkpoint_tests;
 pub(crate) mod holdout;
 mod monitor;
+pub mod on_policy;
 pub mod optim;
 pub(crate) mod padding;
 pub mod recipe;

@@ -194,6 +194,11 @@ pub struct StudentRun {
     /// Recorded rollouts (`frmd collect --policy`) whose states the ODE-map term also labels
     /// with the teacher (empty: the demonstrations only).
     pub on_policy_data: Vec<PathBuf>,
+    /// On-policy rounds run here (tasks frmd-host simulates): after distilling, the student's
+    /// rollouts are recorded and the student is distilled again with their states.
+    pub on_policy_rounds: usize,
+    /// Rollouts recorded per round.
+    pub on_policy_episodes: usize,
 }
 
 /// Model-shape options given for a student run. The student takes its shape from the teacher
@@ -217,6 +222,8 @@ impl Default for StudentRun {
             distill: DistillConfig::default(),
             shape: StudentShape::default(),
             on_policy_data: Vec::new(),
+            on_policy_rounds: 0,
+            on_policy_episodes: 100,
         }
     }
 }

@@ -9,6 +9,7 @@ use super::distill::distill;
 use super::dp::train_dp;
 use super::holdout::{generalization, windows_in, ChunkSampler, GeneralizationReport};
 use super::monitor::{HoldoutProbe, Monitor};
+use super::on_policy::{recorded_windows, student_round};
 use super::padding::pad_episode_ends;
 use super::recipe::{DpRun, ProbeConfig, StudentRun, TeacherRun, TrainConfig};
 use super::teacher::train_teacher;
@@ -266,56 +267,72 @@ pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
             );
         }
     }
-    let mut on_policy: Option<WindowSet> = None;
-    for path in &run.on_policy_data {
-        let visited = Dataset::load(path)?;
-        anyhow::ensure!(
-            visited.task == data.task,
-            "--on-policy-data {}: rollouts of task `{}`, the demonstrations are of `{}`",
-            path.display(),
-            visited.task,
-            data.task
-        );
-        let windows = windows_in(&visited, tcfg.history, tcfg.horizon, &prepared.norm)
-            .with_context(|| format!("--on-policy-data {}", path.display()))?;
-        match &mut on_policy {
-            Some(all) => all.append(&windows)?,
-            None => on_policy = Some(windows),
-        }
+    let mut on_policy = recorded_windows(
+        &run.on_policy_data,
+        &data.task,
+        tcfg.history,
+        tcfg.horizon,
+        &prepared.norm,
+    )?;
+    if run.on_policy_rounds > 0 && !crate::tasks::is_simulated(&data.task) {
+        anyhow::bail!("--on-policy-rounds: task `{}` is not simulated by frmd-host (reach, avoid, push, insert); record the student's rollouts with the task's own simulator and pass them with --on-policy-data", data.task);
     }
     let sampler = Sampler::for_role(Role::Student, c.eval_steps, None)?;
-    let mut mon = Monitor::new(
-        c,
-        &prepared.dataset.task,
-        &prepared.norm,
-        sigma,
-        sampler,
-        "student",
-    );
-    mon.probe = HoldoutProbe::new(
-        c,
-        &prepared.dataset,
-        &prepared.windows,
-        &prepared.norm,
-        ChunkSampler::Student {
-            steps: c.eval_steps.unwrap_or(1),
-        },
-    )?;
-    let distilled = distill(
-        &teacher,
-        &prepared.windows,
-        on_policy.as_ref(),
-        &sigma,
-        &run.distill,
-        &c.loop_config(),
-        &mut |p: &Progress| mon.on_progress(p),
-    )?;
+    let mut round = 0;
+    let (distilled, mon) = loop {
+        let mut mon = Monitor::new(
+            c,
+            &prepared.dataset.task,
+            &prepared.norm,
+            sigma,
+            sampler,
+            "student",
+        );
+        mon.probe = HoldoutProbe::new(
+            c,
+            &prepared.dataset,
+            &prepared.windows,
+            &prepared.norm,
+            ChunkSampler::Student {
+                steps: c.eval_steps.unwrap_or(1),
+            },
+        )?;
+        let distilled = distill(
+            &teacher,
+            &prepared.windows,
+            on_policy.as_ref(),
+            &sigma,
+            &run.distill,
+            &c.loop_config(),
+            &mut |p: &Progress| mon.on_progress(p),
+        )?;
+        if round == run.on_policy_rounds {
+            break (distilled, mon);
+        }
+        round += 1;
+        let (visited, stats) = student_round(
+            distilled.eval_student,
+            &prepared.norm,
+            sigma,
+            &data.task,
+            run.on_policy_episodes,
+            round,
+        )?;
+        eprintln!(
+            "student: on-policy round {round} of {}: the student succeeded in {} of {} recorded rollouts; distilling again from the teacher with the states it visited",
+            run.on_policy_rounds, stats.successes, run.on_policy_episodes
+        );
+        match &mut on_policy {
+            Some(all) => all.append(&visited)?,
+            None => on_policy = Some(visited),
+        }
+    };
     let on_policy_data: Vec<String> = run
         .on_policy_data
         .iter()
         .map(|p| p.display().to_string())
         .collect();
-    let extra = json!({ "distill": run.distill, "teacher": run.teacher.display().to_string(), "teacher_digest": tmeta.dataset.digest, "on_policy_data": on_policy_data });
+    let extra = json!({ "distill": run.distill, "teacher": run.teacher.display().to_string(), "teacher_digest": tmeta.dataset.digest, "on_policy_data": on_policy_data, "on_policy_rounds": run.on_policy_rounds, "on_policy_episodes": run.on_policy_episodes });
     finish(
         Role::Student,
         &distilled.eval_student,

@@ -268,8 +268,16 @@ pub struct StudentArgs {
     /// also runs on their states, labelled by the teacher (on-policy distillation). Repeatable.
     #[arg(long, value_name = "FILE")]
     pub on_policy_data: Vec<PathBuf>,
-    /// Weight of the ODE-map term on the --on-policy-data states.
-    #[arg(long, default_value_t = DistillConfig::default().on_policy_weight, requires = "on_policy_data")]
+    /// On-policy rounds (tasks frmd-host simulates): distill, record --on-policy-episodes
+    /// rollouts of the student, distill again from the teacher with the ODE-map term also on
+    /// the states it visited; repeated this many times (each round costs one more distillation).
+    #[arg(long, default_value_t = StudentRun::default().on_policy_rounds)]
+    pub on_policy_rounds: usize,
+    /// Student rollouts recorded per on-policy round.
+    #[arg(long, default_value_t = StudentRun::default().on_policy_episodes)]
+    pub on_policy_episodes: usize,
+    /// Weight of the ODE-map term on the on-policy states.
+    #[arg(long, default_value_t = DistillConfig::default().on_policy_weight)]
     pub on_policy_weight: f64,
 }
 
@@ -356,6 +364,8 @@ impl From<StudentArgs> for StudentRun {
                 on_policy_weight: a.on_policy_weight,
             },
             on_policy_data: a.on_policy_data,
+            on_policy_rounds: a.on_policy_rounds,
+            on_policy_episodes: a.on_policy_episodes,
         }
     }
 }
