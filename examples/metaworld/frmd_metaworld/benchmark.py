@@ -41,6 +41,10 @@ class BenchConfig:
     after_success: int = 0
     # Also export the student with int16 activations and evaluate it ("int16-student").
     int16: bool = False
+    # On-policy distillation (issue 21): record rollouts of a first student (RUN/student0) and
+    # distill the evaluated student (RUN/student) with the map term also on their states.
+    on_policy: bool = True
+    on_policy_episodes: int = 100
     # Evaluate through the frmd wheel in process (`eval --in-process`) instead of `frmd serve`.
     in_process: bool = False
     # Only these methods (None: all); models no selected method needs are not trained.
@@ -59,7 +63,7 @@ class BenchConfig:
     @staticmethod
     def quick_config(**overrides) -> "BenchConfig":
         cfg = BenchConfig(tasks=["reach-v3"], seeds=[0], demos=5, episodes=1,
-                          train_steps=20, student_steps=10, quick=True)
+                          train_steps=20, student_steps=10, on_policy_episodes=2, quick=True)
         for key, value in overrides.items():
             setattr(cfg, key, value)
         return cfg
@@ -79,6 +83,10 @@ class BenchConfig:
                 for seed in self.multi_seeds:
                     if seed not in self.seeds:
                         yield task, seed
+
+
+# First collection seed of the on-policy rollouts (the demonstrations use 0 ..).
+ON_POLICY_SEED = 1_000_000
 
 
 def data_file_name(task: str, obs: str, after_success: int) -> str:
@@ -117,9 +125,18 @@ class Runner(StepRunner):
         f = self.cfg.frmd
         self.run(f"{task}-s{seed}-teacher", run / "teacher" / "frmd.json",
                  [f, "train", "teacher", *common, *steps, "--out", str(run / "teacher")])
-        self.run(f"{task}-s{seed}-student", run / "student" / "frmd.json",
-                 [f, "train", "student", "--teacher", str(run / "teacher"), "--data", str(data), "--seed", str(seed),
-                  *sstep, "--out", str(run / "student")])
+        student = [f, "train", "student", "--teacher", str(run / "teacher"), "--data", str(data), "--seed", str(seed),
+                   *sstep]
+        if self.cfg.on_policy:
+            self.run(f"{task}-s{seed}-student0", run / "student0" / "frmd.json",
+                     [*student, "--out", str(run / "student0")])
+            rollouts = run / "rollouts.safetensors"
+            self.run(f"{task}-s{seed}-rollouts", rollouts,
+                     [self.python, "-m", "frmd_metaworld", "collect", "--task", task, "--policy-server",
+                      f"{f} serve --ckpt {run / 'student0'} --steps 1", "--episodes", str(self.cfg.on_policy_episodes),
+                      "--seed", str(ON_POLICY_SEED), "--out", str(rollouts)])
+            student += ["--on-policy-data", str(rollouts)]
+        self.run(f"{task}-s{seed}-student", run / "student" / "frmd.json", [*student, "--out", str(run / "student")])
         if any(m.startswith("dp-") for m in self.cfg.methods()):
             self.run(f"{task}-s{seed}-dp", run / "dp" / "frmd.json",
                      [f, "train", "dp", *common, *steps, "--out", str(run / "dp")])

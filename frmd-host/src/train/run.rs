@@ -274,7 +274,8 @@ pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
         tcfg.horizon,
         &prepared.norm,
     )?;
-    if run.on_policy_rounds > 0 && !crate::tasks::is_simulated(&data.task) {
+    let rounds = run.on_policy_rounds_for(&data.task);
+    if rounds > 0 && !crate::tasks::is_simulated(&data.task) {
         anyhow::bail!("--on-policy-rounds: task `{}` is not simulated by frmd-host (reach, avoid, push, insert); record the student's rollouts with the task's own simulator and pass them with --on-policy-data", data.task);
     }
     let sampler = Sampler::for_role(Role::Student, c.eval_steps, None)?;
@@ -306,7 +307,7 @@ pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
             &c.loop_config(),
             &mut |p: &Progress| mon.on_progress(p),
         )?;
-        if round == run.on_policy_rounds {
+        if round == rounds {
             break (distilled, mon);
         }
         round += 1;
@@ -320,7 +321,7 @@ pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
         )?;
         eprintln!(
             "student: on-policy round {round} of {}: the student succeeded in {} of {} recorded rollouts; distilling again from the teacher with the states it visited",
-            run.on_policy_rounds, stats.successes, run.on_policy_episodes
+            rounds, stats.successes, run.on_policy_episodes
         );
         match &mut on_policy {
             Some(all) => all.append(&visited)?,
@@ -332,7 +333,7 @@ pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
         .iter()
         .map(|p| p.display().to_string())
         .collect();
-    let extra = json!({ "distill": run.distill, "teacher": run.teacher.display().to_string(), "teacher_digest": tmeta.dataset.digest, "on_policy_data": on_policy_data, "on_policy_rounds": run.on_policy_rounds, "on_policy_episodes": run.on_policy_episodes });
+    let extra = json!({ "distill": run.distill, "teacher": run.teacher.display().to_string(), "teacher_digest": tmeta.dataset.digest, "on_policy_data": on_policy_data, "on_policy_rounds": rounds, "on_policy_episodes": run.on_policy_episodes });
     finish(
         Role::Student,
         &distilled.eval_student,
