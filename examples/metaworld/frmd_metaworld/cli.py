@@ -142,7 +142,7 @@ def cmd_benchmark(args) -> int:
         "train_steps": args.train_steps, "student_steps": args.student_steps, "data_dir": args.data_dir,
         "out": args.out, "frmd": args.frmd, "obs": args.obs, "after_success": args.after_success,
         "int16": True if args.int16 else None,
-        "on_policy": False if args.no_on_policy else None,
+        "on_policy": True if args.on_policy else None,
         "in_process": True if args.in_process else None,
         "only": _methods(args.methods) if args.methods else None,
         "seeds": [int(s) for s in args.seeds.split(",")] if args.seeds else None,
@@ -233,8 +233,8 @@ def main(argv=None) -> int:
                    "success (default 0)")
     m.add_argument("--methods", help="comma-separated methods to run (default: all); models none of them "
                    "needs are not trained (e.g. no DP without dp-ddpm-100 and dp-ddim-10)")
-    m.add_argument("--no-on-policy", action="store_true", help="distill the student from the demonstrations "
-                   "only, without the on-policy round (rollouts of a first student labelled by the teacher)")
+    m.add_argument("--on-policy", action="store_true", help="distill the evaluated student with an on-policy "
+                   "round: rollouts of a first student (RUN/student0), labelled by the teacher")
     m.add_argument("--int16", action="store_true", help="also export the student with int16 activations "
                    "(frmd export --activations int16) and evaluate it as int16-student")
     m.add_argument("--in-process", action="store_true", help="evaluate the trained policies in this process "
