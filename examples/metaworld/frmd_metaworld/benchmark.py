@@ -44,8 +44,8 @@ class BenchConfig:
     int16: bool = False
     # On-policy distillation (issue 21): record rollouts of a first student (RUN/student0) and
     # distill the evaluated student (RUN/student) with the map term also on their states. Off:
-    # on MetaWorld it lowered the one-step student from 86.8 to 84.8 % (seed 0, 4 tasks, 100
-    # episodes; docs/experiments.md, "On-policy distillation").
+    # on MetaWorld it moved the one-step student from 87.7 to 86.7 % (seed 0, the 6 development
+    # tasks, 100 episodes; docs/experiments.md, "On-policy distillation").
     on_policy: bool = False
     on_policy_episodes: int = 100
     # Evaluate through the frmd wheel in process (`eval --in-process`) instead of `frmd serve`.

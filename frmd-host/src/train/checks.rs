@@ -134,7 +134,7 @@ impl StudentRun {
         validate_augment(&self.distill.augment)?;
         count(
             "on-policy-rounds",
-            self.on_policy_rounds.unwrap_or(0),
+            self.on_policy_rounds,
             0,
             super::on_policy::MAX_ON_POLICY_ROUNDS,
         )?;

@@ -194,10 +194,11 @@ pub struct StudentRun {
     /// Recorded rollouts (`frmd collect --policy`) whose states the ODE-map term also labels
     /// with the teacher (empty: the demonstrations only).
     pub on_policy_data: Vec<PathBuf>,
-    /// On-policy rounds run here: after distilling, the student's rollouts are recorded and the
-    /// student is distilled again with their states (`None`: [`RECIPE_ON_POLICY_ROUNDS`] for
-    /// the tasks frmd-host simulates, 0 for data of other tasks; see [`Self::on_policy_rounds_for`]).
-    pub on_policy_rounds: Option<usize>,
+    /// On-policy rounds run here (tasks frmd-host simulates): after distilling, the student's
+    /// rollouts are recorded and the student is distilled again with their states. 0 in the
+    /// recipe: one round lifted avoid and lowered insert (docs/experiments.md, "On-policy
+    /// distillation").
+    pub on_policy_rounds: usize,
     /// Rollouts recorded per round.
     pub on_policy_episodes: usize,
 }
@@ -223,24 +224,9 @@ impl Default for StudentRun {
             distill: DistillConfig::default(),
             shape: StudentShape::default(),
             on_policy_data: Vec::new(),
-            on_policy_rounds: None,
+            on_policy_rounds: 0,
             on_policy_episodes: 100,
         }
-    }
-}
-
-/// On-policy rounds of the recipe where frmd-host can roll the student out.
-pub const RECIPE_ON_POLICY_ROUNDS: usize = 1;
-
-impl StudentRun {
-    /// The on-policy rounds this run does on data of `task`.
-    pub fn on_policy_rounds_for(&self, task: &str) -> usize {
-        self.on_policy_rounds
-            .unwrap_or(if crate::tasks::is_simulated(task) {
-                RECIPE_ON_POLICY_ROUNDS
-            } else {
-                0
-            })
     }
 }
 

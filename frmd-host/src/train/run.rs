@@ -274,7 +274,7 @@ pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
         tcfg.horizon,
         &prepared.norm,
     )?;
-    let rounds = run.on_policy_rounds_for(&data.task);
+    let rounds = run.on_policy_rounds;
     if rounds > 0 && !crate::tasks::is_simulated(&data.task) {
         anyhow::bail!("--on-policy-rounds: task `{}` is not simulated by frmd-host (reach, avoid, push, insert); record the student's rollouts with the task's own simulator and pass them with --on-policy-data", data.task);
     }

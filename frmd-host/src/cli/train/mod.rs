@@ -271,9 +271,8 @@ pub struct StudentArgs {
     /// On-policy rounds (tasks frmd-host simulates): distill, record --on-policy-episodes
     /// rollouts of the student, distill again from the teacher with the ODE-map term also on
     /// the states it visited; repeated this many times (each round costs one more distillation).
-    /// Default: 1 for the tasks frmd-host simulates, 0 for other data.
-    #[arg(long)]
-    pub on_policy_rounds: Option<usize>,
+    #[arg(long, default_value_t = StudentRun::default().on_policy_rounds)]
+    pub on_policy_rounds: usize,
     /// Student rollouts recorded per on-policy round.
     #[arg(long, default_value_t = StudentRun::default().on_policy_episodes)]
     pub on_policy_episodes: usize,
