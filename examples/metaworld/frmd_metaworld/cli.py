@@ -48,6 +48,9 @@ def cmd_collect(args) -> int:
     from .collect import collect
     if len(args.task) > 1 and args.out:
         sys.exit("--out names one file; use --out-dir for several tasks")
+    if args.policy_server and (args.obs != "raw" or args.after_success):
+        sys.exit("--obs and --after-success shape expert demonstrations; --policy-server records in the "
+                 "policy's own observation layout until its first success")
     out_dir = Path(args.out_dir) if args.out_dir else None
     if out_dir:
         out_dir.mkdir(parents=True, exist_ok=True)
