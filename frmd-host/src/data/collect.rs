@@ -6,8 +6,7 @@ use crate::eval::{rollout, EVAL_SEED_OFFSET};
 use crate::limits::{self, OptionError};
 use crate::policy::float::FloatPolicy;
 use crate::progress::Progress;
-use crate::tasks::make_task;
-use crate::tasks::Policy;
+use crate::tasks::{make_task, Policy, Task};
 use std::path::PathBuf;
 
 /// A collection run (`frmd collect`): `episodes` successful expert demonstrations of `task` on
@@ -195,6 +194,23 @@ fn summarize(
     })
 }
 
+/// An empty dataset of a built-in task's shapes and control period, for a recorder to append
+/// episodes to (the first action holds before the start, as the tasks' experts begin).
+pub(super) fn recording_of(task: &dyn Task, task_name: &str) -> Dataset {
+    Dataset {
+        obs: Vec::new(),
+        action: Vec::new(),
+        episode_ends: Vec::new(),
+        obs_dim: task.obs_dim(),
+        action_dim: task.action_dim(),
+        task: task_name.to_string(),
+        dt: task.dt() as f32,
+        source: String::new(),
+        action_before_start: ActionBeforeStart::First,
+        extra: Default::default(),
+    }
+}
+
 /// Counts from a collection run.
 #[derive(Clone, Debug, Default)]
 pub struct CollectStats {
@@ -250,18 +266,7 @@ pub fn collect_demos(
         }
         None => (task.expert(), None),
     };
-    let mut data = Dataset {
-        obs: Vec::new(),
-        action: Vec::new(),
-        episode_ends: Vec::new(),
-        obs_dim: task.obs_dim(),
-        action_dim: task.action_dim(),
-        task: task_name.to_string(),
-        dt: task.dt() as f32,
-        source: format!("frmd collect: scripted expert, seeds from {seed}"),
-        action_before_start: ActionBeforeStart::First,
-        extra: Default::default(),
-    };
+    let mut data = recording_of(task.as_ref(), task_name);
     let mut stats = CollectStats::default();
     let (mut step_time, mut steps) = (0.0, 0usize);
     while data.episode_ends.len() < episodes {

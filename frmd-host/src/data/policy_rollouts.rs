@@ -3,7 +3,8 @@
 //! Unlike demonstrations, every episode is kept, successful or not (the states where a policy
 //! stalls are the ones worth labelling), and the recorded actions are the executed ones, so the
 //! windows' initial conditions are what the policy sees when it is deployed.
-use super::{ActionBeforeStart, Dataset};
+use super::collect::recording_of;
+use super::Dataset;
 use crate::eval::{rollout, EvalConfig, EVAL_SEED_OFFSET};
 use crate::tasks::{make_task, Policy};
 
@@ -36,18 +37,7 @@ pub fn record_policy_rollouts(
     );
     let mut task = make_task(task_name)?;
     let exec_steps = EvalConfig::default().exec_steps;
-    let mut data = Dataset {
-        obs: Vec::new(),
-        action: Vec::new(),
-        episode_ends: Vec::new(),
-        obs_dim: task.obs_dim(),
-        action_dim: task.action_dim(),
-        task: task_name.to_string(),
-        dt: task.dt() as f32,
-        source: String::new(),
-        action_before_start: ActionBeforeStart::First,
-        extra: Default::default(),
-    };
+    let mut data = recording_of(task.as_ref(), task_name);
     let mut stats = RolloutStats::default();
     for episode in 0..episodes {
         let run = rollout(
