@@ -147,7 +147,7 @@ pub fn train_tiny(name: &str, tiny: &Tiny) -> TinyRun {
             eval_ema: 0.9,
             ..DistillConfig::default()
         },
-        shape: Default::default(),
+        ..StudentRun::default()
     })
     .unwrap();
     assert!(student.join("calibration.safetensors").exists());
