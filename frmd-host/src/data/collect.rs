@@ -1,12 +1,12 @@
 //! Demonstration collection: runs a task's scripted expert and gathers successful episodes.
 use super::perturb::{ActionNoise, PerturbedExpert};
-use super::policy_rollouts::record_policy_rollouts;
-use super::{ActionBeforeStart, Dataset};
+use super::policy_rollouts::{record_policy_rollouts, recording_of};
+use super::Dataset;
 use crate::eval::{rollout, EVAL_SEED_OFFSET};
 use crate::limits::{self, OptionError};
 use crate::policy::float::FloatPolicy;
 use crate::progress::Progress;
-use crate::tasks::{make_task, Policy, Task};
+use crate::tasks::{make_task, Policy};
 use std::path::PathBuf;
 
 /// A collection run (`frmd collect`): `episodes` successful expert demonstrations of `task` on
@@ -192,23 +192,6 @@ fn summarize(
         bytes: std::fs::metadata(&cfg.out)?.len(),
         stats,
     })
-}
-
-/// An empty dataset of a built-in task's shapes and control period, for a recorder to append
-/// episodes to (the first action holds before the start, as the tasks' experts begin).
-pub(super) fn recording_of(task: &dyn Task, task_name: &str) -> Dataset {
-    Dataset {
-        obs: Vec::new(),
-        action: Vec::new(),
-        episode_ends: Vec::new(),
-        obs_dim: task.obs_dim(),
-        action_dim: task.action_dim(),
-        task: task_name.to_string(),
-        dt: task.dt() as f32,
-        source: String::new(),
-        action_before_start: ActionBeforeStart::First,
-        extra: Default::default(),
-    }
 }
 
 /// Counts from a collection run.

@@ -3,10 +3,9 @@
 //! Unlike demonstrations, every episode is kept, successful or not (the states where a policy
 //! stalls are the ones worth labelling), and the recorded actions are the executed ones, so the
 //! windows' initial conditions are what the policy sees when it is deployed.
-use super::collect::recording_of;
-use super::Dataset;
+use super::{ActionBeforeStart, Dataset};
 use crate::eval::{rollout, EvalConfig, EVAL_SEED_OFFSET};
-use crate::tasks::{make_task, Policy};
+use crate::tasks::{make_task, Policy, Task};
 
 /// Counts from a recording run.
 #[derive(Clone, Debug, Default)]
@@ -64,4 +63,21 @@ pub fn record_policy_rollouts(
         stats.successes
     );
     Ok((data, stats))
+}
+
+/// An empty dataset of a built-in task's shapes and control period, for a recorder to append
+/// episodes to (the first action holds before the start, as the tasks' experts begin).
+pub(super) fn recording_of(task: &dyn Task, task_name: &str) -> Dataset {
+    Dataset {
+        obs: Vec::new(),
+        action: Vec::new(),
+        episode_ends: Vec::new(),
+        obs_dim: task.obs_dim(),
+        action_dim: task.action_dim(),
+        task: task_name.to_string(),
+        dt: task.dt() as f32,
+        source: String::new(),
+        action_before_start: ActionBeforeStart::First,
+        extra: Default::default(),
+    }
 }
