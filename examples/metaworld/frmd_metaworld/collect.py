@@ -19,6 +19,12 @@ from .tasks import (ACTION_DIM, DT, EVAL_SEED_OFFSET, MAX_STEPS, SeededEnv, chec
                     layout_dim, observe, package_versions)
 
 
+def check_collection_seeds(seed: int, count: int) -> None:
+    """`count` episode seeds from `seed` must stay below the evaluation stream."""
+    if seed < 0 or seed + count > EVAL_SEED_OFFSET:
+        raise ValueError(f"collection seeds must lie in [0, 2**63) (the evaluation stream starts at 2**63); seed {seed}")
+
+
 def expert_episode(env: SeededEnv, expert, seed: int, obs_layout: str = "raw", after_success: int = 0):
     """(observations, actions, success) of one expert episode, stopping at the first success, or
     `after_success` steps later (the expert keeps acting; the episode still counts as a success).
@@ -50,8 +56,7 @@ def collect(task: str, episodes: int, seed: int = 0, max_attempts: int | None = 
     if episodes < 1:
         raise ValueError("at least one episode must be collected")
     max_attempts = max_attempts or episodes + 10 + episodes // 5
-    if seed < 0 or seed + max_attempts > EVAL_SEED_OFFSET:
-        raise ValueError(f"collection seeds must lie in [0, 2**63) (the evaluation stream starts at 2**63); seed {seed}")
+    check_collection_seeds(seed, max_attempts)
     started = time.perf_counter()
     env, expert = SeededEnv(task), expert_policy(task)
     obs_rows, action_rows, ends, seeds, failed, lengths = [], [], [], [], [], []
@@ -118,8 +123,7 @@ def record_policy(task: str, policy, episodes: int, seed: int, progress=None, ob
     check_task(task)
     if episodes < 1:
         raise ValueError("at least one episode must be recorded")
-    if seed < 0 or seed + episodes > EVAL_SEED_OFFSET:
-        raise ValueError(f"collection seeds must lie in [0, 2**63) (the evaluation stream starts at 2**63); seed {seed}")
+    check_collection_seeds(seed, episodes)
     obs_layout = obs_layout or layout_of_dim(policy.obs_dim)
     started = time.perf_counter()
     env = SeededEnv(task)

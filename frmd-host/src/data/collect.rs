@@ -2,7 +2,7 @@
 use super::perturb::{ActionNoise, PerturbedExpert};
 use super::policy_rollouts::{record_policy_rollouts, recording_of};
 use super::Dataset;
-use crate::eval::{rollout, EVAL_SEED_OFFSET};
+use crate::eval::{check_collection_seeds, rollout, EVAL_SEED_OFFSET};
 use crate::limits::{self, OptionError};
 use crate::policy::float::FloatPolicy;
 use crate::progress::Progress;
@@ -236,10 +236,7 @@ pub fn collect_demos(
     }
     let noise = noise.filter(|n| n.std > 0.0);
     let max_attempts = max_attempts(episodes, noise.is_some());
-    anyhow::ensure!(
-        seed.checked_add(max_attempts as u64).is_some_and(|end| end <= EVAL_SEED_OFFSET),
-        "collection seeds must stay below 2^63 (the evaluation seed stream); seed {seed} is too large"
-    );
+    check_collection_seeds(seed, max_attempts)?;
     let mut task = make_task(task_name)?;
     let (mut expert, clean_action): (Box<dyn Policy>, _) = match noise {
         Some(noise) => {

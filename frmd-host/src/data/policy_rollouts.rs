@@ -4,7 +4,7 @@
 //! stalls are the ones worth labelling), and the recorded actions are the executed ones, so the
 //! windows' initial conditions are what the policy sees when it is deployed.
 use super::{ActionBeforeStart, Dataset};
-use crate::eval::{rollout, EvalConfig, EVAL_SEED_OFFSET};
+use crate::eval::{check_collection_seeds, rollout, EvalConfig};
 use crate::tasks::{make_task, Policy, Task};
 
 /// Counts from a recording run.
@@ -12,8 +12,6 @@ use crate::tasks::{make_task, Policy, Task};
 pub struct RolloutStats {
     /// Episodes in which the task's success test held at some step.
     pub successes: usize,
-    /// Episodes that ended in a failure (e.g. a collision).
-    pub failures: usize,
 }
 
 /// Rolls `policy` (which takes `history` observations) out for `episodes` episodes of
@@ -30,10 +28,7 @@ pub fn record_policy_rollouts(
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<(Dataset, RolloutStats)> {
     anyhow::ensure!(episodes >= 1, "at least one episode must be recorded");
-    anyhow::ensure!(
-        seed.checked_add(episodes as u64).is_some_and(|end| end <= EVAL_SEED_OFFSET),
-        "collection seeds must stay below 2^63 (the evaluation seed stream); seed {seed} is too large"
-    );
+    check_collection_seeds(seed, episodes)?;
     let mut task = make_task(task_name)?;
     let exec_steps = EvalConfig::default().exec_steps;
     let mut data = recording_of(task.as_ref(), task_name);
@@ -52,7 +47,6 @@ pub fn record_policy_rollouts(
             },
         )?;
         stats.successes += run.success as usize;
-        stats.failures += run.failed as usize;
         data.episode_ends
             .push((data.action.len() / data.action_dim) as i64);
         progress(episode + 1);

@@ -19,6 +19,15 @@ mod tests;
 /// First seed of the evaluation stream; collection seeds are all below it.
 pub const EVAL_SEED_OFFSET: u64 = 1 << 63;
 
+/// Checks that `count` collection seeds from `seed` stay below the evaluation stream.
+pub fn check_collection_seeds(seed: u64, count: usize) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        seed.checked_add(count as u64).is_some_and(|end| end <= EVAL_SEED_OFFSET),
+        "collection seeds must stay below 2^63 (the evaluation seed stream); seed {seed} is too large"
+    );
+    Ok(())
+}
+
 /// Settings of a closed-loop evaluation.
 #[derive(Clone, Debug)]
 pub struct EvalConfig {

@@ -40,12 +40,20 @@ pub fn recorded_windows(
         );
         let windows = super::holdout::windows_in(&visited, history, horizon, norm)
             .with_context(|| format!("--on-policy-data {}", path.display()))?;
-        match &mut all {
-            Some(all) => all.append(&windows)?,
-            None => all = Some(windows),
-        }
+        add_windows(&mut all, windows)?;
     }
     Ok(all)
+}
+
+/// Adds `windows` to the on-policy set `all` (which starts as `None`: no on-policy states).
+pub fn add_windows(all: &mut Option<WindowSet>, windows: WindowSet) -> anyhow::Result<()> {
+    match all {
+        Some(all) => all.append(&windows),
+        None => {
+            *all = Some(windows);
+            Ok(())
+        }
+    }
 }
 
 /// Rolls the one-step `student` out for `episodes` episodes of `task` on the collection seeds

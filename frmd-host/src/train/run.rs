@@ -9,7 +9,7 @@ use super::distill::distill;
 use super::dp::train_dp;
 use super::holdout::{generalization, windows_in, ChunkSampler, GeneralizationReport};
 use super::monitor::{HoldoutProbe, Monitor};
-use super::on_policy::{recorded_windows, student_round};
+use super::on_policy::{add_windows, recorded_windows, student_round};
 use super::padding::pad_episode_ends;
 use super::recipe::{DpRun, ProbeConfig, StudentRun, TeacherRun, TrainConfig};
 use super::teacher::train_teacher;
@@ -323,10 +323,7 @@ pub fn run_student(run: &StudentRun) -> anyhow::Result<RunOutcome> {
             "student: on-policy round {round} of {}: the student succeeded in {} of {} recorded rollouts; distilling again from the teacher with the states it visited",
             rounds, stats.successes, run.on_policy_episodes
         );
-        match &mut on_policy {
-            Some(all) => all.append(&visited)?,
-            None => on_policy = Some(visited),
-        }
+        add_windows(&mut on_policy, visited)?;
     };
     let on_policy_data: Vec<String> = run
         .on_policy_data
