@@ -19,7 +19,7 @@ use crate::memory::MemoryFigures;
 use crate::mlp::{MlpExport, MlpExports};
 use crate::reference::KernelCheck;
 use crate::rounding::WeightRounding;
-use crate::transformer::TransformerExport;
+use crate::transformer::{TransformerExport, TransformerExports};
 
 /// A student checkpoint exported by the exporter of its backbone, its blob checked.
 #[derive(Clone, Debug)]
@@ -35,14 +35,14 @@ pub struct ExportedStudent {
 #[derive(Clone, Debug)]
 enum Backbone {
     Mlp(MlpExports),
-    Transformer(TransformerExport),
+    Transformer(TransformerExports),
 }
 
 impl Backbone {
     fn get(&self) -> &dyn ExportedNetwork {
         match self {
             Backbone::Mlp(mlp) => mlp.get(),
-            Backbone::Transformer(transformer) => transformer,
+            Backbone::Transformer(transformer) => transformer.get(),
         }
     }
 }
@@ -93,13 +93,7 @@ pub fn export_checkpoint(
                 .map(Backbone::Mlp)
         }
         BackboneConfig::Transformer { .. } => {
-            if activations != Activations::Int8 {
-                anyhow::bail!(
-                    "{activations} activations are built for the MLP only; a transformer-lite \
-                     student exports with int8 activations"
-                );
-            }
-            crate::transformer::export(&checkpoint, options, &calibration)
+            crate::transformer::export(&checkpoint, options, activations, &calibration)
                 .map(Backbone::Transformer)
         }
     }
@@ -141,7 +135,8 @@ impl ExportedStudent {
     /// The precision of its hidden activations (the options' or the backbone's default).
     pub fn activations(&self) -> Activations {
         match &self.network {
-            Backbone::Mlp(MlpExports::Int16(_)) => Activations::Int16,
+            Backbone::Mlp(MlpExports::Int16(_))
+            | Backbone::Transformer(TransformerExports::Int16(_)) => Activations::Int16,
             _ => Activations::Int8,
         }
     }
@@ -240,11 +235,20 @@ impl ExportedStudent {
         }
     }
 
-    /// The transformer exporter's result (none for an MLP).
+    /// The transformer exporter's result with int8 activations (none for an MLP or int16
+    /// activations).
     pub fn transformer(&self) -> Option<&TransformerExport> {
         match &self.network {
-            Backbone::Transformer(transformer) => Some(transformer),
-            Backbone::Mlp(_) => None,
+            Backbone::Transformer(TransformerExports::Int8(transformer)) => Some(transformer),
+            _ => None,
+        }
+    }
+
+    /// The transformer exporter's result with int16 activations (none otherwise).
+    pub fn transformer16(&self) -> Option<&TransformerExport<i16>> {
+        match &self.network {
+            Backbone::Transformer(TransformerExports::Int16(transformer)) => Some(transformer),
+            _ => None,
         }
     }
 }

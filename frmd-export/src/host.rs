@@ -4,8 +4,9 @@
 //! export passes before anything is written.
 use anyhow::{bail, Context};
 use frmd_core::blob::{AlignedBlob, LoadedBlob};
-use frmd_core::model::transformer::TransformerScratch;
-use frmd_core::policy::{Policy, PolicyDims};
+use frmd_core::kernels::Precision;
+use frmd_core::model::transformer::{TransformerBuffers, TransformerScratch};
+use frmd_core::policy::{Policy, PolicyDims, TransformerWork};
 use frmd_core::prodmp::MAX_NUM_BASIS;
 
 /// Longest observation history the host runs.
@@ -33,12 +34,55 @@ pub type HostPolicy<'a, Net> = Policy<
     MAX_WIDTH,
 >;
 
-/// Scratch for the host's f32 and int8 transformer passes (enough for the `transformer`
-/// backbone, 6 x 256 with horizon 16): floats, bytes, accumulators.
-pub type HostScratch = TransformerScratch<HOST_FLOATS, HOST_BYTES, HOST_ACCUMULATORS>;
+/// Scratch for the host's transformer passes with `P` codes (enough for the `transformer`
+/// backbone, 6 x 256 with horizon 16): floats, codes, accumulators.
+pub type HostScratchOf<P> = TransformerScratch<HOST_FLOATS, HOST_CODES, HOST_ACCUMULATORS, P>;
+/// Scratch for the host's f32 and int8 transformer passes.
+pub type HostScratch = HostScratchOf<i8>;
 pub(crate) const HOST_FLOATS: usize = 32_768;
-pub(crate) const HOST_BYTES: usize = 16_384;
+pub(crate) const HOST_CODES: usize = 16_384;
 pub(crate) const HOST_ACCUMULATORS: usize = 1_024;
+
+/// Working memory for a transformer of either activation precision (what
+/// [`LoadedBlob::network`] takes): an int8 and an int16 scratch on the heap.
+#[derive(Debug)]
+pub struct HostWork {
+    int8: Box<HostScratch>,
+    int16: Box<HostScratchOf<i16>>,
+}
+
+impl HostWork {
+    /// Zeroed scratch of both widths.
+    pub fn new() -> Self {
+        Self {
+            int8: Box::new(HostScratch::new()),
+            int16: Box::new(HostScratchOf::new()),
+        }
+    }
+}
+
+impl Default for HostWork {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl TransformerWork<i8> for HostWork {
+    fn buffers(&mut self) -> TransformerBuffers<'_, i8> {
+        self.int8.buffers()
+    }
+}
+
+impl TransformerWork<i16> for HostWork {
+    fn buffers(&mut self) -> TransformerBuffers<'_, i16> {
+        self.int16.buffers()
+    }
+}
+
+/// A zeroed host scratch of `P` codes on the heap.
+pub(crate) fn boxed_scratch<P: Precision>() -> Box<HostScratchOf<P>> {
+    Box::new(HostScratchOf::new())
+}
 
 /// Refuses a policy whose sizes exceed the host's capacities, naming its shape.
 pub fn check_capacity(d: &PolicyDims) -> anyhow::Result<()> {
@@ -65,9 +109,9 @@ pub fn check_blob(blob: &[u8]) -> anyhow::Result<PolicyDims> {
     let loaded = LoadedBlob::load(aligned.bytes()).context("loading the blob")?;
     let dims = loaded.dims();
     check_capacity(&dims)?;
-    let mut scratch = Box::new(HostScratch::new());
+    let mut work = HostWork::new();
     let network = loaded
-        .network::<MAX_WIDTH, _>(&mut *scratch)
+        .network::<MAX_WIDTH, _>(&mut work)
         .context("the blob's network")?;
     HostPolicy::new(loaded.config(), network).context("the blob's policy")?;
     Ok(dims)

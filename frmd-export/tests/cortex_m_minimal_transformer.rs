@@ -1,20 +1,23 @@
 //! The minimal firmware (`examples/cortex-m/minimal`) runs a transformer-lite student as it runs
 //! the MLP one: its build.rs makes the same one export call (`FRMD_MINIMAL_CHECKPOINT` names the
 //! checkpoint), its `main.rs` is unchanged, and the first action's bits on every core with the
-//! memory for a transformer equal the host's frmd-core policy over the exported blob. Its own
+//! memory for a transformer equal the host's frmd-core policy over the exported blob, with int8
+//! and with int16 activations (`FRMD_MINIMAL_ACTIVATIONS`). Its own
 //! test binary: it rebuilds the minimal image with another checkpoint, which must not race with
 //! `cortex_m_policy.rs`'s build of the reach student.
 
-use frmd_core::blob::{AlignedBlob, LoadedTransformer};
+use frmd_core::blob::{AlignedBlob, LoadedBlob};
 use frmd_core::policy::{Noise, Policy};
 use frmd_core::rng::Rng;
-use frmd_export::host::HostScratch;
+use frmd_export::host::HostWork;
+use frmd_export::{Activations, ExportOptions};
 use frmd_firmware_support::host::qemu;
 use frmd_formats::calibration;
 use frmd_formats::checkpoint::{BackboneConfig, HeadConfig, ModelConfig, Role, CALIBRATION_FILE};
 use frmd_test_support::checkpoint::{
     calibration_rows, scratch_dir, unit_normalization, write_checkpoint, Init,
 };
+use std::path::Path;
 
 const HISTORY: usize = 2;
 const OBS: usize = 4;
@@ -44,9 +47,9 @@ fn model() -> ModelConfig {
 /// noise seed 2024) on the host, as the firmware prints its bits.
 fn host_first_action(blob: &[u8]) -> Vec<String> {
     let blob = AlignedBlob::new(blob);
-    let loaded = LoadedTransformer::load(blob.bytes()).expect("load the blob");
-    let mut scratch = Box::new(HostScratch::new());
-    let network = loaded.network(&mut *scratch).expect("network");
+    let loaded = LoadedBlob::load(blob.bytes()).expect("load the blob");
+    let mut work = HostWork::new();
+    let network = loaded.network::<INPUT, _>(&mut work).expect("network");
     let mut policy =
         Policy::<_, HISTORY, OBS, DOF, HORIZON, PARAMS, INPUT>::new(loaded.config(), network)
             .expect("policy");
@@ -79,25 +82,38 @@ fn qemu_minimal_example_runs_a_transformer_student_like_the_host() {
         &calibration_rows(&model, 32, 5, 6),
     )
     .unwrap();
-    let student = frmd_export::export(&dir, &Default::default(), None).expect("export");
-    let expected = host_first_action(student.blob());
-    assert_eq!(expected.len(), DOF);
-    for board in qemu::TRANSFORMER_BOARDS {
-        let stdout = qemu::run_with_env(
-            &root,
-            board,
-            "minimal",
-            &[("FRMD_MINIMAL_CHECKPOINT", &dir)],
-        );
-        let got: Vec<String> = stdout
-            .lines()
-            .filter(|line| line.starts_with("first action, dof "))
-            .filter_map(|line| line.find("(bits").map(|bits| line[bits..].to_string()))
-            .collect();
-        assert_eq!(
-            got, expected,
-            "minimal transformer example on {board}:\n{stdout}"
-        );
+    let mut first_actions = Vec::new();
+    for activations in [Activations::Int8, Activations::Int16] {
+        let options = ExportOptions {
+            activations: Some(activations),
+            ..Default::default()
+        };
+        let student = frmd_export::export(&dir, &options, None).expect("export");
+        assert_eq!(student.activations(), activations);
+        let expected = host_first_action(student.blob());
+        assert_eq!(expected.len(), DOF);
+        let name = activations.to_string();
+        for board in qemu::TRANSFORMER_BOARDS {
+            let env: [(&str, &Path); 2] = [
+                ("FRMD_MINIMAL_CHECKPOINT", &dir),
+                ("FRMD_MINIMAL_ACTIVATIONS", Path::new(&name)),
+            ];
+            let stdout = qemu::run_with_env(&root, board, "minimal", &env);
+            let got: Vec<String> = stdout
+                .lines()
+                .filter(|line| line.starts_with("first action, dof "))
+                .filter_map(|line| line.find("(bits").map(|bits| line[bits..].to_string()))
+                .collect();
+            assert_eq!(
+                got, expected,
+                "minimal transformer example ({name}) on {board}:\n{stdout}"
+            );
+        }
+        first_actions.push(expected);
     }
+    assert_ne!(
+        first_actions[0], first_actions[1],
+        "int8 and int16 exports gave the same bits"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -150,9 +150,9 @@ fn qemu_minimal_example_acts_like_the_host() {
         .expect("export the student");
     let blob = AlignedBlob::new(exported.blob());
     let loaded = frmd_core::blob::LoadedBlob::load(blob.bytes()).expect("load the blob");
-    let mut scratch = Box::new(frmd_export::host::HostScratch::new());
+    let mut work = frmd_export::host::HostWork::new();
     let network = loaded
-        .network::<MLP_WIDTH, _>(&mut *scratch)
+        .network::<MLP_WIDTH, _>(&mut work)
         .expect("network from the blob");
     let mut policy = frmd_core::policy::Policy::<
         _,

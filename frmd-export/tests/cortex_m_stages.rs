@@ -45,9 +45,9 @@ fn network_of<P: ExportPrecision>(policy: &QuantizedMlp<P>) -> QuantMlpNetwork<'
 fn staged_matches_blob<P: ExportPrecision>(policy: &QuantizedMlp<P>) {
     let blob = AlignedBlob::new(&policy.blob().expect("write the blob"));
     let loaded = LoadedBlob::load(blob.bytes()).expect("load the blob");
-    let mut scratch = Box::new(frmd_export::host::HostScratch::new());
+    let mut work = frmd_export::host::HostWork::new();
     let network = loaded
-        .network::<MLP_WIDTH, _>(&mut *scratch)
+        .network::<MLP_WIDTH, _>(&mut work)
         .expect("the blob's network");
     let reference = StudentPolicy::new(loaded.config(), network).expect("policy from the blob");
     let expected = digest_all(&mut PolicyWorkload::new(reference)).expect("reference chunks");

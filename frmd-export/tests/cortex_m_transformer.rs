@@ -26,7 +26,7 @@ use frmd_firmware_support::workload::digest_all;
 
 type Scratch = frmd_core::model::transformer::TransformerScratch<
     { TRANSFORMER_SCRATCH.floats },
-    { TRANSFORMER_SCRATCH.bytes },
+    { TRANSFORMER_SCRATCH.codes },
     { TRANSFORMER_SCRATCH.accumulators },
 >;
 

@@ -10,7 +10,7 @@ use frmd_export::formats::checkpoint::{
     Activation, BackboneConfig, CheckpointMeta, HeadConfig, ModelConfig, Normalization, Normalizer,
     ProDmpOutput, Role,
 };
-use frmd_export::host::{HostScratch, MAX_WIDTH};
+use frmd_export::host::{HostScratch, HostWork, MAX_WIDTH};
 use frmd_export::{Activations, ExportOptions, ExportedStudent, WeightRounding};
 use frmd_test_support::checkpoint::{scratch_dir, write_meta, write_weights, Init};
 use std::path::{Path, PathBuf};
@@ -91,8 +91,8 @@ fn worst_relative_error(student: &ExportedStudent, gain: f32) -> f32 {
     }
     let blob = AlignedBlob::new(student.blob());
     let loaded = LoadedBlob::load(blob.bytes()).unwrap();
-    let mut scratch = Box::new(HostScratch::new());
-    let mut quantized = loaded.network::<MAX_WIDTH, _>(&mut *scratch).unwrap();
+    let mut work = HostWork::new();
+    let mut quantized = loaded.network::<MAX_WIDTH, _>(&mut work).unwrap();
     let mut float_scratch = Box::new(HostScratch::new());
     let mut worst = 0f32;
     student

@@ -9,7 +9,9 @@ use std::{
 };
 
 /// The student checkpoint (`frmd.json`, `model.safetensors`, `calibration.safetensors`);
-/// `FRMD_MINIMAL_CHECKPOINT=DIR` bakes another one (the host test of a transformer-lite student).
+/// `FRMD_MINIMAL_CHECKPOINT=DIR` bakes another one (the host test of a transformer-lite student)
+/// and `FRMD_MINIMAL_ACTIVATIONS=int8|int16` picks the activation precision (default: the
+/// backbone's recipe).
 const CHECKPOINT: &str = "../policy/reach";
 
 fn main() {
@@ -17,7 +19,15 @@ fn main() {
     let checkpoint = env::var_os("FRMD_MINIMAL_CHECKPOINT")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(CHECKPOINT));
-    frmd_export::export(&checkpoint, &frmd_export::ExportOptions::default(), None)
+    let activations = env::var("FRMD_MINIMAL_ACTIVATIONS").ok().map(|text| {
+        text.parse()
+            .unwrap_or_else(|error| panic!("FRMD_MINIMAL_ACTIVATIONS: {error:#}"))
+    });
+    let options = frmd_export::ExportOptions {
+        activations,
+        ..Default::default()
+    };
+    frmd_export::export(&checkpoint, &options, None)
         .and_then(|student| student.write_module(&out))
         .unwrap_or_else(|error| panic!("exporting {} failed: {error:#}", checkpoint.display()));
 
@@ -30,4 +40,5 @@ fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-env-changed=FRMD_CM_MEMORY_MAP");
     println!("cargo:rerun-if-env-changed=FRMD_MINIMAL_CHECKPOINT");
+    println!("cargo:rerun-if-env-changed=FRMD_MINIMAL_ACTIVATIONS");
 }

@@ -121,8 +121,8 @@ pub fn blocks() -> Option<[Int8Block<'static>; LAYERS]> {
 pub fn model<'a>(blocks: &'a [Int8Block<'static>]) -> Option<Int8Transformer<'a>> {
     Some(Int8Transformer {
         shape: TRANSFORMER_SHAPE,
-        traj_in: TokenLinear::Int8(quantized(0)?),
-        cond_in: TokenLinear::Int8(quantized(1)?),
+        traj_in: TokenLinear::Quantized(quantized(0)?),
+        cond_in: TokenLinear::Quantized(quantized(1)?),
         noise_token: &generated::NOISE_TOKEN,
         positions: &generated::POSITIONS,
         blocks,

@@ -143,7 +143,7 @@ pub const TRANSFORMER_NAME: &str = "policy act: one-step int8 transformer-lite (
 /// Scratch of the synthetic transformer.
 pub type Scratch = TransformerScratch<
     { TRANSFORMER_SCRATCH.floats },
-    { TRANSFORMER_SCRATCH.bytes },
+    { TRANSFORMER_SCRATCH.codes },
     { TRANSFORMER_SCRATCH.accumulators },
 >;
 

@@ -32,8 +32,10 @@ use super::{BlobError, SectionId};
 /// as the byte 0 or 1, which is the same code, so version 2 blobs read unchanged. Version 4 adds
 /// a trailer to the MLP descriptor (activation precision and int16 clamps, `blob::mlp`); a
 /// version 2 or 3 MLP blob has none and reads as int8 activations. Transformer blobs are the same
-/// in versions 2 to 4.
-pub const FORMAT_VERSION: u16 = 4;
+/// in versions 2 to 4; version 5 adds a trailer to the transformer descriptor (activation
+/// precision, `blob::transformer`), and an older transformer blob reads as int8 activations. MLP
+/// blobs are the same in versions 4 and 5.
+pub const FORMAT_VERSION: u16 = 5;
 /// The oldest format version this crate reads.
 pub const MIN_FORMAT_VERSION: u16 = 2;
 /// Header length in bytes (the descriptor starts here).
@@ -194,18 +196,8 @@ fn split(bytes: &[u8], magic: [u8; 4], check_crc: bool) -> Result<(u16, &[u8], &
     Ok((version, descriptor, data))
 }
 
-/// Checks the header and (with `check_crc`) the CRC and decodes the descriptor, which must fill
-/// the descriptor bytes exactly; returns it with the data area.
-pub(crate) fn parse<'a, D: Deserialize<'a>>(
-    bytes: &'a [u8],
-    magic: [u8; 4],
-    check_crc: bool,
-) -> Result<(D, Data<'a>), BlobError> {
-    let (descriptor, _, data) = parse_versioned::<D, ()>(bytes, magic, check_crc, u16::MAX)?;
-    Ok((descriptor, data))
-}
-
-/// [`parse`] for a descriptor that gained a trailer `T` in format version `trailer_since`: blobs
+/// Checks the header and (with `check_crc`) the CRC and decodes the descriptor, for a descriptor
+/// that gained a trailer `T` in format version `trailer_since`: blobs
 /// of that version or later must carry it (`Some`), older ones must not (`None`).
 pub(crate) fn parse_versioned<'a, D: Deserialize<'a>, T: Deserialize<'a>>(
     bytes: &'a [u8],

@@ -1,16 +1,16 @@
-//! A blob of any format, told apart by its magic and (MLP) its activation precision
+//! A blob of any format, told apart by its magic and its activation precision
 //! ([`LoadedBlob`]), and the quantized network of any ([`BlobNetwork`]): what a program holds that
 //! runs whatever student it is given (the host tools, a firmware that takes policy updates of any
 //! backbone). A firmware built for one backbone and precision uses its loader ([`LoadedMlp`],
 //! [`LoadedTransformer`]) directly.
 
 use super::{
-    activation_bits, BlobError, LoadedMlp, LoadedMlp16, LoadedTransformer, MLP_MAGIC,
-    TRANSFORMER_MAGIC,
+    activation_bits, transformer_activation_bits, BlobError, LoadedMlp, LoadedMlp16,
+    LoadedTransformer, LoadedTransformer16, MLP_MAGIC, TRANSFORMER_MAGIC,
 };
 use crate::policy::{
-    Int16MlpNetwork, Int8MlpNetwork, Int8TransformerNetwork, Network, PolicyConfig, PolicyDims,
-    PolicyError, StepConstants, TransformerWork,
+    Int16MlpNetwork, Int16TransformerNetwork, Int8MlpNetwork, Int8TransformerNetwork, Network,
+    PolicyConfig, PolicyDims, PolicyError, StepConstants, TransformerWork,
 };
 
 /// A checked blob of either format, borrowing its bytes.
@@ -21,8 +21,10 @@ pub enum LoadedBlob<'a> {
     Mlp(LoadedMlp<'a>),
     /// An MLP blob with int16 activations.
     Mlp16(LoadedMlp16<'a>),
-    /// A transformer blob (magic [`TRANSFORMER_MAGIC`]).
+    /// A transformer blob (magic [`TRANSFORMER_MAGIC`]) with int8 activations.
     Transformer(LoadedTransformer<'a>),
+    /// A transformer blob with int16 activations.
+    Transformer16(LoadedTransformer16<'a>),
 }
 
 impl<'a> LoadedBlob<'a> {
@@ -35,7 +37,10 @@ impl<'a> LoadedBlob<'a> {
                 _ => LoadedMlp::load(bytes).map(Self::Mlp),
             },
             Some(magic) if magic == TRANSFORMER_MAGIC => {
-                LoadedTransformer::load(bytes).map(Self::Transformer)
+                match transformer_activation_bits(bytes)? {
+                    16 => LoadedTransformer16::load(bytes).map(Self::Transformer16),
+                    _ => LoadedTransformer::load(bytes).map(Self::Transformer),
+                }
             }
             Some(_) => Err(BlobError::BadMagic),
             None => Err(BlobError::Truncated),
@@ -48,6 +53,7 @@ impl<'a> LoadedBlob<'a> {
             Self::Mlp(blob) => blob.dims(),
             Self::Mlp16(blob) => blob.dims(),
             Self::Transformer(blob) => blob.dims(),
+            Self::Transformer16(blob) => blob.dims(),
         }
     }
 
@@ -57,6 +63,7 @@ impl<'a> LoadedBlob<'a> {
             Self::Mlp(blob) => blob.check_dims(expected),
             Self::Mlp16(blob) => blob.check_dims(expected),
             Self::Transformer(blob) => blob.check_dims(expected),
+            Self::Transformer16(blob) => blob.check_dims(expected),
         }
     }
 
@@ -66,6 +73,7 @@ impl<'a> LoadedBlob<'a> {
             Self::Mlp(blob) => blob.steps(),
             Self::Mlp16(blob) => blob.steps(),
             Self::Transformer(blob) => blob.steps(),
+            Self::Transformer16(blob) => blob.steps(),
         }
     }
 
@@ -75,12 +83,13 @@ impl<'a> LoadedBlob<'a> {
             Self::Mlp(blob) => blob.config(),
             Self::Mlp16(blob) => blob.config(),
             Self::Transformer(blob) => blob.config(),
+            Self::Transformer16(blob) => blob.config(),
         }
     }
 
-    /// The int8 network: an MLP with scratch for layers up to `WIDTH` wide, or a transformer
-    /// running in `scratch` (unused by an MLP).
-    pub fn network<const WIDTH: usize, S: TransformerWork>(
+    /// The quantized network: an MLP with scratch for layers up to `WIDTH` wide, or a
+    /// transformer running in `scratch` (unused by an MLP; it serves either code width).
+    pub fn network<const WIDTH: usize, S: TransformerWork<i8> + TransformerWork<i16>>(
         &self,
         scratch: S,
     ) -> Result<BlobNetwork<'_, WIDTH, S>, PolicyError> {
@@ -88,7 +97,16 @@ impl<'a> LoadedBlob<'a> {
             Self::Mlp(blob) => BlobNetwork::Mlp(blob.network::<WIDTH>()?),
             Self::Mlp16(blob) => BlobNetwork::Mlp16(blob.network::<WIDTH>()?),
             Self::Transformer(blob) => BlobNetwork::Transformer(blob.network(scratch)?),
+            Self::Transformer16(blob) => BlobNetwork::Transformer16(blob.network(scratch)?),
         })
+    }
+
+    /// Bits per activation code: 8 or 16.
+    pub fn activation_bits(&self) -> u8 {
+        match self {
+            Self::Mlp(_) | Self::Transformer(_) => 8,
+            Self::Mlp16(_) | Self::Transformer16(_) => 16,
+        }
     }
 }
 
@@ -100,16 +118,22 @@ pub enum BlobNetwork<'a, const WIDTH: usize, S> {
     Mlp(Int8MlpNetwork<'a, WIDTH>),
     /// The MLP of an int16-activation MLP blob.
     Mlp16(Int16MlpNetwork<'a, WIDTH>),
-    /// The transformer of a transformer blob.
+    /// The transformer of an int8-activation transformer blob.
     Transformer(Int8TransformerNetwork<'a, S>),
+    /// The transformer of an int16-activation transformer blob.
+    Transformer16(Int16TransformerNetwork<'a, S>),
 }
 
-impl<const WIDTH: usize, S: TransformerWork> Network for BlobNetwork<'_, WIDTH, S> {
+impl<const WIDTH: usize, S> Network for BlobNetwork<'_, WIDTH, S>
+where
+    S: TransformerWork<i8> + TransformerWork<i16>,
+{
     fn input_width(&self) -> usize {
         match self {
             Self::Mlp(net) => net.input_width(),
             Self::Mlp16(net) => net.input_width(),
             Self::Transformer(net) => net.input_width(),
+            Self::Transformer16(net) => net.input_width(),
         }
     }
 
@@ -118,6 +142,7 @@ impl<const WIDTH: usize, S: TransformerWork> Network for BlobNetwork<'_, WIDTH, 
             Self::Mlp(net) => net.output_width(),
             Self::Mlp16(net) => net.output_width(),
             Self::Transformer(net) => net.output_width(),
+            Self::Transformer16(net) => net.output_width(),
         }
     }
 
@@ -126,6 +151,7 @@ impl<const WIDTH: usize, S: TransformerWork> Network for BlobNetwork<'_, WIDTH, 
             Self::Mlp(net) => net.num_noise_variants(),
             Self::Mlp16(net) => net.num_noise_variants(),
             Self::Transformer(net) => net.num_noise_variants(),
+            Self::Transformer16(net) => net.num_noise_variants(),
         }
     }
 
@@ -139,6 +165,7 @@ impl<const WIDTH: usize, S: TransformerWork> Network for BlobNetwork<'_, WIDTH, 
             Self::Mlp(net) => net.forward(variant, input, output),
             Self::Mlp16(net) => net.forward(variant, input, output),
             Self::Transformer(net) => net.forward(variant, input, output),
+            Self::Transformer16(net) => net.forward(variant, input, output),
         }
     }
 }

@@ -34,8 +34,10 @@ pub use mlp::{
 };
 pub use policy_tables::{PolicyHeader, PolicySection, PolicySections, STEP_WORDS};
 pub use transformer::{
-    encode_transformer, transformer_encoded_len, LoadedTransformer, TransformerBlobParts,
-    TransformerDescriptor, TransformerSection, TRANSFORMER_MAGIC,
+    encode_transformer, transformer_activation_bits, transformer_encoded_len,
+    LoadedQuantTransformer, LoadedTransformer, LoadedTransformer16, TransformerActivations,
+    TransformerBlobParts, TransformerDescriptor, TransformerSection, TRANSFORMER_ACTIVATIONS_SINCE,
+    TRANSFORMER_MAGIC,
 };
 
 use crate::model::transformer::TransformerError;

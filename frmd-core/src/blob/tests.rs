@@ -189,8 +189,13 @@ fn header_damage_is_named() {
         fix_crc(&mut with_trailer);
         assert_eq!(load_copy(&with_trailer), Err(BlobError::Descriptor));
     }
-    // From version 4 the trailer is required and names the precision and every layer's clamps.
+    // From version 4 the trailer is required and names the precision and every layer's clamps;
+    // version 5 changed transformer blobs only, so a version 4 MLP blob reads as before.
     assert_eq!(load_copy(&untrailed), Err(BlobError::Descriptor));
+    let mut four = blob.clone();
+    four[4..6].copy_from_slice(&4_u16.to_le_bytes());
+    fix_crc(&mut four);
+    assert!(load_copy(&four).is_ok());
     let sixteen = with_descriptor_parts(&blob, |_, t| t.as_mut().unwrap().bits = 16);
     assert_eq!(
         load_copy(&sixteen),

@@ -25,8 +25,8 @@ use super::BLOCK_ROWS;
 #[cfg(not(frmd_arm_dsp))]
 use crate::quant::requantize_s64;
 use crate::quant::{
-    dequantize_accumulator, dequantize_wide, requantize_valid, BIAS16_MAX, CHUNK16,
-    IN_FEATURES16_MAX, SHIFT16_MAX, SHIFT16_MIN, SHIFT_MAX, SHIFT_MIN,
+    dequantize_accumulator, dequantize_wide, quantize_sym16, requantize_valid, QuantParams,
+    BIAS16_MAX, CHUNK16, IN_FEATURES16_MAX, SHIFT16_MAX, SHIFT16_MIN, SHIFT_MAX, SHIFT_MIN,
 };
 
 mod quantize;
@@ -332,6 +332,10 @@ pub trait Precision:
     fn table(entries: &[Self]) -> Option<&Self::Table>;
     /// The entries of `table`.
     fn table_entries(table: &Self::Table) -> &[Self];
+    /// The code of the real `value` at `params`: int8 [`QuantParams::quantize`] (asymmetric);
+    /// int16 [`quantize_sym16`] at `params.scale` (symmetric: an int16 activation's zero point
+    /// is 0, which [`Self::zero_point_valid`] demands of its parameters).
+    fn quantize(value: f32, params: QuantParams) -> Self;
 }
 
 impl Precision for i8 {
@@ -365,6 +369,10 @@ impl Precision for i8 {
     }
     fn table_entries(table: &LutTable) -> &[i8] {
         table
+    }
+    #[inline(always)]
+    fn quantize(value: f32, params: QuantParams) -> i8 {
+        params.quantize(value)
     }
 }
 
@@ -420,5 +428,9 @@ impl Precision for i16 {
     }
     fn table_entries(table: &Lut16Table) -> &[i16] {
         table
+    }
+    #[inline(always)]
+    fn quantize(value: f32, params: QuantParams) -> i16 {
+        quantize_sym16(value, params.scale)
     }
 }

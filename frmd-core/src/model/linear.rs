@@ -1,17 +1,19 @@
-//! The linear layer, the building block of both backbones, in its f32 and int8 forms.
+//! The linear layer, the building block of both backbones, in its f32 and quantized forms.
 //!
 //! - [`F32Linear`]: `y = activation(W x + b)` in f32, the reference form.
 //! - [`Int8Linear`]: int8 codes in, f32 out: int8 weights (symmetric per output channel), an int32
 //!   bias with the input zero point folded in, int32 accumulators dequantized per channel with
 //!   `output_scales[o] = input_scale * weight_scale[o]`.
 //! - [`QuantizedLinear`]: f32 in, f32 out through the int8 form: the input is quantized per
-//!   tensor with its own calibrated [`QuantParams`], then [`Int8Linear`].
+//!   tensor with its own calibrated [`QuantParams`] (to int8, or symmetric int16), then
+//!   [`Int8Linear`].
 //! - [`RequantizedLinear`]: int8 codes in, int8 codes out, for a chain of int8 layers (the MLP's
 //!   hidden layers, the transformer's feed-forward expansion): the accumulators are requantized
 //!   per channel straight to the next layer's input parameters (dequantize and quantize fused) and
 //!   an optional 256-entry table applies the activation.
 //!
-//! [`Int8Linear`] and [`RequantizedLinear`] are generic over the activation [`Precision`] (int8
+//! [`Int8Linear`], [`QuantizedLinear`] and [`RequantizedLinear`] are generic over the activation
+//! [`Precision`] (int8
 //! weights either way): with int16 activations (the 16x8 scheme) the bias and accumulators are
 //! int64, the requantization is [`crate::quant::requantize_s64`] and the table an interpolated
 //! [`crate::kernels::Lut16Table`]. The type parameters default to int8.
@@ -171,38 +173,40 @@ impl Int8Linear<'_> {
     }
 }
 
-/// `codes[i] = params.quantize(values[i])` over the common length.
-pub fn quantize_into(values: &[f32], params: QuantParams, codes: &mut [i8]) {
+/// `codes[i] = P::quantize(values[i], params)` over the common length (asymmetric int8 or
+/// symmetric int16, [`Precision::quantize`]).
+pub fn quantize_into<P: Precision>(values: &[f32], params: QuantParams, codes: &mut [P]) {
     for (code, value) in codes.iter_mut().zip(values) {
-        *code = params.quantize(*value);
+        *code = P::quantize(*value, params);
     }
 }
 
-/// f32 in, f32 out through the int8 form: the input is quantized per tensor with `input`, then
-/// [`Int8Linear`] (whose bias has `input.zero_point` folded in and whose scales are
-/// `input.scale * weight_scale[o]`).
+/// f32 in, f32 out through the quantized form: the input is quantized per tensor with `input`
+/// to `P` codes (int8 asymmetric, the default, or int16 symmetric), then [`Int8Linear`] (whose
+/// bias has `input.zero_point` folded in and whose scales are `input.scale * weight_scale[o]`).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct QuantizedLinear<'a> {
-    /// Quantization of the f32 input (calibrated at the layer's input).
+pub struct QuantizedLinear<'a, P: Precision = i8> {
+    /// Quantization of the f32 input (calibrated at the layer's input; zero point 0 for int16).
     pub input: QuantParams,
-    /// The int8 layer.
-    pub linear: Int8Linear<'a>,
+    /// The int8-weight layer.
+    pub linear: Int8Linear<'a, P::Acc>,
 }
 
-impl QuantizedLinear<'_> {
-    /// Quantizes `input` into `codes` (same length), then [`Int8Linear::forward`].
+impl<P: Precision> QuantizedLinear<'_, P> {
+    /// Quantizes `input` into `codes` (same length), then [`Int8Linear::forward_input`].
     pub fn forward(
         &self,
         input: &[f32],
-        codes: &mut [i8],
-        accumulators: &mut [i32],
+        codes: &mut [P],
+        accumulators: &mut [P::Acc],
         output: &mut [f32],
     ) -> Result<(), KernelError> {
         if codes.len() != input.len() {
             return Err(KernelError::InputLength);
         }
         quantize_into(input, self.input, codes);
-        self.linear.forward(codes, accumulators, output)
+        self.linear
+            .forward_input(P::layer_input(codes), accumulators, output)
     }
 
     /// Output channels `start .. start + count` as a layer of their own (same input params).

@@ -114,8 +114,8 @@ pub use network::mlp::{
 };
 pub(crate) use network::transformer::STANDARD_SEGMENTS;
 pub use network::transformer::{
-    F32TransformerNetwork, Int8TransformerNetwork, TransformerBackbone, TransformerNetwork,
-    TransformerWork,
+    F32TransformerNetwork, Int16TransformerNetwork, Int8TransformerNetwork, TransformerBackbone,
+    TransformerNetwork, TransformerWork,
 };
 pub use network::{Network, NoiseVariants};
 pub use normalize::{denormalize_value, normalize_value, RangeNormalizer};

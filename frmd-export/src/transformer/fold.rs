@@ -11,9 +11,9 @@
 //! path ([`F32Transformer`]).
 
 use crate::fold::{FloatLayer, StudentBase};
-use crate::host::{HostScratch, HOST_ACCUMULATORS, HOST_BYTES, HOST_FLOATS};
+use crate::host::{boxed_scratch, HostScratchOf, HOST_ACCUMULATORS, HOST_CODES, HOST_FLOATS};
 use anyhow::{bail, Context};
-use frmd_core::kernels::Activation;
+use frmd_core::kernels::{Activation, Precision};
 use frmd_core::model::linear::F32Linear;
 use frmd_core::model::transformer::{
     fold_noise_token, F32Block, F32FeedForward, F32Transformer, LayerNormWeights, TransformerError,
@@ -146,10 +146,11 @@ impl FoldedTransformer {
             .validate()
             .with_context(|| format!("transformer shape {shape:?}"))?;
         let lens = shape.f32_scratch();
-        let int8 = shape.int8_scratch();
-        if lens.floats.max(int8.floats) > HOST_FLOATS
-            || lens.bytes.max(int8.bytes) > HOST_BYTES
-            || lens.accumulators.max(int8.accumulators) > HOST_ACCUMULATORS
+        // The same element counts for int8 and int16 codes.
+        let quantized = shape.int8_scratch();
+        if lens.floats.max(quantized.floats) > HOST_FLOATS
+            || lens.codes.max(quantized.codes) > HOST_CODES
+            || lens.accumulators.max(quantized.accumulators) > HOST_ACCUMULATORS
         {
             bail!("transformer shape {shape:?} needs more scratch than the exporter's host scratch holds");
         }
@@ -309,11 +310,16 @@ impl FoldedTransformer {
 /// Runs one pass of a transformer of `shape` on the standard-layout model `input` (the
 /// condition, then the trajectory) with a host scratch: `forward(trajectory, condition, output,
 /// scratch)` fills the returned `shape.output` values; `what` names the pass in its error.
-pub(super) fn run_on_input(
+pub(super) fn run_on_input<P: Precision>(
     shape: &TransformerShape,
     input: &[f32],
     what: &str,
-    forward: impl FnOnce(&[f32], &[f32], &mut [f32], &mut HostScratch) -> Result<(), TransformerError>,
+    forward: impl FnOnce(
+        &[f32],
+        &[f32],
+        &mut [f32],
+        &mut HostScratchOf<P>,
+    ) -> Result<(), TransformerError>,
 ) -> anyhow::Result<Vec<f32>> {
     let (condition, trajectory) = input.split_at_checked(shape.cond_dim).with_context(|| {
         format!(
@@ -321,7 +327,7 @@ pub(super) fn run_on_input(
             input.len()
         )
     })?;
-    let mut scratch = Box::new(HostScratch::new());
+    let mut scratch = boxed_scratch::<P>();
     let mut out = vec![0.0; shape.output];
     forward(trajectory, condition, &mut out, &mut scratch).with_context(|| what.to_string())?;
     Ok(out)

@@ -1,19 +1,24 @@
 //! The transformer-lite student's exporter: fold ([`FoldedTransformer`]: per-step noise tokens),
 //! calibrate with frmd-core's transformer probes and quantize ([`calibrate()`], [`quantize()`])
-//! into an owned [`QuantizedTransformer`] that views as frmd-core's
-//! [`Int8Transformer`](frmd_core::model::transformer::Int8Transformer), then write it as the
+//! into an owned [`QuantizedTransformer`] (int8 weights; int8 or int16 activations) that views
+//! as frmd-core's [`QuantTransformer`](frmd_core::model::transformer::QuantTransformer), then
+//! write it as the
 //! `FRMT` blob ([`QuantizedTransformer::blob`], the supported firmware form) or a module that
-//! embeds that blob ([`bake`]), and check every int8 layer against a wide-integer model
-//! ([`reference`](mod@reference)). [`TransformerExport`] is what [`crate::export`] returns inside an
-//! [`ExportedStudent`](crate::ExportedStudent).
+//! embeds that blob ([`bake`]), and check every quantized layer against a wide-integer model
+//! ([`reference`](mod@reference)). [`TransformerExports`] is what [`crate::export`] returns
+//! inside an [`ExportedStudent`](crate::ExportedStudent).
 
 pub mod bake;
 mod fold;
 mod memory;
 mod quantize;
 pub mod reference;
+
+use reference::WideCodes;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests16;
 
 pub use fold::{FloatBlock, FloatNorm, FoldedTransformer};
 pub use quantize::{
@@ -29,7 +34,7 @@ use frmd_core::policy::{F32TransformerNetwork, Network, PolicyDims};
 use frmd_formats::calibration::CalibrationSet;
 use frmd_formats::checkpoint::{Checkpoint, Normalization};
 
-use crate::backbone::{ExportOptions, ExportedNetwork};
+use crate::backbone::{Activations, ExportOptions, ExportedNetwork};
 use crate::host::HostScratch;
 use crate::memory::MemoryFigures;
 use crate::reference::KernelCheck;
@@ -40,26 +45,59 @@ const CHECK_ROWS: usize = 16;
 /// Seed of those rows.
 const CHECK_SEED: u64 = 0x7f3e;
 
-/// An exported transformer student: its calibrated ranges and the int8 model (whose `folded`
-/// field is the f32 reference).
+/// An exported transformer student: its calibrated ranges and the quantized model with `P`
+/// activations (whose `folded` field is the f32 reference).
 #[derive(Clone, Debug)]
-pub struct TransformerExport {
-    /// The calibrated activation parameters.
+pub struct TransformerExport<P: WideCodes = i8> {
+    /// The calibrated (int8) activation parameters.
     pub ranges: TransformerRanges,
-    /// The int8 model.
-    pub model: QuantizedTransformer,
+    /// The quantized model.
+    pub model: QuantizedTransformer<P>,
     /// The folded model's noise tokens back to back (its f32 network's).
     noise_tokens: Vec<f32>,
 }
 
+/// An exported transformer student of either activation precision.
+#[derive(Clone, Debug)]
+pub enum TransformerExports {
+    /// int8 activations.
+    Int8(TransformerExport<i8>),
+    /// int16 activations.
+    Int16(TransformerExport<i16>),
+}
+
+impl TransformerExports {
+    /// The one that is exported.
+    pub(crate) fn get(&self) -> &dyn ExportedNetwork {
+        match self {
+            TransformerExports::Int8(transformer) => transformer,
+            TransformerExports::Int16(transformer) => transformer,
+        }
+    }
+}
+
 /// Folds `checkpoint` (per-step noise tokens), calibrates on `set` with the transformer probes and
-/// quantizes. `options.balance_inputs` and `options.input_precision` do not apply (each input
-/// layer has its own scale).
+/// quantizes with `activations`. `options.balance_inputs` and `options.input_precision` do not
+/// apply (each input layer has its own scale); `options.activation_headroom` widens the int16
+/// ranges as it does for the MLP.
 pub(crate) fn export(
     checkpoint: &Checkpoint,
     options: &ExportOptions,
+    activations: Activations,
     set: &CalibrationSet,
-) -> anyhow::Result<TransformerExport> {
+) -> anyhow::Result<TransformerExports> {
+    Ok(match activations {
+        Activations::Int8 => TransformerExports::Int8(export_as(checkpoint, options, set)?),
+        Activations::Int16 => TransformerExports::Int16(export_as(checkpoint, options, set)?),
+    })
+}
+
+/// [`export`] with `P` activations.
+fn export_as<P: WideCodes>(
+    checkpoint: &Checkpoint,
+    options: &ExportOptions,
+    set: &CalibrationSet,
+) -> anyhow::Result<TransformerExport<P>> {
     if let Some(rounding) = options
         .weight_rounding
         .filter(|r| *r != WeightRounding::Nearest)
@@ -68,7 +106,7 @@ pub(crate) fn export(
     }
     let folded = FoldedTransformer::new(checkpoint, options.steps)?;
     let ranges = calibrate(&folded, set, options.ranges)?;
-    let model = quantize(&folded, &ranges)?;
+    let model = quantize::<P>(&folded, &ranges, options.activation_headroom)?;
     Ok(TransformerExport {
         noise_tokens: folded.flat_noise_tokens(),
         ranges,
@@ -76,7 +114,7 @@ pub(crate) fn export(
     })
 }
 
-impl ExportedNetwork for TransformerExport {
+impl<P: WideCodes> ExportedNetwork for TransformerExport<P> {
     fn dims(&self) -> PolicyDims {
         self.model.dims()
     }
@@ -118,8 +156,8 @@ impl ExportedNetwork for TransformerExport {
         })
     }
 
-    /// Every int8 linear layer on random and edge rows (its own inputs: the model inputs do not
-    /// reach the inner layers as int8 rows).
+    /// Every quantized linear layer on random and edge rows (its own inputs: the model inputs do
+    /// not reach the inner layers as code rows).
     fn check_kernels(&self, _: &[Vec<f32>]) -> anyhow::Result<KernelCheck> {
         reference::check_layers(&self.model, CHECK_ROWS, CHECK_SEED)
     }

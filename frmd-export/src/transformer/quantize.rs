@@ -2,25 +2,30 @@
 //! [`FoldedTransformer`] into an owned [`QuantizedTransformer`].
 //!
 //! Recipe (docs/design.md section 5, transformer-lite): every linear layer gets per-channel symmetric
-//! int8 weights and an int32 bias at `input_scale * weight_scale` with the input zero point folded
-//! ([`crate::calibrate::quantize_weights`], [`crate::calibrate::int_bias`]); its input is
-//! quantized per tensor with the range of the probe that feeds it (`Trajectory` -> `traj_in`,
-//! `Condition` -> `cond_in`, `Norm1` -> `qkv`, `Attention` -> `proj`, `Norm2` -> `fc1`, `Gelu` ->
-//! `fc2`, `FinalNorm` -> `head`). `fc1` is requantized (Q31 multiplier + shift) to the `Fc1`
-//! range, GELU is a 256-entry table from the `Fc1` to the `Gelu` parameters; the residual stream,
-//! LayerNorms, attention and noise tokens stay f32.
+//! int8 weights and a bias at `input_scale * weight_scale` with the input zero point folded
+//! ([`crate::calibrate::quantize_weights`], [`ExportPrecision::bias`]); its input is quantized
+//! per tensor with the range of the probe that feeds it (`Trajectory` -> `traj_in`, `Condition`
+//! -> `cond_in`, `Norm1` -> `qkv`, `Attention` -> `proj`, `Norm2` -> `fc1`, `Gelu` -> `fc2`,
+//! `FinalNorm` -> `head`). `fc1` is requantized (multiplier + shift) to the `Fc1` range, GELU is a
+//! table from the `Fc1` to the `Gelu` parameters; the residual stream, LayerNorms, attention and
+//! noise tokens stay f32. With int8 activations (`P = i8`) the parameters are the calibrated
+//! asymmetric ones, the biases int32 and the table has 256 entries; with int16 activations
+//! (`P = i16`, the 16x8 scheme) every quantization point is symmetric int16 over its calibrated
+//! range widened by the activation headroom ([`ExportPrecision::activation`]), the biases int64
+//! and the table interpolated, exactly as the MLP's int16 export does.
 
 use super::fold::{run_on_input, FloatNorm, FoldedTransformer};
-use crate::calibrate::{check_rows, int_bias, quantize_weights, RangeMethod, Recorder};
+use crate::calibrate::{check_rows, quantize_weights, RangeMethod, Recorder};
 use crate::fold::FloatLayer;
-use anyhow::Context;
+use crate::mlp::ExportPrecision;
+use anyhow::{bail, Context};
 use frmd_core::blob::{
     encode_transformer, transformer_encoded_len, BlobError, TransformerBlobParts,
 };
-use frmd_core::kernels::{gelu_sigmoid, FcRequant, FullyConnected, Lut8};
+use frmd_core::kernels::{gelu_sigmoid, FcRequant, FullyConnected};
 use frmd_core::model::linear::{Int8Linear, QuantizedLinear as LinearView, RequantizedLinear};
 use frmd_core::model::transformer::{
-    Int8Block, Int8FeedForward, Int8Transformer, TokenLinear, TransformerProbe,
+    QuantBlock, QuantFeedForward, QuantTransformer, TokenLinear, TransformerProbe,
 };
 use frmd_core::policy::PolicyDims;
 use frmd_core::quant::{requantization_multiplier, QuantParams};
@@ -94,10 +99,11 @@ pub fn calibrate(
     })
 }
 
-/// An owned int8 linear layer with f32 input and output (frmd-core's `QuantizedLinear`).
+/// An owned int8-weight linear layer with f32 input and output and `P` activation codes
+/// (frmd-core's `QuantizedLinear`).
 #[derive(Clone, Debug, PartialEq)]
-pub struct QuantizedLinear {
-    /// Quantization of the f32 input.
+pub struct QuantizedLinear<P: ExportPrecision = i8> {
+    /// Quantization of the f32 input (symmetric for int16).
     pub input: QuantParams,
     /// Input width.
     pub in_features: usize,
@@ -107,17 +113,17 @@ pub struct QuantizedLinear {
     pub weights: Vec<i8>,
     /// Per output channel.
     pub weight_scales: Vec<f32>,
-    /// int32 at `input.scale * weight_scale`, input zero point folded.
-    pub bias: Vec<i32>,
+    /// At `input.scale * weight_scale`, input zero point folded (int32, or int64 for int16).
+    pub bias: Vec<P::Acc>,
     /// `input.scale * weight_scale` per channel.
     pub output_scales: Vec<f32>,
 }
 
-impl QuantizedLinear {
+impl<P: ExportPrecision> QuantizedLinear<P> {
     /// Quantizes `layer` for inputs with parameters `input`.
     pub fn new(layer: &FloatLayer, input: QuantParams) -> anyhow::Result<Self> {
         let q = quantize_weights(layer)?;
-        let bias = int_bias(&layer.bias, &q, input, layer.in_features)?;
+        let bias = P::bias(&layer.bias, &q, input, layer.in_features)?;
         let output_scales = q
             .scales
             .iter()
@@ -134,8 +140,8 @@ impl QuantizedLinear {
         })
     }
 
-    /// frmd-core's int8 fully connected layer over these weights.
-    pub fn fc(&self) -> FullyConnected<'_> {
+    /// frmd-core's fully connected layer over these weights.
+    pub fn fc(&self) -> FullyConnected<'_, P::Acc> {
         FullyConnected::new(
             self.in_features,
             self.out_features,
@@ -145,7 +151,7 @@ impl QuantizedLinear {
     }
 
     /// frmd-core's view of the layer (f32 in, f32 out).
-    pub fn view(&self) -> LinearView<'_> {
+    pub fn view(&self) -> LinearView<'_, P> {
         LinearView {
             input: self.input,
             linear: Int8Linear {
@@ -158,81 +164,95 @@ impl QuantizedLinear {
 
 /// One quantized block.
 #[derive(Clone, Debug, PartialEq)]
-pub struct QuantizedBlock {
+pub struct QuantizedBlock<P: ExportPrecision = i8> {
     /// LayerNorm before attention (f32).
     pub norm1: FloatNorm,
     /// Query, key and value projection.
-    pub qkv: QuantizedLinear,
+    pub qkv: QuantizedLinear<P>,
     /// Attention output projection.
-    pub proj: QuantizedLinear,
+    pub proj: QuantizedLinear<P>,
     /// LayerNorm before the feed-forward (f32).
     pub norm2: FloatNorm,
-    /// Feed-forward expansion, requantized to int8 for the GELU table.
-    pub fc1: QuantizedLinear,
+    /// Feed-forward expansion, requantized to `P` codes for the GELU table.
+    pub fc1: QuantizedLinear<P>,
     /// Parameters of the `fc1` output (GELU table input).
     pub fc1_output: QuantParams,
-    /// Per-channel Q31 requantization of `fc1` to `fc1_output`.
+    /// Per-channel requantization multipliers of `fc1` to `fc1_output`.
     pub fc1_multipliers: Vec<i32>,
     /// Per-channel shifts of that requantization.
     pub fc1_shifts: Vec<i32>,
     /// GELU from the `fc1` output parameters to the `fc2` input parameters.
-    pub gelu: Lut8,
+    pub gelu: P::Table,
     /// Feed-forward contraction.
-    pub fc2: QuantizedLinear,
+    pub fc2: QuantizedLinear<P>,
 }
 
-/// The owned int8 transformer plus everything the policy needs around it.
+/// The owned quantized transformer (int8 weights, `P` activations) plus everything the policy
+/// needs around it.
 #[derive(Clone, Debug)]
-pub struct QuantizedTransformer {
+pub struct QuantizedTransformer<P: ExportPrecision = i8> {
     /// The f32 model it was quantized from (norms, tokens, positions stay f32).
     pub folded: FoldedTransformer,
     /// Trajectory token embedding.
-    pub traj_in: QuantizedLinear,
+    pub traj_in: QuantizedLinear<P>,
     /// Condition token embedding.
-    pub cond_in: QuantizedLinear,
+    pub cond_in: QuantizedLinear<P>,
     /// The blocks.
-    pub blocks: Vec<QuantizedBlock>,
+    pub blocks: Vec<QuantizedBlock<P>>,
     /// Output layer.
-    pub head: QuantizedLinear,
+    pub head: QuantizedLinear<P>,
 }
 
-/// Quantizes `model` with the calibrated `ranges`.
-pub fn quantize(
+/// Quantizes `model` with the calibrated `ranges`, with `P` activations; `headroom` (>= 1)
+/// widens every activation range where `P` affords it (int16).
+pub fn quantize<P: ExportPrecision>(
     model: &FoldedTransformer,
     ranges: &TransformerRanges,
-) -> anyhow::Result<QuantizedTransformer> {
-    use TransformerProbe as P;
+    headroom: f32,
+) -> anyhow::Result<QuantizedTransformer<P>> {
+    use TransformerProbe as T;
+    let params = |probe: TransformerProbe| -> anyhow::Result<QuantParams> {
+        P::activation(ranges.get(probe)?, headroom)
+            .with_context(|| format!("activation parameters of {probe:?}"))
+    };
     let blocks = model
         .blocks
         .iter()
         .enumerate()
         .map(|(layer, b)| {
             let context = || format!("block {layer}");
-            let fc1 = QuantizedLinear::new(&b.fc1, ranges.get(P::Norm2 { layer })?)
+            let fc1 = QuantizedLinear::<P>::new(&b.fc1, params(T::Norm2 { layer })?)
                 .with_context(context)?;
-            let fc1_output = ranges.get(P::Fc1 { layer })?;
-            let gelu_output = ranges.get(P::Gelu { layer })?;
+            let fc1_output = params(T::Fc1 { layer })?;
+            let gelu_output = params(T::Gelu { layer })?;
             let (mut fc1_multipliers, mut fc1_shifts) = (Vec::new(), Vec::new());
             for (o, w) in fc1.weight_scales.iter().enumerate() {
                 let (m, s) = requantization_multiplier(fc1.input.scale, *w, fc1_output.scale)
                     .with_context(|| {
                         format!("block {layer} fc1 channel {o}: requantization multiplier")
                     })?;
+                if !(P::SHIFT_MIN..=P::SHIFT_MAX).contains(&s) {
+                    bail!(
+                        "block {layer} fc1 channel {o}: requantization shift {s} outside {}..={}",
+                        P::SHIFT_MIN,
+                        P::SHIFT_MAX
+                    );
+                }
                 fc1_multipliers.push(m);
                 fc1_shifts.push(s);
             }
             Ok(QuantizedBlock {
                 norm1: b.norm1.clone(),
-                qkv: QuantizedLinear::new(&b.qkv, ranges.get(P::Norm1 { layer })?)
+                qkv: QuantizedLinear::new(&b.qkv, params(T::Norm1 { layer })?)
                     .with_context(context)?,
-                proj: QuantizedLinear::new(&b.proj, ranges.get(P::Attention { layer })?)
+                proj: QuantizedLinear::new(&b.proj, params(T::Attention { layer })?)
                     .with_context(context)?,
                 norm2: b.norm2.clone(),
                 fc1,
                 fc1_output,
                 fc1_multipliers,
                 fc1_shifts,
-                gelu: Lut8::build(gelu_sigmoid, fc1_output, gelu_output)
+                gelu: P::activation_table(gelu_sigmoid, fc1_output, gelu_output)
                     .with_context(|| format!("block {layer} GELU table"))?,
                 fc2: QuantizedLinear::new(&b.fc2, gelu_output).with_context(context)?,
             })
@@ -240,31 +260,29 @@ pub fn quantize(
         .collect::<anyhow::Result<Vec<_>>>()?;
     let quantized = QuantizedTransformer {
         folded: model.clone(),
-        traj_in: QuantizedLinear::new(&model.traj_in, ranges.get(P::Trajectory)?)
-            .context("traj_in")?,
-        cond_in: QuantizedLinear::new(&model.cond_in, ranges.get(P::Condition)?)
-            .context("cond_in")?,
+        traj_in: QuantizedLinear::new(&model.traj_in, params(T::Trajectory)?).context("traj_in")?,
+        cond_in: QuantizedLinear::new(&model.cond_in, params(T::Condition)?).context("cond_in")?,
         blocks,
-        head: QuantizedLinear::new(&model.head, ranges.get(P::FinalNorm)?).context("head")?,
+        head: QuantizedLinear::new(&model.head, params(T::FinalNorm)?).context("head")?,
     };
     quantized
-        .view(&quantized.int8_blocks(), 0)?
+        .view(&quantized.quant_blocks(), 0)?
         .validate()
         .context("quantized transformer")?;
     Ok(quantized)
 }
 
-impl QuantizedTransformer {
+impl<P: ExportPrecision> QuantizedTransformer<P> {
     /// frmd-core block views (pass to [`Self::view`]).
-    pub fn int8_blocks(&self) -> Vec<Int8Block<'_>> {
+    pub fn quant_blocks(&self) -> Vec<QuantBlock<'_, P>> {
         self.blocks
             .iter()
-            .map(|b| Int8Block {
+            .map(|b| QuantBlock {
                 norm1: b.norm1.view(),
                 qkv: b.qkv.view(),
                 proj: b.proj.view(),
                 norm2: b.norm2.view(),
-                feed_forward: Int8FeedForward {
+                feed_forward: QuantFeedForward {
                     input: b.fc1.input,
                     fc1: RequantizedLinear {
                         fc: b.fc1.fc(),
@@ -272,10 +290,10 @@ impl QuantizedTransformer {
                             multipliers: &b.fc1_multipliers,
                             shifts: &b.fc1_shifts,
                             output_zero_point: b.fc1_output.zero_point,
-                            activation_min: i8::MIN,
-                            activation_max: i8::MAX,
+                            activation_min: P::MIN,
+                            activation_max: P::MAX,
                         },
-                        activation: Some(&b.gelu.table),
+                        activation: Some(&b.gelu),
                     },
                     fc2: b.fc2.view(),
                 },
@@ -283,21 +301,21 @@ impl QuantizedTransformer {
             .collect()
     }
 
-    /// frmd-core's int8 transformer with step `step`'s noise token.
+    /// frmd-core's quantized transformer with step `step`'s noise token.
     pub fn view<'a>(
         &'a self,
-        blocks: &'a [Int8Block<'a>],
+        blocks: &'a [QuantBlock<'a, P>],
         step: usize,
-    ) -> anyhow::Result<Int8Transformer<'a>> {
+    ) -> anyhow::Result<QuantTransformer<'a, P>> {
         let f = &self.folded;
         let noise_token = f
             .noise_tokens
             .get(step)
             .with_context(|| format!("step index {step} out of range"))?;
-        Ok(Int8Transformer {
+        Ok(QuantTransformer {
             shape: f.shape,
-            traj_in: TokenLinear::Int8(self.traj_in.view()),
-            cond_in: TokenLinear::Int8(self.cond_in.view()),
+            traj_in: TokenLinear::Quantized(self.traj_in.view()),
+            cond_in: TokenLinear::Quantized(self.cond_in.view()),
             noise_token,
             positions: &f.positions,
             blocks,
@@ -306,19 +324,20 @@ impl QuantizedTransformer {
         })
     }
 
-    /// Runs step `step` on the standard-layout model `input` through frmd-core's int8 path.
+    /// Runs step `step` on the standard-layout model `input` through frmd-core's quantized path.
     pub fn forward(&self, step: usize, input: &[f32]) -> anyhow::Result<Vec<f32>> {
-        let blocks = self.int8_blocks();
+        let blocks = self.quant_blocks();
         let model = self.view(&blocks, step)?;
         run_on_input(
             &model.shape,
             input,
-            "int8 transformer forward",
+            &format!("int{} transformer forward", P::BITS),
             |t, c, out, scratch| model.forward(t, c, out, scratch),
         )
     }
 
-    /// The int8 consistency sampler (same steps and decode as [`FoldedTransformer::sample`]).
+    /// The quantized consistency sampler (same steps and decode as
+    /// [`FoldedTransformer::sample`]).
     pub fn sample(&self, cond: &[f32], noise: &[f32]) -> anyhow::Result<Vec<f32>> {
         self.folded
             .base
@@ -342,7 +361,7 @@ impl QuantizedTransformer {
     /// [`frmd_core::blob::transformer::MAX_BLOCKS`] blocks, sizes beyond u32). The loader checks
     /// every shape.
     pub fn blob(&self, norm: &Normalization) -> Result<Vec<u8>, BlobError> {
-        let blocks = self.int8_blocks();
+        let blocks = self.quant_blocks();
         let noise_tokens = self.folded.flat_noise_tokens();
         let parts = TransformerBlobParts {
             config: self.folded.config(norm),

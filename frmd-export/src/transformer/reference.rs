@@ -1,73 +1,118 @@
-//! Check (d) of docs/design.md section 6 for an exported transformer: every int8 linear layer of the
-//! model (`traj_in`, `cond_in`, each block's `qkv`, `proj`, `fc1`, `fc2`, and `head`) run by
-//! frmd-core's [`frmd_core::kernels::FullyConnected`] against an independent wide-integer model
-//! with the exported weights: i64 dot products plus the int32 bias; for `fc1` also the Q31
-//! requantization (the i128 model `frmd_core::quant::reference::requantize`) and the GELU table
-//! lookup. Inputs: random int8 rows and edge rows (all -128, all 127, all at the layer's input
-//! zero point, alternating -128 / 127).
+//! Check (d) of docs/design.md section 6 for an exported transformer: every quantized linear
+//! layer of the model (`traj_in`, `cond_in`, each block's `qkv`, `proj`, `fc1`, `fc2`, and `head`)
+//! run by frmd-core's [`frmd_core::kernels::FullyConnected`] against an independent wide-integer
+//! model with the exported weights: i64 dot products plus the bias; for `fc1` also the
+//! requantization (the i128 models `frmd_core::quant::reference::requantize` for int8 and
+//! `requantize16` for int16 codes) and the GELU table (a direct index, or the slope form of the
+//! interpolation for int16). Inputs: random code rows and edge rows (all at the smallest code,
+//! all at the largest, all at the layer's input zero point, alternating smallest / largest).
 //!
 //! The f32 parts of the transformer (LayerNorm, attention, residual) are not integer kernels and
 //! are covered by check (a)/(b) instead.
 
 use super::quantize::{QuantizedLinear, QuantizedTransformer};
+use crate::mlp::ExportPrecision;
 use crate::reference::KernelCheck;
 use anyhow::Context;
 use frmd_core::kernels::FcRequant;
 use frmd_core::quant::reference;
 use frmd_core::rng::Rng;
 
-fn wide_accumulators(layer: &QuantizedLinear, input: &[i8]) -> Vec<i64> {
+/// The code-width-dependent parts of the wide-integer model.
+pub trait WideCodes: ExportPrecision {
+    /// A uniformly random code.
+    fn random(rng: &mut Rng) -> Self;
+    /// The code of input zero point `zero_point` (clamped to the code range).
+    fn zero(zero_point: i32) -> Self;
+    /// The i128 model of the requantization of the exact accumulator `acc` (full code range).
+    fn wide_requantize(acc: i128, multiplier: i32, shift: i32, zero_point: i32) -> Self;
+    /// The table's value at `code`, computed from its entries.
+    fn wide_lookup(table: &Self::Table, code: Self) -> Self;
+}
+
+impl WideCodes for i8 {
+    fn random(rng: &mut Rng) -> i8 {
+        rng.next_u32().to_le_bytes()[0] as i8
+    }
+    fn zero(zero_point: i32) -> i8 {
+        zero_point.clamp(-128, 127) as i8
+    }
+    /// int32 accumulators wrap: the model takes the low 32 bits, as the definition does.
+    fn wide_requantize(acc: i128, multiplier: i32, shift: i32, zero_point: i32) -> i8 {
+        reference::requantize(acc as i32, multiplier, shift, zero_point, i8::MIN, i8::MAX)
+    }
+    fn wide_lookup(table: &[i8; 256], code: i8) -> i8 {
+        table[(i32::from(code) + 128) as usize]
+    }
+}
+
+impl WideCodes for i16 {
+    fn random(rng: &mut Rng) -> i16 {
+        rng.next_u32() as u16 as i16
+    }
+    fn zero(zero_point: i32) -> i16 {
+        zero_point.clamp(-32768, 32767) as i16
+    }
+    fn wide_requantize(acc: i128, multiplier: i32, shift: i32, _zero_point: i32) -> i16 {
+        reference::requantize16(acc, multiplier, shift, i16::MIN, i16::MAX)
+    }
+    fn wide_lookup(table: &[i16; 513], code: i16) -> i16 {
+        reference::lookup16(table, code).unwrap_or(i16::MIN)
+    }
+}
+
+/// The exact accumulators (i128: no wrap for any bias).
+fn wide_accumulators<P: WideCodes>(layer: &QuantizedLinear<P>, input: &[P]) -> Vec<i128> {
     layer
         .weights
         .chunks_exact(layer.in_features)
         .zip(&layer.bias)
         .map(|(row, bias)| {
-            i64::from(*bias)
+            i128::from(Into::<i64>::into(*bias))
                 + row
                     .iter()
                     .zip(input)
-                    .map(|(w, x)| i64::from(*w) * i64::from(*x))
-                    .sum::<i64>()
+                    .map(|(w, x)| i128::from(*w) * i128::from(Into::<i16>::into(*x)))
+                    .sum::<i128>()
         })
         .collect()
 }
 
-fn input_rows(
+fn input_rows<P: WideCodes>(
     in_features: usize,
     zero_point: i32,
     random_rows: usize,
     rng: &mut Rng,
-) -> Vec<Vec<i8>> {
-    let zero = zero_point.clamp(-128, 127) as i8;
+) -> Vec<Vec<P>> {
     let mut rows = vec![
-        vec![i8::MIN; in_features],
-        vec![i8::MAX; in_features],
-        vec![zero; in_features],
+        vec![P::MIN; in_features],
+        vec![P::MAX; in_features],
+        vec![P::zero(zero_point); in_features],
     ];
     rows.push(
         (0..in_features)
-            .map(|i| if i % 2 == 0 { i8::MIN } else { i8::MAX })
+            .map(|i| if i % 2 == 0 { P::MIN } else { P::MAX })
             .collect(),
     );
     for _ in 0..random_rows {
-        rows.push(
-            (0..in_features)
-                .map(|_| rng.next_u32().to_le_bytes()[0] as i8)
-                .collect(),
-        );
+        rows.push((0..in_features).map(|_| P::random(rng)).collect());
     }
     rows
 }
 
 /// Runs the check with `random_rows` random input rows per layer (plus 4 edge rows).
-pub fn check_layers(
-    model: &QuantizedTransformer,
+pub fn check_layers<P: WideCodes>(
+    model: &QuantizedTransformer<P>,
     random_rows: usize,
     seed: u64,
 ) -> anyhow::Result<KernelCheck> {
-    let mut check = KernelCheck::new("int8 transformer layer mismatches vs wide model (every int8 linear layer, fc1 requantization + GELU table)");
+    let mut check = KernelCheck::new(&format!(
+        "int{} transformer layer mismatches vs wide model (every quantized linear layer, fc1 \
+         requantization + GELU table)",
+        P::BITS
+    ));
     let mut rng = Rng::new(seed);
-    let mut layers: Vec<(String, &QuantizedLinear)> = vec![
+    let mut layers: Vec<(String, &QuantizedLinear<P>)> = vec![
         ("traj_in".into(), &model.traj_in),
         ("cond_in".into(), &model.cond_in),
     ];
@@ -82,20 +127,21 @@ pub fn check_layers(
     layers.push(("head".into(), &model.head));
     for (name, layer) in &layers {
         let fc = layer.fc();
-        let mut acc = vec![0i32; layer.out_features];
-        for (r, input) in input_rows(
+        let mut acc = vec![<P::Acc>::default(); layer.out_features];
+        let rows = input_rows::<P>(
             layer.in_features,
             layer.input.zero_point,
             random_rows,
             &mut rng,
-        )
-        .iter()
-        .enumerate()
-        {
-            fc.forward_accumulators(input, &mut acc)
+        );
+        for (r, input) in rows.iter().enumerate() {
+            fc.accumulate(P::layer_input(input), &mut acc)
                 .with_context(|| name.clone())?;
             let want = wide_accumulators(layer, input);
-            let got: Vec<i64> = acc.iter().map(|&a| i64::from(a)).collect();
+            let got: Vec<i128> = acc
+                .iter()
+                .map(|&a| i128::from(Into::<i64>::into(a)))
+                .collect();
             check.record(got == want, || {
                 format!(
                     "{name} row {r}: first differing accumulator {:?}",
@@ -104,47 +150,44 @@ pub fn check_layers(
             });
         }
     }
-    // fc1: requantized int8 outputs and the GELU table.
+    // fc1: requantized codes and the GELU table.
     for (i, b) in model.blocks.iter().enumerate() {
         let requant = FcRequant {
             multipliers: &b.fc1_multipliers,
             shifts: &b.fc1_shifts,
             output_zero_point: b.fc1_output.zero_point,
-            activation_min: i8::MIN,
-            activation_max: i8::MAX,
+            activation_min: P::MIN,
+            activation_max: P::MAX,
         };
-        let mut out = vec![0i8; b.fc1.out_features];
-        for (r, input) in input_rows(
+        let mut out = vec![P::ZERO; b.fc1.out_features];
+        let mut gelu = vec![P::ZERO; b.fc1.out_features];
+        let rows = input_rows::<P>(
             b.fc1.in_features,
             b.fc1.input.zero_point,
             random_rows,
             &mut rng,
-        )
-        .iter()
-        .enumerate()
-        {
-            b.fc1
-                .fc()
-                .forward(&requant, input, &mut out)
-                .with_context(|| format!("block {i} fc1"))?;
-            let mut gelu = out.clone();
-            b.gelu.apply_in_place(&mut gelu);
-            let want: Vec<(i8, i8)> = wide_accumulators(&b.fc1, input)
+        );
+        for (r, input) in rows.iter().enumerate() {
+            let fc = b.fc1.fc();
+            let what = || format!("block {i} fc1");
+            fc.forward_activated(&requant, None, P::layer_input(input), &mut out)
+                .with_context(what)?;
+            fc.forward_activated(&requant, Some(&b.gelu), P::layer_input(input), &mut gelu)
+                .with_context(what)?;
+            let want: Vec<(P, P)> = wide_accumulators(&b.fc1, input)
                 .iter()
                 .enumerate()
                 .map(|(o, &acc)| {
-                    let q = reference::requantize(
-                        acc as i32,
+                    let q = P::wide_requantize(
+                        acc,
                         b.fc1_multipliers[o],
                         b.fc1_shifts[o],
                         b.fc1_output.zero_point,
-                        i8::MIN,
-                        i8::MAX,
                     );
-                    (q, b.gelu.table[(i32::from(q) + 128) as usize])
+                    (q, P::wide_lookup(&b.gelu, q))
                 })
                 .collect();
-            let got: Vec<(i8, i8)> = out.iter().copied().zip(gelu).collect();
+            let got: Vec<(P, P)> = out.iter().copied().zip(gelu.iter().copied()).collect();
             check.record(got == want, || {
                 format!(
                     "block {i} fc1 requantize/GELU row {r}: first differing channel {:?}",

@@ -1,5 +1,6 @@
 //! End-to-end: a randomly initialized transformer-lite checkpoint written with the safetensors
-//! crate is read, folded, calibrated, quantized and sampled by the int8 and f32 paths.
+//! crate is read, folded, calibrated, quantized and sampled by the int8 and f32 paths (int16
+//! activations: `tests16.rs`).
 
 use super::*;
 use crate::calibrate::RangeMethod;
@@ -14,7 +15,7 @@ use frmd_formats::checkpoint::{
 use frmd_test_support::checkpoint::{scratch_dir, unit_normalization, Init};
 use std::path::PathBuf;
 
-fn lite_config() -> ModelConfig {
+pub(super) fn lite_config() -> ModelConfig {
     ModelConfig {
         obs_dim: 5,
         history: 2,
@@ -29,7 +30,7 @@ fn lite_config() -> ModelConfig {
 
 /// A student checkpoint of `config` with random weights drawn like a trained transformer's, in
 /// a fresh temporary directory.
-fn write_checkpoint(name: &str, config: &ModelConfig, seed: u64) -> PathBuf {
+pub(super) fn write_checkpoint(name: &str, config: &ModelConfig, seed: u64) -> PathBuf {
     let dir = scratch_dir(&format!("tfexport-{name}"));
     let norm = unit_normalization(config.obs_dim, config.action_dim);
     frmd_test_support::checkpoint::write_checkpoint(
@@ -43,13 +44,13 @@ fn write_checkpoint(name: &str, config: &ModelConfig, seed: u64) -> PathBuf {
     dir
 }
 
-fn calibration_set(config: &ModelConfig, rows: usize, seed: u64) -> CalibrationSet {
+pub(super) fn calibration_set(config: &ModelConfig, rows: usize, seed: u64) -> CalibrationSet {
     frmd_test_support::checkpoint::calibration_rows(config, rows, seed, seed)
 }
 
 /// Absolute int8-vs-f32 chunk errors and the spread of the f32 chunks.
-struct ChunkError {
-    max: f32,
+pub(super) struct ChunkError {
+    pub(super) max: f32,
     sum: f64,
     count: usize,
     lo: f32,
@@ -57,7 +58,7 @@ struct ChunkError {
 }
 
 impl ChunkError {
-    fn new() -> Self {
+    pub(super) fn new() -> Self {
         ChunkError {
             max: 0.0,
             sum: 0.0,
@@ -67,7 +68,7 @@ impl ChunkError {
         }
     }
 
-    fn add(&mut self, got: f32, want: f32) {
+    pub(super) fn add(&mut self, got: f32, want: f32) {
         self.max = self.max.max((got - want).abs());
         self.sum += f64::from((got - want).abs());
         self.count += 1;
@@ -77,9 +78,14 @@ impl ChunkError {
 
     /// Prints the errors of `what` (in `units`) and asserts the int8 chunks track the f32 ones:
     /// max error within 2.5 % and mean error within 0.75 % of the f32 spread.
-    fn assert_tracks(&self, what: &str, units: &str) {
+    /// Mean absolute error.
+    pub(super) fn mean(&self) -> f32 {
+        (self.sum / self.count as f64) as f32
+    }
+
+    pub(super) fn assert_tracks(&self, what: &str, units: &str) {
         let (max, spread) = (self.max, self.hi - self.lo);
-        let mean = (self.sum / self.count as f64) as f32;
+        let mean = self.mean();
         println!("{what}: int8 vs f32 chunk max {max:.5}, mean {mean:.5}, f32 spread {spread:.3} ({units})");
         assert!(spread > 0.1, "f32 chunks are degenerate (spread {spread})");
         assert!(
@@ -94,7 +100,10 @@ impl ChunkError {
 }
 
 /// The int8-vs-f32 chunk errors (normalized action units) over the rows of `set`.
-fn chunk_error(quantized: &QuantizedTransformer, set: &CalibrationSet) -> ChunkError {
+pub(super) fn chunk_error<P: WideCodes>(
+    quantized: &QuantizedTransformer<P>,
+    set: &CalibrationSet,
+) -> ChunkError {
     let f = &quantized.folded;
     let mut error = ChunkError::new();
     for row in 0..set.rows() {
@@ -120,7 +129,7 @@ fn transformer_lite_checkpoint_exports_and_int8_chunk_tracks_f32() {
         let calibration = calibration_set(&config, 32, 5);
         let ranges = calibrate(&folded, &calibration, RangeMethod::MinMax).unwrap();
         assert_eq!(ranges.rows, 32);
-        let quantized = quantize(&folded, &ranges).unwrap();
+        let quantized = quantize::<i8>(&folded, &ranges, 1.0).unwrap();
         let held_out = calibration_set(&config, 16, 99);
         chunk_error(&quantized, &held_out).assert_tracks(
             &format!("transformer-lite, {steps} step(s)"),
@@ -142,10 +151,10 @@ fn adapters_run_the_exported_model_behind_the_network_trait() {
         RangeMethod::MinMax,
     )
     .unwrap();
-    let quantized = quantize(&folded, &ranges).unwrap();
+    let quantized = quantize::<i8>(&folded, &ranges, 1.0).unwrap();
     let tokens = folded.flat_noise_tokens();
     let f32_blocks = folded.f32_blocks();
-    let int8_blocks = quantized.int8_blocks();
+    let int8_blocks = quantized.quant_blocks();
     let mut f32_scratch = Box::new(HostScratch::new());
     let mut int8_scratch = Box::new(HostScratch::new());
     let layout = &folded.base.layout;
@@ -210,7 +219,10 @@ fn refuses_non_transformer_and_non_student_checkpoints() {
 
 type Lite<'a> = frmd_core::blob::LoadedTransformer<'a>;
 
-fn exported_lite(name: &str, steps: usize) -> (QuantizedTransformer, Normalization, PathBuf) {
+pub(super) fn exported_lite(
+    name: &str,
+    steps: usize,
+) -> (QuantizedTransformer, Normalization, PathBuf) {
     let config = lite_config();
     let dir = write_checkpoint(name, &config, 21);
     let ckpt = Checkpoint::read(&dir).unwrap();
@@ -222,7 +234,7 @@ fn exported_lite(name: &str, steps: usize) -> (QuantizedTransformer, Normalizati
     )
     .unwrap();
     (
-        quantize(&folded, &ranges).unwrap(),
+        quantize::<i8>(&folded, &ranges, 1.0).unwrap(),
         ckpt.meta.normalization.clone().unwrap(),
         dir,
     )
@@ -418,7 +430,8 @@ fn transformer_lite_refuses_gptq_rounding_by_name() {
         ..Default::default()
     };
     let calibration = calibration_set(&config, 4, 5);
-    let error = super::export(&Checkpoint::read(&dir).unwrap(), &options, &calibration)
+    let checkpoint = Checkpoint::read(&dir).unwrap();
+    let error = super::export(&checkpoint, &options, Activations::Int8, &calibration)
         .unwrap_err()
         .to_string();
     assert!(

@@ -261,11 +261,8 @@ fn core_policy_rows(cfg: &BenchConfig) -> anyhow::Result<CoreRows> {
     let mut rows = one_step_rows(int8, Int8Policy::f32_twin(&blob, student, "core-f32")?);
     let two_step = Int8Policy::from_blob(export(2, "int8")?.blob(), "int8-2")?;
     rows.push(("frmd-core int8 2-step".to_string(), Box::new(two_step)));
-    // int16 activations exist for the MLP only.
-    if matches!(backbone, BackboneConfig::Mlp { .. }) {
-        let int16 = Int8Policy::from_blob(export(1, "int16")?.blob(), "int16")?;
-        rows.push(("frmd-core int16-act 1-step".to_string(), Box::new(int16)));
-    }
+    let int16 = Int8Policy::from_blob(export(1, "int16")?.blob(), "int16")?;
+    rows.push(("frmd-core int16-act 1-step".to_string(), Box::new(int16)));
     Ok(Ok((rows, backbone, dims)))
 }
 

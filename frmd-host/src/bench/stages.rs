@@ -58,7 +58,9 @@ pub fn with_stages<R>(
     match &loaded {
         LoadedBlob::Mlp(blob) => f(&mut Work::new(blob, loaded.config(), policy, input)?),
         LoadedBlob::Mlp16(blob) => f(&mut Work::new(blob, loaded.config(), policy, input)?),
-        LoadedBlob::Transformer(_) => bail!("the stage breakdown covers MLP students only"),
+        LoadedBlob::Transformer(_) | LoadedBlob::Transformer16(_) => {
+            bail!("the stage breakdown covers MLP students only")
+        }
     }
 }
 

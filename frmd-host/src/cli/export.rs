@@ -40,7 +40,7 @@ pub struct ExportArgs {
     #[arg(long, default_value_t = ExportConfig::default().input_headroom)]
     pub input_headroom: f32,
     /// Hidden activations: int8 (TFLite int8) or int16 (TFLite 16x8: int8 weights, int16
-    /// activations, int64 biases; MLP only, needs the 16-bit input) [default: int16 for an MLP,
+    /// activations, int64 biases; an MLP needs the 16-bit input) [default: int16 for an MLP,
     /// int8 for transformer-lite]
     #[arg(long)]
     pub activations: Option<Activations>,

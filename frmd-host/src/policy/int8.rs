@@ -13,7 +13,7 @@ use anyhow::{bail, Context};
 use frmd_core::blob::{AlignedBlob, BlobNetwork, LoadedBlob};
 use frmd_core::policy::{Network, Noise, PolicyDims};
 use frmd_core::rng::Rng;
-use frmd_export::host::{check_capacity, HostPolicy, HostScratch, MAX_WIDTH};
+use frmd_export::host::{check_capacity, HostPolicy, HostScratch, HostWork, MAX_WIDTH};
 use frmd_export::ExportedStudent;
 use std::path::Path;
 
@@ -59,7 +59,7 @@ self_cell::self_cell!(
 );
 
 /// The firmware's policy over a loaded blob, with the host capacities.
-type BlobPolicy<'a> = HostPolicy<'a, BlobNetwork<'a, MAX_WIDTH, HostScratch>>;
+type BlobPolicy<'a> = HostPolicy<'a, BlobNetwork<'a, MAX_WIDTH, HostWork>>;
 
 self_cell::self_cell!(
     /// A loaded blob and the policy built over it once.
@@ -139,7 +139,7 @@ impl Int8Policy {
     pub fn from_blob(bytes: &[u8], label: &str) -> anyhow::Result<Self> {
         let ready = Ready::try_new(load(bytes)?, |loaded| -> anyhow::Result<_> {
             let blob = loaded.borrow_dependent();
-            let network = blob.network::<MAX_WIDTH, _>(HostScratch::new())?;
+            let network = blob.network::<MAX_WIDTH, _>(HostWork::new())?;
             Ok(HostPolicy::new(blob.config(), network)?)
         })?;
         Ok(Self::new(Runner::Int8(Box::new(ready)), label))
@@ -171,11 +171,7 @@ impl Int8Policy {
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
         let mut policy =
             Self::from_blob(&bytes, "").with_context(|| format!("loading {}", path.display()))?;
-        policy.label = match policy.runner.blob() {
-            LoadedBlob::Mlp16(_) => "int16",
-            LoadedBlob::Mlp(_) | LoadedBlob::Transformer(_) => "int8",
-        }
-        .into();
+        policy.label = format!("int{}", policy.runner.blob().activation_bits());
         Ok(policy)
     }
 

@@ -54,7 +54,7 @@ fn time_embedding_and_head<const TW: usize, const WIDTH: usize, const OUT: usize
                    codes: &mut [i8],
                    acc: &mut [i32],
                    out: &mut [f32]| match layer {
-        TokenLinear::Int8(linear) => {
+        TokenLinear::Quantized(linear) => {
             let codes = codes
                 .get_mut(..input.len())
                 .ok_or(PolicyError::InputWidth)?;

@@ -1,30 +1,32 @@
-//! The parse side of transformer blobs: [`LoadedTransformer`].
+//! The parse side of transformer blobs: [`LoadedQuantTransformer`] ([`LoadedTransformer`] for
+//! int8 activations, [`LoadedTransformer16`] for int16).
 
 use heapless::Vec;
 
 use super::{
-    BlockDesc, LinearDesc, NormDesc, TensorField, TransformerDescriptor, TransformerSection,
-    MAX_BLOCKS, TRANSFORMER_MAGIC,
+    BlockDesc, LinearDesc, NormDesc, TensorField, TransformerActivations, TransformerDescriptor,
+    TransformerSection, MAX_BLOCKS, TRANSFORMER_ACTIVATIONS_SINCE, TRANSFORMER_MAGIC,
 };
 use crate::blob::container::{self, Data};
-use crate::blob::mlp::LUT_LEN;
 use crate::blob::policy_tables::{self, PolicyTables};
 use crate::blob::{BlobError, SectionId};
-use crate::kernels::{FcRequant, FullyConnected};
+use crate::kernels::{FcRequant, FullyConnected, Precision};
 use crate::model::linear::{Int8Linear, QuantizedLinear, RequantizedLinear};
 use crate::model::transformer::{
-    Int8Block, Int8FeedForward, Int8Transformer, LayerNormWeights, Part, TokenLinear,
+    LayerNormWeights, Part, QuantBlock, QuantFeedForward, QuantTransformer, TokenLinear,
     TransformerError, TransformerShape,
 };
 use crate::policy::{
-    InputLayout, Int8TransformerNetwork, PolicyConfig, PolicyDims, PolicyError, StepConstants,
+    InputLayout, PolicyConfig, PolicyDims, PolicyError, StepConstants, TransformerNetwork,
     TransformerWork, STANDARD_SEGMENTS,
 };
 use crate::quant::QuantParams;
 
 /// A validated transformer blob, borrowed: weights, biases, requantization parameters, tables,
 /// scales, norms, positions, noise tokens, normalization and decoder tables stay in the blob; the
-/// steps are copied.
+/// steps are copied. `P` is the activation precision the loader takes: int8
+/// ([`LoadedTransformer`]) or int16 ([`LoadedTransformer16`]); a blob of the other precision is
+/// refused with [`BlobError::ActivationBits`] ([`crate::blob::LoadedBlob`] takes either).
 ///
 /// ```text
 /// let loaded = LoadedTransformer::load(BLOB)?;
@@ -32,17 +34,52 @@ use crate::quant::QuantParams;
 /// let mut policy = Policy::<_, 2, 20, 7, 12, 11, 160>::new(loaded.config(), network)?;
 /// ```
 #[derive(Clone, Debug)]
-pub struct LoadedTransformer<'a> {
+pub struct LoadedQuantTransformer<'a, P: Precision> {
     tables: PolicyTables<'a>,
     layout: InputLayout,
     shape: TransformerShape,
     noise_tokens: &'a [f32],
     positions: &'a [f32],
-    traj_in: QuantizedLinear<'a>,
-    cond_in: QuantizedLinear<'a>,
-    blocks: Vec<Int8Block<'a>, MAX_BLOCKS>,
+    traj_in: QuantizedLinear<'a, P>,
+    cond_in: QuantizedLinear<'a, P>,
+    blocks: Vec<QuantBlock<'a, P>, MAX_BLOCKS>,
     final_norm: LayerNormWeights<'a>,
-    head: QuantizedLinear<'a>,
+    head: QuantizedLinear<'a, P>,
+}
+
+/// The loader of int8-activation transformer blobs.
+pub type LoadedTransformer<'a> = LoadedQuantTransformer<'a, i8>;
+/// The loader of int16-activation transformer blobs (the blob must start 8-byte aligned: its
+/// biases are i64, read in place).
+pub type LoadedTransformer16<'a> = LoadedQuantTransformer<'a, i16>;
+
+/// Bits per activation of a transformer blob: its trailer's, or 8 for a blob older than format 5.
+pub fn transformer_activation_bits(bytes: &[u8]) -> Result<u8, BlobError> {
+    let (_, trailer, _) = parse(bytes, false)?;
+    Ok(bits(trailer))
+}
+
+fn bits(trailer: Option<TransformerActivations>) -> u8 {
+    trailer.map_or(8, |t| t.bits)
+}
+
+fn parse(
+    bytes: &[u8],
+    check_crc: bool,
+) -> Result<
+    (
+        TransformerDescriptor,
+        Option<TransformerActivations>,
+        Data<'_>,
+    ),
+    BlobError,
+> {
+    container::parse_versioned::<TransformerDescriptor, TransformerActivations>(
+        bytes,
+        TRANSFORMER_MAGIC,
+        check_crc,
+        TRANSFORMER_ACTIVATIONS_SINCE,
+    )
 }
 
 fn field(part: Part, field: TensorField) -> SectionId {
@@ -66,15 +103,15 @@ fn quant_params(scale: f32, zero_point: i32, part: Part) -> Result<QuantParams, 
 }
 
 /// Reads a linear layer; lengths are checked against the shape by
-/// [`Int8Transformer::validate`] after loading (named by part).
-fn read_linear<'a>(
+/// [`QuantTransformer::validate`] after loading (named by part).
+fn read_linear<'a, P: Precision>(
     data: &Data<'a>,
     d: &LinearDesc,
     in_features: usize,
     part: Part,
-) -> Result<QuantizedLinear<'a>, BlobError> {
+) -> Result<QuantizedLinear<'a, P>, BlobError> {
     let weights = data.cast::<i8>(d.weights, field(part, TensorField::Weights))?;
-    let bias = data.cast::<i32>(d.bias, field(part, TensorField::Bias))?;
+    let bias = data.cast::<P::Acc>(d.bias, field(part, TensorField::Bias))?;
     let output_scales = data.finite_any(d.scales, field(part, TensorField::Scales))?;
     Ok(QuantizedLinear {
         input: quant_params(d.input_scale, d.input_zero_point, part)?,
@@ -85,15 +122,15 @@ fn read_linear<'a>(
     })
 }
 
-fn read_block<'a>(
+fn read_block<'a, P: Precision>(
     data: &Data<'a>,
     d: &BlockDesc,
     width: usize,
     layer: usize,
-) -> Result<Int8Block<'a>, BlobError> {
+) -> Result<QuantBlock<'a, P>, BlobError> {
     let hidden = width.checked_mul(4).ok_or(BlobError::TooLarge)?;
     let fc1_part = Part::Fc1 { layer };
-    let fc1 = read_linear(data, &d.fc1, width, fc1_part)?;
+    let fc1 = read_linear::<P>(data, &d.fc1, width, fc1_part)?;
     if !fc1.linear.output_scales.is_empty() {
         return Err(BlobError::SectionLength(field(
             fc1_part,
@@ -101,16 +138,15 @@ fn read_block<'a>(
         )));
     }
     let fc2 = read_linear(data, &d.fc2, hidden, Part::Fc2 { layer })?;
-    let table = data.exact::<i8>(d.gelu, Some(LUT_LEN), field(fc1_part, TensorField::Lut))?;
-    let gelu = table
-        .try_into()
-        .map_err(|_| BlobError::SectionLength(field(fc1_part, TensorField::Lut)))?;
-    Ok(Int8Block {
+    let lut = field(fc1_part, TensorField::Lut);
+    let table = data.exact::<P>(d.gelu, Some(P::TABLE_LEN), lut)?;
+    let gelu = P::table(table).ok_or(BlobError::SectionLength(lut))?;
+    Ok(QuantBlock {
         norm1: read_norm(data, &d.norm1, Part::Norm1 { layer })?,
         qkv: read_linear(data, &d.qkv, width, Part::Qkv { layer })?,
         proj: read_linear(data, &d.proj, width, Part::Proj { layer })?,
         norm2: read_norm(data, &d.norm2, Part::Norm2 { layer })?,
-        feed_forward: Int8FeedForward {
+        feed_forward: QuantFeedForward {
             input: fc1.input,
             fc1: RequantizedLinear {
                 fc: fc1.linear.fc,
@@ -121,8 +157,8 @@ fn read_block<'a>(
                     )?,
                     shifts: data.cast::<i32>(d.fc1_shifts, field(fc1_part, TensorField::Shifts))?,
                     output_zero_point: d.fc1_output_zero_point,
-                    activation_min: i8::MIN,
-                    activation_max: i8::MAX,
+                    activation_min: P::MIN,
+                    activation_max: P::MAX,
                 },
                 activation: Some(gelu),
             },
@@ -131,21 +167,26 @@ fn read_block<'a>(
     })
 }
 
-impl<'a> LoadedTransformer<'a> {
-    /// Validates `bytes` (header, CRC, descriptor, sections, shapes, values; the backbone by
-    /// [`Int8Transformer::validate`], reported as [`BlobError::Transformer`]) and borrows it.
-    /// The buffer must start at a 4-byte aligned address.
+impl<'a, P: Precision> LoadedQuantTransformer<'a, P> {
+    /// Validates `bytes` (header, CRC, descriptor, activation bits, sections, shapes, values; the
+    /// backbone by [`QuantTransformer::validate`], reported as [`BlobError::Transformer`]) and
+    /// borrows it. The buffer must start at a 4-byte (int16: 8-byte) aligned address.
     pub fn load(bytes: &'a [u8]) -> Result<Self, BlobError> {
-        let (descriptor, data) =
-            container::parse::<TransformerDescriptor>(bytes, TRANSFORMER_MAGIC, true)?;
-        Self::view(&descriptor, &data)
+        Self::parse_checked(bytes, true)
     }
 
     /// [`Self::load`] without recomputing the CRC, for bytes that passed [`Self::load`] before;
     /// every other check runs.
     pub fn reload(bytes: &'a [u8]) -> Result<Self, BlobError> {
-        let (descriptor, data) =
-            container::parse::<TransformerDescriptor>(bytes, TRANSFORMER_MAGIC, false)?;
+        Self::parse_checked(bytes, false)
+    }
+
+    fn parse_checked(bytes: &'a [u8], check_crc: bool) -> Result<Self, BlobError> {
+        let (descriptor, trailer, data) = parse(bytes, check_crc)?;
+        let found = bits(trailer);
+        if found != P::BITS {
+            return Err(BlobError::ActivationBits { found });
+        }
         Self::view(&descriptor, &data)
     }
 
@@ -236,12 +277,13 @@ impl<'a> LoadedTransformer<'a> {
         self.noise_tokens
     }
 
-    /// The int8 backbone with the first step's noise token (its blocks borrowed from `self`).
-    pub fn model(&self) -> Int8Transformer<'_> {
-        Int8Transformer {
+    /// The quantized backbone with the first step's noise token (its blocks borrowed from
+    /// `self`).
+    pub fn model(&self) -> QuantTransformer<'_, P> {
+        QuantTransformer {
             shape: self.shape,
-            traj_in: TokenLinear::Int8(self.traj_in),
-            cond_in: TokenLinear::Int8(self.cond_in),
+            traj_in: TokenLinear::Quantized(self.traj_in),
+            cond_in: TokenLinear::Quantized(self.cond_in),
             noise_token: self.noise_tokens.get(..self.shape.width).unwrap_or(&[]),
             positions: self.positions,
             blocks: &self.blocks,
@@ -251,11 +293,11 @@ impl<'a> LoadedTransformer<'a> {
     }
 
     /// The policy network with per-step noise tokens, running in `scratch`.
-    pub fn network<S: TransformerWork>(
+    pub fn network<S: TransformerWork<P>>(
         &self,
         scratch: S,
-    ) -> Result<Int8TransformerNetwork<'_, S>, PolicyError> {
-        Int8TransformerNetwork::new(self.model(), &self.layout, self.noise_tokens, scratch)
+    ) -> Result<TransformerNetwork<'_, QuantTransformer<'_, P>, S>, PolicyError> {
+        TransformerNetwork::new(self.model(), &self.layout, self.noise_tokens, scratch)
     }
 
     /// The policy configuration (normalization, sampler) borrowing the blob.

@@ -7,8 +7,10 @@
 //! `[variants][W]`; a step's `noise_variant` selects its token), the positions, `traj_in`,
 //! `cond_in`, per block `norm1`, `qkv`, `proj`, `norm2`, `fc1` (with its multipliers, shifts and
 //! GELU table), `fc2`, then `final_norm` and `head`. Element types: norms, positions, tokens,
-//! scales f32; weights and tables i8; biases, multipliers, shifts i32. The data area ends with its
-//! last section.
+//! scales f32; weights i8; multipliers, shifts i32; biases i32 and tables i8 `[256]` with int8
+//! activations, biases i64 and tables i16 `[LUT16_LEN]` with int16 activations (format 5 on: the
+//! descriptor's [`TransformerActivations`] trailer says which; older blobs are int8). The data
+//! area ends with its last section.
 
 use heapless::Vec;
 use serde::{Deserialize, Serialize};
@@ -16,9 +18,9 @@ use serde::{Deserialize, Serialize};
 use super::container::{self, Section, SectionWriter};
 use super::policy_tables::{self, PolicyHeader, PolicySections};
 use super::BlobError;
-use crate::kernels::FullyConnected;
+use crate::kernels::{FullyConnected, Precision};
 use crate::model::linear::QuantizedLinear;
-use crate::model::transformer::{Int8Block, Int8Transformer, LayerNormWeights, TokenLinear};
+use crate::model::transformer::{LayerNormWeights, QuantBlock, QuantTransformer, TokenLinear};
 use crate::policy::PolicyConfig;
 use crate::quant::QuantParams;
 
@@ -26,6 +28,9 @@ use crate::quant::QuantParams;
 pub const TRANSFORMER_MAGIC: [u8; 4] = *b"FRMT";
 /// Most blocks a transformer blob can hold.
 pub const MAX_BLOCKS: usize = 8;
+/// Format version from which transformer descriptors end with a [`TransformerActivations`]
+/// trailer.
+pub const TRANSFORMER_ACTIVATIONS_SINCE: u16 = 5;
 
 /// A section of a transformer blob: which part, which array (for
 /// [`SectionId::Transformer`](super::SectionId::Transformer)).
@@ -44,7 +49,7 @@ pub struct TransformerSection {
 pub enum TensorField {
     /// i8 weights.
     Weights,
-    /// i32 bias.
+    /// i32 bias (i64 with int16 activations).
     Bias,
     /// f32 dequantization scales.
     Scales,
@@ -52,7 +57,7 @@ pub enum TensorField {
     Multipliers,
     /// i32 shifts.
     Shifts,
-    /// i8 256-entry GELU table.
+    /// GELU table (i8 `[256]`, or i16 `[LUT16_LEN]` with int16 activations).
     Lut,
     /// f32 LayerNorm gamma.
     Gamma,
@@ -71,7 +76,7 @@ pub struct LinearDesc {
     pub input_zero_point: i32,
     /// i8 `[out, in]`.
     pub weights: Section,
-    /// i32 `[out]`.
+    /// i32 `[out]` (i64 with int16 activations).
     pub bias: Section,
     /// f32 `[out]`.
     pub scales: Section,
@@ -86,7 +91,7 @@ pub struct NormDesc {
     pub beta: Section,
 }
 
-/// One block ([`Int8Block`]).
+/// One block ([`QuantBlock`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BlockDesc {
     /// LayerNorm before attention.
@@ -103,9 +108,9 @@ pub struct BlockDesc {
     pub fc1_multipliers: Section,
     /// i32 `[4W]` shifts of `fc1`.
     pub fc1_shifts: Section,
-    /// Zero point of the requantized `fc1` output (GELU table input).
+    /// Zero point of the requantized `fc1` output (GELU table input; 0 for int16).
     pub fc1_output_zero_point: i32,
-    /// i8 `[256]` GELU table.
+    /// GELU table: i8 `[256]`, or i16 `[LUT16_LEN]` knots.
     pub gelu: Section,
     /// `4W -> W`; its input parameters are the GELU output's.
     pub fc2: LinearDesc,
@@ -138,13 +143,21 @@ pub struct TransformerDescriptor {
     pub head: LinearDesc,
 }
 
-/// Everything a transformer blob holds, borrowed.
+/// The trailer of a transformer descriptor (format 5 on; older blobs have int8 activations).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TransformerActivations {
+    /// Bits per activation code: 8 (i32 biases, 256-entry table) or 16 (i64 biases,
+    /// interpolated table).
+    pub bits: u8,
+}
+
+/// Everything a transformer blob holds, borrowed; `P` is the activation precision.
 #[derive(Clone, Copy, Debug)]
-pub struct TransformerBlobParts<'p> {
+pub struct TransformerBlobParts<'p, P: Precision = i8> {
     /// Normalization, steps, decoder tables, layout, control period.
     pub config: PolicyConfig<'p>,
-    /// The int8 backbone (`traj_in` and `cond_in` int8).
-    pub model: Int8Transformer<'p>,
+    /// The quantized backbone (`traj_in` and `cond_in` quantized).
+    pub model: QuantTransformer<'p, P>,
     /// The per-step noise tokens, `W` values each, back to back.
     pub noise_tokens: &'p [f32],
 }
@@ -153,26 +166,26 @@ fn small(value: usize) -> Result<u32, BlobError> {
     u32::try_from(value).map_err(|_| BlobError::TooLarge)
 }
 
-fn write_linear(
+fn write_linear<P: Precision>(
     writer: &mut SectionWriter<'_>,
     input: QuantParams,
-    fc: &FullyConnected<'_>,
+    fc: &FullyConnected<'_, P::Acc>,
     scales: &[f32],
 ) -> Result<LinearDesc, BlobError> {
     Ok(LinearDesc {
         input_scale: input.scale,
         input_zero_point: input.zero_point,
         weights: writer.i8s(fc.weights.iter())?,
-        bias: writer.i32s(fc.bias)?,
+        bias: writer.ints([fc.bias].into_iter())?,
         scales: writer.f32s(scales.iter())?,
     })
 }
 
-fn write_quantized(
+fn write_quantized<P: Precision>(
     writer: &mut SectionWriter<'_>,
-    layer: &QuantizedLinear<'_>,
+    layer: &QuantizedLinear<'_, P>,
 ) -> Result<LinearDesc, BlobError> {
-    write_linear(
+    write_linear::<P>(
         writer,
         layer.input,
         &layer.linear.fc,
@@ -180,13 +193,13 @@ fn write_quantized(
     )
 }
 
-fn write_input(
+fn write_input<P: Precision>(
     writer: &mut SectionWriter<'_>,
-    layer: &TokenLinear<'_>,
+    layer: &TokenLinear<'_, P>,
 ) -> Result<LinearDesc, BlobError> {
     match layer {
-        TokenLinear::Int8(layer) => write_quantized(writer, layer),
-        // The format holds int8 input layers only.
+        TokenLinear::Quantized(layer) => write_quantized(writer, layer),
+        // The format holds quantized input layers only.
         TokenLinear::Float(_) => Err(BlobError::Encode),
     }
 }
@@ -201,9 +214,9 @@ fn write_norm(
     })
 }
 
-fn write_block(
+fn write_block<P: Precision>(
     writer: &mut SectionWriter<'_>,
-    block: &Int8Block<'_>,
+    block: &QuantBlock<'_, P>,
 ) -> Result<BlockDesc, BlobError> {
     let ff = &block.feed_forward;
     let gelu = ff.fc1.activation.ok_or(BlobError::Encode)?;
@@ -212,20 +225,20 @@ fn write_block(
         qkv: write_quantized(writer, &block.qkv)?,
         proj: write_quantized(writer, &block.proj)?,
         norm2: write_norm(writer, &block.norm2)?,
-        fc1: write_linear(writer, ff.input, &ff.fc1.fc, &[])?,
+        fc1: write_linear::<P>(writer, ff.input, &ff.fc1.fc, &[])?,
         fc1_multipliers: writer.i32s(ff.fc1.requant.multipliers)?,
         fc1_shifts: writer.i32s(ff.fc1.requant.shifts)?,
         fc1_output_zero_point: ff.fc1.requant.output_zero_point,
-        gelu: writer.i8s(gelu.iter())?,
+        gelu: writer.ints([P::table_entries(gelu)].into_iter())?,
         fc2: write_quantized(writer, &ff.fc2)?,
     })
 }
 
-/// Lays out the sections of `parts` and returns the descriptor.
-fn emit(
-    parts: &TransformerBlobParts<'_>,
+/// Lays out the sections of `parts` and returns the descriptor and its trailer.
+fn emit<P: Precision>(
+    parts: &TransformerBlobParts<'_, P>,
     writer: &mut SectionWriter<'_>,
-) -> Result<TransformerDescriptor, BlobError> {
+) -> Result<(TransformerDescriptor, TransformerActivations), BlobError> {
     let tables = policy_tables::write(writer, &parts.config)?;
     let model = &parts.model;
     let noise_tokens = writer.f32s(parts.noise_tokens.iter())?;
@@ -239,7 +252,7 @@ fn emit(
     }
     let final_norm = write_norm(writer, &model.final_norm)?;
     let head = write_quantized(writer, &model.head)?;
-    Ok(TransformerDescriptor {
+    let descriptor = TransformerDescriptor {
         header: PolicyHeader::of(&parts.config)?,
         width: small(model.shape.width)?,
         heads: small(model.shape.heads)?,
@@ -251,11 +264,14 @@ fn emit(
         blocks,
         final_norm,
         head,
-    })
+    };
+    Ok((descriptor, TransformerActivations { bits: P::BITS }))
 }
 
 /// Exact length of the blob [`encode_transformer`] writes for `parts`.
-pub fn transformer_encoded_len(parts: &TransformerBlobParts<'_>) -> Result<usize, BlobError> {
+pub fn transformer_encoded_len<P: Precision>(
+    parts: &TransformerBlobParts<'_, P>,
+) -> Result<usize, BlobError> {
     container::encoded_len(|writer| emit(parts, writer))
 }
 
@@ -263,8 +279,8 @@ pub fn transformer_encoded_len(parts: &TransformerBlobParts<'_>) -> Result<usize
 /// ([`transformer_encoded_len`]). Fails with a named error if a size does not fit the format
 /// (more than [`MAX_BLOCKS`] blocks, sizes beyond u32, f32 input layers); the loader checks
 /// every shape.
-pub fn encode_transformer(
-    parts: &TransformerBlobParts<'_>,
+pub fn encode_transformer<P: Precision>(
+    parts: &TransformerBlobParts<'_, P>,
     out: &mut [u8],
 ) -> Result<usize, BlobError> {
     container::encode(TRANSFORMER_MAGIC, out, |writer| emit(parts, writer))
@@ -272,4 +288,6 @@ pub fn encode_transformer(
 
 mod load;
 
-pub use load::LoadedTransformer;
+pub use load::{
+    transformer_activation_bits, LoadedQuantTransformer, LoadedTransformer, LoadedTransformer16,
+};

@@ -13,19 +13,19 @@ pub(super) trait LinearSteps: BlockLinear {
     fn rows(&self, start: usize, count: usize) -> Result<Self, KernelError>;
 
     /// `values` (f32) as this layer's input codes (a copy in f32, quantized with the layer's
-    /// input parameters in int8).
+    /// input parameters in the quantized form).
     fn encode(&self, values: &[f32], codes: &mut [Self::Code]);
 
-    /// `output = layer(codes)`; the int8 form uses the first `output.len()` accumulators.
+    /// `output = layer(codes)`; the quantized form uses the first `output.len()` accumulators.
     fn apply(
         &self,
         codes: &[Self::Code],
-        accumulators: &mut [i32],
+        accumulators: &mut [Self::Acc],
         output: &mut [f32],
     ) -> Result<(), KernelError>;
 
     /// One head's attention output for one query ([`attend`]) as this (`proj`) layer's input
-    /// codes in `out` (`head_dim` long); the int8 form attends into `head_out` first.
+    /// codes in `out` (`head_dim` long); the quantized form attends into `head_out` first.
     #[allow(clippy::too_many_arguments)]
     fn attend_head(
         &self,
@@ -42,8 +42,8 @@ pub(super) trait LinearSteps: BlockLinear {
     fn observed(codes: &[Self::Code]) -> Option<&[f32]>;
 }
 
-/// The precision-dependent feed-forward of one token, with codes `C`.
-pub(super) trait FeedForwardSteps<C>: FeedForward {
+/// The precision-dependent feed-forward of one token, with codes `C` and accumulators `A`.
+pub(super) trait FeedForwardSteps<C, A>: FeedForward {
     /// Replaces `row` (`W`, the LN2 output of one token) by `fc2(gelu(fc1(row)))`, with `codes`
     /// (`>= W`), `hidden` (`>= 4W`) and `accumulators` as scratch; the f32 form shows the
     /// `Norm2`, `Fc1` and `Gelu` probes of block `layer` to `observe`.
@@ -53,13 +53,13 @@ pub(super) trait FeedForwardSteps<C>: FeedForward {
         row: &mut [f32],
         codes: &mut [C],
         hidden: &mut [C],
-        accumulators: &mut [i32],
+        accumulators: &mut [A],
         observe: &mut O,
     ) -> Result<(), TransformerError>;
 }
 
 /// Working memory of [`run_blocks`] and [`finish`].
-pub(super) struct BlockWork<'s, C> {
+pub(super) struct BlockWork<'s, C, A> {
     /// `[T, W]` residual stream.
     pub(super) residual: &'s mut [f32],
     /// `[T, W]` normalized tokens as codes.
@@ -73,26 +73,26 @@ pub(super) struct BlockWork<'s, C> {
     pub(super) values: &'s mut [f32],
     /// `[hd]` one query.
     pub(super) query: &'s mut [f32],
-    /// `[hd]` one head output (int8 form; empty in f32).
+    /// `[hd]` one head output (quantized form; empty in f32).
     pub(super) head_out: &'s mut [f32],
     /// `[T]` one score row.
     pub(super) scores: &'s mut [f32],
     /// `[W]` one token row.
     pub(super) row: &'s mut [f32],
-    /// int32 accumulators (int8 form; empty in f32).
-    pub(super) accumulators: &'s mut [i32],
+    /// Accumulators (quantized form; empty in f32).
+    pub(super) accumulators: &'s mut [A],
 }
 
 /// Runs `blocks` on `work.residual`.
 pub(super) fn run_blocks<L, FF, O>(
     shape: &TransformerShape,
     blocks: &[Block<'_, L, FF>],
-    work: &mut BlockWork<'_, L::Code>,
+    work: &mut BlockWork<'_, L::Code, L::Acc>,
     observe: &mut O,
 ) -> Result<(), TransformerError>
 where
     L: LinearSteps,
-    FF: FeedForwardSteps<L::Code>,
+    FF: FeedForwardSteps<L::Code, L::Acc>,
     O: FnMut(TransformerProbe, &[f32]),
 {
     let (width, head_dim) = (shape.width, shape.head_dim());
@@ -166,7 +166,7 @@ pub(super) fn finish<L: LinearSteps, O: FnMut(TransformerProbe, &[f32])>(
     shape: &TransformerShape,
     final_norm: &LayerNormWeights<'_>,
     head: &L,
-    work: &mut BlockWork<'_, L::Code>,
+    work: &mut BlockWork<'_, L::Code, L::Acc>,
     output: &mut [f32],
     observe: &mut O,
 ) -> Result<(), TransformerError> {

@@ -60,9 +60,9 @@ pub enum Part {
 pub enum ScratchBuffer {
     /// The f32 buffer.
     Floats,
-    /// The int8 buffer.
-    Bytes,
-    /// The int32 buffer.
+    /// The activation-code buffer (int8 or int16).
+    Codes,
+    /// The accumulator buffer (int32 or int64).
     Accumulators,
 }
 

@@ -65,6 +65,7 @@ impl CheckedLinear for F32Linear<'_> {
 
 impl BlockLinear for F32Linear<'_> {
     type Code = f32;
+    type Acc = i32;
 }
 
 impl FeedForward for F32FeedForward<'_> {
@@ -124,7 +125,7 @@ impl LinearSteps for F32Linear<'_> {
     }
 }
 
-impl FeedForwardSteps<f32> for F32FeedForward<'_> {
+impl FeedForwardSteps<f32, i32> for F32FeedForward<'_> {
     fn run<O: FnMut(TransformerProbe, &[f32])>(
         &self,
         layer: usize,
@@ -272,7 +273,7 @@ impl F32Transformer<'_> {
     }
 
     /// [`F32Transformer::forward`] that shows the tensors of [`TransformerProbe`] to `observe`
-    /// (e.g. to record the calibration ranges of the int8 form's quantization points).
+    /// (e.g. to record the calibration ranges of the quantized form's quantization points).
     pub fn forward_observed<const F: usize, const B: usize, const A: usize, O>(
         &self,
         trajectory: &[f32],

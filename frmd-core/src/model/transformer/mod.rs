@@ -66,14 +66,14 @@
 mod block;
 mod error;
 mod float;
-mod int8;
+mod quantized;
 mod shape;
 #[cfg(test)]
 mod tests;
 
 pub use error::{Part, ScratchBuffer, TransformerError};
 pub use float::{fold_noise_token, F32FeedForward, TransformerProbe};
-pub use int8::{Int8FeedForward, TokenLinear};
+pub use quantized::{Int16FeedForward, Int8FeedForward, QuantFeedForward, TokenLinear};
 pub use shape::{ScratchLens, TransformerBuffers, TransformerScratch, TransformerShape};
 
 #[cfg(test)]
@@ -118,20 +118,33 @@ pub trait CheckedLinear: Copy {
         out_features: usize,
         part: Part,
     ) -> Result<(), TransformerError>;
+
+    /// Checks what keeps every accumulator exact (int64 accumulators: weight and bias bounds,
+    /// O(weights), [`crate::kernels::FullyConnected::validate_exact`]); nothing for f32 and int8.
+    fn check_exact(&self, _part: Part) -> Result<(), TransformerError> {
+        Ok(())
+    }
 }
 
 /// A linear layer of a block (`qkv`, `proj`) or the head, in one precision ([`F32Linear`] or
 /// [`QuantizedLinear`]).
 pub trait BlockLinear: CheckedLinear {
     /// Element of the normalized tokens and attention outputs that feed the layer: `f32`, or an
-    /// int8 code.
+    /// int8 or int16 code.
     type Code: Copy;
+    /// Accumulator of the layer (`i32` or `i64`; unused by the f32 form).
+    type Acc: Copy;
 }
 
 /// A feed-forward `fc2(gelu(fc1(x)))`: [`F32FeedForward`] or [`Int8FeedForward`].
 pub trait FeedForward: Copy {
     /// Checks `width -> hidden -> width` of block `layer`.
     fn check(&self, width: usize, hidden: usize, layer: usize) -> Result<(), TransformerError>;
+
+    /// [`CheckedLinear::check_exact`] of both layers of block `layer`.
+    fn check_exact(&self, _layer: usize) -> Result<(), TransformerError> {
+        Ok(())
+    }
 }
 
 /// One pre-LayerNorm block (see the module docs) with linear layers `L` and feed-forward `FF`.
@@ -177,13 +190,21 @@ pub struct Transformer<'a, I, L, FF> {
 
 /// A block with f32 layers.
 pub type F32Block<'a> = Block<'a, F32Linear<'a>, F32FeedForward<'a>>;
+/// A block with int8-weight layers and `P` activations.
+pub type QuantBlock<'a, P = i8> = Block<'a, QuantizedLinear<'a, P>, QuantFeedForward<'a, P>>;
 /// A block with int8 layers.
-pub type Int8Block<'a> = Block<'a, QuantizedLinear<'a>, Int8FeedForward<'a>>;
+pub type Int8Block<'a> = QuantBlock<'a, i8>;
+/// A block with int8 weights and int16 activations.
+pub type Int16Block<'a> = QuantBlock<'a, i16>;
 /// The f32 reference backbone.
 pub type F32Transformer<'a> = Transformer<'a, F32Linear<'a>, F32Linear<'a>, F32FeedForward<'a>>;
+/// The hybrid quantized backbone: int8 weights, `P` activations.
+pub type QuantTransformer<'a, P = i8> =
+    Transformer<'a, TokenLinear<'a, P>, QuantizedLinear<'a, P>, QuantFeedForward<'a, P>>;
 /// The hybrid int8 backbone.
-pub type Int8Transformer<'a> =
-    Transformer<'a, TokenLinear<'a>, QuantizedLinear<'a>, Int8FeedForward<'a>>;
+pub type Int8Transformer<'a> = QuantTransformer<'a, i8>;
+/// The hybrid backbone with int16 activations (the 16x8 scheme).
+pub type Int16Transformer<'a> = QuantTransformer<'a, i16>;
 
 impl<L: BlockLinear, FF: FeedForward> Block<'_, L, FF> {
     fn check(&self, shape: &TransformerShape, layer: usize) -> Result<(), TransformerError> {
@@ -195,11 +216,31 @@ impl<L: BlockLinear, FF: FeedForward> Block<'_, L, FF> {
         self.norm2.check(width, Part::Norm2 { layer })?;
         self.feed_forward.check(width, shape.hidden(), layer)
     }
+
+    fn check_exact(&self, layer: usize) -> Result<(), TransformerError> {
+        self.qkv.check_exact(Part::Qkv { layer })?;
+        self.proj.check_exact(Part::Proj { layer })?;
+        self.feed_forward.check_exact(layer)
+    }
 }
 
 impl<'a, I: CheckedLinear, L: BlockLinear, FF: FeedForward> Transformer<'a, I, L, FF> {
-    /// Checks every part against the shape (including quantization parameters).
+    /// Checks every part against the shape (including quantization parameters) and, with int64
+    /// accumulators, the weight and bias bounds that keep them exact (O(weights): run it once
+    /// when the model is built; a forward pass checks only [`Self::validate_shapes`]).
     pub fn validate(&self) -> Result<(), TransformerError> {
+        self.validate_shapes()?;
+        self.traj_in.check_exact(Part::TrajIn)?;
+        self.cond_in.check_exact(Part::CondIn)?;
+        for (layer, block) in self.blocks.iter().enumerate() {
+            block.check_exact(layer)?;
+        }
+        self.head.check_exact(Part::Head)
+    }
+
+    /// [`Self::validate`] without the O(weights) exactness checks (what every forward pass
+    /// runs; a model that fails only those gives unspecified outputs, never a panic).
+    pub fn validate_shapes(&self) -> Result<(), TransformerError> {
         let shape = &self.shape;
         shape.validate()?;
         if self.blocks.len() != shape.layers {

@@ -1,6 +1,7 @@
 //! Sizes of a transformer backbone and the scratch memory its forward passes need.
 
 use super::{ScratchBuffer, TransformerError};
+use crate::kernels::{Accumulator, Precision};
 
 /// Sizes of a transformer backbone.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -26,19 +27,24 @@ pub struct TransformerShape {
 pub struct ScratchLens {
     /// f32 values.
     pub floats: usize,
-    /// int8 values.
-    pub bytes: usize,
-    /// int32 values.
+    /// Activation codes (int8 or int16).
+    pub codes: usize,
+    /// Accumulators (int32 or int64).
     pub accumulators: usize,
+    /// Bytes per code (1 or 2).
+    pub code_bytes: usize,
+    /// Bytes per accumulator (4 or 8).
+    pub accumulator_bytes: usize,
 }
 
 impl ScratchLens {
-    /// Total RAM in bytes (`4 floats + bytes + 4 accumulators`, saturating).
+    /// Total RAM in bytes (`4 floats + code_bytes codes + accumulator_bytes accumulators`,
+    /// saturating).
     pub const fn ram_bytes(&self) -> usize {
         self.floats
             .saturating_mul(4)
-            .saturating_add(self.bytes)
-            .saturating_add(self.accumulators.saturating_mul(4))
+            .saturating_add(self.codes.saturating_mul(self.code_bytes))
+            .saturating_add(self.accumulators.saturating_mul(self.accumulator_bytes))
     }
 }
 
@@ -94,16 +100,30 @@ impl TransformerShape {
             .saturating_add(self.width.saturating_mul(5));
         ScratchLens {
             floats,
-            bytes: 0,
+            codes: 0,
             accumulators: 0,
+            code_bytes: 1,
+            accumulator_bytes: 4,
         }
     }
 
-    /// Scratch needed by the int8 form: floats `TW + 2T hd + 2hd + T + W` (residual, one
-    /// head's keys and values, one query, one head output, one score row, one token row); bytes
-    /// `max(2TW + 4W, cond_dim, k)` (quantized LN1 outputs, quantized attention outputs, the
-    /// feed-forward hidden row); accumulators `max(W, output)`. Saturates on overflow.
+    /// Scratch needed by the int8 form ([`Self::quantized_scratch`] of `i8`).
     pub const fn int8_scratch(&self) -> ScratchLens {
+        self.quantized_scratch::<i8>()
+    }
+
+    /// Scratch needed by the int16-activation form ([`Self::quantized_scratch`] of `i16`).
+    pub const fn int16_scratch(&self) -> ScratchLens {
+        self.quantized_scratch::<i16>()
+    }
+
+    /// Scratch needed by the quantized form with `P` activations: floats
+    /// `TW + 2T hd + 2hd + T + W` (residual, one head's keys and values, one query, one head
+    /// output, one score row, one token row); codes `max(2TW + 4W, cond_dim, k)` (quantized LN1
+    /// outputs, quantized attention outputs, the feed-forward hidden row); accumulators
+    /// `max(W, output)`. The same counts for both precisions; int16 codes and int64 accumulators
+    /// take twice the bytes. Saturates on overflow.
+    pub const fn quantized_scratch<P: Precision>(&self) -> ScratchLens {
         let tw = self.token_values();
         let hd = self.head_dim();
         let floats = tw
@@ -111,11 +131,13 @@ impl TransformerShape {
             .saturating_add(hd.saturating_mul(2))
             .saturating_add(self.tokens())
             .saturating_add(self.width);
-        let bytes = tw.saturating_mul(2).saturating_add(self.hidden());
+        let codes = tw.saturating_mul(2).saturating_add(self.hidden());
         ScratchLens {
             floats,
-            bytes: max(bytes, max(self.cond_dim, self.action_dim)),
+            codes: max(codes, max(self.cond_dim, self.action_dim)),
             accumulators: max(self.width, self.output),
+            code_bytes: core::mem::size_of::<P>(),
+            accumulator_bytes: core::mem::size_of::<P::Acc>(),
         }
     }
 
@@ -160,19 +182,20 @@ impl TransformerShape {
 }
 
 /// Scratch of a forward pass, borrowed: at least [`TransformerShape::f32_scratch`] /
-/// [`TransformerShape::int8_scratch`] elements in each buffer (longer is fine).
+/// [`TransformerShape::quantized_scratch`] elements in each buffer (longer is fine), with `P`
+/// codes (int8, the default, or int16) and their accumulators.
 #[derive(Debug)]
-pub struct TransformerBuffers<'s> {
+pub struct TransformerBuffers<'s, P: Precision = i8> {
     /// f32 values.
     pub floats: &'s mut [f32],
-    /// int8 values.
-    pub bytes: &'s mut [i8],
-    /// int32 values.
-    pub accumulators: &'s mut [i32],
+    /// Activation codes.
+    pub codes: &'s mut [P],
+    /// Accumulators.
+    pub accumulators: &'s mut [P::Acc],
 }
 
 /// [`TransformerBuffers`] as fixed arrays, sized by `const` lengths from
-/// [`TransformerShape::f32_scratch`] / [`TransformerShape::int8_scratch`] (longer is fine):
+/// [`TransformerShape::f32_scratch`] / [`TransformerShape::quantized_scratch`] (longer is fine):
 ///
 /// ```
 /// use frmd_core::model::transformer::{ScratchLens, TransformerScratch, TransformerShape};
@@ -180,42 +203,53 @@ pub struct TransformerBuffers<'s> {
 ///     horizon: 12, action_dim: 7, cond_dim: 54, width: 128, heads: 2, layers: 3, output: 77,
 /// };
 /// const LENS: ScratchLens = SHAPE.int8_scratch();
-/// type Scratch = TransformerScratch<{ LENS.floats }, { LENS.bytes }, { LENS.accumulators }>;
+/// type Scratch = TransformerScratch<{ LENS.floats }, { LENS.codes }, { LENS.accumulators }>;
 /// let scratch = Scratch::new();
 /// assert_eq!(LENS.ram_bytes(), 20_024);
-/// # let _ = scratch;
+/// // int16 activations: the same counts, twice the bytes for codes and accumulators.
+/// const LENS16: ScratchLens = SHAPE.int16_scratch();
+/// type Scratch16 =
+///     TransformerScratch<{ LENS16.floats }, { LENS16.codes }, { LENS16.accumulators }, i16>;
+/// let scratch16 = Scratch16::new();
+/// assert_eq!(LENS16.ram_bytes(), 24_632);
+/// # let _ = (scratch, scratch16);
 /// ```
 #[derive(Clone, Debug, PartialEq)]
-pub struct TransformerScratch<const FLOATS: usize, const BYTES: usize, const ACCUMULATORS: usize> {
+pub struct TransformerScratch<
+    const FLOATS: usize,
+    const CODES: usize,
+    const ACCUMULATORS: usize,
+    P: Precision = i8,
+> {
     floats: [f32; FLOATS],
-    bytes: [i8; BYTES],
-    accumulators: [i32; ACCUMULATORS],
+    codes: [P; CODES],
+    accumulators: [P::Acc; ACCUMULATORS],
 }
 
-impl<const FLOATS: usize, const BYTES: usize, const ACCUMULATORS: usize>
-    TransformerScratch<FLOATS, BYTES, ACCUMULATORS>
+impl<const FLOATS: usize, const CODES: usize, const ACCUMULATORS: usize, P: Precision>
+    TransformerScratch<FLOATS, CODES, ACCUMULATORS, P>
 {
     /// Zeroed scratch.
     pub const fn new() -> Self {
         Self {
             floats: [0.0; FLOATS],
-            bytes: [0; BYTES],
-            accumulators: [0; ACCUMULATORS],
+            codes: [P::ZERO; CODES],
+            accumulators: [<P::Acc as Accumulator>::ZERO; ACCUMULATORS],
         }
     }
 
     /// The arrays as [`TransformerBuffers`].
-    pub fn buffers(&mut self) -> TransformerBuffers<'_> {
+    pub fn buffers(&mut self) -> TransformerBuffers<'_, P> {
         TransformerBuffers {
             floats: &mut self.floats,
-            bytes: &mut self.bytes,
+            codes: &mut self.codes,
             accumulators: &mut self.accumulators,
         }
     }
 }
 
-impl<const FLOATS: usize, const BYTES: usize, const ACCUMULATORS: usize> Default
-    for TransformerScratch<FLOATS, BYTES, ACCUMULATORS>
+impl<const FLOATS: usize, const CODES: usize, const ACCUMULATORS: usize, P: Precision> Default
+    for TransformerScratch<FLOATS, CODES, ACCUMULATORS, P>
 {
     fn default() -> Self {
         Self::new()

@@ -222,7 +222,7 @@ fn deterministic_and_independent_of_scratch_contents() {
         if dirty {
             let buffers = scratch.buffers();
             buffers.floats.fill(f32::NAN);
-            buffers.bytes.fill(-77);
+            buffers.codes.fill(-77);
             buffers.accumulators.fill(i32::MIN);
         }
         let mut float_out = [0.0_f32; 8];
@@ -269,23 +269,23 @@ fn exact_scratch_sizes_suffice_and_one_less_fails() {
             needed: F.floats
         })
     );
-    let mut exact = TransformerScratch::<{ Q.floats }, { Q.bytes }, { Q.accumulators }>::new();
+    let mut exact = TransformerScratch::<{ Q.floats }, { Q.codes }, { Q.accumulators }>::new();
     assert_eq!(
         net.forward(&trajectory, &condition, &mut out, &mut exact),
         Ok(())
     );
     let too_small = |buffer, needed| Err(TransformerError::ScratchTooSmall { buffer, needed });
-    let mut short = TransformerScratch::<{ Q.floats - 1 }, { Q.bytes }, { Q.accumulators }>::new();
+    let mut short = TransformerScratch::<{ Q.floats - 1 }, { Q.codes }, { Q.accumulators }>::new();
     assert_eq!(
         net.forward(&trajectory, &condition, &mut out, &mut short),
         too_small(ScratchBuffer::Floats, Q.floats)
     );
-    let mut short = TransformerScratch::<{ Q.floats }, { Q.bytes - 1 }, { Q.accumulators }>::new();
+    let mut short = TransformerScratch::<{ Q.floats }, { Q.codes - 1 }, { Q.accumulators }>::new();
     assert_eq!(
         net.forward(&trajectory, &condition, &mut out, &mut short),
-        too_small(ScratchBuffer::Bytes, Q.bytes)
+        too_small(ScratchBuffer::Codes, Q.codes)
     );
-    let mut short = TransformerScratch::<{ Q.floats }, { Q.bytes }, { Q.accumulators - 1 }>::new();
+    let mut short = TransformerScratch::<{ Q.floats }, { Q.codes }, { Q.accumulators - 1 }>::new();
     assert_eq!(
         net.forward(&trajectory, &condition, &mut out, &mut short),
         too_small(ScratchBuffer::Accumulators, Q.accumulators)
@@ -298,7 +298,7 @@ fn transformer_lite_scratch_ram() {
     let q = LITE.int8_scratch();
     // T = 14, W = 128, hd = 64: int8 floats = TW + 2T hd + 2 hd + T + W.
     assert_eq!(q.floats, 1792 + 1792 + 128 + 14 + 128);
-    assert_eq!(q.bytes, 2 * 1792 + 512);
+    assert_eq!(q.codes, 2 * 1792 + 512);
     assert_eq!(q.accumulators, 128);
     assert_eq!(q.ram_bytes(), 20_024);
     assert_eq!(f.floats, 3 * 1792 + 1792 + 64 + 14 + 5 * 128);
@@ -310,7 +310,7 @@ fn transformer_lite_scratch_ram() {
         ..LITE
     };
     assert_eq!(wide.int8_scratch().accumulators, 300);
-    assert_eq!(wide.int8_scratch().bytes, 5000);
+    assert_eq!(wide.int8_scratch().codes, 5000);
 }
 
 #[test]

@@ -12,9 +12,10 @@
 //! `noise_token`.
 
 use super::{Network, NoiseVariants};
+use crate::kernels::Precision;
 use crate::model::transformer::{
-    F32Transformer, Int8Transformer, TransformerBuffers, TransformerError, TransformerScratch,
-    TransformerShape,
+    F32Transformer, Int16Transformer, Int8Transformer, QuantTransformer, TransformerBuffers,
+    TransformerError, TransformerScratch, TransformerShape,
 };
 use crate::policy::{InputLayout, InputSegment, PolicyError};
 
@@ -26,29 +27,32 @@ pub(crate) const STANDARD_SEGMENTS: [InputSegment; 4] = [
     InputSegment::NoisyTrajectory,
 ];
 
-/// Working memory a [`TransformerNetwork`] runs in: a [`TransformerScratch`], or a mutable
-/// borrow of one (so that moving the network or the policy copies no large buffers).
-pub trait TransformerWork {
+/// Working memory a [`TransformerNetwork`] runs in, with `P` codes: a [`TransformerScratch`], or
+/// a mutable borrow of one (so that moving the network or the policy copies no large buffers).
+/// A host that runs either precision may implement it for both `i8` and `i16`.
+pub trait TransformerWork<P: Precision = i8> {
     /// The buffers.
-    fn buffers(&mut self) -> TransformerBuffers<'_>;
+    fn buffers(&mut self) -> TransformerBuffers<'_, P>;
 }
 
-impl<const F: usize, const B: usize, const A: usize> TransformerWork
-    for TransformerScratch<F, B, A>
+impl<const F: usize, const B: usize, const A: usize, P: Precision> TransformerWork<P>
+    for TransformerScratch<F, B, A, P>
 {
-    fn buffers(&mut self) -> TransformerBuffers<'_> {
+    fn buffers(&mut self) -> TransformerBuffers<'_, P> {
         TransformerScratch::buffers(self)
     }
 }
 
-impl<T: TransformerWork + ?Sized> TransformerWork for &mut T {
-    fn buffers(&mut self) -> TransformerBuffers<'_> {
+impl<P: Precision, T: TransformerWork<P> + ?Sized> TransformerWork<P> for &mut T {
+    fn buffers(&mut self) -> TransformerBuffers<'_, P> {
         (**self).buffers()
     }
 }
 
-/// A transformer backbone the network can run ([`F32Transformer`], [`Int8Transformer`]).
+/// A transformer backbone the network can run ([`F32Transformer`], [`QuantTransformer`]).
 pub trait TransformerBackbone<'a>: Copy {
+    /// The code type of its scratch (`i8` for the f32 form, which uses only the floats).
+    type Codes: Precision;
     /// Sizes.
     fn shape(&self) -> &TransformerShape;
     /// Checks every part against the shape.
@@ -61,11 +65,12 @@ pub trait TransformerBackbone<'a>: Copy {
         trajectory: &[f32],
         condition: &[f32],
         output: &mut [f32],
-        buffers: TransformerBuffers<'_>,
+        buffers: TransformerBuffers<'_, Self::Codes>,
     ) -> Result<(), TransformerError>;
 }
 
 impl<'a> TransformerBackbone<'a> for F32Transformer<'a> {
+    type Codes = i8;
     fn shape(&self) -> &TransformerShape {
         &self.shape
     }
@@ -86,22 +91,23 @@ impl<'a> TransformerBackbone<'a> for F32Transformer<'a> {
     }
 }
 
-impl<'a> TransformerBackbone<'a> for Int8Transformer<'a> {
+impl<'a, P: Precision> TransformerBackbone<'a> for QuantTransformer<'a, P> {
+    type Codes = P;
     fn shape(&self) -> &TransformerShape {
         &self.shape
     }
     fn validate(&self) -> Result<(), TransformerError> {
-        Int8Transformer::validate(self)
+        QuantTransformer::validate(self)
     }
     fn with_noise_token(&self, noise_token: &'a [f32]) -> Self {
-        Int8Transformer::with_noise_token(self, noise_token)
+        QuantTransformer::with_noise_token(self, noise_token)
     }
     fn run(
         &self,
         trajectory: &[f32],
         condition: &[f32],
         output: &mut [f32],
-        buffers: TransformerBuffers<'_>,
+        buffers: TransformerBuffers<'_, P>,
     ) -> Result<(), TransformerError> {
         self.forward_in(trajectory, condition, output, buffers)
     }
@@ -117,10 +123,13 @@ pub struct TransformerNetwork<'a, T, S> {
 /// [`TransformerNetwork`] over the int8 backbone.
 pub type Int8TransformerNetwork<'a, S> = TransformerNetwork<'a, Int8Transformer<'a>, S>;
 
+/// [`TransformerNetwork`] over the int16-activation backbone.
+pub type Int16TransformerNetwork<'a, S> = TransformerNetwork<'a, Int16Transformer<'a>, S>;
+
 /// [`TransformerNetwork`] over the f32 reference backbone.
 pub type F32TransformerNetwork<'a, S> = TransformerNetwork<'a, F32Transformer<'a>, S>;
 
-impl<'a, T: TransformerBackbone<'a>, S: TransformerWork> TransformerNetwork<'a, T, S> {
+impl<'a, T: TransformerBackbone<'a>, S: TransformerWork<T::Codes>> TransformerNetwork<'a, T, S> {
     /// Wraps `model` for inputs laid out by `layout` (must be the standard order: observation
     /// history, previous action, previous rate, noisy trajectory). `noise_tokens` holds one
     /// `width`-long noise token per sampling step back to back, or is empty to use the model's
@@ -157,7 +166,11 @@ impl<'a, T: TransformerBackbone<'a>, S: TransformerWork> TransformerNetwork<'a, 
     }
 }
 
-impl<'a, T: TransformerBackbone<'a>, S: TransformerWork> Network for TransformerNetwork<'a, T, S> {
+impl<'a, T, S> Network for TransformerNetwork<'a, T, S>
+where
+    T: TransformerBackbone<'a>,
+    S: TransformerWork<T::Codes>,
+{
     fn input_width(&self) -> usize {
         let shape = self.model.shape();
         shape.cond_dim.saturating_add(shape.trajectory_len())

@@ -161,8 +161,8 @@ impl TransformerData {
     pub fn model<'a>(&'a self, blocks: &'a [Int8Block<'a>]) -> Int8Transformer<'a> {
         Int8Transformer {
             shape: TRANSFORMER_SHAPE,
-            traj_in: TokenLinear::Int8(quantized(&self.linears[0])),
-            cond_in: TokenLinear::Int8(quantized(&self.linears[1])),
+            traj_in: TokenLinear::Quantized(quantized(&self.linears[0])),
+            cond_in: TokenLinear::Quantized(quantized(&self.linears[1])),
             noise_token: &self.noise_token,
             positions: &self.positions,
             blocks,

@@ -420,8 +420,8 @@ impl QuantModel {
             )
         } else {
             (
-                TokenLinear::Int8(self.traj_in.view()),
-                TokenLinear::Int8(self.cond_in.view()),
+                TokenLinear::Quantized(self.traj_in.view()),
+                TokenLinear::Quantized(self.cond_in.view()),
             )
         };
         Int8Transformer {

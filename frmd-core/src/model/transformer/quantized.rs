@@ -1,42 +1,41 @@
-//! The hybrid int8 form of the transformer ([`Int8Transformer`]): int8 linear layers, f32 residual
-//! stream, LayerNorm and attention (see the module docs of [`super`]).
+//! The hybrid quantized form of the transformer ([`QuantTransformer`]): linear layers with int8
+//! weights and int8 ([`Int8Transformer`]) or int16 ([`Int16Transformer`]) activations, f32
+//! residual stream, LayerNorm and attention (see the module docs of [`super`]).
 
 use super::block::{attend, embed_tokens, finish, run_blocks, BlockWork, TokenInput};
 use super::block::{FeedForwardSteps, LinearSteps};
-use super::float::feed_forward_error;
 use super::shape::{prefix, take};
 use super::{
-    check_io, BlockLinear, CheckedLinear, FeedForward, Int8Transformer, Part, ScratchBuffer,
+    check_io, BlockLinear, CheckedLinear, FeedForward, Part, QuantTransformer, ScratchBuffer,
     TransformerBuffers, TransformerError, TransformerProbe, TransformerScratch,
 };
-use crate::kernels::KernelError;
+use crate::kernels::{KernelError, Precision};
 use crate::model::linear::{quantize_into, F32Linear, QuantizedLinear, RequantizedLinear};
-use crate::model::mlp::{Int8Buffers, Int8Mlp};
 use crate::quant::QuantParams;
 
-/// An input layer (`traj_in`, `cond_in`) that may stay f32 or run as int8.
+/// An input layer (`traj_in`, `cond_in`) that may stay f32 or run quantized.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum TokenLinear<'a> {
+pub enum TokenLinear<'a, P: Precision = i8> {
     /// f32 weights (activation must be `Identity`).
     Float(F32Linear<'a>),
-    /// int8 weights.
-    Int8(QuantizedLinear<'a>),
+    /// int8 weights, `P` activations.
+    Quantized(QuantizedLinear<'a, P>),
 }
 
-impl TokenLinear<'_> {
-    /// `output = layer(input)`; the int8 variant uses the first `input.len()` codes of `bytes`
-    /// and the first `output.len()` accumulators.
+impl<P: Precision> TokenLinear<'_, P> {
+    /// `output = layer(input)`; the quantized variant uses the first `input.len()` codes of
+    /// `codes` and the first `output.len()` accumulators.
     pub fn forward(
         &self,
         input: &[f32],
-        bytes: &mut [i8],
-        accumulators: &mut [i32],
+        codes: &mut [P],
+        accumulators: &mut [P::Acc],
         output: &mut [f32],
     ) -> Result<(), KernelError> {
         match self {
             Self::Float(layer) => layer.forward(input, output),
-            Self::Int8(layer) => {
-                let codes = bytes
+            Self::Quantized(layer) => {
+                let codes = codes
                     .get_mut(..input.len())
                     .ok_or(KernelError::InputLength)?;
                 let acc = accumulators
@@ -48,43 +47,45 @@ impl TokenLinear<'_> {
     }
 }
 
-/// The int8 feed-forward `fc2(gelu(fc1(x)))` of one token as a one-hidden-layer [`Int8Mlp`]:
-/// `x` quantized with `input`, `fc1` requantized to the GELU table's input parameters, the table,
-/// `fc2` dequantized to f32.
+/// The quantized feed-forward `fc2(gelu(fc1(x)))` of one token: `x` quantized with `input`,
+/// `fc1` requantized to the GELU table's input parameters, the table, `fc2` dequantized to f32
+/// (the steps of a one-hidden-layer [`crate::model::mlp::QuantMlp`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Int8FeedForward<'a> {
-    /// Quantization of the LN2 output (`fc1` input).
+pub struct QuantFeedForward<'a, P: Precision = i8> {
+    /// Quantization of the LN2 output (`fc1` input; zero point 0 for int16).
     pub input: QuantParams,
     /// `W -> 4W`, bias with `input.zero_point` folded, requantized to the `fc1` output params
-    /// (clamp normally `-128..=127`), then the GELU table (required) to the `fc2` input params.
-    pub fc1: RequantizedLinear<'a>,
+    /// (clamp normally the full code range), then the GELU table (required) to the `fc2` input
+    /// params.
+    pub fc1: RequantizedLinear<'a, P>,
     /// `4W -> W`: its input parameters are the GELU table's output parameters (the codes arrive
     /// quantized; its bias has their zero point folded, its scales are
     /// `gelu_output_scale * weight_scale[o]`).
-    pub fc2: QuantizedLinear<'a>,
+    pub fc2: QuantizedLinear<'a, P>,
 }
 
-impl Int8FeedForward<'_> {
-    /// The feed-forward as an MLP.
-    pub fn mlp(&self) -> Int8Mlp<'_> {
-        Int8Mlp {
-            input: self.input,
-            hidden: core::slice::from_ref(&self.fc1),
-            output: self.fc2.linear,
-        }
+/// The int8-activation feed-forward.
+pub type Int8FeedForward<'a> = QuantFeedForward<'a, i8>;
+/// The int16-activation feed-forward (int64 bias and accumulators, interpolated GELU table).
+pub type Int16FeedForward<'a> = QuantFeedForward<'a, i16>;
+
+fn check_input_params<P: Precision>(
+    params: QuantParams,
+    part: Part,
+) -> Result<(), TransformerError> {
+    if params.validate().is_err() || !P::zero_point_valid(params.zero_point) {
+        return Err(TransformerError::InputParams { part });
     }
+    Ok(())
 }
 
-fn check_quantized(
-    layer: &QuantizedLinear<'_>,
+fn check_quantized<P: Precision>(
+    layer: &QuantizedLinear<'_, P>,
     in_features: usize,
     out_features: usize,
     part: Part,
 ) -> Result<(), TransformerError> {
-    layer
-        .input
-        .validate()
-        .map_err(|_| TransformerError::InputParams { part })?;
+    check_input_params::<P>(layer.input, part)?;
     let fc = &layer.linear.fc;
     fc.validate()
         .map_err(|error| TransformerError::Weights { part, error })?;
@@ -100,7 +101,7 @@ fn check_quantized(
     Ok(())
 }
 
-impl CheckedLinear for QuantizedLinear<'_> {
+impl<P: Precision> CheckedLinear for QuantizedLinear<'_, P> {
     fn check(
         &self,
         in_features: usize,
@@ -109,13 +110,21 @@ impl CheckedLinear for QuantizedLinear<'_> {
     ) -> Result<(), TransformerError> {
         check_quantized(self, in_features, out_features, part)
     }
+
+    fn check_exact(&self, part: Part) -> Result<(), TransformerError> {
+        self.linear
+            .fc
+            .validate_exact()
+            .map_err(|error| TransformerError::Weights { part, error })
+    }
 }
 
-impl BlockLinear for QuantizedLinear<'_> {
-    type Code = i8;
+impl<P: Precision> BlockLinear for QuantizedLinear<'_, P> {
+    type Code = P;
+    type Acc = P::Acc;
 }
 
-impl CheckedLinear for TokenLinear<'_> {
+impl<P: Precision> CheckedLinear for TokenLinear<'_, P> {
     fn check(
         &self,
         in_features: usize,
@@ -126,27 +135,31 @@ impl CheckedLinear for TokenLinear<'_> {
             TokenLinear::Float(layer) => {
                 CheckedLinear::check(layer, in_features, out_features, part)
             }
-            TokenLinear::Int8(layer) => check_quantized(layer, in_features, out_features, part),
+            TokenLinear::Quantized(layer) => {
+                check_quantized(layer, in_features, out_features, part)
+            }
+        }
+    }
+
+    fn check_exact(&self, part: Part) -> Result<(), TransformerError> {
+        match self {
+            TokenLinear::Float(_) => Ok(()),
+            TokenLinear::Quantized(layer) => layer.check_exact(part),
         }
     }
 }
 
-impl FeedForward for Int8FeedForward<'_> {
+impl<P: Precision> FeedForward for QuantFeedForward<'_, P> {
     fn check(&self, width: usize, hidden: usize, layer: usize) -> Result<(), TransformerError> {
         let (fc1, fc2) = (Part::Fc1 { layer }, Part::Fc2 { layer });
-        self.input
-            .validate()
-            .map_err(|_| TransformerError::InputParams { part: fc1 })?;
-        for (fc, part, in_features, out_features) in [
-            (&self.fc1.fc, fc1, width, hidden),
-            (&self.fc2.linear.fc, fc2, hidden, width),
-        ] {
-            fc.validate()
-                .map_err(|error| TransformerError::Weights { part, error })?;
-            if fc.in_features != in_features || fc.out_features != out_features {
-                return Err(TransformerError::Features { part });
-            }
+        check_input_params::<P>(self.input, fc1)?;
+        let fc = &self.fc1.fc;
+        fc.validate()
+            .map_err(|error| TransformerError::Weights { part: fc1, error })?;
+        if fc.in_features != width || fc.out_features != hidden {
+            return Err(TransformerError::Features { part: fc1 });
         }
+        check_quantized(&self.fc2, hidden, width, fc2)?;
         self.fc1
             .requant
             .validate(hidden)
@@ -154,35 +167,39 @@ impl FeedForward for Int8FeedForward<'_> {
         if self.fc1.activation.is_none() {
             return Err(TransformerError::Activation { part: fc1 });
         }
-        if self.fc2.linear.output_scales.len() != width {
-            return Err(TransformerError::Weights {
-                part: fc2,
-                error: KernelError::ScaleLength,
-            });
-        }
         Ok(())
+    }
+
+    fn check_exact(&self, layer: usize) -> Result<(), TransformerError> {
+        let part = Part::Fc1 { layer };
+        self.fc1
+            .fc
+            .validate_exact()
+            .map_err(|error| TransformerError::Weights { part, error })?;
+        self.fc2.check_exact(Part::Fc2 { layer })
     }
 }
 
-impl LinearSteps for QuantizedLinear<'_> {
+impl<P: Precision> LinearSteps for QuantizedLinear<'_, P> {
     fn rows(&self, start: usize, count: usize) -> Result<Self, KernelError> {
         QuantizedLinear::rows(self, start, count)
     }
 
-    fn encode(&self, values: &[f32], codes: &mut [i8]) {
+    fn encode(&self, values: &[f32], codes: &mut [P]) {
         quantize_into(values, self.input, codes);
     }
 
     fn apply(
         &self,
-        codes: &[i8],
-        accumulators: &mut [i32],
+        codes: &[P],
+        accumulators: &mut [P::Acc],
         output: &mut [f32],
     ) -> Result<(), KernelError> {
         let acc = accumulators
             .get_mut(..output.len())
             .ok_or(KernelError::OutputLength)?;
-        self.linear.forward(codes, acc, output)
+        self.linear
+            .forward_input(P::layer_input(codes), acc, output)
     }
 
     fn attend_head(
@@ -193,48 +210,55 @@ impl LinearSteps for QuantizedLinear<'_> {
         scale: f32,
         scores: &mut [f32],
         head_out: &mut [f32],
-        out: &mut [i8],
+        out: &mut [P],
     ) -> Result<(), KernelError> {
         attend(query, keys, values, scale, scores, head_out)?;
         quantize_into(head_out, self.input, out);
         Ok(())
     }
 
-    fn observed(_codes: &[i8]) -> Option<&[f32]> {
+    fn observed(_codes: &[P]) -> Option<&[f32]> {
         None
     }
 }
 
-impl FeedForwardSteps<i8> for Int8FeedForward<'_> {
+impl<P: Precision> FeedForwardSteps<P, P::Acc> for QuantFeedForward<'_, P> {
     fn run<O: FnMut(TransformerProbe, &[f32])>(
         &self,
-        layer: usize,
+        _layer: usize,
         row: &mut [f32],
-        codes: &mut [i8],
-        hidden: &mut [i8],
-        accumulators: &mut [i32],
+        codes: &mut [P],
+        hidden: &mut [P],
+        accumulators: &mut [P::Acc],
         _observe: &mut O,
     ) -> Result<(), TransformerError> {
-        let buffers = Int8Buffers {
-            ping: codes,
-            pong: hidden,
-            accumulators,
-        };
-        self.mlp()
-            .forward_in_place_prevalidated(row, buffers)
-            .map_err(|error| feed_forward_error(error, layer))
+        let width = row.len();
+        let codes = codes.get_mut(..width).ok_or(KernelError::InputLength)?;
+        quantize_into(row, self.input, codes);
+        let hidden = hidden
+            .get_mut(..self.fc1.fc.out_features)
+            .ok_or(KernelError::OutputLength)?;
+        self.fc1
+            .forward_prevalidated(P::layer_input(codes), hidden)?;
+        let acc = accumulators
+            .get_mut(..width)
+            .ok_or(KernelError::OutputLength)?;
+        self.fc2
+            .linear
+            .forward_input(P::layer_input(hidden), acc, row)?;
+        Ok(())
     }
 }
 
-impl Int8Transformer<'_> {
+impl<P: Precision> QuantTransformer<'_, P> {
     /// Runs the backbone (same arguments as [`super::F32Transformer::forward`]); the scratch must
-    /// hold at least [`super::TransformerShape::int8_scratch`] elements in each buffer.
+    /// hold at least [`super::TransformerShape::quantized_scratch`] elements in each buffer.
     pub fn forward<const F: usize, const B: usize, const A: usize>(
         &self,
         trajectory: &[f32],
         condition: &[f32],
         output: &mut [f32],
-        scratch: &mut TransformerScratch<F, B, A>,
+        scratch: &mut TransformerScratch<F, B, A, P>,
     ) -> Result<(), TransformerError> {
         self.forward_in(trajectory, condition, output, scratch.buffers())
     }
@@ -245,14 +269,14 @@ impl Int8Transformer<'_> {
         trajectory: &[f32],
         condition: &[f32],
         output: &mut [f32],
-        buffers: TransformerBuffers<'_>,
+        buffers: TransformerBuffers<'_, P>,
     ) -> Result<(), TransformerError> {
-        self.validate()?;
+        self.validate_shapes()?;
         let shape = &self.shape;
         check_io(shape, trajectory, condition, output)?;
-        let lens = shape.int8_scratch();
+        let lens = shape.quantized_scratch::<P>();
         let floats = prefix(buffers.floats, lens.floats, ScratchBuffer::Floats)?;
-        let bytes = prefix(buffers.bytes, lens.bytes, ScratchBuffer::Bytes)?;
+        let codes = prefix(buffers.codes, lens.codes, ScratchBuffer::Codes)?;
         let accumulators = prefix(
             buffers.accumulators,
             lens.accumulators,
@@ -281,14 +305,14 @@ impl Int8Transformer<'_> {
                     TokenInput::Condition => &self.cond_in,
                     TokenInput::Step => &self.traj_in,
                 };
-                Ok(layer.forward(values, bytes, accumulators, token)?)
+                Ok(layer.forward(values, codes, accumulators, token)?)
             },
         )?;
 
-        let mut rest = bytes;
-        let normed = take(&mut rest, tw, ScratchBuffer::Bytes)?;
-        let attention = take(&mut rest, tw, ScratchBuffer::Bytes)?;
-        let hidden = take(&mut rest, shape.hidden(), ScratchBuffer::Bytes)?;
+        let mut rest = codes;
+        let normed = take(&mut rest, tw, ScratchBuffer::Codes)?;
+        let attention = take(&mut rest, tw, ScratchBuffer::Codes)?;
+        let hidden = take(&mut rest, shape.hidden(), ScratchBuffer::Codes)?;
         let mut work = BlockWork {
             residual,
             normed,
