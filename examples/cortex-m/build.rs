@@ -16,6 +16,9 @@
 //!    (normalization, step constants, decoder, 44-input layout), not its MLP.
 //! 5. Generates the synthetic transformer-lite (`synthetic::transformer`): weights as
 //!    `synthetic_transformer.bin`, everything else as `synthetic_transformer.rs`.
+//! 6. Writes the random transformer-lite student checkpoint (`host::transformer_student`) into
+//!    `$OUT_DIR/transformer_checkpoint/` and bakes its int8 and int16 exports (the blob form)
+//!    into `$OUT_DIR/transformer_student{8,16}/` for the `transformer-student` images.
 use std::{
     env, fs,
     path::{Path, PathBuf},
@@ -25,6 +28,7 @@ use frmd_core::prodmp::BakedProDmp;
 use frmd_export::fold::ProDmpTablesOwned;
 use frmd_export::mlp::QuantizedMlp;
 use frmd_firmware_support::host::student::{student_export, student_export_as};
+use frmd_firmware_support::host::transformer_student;
 use frmd_firmware_support::shape;
 use frmd_firmware_support::synthetic;
 
@@ -157,4 +161,21 @@ fn main() {
         transformer.rust_source(),
     )
     .expect("write synthetic_transformer.rs");
+    bake_transformer_student(&out);
+}
+
+/// The transformer-lite student of the `transformer-student` images, exported with int8 and with
+/// int16 activations (the same checkpoint, so the same network).
+fn bake_transformer_student(out: &Path) {
+    let checkpoint = out.join("transformer_checkpoint");
+    fs::create_dir_all(&checkpoint).expect("create OUT_DIR/transformer_checkpoint");
+    transformer_student::write(&checkpoint);
+    for (activations, dir) in [
+        (frmd_export::Activations::Int8, "transformer_student8"),
+        (frmd_export::Activations::Int16, "transformer_student16"),
+    ] {
+        transformer_student::export(&checkpoint, activations)
+            .write_module(&out.join(dir))
+            .unwrap_or_else(|error| panic!("baking {dir} failed: {error:#}"));
+    }
 }

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds the FRMD firmware (release) for a core and runs it under QEMU with instruction counting:
 #
-#   bash examples/cortex-m/run-qemu.sh m4|m7|m33|m0|m55 [prodmp|mlp|policy|policy16|transformer|policy-stages|policy16-stages|transformer-stages|kernels|minimal] [extra cargo build args]
+#   bash examples/cortex-m/run-qemu.sh m4|m7|m33|m0|m55 [prodmp|mlp|policy|policy16|transformer|transformer-student|transformer-student16|policy-stages|policy16-stages|transformer-stages|kernels|minimal] [extra cargo build args]
 #
 #   m4:  thumbv7em-none-eabihf,     -machine mps2-an386  -cpu cortex-m4  (Cortex-M4F)
 #   m7:  thumbv7em-none-eabihf,     -machine mps2-an500  -cpu cortex-m7  (Cortex-M7, same ELF)
@@ -16,6 +16,8 @@
 #   policy16: firmware frmd-cortex-m-policy16, the same student exported with int16 activations
 #   transformer: firmware frmd-cortex-m-transformer, a synthetic one-step policy with a
 #     transformer-lite network
+#   transformer-student, transformer-student16: firmware frmd-cortex-m-transformer-student[16], a
+#     random transformer-lite student exported with int8 / int16 activations, run from its blob
 #   pil: firmware frmd-cortex-m-pil, processor in the loop: answers frames on standard input
 #     (frmd_firmware_support::pil); driven by the host (`frmd eval --firmware`), not run here
 #   policy-stages, transformer-stages: the policy (same baked student) and the transformer
@@ -45,7 +47,7 @@ case "$board" in
     m33) machine=mps2-an505; cpu=cortex-m33; target=thumbv8m.main-none-eabihf ;;
     m0) machine=microbit; cpu=cortex-m0; target=thumbv6m-none-eabi ;;
     m55) machine=mps3-an547; cpu=cortex-m55; target=thumbv8m.main-none-eabihf; memory_map=an547 ;;
-    *) echo "usage: $0 m4|m7|m33|m0|m55 [prodmp|mlp|policy|policy16|transformer|policy-stages|policy16-stages|transformer-stages|kernels|minimal] [extra cargo build args]" >&2; exit 2 ;;
+    *) echo "usage: $0 m4|m7|m33|m0|m55 [prodmp|mlp|policy|policy16|transformer|transformer-student|transformer-student16|policy-stages|policy16-stages|transformer-stages|kernels|minimal] [extra cargo build args]" >&2; exit 2 ;;
 esac
 shift
 bin=frmd-cortex-m
@@ -55,6 +57,8 @@ case "${1:-}" in
     policy) bin=frmd-cortex-m-policy; shift ;;
     policy16) bin=frmd-cortex-m-policy16; shift ;;
     transformer) bin=frmd-cortex-m-transformer; shift ;;
+    transformer-student) bin=frmd-cortex-m-transformer-student; shift ;;
+    transformer-student16) bin=frmd-cortex-m-transformer-student16; shift ;;
     policy-stages) bin=frmd-cortex-m-policy-stages; shift ;;
     policy16-stages) bin=frmd-cortex-m-policy16-stages; shift ;;
     kernels) bin=frmd-cortex-m-kernels; shift ;;

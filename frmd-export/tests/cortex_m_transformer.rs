@@ -6,7 +6,10 @@
 //! QEMU. Here the same backbone is regenerated in memory, the configuration comes from the blob
 //! form of the same policy (`frmd_core::blob::LoadedMlp::config`), and the same workload
 //! runs it; `qemu_transformer_digest_matches_host` requires the firmware's printed digest on
-//! every board with the memory for it (Cortex-M4F, M7, M33) to equal the host's. It needs
+//! every board with the memory for it (Cortex-M4F, M7, M33) to equal the host's, and
+//! `qemu_transformer_student_digests_match_host` does the same for the images that run a random
+//! transformer-lite student from its exported blob with int8 and int16 activations
+//! (`frmd-cortex-m-transformer-student[16]`). It needs
 //! `bash scripts/setup-cortex-m.sh` to have run (CI does that first); without it, or with
 //! FRMD_SKIP_QEMU=1, it prints why and passes without checking (unless FRMD_REQUIRE_QEMU is set,
 //! as in CI: then it fails).
@@ -108,4 +111,61 @@ fn qemu_transformer_digest_matches_host() {
         digest,
         "the host",
     );
+}
+
+/// Digest of the fixed cases for the random transformer-lite student exported with
+/// `activations`, run from its blob as the `transformer-student` images run it.
+fn student_digest(activations: frmd_export::Activations) -> u64 {
+    use frmd_firmware_support::host::transformer_student;
+    let dir = frmd_test_support::checkpoint::scratch_dir(&format!("tstudent-{activations}"));
+    transformer_student::write(&dir);
+    let student = transformer_student::export(&dir, activations);
+    assert_eq!(student.activations(), activations);
+    let blob = AlignedBlob::new(student.blob());
+    let loaded = frmd_core::blob::LoadedBlob::load(blob.bytes()).expect("load the blob");
+    assert_eq!(
+        loaded.activation_bits(),
+        if activations == frmd_export::Activations::Int16 {
+            16
+        } else {
+            8
+        }
+    );
+    let mut work = frmd_export::host::HostWork::new();
+    let network = loaded
+        .network::<POLICY_INPUT, _>(&mut work)
+        .expect("the blob's network");
+    let policy =
+        Policy::<_, POLICY_HISTORY, POLICY_OBS_DIM, DOF, HORIZON, PARAMS, POLICY_INPUT>::new(
+            loaded.config(),
+            network,
+        )
+        .expect("the blob's policy");
+    let mut workload = PolicyWorkload::with_name(policy, "transformer student");
+    let digest = digest_all(&mut workload).expect("the student acts on every case");
+    std::fs::remove_dir_all(&dir).unwrap();
+    digest
+}
+
+#[test]
+fn qemu_transformer_student_digests_match_host() {
+    use frmd_export::Activations;
+    let int8 = student_digest(Activations::Int8);
+    let int16 = student_digest(Activations::Int16);
+    assert_ne!(int8, int16, "int8 and int16 students gave the same chunks");
+    assert_eq!(
+        int16,
+        student_digest(Activations::Int16),
+        "not reproducible"
+    );
+    let root = qemu::repo_root();
+    if !qemu::available("qemu_transformer_student_digests_match_host", &root) {
+        return;
+    }
+    for (image, digest) in [
+        ("transformer-student", int8),
+        ("transformer-student16", int16),
+    ] {
+        qemu::assert_digest_on(&root, &qemu::TRANSFORMER_BOARDS, image, digest, "the host");
+    }
 }

@@ -216,3 +216,25 @@ pub fn transformer_image(
     let mut workload = transformer_workload(transformer_network(&blocks, &mut scratch));
     measure(&mut workload, stack)
 }
+
+/// Printed as the `transformer-student` images' `workload:` line.
+pub const TRANSFORMER_STUDENT_NAME: &str = "policy act: one-step transformer-lite student (random weights) from its blob, int8 activations";
+/// The same for the int16 image.
+pub const TRANSFORMER_STUDENT16_NAME: &str = "policy act: one-step transformer-lite student (random weights) from its blob, int16 activations";
+
+/// The start of the `transformer-student` images: the baked blob's policy (built by `policy` over
+/// `storage`, which the caller keeps in `main`'s frame) as a workload named `name`, measured on
+/// the fixed observation histories.
+#[inline(always)]
+pub fn transformer_student_image<'a, Net: Network, E: core::fmt::Display>(
+    stack: StackProbe,
+    policy: Result<TransformerPolicy<'a, Net>, E>,
+    name: &'static str,
+) -> ! {
+    let policy = match policy {
+        Ok(policy) => policy,
+        Err(error) => exit_failure(&error),
+    };
+    let mut workload: TransformerWorkload<'a, Net> = PolicyWorkload::with_name(policy, name);
+    crate::bench::run::<_, { CASES }>(&mut workload, stack)
+}

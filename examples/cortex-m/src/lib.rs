@@ -11,6 +11,10 @@
 //!   in, action chunk out).
 //! - `frmd-cortex-m-transformer` (src/bin/frmd-cortex-m-transformer.rs): a synthetic one-step
 //!   policy configuration with a synthetic int8 transformer-lite backbone instead of the MLP.
+//! - `frmd-cortex-m-transformer-student`, `frmd-cortex-m-transformer-student16`: a random
+//!   transformer-lite student (the synthetic policy's sizes) exported by frmd-export with int8 /
+//!   int16 activations and run from its blob (`LoadedTransformer[16]`), as a user's firmware
+//!   runs a transformer student: the two precisions of the same network side by side.
 //! - `frmd-cortex-m-pil` (src/bin/frmd-cortex-m-pil.rs): processor in the loop, a baked policy
 //!   answering act requests from the host over semihosting (see [`pil`]).
 //! - `frmd-cortex-m-kernels` (src/bin/frmd-cortex-m-kernels.rs): frmd-core's fully connected
@@ -60,6 +64,20 @@ pub mod baked_student {
 pub mod baked_student16 {
     include!(concat!(env!("OUT_DIR"), "/student16/policy.rs"));
     include!(concat!(env!("OUT_DIR"), "/student16/network_macs.rs"));
+}
+
+/// The random transformer-lite student exported with int8 activations (blob form,
+/// `OUT_DIR/transformer_student8`): the `transformer-student` image.
+#[allow(dead_code)]
+pub mod baked_transformer_student8 {
+    include!(concat!(env!("OUT_DIR"), "/transformer_student8/policy.rs"));
+}
+
+/// The same student exported with int16 activations (`OUT_DIR/transformer_student16`): the
+/// `transformer-student16` image.
+#[allow(dead_code)]
+pub mod baked_transformer_student16 {
+    include!(concat!(env!("OUT_DIR"), "/transformer_student16/policy.rs"));
 }
 
 /// The module frmd-export generated for the synthetic MLP policy

@@ -1,5 +1,6 @@
 //! Host side of the firmware checks (std): [`qemu`] runs an image under QEMU for a test;
-//! [`student`] (feature `export`) exports the checked-in trained student as build.rs does;
+//! [`student`] (feature `export`) exports the checked-in trained student as build.rs does and
+//! [`transformer_student`] the random transformer-lite student of the blob images;
 //! [`board_memory_map`] picks the QEMU board's memory map for the build scripts.
 
 pub mod qemu;
@@ -22,3 +23,5 @@ pub fn board_memory_map(target: &str) -> &'static str {
 }
 #[cfg(feature = "export")]
 pub mod student;
+#[cfg(feature = "export")]
+pub mod transformer_student;
