@@ -6,7 +6,7 @@
 # table from their `-stages` images (same measurement plus the breakdown; the table states both
 # totals, and the script fails if a stages image's digest differs from its image's).
 #
-#   bash examples/cortex-m/bench.sh            # all images: prodmp mlp policy policy16 transformer
+#   bash examples/cortex-m/bench.sh            # all images: prodmp mlp policy policy16 transformer transformer-student transformer-student16
 #   bash examples/cortex-m/bench.sh policy     # a subset
 #   FRMD_BENCH_CORES="m4 m33" bash examples/cortex-m/bench.sh policy
 #
@@ -22,7 +22,7 @@ set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 images=("$@")
-[ "${#images[@]}" -gt 0 ] || images=(prodmp mlp policy policy16 transformer)
+[ "${#images[@]}" -gt 0 ] || images=(prodmp mlp policy policy16 transformer transformer-student transformer-student16)
 read -r -a cores <<<"${FRMD_BENCH_CORES:-m4 m7 m33 m0 m55}"
 out_dir="${FRMD_BENCH_DIR:-$(mktemp -d)}"
 mkdir -p "$out_dir"
