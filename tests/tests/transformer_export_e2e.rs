@@ -87,5 +87,27 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
 
     let report = equiv_within_bounds(student, baked, 5, 32);
     assert_eq!(row(&report, "int8 transformer layer mismatches"), 0.0);
+
+    // `frmd export --activations int16`: the int16 blob (format 5 trailer) loads only with the
+    // int16 loader and passes the same harness, its layers equal to the wide model.
+    let baked16 = run.dir.join("int16");
+    let cfg = frmd_host::export::ExportConfig {
+        activations: Some("int16".into()),
+        ..frmd_host::export::ExportConfig::for_checkpoint(student)
+    };
+    let exported16 = frmd_host::export::export_student(&cfg, false).unwrap();
+    assert_eq!(exported16.activations(), frmd_export::Activations::Int16);
+    frmd_host::export::write_export(&cfg, &exported16, Some(&baked16), None).unwrap();
+    let blob16 = std::fs::read(baked16.join("policy.blob")).unwrap();
+    let aligned16 = AlignedBlob::new(&blob16);
+    assert!(frmd_core::blob::LoadedTransformer16::load(aligned16.bytes()).is_ok());
+    assert_eq!(
+        frmd_core::blob::LoadedTransformer::load(aligned16.bytes()).err(),
+        Some(frmd_core::blob::BlobError::ActivationBits { found: 16 })
+    );
+    let module = std::fs::read_to_string(baked16.join("policy.rs")).unwrap();
+    assert!(module.contains("pub const ACTIVATION_BITS: u8 = 16;"), "policy.rs");
+    let report16 = equiv_within_bounds(student, &baked16, 5, 32);
+    assert_eq!(row(&report16, "int16 transformer layer mismatches"), 0.0);
     let _ = std::fs::remove_dir_all(&run.dir);
 }
