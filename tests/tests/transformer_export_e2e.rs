@@ -106,7 +106,10 @@ fn tiny_transformer_student_exports_and_meets_the_harness_bounds() {
         Some(frmd_core::blob::BlobError::ActivationBits { found: 16 })
     );
     let module = std::fs::read_to_string(baked16.join("policy.rs")).unwrap();
-    assert!(module.contains("pub const ACTIVATION_BITS: u8 = 16;"), "policy.rs");
+    assert!(
+        module.contains("pub const ACTIVATION_BITS: u8 = 16;"),
+        "policy.rs"
+    );
     let report16 = equiv_within_bounds(student, &baked16, 5, 32);
     assert_eq!(row(&report16, "int16 transformer layer mismatches"), 0.0);
     let _ = std::fs::remove_dir_all(&run.dir);

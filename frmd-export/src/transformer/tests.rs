@@ -223,6 +223,15 @@ pub(super) fn exported_lite(
     name: &str,
     steps: usize,
 ) -> (QuantizedTransformer, Normalization, PathBuf) {
+    exported_lite_as::<i8>(name, steps, 1.0)
+}
+
+/// [`exported_lite`] with `P` activations and activation headroom `headroom`.
+pub(super) fn exported_lite_as<P: WideCodes>(
+    name: &str,
+    steps: usize,
+    headroom: f32,
+) -> (QuantizedTransformer<P>, Normalization, PathBuf) {
     let config = lite_config();
     let dir = write_checkpoint(name, &config, 21);
     let ckpt = Checkpoint::read(&dir).unwrap();
@@ -234,7 +243,7 @@ pub(super) fn exported_lite(
     )
     .unwrap();
     (
-        quantize::<i8>(&folded, &ranges, 1.0).unwrap(),
+        quantize::<P>(&folded, &ranges, headroom).unwrap(),
         ckpt.meta.normalization.clone().unwrap(),
         dir,
     )

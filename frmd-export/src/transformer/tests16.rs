@@ -4,9 +4,8 @@
 //! the exporter's model, its layers match the wide-integer model, and an int8 blob of format 4
 //! (before the activation trailer) still loads.
 
-use super::tests::{calibration_set, chunk_error, lite_config, write_checkpoint};
+use super::tests::{calibration_set, chunk_error, exported_lite_as, lite_config};
 use super::*;
-use crate::calibrate::RangeMethod;
 use crate::host::{HostWork, MAX_WIDTH};
 use frmd_core::blob::{
     crc32, AlignedBlob, BlobError, LoadedBlob, LoadedTransformer, LoadedTransformer16,
@@ -14,10 +13,9 @@ use frmd_core::blob::{
 };
 use frmd_core::policy::Network;
 use frmd_core::rng::Rng;
-use frmd_formats::checkpoint::Checkpoint;
 
-/// The int8 and int16 exports of one random transformer-lite student (`steps` steps), with the
-/// checkpoint's normalization and directory.
+/// The int8 and int16 (headroom 1.5) exports of one random transformer-lite student (`steps`
+/// steps, the same checkpoint and calibration), with its normalization and directory.
 fn both(
     name: &str,
     steps: usize,
@@ -27,19 +25,9 @@ fn both(
     Normalization,
     PathBuf,
 ) {
-    let config = lite_config();
-    let dir = write_checkpoint(name, &config, 31);
-    let ckpt = Checkpoint::read(&dir).unwrap();
-    let folded = FoldedTransformer::new(&ckpt, steps).unwrap();
-    let ranges = calibrate(
-        &folded,
-        &calibration_set(&config, 24, 7),
-        RangeMethod::MinMax,
-    )
-    .unwrap();
-    let int8 = quantize::<i8>(&folded, &ranges, 1.0).unwrap();
-    let int16 = quantize::<i16>(&folded, &ranges, 1.5).unwrap();
-    (int8, int16, ckpt.meta.normalization.clone().unwrap(), dir)
+    let (int8, _, _) = exported_lite_as::<i8>(name, steps, 1.0);
+    let (int16, norm, dir) = exported_lite_as::<i16>(name, steps, 1.5);
+    (int8, int16, norm, dir)
 }
 
 #[test]
