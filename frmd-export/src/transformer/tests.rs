@@ -86,7 +86,7 @@ impl ChunkError {
     pub(super) fn assert_tracks(&self, what: &str, units: &str) {
         let (max, spread) = (self.max, self.hi - self.lo);
         let mean = self.mean();
-        println!("{what}: int8 vs f32 chunk max {max:.5}, mean {mean:.5}, f32 spread {spread:.3} ({units})");
+        println!("{what}: quantized vs f32 chunk max {max:.5}, mean {mean:.5}, f32 spread {spread:.3} ({units})");
         assert!(spread > 0.1, "f32 chunks are degenerate (spread {spread})");
         assert!(
             max <= 0.025 * spread,
