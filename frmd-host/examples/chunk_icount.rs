@@ -1,8 +1,8 @@
 //! Instruction counts per chunk under callgrind: runs `CHUNKS` (argument 2, default 1) int8 or
 //! float chunks (argument 1: int8 | int8-avx2 | int8-portable | int16 | core-f32 | candle-f32;
-//! int16: the MLP exported with int16 activations) of a
+//! int16: the student exported with int16 activations) of a
 //! randomly initialized student at the reach shape with backbone argument 3 (default `mlp`;
-//! `transformer-lite` runs frmd-core's int8 transformer policy). Per-chunk Ir = (Ir(101 chunks) -
+//! `transformer-lite` runs frmd-core's transformer policy). Per-chunk Ir = (Ir(101 chunks) -
 //! Ir(1 chunk)) / 100. `int8-avx2` / `int8-portable` run the int8 policy with frmd-core's AVX-512 and
 //! AVX-VNNI / AVX2 kernels turned off (x86-64; callgrind's virtual CPU reports neither VNNI kind
 //! anyway).
@@ -34,10 +34,7 @@ fn main() -> anyhow::Result<()> {
     let policy: &mut dyn Policy = match (which_policy, &mut p.core) {
         ("candle-f32", _) => &mut p.float,
         ("int8", Ok(core)) => &mut core.int8,
-        ("int16", Ok(core)) => core
-            .int16
-            .as_mut()
-            .ok_or_else(|| anyhow::anyhow!("no int16-activation policy for {backbone}"))?,
+        ("int16", Ok(core)) => &mut core.int16,
         ("core-f32", Ok(core)) => &mut core.core_f32,
         ("int8" | "int16" | "core-f32", Err(reason)) => {
             anyhow::bail!("no frmd-core policy for {backbone}: {reason}")

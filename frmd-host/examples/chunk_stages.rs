@@ -30,11 +30,7 @@ fn main() -> anyhow::Result<()> {
     let core = policies?.core.map_err(anyhow::Error::msg)?;
     let (mut policy, blob) = match precision {
         "int8" => (core.int8, core.int8_blob),
-        "int16" => (
-            core.int16
-                .ok_or_else(|| anyhow::anyhow!("no int16 policy"))?,
-            core.int16_blob.unwrap_or_default(),
-        ),
+        "int16" => (core.int16, core.int16_blob),
         other => anyhow::bail!("unknown precision {other}"),
     };
     let (history, prev, rate) = reach_input();

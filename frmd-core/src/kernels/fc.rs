@@ -368,9 +368,7 @@ pub fn dequantize_accumulators<A: Accumulator>(
     if out.len() != acc.len() {
         return Err(KernelError::OutputLength);
     }
-    for ((a, s), o) in acc.iter().zip(scales).zip(out.iter_mut()) {
-        *o = a.dequantize(*s);
-    }
+    A::dequantize_all(acc, scales, out);
     Ok(())
 }
 

@@ -69,6 +69,11 @@ pub(crate) mod sealed {
             input: crate::kernels::LayerInput<'_>,
             acc: &mut [Self],
         );
+
+        /// `out[o] = acc[o].dequantize(scales[o])` over the common length
+        /// (`kernels::dequantize_accumulators` after its length checks): one value at a time, or
+        /// for int64 accumulators eight at a time with AVX2 where it runs (the same bits).
+        fn dequantize_all(acc: &[Self], scales: &[f32], out: &mut [f32]);
     }
 
     /// The x86-64 requantizing kernels of a precision, and the DSP cores' fused int16 path.
@@ -160,6 +165,13 @@ pub trait Accumulator:
 
 #[allow(private_interfaces)]
 impl sealed::Accumulate for i32 {
+    #[inline(always)]
+    fn dequantize_all(acc: &[i32], scales: &[f32], out: &mut [f32]) {
+        for ((a, s), o) in acc.iter().zip(scales).zip(out.iter_mut()) {
+            *o = dequantize_accumulator(*a, *s);
+        }
+    }
+
     /// One kernel call over the whole row, started at the bias: the int8 kernels as they were.
     #[inline(always)]
     fn block(
@@ -209,6 +221,18 @@ impl Accumulator for i32 {
 
 #[allow(private_interfaces)]
 impl sealed::Accumulate for i64 {
+    #[inline(always)]
+    fn dequantize_all(acc: &[i64], scales: &[f32], out: &mut [f32]) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx2) = super::x86::Avx2::get() {
+            avx2.dequantize_wide(acc, scales, out);
+            return;
+        }
+        for ((a, s), o) in acc.iter().zip(scales).zip(out.iter_mut()) {
+            *o = dequantize_wide(*a, *s);
+        }
+    }
+
     /// One kernel call per 512-column chunk, started at 0; each int32 result is sign-extended and
     /// added to the row's int64 sum (the first chunk's to the bias).
     #[inline(always)]

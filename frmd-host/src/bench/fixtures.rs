@@ -84,15 +84,15 @@ pub struct BenchPolicies {
     pub core: Result<CorePolicies, String>,
 }
 
-/// frmd-core's int8 policy and its f32 twin (and, for an MLP, the int16-activation export).
+/// frmd-core's int8 policy, its f32 twin and the int16-activation export.
 pub struct CorePolicies {
     pub core_f32: Int8Policy,
     pub int8: Int8Policy,
-    /// The same student exported with int16 activations (MLP students only).
-    pub int16: Option<Int8Policy>,
+    /// The same student exported with int16 activations.
+    pub int16: Int8Policy,
     /// The blobs of `int8` and `int16` (for the stage breakdown, [`super::stages`]).
     pub int8_blob: Vec<u8>,
-    pub int16_blob: Option<Vec<u8>>,
+    pub int16_blob: Vec<u8>,
     /// Flash bytes (weights + tables) of the int8 policy.
     pub flash_bytes: usize,
 }
@@ -128,14 +128,6 @@ pub fn reach_student(
         activations: Some(Activations::Int16),
         ..ExportOptions::default()
     };
-    let int16_blob = match backbone {
-        BackboneConfig::Mlp { .. } => Some(frmd_export::export(dir, &int16, None)?.blob().to_vec()),
-        _ => None,
-    };
-    let int16 = int16_blob
-        .as_deref()
-        .map(|blob| Int8Policy::from_blob(blob, "int16"))
-        .transpose()?;
     let int8 = ExportOptions {
         activations: Some(Activations::Int8),
         ..ExportOptions::default()
@@ -143,11 +135,12 @@ pub fn reach_student(
     let core = match frmd_export::export(dir, &int8, None) {
         Ok(student) => {
             let blob = student.blob().to_vec();
+            let int16_blob = frmd_export::export(dir, &int16, None)?.blob().to_vec();
             Ok(CorePolicies {
                 flash_bytes: student.memory().flash_bytes(),
                 int8: Int8Policy::from_blob(&blob, "int8")?,
                 int8_blob: blob.clone(),
-                int16,
+                int16: Int8Policy::from_blob(&int16_blob, "int16")?,
                 int16_blob,
                 core_f32: Int8Policy::f32_twin(&blob, student, "core-f32")?,
             })

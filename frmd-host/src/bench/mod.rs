@@ -233,9 +233,7 @@ fn core_policy_rows(cfg: &BenchConfig) -> anyhow::Result<CoreRows> {
         return Ok(policies?.core.map(|c| {
             let dims = c.int8.dims();
             let mut rows = one_step_rows(c.int8, c.core_f32);
-            if let Some(int16) = c.int16 {
-                rows.push(("frmd-core int16-act 1-step".to_string(), Box::new(int16)));
-            }
+            rows.push(("frmd-core int16-act 1-step".to_string(), Box::new(c.int16)));
             (rows, cfg.backbone.clone(), dims)
         }));
     }

@@ -39,7 +39,7 @@ fn mlp_chunk_stages_recombine_into_the_policy_chunk() {
         prev_action: &prev,
         prev_rate: &rate,
     };
-    let int16 = (core.int16.unwrap(), core.int16_blob.unwrap());
+    let int16 = (core.int16, core.int16_blob);
     for (mut policy, blob) in [(core.int8, core.int8_blob), int16] {
         let names = stages::with_stages(&blob, &mut policy, &input, |stages| {
             stages.check()?;

@@ -11,7 +11,8 @@
 //! - `vnni`: the fronts of the row sums with `vpdpbusd`/`vpdpwssd`, VEX-encoded on 256 bits
 //!   (AVX-VNNI) or EVEX-encoded on 512 bits (AVX-512 F/BW/VNNI, checked with [`avx512_active`]);
 //! - `wide`: the int16-activation layers (int64 accumulation from 512-column int32 chunk sums,
-//!   requantization to int16 and the interpolated table in registers).
+//!   requantization to int16 and the interpolated table in registers);
+//! - `dequant`: dequantization of int64 accumulators to f32, eight at a time.
 //!
 //! Detection is `no_std`: `CPUID` leaf 1 (AVX and OSXSAVE bits), `XGETBV` (the OS saves the SSE
 //! and AVX register state: XCR0 bits 1 and 2) and `CPUID` leaf 7 (AVX2 bit), cached in an
@@ -19,7 +20,7 @@
 //! [`set_avx_vnni_enabled`] turn the paths off (or back on, if the CPU has them) for A/B
 //! measurements.
 //!
-//! Safety audit: `unsafe` is allowed in this module and its four submodules only (and in
+//! Safety audit: `unsafe` is allowed in this module and its submodules only (and in
 //! `kernels::dsp_asm`). There are four kinds of `unsafe` expression:
 //! - `_xgetbv(0)` here: requires the `XGETBV` instruction, which exists when `CPUID.1:ECX.OSXSAVE`
 //!   (bit 27) is set; it is called only after checking that bit.
@@ -34,9 +35,9 @@
 //! - unaligned loads and stores (`_mm_loadu_si128`, `_mm256_loadu_si256`, `_mm256_storeu_si256`,
 //!   `_mm_storeu_si128`) through pointers made from references to fixed-size arrays of exactly
 //!   the accessed size (`&[i8; 16]`, `&[i8; 32]`, `&[i8; 64]` (`_mm512_loadu_si512`), `&[i16; 32]`,
-//!   `&[i16; 16]`, `&[i16; 8]`, `&[i32; 8]`, `&[i64; 4]`,
-//!   `&mut [i32; 8]`, `&mut [i16; 8]`, `&mut [i64; 4]`): in bounds, initialized, no alignment
-//!   needed.
+//!   `&[i16; 16]`, `&[i16; 8]`, `&[i32; 8]`, `&[i64; 4]`, `&[f32; 8]`,
+//!   `&mut [i32; 8]`, `&mut [i16; 8]`, `&mut [i64; 4]`, `&mut [f32; 8]`): in bounds,
+//!   initialized, no alignment needed.
 //! - `_mm256_i32gather_epi32` in `wide::interpolate`: eight 4-byte reads from a `&[i16; 513]`
 //!   table at byte offsets `2 i` with every index `i` masked to `0..=511`, so each read
 //!   (`t[i]`, `t[i + 1]`) ends at byte 1026 at most, inside the table.
@@ -44,6 +45,7 @@
 //! No other memory is touched: slices are walked with `as_chunks` iterators.
 #![allow(unsafe_code)]
 
+mod dequant;
 mod layer;
 mod matvec;
 mod requant;
