@@ -249,6 +249,24 @@ pub(super) fn exported_lite_as<P: WideCodes>(
     )
 }
 
+/// One random model input per sampling step of `folded` (condition `0.3 g`, trajectory `g`
+/// from `Rng::new(seed)`).
+pub(super) fn step_inputs(folded: &FoldedTransformer, seed: u64) -> Vec<Vec<f32>> {
+    let config = &folded.base.config;
+    let mut rng = Rng::new(seed);
+    let cond: Vec<f32> = (0..config.cond_dim())
+        .map(|_| 0.3 * rng.gaussian())
+        .collect();
+    let x: Vec<f32> = (0..config.traj_dim()).map(|_| rng.gaussian()).collect();
+    let layout = &folded.base.layout;
+    folded
+        .base
+        .steps
+        .iter()
+        .map(|step| crate::fold::model_input(config, layout, step, &cond, &x).unwrap())
+        .collect()
+}
+
 #[test]
 fn blob_round_trip_is_bit_exact_and_drives_the_core_policy() {
     use frmd_core::policy::{Noise, Policy};
@@ -261,18 +279,10 @@ fn blob_round_trip_is_bit_exact_and_drives_the_core_policy() {
     let mut network = loaded.network(&mut *scratch).unwrap();
     assert_eq!(network.num_noise_variants(), 2);
     // Same int8 outputs as the exporter's in-memory model, per step, bit for bit.
-    let config = lite_config();
-    let mut rng = Rng::new(8);
-    let cond: Vec<f32> = (0..config.cond_dim())
-        .map(|_| 0.3 * rng.gaussian())
-        .collect();
-    let x: Vec<f32> = (0..config.traj_dim()).map(|_| rng.gaussian()).collect();
-    for (i, step) in quantized.folded.base.steps.iter().enumerate() {
-        let layout = &quantized.folded.base.layout;
-        let input = crate::fold::model_input(&config, layout, step, &cond, &x).unwrap();
-        let mut out = vec![0.0; config.output_dim()];
-        network.forward(i, &input, &mut out).unwrap();
-        assert_eq!(out, quantized.forward(i, &input).unwrap(), "step {i}");
+    for (i, input) in step_inputs(&quantized.folded, 8).iter().enumerate() {
+        let mut out = vec![0.0; lite_config().output_dim()];
+        network.forward(i, input, &mut out).unwrap();
+        assert_eq!(out, quantized.forward(i, input).unwrap(), "step {i}");
     }
     // The loaded blob runs frmd-core's Policy end to end and yields finite chunks.
     let mut policy = Policy::<_, 2, 5, 3, 8, 5, 64>::new(loaded.config(), network).unwrap();

@@ -4,7 +4,7 @@
 //! the exporter's model, its layers match the wide-integer model, and an int8 blob of format 4
 //! (before the activation trailer) still loads.
 
-use super::tests::{calibration_set, chunk_error, exported_lite_as, lite_config};
+use super::tests::{calibration_set, chunk_error, exported_lite_as, lite_config, step_inputs};
 use super::*;
 use crate::host::{HostWork, MAX_WIDTH};
 use frmd_core::blob::{
@@ -12,7 +12,6 @@ use frmd_core::blob::{
     FORMAT_VERSION, HEADER_LEN, SECTION_ALIGN,
 };
 use frmd_core::policy::Network;
-use frmd_core::rng::Rng;
 
 /// The int8 and int16 (headroom 1.5) exports of one random transformer-lite student (`steps`
 /// steps, the same checkpoint and calibration), with its normalization and directory.
@@ -74,21 +73,13 @@ fn int16_blob_round_trip_is_bit_exact_and_loaders_check_the_precision() {
     let mut work = HostWork::new();
     let mut network = any.network::<MAX_WIDTH, _>(&mut work).unwrap();
     assert_eq!(network.num_noise_variants(), 2);
-    let config = lite_config();
-    let mut rng = Rng::new(8);
-    let cond: Vec<f32> = (0..config.cond_dim())
-        .map(|_| 0.3 * rng.gaussian())
-        .collect();
-    let x: Vec<f32> = (0..config.traj_dim()).map(|_| rng.gaussian()).collect();
-    for (i, step) in int16.folded.base.steps.iter().enumerate() {
-        let input =
-            crate::fold::model_input(&config, &int16.folded.base.layout, step, &cond, &x).unwrap();
-        let mut out = vec![0.0; config.output_dim()];
-        network.forward(i, &input, &mut out).unwrap();
-        assert_eq!(out, int16.forward(i, &input).unwrap(), "step {i}");
+    for (i, input) in step_inputs(&int16.folded, 8).iter().enumerate() {
+        let mut out = vec![0.0; lite_config().output_dim()];
+        network.forward(i, input, &mut out).unwrap();
+        assert_eq!(out, int16.forward(i, input).unwrap(), "step {i}");
         assert_ne!(
             out,
-            int8.forward(i, &input).unwrap(),
+            int8.forward(i, input).unwrap(),
             "step {i}: int8 gave the same bits"
         );
     }
