@@ -1,7 +1,8 @@
 //! Transformer backbone (transformer-lite) built from [`crate::model::linear`]: one generic
 //! [`Transformer`] of [`Block`]s, generic over its layers' precision: f32 ([`F32Transformer`],
-//! the reference, with calibration probes) or the hybrid int8 form ([`Int8Transformer`]); both
-//! forms share the block skeleton and the validation, over borrowed weights.
+//! the reference, with calibration probes) or the hybrid quantized form ([`QuantTransformer`]:
+//! [`Int8Transformer`], or [`Int16Transformer`] with int16 activations); every form shares the
+//! block skeleton and the validation, over borrowed weights.
 //!
 //! # Structure (mirrors `frmd-host` `models::transformer::Transformer`)
 //!
@@ -30,6 +31,11 @@
 //! feed-forward is an int8 MLP: `fc1` requantized to int8 and mapped through a 256-entry GELU
 //! table, `fc2` dequantized ([`Int8FeedForward`]). LayerNorm and the attention (scores, softmax,
 //! weighted sum of values) run in f32.
+//!
+//! [`Int16Transformer`] is the same with TFLite's 16x8 scheme: every quantization point is a
+//! symmetric int16 code (zero point 0), biases and accumulators are int64 and the GELU table is
+//! an interpolated int16 table; its scratch holds the same counts at twice the bytes for codes
+//! and accumulators ([`TransformerShape::int16_scratch`]).
 //!
 //! Quantization points, each with its own calibrated parameters recorded by
 //! [`F32Transformer::forward_observed`] under the named [`TransformerProbe`]:
