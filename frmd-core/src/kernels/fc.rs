@@ -368,7 +368,15 @@ pub fn dequantize_accumulators<A: Accumulator>(
     if out.len() != acc.len() {
         return Err(KernelError::OutputLength);
     }
-    A::dequantize_all(acc, scales, out);
+    #[cfg(target_arch = "x86_64")]
+    if let Some(avx2) = super::x86::Avx2::get() {
+        if A::dequantize_x86(avx2, acc, scales, out) {
+            return Ok(());
+        }
+    }
+    for ((a, s), o) in acc.iter().zip(scales).zip(out.iter_mut()) {
+        *o = a.dequantize(*s);
+    }
     Ok(())
 }
 

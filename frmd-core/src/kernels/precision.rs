@@ -70,10 +70,18 @@ pub(crate) mod sealed {
             acc: &mut [Self],
         );
 
-        /// `out[o] = acc[o].dequantize(scales[o])` over the common length
-        /// (`kernels::dequantize_accumulators` after its length checks): one value at a time, or
-        /// for int64 accumulators eight at a time with AVX2 where it runs (the same bits).
-        fn dequantize_all(acc: &[Self], scales: &[f32], out: &mut [f32]);
+        /// `kernels::dequantize_accumulators` with the x86 kernels (the caller checked the
+        /// lengths): `true` if they wrote every output (int64 accumulators, eight at a time,
+        /// the same bits as `Accumulator::dequantize`), `false` to use the scalar loop.
+        #[cfg(target_arch = "x86_64")]
+        fn dequantize_x86(
+            _avx2: crate::kernels::x86::Avx2,
+            _acc: &[Self],
+            _scales: &[f32],
+            _out: &mut [f32],
+        ) -> bool {
+            false
+        }
     }
 
     /// The x86-64 requantizing kernels of a precision, and the DSP cores' fused int16 path.
@@ -165,13 +173,6 @@ pub trait Accumulator:
 
 #[allow(private_interfaces)]
 impl sealed::Accumulate for i32 {
-    #[inline(always)]
-    fn dequantize_all(acc: &[i32], scales: &[f32], out: &mut [f32]) {
-        for ((a, s), o) in acc.iter().zip(scales).zip(out.iter_mut()) {
-            *o = dequantize_accumulator(*a, *s);
-        }
-    }
-
     /// One kernel call over the whole row, started at the bias: the int8 kernels as they were.
     #[inline(always)]
     fn block(
@@ -221,16 +222,16 @@ impl Accumulator for i32 {
 
 #[allow(private_interfaces)]
 impl sealed::Accumulate for i64 {
+    #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    fn dequantize_all(acc: &[i64], scales: &[f32], out: &mut [f32]) {
-        #[cfg(target_arch = "x86_64")]
-        if let Some(avx2) = super::x86::Avx2::get() {
-            avx2.dequantize_wide(acc, scales, out);
-            return;
-        }
-        for ((a, s), o) in acc.iter().zip(scales).zip(out.iter_mut()) {
-            *o = dequantize_wide(*a, *s);
-        }
+    fn dequantize_x86(
+        avx2: super::x86::Avx2,
+        acc: &[i64],
+        scales: &[f32],
+        out: &mut [f32],
+    ) -> bool {
+        avx2.dequantize_wide(acc, scales, out);
+        true
     }
 
     /// One kernel call per 512-column chunk, started at 0; each int32 result is sign-extended and

@@ -160,19 +160,6 @@ impl<'a, A: Accumulator> Int8Linear<'a, A> {
     }
 }
 
-impl Int8Linear<'_> {
-    /// int8 codes to dequantized f32; `accumulators` and `output` are `out_features` long.
-    pub fn forward(
-        &self,
-        codes: &[i8],
-        accumulators: &mut [i32],
-        output: &mut [f32],
-    ) -> Result<(), KernelError> {
-        self.fc.forward_accumulators(codes, accumulators)?;
-        dequantize_accumulators(accumulators, self.output_scales, output)
-    }
-}
-
 /// `codes[i] = P::quantize(values[i], params)` over the common length (asymmetric int8 or
 /// symmetric int16, [`Precision::quantize`]).
 pub fn quantize_into<P: Precision>(values: &[f32], params: QuantParams, codes: &mut [P]) {

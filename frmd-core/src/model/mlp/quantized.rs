@@ -383,36 +383,4 @@ impl Int8Mlp<'_> {
         let rest = self.hidden.get(1..).unwrap_or(&[]);
         self.run(pong, ping, out_width, rest, accumulators, output, stage)
     }
-
-    /// The network on `values` with int8 input ([`InputPrecision::Int8`]), writing its output
-    /// back into `values` (input and output width must agree); requantization as for
-    /// [`Self::forward_prevalidated`].
-    pub fn forward_in_place_prevalidated(
-        &self,
-        values: &mut [f32],
-        buffers: Int8Buffers<'_>,
-    ) -> Result<(), ModelError> {
-        self.check_io(values.len(), values.len())?;
-        let Int8Buffers {
-            ping,
-            pong,
-            accumulators,
-        } = buffers;
-        let first = ping
-            .get_mut(..values.len())
-            .ok_or(ModelError::ScratchTooSmall)?;
-        for (q, x) in first.iter_mut().zip(values.iter()) {
-            *q = self.input.quantize(*x);
-        }
-        let no_stages = &mut || {};
-        self.run(
-            ping,
-            pong,
-            values.len(),
-            self.hidden,
-            accumulators,
-            values,
-            no_stages,
-        )
-    }
 }

@@ -7,7 +7,7 @@ mod errors;
 mod fixture;
 
 use super::*;
-use crate::kernels::KernelError;
+use crate::kernels::{KernelError, LayerInput};
 use crate::rng::Rng;
 use fixture::{big_scratch, calibrated, random_inputs, BothForms, FloatModel};
 use std::{vec, vec::Vec};
@@ -378,13 +378,15 @@ fn int8_linear_rows_match_the_full_layer() {
     let qkv = quant.blocks[0].qkv.view();
     let input: Vec<i8> = (0..16).map(|i| (i * 13 - 100) as i8).collect();
     let mut full = [0.0_f32; 48];
-    qkv.linear.forward(&input, &mut [0; 48], &mut full).unwrap();
+    qkv.linear
+        .forward_input(LayerInput::Int8(&input), &mut [0; 48], &mut full)
+        .unwrap();
     for start in [0_usize, 8, 16, 40] {
         let mut part = [0.0_f32; 8];
         qkv.rows(start, 8)
             .unwrap()
             .linear
-            .forward(&input, &mut [0; 8], &mut part)
+            .forward_input(LayerInput::Int8(&input), &mut [0; 8], &mut part)
             .unwrap();
         assert_eq!(part, full[start..start + 8]);
     }
