@@ -1,4 +1,6 @@
-//! What the MLP's quantization does differently per activation precision ([`ExportPrecision`]):
+//! What quantization does differently per activation precision ([`ExportPrecision`], the MLP's
+//! and transformer-lite's exporters) and the wide-integer model of one output code
+//! ([`WideModel`]):
 //! int8 activations (TFLite's int8 scheme: asymmetric codes, int32 biases, 256-entry tables) or
 //! int16 activations (TFLite's 16x8 scheme: symmetric codes, int64 biases, interpolated 513-knot
 //! tables). Everything else in [`super::quantize`] is shared.
@@ -109,44 +111,76 @@ impl ExportPrecision for i16 {
     const INT32_ACCUMULATORS: bool = false;
 }
 
-/// A hidden layer's requantization and table in the wide-integer model, per precision.
-pub trait WideModel: frmd_core::kernels::Precision {
-    /// Channel `o`'s output code for the exact accumulator `acc`.
-    fn output(layer: &QuantizedLayer<Self>, tables: &[Self::Table], o: usize, acc: i64) -> i64;
-}
+/// The wide-integer model of one output code, per precision: the requantization of an exact
+/// accumulator and the activation table read from its entries (the MLP's and the transformer's
+/// kernel checks).
+pub trait WideModel: frmd_core::kernels::Precision + Into<i64> {
+    /// The i128 model of the requantization of `acc` to the codes `lo..=hi`.
+    fn wide_requantize(
+        acc: i128,
+        multiplier: i32,
+        shift: i32,
+        zero_point: i32,
+        lo: Self,
+        hi: Self,
+    ) -> Self;
 
-impl WideModel for i8 {
-    /// The i128 model of Q31 requantization (int32 accumulators wrap: the model takes the low
-    /// 32 bits, as the definition does), then the table indexed directly.
-    fn output(layer: &QuantizedLayer<i8>, tables: &[[i8; 256]], o: usize, acc: i64) -> i64 {
-        let q = reference::requantize(
-            acc as i32,
+    /// The table's value at `code`, computed from its entries.
+    fn wide_lookup(table: &Self::Table, code: Self) -> Self;
+
+    /// Channel `o`'s output code of an MLP hidden layer for the exact accumulator `acc`.
+    fn output(layer: &QuantizedLayer<Self>, tables: &[Self::Table], o: usize, acc: i64) -> i64 {
+        let q = Self::wide_requantize(
+            i128::from(acc),
             layer.multipliers[o],
             layer.shifts[o],
             layer.output_zero_point,
             layer.activation_min,
             layer.activation_max,
         );
-        i64::from(match layer.lut {
-            Some(t) => tables[t][(i32::from(q) + 128) as usize],
+        match layer.lut {
+            Some(t) => Self::wide_lookup(&tables[t], q),
             None => q,
-        })
+        }
+        .into()
+    }
+}
+
+impl WideModel for i8 {
+    /// The i128 model of Q31 requantization (int32 accumulators wrap: the model takes the low
+    /// 32 bits, as the definition does).
+    fn wide_requantize(
+        acc: i128,
+        multiplier: i32,
+        shift: i32,
+        zero_point: i32,
+        lo: i8,
+        hi: i8,
+    ) -> i8 {
+        reference::requantize(acc as i32, multiplier, shift, zero_point, lo, hi)
+    }
+
+    /// The table indexed directly.
+    fn wide_lookup(table: &[i8; 256], code: i8) -> i8 {
+        table[(i32::from(code) + 128) as usize]
     }
 }
 
 impl WideModel for i16 {
-    /// The i128 model of the Q15 requantization, then the slope form of the interpolation.
-    fn output(layer: &QuantizedLayer<i16>, tables: &[[i16; 513]], o: usize, acc: i64) -> i64 {
-        let q = reference::requantize16(
-            i128::from(acc),
-            layer.multipliers[o],
-            layer.shifts[o],
-            layer.activation_min,
-            layer.activation_max,
-        );
-        i64::from(match layer.lut {
-            Some(t) => reference::lookup16(&tables[t], q).unwrap_or(i16::MIN),
-            None => q,
-        })
+    /// The i128 model of the Q15 requantization (zero point 0).
+    fn wide_requantize(
+        acc: i128,
+        multiplier: i32,
+        shift: i32,
+        _zero_point: i32,
+        lo: i16,
+        hi: i16,
+    ) -> i16 {
+        reference::requantize16(acc, multiplier, shift, lo, hi)
+    }
+
+    /// The slope form of the interpolation.
+    fn wide_lookup(table: &[i16; 513], code: i16) -> i16 {
+        reference::lookup16(table, code).unwrap_or(i16::MIN)
     }
 }

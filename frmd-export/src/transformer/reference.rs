@@ -15,19 +15,15 @@ use crate::mlp::ExportPrecision;
 use crate::reference::KernelCheck;
 use anyhow::Context;
 use frmd_core::kernels::FcRequant;
-use frmd_core::quant::reference;
 use frmd_core::rng::Rng;
 
-/// The code-width-dependent parts of the wide-integer model.
+/// The code-width-dependent inputs of the check (the model itself is
+/// [`WideModel`](crate::mlp::WideModel)'s).
 pub trait WideCodes: ExportPrecision {
     /// A uniformly random code.
     fn random(rng: &mut Rng) -> Self;
     /// The code of input zero point `zero_point` (clamped to the code range).
     fn zero(zero_point: i32) -> Self;
-    /// The i128 model of the requantization of the exact accumulator `acc` (full code range).
-    fn wide_requantize(acc: i128, multiplier: i32, shift: i32, zero_point: i32) -> Self;
-    /// The table's value at `code`, computed from its entries.
-    fn wide_lookup(table: &Self::Table, code: Self) -> Self;
 }
 
 impl WideCodes for i8 {
@@ -37,13 +33,6 @@ impl WideCodes for i8 {
     fn zero(zero_point: i32) -> i8 {
         zero_point.clamp(-128, 127) as i8
     }
-    /// int32 accumulators wrap: the model takes the low 32 bits, as the definition does.
-    fn wide_requantize(acc: i128, multiplier: i32, shift: i32, zero_point: i32) -> i8 {
-        reference::requantize(acc as i32, multiplier, shift, zero_point, i8::MIN, i8::MAX)
-    }
-    fn wide_lookup(table: &[i8; 256], code: i8) -> i8 {
-        table[(i32::from(code) + 128) as usize]
-    }
 }
 
 impl WideCodes for i16 {
@@ -52,12 +41,6 @@ impl WideCodes for i16 {
     }
     fn zero(zero_point: i32) -> i16 {
         zero_point.clamp(-32768, 32767) as i16
-    }
-    fn wide_requantize(acc: i128, multiplier: i32, shift: i32, _zero_point: i32) -> i16 {
-        reference::requantize16(acc, multiplier, shift, i16::MIN, i16::MAX)
-    }
-    fn wide_lookup(table: &[i16; 513], code: i16) -> i16 {
-        reference::lookup16(table, code).unwrap_or(i16::MIN)
     }
 }
 
@@ -183,6 +166,8 @@ pub fn check_layers<P: WideCodes>(
                         b.fc1_multipliers[o],
                         b.fc1_shifts[o],
                         b.fc1_output.zero_point,
+                        P::MIN,
+                        P::MAX,
                     );
                     (q, P::wide_lookup(&b.gelu, q))
                 })
