@@ -44,38 +44,30 @@ pub(crate) const HOST_CODES: usize = 16_384;
 pub(crate) const HOST_ACCUMULATORS: usize = 1_024;
 
 /// Working memory for a transformer of either activation precision (what
-/// [`LoadedBlob::network`] takes): an int8 and an int16 scratch on the heap.
-#[derive(Debug)]
+/// [`LoadedBlob::network`] takes): an int8 and an int16 scratch, each allocated on the heap when
+/// a network first asks for it (an MLP never does).
+#[derive(Debug, Default)]
 pub struct HostWork {
-    int8: Box<HostScratch>,
-    int16: Box<HostScratchOf<i16>>,
+    int8: Option<Box<HostScratch>>,
+    int16: Option<Box<HostScratchOf<i16>>>,
 }
 
 impl HostWork {
-    /// Zeroed scratch of both widths.
+    /// No scratch yet.
     pub fn new() -> Self {
-        Self {
-            int8: Box::new(HostScratch::new()),
-            int16: Box::new(HostScratchOf::new()),
-        }
-    }
-}
-
-impl Default for HostWork {
-    fn default() -> Self {
-        Self::new()
+        Self::default()
     }
 }
 
 impl TransformerWork<i8> for HostWork {
     fn buffers(&mut self) -> TransformerBuffers<'_, i8> {
-        self.int8.buffers()
+        self.int8.get_or_insert_with(boxed_scratch).buffers()
     }
 }
 
 impl TransformerWork<i16> for HostWork {
     fn buffers(&mut self) -> TransformerBuffers<'_, i16> {
-        self.int16.buffers()
+        self.int16.get_or_insert_with(boxed_scratch).buffers()
     }
 }
 
