@@ -1,11 +1,13 @@
 //! Calibration and quantization helpers both backbones use: how ranges are chosen from the
 //! recorded values ([`RangeMethod`], `Recorder`), range widening, and per-channel symmetric int8
-//! weights with an int32 bias at `input_scale * weight_scale`, the input zero point folded
-//! (docs/design.md section 5, with frmd-core's `quant` helpers).
+//! weights with an int32 (or int64) bias at `input_scale * weight_scale`, the input zero point
+//! folded, and the per-channel requantization of a layer (docs/design.md section 5, with
+//! frmd-core's `quant` helpers).
 use anyhow::{bail, Context};
+use frmd_core::kernels::Precision;
 use frmd_core::quant::{
     fold_input_zero_point, fold_input_zero_point_i64, quantize_bias, quantize_bias_i64,
-    quantize_weights_per_channel, QuantParams,
+    quantize_weights_per_channel, requantization_multiplier, QuantParams,
 };
 use frmd_formats::calibration::CalibrationSet;
 
@@ -148,6 +150,34 @@ pub(crate) fn int_bias_i64(
             .with_context(|| format!("bias {o} with zero point"))
         })
         .collect()
+}
+
+/// Per-channel requantization of a layer from accumulators at `input_scale * weight_scales[o]`
+/// to codes at `output_scale`: the multipliers and shifts of
+/// [`requantization_multiplier`], each shift checked against the range of `P`'s kernels. `what`
+/// names the layer in errors.
+pub(crate) fn requantization<P: Precision>(
+    input_scale: f32,
+    weight_scales: &[f32],
+    output_scale: f32,
+    what: &str,
+) -> anyhow::Result<(Vec<i32>, Vec<i32>)> {
+    let (mut multipliers, mut shifts) = (Vec::new(), Vec::new());
+    for (o, scale) in weight_scales.iter().enumerate() {
+        let (m, s) = requantization_multiplier(input_scale, *scale, output_scale)
+            .with_context(|| format!("{what} channel {o}: requantization multiplier"))?;
+        if !(P::SHIFT_MIN..=P::SHIFT_MAX).contains(&s) {
+            bail!(
+                "{what} channel {o}: requantization shift {s} outside {}..={} (input scale \
+                 {input_scale:e}, weight scale {scale:e}, output scale {output_scale:e})",
+                P::SHIFT_MIN,
+                P::SHIFT_MAX,
+            );
+        }
+        multipliers.push(m);
+        shifts.push(s);
+    }
+    Ok((multipliers, shifts))
 }
 
 /// `bias` as int32 at `input.scale * weight_scale`, with the input zero point folded in.

@@ -18,13 +18,11 @@
 use super::fold::{FoldedMlp, InputGains};
 use super::precision::ExportPrecision;
 use super::quantized::{QuantizedLayer, QuantizedMlp, QuantizedOutput};
-use crate::calibrate::{check_rows, RangeMethod, Recorder};
+use crate::calibrate::{check_rows, requantization, RangeMethod, Recorder};
 use crate::rounding::{round_weights, InputMoments, WeightRounding};
 use anyhow::{bail, Context};
 use frmd_core::model::mlp::{InputPrecision, Probe};
-use frmd_core::quant::{
-    requantization_multiplier, wide_scale, wide_zero_point, QuantParams, FINE_INPUT_BITS,
-};
+use frmd_core::quant::{wide_scale, wide_zero_point, QuantParams, FINE_INPUT_BITS};
 use frmd_formats::calibration::CalibrationSet;
 use frmd_formats::checkpoint::Normalization;
 
@@ -251,25 +249,12 @@ pub fn quantize<P: ExportPrecision>(
                 accumulator_input_scale = current.scale / (1_u32 << FINE_INPUT_BITS) as f32;
             }
         }
-        let (mut multipliers, mut shifts) = (Vec::new(), Vec::new());
-        for (o, scale) in q.scales.iter().enumerate() {
-            let (m, s) = requantization_multiplier(accumulator_input_scale, *scale, pre.scale)
-                .with_context(|| {
-                    format!("hidden layer {l} channel {o}: requantization multiplier")
-                })?;
-            if !(P::SHIFT_MIN..=P::SHIFT_MAX).contains(&s) {
-                bail!(
-                    "hidden layer {l} channel {o}: requantization shift {s} outside {}..={} \
-                     (input scale {accumulator_input_scale:e}, weight scale {scale:e}, output \
-                     scale {:e})",
-                    P::SHIFT_MIN,
-                    P::SHIFT_MAX,
-                    pre.scale
-                );
-            }
-            multipliers.push(m);
-            shifts.push(s);
-        }
+        let (multipliers, shifts) = requantization::<P>(
+            accumulator_input_scale,
+            &q.scales,
+            pre.scale,
+            &format!("hidden layer {l}"),
+        )?;
         let activation = layer.activation;
         let table = P::activation_table(|x| activation.apply(x), pre, out)
             .with_context(|| format!("hidden layer {l}: activation table"))?;

@@ -15,10 +15,10 @@
 //! and the table interpolated, exactly as the MLP's int16 export does.
 
 use super::fold::{run_on_input, FloatNorm, FoldedTransformer};
-use crate::calibrate::{check_rows, quantize_weights, RangeMethod, Recorder};
+use crate::calibrate::{check_rows, quantize_weights, requantization, RangeMethod, Recorder};
 use crate::fold::FloatLayer;
 use crate::mlp::ExportPrecision;
-use anyhow::{bail, Context};
+use anyhow::Context;
 use frmd_core::blob::{
     encode_transformer, transformer_encoded_len, BlobError, TransformerBlobParts,
 };
@@ -28,7 +28,7 @@ use frmd_core::model::transformer::{
     QuantBlock, QuantFeedForward, QuantTransformer, TokenLinear, TransformerProbe,
 };
 use frmd_core::policy::PolicyDims;
-use frmd_core::quant::{requantization_multiplier, QuantParams};
+use frmd_core::quant::QuantParams;
 use frmd_formats::calibration::CalibrationSet;
 use frmd_formats::checkpoint::Normalization;
 use std::collections::BTreeMap;
@@ -225,22 +225,12 @@ pub fn quantize<P: ExportPrecision>(
                 .with_context(context)?;
             let fc1_output = params(T::Fc1 { layer })?;
             let gelu_output = params(T::Gelu { layer })?;
-            let (mut fc1_multipliers, mut fc1_shifts) = (Vec::new(), Vec::new());
-            for (o, w) in fc1.weight_scales.iter().enumerate() {
-                let (m, s) = requantization_multiplier(fc1.input.scale, *w, fc1_output.scale)
-                    .with_context(|| {
-                        format!("block {layer} fc1 channel {o}: requantization multiplier")
-                    })?;
-                if !(P::SHIFT_MIN..=P::SHIFT_MAX).contains(&s) {
-                    bail!(
-                        "block {layer} fc1 channel {o}: requantization shift {s} outside {}..={}",
-                        P::SHIFT_MIN,
-                        P::SHIFT_MAX
-                    );
-                }
-                fc1_multipliers.push(m);
-                fc1_shifts.push(s);
-            }
+            let (fc1_multipliers, fc1_shifts) = requantization::<P>(
+                fc1.input.scale,
+                &fc1.weight_scales,
+                fc1_output.scale,
+                &format!("block {layer} fc1"),
+            )?;
             Ok(QuantizedBlock {
                 norm1: b.norm1.clone(),
                 qkv: QuantizedLinear::new(&b.qkv, params(T::Norm1 { layer })?)

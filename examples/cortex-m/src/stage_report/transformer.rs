@@ -2,6 +2,7 @@
 //! pass), head, and the stages outside the network (see the parent module).
 
 use super::*;
+use frmd_core::kernels::LayerInput;
 
 /// Ticks of `Int8Transformer::forward` of `model` restricted to its first `layers` blocks, on the
 /// fixed input.
@@ -109,7 +110,7 @@ fn time_embedding_and_head<const TW: usize, const WIDTH: usize, const OUT: usize
         model
             .head
             .linear
-            .forward(&codes, acc, &mut output)
+            .forward_input(LayerInput::Int8(&codes), acc, &mut output)
             .map_err(failed)?;
         let end = systick();
         head = elapsed(start, end);
