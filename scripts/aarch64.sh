@@ -2,24 +2,31 @@
 # aarch64 (Linux ARM controllers: Raspberry Pi 5, Jetson CPUs): cross-builds
 # examples/host-digests for aarch64-unknown-linux-gnu, runs it under qemu-aarch64 (user mode)
 # and requires every digest to equal this host's (x86-64, every kernel level of this CPU checked
-# to agree first). aarch64 runs frmd-core's portable kernels (no NEON sdot path yet).
-#   scripts/aarch64.sh [--install] [--count]
+# to agree first). aarch64 runs frmd-core's NEON row kernels (kernels::aarch64): once on qemu's
+# `max` CPU, which has the dot-product extension (SDOT path, checked against the NEON-only and
+# portable paths inside the program), once on a Cortex-A53 (no SDOT: detection must say so).
+#   scripts/aarch64.sh [--install] [--test] [--count]
 # --install  installs what is missing first (as CI does): Debian's qemu-user, the aarch64 cross
 #            gcc (the linker) and libc; the Rust standard library for the target from
 #            `rustup target add`, or else Debian's Rust (rustc-web >= 1.95) with its arm64
 #            standard library (libstd-rust-web-dev:arm64);
+# --test     also runs frmd-core's kernel unit tests under qemu-aarch64 (the NEON kernels against
+#            the wide sums on random shapes at every level);
 # --count    also prints the aarch64 instructions of one run of the firmware-size MLP workload
-#            (int8 MLP 256-256-256 and its decode, as the Cortex-M `mlp` image), counted with
-#            qemu's one-instruction translation blocks: (trace(3 runs) - trace(1 run)) / 2.
+#            (int8 MLP 256-256-256 and its decode, as the Cortex-M `mlp` image) for each kernel
+#            level, counted with qemu's one-instruction translation blocks:
+#            (trace(3 runs) - trace(1 run)) / 2.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 install=0
 count=0
+unit=0
 for arg in "$@"; do
     case "$arg" in
         --install) install=1 ;;
+        --test) unit=1 ;;
         --count) count=1 ;;
-        *) echo "usage: $0 [--install] [--count]" >&2; exit 2 ;;
+        *) echo "usage: $0 [--install] [--test] [--count]" >&2; exit 2 ;;
     esac
 done
 target=aarch64-unknown-linux-gnu
@@ -53,31 +60,44 @@ for tool in aarch64-linux-gnu-gcc qemu-aarch64 "${cross_cargo[-1]}"; do
     command -v "$tool" >/dev/null || { echo "aarch64: $tool missing (run with --install)" >&2; exit 1; }
 done
 manifest=examples/host-digests/Cargo.toml
+export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=aarch64-linux-gnu-gcc
 CARGO_TARGET_DIR=target/host-digests cargo build -q --release --manifest-path "$manifest"
-CARGO_TARGET_DIR=target/aarch64 CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=aarch64-linux-gnu-gcc \
-    "${cross_cargo[@]}" build -q --release --target "$target" --manifest-path "$manifest"
+CARGO_TARGET_DIR=target/aarch64 "${cross_cargo[@]}" build -q --release --target "$target" \
+    --manifest-path "$manifest"
 native=target/host-digests/release/frmd-host-digests
 arm=target/aarch64/$target/release/frmd-host-digests
 qemu=(qemu-aarch64 -L /usr/aarch64-linux-gnu)
 "$native" >target/aarch64/digests.x86_64
-"${qemu[@]}" "$arm" >target/aarch64/digests.aarch64
 passed=0
 failed=0
-while read -r name host; do
-    arm_digest=$(awk -v n="$name" '$1 == n { print $2 }' target/aarch64/digests.aarch64)
-    if [ "$arm_digest" = "$host" ]; then
-        passed=$((passed + 1))
-        echo "aarch64 $name $arm_digest = x86-64"
-    else
-        failed=$((failed + 1))
-        echo "aarch64 $name ${arm_digest:-missing} != x86-64 $host"
-    fi
-done <target/aarch64/digests.x86_64
+for cpu in max cortex-a53; do
+    "${qemu[@]}" -cpu "$cpu" "$arm" >target/aarch64/digests.aarch64
+    while read -r name host; do
+        arm_digest=$(awk -v n="$name" '$1 == n { print $2 }' target/aarch64/digests.aarch64)
+        if [ "$arm_digest" = "$host" ]; then
+            passed=$((passed + 1))
+            echo "aarch64 ($cpu) $name $arm_digest = x86-64"
+        else
+            failed=$((failed + 1))
+            echo "aarch64 ($cpu) $name ${arm_digest:-missing} != x86-64 $host"
+        fi
+    done <target/aarch64/digests.x86_64
+done
+if [ "$unit" = 1 ]; then
+    CARGO_TARGET_DIR=target/aarch64 \
+        CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="${qemu[*]} -cpu max" \
+        "${cross_cargo[@]}" test -q -p frmd-core --lib --target "$target" -- kernels::
+fi
 if [ "$count" = 1 ]; then
-    trace() { "${qemu[@]}" -singlestep -d exec,nochain "$arm" mlp "$1" 2>&1 >/dev/null | grep -c '^Trace'; }
-    one=$(trace 1)
-    three=$(trace 3)
-    echo "aarch64 instructions per MLP-256 run (portable kernels): $(((three - one) / 2))"
+    trace() {
+        FRMD_KERNELS=$1 "${qemu[@]}" -cpu max -singlestep -d exec,nochain "$arm" mlp "$2" 2>&1 >/dev/null |
+            grep -c '^Trace'
+    }
+    for level in portable neon sdot; do
+        one=$(trace "$level" 1)
+        three=$(trace "$level" 3)
+        echo "aarch64 instructions per MLP-256 run ($level kernels): $(((three - one) / 2))"
+    done
 fi
 echo "aarch64 digests: $passed passed, $failed failed"
 [ "$failed" = 0 ] && [ "$passed" -gt 0 ]

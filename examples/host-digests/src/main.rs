@@ -3,11 +3,13 @@
 //! the fully connected kernel cases with int8 and int16 activations) and chunks of the sample
 //! policy blob (loader, sampler with the integer Gaussian, decode). The same bytes on every host:
 //! on x86-64 every kernel level this CPU runs (portable, AVX2, AVX-VNNI, AVX-512 VNNI) is checked
-//! to agree before printing; `scripts/aarch64.sh` runs this example natively and under
+//! to agree before printing, on aarch64 every level (portable, NEON, NEON with `SDOT`) likewise;
+//! `scripts/aarch64.sh` runs this example natively and under
 //! `qemu-aarch64` and compares the lines.
 //!
 //! `frmd-host-digests mlp N` runs the MLP workload's first case `N` times instead (for instruction
-//! counts per chunk: the difference of two `N` divided by their difference).
+//! counts per chunk: the difference of two `N` divided by their difference); on aarch64,
+//! `FRMD_KERNELS=portable|neon|sdot` picks its row kernels.
 //!
 //! Run with `cargo run --release --manifest-path examples/host-digests/Cargo.toml`.
 use frmd_core::blob::LoadedMlp;
@@ -87,15 +89,53 @@ fn checked_digests() -> Vec<(&'static str, u64)> {
     best
 }
 
-#[cfg(not(target_arch = "x86_64"))]
+/// The digests at every kernel level of this CPU (NEON with `SDOT` if it has it, NEON without,
+/// portable), which must agree.
+#[cfg(target_arch = "aarch64")]
+fn checked_digests() -> Vec<(&'static str, u64)> {
+    use frmd_core::kernels::aarch64;
+    let best = digests();
+    let dotprod = aarch64::dotprod_active();
+    for (level, neon, sdot) in [("neon", true, false), ("portable", false, false)] {
+        aarch64::set_neon_enabled(neon);
+        aarch64::set_dotprod_enabled(sdot);
+        assert_eq!(digests(), best, "the {level} kernels differ");
+    }
+    aarch64::set_neon_enabled(true);
+    aarch64::set_dotprod_enabled(dotprod);
+    best
+}
+
+#[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
 fn checked_digests() -> Vec<(&'static str, u64)> {
     digests()
 }
+
+/// `FRMD_KERNELS=portable|neon|sdot` (aarch64) picks the row kernels of the `mlp N` runs.
+#[cfg(target_arch = "aarch64")]
+fn select_kernels() {
+    use frmd_core::kernels::aarch64;
+    match std::env::var("FRMD_KERNELS").as_deref() {
+        Ok("portable") => {
+            aarch64::set_neon_enabled(false);
+        }
+        Ok("neon") => {
+            aarch64::set_dotprod_enabled(false);
+        }
+        Ok("sdot") => assert!(aarch64::set_dotprod_enabled(true), "this CPU has no SDOT"),
+        Ok(other) => panic!("FRMD_KERNELS: expected portable, neon or sdot, got {other}"),
+        Err(_) => {}
+    }
+}
+
+#[cfg(not(target_arch = "aarch64"))]
+fn select_kernels() {}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.get(1).map(String::as_str) == Some("mlp") {
         let runs: usize = args.get(2).and_then(|n| n.parse().ok()).unwrap_or(1);
+        select_kernels();
         let baked = baked();
         let model = synthetic_mlp::generate();
         let hidden = model.hidden_layers();

@@ -63,10 +63,10 @@ pub(crate) trait RowInput: Copy {
     #[cfg(frmd_arm_dsp)]
     fn half(self) -> u32;
     /// The input as int8 codes, if it is int8.
-    #[cfg(frmd_arm_dsp)]
+    #[cfg(any(frmd_arm_dsp, target_arch = "aarch64"))]
     fn as_i8(input: &[Self]) -> Option<&[i8]>;
     /// The input as int16 codes, if it is int16.
-    #[cfg(frmd_arm_dsp)]
+    #[cfg(any(frmd_arm_dsp, target_arch = "aarch64"))]
     fn as_i16(input: &[Self]) -> Option<&[i16]>;
 }
 
@@ -80,12 +80,12 @@ impl RowInput for i8 {
     fn half(self) -> u32 {
         u32::from(i16::from(self) as u16)
     }
-    #[cfg(frmd_arm_dsp)]
+    #[cfg(any(frmd_arm_dsp, target_arch = "aarch64"))]
     #[inline(always)]
     fn as_i8(input: &[i8]) -> Option<&[i8]> {
         Some(input)
     }
-    #[cfg(frmd_arm_dsp)]
+    #[cfg(any(frmd_arm_dsp, target_arch = "aarch64"))]
     #[inline(always)]
     fn as_i16(_: &[i8]) -> Option<&[i16]> {
         None
@@ -102,12 +102,12 @@ impl RowInput for i16 {
     fn half(self) -> u32 {
         u32::from(self as u16)
     }
-    #[cfg(frmd_arm_dsp)]
+    #[cfg(any(frmd_arm_dsp, target_arch = "aarch64"))]
     #[inline(always)]
     fn as_i8(_: &[i16]) -> Option<&[i8]> {
         None
     }
-    #[cfg(frmd_arm_dsp)]
+    #[cfg(any(frmd_arm_dsp, target_arch = "aarch64"))]
     #[inline(always)]
     fn as_i16(input: &[i16]) -> Option<&[i16]> {
         Some(input)

@@ -16,6 +16,8 @@
 //! `SMLAD`/`MLA` instructions), so the result does not depend on summation order; int64
 //! accumulation adds the sign-extended int32 sums of fixed 512-column chunks.
 
+#[cfg(target_arch = "aarch64")]
+pub mod aarch64;
 pub mod activation;
 pub mod dot;
 #[cfg(frmd_arm_dsp)]

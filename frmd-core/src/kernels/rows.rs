@@ -5,9 +5,10 @@
 //! [`for_each_block`] prepares the input once per layer call and hands the sums to its caller in
 //! blocks of [`BLOCK_ROWS`] rows, which the caller requantizes before the next block. On Arm cores
 //! with the DSP extension (`cfg(frmd_arm_dsp)`, module `kernels::dsp`) the input is unpacked to
-//! halfword pairs once and two rows at a time go through an `SMLAD` kernel; elsewhere each row is
-//! [`dot_i8_prefix`] / [`dot_i8_i16_prefix`]. Both give identical sums: wrapping int32 addition is
-//! associative and commutative. (On x86-64 CPUs with AVX2, `FullyConnected` uses the eight-row
+//! halfword pairs once and two rows at a time go through an `SMLAD` kernel; on aarch64 four rows
+//! at a time go through NEON (`SDOT` where the core has it; module `kernels::aarch64`); elsewhere
+//! each row is [`dot_i8_prefix`] / [`dot_i8_i16_prefix`]. All give identical sums: wrapping int32
+//! addition is associative and commutative. (On x86-64 CPUs with AVX2, `FullyConnected` uses the eight-row
 //! kernels of `kernels::x86` for int8 inputs instead. A four-row SSE2 version of the portable loop
 //! ran fewer instructions but was slower: LLVM's `punpcklbw` sign extension read a stale register
 //! and chained the whole loop body.)
@@ -46,7 +47,9 @@ pub(crate) fn for_each_block<T: RowInput, A: Accumulator>(
         A::block(block_bias, out, width, |columns, start, residues| {
             #[cfg(frmd_arm_dsp)]
             super::dsp::block_sums(&prepared, input, rows, columns, start, residues);
-            #[cfg(not(frmd_arm_dsp))]
+            #[cfg(target_arch = "aarch64")]
+            super::aarch64::block_sums(input, rows, columns, start, residues);
+            #[cfg(not(any(frmd_arm_dsp, target_arch = "aarch64")))]
             portable_block_sums(input, rows, columns, start, residues);
         });
         block(first, out);

@@ -1,0 +1,308 @@
+//! Row kernels for aarch64 (Linux Arm controllers: the Raspberry Pi 5's Cortex-A76, Jetson
+//! CPUs), for `super::rows::for_each_block`.
+//!
+//! Four rows share each 16-column load of the input. int8 inputs: with the dot-product
+//! extension (`FEAT_DotProd`, Armv8.2 and later cores) one `SDOT` adds 16 products into a row's
+//! four int32 lanes; without it, every aarch64 core has NEON's `SMULL`/`SMULL2` (exact int16
+//! products of int8 codes, each in `[-16256, 16384]`) and `SADALP` (pairwise into the int32 lanes).
+//! int16 inputs (the 16-bit first-layer plane and the int16-activation layers): the weights are
+//! sign-extended (`SXTL`) and `SMLAL`/`SMLAL2` multiply-accumulate into int32 lanes. Each row's
+//! lanes are summed at the end (`ADDV`) and the last `columns % 16` columns are added in Rust.
+//!
+//! Bit-exactness: every lane adds exact products modulo 2^32, as the portable loop does, and
+//! wrapping int32 addition is associative and commutative, so every path gives the portable sums
+//! for every input (tested against the wide sums on random shapes at every level by
+//! `tests/row_kernels.rs`, and by the digests that `scripts/aarch64.sh` compares with x86-64's;
+//! both run under `qemu-aarch64`). The `SMMLA` of `FEAT_I8MM` is not used: its 2x2
+//! output tile needs two input vectors, and at batch 1 half of its products would be wasted,
+//! which leaves it at `SDOT`'s 16 useful products per instruction.
+//!
+//! Run-time choice: NEON is part of the aarch64 baseline; `SDOT` is used when the target enables
+//! `dotprod` at compile time (`-C target-cpu=cortex-a76`) or, on Linux, when the kernel reports
+//! it (`getauxval(AT_HWCAP) & HWCAP_ASIMDDP`, as std's feature detection reads it; frmd-core
+//! stays `no_std` and links only that libc symbol). [`set_neon_enabled`] and
+//! [`set_dotprod_enabled`] switch the paths process-wide for A/B measurements and the agreement
+//! checks.
+#![allow(unsafe_code)]
+
+use super::dot::RowInput;
+use core::arch::aarch64::{
+    int32x4_t, vaddvq_s32, vdupq_n_s32, vget_low_s16, vget_low_s8, vld1q_s16, vld1q_s8,
+    vmlal_high_s16, vmlal_s16, vmovl_high_s8, vmovl_s8, vmull_high_s8, vmull_s8, vpadalq_s16,
+};
+use core::ops::Range;
+use core::sync::atomic::{AtomicU8, Ordering};
+
+/// Rows per pass.
+const ROWS: usize = 4;
+/// Columns per vector step.
+const LANES: usize = 16;
+
+/// Path states: not yet probed, active, inactive (unsupported or switched off).
+const UNKNOWN: u8 = 0;
+const ACTIVE: u8 = 1;
+const INACTIVE: u8 = 2;
+
+static NEON_STATE: AtomicU8 = AtomicU8::new(ACTIVE);
+static DOTPROD_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
+
+/// Whether the row kernels use NEON (otherwise the portable loops). On by default.
+#[inline]
+pub fn neon_active() -> bool {
+    NEON_STATE.load(Ordering::Relaxed) == ACTIVE
+}
+
+/// Switches the NEON row kernels on or off, process-wide (off: the portable loops, which give
+/// the same sums); returns whether they are active afterwards.
+pub fn set_neon_enabled(enabled: bool) -> bool {
+    NEON_STATE.store(if enabled { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
+    enabled
+}
+
+/// Whether this CPU has the dot-product instructions (`SDOT`).
+pub fn dotprod_supported() -> bool {
+    detect_dotprod()
+}
+
+/// Whether the int8 row kernels use `SDOT` (only while NEON is active).
+#[inline]
+pub fn dotprod_active() -> bool {
+    match DOTPROD_STATE.load(Ordering::Relaxed) {
+        ACTIVE => true,
+        INACTIVE => false,
+        _ => {
+            let supported = detect_dotprod();
+            DOTPROD_STATE.store(if supported { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
+            supported
+        }
+    }
+}
+
+/// Enables (if supported) or disables the `SDOT` path, process-wide; returns whether it is
+/// active afterwards. Both int8 paths give identical sums.
+pub fn set_dotprod_enabled(enabled: bool) -> bool {
+    let active = enabled && detect_dotprod();
+    DOTPROD_STATE.store(if active { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
+    active
+}
+
+#[cfg(target_feature = "dotprod")]
+fn detect_dotprod() -> bool {
+    true
+}
+
+#[cfg(all(not(target_feature = "dotprod"), target_os = "linux"))]
+fn detect_dotprod() -> bool {
+    use core::ffi::c_ulong;
+    const AT_HWCAP: c_ulong = 16;
+    const HWCAP_ASIMDDP: c_ulong = 1 << 20;
+    extern "C" {
+        fn getauxval(kind: c_ulong) -> c_ulong;
+    }
+    // SAFETY: getauxval (glibc >= 2.16, musl, bionic) only reads the process's auxiliary vector;
+    // for a type it does not know it returns 0.
+    unsafe { getauxval(AT_HWCAP) & HWCAP_ASIMDDP != 0 }
+}
+
+#[cfg(all(not(target_feature = "dotprod"), not(target_os = "linux")))]
+fn detect_dotprod() -> bool {
+    false
+}
+
+/// `sums[r] = start[r] + dot(row_r[columns], input[columns])` (int32, wrapping; missing `start`
+/// entries count as 0) for the first `sums.len()` rows of `rows` (`input.len()` columns each),
+/// as `rows::portable_block_sums` computes them.
+#[inline]
+pub(crate) fn block_sums<T: RowInput>(
+    input: &[T],
+    rows: &[i8],
+    columns: Range<usize>,
+    start: &[i32],
+    sums: &mut [i32],
+) {
+    if !neon_active() {
+        super::rows::portable_block_sums(input, rows, columns, start, sums);
+        return;
+    }
+    let width = input.len();
+    let count = columns.len();
+    let chunk = input.get(columns.clone()).unwrap_or(&[]);
+    let mut starts = start.iter().copied().chain(core::iter::repeat(0));
+    let mut row_slices = rows
+        .chunks_exact(width)
+        .map(|row| row.get(columns.clone()).unwrap_or(&[]));
+    let (groups, rest) = sums.as_chunks_mut::<ROWS>();
+    match (T::as_i8(chunk), T::as_i16(chunk)) {
+        (Some(x), _) => {
+            let dotprod = dotprod_active();
+            for group in groups {
+                let w: [&[i8]; ROWS] = core::array::from_fn(|_| row_slices.next().unwrap_or(&[]));
+                let dots = if w.iter().any(|row| row.len() != count) || x.len() != count {
+                    w.map(|row| row.iter().zip(x).fold(0_i32, wide_step_i8))
+                } else if dotprod {
+                    // SAFETY: the CPU has FEAT_DotProd (`dotprod_active`); every row and `x` have
+                    // `count` elements (checked above).
+                    unsafe { dots_i8_sdot(w, x) }
+                } else {
+                    // SAFETY: NEON is part of the aarch64 baseline.
+                    unsafe { dots_i8_neon(w, x) }
+                };
+                for (sum, dot) in group.iter_mut().zip(dots) {
+                    *sum = starts.next().unwrap_or(0).wrapping_add(dot);
+                }
+            }
+            for sum in rest {
+                let row = row_slices.next().unwrap_or(&[]);
+                *sum = starts.next().unwrap_or(0).wrapping_add(T::dot(row, chunk));
+            }
+        }
+        (None, Some(x)) => {
+            for group in groups {
+                let w: [&[i8]; ROWS] = core::array::from_fn(|_| row_slices.next().unwrap_or(&[]));
+                let dots = if w.iter().any(|row| row.len() != count) || x.len() != count {
+                    w.map(|row| row.iter().zip(x).fold(0_i32, wide_step_i16))
+                } else {
+                    // SAFETY: NEON is part of the aarch64 baseline.
+                    unsafe { dots_i16_neon(w, x) }
+                };
+                for (sum, dot) in group.iter_mut().zip(dots) {
+                    *sum = starts.next().unwrap_or(0).wrapping_add(dot);
+                }
+            }
+            for sum in rest {
+                let row = row_slices.next().unwrap_or(&[]);
+                *sum = starts.next().unwrap_or(0).wrapping_add(T::dot(row, chunk));
+            }
+        }
+        (None, None) => {}
+    }
+}
+
+#[inline(always)]
+fn wide_step_i8(sum: i32, (w, x): (&i8, &i8)) -> i32 {
+    sum.wrapping_add(i32::from(*w) * i32::from(*x))
+}
+
+#[inline(always)]
+fn wide_step_i16(sum: i32, (w, x): (&i8, &i16)) -> i32 {
+    sum.wrapping_add(i32::from(*w) * i32::from(*x))
+}
+
+/// The four rows' sums of the last `x.len() % 16` columns added to their vector lanes.
+#[target_feature(enable = "neon")]
+fn finish<X: Copy>(
+    acc: [int32x4_t; ROWS],
+    w: [&[i8]; ROWS],
+    x: &[X],
+    step: fn(i32, (&i8, &X)) -> i32,
+) -> [i32; ROWS] {
+    let head = x.len() - x.len() % LANES;
+    let x_tail = x.get(head..).unwrap_or(&[]);
+    core::array::from_fn(|r| {
+        let lanes = acc.get(r).map_or(0, |lanes| vaddvq_s32(*lanes));
+        let row_tail = w.get(r).and_then(|row| row.get(head..)).unwrap_or(&[]);
+        row_tail.iter().zip(x_tail).fold(lanes, step)
+    })
+}
+
+/// Four int8 rows times an int8 vector with `SMULL`/`SMULL2` + `SADALP` (rows and `x` of equal
+/// length, checked by the caller; shorter rows would only shorten the sum).
+#[target_feature(enable = "neon")]
+fn dots_i8_neon(w: [&[i8]; ROWS], x: &[i8]) -> [i32; ROWS] {
+    let mut acc = [vdupq_n_s32(0); ROWS];
+    let (x_blocks, _) = x.as_chunks::<LANES>();
+    let row_blocks = w.map(|row| row.as_chunks::<LANES>().0);
+    for (b, x_block) in x_blocks.iter().enumerate() {
+        // SAFETY: `x_block` and every row block are 16-byte arrays (vld1q reads 16 bytes).
+        let xv = unsafe { vld1q_s8(x_block.as_ptr()) };
+        for (lanes, blocks) in acc.iter_mut().zip(row_blocks) {
+            let Some(w_block) = blocks.get(b) else {
+                continue;
+            };
+            // SAFETY: as above.
+            let wv = unsafe { vld1q_s8(w_block.as_ptr()) };
+            let low = vmull_s8(vget_low_s8(wv), vget_low_s8(xv));
+            let high = vmull_high_s8(wv, xv);
+            *lanes = vpadalq_s16(vpadalq_s16(*lanes, low), high);
+        }
+    }
+    finish(acc, w, x, wide_step_i8)
+}
+
+/// [`dots_i8_neon`] with `SDOT` (16 products per instruction).
+///
+/// # Safety
+/// The CPU must implement FEAT_DotProd; every row must have `x.len()` elements.
+#[target_feature(enable = "neon,dotprod")]
+unsafe fn dots_i8_sdot(w: [&[i8]; ROWS], x: &[i8]) -> [i32; ROWS] {
+    let [mut a0, mut a1, mut a2, mut a3] = [vdupq_n_s32(0); ROWS];
+    let blocks = x.len() / LANES;
+    let [w0, w1, w2, w3] = w.map(<[i8]>::as_ptr);
+    let xp = x.as_ptr();
+    for b in 0..blocks {
+        let offset = b * LANES;
+        // SAFETY: `offset + 16 <= x.len()` and every row is as long as `x` (the caller's
+        // contract); `sdot` needs FEAT_DotProd (the caller's contract) and touches no memory.
+        unsafe {
+            core::arch::asm!(
+                "ldr {x:q}, [{xp}, {o}]",
+                "ldr {v0:q}, [{w0}, {o}]",
+                "ldr {v1:q}, [{w1}, {o}]",
+                "ldr {v2:q}, [{w2}, {o}]",
+                "ldr {v3:q}, [{w3}, {o}]",
+                "sdot {a0:v}.4s, {v0:v}.16b, {x:v}.16b",
+                "sdot {a1:v}.4s, {v1:v}.16b, {x:v}.16b",
+                "sdot {a2:v}.4s, {v2:v}.16b, {x:v}.16b",
+                "sdot {a3:v}.4s, {v3:v}.16b, {x:v}.16b",
+                xp = in(reg) xp,
+                w0 = in(reg) w0,
+                w1 = in(reg) w1,
+                w2 = in(reg) w2,
+                w3 = in(reg) w3,
+                o = in(reg) offset,
+                x = out(vreg) _,
+                v0 = out(vreg) _,
+                v1 = out(vreg) _,
+                v2 = out(vreg) _,
+                v3 = out(vreg) _,
+                a0 = inout(vreg) a0,
+                a1 = inout(vreg) a1,
+                a2 = inout(vreg) a2,
+                a3 = inout(vreg) a3,
+                options(pure, readonly, nostack, preserves_flags),
+            );
+        }
+    }
+    finish([a0, a1, a2, a3], w, x, wide_step_i8)
+}
+
+/// Four int8 rows times an int16 vector: weights sign-extended by `SXTL`/`SXTL2`, products
+/// accumulated by `SMLAL`/`SMLAL2` into int32 lanes (modulo 2^32).
+#[target_feature(enable = "neon")]
+fn dots_i16_neon(w: [&[i8]; ROWS], x: &[i16]) -> [i32; ROWS] {
+    let mut acc = [vdupq_n_s32(0); ROWS];
+    let (x_blocks, _) = x.as_chunks::<LANES>();
+    let row_blocks = w.map(|row| row.as_chunks::<LANES>().0);
+    for (b, x_block) in x_blocks.iter().enumerate() {
+        // SAFETY: `x_block` holds 16 halfwords: two 8-halfword loads.
+        let (x_low, x_high) = unsafe {
+            (
+                vld1q_s16(x_block.as_ptr()),
+                vld1q_s16(x_block.as_ptr().add(8)),
+            )
+        };
+        for (lanes, blocks) in acc.iter_mut().zip(row_blocks) {
+            let Some(w_block) = blocks.get(b) else {
+                continue;
+            };
+            // SAFETY: `w_block` is a 16-byte array.
+            let wv = unsafe { vld1q_s8(w_block.as_ptr()) };
+            let (w_low, w_high) = (vmovl_s8(vget_low_s8(wv)), vmovl_high_s8(wv));
+            let mut sum = vmlal_s16(*lanes, vget_low_s16(w_low), vget_low_s16(x_low));
+            sum = vmlal_high_s16(sum, w_low, x_low);
+            sum = vmlal_s16(sum, vget_low_s16(w_high), vget_low_s16(x_high));
+            *lanes = vmlal_high_s16(sum, w_high, x_high);
+        }
+    }
+    finish(acc, w, x, wide_step_i16)
+}
