@@ -10,8 +10,9 @@
 #            gcc (the linker) and libc; the Rust standard library for the target from
 #            `rustup target add`, or else Debian's Rust (rustc-web >= 1.95) with its arm64
 #            standard library (libstd-rust-web-dev:arm64);
-# --test     also runs frmd-core's kernel unit tests under qemu-aarch64 (the NEON kernels against
-#            the wide sums on random shapes at every level);
+# --test     also runs frmd-core's tests/row_kernels.rs under qemu-aarch64 (the row kernels
+#            against the wide sums on random shapes at every level; a plain program, since
+#            libtest's threads hang under Debian 12's qemu-aarch64 7.2);
 # --count    also prints the aarch64 instructions of one run of the firmware-size MLP workload
 #            (int8 MLP 256-256-256 and its decode, as the Cortex-M `mlp` image) for each kernel
 #            level, counted with qemu's one-instruction translation blocks:
@@ -86,7 +87,7 @@ done
 if [ "$unit" = 1 ]; then
     CARGO_TARGET_DIR=target/aarch64 \
         CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="${qemu[*]} -cpu max" \
-        "${cross_cargo[@]}" test -q -p frmd-core --lib --target "$target" -- kernels::
+        "${cross_cargo[@]}" test -q -p frmd-core --target "$target" --test row_kernels
 fi
 if [ "$count" = 1 ]; then
     trace() {

@@ -1,13 +1,16 @@
 //! Row kernels for aarch64 (Linux Arm controllers: the Raspberry Pi 5's Cortex-A76, Jetson
 //! CPUs), for `super::rows::for_each_block`.
 //!
-//! Four rows share each 16-column load of the input. int8 inputs: with the dot-product
-//! extension (`FEAT_DotProd`, Armv8.2 and later cores) one `SDOT` adds 16 products into a row's
-//! four int32 lanes; without it, every aarch64 core has NEON's `SMULL`/`SMULL2` (exact int16
-//! products of int8 codes, each in `[-16256, 16384]`) and `SADALP` (pairwise into the int32 lanes).
-//! int16 inputs (the 16-bit first-layer plane and the int16-activation layers): the weights are
-//! sign-extended (`SXTL`) and `SMLAL`/`SMLAL2` multiply-accumulate into int32 lanes. Each row's
-//! lanes are summed at the end (`ADDV`) and the last `columns % 16` columns are added in Rust.
+//! Four rows share each 16-column load of the input; each 16-column step is one `asm!` block, so
+//! the instruction selection is fixed. int8 inputs: with the dot-product extension
+//! (`FEAT_DotProd`, Armv8.2 and later cores) one `SDOT` adds 16 products into a row's four int32
+//! lanes (9 instructions per 64 products); without it, every aarch64 core has `SMULL`/`SMULL2`
+//! (exact int16 products of int8 codes, each in `[-16256, 16384]`) and `SADALP` (pairwise into
+//! the int32 lanes; 21 per 64). int16 inputs (the 16-bit first-layer plane and the
+//! int16-activation layers): the weights are sign-extended (`SXTL`/`SXTL2`) and
+//! `SMLAL`/`SMLAL2` multiply-accumulate into int32 lanes (29 per 64). Each row's lanes are summed
+//! at the end (`ADDV`) and the last `columns % 16` columns, and the last `rows % 4` rows, are
+//! added in Rust.
 //!
 //! Bit-exactness: every lane adds exact products modulo 2^32, as the portable loop does, and
 //! wrapping int32 addition is associative and commutative, so every path gives the portable sums
@@ -26,10 +29,7 @@
 #![allow(unsafe_code)]
 
 use super::dot::RowInput;
-use core::arch::aarch64::{
-    int32x4_t, vaddvq_s32, vdupq_n_s32, vget_low_s16, vget_low_s8, vld1q_s16, vld1q_s8,
-    vmlal_high_s16, vmlal_s16, vmovl_high_s8, vmovl_s8, vmull_high_s8, vmull_s8, vpadalq_s16,
-};
+use core::arch::aarch64::{int32x4_t, vaddvq_s32, vdupq_n_s32};
 use core::ops::Range;
 use core::sync::atomic::{AtomicU8, Ordering};
 
@@ -144,7 +144,8 @@ pub(crate) fn block_sums<T: RowInput>(
                     // `count` elements (checked above).
                     unsafe { dots_i8_sdot(w, x) }
                 } else {
-                    // SAFETY: NEON is part of the aarch64 baseline.
+                    // SAFETY: NEON is part of the aarch64 baseline; every row and `x` have
+                    // `count` elements (checked above).
                     unsafe { dots_i8_neon(w, x) }
                 };
                 for (sum, dot) in group.iter_mut().zip(dots) {
@@ -162,7 +163,8 @@ pub(crate) fn block_sums<T: RowInput>(
                 let dots = if w.iter().any(|row| row.len() != count) || x.len() != count {
                     w.map(|row| row.iter().zip(x).fold(0_i32, wide_step_i16))
                 } else {
-                    // SAFETY: NEON is part of the aarch64 baseline.
+                    // SAFETY: NEON is part of the aarch64 baseline; every row and `x` have
+                    // `count` elements (checked above).
                     unsafe { dots_i16_neon(w, x) }
                 };
                 for (sum, dot) in group.iter_mut().zip(dots) {
@@ -205,28 +207,64 @@ fn finish<X: Copy>(
     })
 }
 
-/// Four int8 rows times an int8 vector with `SMULL`/`SMULL2` + `SADALP` (rows and `x` of equal
-/// length, checked by the caller; shorter rows would only shorten the sum).
+/// Four int8 rows times an int8 vector with `SMULL`/`SMULL2` + `SADALP`: per 16 columns one
+/// input load, and per row one load, two multiplies and two pairwise accumulations.
+///
+/// # Safety
+/// Every row must have `x.len()` elements.
 #[target_feature(enable = "neon")]
-fn dots_i8_neon(w: [&[i8]; ROWS], x: &[i8]) -> [i32; ROWS] {
-    let mut acc = [vdupq_n_s32(0); ROWS];
-    let (x_blocks, _) = x.as_chunks::<LANES>();
-    let row_blocks = w.map(|row| row.as_chunks::<LANES>().0);
-    for (b, x_block) in x_blocks.iter().enumerate() {
-        // SAFETY: `x_block` and every row block are 16-byte arrays (vld1q reads 16 bytes).
-        let xv = unsafe { vld1q_s8(x_block.as_ptr()) };
-        for (lanes, blocks) in acc.iter_mut().zip(row_blocks) {
-            let Some(w_block) = blocks.get(b) else {
-                continue;
-            };
-            // SAFETY: as above.
-            let wv = unsafe { vld1q_s8(w_block.as_ptr()) };
-            let low = vmull_s8(vget_low_s8(wv), vget_low_s8(xv));
-            let high = vmull_high_s8(wv, xv);
-            *lanes = vpadalq_s16(vpadalq_s16(*lanes, low), high);
+unsafe fn dots_i8_neon(w: [&[i8]; ROWS], x: &[i8]) -> [i32; ROWS] {
+    let [mut a0, mut a1, mut a2, mut a3] = [vdupq_n_s32(0); ROWS];
+    let [w0, w1, w2, w3] = w.map(<[i8]>::as_ptr);
+    let xp = x.as_ptr();
+    for offset in (0..x.len() / LANES).map(|b| b * LANES) {
+        // SAFETY: `offset + 16 <= x.len()` and every row is as long as `x` (the caller's
+        // contract); the instructions are baseline NEON and touch no other memory.
+        unsafe {
+            core::arch::asm!(
+                "ldr {x:q}, [{xp}, {o}]",
+                "ldr {v0:q}, [{w0}, {o}]",
+                "ldr {v1:q}, [{w1}, {o}]",
+                "ldr {v2:q}, [{w2}, {o}]",
+                "ldr {v3:q}, [{w3}, {o}]",
+                "smull {p0:v}.8h, {v0:v}.8b, {x:v}.8b",
+                "smull2 {v0:v}.8h, {v0:v}.16b, {x:v}.16b",
+                "smull {p1:v}.8h, {v1:v}.8b, {x:v}.8b",
+                "smull2 {v1:v}.8h, {v1:v}.16b, {x:v}.16b",
+                "sadalp {a0:v}.4s, {p0:v}.8h",
+                "sadalp {a1:v}.4s, {p1:v}.8h",
+                "smull {p0:v}.8h, {v2:v}.8b, {x:v}.8b",
+                "smull2 {v2:v}.8h, {v2:v}.16b, {x:v}.16b",
+                "smull {p1:v}.8h, {v3:v}.8b, {x:v}.8b",
+                "smull2 {v3:v}.8h, {v3:v}.16b, {x:v}.16b",
+                "sadalp {a0:v}.4s, {v0:v}.8h",
+                "sadalp {a1:v}.4s, {v1:v}.8h",
+                "sadalp {a2:v}.4s, {p0:v}.8h",
+                "sadalp {a3:v}.4s, {p1:v}.8h",
+                "sadalp {a2:v}.4s, {v2:v}.8h",
+                "sadalp {a3:v}.4s, {v3:v}.8h",
+                xp = in(reg) xp,
+                w0 = in(reg) w0,
+                w1 = in(reg) w1,
+                w2 = in(reg) w2,
+                w3 = in(reg) w3,
+                o = in(reg) offset,
+                x = out(vreg) _,
+                v0 = out(vreg) _,
+                v1 = out(vreg) _,
+                v2 = out(vreg) _,
+                v3 = out(vreg) _,
+                p0 = out(vreg) _,
+                p1 = out(vreg) _,
+                a0 = inout(vreg) a0,
+                a1 = inout(vreg) a1,
+                a2 = inout(vreg) a2,
+                a3 = inout(vreg) a3,
+                options(pure, readonly, nostack, preserves_flags),
+            );
         }
     }
-    finish(acc, w, x, wide_step_i8)
+    finish([a0, a1, a2, a3], w, x, wide_step_i8)
 }
 
 /// [`dots_i8_neon`] with `SDOT` (16 products per instruction).
@@ -236,11 +274,9 @@ fn dots_i8_neon(w: [&[i8]; ROWS], x: &[i8]) -> [i32; ROWS] {
 #[target_feature(enable = "neon,dotprod")]
 unsafe fn dots_i8_sdot(w: [&[i8]; ROWS], x: &[i8]) -> [i32; ROWS] {
     let [mut a0, mut a1, mut a2, mut a3] = [vdupq_n_s32(0); ROWS];
-    let blocks = x.len() / LANES;
     let [w0, w1, w2, w3] = w.map(<[i8]>::as_ptr);
     let xp = x.as_ptr();
-    for b in 0..blocks {
-        let offset = b * LANES;
+    for offset in (0..x.len() / LANES).map(|b| b * LANES) {
         // SAFETY: `offset + 16 <= x.len()` and every row is as long as `x` (the caller's
         // contract); `sdot` needs FEAT_DotProd (the caller's contract) and touches no memory.
         unsafe {
@@ -276,33 +312,69 @@ unsafe fn dots_i8_sdot(w: [&[i8]; ROWS], x: &[i8]) -> [i32; ROWS] {
     finish([a0, a1, a2, a3], w, x, wide_step_i8)
 }
 
-/// Four int8 rows times an int16 vector: weights sign-extended by `SXTL`/`SXTL2`, products
-/// accumulated by `SMLAL`/`SMLAL2` into int32 lanes (modulo 2^32).
+/// Four int8 rows times an int16 vector: per 16 columns two input loads, and per row one load,
+/// two sign extensions (`SXTL`/`SXTL2`) and four `SMLAL`/`SMLAL2` into int32 lanes (modulo 2^32).
+///
+/// # Safety
+/// Every row must have `x.len()` elements.
 #[target_feature(enable = "neon")]
-fn dots_i16_neon(w: [&[i8]; ROWS], x: &[i16]) -> [i32; ROWS] {
-    let mut acc = [vdupq_n_s32(0); ROWS];
-    let (x_blocks, _) = x.as_chunks::<LANES>();
-    let row_blocks = w.map(|row| row.as_chunks::<LANES>().0);
-    for (b, x_block) in x_blocks.iter().enumerate() {
-        // SAFETY: `x_block` holds 16 halfwords: two 8-halfword loads.
-        let (x_low, x_high) = unsafe {
-            (
-                vld1q_s16(x_block.as_ptr()),
-                vld1q_s16(x_block.as_ptr().add(8)),
-            )
-        };
-        for (lanes, blocks) in acc.iter_mut().zip(row_blocks) {
-            let Some(w_block) = blocks.get(b) else {
-                continue;
-            };
-            // SAFETY: `w_block` is a 16-byte array.
-            let wv = unsafe { vld1q_s8(w_block.as_ptr()) };
-            let (w_low, w_high) = (vmovl_s8(vget_low_s8(wv)), vmovl_high_s8(wv));
-            let mut sum = vmlal_s16(*lanes, vget_low_s16(w_low), vget_low_s16(x_low));
-            sum = vmlal_high_s16(sum, w_low, x_low);
-            sum = vmlal_s16(sum, vget_low_s16(w_high), vget_low_s16(x_high));
-            *lanes = vmlal_high_s16(sum, w_high, x_high);
+unsafe fn dots_i16_neon(w: [&[i8]; ROWS], x: &[i16]) -> [i32; ROWS] {
+    let [mut a0, mut a1, mut a2, mut a3] = [vdupq_n_s32(0); ROWS];
+    let [w0, w1, w2, w3] = w.map(<[i8]>::as_ptr);
+    let xp = x.as_ptr();
+    for offset in (0..x.len() / LANES).map(|b| b * LANES) {
+        // SAFETY: `offset + 16 <= x.len()` (32 input bytes from `2 * offset`) and every row is
+        // as long as `x` (the caller's contract); baseline NEON, no other memory.
+        unsafe {
+            core::arch::asm!(
+                "ldp {x0:q}, {x1:q}, [{xp}]",
+                "ldr {v0:q}, [{w0}, {o}]",
+                "ldr {v1:q}, [{w1}, {o}]",
+                "sxtl {l:v}.8h, {v0:v}.8b",
+                "sxtl2 {h:v}.8h, {v0:v}.16b",
+                "sxtl {v0:v}.8h, {v1:v}.8b",
+                "sxtl2 {v1:v}.8h, {v1:v}.16b",
+                "smlal {a0:v}.4s, {l:v}.4h, {x0:v}.4h",
+                "smlal2 {a0:v}.4s, {l:v}.8h, {x0:v}.8h",
+                "smlal {a0:v}.4s, {h:v}.4h, {x1:v}.4h",
+                "smlal2 {a0:v}.4s, {h:v}.8h, {x1:v}.8h",
+                "smlal {a1:v}.4s, {v0:v}.4h, {x0:v}.4h",
+                "smlal2 {a1:v}.4s, {v0:v}.8h, {x0:v}.8h",
+                "smlal {a1:v}.4s, {v1:v}.4h, {x1:v}.4h",
+                "smlal2 {a1:v}.4s, {v1:v}.8h, {x1:v}.8h",
+                "ldr {v0:q}, [{w2}, {o}]",
+                "ldr {v1:q}, [{w3}, {o}]",
+                "sxtl {l:v}.8h, {v0:v}.8b",
+                "sxtl2 {h:v}.8h, {v0:v}.16b",
+                "sxtl {v0:v}.8h, {v1:v}.8b",
+                "sxtl2 {v1:v}.8h, {v1:v}.16b",
+                "smlal {a2:v}.4s, {l:v}.4h, {x0:v}.4h",
+                "smlal2 {a2:v}.4s, {l:v}.8h, {x0:v}.8h",
+                "smlal {a2:v}.4s, {h:v}.4h, {x1:v}.4h",
+                "smlal2 {a2:v}.4s, {h:v}.8h, {x1:v}.8h",
+                "smlal {a3:v}.4s, {v0:v}.4h, {x0:v}.4h",
+                "smlal2 {a3:v}.4s, {v0:v}.8h, {x0:v}.8h",
+                "smlal {a3:v}.4s, {v1:v}.4h, {x1:v}.4h",
+                "smlal2 {a3:v}.4s, {v1:v}.8h, {x1:v}.8h",
+                xp = in(reg) xp.add(offset),
+                w0 = in(reg) w0,
+                w1 = in(reg) w1,
+                w2 = in(reg) w2,
+                w3 = in(reg) w3,
+                o = in(reg) offset,
+                x0 = out(vreg) _,
+                x1 = out(vreg) _,
+                v0 = out(vreg) _,
+                v1 = out(vreg) _,
+                l = out(vreg) _,
+                h = out(vreg) _,
+                a0 = inout(vreg) a0,
+                a1 = inout(vreg) a1,
+                a2 = inout(vreg) a2,
+                a3 = inout(vreg) a3,
+                options(pure, readonly, nostack, preserves_flags),
+            );
         }
     }
-    finish(acc, w, x, wide_step_i16)
+    finish([a0, a1, a2, a3], w, x, wide_step_i16)
 }
