@@ -111,7 +111,8 @@ fn detect_dotprod() -> bool {
 
 /// `sums[r] = start[r] + dot(row_r[columns], input[columns])` (int32, wrapping; missing `start`
 /// entries count as 0) for the first `sums.len()` rows of `rows` (`input.len()` columns each),
-/// as `rows::portable_block_sums` computes them.
+/// as `rows::portable_block_sums` computes them (which `rows` calls instead while
+/// [`neon_active`] is false).
 #[inline]
 pub(crate) fn block_sums<T: RowInput>(
     input: &[T],
@@ -120,10 +121,6 @@ pub(crate) fn block_sums<T: RowInput>(
     start: &[i32],
     sums: &mut [i32],
 ) {
-    if !neon_active() {
-        super::rows::portable_block_sums(input, rows, columns, start, sums);
-        return;
-    }
     let width = input.len();
     let count = columns.len();
     let chunk = input.get(columns.clone()).unwrap_or(&[]);

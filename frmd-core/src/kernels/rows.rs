@@ -48,7 +48,11 @@ pub(crate) fn for_each_block<T: RowInput, A: Accumulator>(
             #[cfg(frmd_arm_dsp)]
             super::dsp::block_sums(&prepared, input, rows, columns, start, residues);
             #[cfg(target_arch = "aarch64")]
-            super::aarch64::block_sums(input, rows, columns, start, residues);
+            if super::aarch64::neon_active() {
+                super::aarch64::block_sums(input, rows, columns, start, residues);
+            } else {
+                portable_block_sums(input, rows, columns, start, residues);
+            }
             #[cfg(not(any(frmd_arm_dsp, target_arch = "aarch64")))]
             portable_block_sums(input, rows, columns, start, residues);
         });
