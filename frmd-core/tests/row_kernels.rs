@@ -25,7 +25,7 @@ fn draw(rng: &mut SplitMix64, below: usize) -> usize {
 fn int8_case(rng: &mut SplitMix64, case: usize) -> Case<i8, i32> {
     let columns = 1 + draw(rng, 300);
     let rows = 1 + draw(rng, 11);
-    let extreme = case % 5 == 0;
+    let extreme = case.is_multiple_of(5);
     let byte = |rng: &mut SplitMix64| match (extreme, rng.next_u64() % 2) {
         (true, 0) => -128,
         (true, _) => 127,
@@ -43,7 +43,7 @@ fn int8_case(rng: &mut SplitMix64, case: usize) -> Case<i8, i32> {
 fn int16_case(rng: &mut SplitMix64, case: usize) -> Case<i16, i64> {
     let columns = 1 + draw(rng, 1100);
     let rows = 1 + draw(rng, 11);
-    let extreme = case % 5 == 0;
+    let extreme = case.is_multiple_of(5);
     let weights = (0..rows * columns)
         .map(|_| match (extreme, rng.next_u64() % 2) {
             (true, 0) => -127,
@@ -148,38 +148,37 @@ fn main() {
     let mut checked = 0;
     for (level, select) in levels() {
         select();
-        for case in int8.iter().chain([&wrapping]) {
-            let layer = FullyConnected::new(case.columns, case.rows, &case.weights, &case.bias);
-            let mut acc = vec![0_i32; case.rows];
-            layer
-                .accumulate(LayerInput::Int8(&case.input), &mut acc)
-                .expect("valid int8 layer");
-            let expected: Vec<i32> = wide(case).iter().map(|sum| *sum as i32).collect();
-            assert_eq!(
-                acc, expected,
-                "{level}: int8 {}x{}",
-                case.rows, case.columns
-            );
-            checked += 1;
-        }
-        for case in &int16 {
-            let layer = FullyConnected::new(case.columns, case.rows, &case.weights, &case.bias);
-            let mut acc = vec![0_i64; case.rows];
-            layer
-                .accumulate(LayerInput::Int16(&case.input), &mut acc)
-                .expect("valid int16 layer");
-            let expected: Vec<i64> = wide(case).iter().map(|sum| *sum as i64).collect();
-            assert_eq!(
-                acc, expected,
-                "{level}: int16 {}x{}",
-                case.rows, case.columns
-            );
-            checked += 1;
-        }
-        println!(
-            "row kernels, {level}: {} layers equal the wide sums",
-            int8.len() + 1 + int16.len()
-        );
+        let int8_cases = int8.iter().chain([&wrapping]);
+        let layers = check(level, int8_cases, LayerInput::Int8, |sum| sum as i32)
+            + check(level, &int16, LayerInput::Int16, |sum| sum as i64);
+        println!("row kernels, {level}: {layers} layers equal the wide sums");
+        checked += layers;
     }
     assert!(checked > 0);
+}
+
+/// `FullyConnected::accumulate` of every case against its wide sums (narrowed by `narrow`: int32
+/// accumulators wrap); returns the number of layers checked.
+fn check<'a, X, A>(
+    level: &str,
+    cases: impl IntoIterator<Item = &'a Case<X, A>>,
+    input: fn(&'a [X]) -> LayerInput<'a>,
+    narrow: fn(i128) -> A,
+) -> usize
+where
+    X: Copy + Into<i64> + 'a,
+    A: frmd_core::kernels::Accumulator + Into<i64> + 'a,
+{
+    let mut checked = 0;
+    for case in cases {
+        let layer = FullyConnected::new(case.columns, case.rows, &case.weights, &case.bias);
+        let mut acc = vec![A::ZERO; case.rows];
+        layer
+            .accumulate(input(&case.input), &mut acc)
+            .expect("valid layer");
+        let expected: Vec<A> = wide(case).into_iter().map(narrow).collect();
+        assert_eq!(acc, expected, "{level}: {}x{}", case.rows, case.columns);
+        checked += 1;
+    }
+    checked
 }

@@ -122,58 +122,63 @@ pub(crate) fn block_sums<T: RowInput>(
     sums: &mut [i32],
 ) {
     let width = input.len();
-    let count = columns.len();
     let chunk = input.get(columns.clone()).unwrap_or(&[]);
-    let mut starts = start.iter().copied().chain(core::iter::repeat(0));
-    let mut row_slices = rows
+    let row_slices = rows
         .chunks_exact(width)
         .map(|row| row.get(columns.clone()).unwrap_or(&[]));
-    let (groups, rest) = sums.as_chunks_mut::<ROWS>();
+    let rest_dot = |row: &[i8]| T::dot(row, chunk);
     match (T::as_i8(chunk), T::as_i16(chunk)) {
         (Some(x), _) => {
             let dotprod = dotprod_active();
-            for group in groups {
-                let w: [&[i8]; ROWS] = core::array::from_fn(|_| row_slices.next().unwrap_or(&[]));
-                let dots = if w.iter().any(|row| row.len() != count) || x.len() != count {
-                    w.map(|row| row.iter().zip(x).fold(0_i32, wide_step_i8))
-                } else if dotprod {
-                    // SAFETY: the CPU has FEAT_DotProd (`dotprod_active`); every row and `x` have
-                    // `count` elements (checked above).
+            by_four(x, row_slices, start, sums, wide_step_i8, rest_dot, |w| {
+                if dotprod {
+                    // SAFETY: the CPU has FEAT_DotProd (`dotprod_active`); `by_four` passes only
+                    // rows of `x.len()` elements.
                     unsafe { dots_i8_sdot(w, x) }
                 } else {
-                    // SAFETY: NEON is part of the aarch64 baseline; every row and `x` have
-                    // `count` elements (checked above).
+                    // SAFETY: NEON is part of the aarch64 baseline; rows as above.
                     unsafe { dots_i8_neon(w, x) }
-                };
-                for (sum, dot) in group.iter_mut().zip(dots) {
-                    *sum = starts.next().unwrap_or(0).wrapping_add(dot);
                 }
-            }
-            for sum in rest {
-                let row = row_slices.next().unwrap_or(&[]);
-                *sum = starts.next().unwrap_or(0).wrapping_add(T::dot(row, chunk));
-            }
+            });
         }
         (None, Some(x)) => {
-            for group in groups {
-                let w: [&[i8]; ROWS] = core::array::from_fn(|_| row_slices.next().unwrap_or(&[]));
-                let dots = if w.iter().any(|row| row.len() != count) || x.len() != count {
-                    w.map(|row| row.iter().zip(x).fold(0_i32, wide_step_i16))
-                } else {
-                    // SAFETY: NEON is part of the aarch64 baseline; every row and `x` have
-                    // `count` elements (checked above).
-                    unsafe { dots_i16_neon(w, x) }
-                };
-                for (sum, dot) in group.iter_mut().zip(dots) {
-                    *sum = starts.next().unwrap_or(0).wrapping_add(dot);
-                }
-            }
-            for sum in rest {
-                let row = row_slices.next().unwrap_or(&[]);
-                *sum = starts.next().unwrap_or(0).wrapping_add(T::dot(row, chunk));
-            }
+            // SAFETY: NEON is part of the aarch64 baseline; `by_four` passes only rows of
+            // `x.len()` elements.
+            let dots = |w| unsafe { dots_i16_neon(w, x) };
+            by_four(x, row_slices, start, sums, wide_step_i16, rest_dot, dots);
         }
         (None, None) => {}
+    }
+}
+
+/// `sums[r] = start[r] + dot(row_r, x)`: whole groups of four rows by `dots` (called only with
+/// rows as long as `x`; others by the scalar `step`), the last `sums.len() % 4` by `rest_dot`.
+#[inline(always)]
+fn by_four<'a, X: Copy>(
+    x: &[X],
+    mut row_slices: impl Iterator<Item = &'a [i8]>,
+    start: &[i32],
+    sums: &mut [i32],
+    step: fn(i32, (&i8, &X)) -> i32,
+    rest_dot: impl Fn(&[i8]) -> i32,
+    dots: impl Fn([&'a [i8]; ROWS]) -> [i32; ROWS],
+) {
+    let mut starts = start.iter().copied().chain(core::iter::repeat(0));
+    let (groups, rest) = sums.as_chunks_mut::<ROWS>();
+    for group in groups {
+        let w: [&[i8]; ROWS] = core::array::from_fn(|_| row_slices.next().unwrap_or(&[]));
+        let sums = if w.iter().all(|row| row.len() == x.len()) {
+            dots(w)
+        } else {
+            w.map(|row| row.iter().zip(x).fold(0_i32, step))
+        };
+        for (sum, dot) in group.iter_mut().zip(sums) {
+            *sum = starts.next().unwrap_or(0).wrapping_add(dot);
+        }
+    }
+    for sum in rest {
+        let row = row_slices.next().unwrap_or(&[]);
+        *sum = starts.next().unwrap_or(0).wrapping_add(rest_dot(row));
     }
 }
 
