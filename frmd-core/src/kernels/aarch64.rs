@@ -31,59 +31,44 @@
 use super::dot::RowInput;
 use core::arch::aarch64::{int32x4_t, vaddvq_s32, vdupq_n_s32};
 use core::ops::Range;
-use core::sync::atomic::{AtomicU8, Ordering};
+
+use super::switch::KernelSwitch;
 
 /// Rows per pass.
 const ROWS: usize = 4;
 /// Columns per vector step.
 const LANES: usize = 16;
 
-/// Path states: not yet probed, active, inactive (unsupported or switched off).
-const UNKNOWN: u8 = 0;
-const ACTIVE: u8 = 1;
-const INACTIVE: u8 = 2;
-
-static NEON_STATE: AtomicU8 = AtomicU8::new(ACTIVE);
-static DOTPROD_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
+static NEON: KernelSwitch = KernelSwitch::baseline();
+static DOTPROD: KernelSwitch = KernelSwitch::probed(detect_dotprod);
 
 /// Whether the row kernels use NEON (otherwise the portable loops). On by default.
 #[inline]
 pub fn neon_active() -> bool {
-    NEON_STATE.load(Ordering::Relaxed) == ACTIVE
+    NEON.active()
 }
 
 /// Switches the NEON row kernels on or off, process-wide (off: the portable loops, which give
 /// the same sums); returns whether they are active afterwards.
 pub fn set_neon_enabled(enabled: bool) -> bool {
-    NEON_STATE.store(if enabled { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
-    enabled
+    NEON.set(enabled)
 }
 
 /// Whether this CPU has the dot-product instructions (`SDOT`).
 pub fn dotprod_supported() -> bool {
-    detect_dotprod()
+    DOTPROD.supported()
 }
 
 /// Whether the int8 row kernels use `SDOT` (only while NEON is active).
 #[inline]
 pub fn dotprod_active() -> bool {
-    match DOTPROD_STATE.load(Ordering::Relaxed) {
-        ACTIVE => true,
-        INACTIVE => false,
-        _ => {
-            let supported = detect_dotprod();
-            DOTPROD_STATE.store(if supported { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
-            supported
-        }
-    }
+    DOTPROD.active()
 }
 
 /// Enables (if supported) or disables the `SDOT` path, process-wide; returns whether it is
 /// active afterwards. Both int8 paths give identical sums.
 pub fn set_dotprod_enabled(enabled: bool) -> bool {
-    let active = enabled && detect_dotprod();
-    DOTPROD_STATE.store(if active { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
-    active
+    DOTPROD.set(enabled)
 }
 
 #[cfg(target_feature = "dotprod")]

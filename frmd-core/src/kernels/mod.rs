@@ -32,6 +32,8 @@ pub mod norm;
 pub mod precision;
 pub(crate) mod rows;
 pub mod softmax;
+#[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
+mod switch;
 #[cfg(target_arch = "x86_64")]
 pub mod x86;
 

@@ -94,19 +94,12 @@ pub(crate) fn for_each_tail_row<O, B>(
     }
 }
 
+use crate::kernels::switch::KernelSwitch;
 #[cfg(test)]
 use alloc::vec::Vec;
 use core::arch::x86_64::{__cpuid, __cpuid_count, _xgetbv};
-use core::sync::atomic::{AtomicU8, Ordering};
 
-/// Detection state: not yet probed.
-const UNKNOWN: u8 = 0;
-/// The CPU and OS support AVX2 and the path is enabled.
-const ACTIVE: u8 = 1;
-/// AVX2 is unsupported, or disabled by [`set_avx2_enabled`].
-const INACTIVE: u8 = 2;
-
-static AVX2_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
+static AVX2: KernelSwitch = KernelSwitch::probed(detect_avx2);
 
 /// Proof that the AVX2 kernels may run: `Avx2::get` hands one out only while [`avx2_active`]
 /// is true. The kernels are methods of this token (`matvec`, `requant`). `vnni` records whether
@@ -181,8 +174,8 @@ pub(crate) fn test_tokens() -> Vec<Avx2> {
     tokens
 }
 
-/// Same states as `AVX2_STATE`, for AVX-512 (only consulted while AVX2 is active).
-static AVX512_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
+/// AVX-512's switch (only consulted while AVX2 is active).
+static AVX512: KernelSwitch = KernelSwitch::probed(avx512_supported);
 
 /// Whether the CPU and OS support AVX-512 F, BW and VNNI (with the ZMM register state saved).
 pub fn avx512_supported() -> bool {
@@ -192,26 +185,13 @@ pub fn avx512_supported() -> bool {
 /// Whether the int8 and int16 row kernels currently use their AVX-512 VNNI variant.
 #[inline]
 pub fn avx512_active() -> bool {
-    if !avx2_active() {
-        return false;
-    }
-    match AVX512_STATE.load(Ordering::Relaxed) {
-        ACTIVE => true,
-        INACTIVE => false,
-        _ => {
-            let supported = detect_avx512();
-            AVX512_STATE.store(if supported { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
-            supported
-        }
-    }
+    avx2_active() && AVX512.active()
 }
 
 /// Enables (if supported) or disables the AVX-512 variant, process-wide; returns whether it is
 /// active afterwards. All variants give identical results (for A/B measurements).
 pub fn set_avx512_enabled(enabled: bool) -> bool {
-    let active = enabled && avx512_supported();
-    AVX512_STATE.store(if active { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
-    active && avx2_active()
+    AVX512.set(enabled) && avx2_active()
 }
 
 /// `CPUID.(7,0)`: AVX512F (EBX bit 16), AVX512BW (EBX bit 30), AVX512_VNNI (ECX bit 11); `XGETBV`:
@@ -231,8 +211,8 @@ fn detect_avx512() -> bool {
     xcr0 & XCR0_ZMM == XCR0_ZMM && leaf.ebx & (F | BW) == F | BW && leaf.ecx & VNNI != 0
 }
 
-/// Same states as `AVX2_STATE`, for AVX-VNNI (only consulted while AVX2 is active).
-static VNNI_STATE: AtomicU8 = AtomicU8::new(UNKNOWN);
+/// AVX-VNNI's switch (only consulted while AVX2 is active).
+static VNNI: KernelSwitch = KernelSwitch::probed(avx_vnni_supported);
 
 /// Whether the CPU supports AVX-VNNI (VEX-encoded `vpdpbusd`; Intel Alder Lake and later, AMD
 /// Zen 5; also reported by Zen 4) besides AVX2.
@@ -243,54 +223,31 @@ pub fn avx_vnni_supported() -> bool {
 /// Whether the int8 matrix-vector kernel currently uses the AVX-VNNI variant.
 #[inline]
 pub fn avx_vnni_active() -> bool {
-    if !avx2_active() {
-        return false;
-    }
-    match VNNI_STATE.load(Ordering::Relaxed) {
-        ACTIVE => true,
-        INACTIVE => false,
-        _ => {
-            let supported = detect_avx_vnni();
-            VNNI_STATE.store(if supported { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
-            supported
-        }
-    }
+    avx2_active() && VNNI.active()
 }
 
 /// Enables (if supported) or disables the AVX-VNNI variant, process-wide; returns whether it is
 /// active afterwards. All variants give identical results (for A/B measurements).
 pub fn set_avx_vnni_enabled(enabled: bool) -> bool {
-    let active = enabled && avx_vnni_supported();
-    VNNI_STATE.store(if active { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
-    active && avx2_active()
+    VNNI.set(enabled) && avx2_active()
 }
 
-/// Whether the CPU and the OS support AVX2 (probed once with `CPUID`/`XGETBV`).
+/// Whether the CPU and the OS support AVX2 (probed with `CPUID`/`XGETBV`).
 pub fn avx2_supported() -> bool {
-    detect_avx2()
+    AVX2.supported()
 }
 
 /// Whether the int8 kernels currently use the AVX2 build.
 #[inline]
 pub fn avx2_active() -> bool {
-    match AVX2_STATE.load(Ordering::Relaxed) {
-        ACTIVE => true,
-        INACTIVE => false,
-        _ => {
-            let supported = detect_avx2();
-            AVX2_STATE.store(if supported { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
-            supported
-        }
-    }
+    AVX2.active()
 }
 
 /// Enables (if the CPU supports it) or disables the AVX2 build of the int8 kernels, process-wide.
 /// Returns whether AVX2 is active afterwards. Both builds give identical results; this only
 /// exists to measure one against the other.
 pub fn set_avx2_enabled(enabled: bool) -> bool {
-    let active = enabled && detect_avx2();
-    AVX2_STATE.store(if active { ACTIVE } else { INACTIVE }, Ordering::Relaxed);
-    active
+    AVX2.set(enabled)
 }
 
 /// `CPUID`/`XGETBV` probe for AVX2 with OS support of the YMM state.
