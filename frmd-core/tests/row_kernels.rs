@@ -1,6 +1,6 @@
 //! `FullyConnected::accumulate` against wide sums on random shapes, at every row-kernel level this
 //! CPU runs: on aarch64 NEON with `SDOT` (if the CPU has it), NEON without, portable; on x86-64
-//! AVX-512 VNNI (if present), AVX2, portable. int8 inputs with int32 accumulators (every column remainder, rows
+//! AVX-512 VNNI and AVX-VNNI (if present), AVX2, portable. int8 inputs with int32 accumulators (every column remainder, rows
 //! not multiples of four, -128/127 extremes, sums that wrap) and int16 inputs with int64
 //! accumulators (widths across the 512-column chunks, -32768/32767 extremes).
 //!
@@ -114,6 +114,13 @@ fn levels() -> Vec<(&'static str, fn())> {
         levels.push(("avx512-vnni", || {
             x86::set_avx2_enabled(true);
             x86::set_avx512_enabled(true);
+        }));
+    }
+    if x86::avx_vnni_supported() {
+        levels.push(("avx-vnni", || {
+            x86::set_avx2_enabled(true);
+            x86::set_avx512_enabled(false);
+            x86::set_avx_vnni_enabled(true);
         }));
     }
     levels.push(("avx2", || {
