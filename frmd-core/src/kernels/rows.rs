@@ -8,10 +8,10 @@
 //! halfword pairs once and two rows at a time go through an `SMLAD` kernel; on aarch64 four rows
 //! at a time go through NEON (`SDOT` where the core has it; module `kernels::aarch64`); elsewhere
 //! each row is [`dot_i8_prefix`] / [`dot_i8_i16_prefix`]. All give identical sums: wrapping int32
-//! addition is associative and commutative. (On x86-64 CPUs with AVX2, `FullyConnected` uses the eight-row
-//! kernels of `kernels::x86` for int8 inputs instead. A four-row SSE2 version of the portable loop
-//! ran fewer instructions but was slower: LLVM's `punpcklbw` sign extension read a stale register
-//! and chained the whole loop body.)
+//! addition is associative and commutative. (On x86-64 CPUs with AVX2, `FullyConnected` uses the
+//! eight-row kernels of `kernels::x86` for int8 inputs instead. A four-row SSE2 version of the
+//! portable loop ran fewer instructions but was slower: LLVM's `punpcklbw` sign extension read a
+//! stale register and chained the whole loop body.)
 
 use super::dot::RowInput;
 use super::precision::Accumulator;
