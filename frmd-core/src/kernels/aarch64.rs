@@ -115,7 +115,7 @@ pub(crate) fn block_sums<T: RowInput>(
     match (T::as_i8(chunk), T::as_i16(chunk)) {
         (Some(x), _) => {
             let dotprod = dotprod_active();
-            by_four(x, row_slices, start, sums, wide_step_i8, rest_dot, |w| {
+            by_four(x, row_slices, start, sums, rest_dot, |w| {
                 if dotprod {
                     // SAFETY: the CPU has FEAT_DotProd (`dotprod_active`); `by_four` passes only
                     // rows of `x.len()` elements.
@@ -130,21 +130,20 @@ pub(crate) fn block_sums<T: RowInput>(
             // SAFETY: NEON is part of the aarch64 baseline; `by_four` passes only rows of
             // `x.len()` elements.
             let dots = |w| unsafe { dots_i16_neon(w, x) };
-            by_four(x, row_slices, start, sums, wide_step_i16, rest_dot, dots);
+            by_four(x, row_slices, start, sums, rest_dot, dots);
         }
         (None, None) => {}
     }
 }
 
 /// `sums[r] = start[r] + dot(row_r, x)`: whole groups of four rows by `dots` (called only with
-/// rows as long as `x`; others by the scalar `step`), the last `sums.len() % 4` by `rest_dot`.
+/// rows as long as `x`; others by a scalar loop), the last `sums.len() % 4` rows by `rest_dot`.
 #[inline(always)]
-fn by_four<'a, X: Copy>(
+fn by_four<'a, X: Copy + Into<i32>>(
     x: &[X],
     mut row_slices: impl Iterator<Item = &'a [i8]>,
     start: &[i32],
     sums: &mut [i32],
-    step: fn(i32, (&i8, &X)) -> i32,
     rest_dot: impl Fn(&[i8]) -> i32,
     dots: impl Fn([&'a [i8]; ROWS]) -> [i32; ROWS],
 ) {
@@ -155,7 +154,7 @@ fn by_four<'a, X: Copy>(
         let sums = if w.iter().all(|row| row.len() == x.len()) {
             dots(w)
         } else {
-            w.map(|row| row.iter().zip(x).fold(0_i32, step))
+            w.map(|row| row.iter().zip(x).fold(0_i32, wide_step))
         };
         for (sum, dot) in group.iter_mut().zip(sums) {
             *sum = starts.next().unwrap_or(0).wrapping_add(dot);
@@ -167,30 +166,21 @@ fn by_four<'a, X: Copy>(
     }
 }
 
+/// `sum + w * x` (int32, wrapping) for an int8 or int16 input code.
 #[inline(always)]
-fn wide_step_i8(sum: i32, (w, x): (&i8, &i8)) -> i32 {
-    sum.wrapping_add(i32::from(*w) * i32::from(*x))
-}
-
-#[inline(always)]
-fn wide_step_i16(sum: i32, (w, x): (&i8, &i16)) -> i32 {
-    sum.wrapping_add(i32::from(*w) * i32::from(*x))
+fn wide_step<X: Copy + Into<i32>>(sum: i32, (w, x): (&i8, &X)) -> i32 {
+    sum.wrapping_add(i32::from(*w) * (*x).into())
 }
 
 /// The four rows' sums of the last `x.len() % 16` columns added to their vector lanes.
 #[target_feature(enable = "neon")]
-fn finish<X: Copy>(
-    acc: [int32x4_t; ROWS],
-    w: [&[i8]; ROWS],
-    x: &[X],
-    step: fn(i32, (&i8, &X)) -> i32,
-) -> [i32; ROWS] {
+fn finish<X: Copy + Into<i32>>(acc: [int32x4_t; ROWS], w: [&[i8]; ROWS], x: &[X]) -> [i32; ROWS] {
     let head = x.len() - x.len() % LANES;
     let x_tail = x.get(head..).unwrap_or(&[]);
     core::array::from_fn(|r| {
         let lanes = acc.get(r).map_or(0, |lanes| vaddvq_s32(*lanes));
         let row_tail = w.get(r).and_then(|row| row.get(head..)).unwrap_or(&[]);
-        row_tail.iter().zip(x_tail).fold(lanes, step)
+        row_tail.iter().zip(x_tail).fold(lanes, wide_step)
     })
 }
 
@@ -251,7 +241,7 @@ unsafe fn dots_i8_neon(w: [&[i8]; ROWS], x: &[i8]) -> [i32; ROWS] {
             );
         }
     }
-    finish([a0, a1, a2, a3], w, x, wide_step_i8)
+    finish([a0, a1, a2, a3], w, x)
 }
 
 /// [`dots_i8_neon`] with `SDOT` (16 products per instruction).
@@ -296,7 +286,7 @@ unsafe fn dots_i8_sdot(w: [&[i8]; ROWS], x: &[i8]) -> [i32; ROWS] {
             );
         }
     }
-    finish([a0, a1, a2, a3], w, x, wide_step_i8)
+    finish([a0, a1, a2, a3], w, x)
 }
 
 /// Four int8 rows times an int16 vector: per 16 columns two input loads, and per row one load,
@@ -363,5 +353,5 @@ unsafe fn dots_i16_neon(w: [&[i8]; ROWS], x: &[i16]) -> [i32; ROWS] {
             );
         }
     }
-    finish([a0, a1, a2, a3], w, x, wide_step_i16)
+    finish([a0, a1, a2, a3], w, x)
 }
