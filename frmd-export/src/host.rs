@@ -3,10 +3,10 @@
 //! descriptor gives the sizes at run time), the transformer scratch, and [`check_blob`], which an
 //! export passes before anything is written.
 use anyhow::{bail, Context};
-use frmd_core::blob::{AlignedBlob, LoadedBlob};
+use frmd_core::blob::{AlignedBlob, BlobNetwork, LoadedBlob};
 use frmd_core::kernels::Precision;
 use frmd_core::model::transformer::{TransformerBuffers, TransformerScratch};
-use frmd_core::policy::{Policy, PolicyDims, TransformerWork};
+use frmd_core::policy::{Noise, Policy, PolicyDims, PolicyError, Trajectory, TransformerWork};
 use frmd_core::prodmp::MAX_NUM_BASIS;
 
 /// Longest observation history the host runs.
@@ -33,6 +33,23 @@ pub type HostPolicy<'a, Net> = Policy<
     MAX_PARAMS_PER_DOF,
     MAX_WIDTH,
 >;
+
+/// frmd-core's policy over a loaded blob of any backbone and precision, with the host
+/// capacities: what `frmd` runs for an exported student.
+pub type BlobPolicy<'a> = HostPolicy<'a, BlobNetwork<'a, MAX_WIDTH, HostWork>>;
+
+/// One chunk of a blob policy ([`Policy::act`]). Not generic on purpose: the chunk's code
+/// (sampler, network glue, decode; frmd-core's generics) is compiled in this crate, which every
+/// profile optimizes (`opt-level = 3` in the dev profile too, see the workspace Cargo.toml), and
+/// not in a caller built with `opt-level = 1` (frmd-host in the dev profile, where the same
+/// chunk took 10.0 us against 7.3 us in release: docs/design.md section 8).
+#[inline(never)]
+pub fn act_blob<'p>(
+    policy: &'p mut BlobPolicy<'_>,
+    noise: Noise<'_>,
+) -> Result<&'p Trajectory<MAX_HORIZON, MAX_ACTION_DIM>, PolicyError> {
+    policy.act(noise)
+}
 
 /// Scratch for the host's transformer passes with `P` codes (enough for the `transformer`
 /// backbone, 6 x 256 with horizon 16): floats, codes, accumulators.

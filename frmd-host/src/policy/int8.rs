@@ -10,19 +10,25 @@
 //! comparison tool, builds its f32 network per chunk.
 use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
-use frmd_core::blob::{AlignedBlob, BlobNetwork, LoadedBlob};
-use frmd_core::policy::{Network, Noise, PolicyDims};
+use frmd_core::blob::{AlignedBlob, LoadedBlob};
+use frmd_core::policy::{Network, Noise, PolicyDims, PolicyError, Trajectory};
 use frmd_core::rng::Rng;
-use frmd_export::host::{check_capacity, HostPolicy, HostScratch, HostWork, MAX_WIDTH};
+use frmd_export::host::{
+    act_blob, check_capacity, BlobPolicy, HostPolicy, HostScratch, HostWork, MAX_ACTION_DIM,
+    MAX_HORIZON, MAX_WIDTH,
+};
 use frmd_export::ExportedStudent;
 use std::path::Path;
 
 /// One chunk of `policy` from raw inputs: a fresh episode with the observation history and the
 /// last commanded action and rate of `input`; the positions `[n][k]` in raw units.
-fn run_chunk<Net: Network>(
-    policy: &mut HostPolicy<'_, Net>,
+/// `act` is the policy's [`frmd_core::policy::Policy::act`], or for a blob policy
+/// [`frmd_export::host::act_blob`] (the same call, compiled optimized in every profile).
+fn run_chunk<'a, Net: Network>(
+    policy: &mut HostPolicy<'a, Net>,
     input: &PolicyInput<'_>,
     noise: Noise<'_>,
+    act: for<'p, 'n> fn(&'p mut HostPolicy<'a, Net>, Noise<'n>) -> Result<&'p HostChunk, PolicyError>,
 ) -> anyhow::Result<Vec<Vec<f32>>> {
     let dims = policy.dims();
     if input.obs_history.len() != dims.history {
@@ -39,7 +45,7 @@ fn run_chunk<Net: Network>(
     policy
         .set_previous_action(input.prev_action, input.prev_rate)
         .context("previous action")?;
-    let chunk = policy.act(noise).context("act")?;
+    let chunk = act(policy, noise).context("act")?;
     let (positions, _) = chunk
         .values(dims.horizon * dims.action_dim)
         .context("chunk")?;
@@ -49,6 +55,9 @@ fn run_chunk<Net: Network>(
         .collect())
 }
 
+/// A chunk of the host policy.
+type HostChunk = Trajectory<MAX_HORIZON, MAX_ACTION_DIM>;
+
 self_cell::self_cell!(
     /// A blob and its checked view.
     struct Loaded {
@@ -57,9 +66,6 @@ self_cell::self_cell!(
         dependent: LoadedBlob,
     }
 );
-
-/// The firmware's policy over a loaded blob, with the host capacities.
-type BlobPolicy<'a> = HostPolicy<'a, BlobNetwork<'a, MAX_WIDTH, HostWork>>;
 
 self_cell::self_cell!(
     /// A loaded blob and the policy built over it once.
@@ -98,7 +104,7 @@ impl Runner {
     fn run(&mut self, input: &PolicyInput<'_>, noise: Noise<'_>) -> anyhow::Result<Vec<Vec<f32>>> {
         match self {
             Self::Int8(ready) => {
-                ready.with_dependent_mut(|_, policy| run_chunk(policy, input, noise))
+                ready.with_dependent_mut(|_, policy| run_chunk(policy, input, noise, act_blob))
             }
             Self::F32Twin {
                 blob,
@@ -111,6 +117,7 @@ impl Runner {
                         &mut HostPolicy::new(loaded.config(), network)?,
                         input,
                         noise,
+                        HostPolicy::act,
                     )
                 })
             }
