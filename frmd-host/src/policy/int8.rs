@@ -28,7 +28,10 @@ fn run_chunk<'a, Net: Network>(
     policy: &mut HostPolicy<'a, Net>,
     input: &PolicyInput<'_>,
     noise: Noise<'_>,
-    act: for<'p, 'n> fn(&'p mut HostPolicy<'a, Net>, Noise<'n>) -> Result<&'p HostChunk, PolicyError>,
+    act: for<'p, 'n> fn(
+        &'p mut HostPolicy<'a, Net>,
+        Noise<'n>,
+    ) -> Result<&'p HostChunk, PolicyError>,
 ) -> anyhow::Result<Vec<Vec<f32>>> {
     let dims = policy.dims();
     if input.obs_history.len() != dims.history {
