@@ -7,7 +7,8 @@
 //!
 //! By default it times the checkpoints `frmd quickstart` wrote (`runs/quickstart/{student,
 //! teacher,dp}`): student 1 and 2 steps (candle, and frmd-core int8), teacher 10 Heun steps, DP
-//! 100 (DDPM) and 10 (DDIM) steps, all with the same backbone. [`BenchConfig::policies`] times other checkpoints instead, and
+//! 100 (DDPM) and 10 (DDIM) steps, all with the same backbone. [`BenchConfig::policies`] times
+//! other checkpoints instead (the frmd-core rows then export the first student among them), and
 //! [`BenchConfig::synthetic`] times randomly initialized networks of a given backbone (latency
 //! does not depend on the weights), which needs no checkpoint at all. [`fixtures`] builds such
 //! networks for the benchmarks and instruction counts.
@@ -16,7 +17,7 @@ use crate::diffusion::samplers::Solver;
 use crate::eval::metrics::quantile;
 use crate::export::{export_student, ExportConfig};
 use crate::models::BackboneConfig;
-use crate::policy::float::FloatPolicy;
+use crate::policy::float::{FloatPolicy, Sampler};
 use crate::policy::int8::Int8Policy;
 use crate::quickstart::QuickstartConfig;
 use crate::tasks::{Policy, PolicyInput};
@@ -36,7 +37,8 @@ mod tests;
 pub struct BenchConfig {
     /// Checkpoints to time (empty: student:1, teacher:10:heun, dp:100, dp:10 from `dir`).
     pub policies: Vec<PolicySpec>,
-    /// Directory holding `student/`, `teacher/` and `dp/` checkpoints (as written by quickstart).
+    /// Directory holding `student/`, `teacher/` and `dp/` checkpoints (as written by quickstart);
+    /// the frmd-core rows export its student unless a `--policy` names a student checkpoint.
     pub dir: PathBuf,
     /// Time randomly initialized networks of `backbone` instead of checkpoints.
     pub synthetic: bool,
@@ -205,12 +207,12 @@ struct CorePolicySet {
     policies: LabelledPolicies,
 }
 
-/// The frmd-core int8 and f32 policies for the comparison: the student in `--dir` exported as
-/// `frmd export` does it, one step and (int8) two steps (or, with `--synthetic`, a random
-/// one-step student of `--backbone` exported the same way). Returns the policies, or why there
-/// are none.
-fn core_policies(cfg: &BenchConfig) -> Result<CorePolicySet, String> {
-    match core_policy_rows(cfg) {
+/// The frmd-core int8 and f32 policies for the comparison: the student checkpoint `student`
+/// exported as `frmd export` does it, one step and (int8) two steps (or, with `--synthetic`, a
+/// random one-step student of `--backbone` exported the same way). Returns the policies, or why
+/// there are none.
+fn core_policies(cfg: &BenchConfig, student: &Path) -> Result<CorePolicySet, String> {
+    match core_policy_rows(cfg, student) {
         Ok(Ok((policies, backbone, dims))) => Ok(CorePolicySet {
             backbone: backbone_label(&backbone),
             input: FixedInput::new(dims.obs_dim, dims.action_dim, dims.history),
@@ -225,7 +227,7 @@ fn core_policies(cfg: &BenchConfig) -> Result<CorePolicySet, String> {
 /// synthetic exporter's refusal (a reason to print, not a failure).
 type CoreRows = Result<(LabelledPolicies, BackboneConfig, PolicyDims), String>;
 
-fn core_policy_rows(cfg: &BenchConfig) -> anyhow::Result<CoreRows> {
+fn core_policy_rows(cfg: &BenchConfig, ckpt: &Path) -> anyhow::Result<CoreRows> {
     if cfg.synthetic {
         let dir = std::env::temp_dir().join(format!("frmd-bench-{}", std::process::id()));
         let policies = fixtures::reach_student(&dir, &cfg.backbone, 7);
@@ -237,12 +239,11 @@ fn core_policy_rows(cfg: &BenchConfig) -> anyhow::Result<CoreRows> {
             (rows, cfg.backbone.clone(), dims)
         }));
     }
-    let ckpt = cfg.dir.join("student");
     let export = |steps, activations: &str| {
         let config = ExportConfig {
             steps,
             activations: Some(activations.to_string()),
-            ..ExportConfig::for_checkpoint(&ckpt)
+            ..ExportConfig::for_checkpoint(ckpt)
         };
         export_student(&config, false).with_context(|| {
             format!(
@@ -287,7 +288,14 @@ pub fn bench_rows(cfg: &BenchConfig) -> anyhow::Result<(Vec<BenchRow>, Option<St
         }
         v
     };
-    let (core, note) = match core_policies(cfg) {
+    // The frmd-core rows export the first student among --policy, else the one in --dir.
+    let student = cfg
+        .policies
+        .iter()
+        .zip(&floats)
+        .find(|(_, policy)| matches!(policy.sampler(), Sampler::Student { .. }))
+        .map_or_else(|| cfg.dir.join("student"), |(spec, _)| spec.dir.clone());
+    let (core, note) = match core_policies(cfg, &student) {
         Ok(set) => (Some(set), None),
         Err(reason) => (None, Some(reason)),
     };
@@ -301,7 +309,7 @@ pub fn bench_rows(cfg: &BenchConfig) -> anyhow::Result<(Vec<BenchRow>, Option<St
         let label = if cfg.policies.is_empty() || cfg.synthetic {
             label
         } else {
-            format!("{label} ({}/student)", cfg.dir.display())
+            format!("{label} ({})", student.display())
         };
         let (median_us, p99_us) =
             time_policy(policy.as_mut(), &fixed.input(), cfg.warmup, cfg.calls)?;

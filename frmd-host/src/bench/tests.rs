@@ -65,3 +65,28 @@ fn mlp_chunk_stages_recombine_into_the_policy_chunk() {
         assert_eq!(names.last().map(String::as_str), Some("chunk"));
     }
 }
+
+/// With `--policy` naming a student, the frmd-core rows export that student (not the one under
+/// `--dir`, which here does not exist) and say so in their labels.
+#[test]
+fn frmd_core_rows_follow_the_student_given_as_policy() {
+    let root = std::env::temp_dir().join(format!("frmd-bench-policy-{}", std::process::id()));
+    let student = root.join("mine");
+    let made = fixtures::reach_student(&student, &"mlp:32,24".parse().unwrap(), 5);
+    let cfg = BenchConfig {
+        dir: root.join("no-such-quickstart"),
+        policies: vec![format!("{}:1", student.display()).parse().unwrap()],
+        calls: 2,
+        warmup: 0,
+        ..BenchConfig::default()
+    };
+    let result = made.map(|_| bench_rows(&cfg));
+    let _ = std::fs::remove_dir_all(&root);
+    let (rows, note) = result.unwrap().unwrap();
+    assert_eq!(note, None, "frmd-core policies missing");
+    let label = format!("frmd-core int8 1-step ({})", student.display());
+    assert!(
+        rows.iter().any(|r| r.label == label),
+        "no `{label}` row in {rows:?}"
+    );
+}

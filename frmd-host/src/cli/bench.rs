@@ -12,7 +12,8 @@ pub struct BenchArgs {
     /// Default: student:1, student:2, teacher:10:heun, dp:100, dp:10 from --dir.
     #[arg(long = "policy")]
     pub policies: Vec<PolicySpec>,
-    /// Directory holding `student/`, `teacher/` and `dp/` checkpoints (as written by quickstart).
+    /// Directory holding `student/`, `teacher/` and `dp/` checkpoints (as written by quickstart);
+    /// the frmd-core rows export its student unless a `--policy` names a student checkpoint.
     #[arg(long, default_value_os_t = BenchConfig::default().dir)]
     pub dir: PathBuf,
     /// Time randomly initialized networks of `--backbone` instead of checkpoints.
