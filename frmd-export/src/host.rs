@@ -38,6 +38,9 @@ pub type HostPolicy<'a, Net> = Policy<
 /// capacities: what `frmd` runs for an exported student.
 pub type BlobPolicy<'a> = HostPolicy<'a, BlobNetwork<'a, MAX_WIDTH, HostWork>>;
 
+/// A chunk of a host policy (positions and velocities up to the host capacities).
+pub type HostTrajectory = Trajectory<MAX_HORIZON, MAX_ACTION_DIM>;
+
 /// One chunk of a blob policy ([`Policy::act`]). Not generic on purpose: the chunk's code
 /// (sampler, network glue, decode; frmd-core's generics) is compiled in this crate, which every
 /// profile optimizes (`opt-level = 3` in the dev profile too, see the workspace Cargo.toml), and
@@ -47,7 +50,7 @@ pub type BlobPolicy<'a> = HostPolicy<'a, BlobNetwork<'a, MAX_WIDTH, HostWork>>;
 pub fn act_blob<'p>(
     policy: &'p mut BlobPolicy<'_>,
     noise: Noise<'_>,
-) -> Result<&'p Trajectory<MAX_HORIZON, MAX_ACTION_DIM>, PolicyError> {
+) -> Result<&'p HostTrajectory, PolicyError> {
     policy.act(noise)
 }
 

@@ -11,11 +11,11 @@
 use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
 use frmd_core::blob::{AlignedBlob, LoadedBlob};
-use frmd_core::policy::{Network, Noise, PolicyDims, PolicyError, Trajectory};
+use frmd_core::policy::{Network, Noise, PolicyDims, PolicyError};
 use frmd_core::rng::Rng;
 use frmd_export::host::{
-    act_blob, check_capacity, BlobPolicy, HostPolicy, HostScratch, HostWork, MAX_ACTION_DIM,
-    MAX_HORIZON, MAX_WIDTH,
+    act_blob, check_capacity, BlobPolicy, HostPolicy, HostScratch, HostTrajectory, HostWork,
+    MAX_WIDTH,
 };
 use frmd_export::ExportedStudent;
 use std::path::Path;
@@ -31,7 +31,7 @@ fn run_chunk<'a, Net: Network>(
     act: for<'p, 'n> fn(
         &'p mut HostPolicy<'a, Net>,
         Noise<'n>,
-    ) -> Result<&'p HostChunk, PolicyError>,
+    ) -> Result<&'p HostTrajectory, PolicyError>,
 ) -> anyhow::Result<Vec<Vec<f32>>> {
     let dims = policy.dims();
     if input.obs_history.len() != dims.history {
@@ -57,9 +57,6 @@ fn run_chunk<'a, Net: Network>(
         .map(<[f32]>::to_vec)
         .collect())
 }
-
-/// A chunk of the host policy.
-type HostChunk = Trajectory<MAX_HORIZON, MAX_ACTION_DIM>;
 
 self_cell::self_cell!(
     /// A blob and its checked view.
