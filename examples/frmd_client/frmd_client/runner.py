@@ -88,13 +88,53 @@ def check_report(path: Path, task: str, episodes: int) -> dict:
     return report
 
 
+def load_previous(path: Path) -> dict:
+    """An earlier results.json (for `--previous`), checked before any step runs: raises StepFailed
+    naming the file and what is wrong."""
+    try:
+        previous = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as e:
+        raise StepFailed(f"--previous {path}: unreadable results file: {e}") from None
+    rows = previous.get("rows") if isinstance(previous, dict) else None
+    keys = ("task", "seed", "method", "episodes", "successes")
+    if not isinstance(rows, list) or not all(isinstance(r, dict) and all(k in r for k in keys) for r in rows):
+        raise StepFailed(f"--previous {path}: expected a results.json with a 'rows' list whose rows have "
+                         f"{', '.join(keys)}")
+    return previous
+
+
+def carry_over(results: dict, previous: dict, cfg) -> int:
+    """Adds to `results` the rows of `previous` (an earlier results.json) for the configured
+    task-seeds and methods that have no report under OUT (e.g. runs made on another machine, whose
+    files are gone), and the demonstration statistics of tasks without any here. Each carried row
+    keeps the report path recorded in `previous`. Returns how many rows were added."""
+    runs = set(cfg.runs())
+    methods = set(cfg.methods()) if hasattr(cfg, "methods") else None
+    have = {(r["task"], r["seed"], r["method"]) for r in results["rows"]}
+    carried = [r for r in previous["rows"] if (r["task"], r["seed"], r["method"]) not in have
+               and (r["task"], r["seed"]) in runs and (methods is None or r["method"] in methods)]
+    results["rows"].extend(carried)
+    demos = results.setdefault("demos", {})
+    for task, stats in (previous.get("demos") or {}).items():
+        demos.setdefault(task, stats)
+    return len(carried)
+
+
 def run_and_report(runner, cfg, collect_results, write_report, quick_check, md: Path, command: str,
-                   notes: list, report_only: bool = False, quick: bool = False) -> int:
+                   notes: list, report_only: bool = False, quick: bool = False,
+                   previous: Path | None = None) -> int:
     """A simulator package's `benchmark` command after its options: runs every step (unless
     `report_only`), then writes the report of whatever exists, noting an early stop and the task-seeds
     without reports; the quick mode checks the written reports. 1 if a step failed, else 0.
-    `write_report(results, md, command, notes)` returns what `quick_check(written, md)` checks."""
+    `write_report(results, md, command, notes)` returns what `quick_check(written, md)` checks.
+    `previous`: an earlier results.json whose rows fill in the runs without a report here
+    ([`carry_over`]; noted in the report)."""
     import sys
+    try:
+        earlier = load_previous(previous) if previous else None
+    except StepFailed as e:
+        print(e, file=sys.stderr, flush=True)
+        return 2
     failed = None
     if report_only:
         results = collect_results(cfg)
@@ -106,6 +146,11 @@ def run_and_report(runner, cfg, collect_results, write_report, quick_check, md: 
             print(f"benchmark stopped: {failed}", file=sys.stderr, flush=True)
             results = collect_results(cfg)
     notes = list(notes)
+    if earlier is not None:
+        carried = carry_over(results, earlier, cfg)
+        notes.append(f"{carried} of the {len(results['rows'])} reports are carried over from {previous} (runs "
+                     "without a report under the run directory; each row names the report file it was read from "
+                     "when that results file was written).")
     if failed:
         notes.append(f"The run stopped early: {failed}")
     missing = sorted({(task, seed) for task, seed in cfg.runs()}

@@ -150,7 +150,8 @@ def cmd_benchmark(args) -> int:
     command = "cd examples/maniskill && .venv/bin/python -m frmd_maniskill " + " ".join(
         shlex.quote(a) for a in args.argv if a != "--report-only")
     return run_and_report(Runner(cfg), cfg, collect_results, report.write, report.quick_check, md, command,
-                          args.note or [], report_only=args.report_only, quick=args.quick)
+                          args.note or [], report_only=args.report_only, quick=args.quick,
+                          previous=Path(args.previous) if args.previous else None)
 
 
 def main(argv=None) -> int:
@@ -221,6 +222,8 @@ def main(argv=None) -> int:
     m.add_argument("--frmd", help="the frmd binary (default: frmd on PATH)")
     m.add_argument("--results", help="results.md path (results.json and .png beside it; default OUT/results.md)")
     m.add_argument("--note", action="append", help="a line for the results file (repeatable)")
+    m.add_argument("--previous", metavar="RESULTS_JSON", help="an earlier results.json: its rows stand in for the "
+                   "runs that have no report under --out (e.g. made on another machine), noted in the report")
     m.add_argument("--report-only", action="store_true", help="run nothing: write the results files from the "
                    "reports OUT already holds")
     m.set_defaults(run=cmd_benchmark)

@@ -160,7 +160,8 @@ def cmd_benchmark(args) -> int:
     return run_and_report(Runner(cfg), cfg, collect_results,
                           lambda results, md, command, notes: report.write(results, md, command, notes, instructions),
                           report.quick_check, md, command, args.note or [],
-                          report_only=args.report_only, quick=args.quick)
+                          report_only=args.report_only, quick=args.quick,
+                          previous=Path(args.previous) if args.previous else None)
 
 
 def argv_of(args) -> list:
@@ -251,6 +252,8 @@ def main(argv=None) -> int:
     m.add_argument("--note", action="append", help="a line for the results file (repeatable)")
     m.add_argument("--instructions", metavar="JSON", help="Cortex-M4 instructions per chunk of each method "
                    "({\"student-1\": N, ...}): adds the success-per-instruction-budget line")
+    m.add_argument("--previous", metavar="RESULTS_JSON", help="an earlier results.json: its rows stand in for the "
+                   "runs that have no report under --out (e.g. made on another machine), noted in the report")
     m.add_argument("--report-only", action="store_true", help="run nothing: write the results files from the "
                    "reports OUT already holds (e.g. while parts of a run are still going)")
     m.set_defaults(run=cmd_benchmark)
