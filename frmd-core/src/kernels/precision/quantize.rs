@@ -37,7 +37,7 @@ impl sealed::Quantize for i8 {
     ) {
         fc.forward_avx2(avx2, requant, input, output);
         if let Some(table) = table {
-            lut::apply_in_place(table, output);
+            lut::apply_in_place_by_words(table, output);
         }
     }
 }

@@ -6,7 +6,10 @@
 //! last `out_features % 8` rows are the callers' (portable kernels).
 #![allow(unsafe_code)]
 
-use super::matvec::{self, row_sums_i8, split_rows};
+use super::matvec::{
+    finish_row_sums, split_rows, sums_i16_512, sums_i16_avx2, sums_i8_512, sums_i8_avx2,
+    sums_i8_vnni,
+};
 use super::requant::{load_i32, pack_i8, requantize_lanes, RequantBlock};
 use super::wide::{finish_wide, load_i64x4, pack_i16, RequantBlock16};
 use super::{Avx2, BLOCK_ROWS};
@@ -48,21 +51,29 @@ fn blocks<'f, 'o, A, O>(
         .zip(fc.bias.as_chunks::<BLOCK_ROWS>().0)
 }
 
-/// The loops of one level: `$sums8(rows, input)` and `$sums16(rows, input, start)` are its
-/// eight-row sums of an int8 and an int16 input (from column `start` on).
+/// The loops of one level: `$sums8!(rows, input, start)` and `$sums16!(rows, input, start)` (macros
+/// of `x86::matvec`) are its eight-row sums of an int8 and an int16 input from column `start` on.
 macro_rules! level_loops {
-    ($level:ident, $features:literal, $sums8:path, $sums16:path) => {
+    ($level:ident, $features:literal, $sums8:ident, $sums16:ident) => {
         mod $level {
             use super::*;
 
-            /// The eight rows' int32 sums of `input` (whole rows).
-            #[inline]
-            #[target_feature(enable = $features)]
-            fn sums(rows: [&[i8]; BLOCK_ROWS], input: LayerInput<'_>) -> __m256i {
-                match input {
-                    LayerInput::Int8(x) => $sums8(rows, x),
-                    LayerInput::Int16(x) => $sums16(rows, x, 0),
-                }
+            /// Calls `$body` with `$sums` bound to a closure giving the eight rows' int32 sums
+            /// of `input` (whole rows), once per input type, so that each expansion of the
+            /// layer loop inlines one row kernel (matching per block kept it out of line).
+            macro_rules! with_row_sums {
+                ($input:expr, |$sums:ident| $body:expr) => {
+                    match $input {
+                        LayerInput::Int8(x) => {
+                            let $sums = |rows: [&[i8]; BLOCK_ROWS]| $sums8!(rows, x, 0);
+                            $body
+                        }
+                        LayerInput::Int16(x) => {
+                            let $sums = |rows: [&[i8]; BLOCK_ROWS]| $sums16!(rows, x, 0);
+                            $body
+                        }
+                    }
+                };
             }
 
             /// The eight rows' int64 accumulators: `bias` plus the sign-extended int32 sums of
@@ -84,9 +95,11 @@ macro_rules! level_loops {
                     let end = start.saturating_add(CHUNK16).min(width);
                     let sums = match input {
                         LayerInput::Int8(x) => {
-                            row_sums_i8(rows, x.get(..end).unwrap_or(&[]), start)
+                            sums_i8_avx2!(rows, x.get(..end).unwrap_or(&[]), start)
                         }
-                        LayerInput::Int16(x) => $sums16(rows, x.get(..end).unwrap_or(&[]), start),
+                        LayerInput::Int16(x) => {
+                            $sums16!(rows, x.get(..end).unwrap_or(&[]), start)
+                        }
                     };
                     let (lo, hi) = (
                         _mm256_castsi256_si128(sums),
@@ -108,15 +121,17 @@ macro_rules! level_loops {
                 out: &mut [i32],
             ) {
                 let width = fc.in_features;
-                for ((out, rows), bias) in blocks(fc, out) {
-                    let sums = sums(split_rows(rows, width), input);
-                    let sums = if with_bias {
-                        _mm256_add_epi32(sums, load_i32(bias))
-                    } else {
-                        sums
-                    };
-                    store_i32(out, sums);
-                }
+                with_row_sums!(input, |sums| {
+                    for ((out, rows), bias) in blocks(fc, out) {
+                        let sums = sums(split_rows(rows, width));
+                        let sums = if with_bias {
+                            _mm256_add_epi32(sums, load_i32(bias))
+                        } else {
+                            sums
+                        };
+                        store_i32(out, sums);
+                    }
+                })
             }
 
             /// `out[o] = requantize_to_i8(bias[o] + dot(row o, input), ...)`.
@@ -131,17 +146,19 @@ macro_rules! level_loops {
                 let (multipliers, _) = requant.multipliers.as_chunks::<BLOCK_ROWS>();
                 let (shifts, _) = requant.shifts.as_chunks::<BLOCK_ROWS>();
                 let channels = blocks(fc, out).zip(multipliers.iter().zip(shifts));
-                for (((out, rows), bias), (multipliers, shifts)) in channels {
-                    let sums = sums(split_rows(rows, width), input);
-                    let block = RequantBlock {
-                        multipliers,
-                        shifts,
-                        zero_point: requant.output_zero_point,
-                        bounds: (requant.activation_min, requant.activation_max),
-                    };
-                    let acc = _mm256_add_epi32(sums, load_i32(bias));
-                    *out = pack_i8(requantize_lanes(acc, block));
-                }
+                with_row_sums!(input, |sums| {
+                    for (((out, rows), bias), (multipliers, shifts)) in channels {
+                        let sums = sums(split_rows(rows, width));
+                        let block = RequantBlock {
+                            multipliers,
+                            shifts,
+                            zero_point: requant.output_zero_point,
+                            bounds: (requant.activation_min, requant.activation_max),
+                        };
+                        let acc = _mm256_add_epi32(sums, load_i32(bias));
+                        *out = pack_i8(requantize_lanes(acc, block));
+                    }
+                })
             }
 
             /// The int64 accumulators of every row.
@@ -188,18 +205,13 @@ macro_rules! level_loops {
     };
 }
 
-level_loops!(plain, "avx2", matvec::sums_i8_avx2, matvec::sums_i16_avx2);
-level_loops!(
-    dot_avx,
-    "avx2,avxvnni",
-    matvec::sums_i8_vnni,
-    matvec::sums_i16_avx2
-);
+level_loops!(plain, "avx2", sums_i8_avx2, sums_i16_avx2);
+level_loops!(dot_avx, "avx2,avxvnni", sums_i8_vnni, sums_i16_avx2);
 level_loops!(
     dot_512,
     "avx2,avx512f,avx512bw,avx512vnni",
-    matvec::sums_i8_512,
-    matvec::sums_i16_512
+    sums_i8_512,
+    sums_i16_512
 );
 
 /// Calls `$call` in the module of the token's level (the unsafe call of a target-feature

@@ -19,27 +19,27 @@
 //! `2^22`, a pair sum `2^23`: exact), so they cost the same 25 instructions per 128 MACs; their
 //! sums start at any column (one 512-column chunk of an int64 accumulator, see `x86::wide`).
 //!
-//! Each kernel level has its `sums_*` functions here (AVX2; AVX-VNNI and AVX-512 VNNI put a
-//! `x86::vnni` front before the AVX2 steps); `x86::layer` loops them over a whole layer.
+//! Each kernel level has its `sums_*` macros (int8 inputs, expanded inside the layer loops) and
+//! functions (int16 inputs) here (AVX2; AVX-VNNI and AVX-512 VNNI put a `x86::vnni` front before
+//! the AVX2 steps); `x86::layer` loops them over a whole layer.
 #![allow(unsafe_code)]
 
-use super::requant::load_i32;
-use super::{vnni, BLOCK_ROWS};
-use crate::kernels::dot::{dot_i8_i16_prefix, dot_i8_prefix};
+use super::BLOCK_ROWS;
 use core::arch::x86_64::{
     __m128i, __m256i, _mm256_add_epi32, _mm256_cvtepi8_epi16, _mm256_hadd_epi32,
-    _mm256_loadu_si256, _mm256_madd_epi16, _mm256_permute2x128_si256, _mm256_setzero_si256,
-    _mm256_zextsi128_si256, _mm_cvtepi8_epi16, _mm_loadl_epi64, _mm_loadu_si128, _mm_madd_epi16,
+    _mm256_loadu_si256, _mm256_permute2x128_si256, _mm_cvtepi8_epi16, _mm_loadl_epi64,
+    _mm_loadu_si128,
 };
 
 /// Columns per `vpmaddwd` step.
-const COLUMNS: usize = 16;
+pub(super) const COLUMNS: usize = 16;
 
 /// Columns of the 128-bit step after the 16-column blocks.
-const HALF: usize = 8;
+pub(super) const HALF: usize = 8;
 
-/// The end of both row-sum functions, expanded in each so that everything stays in registers (as
-/// a function, LLVM did not inline it and passed the eight accumulators through memory): adds
+/// The end of every row-sum kernel, expanded in each so that everything stays in registers (as a
+/// function, LLVM did not inline it and passed the eight accumulators through memory; its helpers
+/// are named by path because the int8 kernels expand in `x86::layer`): adds
 /// columns `$start..` of the eight `$rows` times `$input` to the partial sums `$acc` (16-column
 /// `vpmaddwd` blocks, one 8-column step, then scalar) and reduces them to one vector of row sums.
 /// The input is loaded by `$load` (16 columns), `$load_half` (8) and its tail summed by `$dot`:
@@ -51,89 +51,175 @@ macro_rules! finish_row_sums {
             $input,
             $acc,
             $start,
-            widen,
-            widen_half,
-            dot_i8_prefix
+            $crate::kernels::x86::matvec::widen,
+            $crate::kernels::x86::matvec::widen_half,
+            $crate::kernels::dot::dot_i8_prefix
         )
     };
-    ($rows:expr, $input:expr, $acc:expr, $start:expr, $load:ident, $load_half:ident, $dot:path) => {{
-        let rows: [&[i8]; BLOCK_ROWS] = $rows;
-        let start: usize = $start;
-        let mut acc: [__m256i; BLOCK_ROWS] = $acc;
-        let input = $input.get(start..).unwrap_or(&[]);
-        if input.is_empty() {
-            // A front took every column: only the reduction is left.
-            return reduce(acc);
-        }
-        let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
-        let (r0, r1, r2, r3) = (
-            from(r0, start),
-            from(r1, start),
-            from(r2, start),
-            from(r3, start),
-        );
-        let (r4, r5, r6, r7) = (
-            from(r4, start),
-            from(r5, start),
-            from(r6, start),
-            from(r7, start),
-        );
-
-        let (x_blocks, x_tail) = input.as_chunks::<COLUMNS>();
-        let blocks = x_blocks
-            .iter()
-            .zip(r0.as_chunks::<COLUMNS>().0)
-            .zip(r1.as_chunks::<COLUMNS>().0)
-            .zip(r2.as_chunks::<COLUMNS>().0)
-            .zip(r3.as_chunks::<COLUMNS>().0)
-            .zip(r4.as_chunks::<COLUMNS>().0)
-            .zip(r5.as_chunks::<COLUMNS>().0)
-            .zip(r6.as_chunks::<COLUMNS>().0)
-            .zip(r7.as_chunks::<COLUMNS>().0);
-        for ((((((((x, w0), w1), w2), w3), w4), w5), w6), w7) in blocks {
-            let x = $load(x);
-            let [a0, a1, a2, a3, a4, a5, a6, a7] = &mut acc;
-            *a0 = _mm256_add_epi32(*a0, _mm256_madd_epi16(widen(w0), x));
-            *a1 = _mm256_add_epi32(*a1, _mm256_madd_epi16(widen(w1), x));
-            *a2 = _mm256_add_epi32(*a2, _mm256_madd_epi16(widen(w2), x));
-            *a3 = _mm256_add_epi32(*a3, _mm256_madd_epi16(widen(w3), x));
-            *a4 = _mm256_add_epi32(*a4, _mm256_madd_epi16(widen(w4), x));
-            *a5 = _mm256_add_epi32(*a5, _mm256_madd_epi16(widen(w5), x));
-            *a6 = _mm256_add_epi32(*a6, _mm256_madd_epi16(widen(w6), x));
-            *a7 = _mm256_add_epi32(*a7, _mm256_madd_epi16(widen(w7), x));
-        }
-        let rows = [r0, r1, r2, r3, r4, r5, r6, r7];
-        // Eight more columns with 128-bit registers when at least eight are left.
-        let mut column = input.len() - x_tail.len();
-        if let Some((x_half, _)) = x_tail.split_first_chunk::<HALF>() {
-            let x = $load_half(x_half);
-            for (a, row) in acc.iter_mut().zip(rows) {
-                let weights = row
-                    .get(column..)
-                    .and_then(|w| w.split_first_chunk::<HALF>());
-                if let Some((w, _)) = weights {
-                    let products = _mm_madd_epi16(widen_half(w), x);
-                    *a = _mm256_add_epi32(*a, _mm256_zextsi128_si256(products));
-                }
+    ($rows:expr, $input:expr, $acc:expr, $start:expr, $load:path, $load_half:path, $dot:path) => {
+        // A closure called in place, so that its early `return`s end the expansion only.
+        (|| -> core::arch::x86_64::__m256i {
+            let rows: [&[i8]; $crate::kernels::x86::BLOCK_ROWS] = $rows;
+            let start: usize = $start;
+            let mut acc: [core::arch::x86_64::__m256i; $crate::kernels::x86::BLOCK_ROWS] = $acc;
+            let input = $input.get(start..).unwrap_or(&[]);
+            if input.is_empty() {
+                // A front took every column: only the reduction is left.
+                return $crate::kernels::x86::matvec::reduce(acc);
             }
-            column += HALF;
-        }
-        let sums = reduce(acc);
-        let Some(x_rest) = input.get(column..).filter(|rest| !rest.is_empty()) else {
-            return sums;
-        };
-        let mut tails = [0_i32; BLOCK_ROWS];
-        for (tail, row) in tails.iter_mut().zip(rows) {
-            *tail = $dot(row.get(column..).unwrap_or(&[]), x_rest);
-        }
-        _mm256_add_epi32(sums, load_i32(&tails))
-    }};
+            let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
+            let (r0, r1, r2, r3) = (
+                $crate::kernels::x86::matvec::from(r0, start),
+                $crate::kernels::x86::matvec::from(r1, start),
+                $crate::kernels::x86::matvec::from(r2, start),
+                $crate::kernels::x86::matvec::from(r3, start),
+            );
+            let (r4, r5, r6, r7) = (
+                $crate::kernels::x86::matvec::from(r4, start),
+                $crate::kernels::x86::matvec::from(r5, start),
+                $crate::kernels::x86::matvec::from(r6, start),
+                $crate::kernels::x86::matvec::from(r7, start),
+            );
+
+            let (x_blocks, x_tail) = input.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>();
+            let blocks = x_blocks
+                .iter()
+                .zip(
+                    r0.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
+                        .0,
+                )
+                .zip(
+                    r1.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
+                        .0,
+                )
+                .zip(
+                    r2.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
+                        .0,
+                )
+                .zip(
+                    r3.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
+                        .0,
+                )
+                .zip(
+                    r4.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
+                        .0,
+                )
+                .zip(
+                    r5.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
+                        .0,
+                )
+                .zip(
+                    r6.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
+                        .0,
+                )
+                .zip(
+                    r7.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
+                        .0,
+                );
+            for ((((((((x, w0), w1), w2), w3), w4), w5), w6), w7) in blocks {
+                let x = $load(x);
+                let [a0, a1, a2, a3, a4, a5, a6, a7] = &mut acc;
+                *a0 = core::arch::x86_64::_mm256_add_epi32(
+                    *a0,
+                    core::arch::x86_64::_mm256_madd_epi16(
+                        $crate::kernels::x86::matvec::widen(w0),
+                        x,
+                    ),
+                );
+                *a1 = core::arch::x86_64::_mm256_add_epi32(
+                    *a1,
+                    core::arch::x86_64::_mm256_madd_epi16(
+                        $crate::kernels::x86::matvec::widen(w1),
+                        x,
+                    ),
+                );
+                *a2 = core::arch::x86_64::_mm256_add_epi32(
+                    *a2,
+                    core::arch::x86_64::_mm256_madd_epi16(
+                        $crate::kernels::x86::matvec::widen(w2),
+                        x,
+                    ),
+                );
+                *a3 = core::arch::x86_64::_mm256_add_epi32(
+                    *a3,
+                    core::arch::x86_64::_mm256_madd_epi16(
+                        $crate::kernels::x86::matvec::widen(w3),
+                        x,
+                    ),
+                );
+                *a4 = core::arch::x86_64::_mm256_add_epi32(
+                    *a4,
+                    core::arch::x86_64::_mm256_madd_epi16(
+                        $crate::kernels::x86::matvec::widen(w4),
+                        x,
+                    ),
+                );
+                *a5 = core::arch::x86_64::_mm256_add_epi32(
+                    *a5,
+                    core::arch::x86_64::_mm256_madd_epi16(
+                        $crate::kernels::x86::matvec::widen(w5),
+                        x,
+                    ),
+                );
+                *a6 = core::arch::x86_64::_mm256_add_epi32(
+                    *a6,
+                    core::arch::x86_64::_mm256_madd_epi16(
+                        $crate::kernels::x86::matvec::widen(w6),
+                        x,
+                    ),
+                );
+                *a7 = core::arch::x86_64::_mm256_add_epi32(
+                    *a7,
+                    core::arch::x86_64::_mm256_madd_epi16(
+                        $crate::kernels::x86::matvec::widen(w7),
+                        x,
+                    ),
+                );
+            }
+            let rows = [r0, r1, r2, r3, r4, r5, r6, r7];
+            // Eight more columns with 128-bit registers when at least eight are left.
+            let mut column = input.len() - x_tail.len();
+            if let Some((x_half, _)) =
+                x_tail.split_first_chunk::<{ $crate::kernels::x86::matvec::HALF }>()
+            {
+                let x = $load_half(x_half);
+                for (a, row) in acc.iter_mut().zip(rows) {
+                    let weights = row.get(column..).and_then(|w| {
+                        w.split_first_chunk::<{ $crate::kernels::x86::matvec::HALF }>()
+                    });
+                    if let Some((w, _)) = weights {
+                        let products = core::arch::x86_64::_mm_madd_epi16(
+                            $crate::kernels::x86::matvec::widen_half(w),
+                            x,
+                        );
+                        *a = core::arch::x86_64::_mm256_add_epi32(
+                            *a,
+                            core::arch::x86_64::_mm256_zextsi128_si256(products),
+                        );
+                    }
+                }
+                column += $crate::kernels::x86::matvec::HALF;
+            }
+            let sums = $crate::kernels::x86::matvec::reduce(acc);
+            let Some(x_rest) = input.get(column..).filter(|rest| !rest.is_empty()) else {
+                return sums;
+            };
+            let mut tails = [0_i32; $crate::kernels::x86::BLOCK_ROWS];
+            for (tail, row) in tails.iter_mut().zip(rows) {
+                *tail = $dot(row.get(column..).unwrap_or(&[]), x_rest);
+            }
+            core::arch::x86_64::_mm256_add_epi32(
+                sums,
+                $crate::kernels::x86::requant::load_i32(&tails),
+            )
+        })()
+    };
 }
 
 /// One vector of the eight rows' sums: lane `r` is the sum of the eight lanes of `acc[r]`.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn reduce(acc: [__m256i; BLOCK_ROWS]) -> __m256i {
+pub(super) fn reduce(acc: [__m256i; BLOCK_ROWS]) -> __m256i {
     let [a0, a1, a2, a3, a4, a5, a6, a7] = acc;
     // Per 128-bit half: [row 0 .. row 3 partial sums] and [row 4 .. row 7 partial sums].
     let first = _mm256_hadd_epi32(_mm256_hadd_epi32(a0, a1), _mm256_hadd_epi32(a2, a3));
@@ -143,28 +229,73 @@ fn reduce(acc: [__m256i; BLOCK_ROWS]) -> __m256i {
     _mm256_add_epi32(low_halves, high_halves)
 }
 
-/// `[dot(row r, input) for r in 0..8]` as one vector (wrapping int32 sums), AVX2 only.
-#[inline]
-#[target_feature(enable = "avx2")]
-pub(super) fn sums_i8_avx2(rows: [&[i8]; BLOCK_ROWS], input: &[i8]) -> __m256i {
-    finish_row_sums!(rows, input, [_mm256_setzero_si256(); BLOCK_ROWS], 0)
+/// `[dot(rows[r][start..], input[start..]) for r in 0..8]` as one vector (wrapping int32 sums),
+/// one macro per kernel level and input type: AVX2 alone, with the AVX-VNNI front (int8) or the
+/// AVX-512 VNNI front. `input` ends where the columns end, `rows` are the whole rows. They expand
+/// in place in the layer loops of `x86::layer`, inside functions with the level's target
+/// features: as functions, LLVM kept them out of line, one call per block of eight rows with
+/// the row slices passed through memory.
+macro_rules! sums_i8_avx2 {
+    ($rows:expr, $input:expr, $start:expr) => {
+        finish_row_sums!(
+            $rows,
+            $input,
+            [core::arch::x86_64::_mm256_setzero_si256(); $crate::kernels::x86::BLOCK_ROWS],
+            $start
+        )
+    };
 }
 
 /// [`sums_i8_avx2`] with the AVX-VNNI front.
-#[inline]
-#[target_feature(enable = "avx2,avxvnni")]
-pub(super) fn sums_i8_vnni(rows: [&[i8]; BLOCK_ROWS], input: &[i8]) -> __m256i {
-    let (acc, done) = vnni::front_i8_avx(rows, input, 0);
-    finish_row_sums!(rows, input, acc, done)
+macro_rules! sums_i8_vnni {
+    ($rows:expr, $input:expr, $start:expr) => {{
+        let (acc, done) = $crate::kernels::x86::vnni::front_i8_avx($rows, $input, $start);
+        finish_row_sums!($rows, $input, acc, done)
+    }};
 }
 
 /// [`sums_i8_avx2`] with the AVX-512 VNNI front.
-#[inline]
-#[target_feature(enable = "avx2,avx512f,avx512bw,avx512vnni")]
-pub(super) fn sums_i8_512(rows: [&[i8]; BLOCK_ROWS], input: &[i8]) -> __m256i {
-    let (acc, done) = vnni::front_i8_512(rows, input, 0);
-    finish_row_sums!(rows, input, acc, done)
+macro_rules! sums_i8_512 {
+    ($rows:expr, $input:expr, $start:expr) => {{
+        let (acc, done) = $crate::kernels::x86::vnni::front_i8_512($rows, $input, $start);
+        finish_row_sums!($rows, $input, acc, done)
+    }};
 }
+
+/// [`sums_i8_avx2`] for an int16 input (its codes loaded as they are).
+macro_rules! sums_i16_avx2 {
+    ($rows:expr, $input:expr, $start:expr) => {
+        finish_row_sums!(
+            $rows,
+            $input,
+            [core::arch::x86_64::_mm256_setzero_si256(); $crate::kernels::x86::BLOCK_ROWS],
+            $start,
+            $crate::kernels::x86::matvec::load_halves,
+            $crate::kernels::x86::matvec::load_halves_half,
+            $crate::kernels::dot::dot_i8_i16_prefix
+        )
+    };
+}
+
+/// [`sums_i16_avx2`] with the AVX-512 front.
+macro_rules! sums_i16_512 {
+    ($rows:expr, $input:expr, $start:expr) => {{
+        let (acc, done) = $crate::kernels::x86::vnni::front_i16_512($rows, $input, $start);
+        finish_row_sums!(
+            $rows,
+            $input,
+            acc,
+            done,
+            $crate::kernels::x86::matvec::load_halves,
+            $crate::kernels::x86::matvec::load_halves_half,
+            $crate::kernels::dot::dot_i8_i16_prefix
+        )
+    }};
+}
+
+pub(super) use {
+    finish_row_sums, sums_i16_512, sums_i16_avx2, sums_i8_512, sums_i8_avx2, sums_i8_vnni,
+};
 
 /// The eight rows of `rows` (`columns` weights each; missing rows are empty), cut one after
 /// the other (no division).
@@ -190,14 +321,14 @@ pub(super) fn split_rows(rows: &[i8], columns: usize) -> [&[i8]; BLOCK_ROWS] {
 
 /// `row[start..]`, empty if `start` is past the end.
 #[inline(always)]
-fn from(row: &[i8], start: usize) -> &[i8] {
+pub(super) fn from(row: &[i8], start: usize) -> &[i8] {
     row.get(start..).unwrap_or(&[])
 }
 
 /// Loads 8 int8 values and sign-extends them to 8 int16 lanes.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn widen_half(block: &[i8; HALF]) -> __m128i {
+pub(super) fn widen_half(block: &[i8; HALF]) -> __m128i {
     // SAFETY: the pointer comes from a `&[i8; 8]`: `loadl` reads exactly 8 initialized bytes and
     // has no alignment requirement.
     let bytes = unsafe { _mm_loadl_epi64(block.as_ptr().cast::<__m128i>()) };
@@ -207,7 +338,7 @@ fn widen_half(block: &[i8; HALF]) -> __m128i {
 /// Loads 16 int8 values and sign-extends them to 16 int16 lanes.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn widen(block: &[i8; COLUMNS]) -> __m256i {
+pub(super) fn widen(block: &[i8; COLUMNS]) -> __m256i {
     // SAFETY: the pointer comes from a `&[i8; 16]`: 16 initialized, readable bytes; `loadu`
     // has no alignment requirement.
     let bytes = unsafe { _mm_loadu_si128(block.as_ptr().cast::<__m128i>()) };
@@ -217,7 +348,7 @@ fn widen(block: &[i8; COLUMNS]) -> __m256i {
 /// Loads 16 int16 values.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn load_halves(block: &[i16; COLUMNS]) -> __m256i {
+pub(super) fn load_halves(block: &[i16; COLUMNS]) -> __m256i {
     // SAFETY: the pointer comes from a `&[i16; 16]`: 32 initialized, readable bytes; `loadu` has
     // no alignment requirement.
     unsafe { _mm256_loadu_si256(block.as_ptr().cast::<__m256i>()) }
@@ -226,53 +357,10 @@ fn load_halves(block: &[i16; COLUMNS]) -> __m256i {
 /// Loads 8 int16 values.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn load_halves_half(block: &[i16; HALF]) -> __m128i {
+pub(super) fn load_halves_half(block: &[i16; HALF]) -> __m128i {
     // SAFETY: the pointer comes from a `&[i16; 8]`: 16 initialized, readable bytes; `loadu` has
     // no alignment requirement.
     unsafe { _mm_loadu_si128(block.as_ptr().cast::<__m128i>()) }
-}
-
-/// Column sums `[dot(rows[r][start..], input[start..]) for r in 0..8]` of an int8 input (AVX2
-/// only; `input` ends where the columns end, `rows` are the whole rows).
-#[inline]
-#[target_feature(enable = "avx2")]
-pub(super) fn row_sums_i8(rows: [&[i8]; BLOCK_ROWS], input: &[i8], start: usize) -> __m256i {
-    finish_row_sums!(rows, input, [_mm256_setzero_si256(); BLOCK_ROWS], start)
-}
-
-/// [`row_sums_i8`] for an int16 input, AVX2 only.
-#[inline]
-#[target_feature(enable = "avx2")]
-pub(super) fn sums_i16_avx2(rows: [&[i8]; BLOCK_ROWS], input: &[i16], start: usize) -> __m256i {
-    finish_row_sums_i16(rows, input, [_mm256_setzero_si256(); BLOCK_ROWS], start)
-}
-
-/// [`sums_i16_avx2`] with the AVX-512 front.
-#[inline]
-#[target_feature(enable = "avx2,avx512f,avx512bw,avx512vnni")]
-pub(super) fn sums_i16_512(rows: [&[i8]; BLOCK_ROWS], input: &[i16], start: usize) -> __m256i {
-    let (acc, done) = vnni::front_i16_512(rows, input, start);
-    finish_row_sums_i16(rows, input, acc, done)
-}
-
-/// The AVX2 steps of the int16-input sums from column `start` on, added to `acc`.
-#[inline]
-#[target_feature(enable = "avx2")]
-fn finish_row_sums_i16(
-    rows: [&[i8]; BLOCK_ROWS],
-    input: &[i16],
-    acc: [__m256i; BLOCK_ROWS],
-    start: usize,
-) -> __m256i {
-    finish_row_sums!(
-        rows,
-        input,
-        acc,
-        start,
-        load_halves,
-        load_halves_half,
-        dot_i8_i16_prefix
-    )
 }
 
 #[cfg(test)]
