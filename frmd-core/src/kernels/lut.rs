@@ -107,7 +107,10 @@ mod tests {
             apply_in_place(&table, &mut bytes[..len]);
             apply_in_place_by_words(&table, &mut words[..len]);
             assert_eq!(bytes, words, "length {len}");
-            assert!(words[..len].iter().zip(&data).all(|(&w, &x)| w == lookup(&table, x)));
+            assert!(words[..len]
+                .iter()
+                .zip(&data)
+                .all(|(&w, &x)| w == lookup(&table, x)));
         }
     }
 
