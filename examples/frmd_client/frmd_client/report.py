@@ -32,8 +32,7 @@ def commit(here: Path) -> str:
     """HEAD's short hash, marked when the package directory `here` has uncommitted changes."""
     try:
         head = subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], cwd=here, text=True).strip()
-        top = subprocess.check_output(["git", "rev-parse", "--show-toplevel"], cwd=here, text=True).strip()
-        dirty = subprocess.call(["git", "diff", "--quiet", "HEAD", "--", "."], cwd=top)
+        dirty = subprocess.call(["git", "diff", "--quiet", "HEAD", "--", "."], cwd=here)
         return head + (" (with uncommitted changes)" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
