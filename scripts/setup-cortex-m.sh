@@ -44,7 +44,10 @@ as_root() {
 }
 apt_install() {
     local missing=()
+    local options=()
     local pkg
+    # Leading apt-get options (e.g. -t SUITE) pass through.
+    while [ $# -gt 0 ] && [ "${1#-}" != "$1" ]; do options+=("$1" "$2"); shift 2; done
     for pkg in "$@"; do
         dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed' || missing+=("$pkg")
     done
@@ -55,7 +58,7 @@ apt_install() {
         apt_updated=1
     fi
     log "apt-get install ${missing[*]}"
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}" >&2
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${options[@]}" "${missing[@]}" >&2
 }
 
 # --- Probe: link a tiny no_std program for the target with a given rustc (target default linker).
@@ -136,7 +139,25 @@ case "$choice" in
     auto) try_rustup || { log "falling back to Debian's toolchain with -Z build-std=core"; try_debian; } ;;
 esac
 
-apt_install qemu-system-arm
+# QEMU from the suite of the machine's other QEMU packages: an image with qemu-utils from
+# bookworm-backports (10.x) cannot take bookworm's qemu-system-arm 7.2 (qemu-utils Breaks
+# qemu-system-common < 8.0), so it gets the backports build when that suite is configured (e.g.
+# by examples/maniskill/setup-system.sh, which CI runs first).
+qemu_suite=()
+if ! command -v qemu-system-arm >/dev/null \
+    && dpkg-query -W -f='${Version}' qemu-utils 2>/dev/null | grep -q 'bpo12'; then
+    if [ "$apt_updated" -eq 0 ]; then
+        log "apt-get update"
+        as_root env DEBIAN_FRONTEND=noninteractive apt-get update -q >&2
+        apt_updated=1
+    fi
+    if apt-get indextargets --format '$(RELEASE)' | grep -qx bookworm-backports; then
+        qemu_suite=(-t bookworm-backports)
+    else
+        log "qemu-utils comes from bookworm-backports but that suite is not in apt's sources; installing bookworm's qemu-system-arm may conflict (add bookworm-backports, e.g. with sudo bash examples/maniskill/setup-system.sh)"
+    fi
+fi
+apt_install "${qemu_suite[@]}" qemu-system-arm
 qemu="$(command -v qemu-system-arm)"
 
 mkdir -p "$(dirname "$env_file")"
