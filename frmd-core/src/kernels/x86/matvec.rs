@@ -57,161 +57,86 @@ macro_rules! finish_row_sums {
         )
     };
     ($rows:expr, $input:expr, $acc:expr, $start:expr, $load:path, $load_half:path, $dot:path) => {
-        // A closure called in place, so that its early `return`s end the expansion only.
+        // A closure called in place, so that its early `return`s end the expansion only; the
+        // `use`s name the helpers wherever it expands.
         (|| -> core::arch::x86_64::__m256i {
-            let rows: [&[i8]; $crate::kernels::x86::BLOCK_ROWS] = $rows;
+            use core::arch::x86_64::{
+                __m256i, _mm256_add_epi32, _mm256_madd_epi16, _mm256_zextsi128_si256,
+                _mm_madd_epi16,
+            };
+            use $crate::kernels::x86::matvec::{from, reduce, widen, widen_half, COLUMNS, HALF};
+            use $crate::kernels::x86::requant::load_i32;
+            use $crate::kernels::x86::BLOCK_ROWS;
+            let rows: [&[i8]; BLOCK_ROWS] = $rows;
             let start: usize = $start;
-            let mut acc: [core::arch::x86_64::__m256i; $crate::kernels::x86::BLOCK_ROWS] = $acc;
+            let mut acc: [__m256i; BLOCK_ROWS] = $acc;
             let input = $input.get(start..).unwrap_or(&[]);
             if input.is_empty() {
                 // A front took every column: only the reduction is left.
-                return $crate::kernels::x86::matvec::reduce(acc);
+                return reduce(acc);
             }
             let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
             let (r0, r1, r2, r3) = (
-                $crate::kernels::x86::matvec::from(r0, start),
-                $crate::kernels::x86::matvec::from(r1, start),
-                $crate::kernels::x86::matvec::from(r2, start),
-                $crate::kernels::x86::matvec::from(r3, start),
+                from(r0, start),
+                from(r1, start),
+                from(r2, start),
+                from(r3, start),
             );
             let (r4, r5, r6, r7) = (
-                $crate::kernels::x86::matvec::from(r4, start),
-                $crate::kernels::x86::matvec::from(r5, start),
-                $crate::kernels::x86::matvec::from(r6, start),
-                $crate::kernels::x86::matvec::from(r7, start),
+                from(r4, start),
+                from(r5, start),
+                from(r6, start),
+                from(r7, start),
             );
 
-            let (x_blocks, x_tail) = input.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>();
+            let (x_blocks, x_tail) = input.as_chunks::<COLUMNS>();
             let blocks = x_blocks
                 .iter()
-                .zip(
-                    r0.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
-                        .0,
-                )
-                .zip(
-                    r1.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
-                        .0,
-                )
-                .zip(
-                    r2.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
-                        .0,
-                )
-                .zip(
-                    r3.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
-                        .0,
-                )
-                .zip(
-                    r4.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
-                        .0,
-                )
-                .zip(
-                    r5.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
-                        .0,
-                )
-                .zip(
-                    r6.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
-                        .0,
-                )
-                .zip(
-                    r7.as_chunks::<{ $crate::kernels::x86::matvec::COLUMNS }>()
-                        .0,
-                );
+                .zip(r0.as_chunks::<COLUMNS>().0)
+                .zip(r1.as_chunks::<COLUMNS>().0)
+                .zip(r2.as_chunks::<COLUMNS>().0)
+                .zip(r3.as_chunks::<COLUMNS>().0)
+                .zip(r4.as_chunks::<COLUMNS>().0)
+                .zip(r5.as_chunks::<COLUMNS>().0)
+                .zip(r6.as_chunks::<COLUMNS>().0)
+                .zip(r7.as_chunks::<COLUMNS>().0);
             for ((((((((x, w0), w1), w2), w3), w4), w5), w6), w7) in blocks {
                 let x = $load(x);
                 let [a0, a1, a2, a3, a4, a5, a6, a7] = &mut acc;
-                *a0 = core::arch::x86_64::_mm256_add_epi32(
-                    *a0,
-                    core::arch::x86_64::_mm256_madd_epi16(
-                        $crate::kernels::x86::matvec::widen(w0),
-                        x,
-                    ),
-                );
-                *a1 = core::arch::x86_64::_mm256_add_epi32(
-                    *a1,
-                    core::arch::x86_64::_mm256_madd_epi16(
-                        $crate::kernels::x86::matvec::widen(w1),
-                        x,
-                    ),
-                );
-                *a2 = core::arch::x86_64::_mm256_add_epi32(
-                    *a2,
-                    core::arch::x86_64::_mm256_madd_epi16(
-                        $crate::kernels::x86::matvec::widen(w2),
-                        x,
-                    ),
-                );
-                *a3 = core::arch::x86_64::_mm256_add_epi32(
-                    *a3,
-                    core::arch::x86_64::_mm256_madd_epi16(
-                        $crate::kernels::x86::matvec::widen(w3),
-                        x,
-                    ),
-                );
-                *a4 = core::arch::x86_64::_mm256_add_epi32(
-                    *a4,
-                    core::arch::x86_64::_mm256_madd_epi16(
-                        $crate::kernels::x86::matvec::widen(w4),
-                        x,
-                    ),
-                );
-                *a5 = core::arch::x86_64::_mm256_add_epi32(
-                    *a5,
-                    core::arch::x86_64::_mm256_madd_epi16(
-                        $crate::kernels::x86::matvec::widen(w5),
-                        x,
-                    ),
-                );
-                *a6 = core::arch::x86_64::_mm256_add_epi32(
-                    *a6,
-                    core::arch::x86_64::_mm256_madd_epi16(
-                        $crate::kernels::x86::matvec::widen(w6),
-                        x,
-                    ),
-                );
-                *a7 = core::arch::x86_64::_mm256_add_epi32(
-                    *a7,
-                    core::arch::x86_64::_mm256_madd_epi16(
-                        $crate::kernels::x86::matvec::widen(w7),
-                        x,
-                    ),
-                );
+                *a0 = _mm256_add_epi32(*a0, _mm256_madd_epi16(widen(w0), x));
+                *a1 = _mm256_add_epi32(*a1, _mm256_madd_epi16(widen(w1), x));
+                *a2 = _mm256_add_epi32(*a2, _mm256_madd_epi16(widen(w2), x));
+                *a3 = _mm256_add_epi32(*a3, _mm256_madd_epi16(widen(w3), x));
+                *a4 = _mm256_add_epi32(*a4, _mm256_madd_epi16(widen(w4), x));
+                *a5 = _mm256_add_epi32(*a5, _mm256_madd_epi16(widen(w5), x));
+                *a6 = _mm256_add_epi32(*a6, _mm256_madd_epi16(widen(w6), x));
+                *a7 = _mm256_add_epi32(*a7, _mm256_madd_epi16(widen(w7), x));
             }
             let rows = [r0, r1, r2, r3, r4, r5, r6, r7];
             // Eight more columns with 128-bit registers when at least eight are left.
             let mut column = input.len() - x_tail.len();
-            if let Some((x_half, _)) =
-                x_tail.split_first_chunk::<{ $crate::kernels::x86::matvec::HALF }>()
-            {
+            if let Some((x_half, _)) = x_tail.split_first_chunk::<HALF>() {
                 let x = $load_half(x_half);
                 for (a, row) in acc.iter_mut().zip(rows) {
-                    let weights = row.get(column..).and_then(|w| {
-                        w.split_first_chunk::<{ $crate::kernels::x86::matvec::HALF }>()
-                    });
+                    let weights = row
+                        .get(column..)
+                        .and_then(|w| w.split_first_chunk::<HALF>());
                     if let Some((w, _)) = weights {
-                        let products = core::arch::x86_64::_mm_madd_epi16(
-                            $crate::kernels::x86::matvec::widen_half(w),
-                            x,
-                        );
-                        *a = core::arch::x86_64::_mm256_add_epi32(
-                            *a,
-                            core::arch::x86_64::_mm256_zextsi128_si256(products),
-                        );
+                        let products = _mm_madd_epi16(widen_half(w), x);
+                        *a = _mm256_add_epi32(*a, _mm256_zextsi128_si256(products));
                     }
                 }
-                column += $crate::kernels::x86::matvec::HALF;
+                column += HALF;
             }
-            let sums = $crate::kernels::x86::matvec::reduce(acc);
+            let sums = reduce(acc);
             let Some(x_rest) = input.get(column..).filter(|rest| !rest.is_empty()) else {
                 return sums;
             };
-            let mut tails = [0_i32; $crate::kernels::x86::BLOCK_ROWS];
+            let mut tails = [0_i32; BLOCK_ROWS];
             for (tail, row) in tails.iter_mut().zip(rows) {
                 *tail = $dot(row.get(column..).unwrap_or(&[]), x_rest);
             }
-            core::arch::x86_64::_mm256_add_epi32(
-                sums,
-                $crate::kernels::x86::requant::load_i32(&tails),
-            )
+            _mm256_add_epi32(sums, load_i32(&tails))
         })()
     };
 }
