@@ -19,9 +19,9 @@
 //! `2^22`, a pair sum `2^23`: exact), so they cost the same 25 instructions per 128 MACs; their
 //! sums start at any column (one 512-column chunk of an int64 accumulator, see `x86::wide`).
 //!
-//! Each kernel level has its `sums_*` macros (int8 inputs, expanded inside the layer loops) and
-//! functions (int16 inputs) here (AVX2; AVX-VNNI and AVX-512 VNNI put a `x86::vnni` front before
-//! the AVX2 steps); `x86::layer` loops them over a whole layer.
+//! Each kernel level has its `sums_*` macros here, for int8 and int16 inputs (AVX2; AVX-VNNI and
+//! AVX-512 VNNI put a `x86::vnni` front before the AVX2 steps); `x86::layer` expands them inside
+//! its loops over a whole layer.
 #![allow(unsafe_code)]
 
 use super::BLOCK_ROWS;
