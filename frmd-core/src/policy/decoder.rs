@@ -175,7 +175,7 @@ impl<'p> ProDmpTables<'p> {
     /// accumulator lane per output, each in [`apply_row_f32`]'s order (the same bits as
     /// [`Self::decode_rows`]; separate multiplies and adds, which SSE does lane by lane): the
     /// accumulators stay in registers and the four sums overlap, where `decode_rows` runs one
-    /// dependent chain after the other (~0.6 us of a 4.4 us x86 MLP-256 int8 chunk). The
+    /// dependent chain after the other (0.9-1.4 us of a 4.4 us x86 MLP-256 int8 chunk). The
     /// firmware keeps `decode_rows` and its instruction counts. Returns false (nothing written)
     /// when `p > P`; callers checked the lengths.
     #[cfg(not(target_os = "none"))]
