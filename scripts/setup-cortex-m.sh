@@ -42,6 +42,12 @@ as_root() {
     elif command -v sudo >/dev/null; then sudo "$@"
     else log "need root (or sudo) to run: $*"; return 1; fi
 }
+apt_update_once() {
+    [ "$apt_updated" -eq 1 ] && return 0
+    log "apt-get update"
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get update -q >&2
+    apt_updated=1
+}
 apt_install() {
     local missing=()
     local options=()
@@ -52,11 +58,7 @@ apt_install() {
         dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed' || missing+=("$pkg")
     done
     [ ${#missing[@]} -eq 0 ] && return 0
-    if [ "$apt_updated" -eq 0 ]; then
-        log "apt-get update"
-        as_root env DEBIAN_FRONTEND=noninteractive apt-get update -q >&2
-        apt_updated=1
-    fi
+    apt_update_once
     log "apt-get install ${missing[*]}"
     as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${options[@]}" "${missing[@]}" >&2
 }
@@ -146,11 +148,7 @@ esac
 qemu_suite=()
 if ! command -v qemu-system-arm >/dev/null \
     && dpkg-query -W -f='${Version}' qemu-utils 2>/dev/null | grep -q 'bpo12'; then
-    if [ "$apt_updated" -eq 0 ]; then
-        log "apt-get update"
-        as_root env DEBIAN_FRONTEND=noninteractive apt-get update -q >&2
-        apt_updated=1
-    fi
+    apt_update_once
     if apt-get indextargets --format '$(RELEASE)' | grep -qx bookworm-backports; then
         qemu_suite=(-t bookworm-backports)
     else

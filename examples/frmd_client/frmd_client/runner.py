@@ -109,10 +109,10 @@ def carry_over(results: dict, previous: dict, cfg) -> int:
     files are gone), and the demonstration statistics of tasks without any here. Each carried row
     keeps the report path recorded in `previous`. Returns how many rows were added."""
     runs = set(cfg.runs())
-    methods = set(cfg.methods()) if hasattr(cfg, "methods") else None
+    methods = set(cfg.methods())
     have = {(r["task"], r["seed"], r["method"]) for r in results["rows"]}
     carried = [r for r in previous["rows"] if (r["task"], r["seed"], r["method"]) not in have
-               and (r["task"], r["seed"]) in runs and (methods is None or r["method"] in methods)]
+               and (r["task"], r["seed"]) in runs and r["method"] in methods]
     results["rows"].extend(carried)
     demos = results.setdefault("demos", {})
     for task, stats in (previous.get("demos") or {}).items():

@@ -64,7 +64,9 @@ macro_rules! finish_row_sums {
                 __m256i, _mm256_add_epi32, _mm256_madd_epi16, _mm256_zextsi128_si256,
                 _mm_madd_epi16,
             };
-            use $crate::kernels::x86::matvec::{from, reduce, widen, widen_half, COLUMNS, HALF};
+            use $crate::kernels::x86::matvec::{
+                reduce, rows_from, widen, widen_half, COLUMNS, HALF,
+            };
             use $crate::kernels::x86::requant::load_i32;
             use $crate::kernels::x86::BLOCK_ROWS;
             let rows: [&[i8]; BLOCK_ROWS] = $rows;
@@ -75,19 +77,8 @@ macro_rules! finish_row_sums {
                 // A front took every column: only the reduction is left.
                 return reduce(acc);
             }
+            let rows = rows_from(rows, start);
             let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
-            let (r0, r1, r2, r3) = (
-                from(r0, start),
-                from(r1, start),
-                from(r2, start),
-                from(r3, start),
-            );
-            let (r4, r5, r6, r7) = (
-                from(r4, start),
-                from(r5, start),
-                from(r6, start),
-                from(r7, start),
-            );
 
             let (x_blocks, x_tail) = input.as_chunks::<COLUMNS>();
             let blocks = x_blocks
@@ -112,7 +103,6 @@ macro_rules! finish_row_sums {
                 *a6 = _mm256_add_epi32(*a6, _mm256_madd_epi16(widen(w6), x));
                 *a7 = _mm256_add_epi32(*a7, _mm256_madd_epi16(widen(w7), x));
             }
-            let rows = [r0, r1, r2, r3, r4, r5, r6, r7];
             // Eight more columns with 128-bit registers when at least eight are left.
             let mut column = input.len() - x_tail.len();
             if let Some((x_half, _)) = x_tail.split_first_chunk::<HALF>() {
@@ -244,10 +234,10 @@ pub(super) fn split_rows(rows: &[i8], columns: usize) -> [&[i8]; BLOCK_ROWS] {
     ]
 }
 
-/// `row[start..]`, empty if `start` is past the end.
+/// Each of the eight rows from column `start` on (empty if `start` is past its end).
 #[inline(always)]
-pub(super) fn from(row: &[i8], start: usize) -> &[i8] {
-    row.get(start..).unwrap_or(&[])
+pub(super) fn rows_from(rows: [&[i8]; BLOCK_ROWS], start: usize) -> [&[i8]; BLOCK_ROWS] {
+    rows.map(|row| row.get(start..).unwrap_or(&[]))
 }
 
 /// Loads 8 int8 values and sign-extends them to 8 int16 lanes.

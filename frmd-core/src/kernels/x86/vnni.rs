@@ -15,6 +15,7 @@
 //! sign-extended to int16 (`vpmovsxbw`) adds pair sums of at most `2^23` modulo 2^32: the same.
 #![allow(unsafe_code)]
 
+use super::matvec::rows_from;
 use super::BLOCK_ROWS;
 use core::arch::x86_64::{
     __m256i, __m512i, _mm256_add_epi32, _mm256_dpbusd_avx_epi32, _mm256_loadu_si256,
@@ -34,29 +35,11 @@ const ZMM_WORDS: usize = 32;
 /// Partial accumulators of the eight rows and the first column not yet summed.
 pub(super) type Front = ([__m256i; BLOCK_ROWS], usize);
 
-/// `row[start..]`, empty if `start` is past the end.
-#[inline(always)]
-fn from(row: &[i8], start: usize) -> &[i8] {
-    row.get(start..).unwrap_or(&[])
-}
-
 /// AVX-VNNI front for an int8 input: the 32-column blocks of columns `start..`.
 #[inline]
 #[target_feature(enable = "avx2,avxvnni")]
 pub(super) fn front_i8_avx(rows: [&[i8]; BLOCK_ROWS], input: &[i8], start: usize) -> Front {
-    let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
-    let (r0, r1, r2, r3) = (
-        from(r0, start),
-        from(r1, start),
-        from(r2, start),
-        from(r3, start),
-    );
-    let (r4, r5, r6, r7) = (
-        from(r4, start),
-        from(r5, start),
-        from(r6, start),
-        from(r7, start),
-    );
+    let [r0, r1, r2, r3, r4, r5, r6, r7] = rows_from(rows, start);
     let (x_blocks, _) = input.get(start..).unwrap_or(&[]).as_chunks::<YMM_BYTES>();
     let blocks = x_blocks
         .iter()
@@ -96,19 +79,7 @@ pub(super) fn front_i8_avx(rows: [&[i8]; BLOCK_ROWS], input: &[i8], start: usize
 #[inline]
 #[target_feature(enable = "avx2,avx512f,avx512bw,avx512vnni")]
 pub(super) fn front_i8_512(rows: [&[i8]; BLOCK_ROWS], input: &[i8], start: usize) -> Front {
-    let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
-    let (r0, r1, r2, r3) = (
-        from(r0, start),
-        from(r1, start),
-        from(r2, start),
-        from(r3, start),
-    );
-    let (r4, r5, r6, r7) = (
-        from(r4, start),
-        from(r5, start),
-        from(r6, start),
-        from(r7, start),
-    );
+    let [r0, r1, r2, r3, r4, r5, r6, r7] = rows_from(rows, start);
     let (x_blocks, _) = input.get(start..).unwrap_or(&[]).as_chunks::<ZMM_BYTES>();
     let blocks = x_blocks
         .iter()
@@ -157,19 +128,7 @@ pub(super) fn front_i8_512(rows: [&[i8]; BLOCK_ROWS], input: &[i8], start: usize
 #[inline]
 #[target_feature(enable = "avx2,avx512f,avx512bw,avx512vnni")]
 pub(super) fn front_i16_512(rows: [&[i8]; BLOCK_ROWS], input: &[i16], start: usize) -> Front {
-    let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
-    let (r0, r1, r2, r3) = (
-        from(r0, start),
-        from(r1, start),
-        from(r2, start),
-        from(r3, start),
-    );
-    let (r4, r5, r6, r7) = (
-        from(r4, start),
-        from(r5, start),
-        from(r6, start),
-        from(r7, start),
-    );
+    let [r0, r1, r2, r3, r4, r5, r6, r7] = rows_from(rows, start);
     let (x_blocks, _) = input.get(start..).unwrap_or(&[]).as_chunks::<ZMM_WORDS>();
     let blocks = x_blocks
         .iter()
