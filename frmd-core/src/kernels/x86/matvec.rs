@@ -64,11 +64,9 @@ macro_rules! finish_row_sums {
                 __m256i, _mm256_add_epi32, _mm256_madd_epi16, _mm256_zextsi128_si256,
                 _mm_madd_epi16,
             };
-            use $crate::kernels::x86::matvec::{
-                reduce, rows_from, widen, widen_half, COLUMNS, HALF,
-            };
+            use $crate::kernels::x86::matvec::{reduce, widen, widen_half, COLUMNS, HALF};
             use $crate::kernels::x86::requant::load_i32;
-            use $crate::kernels::x86::BLOCK_ROWS;
+            use $crate::kernels::x86::{rows_from, BLOCK_ROWS};
             let rows: [&[i8]; BLOCK_ROWS] = $rows;
             let start: usize = $start;
             let mut acc: [__m256i; BLOCK_ROWS] = $acc;
@@ -232,12 +230,6 @@ pub(super) fn split_rows(rows: &[i8], columns: usize) -> [&[i8]; BLOCK_ROWS] {
         next(),
         next(),
     ]
-}
-
-/// Each of the eight rows from column `start` on (empty if `start` is past its end).
-#[inline(always)]
-pub(super) fn rows_from(rows: [&[i8]; BLOCK_ROWS], start: usize) -> [&[i8]; BLOCK_ROWS] {
-    rows.map(|row| row.get(start..).unwrap_or(&[]))
 }
 
 /// Loads 8 int8 values and sign-extends them to 8 int16 lanes.

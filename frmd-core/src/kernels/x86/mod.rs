@@ -55,6 +55,12 @@ mod wide;
 /// Output channels (weight rows) per call of the row kernels, and lanes of a requantized block.
 pub(crate) const BLOCK_ROWS: usize = 8;
 
+/// Each of the eight rows from column `start` on (empty if `start` is past its end).
+#[inline(always)]
+pub(crate) fn rows_from(rows: [&[i8]; BLOCK_ROWS], start: usize) -> [&[i8]; BLOCK_ROWS] {
+    rows.map(|row| row.get(start..).unwrap_or(&[]))
+}
+
 use super::{FcRequant, FullyConnected};
 
 /// One output channel of a layer: its output, weight row, bias, multiplier and shift.

@@ -15,8 +15,7 @@
 //! sign-extended to int16 (`vpmovsxbw`) adds pair sums of at most `2^23` modulo 2^32: the same.
 #![allow(unsafe_code)]
 
-use super::matvec::rows_from;
-use super::BLOCK_ROWS;
+use super::{rows_from, BLOCK_ROWS};
 use core::arch::x86_64::{
     __m256i, __m512i, _mm256_add_epi32, _mm256_dpbusd_avx_epi32, _mm256_loadu_si256,
     _mm256_set1_epi8, _mm256_setzero_si256, _mm256_sub_epi32, _mm256_xor_si256,
