@@ -96,6 +96,23 @@ pub(crate) fn boxed_scratch<P: Precision>() -> Box<HostScratchOf<P>> {
     Box::new(HostScratchOf::new())
 }
 
+/// The packed copy of `blob`'s network weights for this CPU's kernels
+/// ([`frmd_core::kernels::packed`], handed to [`BlobNetwork::use_packed_weights`]): empty where
+/// they would not run it (no VNNI level here, or a network other than an int8 MLP).
+pub fn packed_weights(blob: &LoadedBlob<'_>) -> anyhow::Result<Vec<u8>> {
+    if !frmd_core::kernels::packed::runs_here() {
+        return Ok(Vec::new());
+    }
+    let network = blob
+        .network::<MAX_WIDTH, _>(HostWork::new())
+        .context("the blob's network")?;
+    let mut bytes = vec![0; network.packed_len()];
+    network
+        .pack_weights(&mut bytes)
+        .context("packing the weights")?;
+    Ok(bytes)
+}
+
 /// Refuses a policy whose sizes exceed the host's capacities, naming its shape.
 pub fn check_capacity(d: &PolicyDims) -> anyhow::Result<()> {
     let limits = [

@@ -8,6 +8,8 @@ use super::{
     activation_bits, transformer_activation_bits, BlobError, LoadedMlp, LoadedMlp16,
     LoadedTransformer, LoadedTransformer16, MLP_MAGIC, TRANSFORMER_MAGIC,
 };
+use crate::kernels::KernelError;
+use crate::model::mlp::ModelError;
 use crate::policy::{
     Int16MlpNetwork, Int16TransformerNetwork, Int8MlpNetwork, Int8TransformerNetwork, Network,
     PolicyConfig, PolicyDims, PolicyError, StepConstants, TransformerWork,
@@ -122,6 +124,42 @@ pub enum BlobNetwork<'a, const WIDTH: usize, S> {
     Transformer(Int8TransformerNetwork<'a, S>),
     /// The transformer of an int16-activation transformer blob.
     Transformer16(Int16TransformerNetwork<'a, S>),
+}
+
+impl<'a, const WIDTH: usize, S> BlobNetwork<'a, WIDTH, S> {
+    /// Bytes of the packed weights of an int8-activation MLP
+    /// ([`Int8MlpNetwork::packed_len`]); 0 for the other networks, which run their row-major
+    /// weights.
+    pub fn packed_len(&self) -> usize {
+        match self {
+            Self::Mlp(net) => net.packed_len(),
+            _ => 0,
+        }
+    }
+
+    /// Writes the packed weights ([`Int8MlpNetwork::pack_weights`]) into `out` of
+    /// [`Self::packed_len`] bytes.
+    pub fn pack_weights(&self, out: &mut [u8]) -> Result<(), PolicyError> {
+        match self {
+            Self::Mlp(net) => net.pack_weights(out),
+            _ if out.is_empty() => Ok(()),
+            _ => Err(PolicyError::Model(ModelError::Kernel(
+                KernelError::OutputLength,
+            ))),
+        }
+    }
+
+    /// Runs the packed weights `bytes` from [`Self::pack_weights`], checked against the
+    /// network's ([`Int8MlpNetwork::use_packed_weights`]).
+    pub fn use_packed_weights(&mut self, bytes: &'a [u8]) -> Result<(), PolicyError> {
+        match self {
+            Self::Mlp(net) => net.use_packed_weights(bytes),
+            _ if bytes.is_empty() => Ok(()),
+            _ => Err(PolicyError::Model(ModelError::Kernel(
+                KernelError::WeightsLength,
+            ))),
+        }
+    }
 }
 
 impl<const WIDTH: usize, S> Network for BlobNetwork<'_, WIDTH, S>

@@ -14,6 +14,7 @@
 
 use super::dot::RowInput;
 pub use super::input::LayerInput;
+use super::packed::PackedWeights;
 use super::precision::{Accumulator, Precision};
 use super::rows::for_each_block;
 use super::KernelError;
@@ -60,6 +61,10 @@ pub struct FullyConnected<'a, A = i32> {
     /// `[out_features]` bias (int32, or int64 for int16 activations) at scale
     /// `input_scale * weight_scale[o]`, input zero point folded.
     pub bias: &'a [A],
+    /// The same weights packed for a host's dot-product kernels ([`super::packed`], int32
+    /// accumulators on x86-64 with AVX-VNNI or AVX-512 VNNI), or `None` ([`Self::new`]'s
+    /// default): the row-major `weights` run. Same results either way.
+    pub packed: Option<PackedWeights<'a>>,
 }
 
 /// Per-output-channel requantization of a layer's accumulators to `P` codes: int8 (the default)
@@ -93,6 +98,7 @@ impl<'a, A: Accumulator> FullyConnected<'a, A> {
             out_features,
             weights,
             bias,
+            packed: None,
         }
     }
 
@@ -176,7 +182,9 @@ impl<'a, A: Accumulator> FullyConnected<'a, A> {
     #[cfg(target_arch = "x86_64")]
     fn accumulate_avx2(&self, avx2: super::x86::Avx2, input: LayerInput<'_>, acc: &mut [A]) {
         use super::x86::BLOCK_ROWS;
-        A::accumulate_x86(self, avx2, input, acc);
+        if A::accumulate_x86(self, avx2, input, acc) {
+            return;
+        }
         let Some(block_len) = self.in_features.checked_mul(BLOCK_ROWS) else {
             return;
         };

@@ -9,6 +9,7 @@
 //! - [`precision`]: the [`Precision`] (`i8`, `i16`) and [`Accumulator`] (`i32`, `i64`) traits;
 //! - [`activation`]: the f32 SiLU / Mish / GELU (erf, tanh and sigmoid forms) definitions used
 //!   everywhere (LUT building, f32 reference paths, host models);
+//! - [`packed`]: a layer's weights packed for the hosts' dot-product instructions;
 //! - [`norm`]: f32 LayerNorm; [`softmax`]: numerically stable f32 softmax.
 //!
 //! Every kernel checks slice lengths and returns a [`KernelError`] instead of panicking. Integer
@@ -29,6 +30,7 @@ mod input;
 pub mod lut;
 pub mod lut16;
 pub mod norm;
+pub mod packed;
 pub mod precision;
 pub(crate) mod rows;
 pub mod softmax;

@@ -60,15 +60,16 @@ pub(crate) mod sealed {
             acc: &mut [Self],
         );
 
-        /// The accumulators of the whole blocks of eight rows of `fc` with the x86 kernels
-        /// (`x86::layer`; the caller checked the shapes and does the remaining rows).
+        /// The accumulators of `fc` with the x86 kernels (the caller checked the shapes):
+        /// `true` if every row was written (packed weights), else the whole blocks of eight
+        /// rows only (`x86::layer`) and the caller does the remaining rows.
         #[cfg(target_arch = "x86_64")]
         fn accumulate_x86(
             fc: &crate::kernels::FullyConnected<'_, Self>,
             avx2: crate::kernels::x86::Avx2,
             input: crate::kernels::LayerInput<'_>,
             acc: &mut [Self],
-        );
+        ) -> bool;
 
         /// `kernels::dequantize_accumulators` with the x86 kernels (the caller checked the
         /// lengths): `true` if they wrote every output (int64 accumulators, eight at a time,
@@ -200,8 +201,14 @@ impl sealed::Accumulate for i32 {
         avx2: super::x86::Avx2,
         input: LayerInput<'_>,
         acc: &mut [i32],
-    ) {
+    ) -> bool {
+        if let Some(packed) = fc.packed.filter(|p| p.serves(fc, input)) {
+            if avx2.accumulate_packed(&packed, fc, input, acc) {
+                return true;
+            }
+        }
         avx2.accumulate_blocks(fc, input, true, acc);
+        false
     }
 }
 
@@ -292,8 +299,9 @@ impl sealed::Accumulate for i64 {
         avx2: super::x86::Avx2,
         input: LayerInput<'_>,
         acc: &mut [i64],
-    ) {
+    ) -> bool {
         avx2.accumulate_blocks_wide(fc, input, acc);
+        false
     }
 }
 

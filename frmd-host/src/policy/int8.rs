@@ -14,8 +14,8 @@ use frmd_core::blob::{AlignedBlob, LoadedBlob};
 use frmd_core::policy::{Network, Noise, PolicyDims, PolicyError};
 use frmd_core::rng::Rng;
 use frmd_export::host::{
-    act_blob, check_capacity, BlobPolicy, HostPolicy, HostScratch, HostTrajectory, HostWork,
-    MAX_WIDTH,
+    act_blob, check_capacity, packed_weights, BlobPolicy, HostPolicy, HostScratch, HostTrajectory,
+    HostWork, MAX_WIDTH,
 };
 use frmd_export::ExportedStudent;
 use std::path::Path;
@@ -67,10 +67,17 @@ self_cell::self_cell!(
     }
 );
 
+/// A loaded blob and its weights packed for this CPU's kernels (empty where they run the
+/// row-major weights).
+struct Packed {
+    loaded: Loaded,
+    weights: Vec<u8>,
+}
+
 self_cell::self_cell!(
     /// A loaded blob and the policy built over it once.
     struct Ready {
-        owner: Loaded,
+        owner: Packed,
         #[not_covariant]
         dependent: BlobPolicy,
     }
@@ -78,7 +85,7 @@ self_cell::self_cell!(
 
 impl Ready {
     fn blob(&self) -> &LoadedBlob<'_> {
-        self.borrow_owner().borrow_dependent()
+        self.borrow_owner().loaded.borrow_dependent()
     }
 }
 
@@ -144,9 +151,12 @@ pub struct Int8Policy {
 impl Int8Policy {
     /// The policy of an exported blob (MLP or transformer, by its magic).
     pub fn from_blob(bytes: &[u8], label: &str) -> anyhow::Result<Self> {
-        let ready = Ready::try_new(load(bytes)?, |loaded| -> anyhow::Result<_> {
-            let blob = loaded.borrow_dependent();
-            let network = blob.network::<MAX_WIDTH, _>(HostWork::new())?;
+        let loaded = load(bytes)?;
+        let weights = packed_weights(loaded.borrow_dependent())?;
+        let ready = Ready::try_new(Packed { loaded, weights }, |packed| -> anyhow::Result<_> {
+            let blob = packed.loaded.borrow_dependent();
+            let mut network = blob.network::<MAX_WIDTH, _>(HostWork::new())?;
+            network.use_packed_weights(&packed.weights)?;
             Ok(HostPolicy::new(blob.config(), network)?)
         })?;
         Ok(Self::new(Runner::Int8(Box::new(ready)), label))

@@ -60,6 +60,7 @@ impl<'a> FullyConnected<'a, i32> {
     }
 
     /// [`Self::forward`] with the x86 kernels (callers checked the shapes and `requant`): the
+    /// packed weights if the layer has them and the CPU a VNNI level, else the
     /// whole blocks of eight output channels by `x86::layer` (requantized in registers), the
     /// last `out_features % 8` channels one at a time. Same outputs as the portable loop. int16
     /// inputs (a 16-bit first-layer input plane) take the same kernels with the codes loaded as
@@ -72,6 +73,11 @@ impl<'a> FullyConnected<'a, i32> {
         input: LayerInput<'_>,
         output: &mut [i8],
     ) {
+        if let Some(packed) = self.packed.filter(|p| p.serves(self, input)) {
+            if avx2.requantize_packed(&packed, self, requant, input, output) {
+                return;
+            }
+        }
         avx2.requantize_blocks(self, requant, input, output);
         let zero_point = requant.output_zero_point;
         let bounds = (requant.activation_min, requant.activation_max);

@@ -8,6 +8,8 @@
 //!   the bias added and, for hidden layers, requantized (and the int16 table applied) in
 //!   registers;
 //! - `requant`: requantization of eight accumulators at once;
+//! - `packed`: whole layers of weights packed for `vpdpbusd`/`vpdpwssd` (`kernels::packed`),
+//!   sixteen rows per instruction;
 //! - `vnni`: the fronts of the row sums with `vpdpbusd`/`vpdpwssd`, VEX-encoded on 256 bits
 //!   (AVX-VNNI) or EVEX-encoded on 512 bits (AVX-512 F/BW/VNNI, checked with [`avx512_active`]);
 //! - `wide`: the int16-activation layers (int64 accumulation from 512-column int32 chunk sums,
@@ -48,6 +50,7 @@
 mod dequant;
 mod layer;
 mod matvec;
+mod packed;
 mod requant;
 mod vnni;
 mod wide;

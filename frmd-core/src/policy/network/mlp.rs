@@ -5,6 +5,8 @@
 
 use heapless::Vec;
 
+mod packed;
+
 use super::{Network, NoiseVariants};
 use crate::kernels::{Accumulator, KernelError, Precision};
 use crate::model::linear::{F32Linear, Int8Linear, RequantizedLinear};

@@ -1,0 +1,394 @@
+//! Whole layers of packed weights (`kernels::packed`): per block of sixteen rows and group of
+//! columns, one `vpdpbusd` (int8 inputs, four columns) or `vpdpwssd` (int16 inputs, two columns)
+//! of the 64 packed bytes and the group's input word broadcast to every lane, so each lane
+//! accumulates its own row and a block's sums are ready without a horizontal reduction. AVX-512
+//! VNNI takes a group in one 512-bit instruction, AVX-VNNI in two 256-bit ones; four groups are
+//! in flight at once (independent accumulators). The sums then get the bias and, for hidden
+//! layers, `x86::requant`'s requantization, sixteen outputs at a time.
+//!
+//! Bit-exactness: int8 weights are stored as `u = w + 128`, so a lane accumulates
+//! `sum u x = sum w x + 128 sum x` (four-product groups of at most `4 * 255 * 128` in magnitude,
+//! lanes adding modulo 2^32); `128 sum x`, the same for every row, is subtracted once per
+//! block. int16 inputs meet weights widened to int16: pair sums of at most `2^23`, exact. Each
+//! row's result is therefore the wrapping int32 sum of its products, as in the portable kernel;
+//! padded columns meet a zero input and padded rows are never stored.
+#![allow(unsafe_code)]
+
+use super::requant::{load_i32, pack_i8, requantize_lanes, RequantBlock};
+use super::{Avx2, BLOCK_ROWS};
+use crate::kernels::packed::{PackedWeights, GROUP_BYTES, PACK_ROWS};
+use crate::kernels::{FcRequant, FullyConnected, LayerInput};
+use core::arch::x86_64::{
+    __m256i, __m512i, _mm256_add_epi32, _mm256_dpbusd_avx_epi32, _mm256_dpwssd_avx_epi32,
+    _mm256_loadu_si256, _mm256_set1_epi32, _mm256_setzero_si256, _mm256_storeu_si256,
+    _mm256_sub_epi32, _mm512_add_epi32, _mm512_castsi512_si256, _mm512_dpbusd_epi32,
+    _mm512_dpwssd_epi32, _mm512_extracti64x4_epi64, _mm512_loadu_si512, _mm512_set1_epi32,
+    _mm512_setzero_si512,
+};
+
+/// Groups of columns in flight (independent accumulators).
+const UNROLL: usize = 4;
+
+/// The sums of one block's sixteen rows: rows 0..8 and 8..16.
+type BlockSums = [__m256i; 2];
+
+/// The broadcast word of four int8 codes.
+#[inline(always)]
+fn word_of_bytes(group: &[i8; 4]) -> i32 {
+    i32::from_le_bytes(group.map(|code| code as u8))
+}
+
+/// The broadcast word of two int16 codes.
+#[inline(always)]
+fn word_of_halves(group: &[i16; 2]) -> i32 {
+    let [low, high] = group.map(|code| i32::from(code as u16));
+    low | (high << 16)
+}
+
+/// Loads 32 packed bytes.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn load_half(bytes: &[u8; 32]) -> __m256i {
+    // SAFETY: the pointer comes from a `&[u8; 32]`: 32 initialized, readable bytes; `loadu` has
+    // no alignment requirement.
+    unsafe { _mm256_loadu_si256(bytes.as_ptr().cast::<__m256i>()) }
+}
+
+/// Loads one 64-byte group.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn load_group(group: &[u8; GROUP_BYTES]) -> __m512i {
+    // SAFETY: the pointer comes from a `&[u8; 64]`: 64 initialized, readable bytes; `loadu` has
+    // no alignment requirement.
+    unsafe { _mm512_loadu_si512(group.as_ptr().cast::<__m512i>()) }
+}
+
+/// The two 32-byte halves of a group (rows 0..8 and 8..16).
+#[inline(always)]
+fn halves(group: &[u8; GROUP_BYTES]) -> (&[u8; 32], &[u8; 32]) {
+    let (low, high) = group.split_at(32);
+    match (low.as_chunks::<32>().0, high.as_chunks::<32>().0) {
+        ([low], [high]) => (low, high),
+        _ => (&[0; 32], &[0; 32]),
+    }
+}
+
+/// One group's products added to the accumulators, per level and input type.
+macro_rules! step {
+    (avx, $dot:ident, $acc:expr, $group:expr, $word:expr) => {{
+        let [low, high] = $acc;
+        let (w_low, w_high) = halves($group);
+        let x = _mm256_set1_epi32($word);
+        [
+            $dot(low, load_half(w_low), x),
+            $dot(high, load_half(w_high), x),
+        ]
+    }};
+    (zmm, $dot:ident, $acc:expr, $group:expr, $word:expr) => {
+        $dot($acc, load_group($group), _mm512_set1_epi32($word))
+    };
+}
+
+/// `fn $name(block, input) -> BlockSums`: the sums of one packed block over `input` (whole
+/// block of `ceil(len / $columns)` groups), for one level (`avx` | `zmm`) and input type.
+macro_rules! block_sums {
+    ($name:ident, $features:literal, $level:ident, $dot:ident, $zero:expr, $x:ty, $columns:literal, $word:ident) => {
+        #[inline]
+        #[target_feature(enable = $features)]
+        fn $name(block: &[u8], input: &[$x]) -> BlockSums {
+            let (groups, _) = block.as_chunks::<GROUP_BYTES>();
+            let (words, tail) = input.as_chunks::<$columns>();
+            let mut acc = [$zero; UNROLL];
+            let (group_runs, _) = groups.as_chunks::<UNROLL>();
+            let (word_runs, _) = words.as_chunks::<UNROLL>();
+            for (run, x) in group_runs.iter().zip(word_runs) {
+                for k in 0..UNROLL {
+                    acc[k] = step!($level, $dot, acc[k], &run[k], $word(&x[k]));
+                }
+            }
+            let done = word_runs.len() * UNROLL;
+            let rest = groups.get(done..).unwrap_or(&[]);
+            for (group, x) in rest.iter().zip(words.get(done..).unwrap_or(&[])) {
+                acc[0] = step!($level, $dot, acc[0], group, $word(x));
+            }
+            if !tail.is_empty() {
+                // The last, partial group: the missing columns meet zero inputs.
+                let mut last = [0; $columns];
+                for (slot, code) in last.iter_mut().zip(tail) {
+                    *slot = *code;
+                }
+                if let Some(group) = groups.get(words.len()) {
+                    acc[0] = step!($level, $dot, acc[0], group, $word(&last));
+                }
+            }
+            let [a, b, c, d] = acc;
+            block_sums!(@finish $level, a, b, c, d)
+        }
+    };
+    (@finish avx, $a:ident, $b:ident, $c:ident, $d:ident) => {
+        [
+            _mm256_add_epi32(
+                _mm256_add_epi32($a[0], $b[0]),
+                _mm256_add_epi32($c[0], $d[0]),
+            ),
+            _mm256_add_epi32(
+                _mm256_add_epi32($a[1], $b[1]),
+                _mm256_add_epi32($c[1], $d[1]),
+            ),
+        ]
+    };
+    (@finish zmm, $a:ident, $b:ident, $c:ident, $d:ident) => {{
+        let sum = _mm512_add_epi32(_mm512_add_epi32($a, $b), _mm512_add_epi32($c, $d));
+        [
+            _mm512_castsi512_si256(sum),
+            _mm512_extracti64x4_epi64::<1>(sum),
+        ]
+    }};
+}
+
+/// `128 sum x` as eight lanes: what the unsigned int8 weights add to every row (zero for int16
+/// inputs, whose weights keep their sign).
+#[inline]
+#[target_feature(enable = "avx2")]
+fn weight_offset(input: LayerInput<'_>) -> __m256i {
+    match input {
+        LayerInput::Int8(x) => {
+            let sum = x.iter().fold(0_i32, |s, v| s.wrapping_add(i32::from(*v)));
+            _mm256_set1_epi32(sum.wrapping_mul(128))
+        }
+        LayerInput::Int16(_) => _mm256_setzero_si256(),
+    }
+}
+
+/// The sixteen rows of a block as `bias + sums` (the weight offset removed).
+#[inline]
+#[target_feature(enable = "avx2")]
+fn with_bias(sums: BlockSums, offset: __m256i, bias: &[i32; PACK_ROWS]) -> BlockSums {
+    let (bias, _) = bias.as_chunks::<BLOCK_ROWS>();
+    let mut out = sums;
+    for (lanes, bias) in out.iter_mut().zip(bias) {
+        *lanes = _mm256_add_epi32(_mm256_sub_epi32(*lanes, offset), load_i32(bias));
+    }
+    out
+}
+
+/// `values[first..first + 16]`, zero-padded past the end.
+#[inline(always)]
+fn padded<T: Copy + Default>(values: &[T], first: usize) -> [T; PACK_ROWS] {
+    let mut block = [T::default(); PACK_ROWS];
+    for (slot, value) in block.iter_mut().zip(values.get(first..).unwrap_or(&[])) {
+        *slot = *value;
+    }
+    block
+}
+
+/// The layer loops of one level: `$bytes` / `$words` are its block sums of int8 / int16 inputs.
+macro_rules! packed_level {
+    ($level:ident, $features:literal, $bytes:ident, $words:ident) => {
+        mod $level {
+            use super::*;
+
+            /// The packed blocks of the layer with their block-sum function for `input`.
+            #[inline(always)]
+            fn blocks<'p>(packed: &PackedWeights<'p>) -> core::slice::ChunksExact<'p, u8> {
+                let groups = packed.in_features().div_ceil(packed.kind().columns());
+                let block_len = groups.saturating_mul(GROUP_BYTES).max(1);
+                packed.bytes().chunks_exact(block_len)
+            }
+
+            /// `out[o] = requantize_to_i8(bias[o] + dot(row o, input), ...)` for every row.
+            #[target_feature(enable = $features)]
+            pub(super) fn requantize(
+                packed: &PackedWeights<'_>,
+                fc: &FullyConnected<'_, i32>,
+                requant: &FcRequant<'_, i8>,
+                input: LayerInput<'_>,
+                out: &mut [i8],
+            ) {
+                let offset = weight_offset(input);
+                let sums = |block: &[u8]| match input {
+                    LayerInput::Int8(x) => bytes_sums(block, x),
+                    LayerInput::Int16(x) => words_sums(block, x),
+                };
+                let finish = |sums: BlockSums,
+                              bias: &[i32; PACK_ROWS],
+                              multipliers: &[i32; PACK_ROWS],
+                              shifts: &[i32; PACK_ROWS]| {
+                    let lanes = with_bias(sums, offset, bias);
+                    let (multipliers, _) = multipliers.as_chunks::<BLOCK_ROWS>();
+                    let (shifts, _) = shifts.as_chunks::<BLOCK_ROWS>();
+                    let mut codes = [0_i8; PACK_ROWS];
+                    let halves = codes.as_chunks_mut::<BLOCK_ROWS>().0.iter_mut().zip(lanes);
+                    for ((codes, lanes), (multipliers, shifts)) in
+                        halves.zip(multipliers.iter().zip(shifts))
+                    {
+                        let block = RequantBlock {
+                            multipliers,
+                            shifts,
+                            zero_point: requant.output_zero_point,
+                            bounds: (requant.activation_min, requant.activation_max),
+                        };
+                        *codes = pack_i8(requantize_lanes(lanes, block));
+                    }
+                    codes
+                };
+                let mut blocks = blocks(packed);
+                let (whole, tail) = out.as_chunks_mut::<PACK_ROWS>();
+                let channels = fc
+                    .bias
+                    .as_chunks::<PACK_ROWS>()
+                    .0
+                    .iter()
+                    .zip(requant.multipliers.as_chunks::<PACK_ROWS>().0)
+                    .zip(requant.shifts.as_chunks::<PACK_ROWS>().0);
+                for ((out, ((bias, multipliers), shifts)), block) in
+                    whole.iter_mut().zip(channels).zip(blocks.by_ref())
+                {
+                    *out = finish(sums(block), bias, multipliers, shifts);
+                }
+                if let (false, Some(block)) = (tail.is_empty(), blocks.next()) {
+                    let first = whole.len() * PACK_ROWS;
+                    let codes = finish(
+                        sums(block),
+                        &padded(fc.bias, first),
+                        &padded(requant.multipliers, first),
+                        &padded(requant.shifts, first),
+                    );
+                    for (slot, code) in tail.iter_mut().zip(codes) {
+                        *slot = code;
+                    }
+                }
+            }
+
+            /// `acc[o] = bias[o] + dot(row o, input)` (wrapping) for every row.
+            #[target_feature(enable = $features)]
+            pub(super) fn accumulate(
+                packed: &PackedWeights<'_>,
+                fc: &FullyConnected<'_, i32>,
+                input: LayerInput<'_>,
+                acc: &mut [i32],
+            ) {
+                let offset = weight_offset(input);
+                for (index, block) in blocks(packed).enumerate() {
+                    let sums = match input {
+                        LayerInput::Int8(x) => bytes_sums(block, x),
+                        LayerInput::Int16(x) => words_sums(block, x),
+                    };
+                    let first = index * PACK_ROWS;
+                    let lanes = with_bias(sums, offset, &padded(fc.bias, first));
+                    let mut block = [0_i32; PACK_ROWS];
+                    let halves = block.as_chunks_mut::<BLOCK_ROWS>().0.iter_mut().zip(lanes);
+                    for (half, lanes) in halves {
+                        // SAFETY: the pointer comes from a `&mut [i32; 8]`: 32 writable bytes;
+                        // no alignment needed.
+                        unsafe { _mm256_storeu_si256(half.as_mut_ptr().cast::<__m256i>(), lanes) };
+                    }
+                    let rows = acc.get_mut(first..).unwrap_or(&mut []);
+                    for (slot, sum) in rows.iter_mut().zip(block) {
+                        *slot = sum;
+                    }
+                }
+            }
+
+            block_sums!(
+                bytes_sums,
+                $features,
+                $level,
+                $bytes,
+                zero!($level),
+                i8,
+                4,
+                word_of_bytes
+            );
+            block_sums!(
+                words_sums,
+                $features,
+                $level,
+                $words,
+                zero!($level),
+                i16,
+                2,
+                word_of_halves
+            );
+        }
+    };
+}
+
+/// A zero accumulator of the level.
+macro_rules! zero {
+    (avx) => {
+        [_mm256_setzero_si256(); 2]
+    };
+    (zmm) => {
+        _mm512_setzero_si512()
+    };
+}
+
+packed_level!(
+    avx,
+    "avx2,avxvnni",
+    _mm256_dpbusd_avx_epi32,
+    _mm256_dpwssd_avx_epi32
+);
+packed_level!(
+    zmm,
+    "avx2,avx512f,avx512bw,avx512vnni",
+    _mm512_dpbusd_epi32,
+    _mm512_dpwssd_epi32
+);
+
+/// Calls `$level::$name(args)` for the token's packed level; `false` when it has none.
+macro_rules! by_packed_level {
+    ($token:expr, $name:ident($($arg:expr),*)) => {
+        // SAFETY: the token's `avx512` flag is set only after `avx512_active()` detected AVX-512
+        // F/BW/VNNI, its `vnni` flag only after `avx_vnni_active()` detected AVX-VNNI (both on
+        // top of AVX2, which every token has).
+        unsafe {
+            if $token.avx512() {
+                zmm::$name($($arg),*);
+                true
+            } else if $token.vnni() {
+                avx::$name($($arg),*);
+                true
+            } else {
+                false
+            }
+        }
+    };
+}
+
+impl Avx2 {
+    /// Whether this token runs packed weights (it has a VNNI level).
+    pub(crate) fn runs_packed(self) -> bool {
+        self.avx512() || self.vnni()
+    }
+
+    /// Every requantized int8 output of `fc` from its packed copy `packed` (which serves `fc`
+    /// and `input`; `requant` passed `FcRequant::validate`); `false` (nothing written) without
+    /// a VNNI level.
+    pub(crate) fn requantize_packed(
+        self,
+        packed: &PackedWeights<'_>,
+        fc: &FullyConnected<'_, i32>,
+        requant: &FcRequant<'_, i8>,
+        input: LayerInput<'_>,
+        out: &mut [i8],
+    ) -> bool {
+        by_packed_level!(self, requantize(packed, fc, requant, input, out))
+    }
+
+    /// Every accumulator of `fc` from its packed copy; `false` (nothing written) without a VNNI
+    /// level.
+    pub(crate) fn accumulate_packed(
+        self,
+        packed: &PackedWeights<'_>,
+        fc: &FullyConnected<'_, i32>,
+        input: LayerInput<'_>,
+        acc: &mut [i32],
+    ) -> bool {
+        by_packed_level!(self, accumulate(packed, fc, input, acc))
+    }
+}
+
+#[cfg(test)]
+mod tests;

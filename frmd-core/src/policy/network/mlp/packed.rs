@@ -1,0 +1,111 @@
+//! An int8 MLP network's weights packed for the host kernels ([`crate::kernels::packed`]): the
+//! host sizes a buffer ([`QuantMlpNetwork::packed_len`]), fills it once
+//! ([`QuantMlpNetwork::pack_weights`]) and hands it back
+//! ([`QuantMlpNetwork::use_packed_weights`]), which checks every layer's part against its
+//! weights. The network then runs the packed copies where this CPU can
+//! ([`crate::kernels::packed::runs_here`]), with the same results.
+
+use super::{QuantMlpNetwork, MAX_HIDDEN_LAYERS};
+use crate::kernels::packed::{pack, PackedKind, PackedWeights};
+use crate::kernels::{FullyConnected, KernelError};
+use crate::model::mlp::{InputPrecision, ModelError};
+use crate::policy::PolicyError;
+
+/// A kernel error as a policy error.
+fn kernel(error: KernelError) -> PolicyError {
+    PolicyError::Model(ModelError::Kernel(error))
+}
+
+impl<'a, const WIDTH: usize> QuantMlpNetwork<'a, i8, WIDTH> {
+    /// Every layer (hidden layers, then the output layer) with the packed kind of its input:
+    /// the first layer's by the input precision (none for two planes, whose fine plane runs
+    /// separately), int8 codes for the others.
+    fn packed_layers(
+        &self,
+    ) -> impl Iterator<Item = (&FullyConnected<'a, i32>, Option<PackedKind>)> {
+        let first = match self.precision {
+            InputPrecision::Int8 => Some(PackedKind::Bytes),
+            InputPrecision::Int16 => Some(PackedKind::Words),
+            InputPrecision::TwoPlane => None,
+        };
+        let hidden = self.layers.hidden.iter().map(|layer| &layer.fc);
+        hidden
+            .chain([&self.layers.output.fc])
+            .enumerate()
+            .map(move |(index, fc)| {
+                (
+                    fc,
+                    if index == 0 {
+                        first
+                    } else {
+                        Some(PackedKind::Bytes)
+                    },
+                )
+            })
+    }
+
+    /// The packed length of each layer (0 for one that is not packed).
+    fn packed_lens(&self) -> impl Iterator<Item = usize> + '_ {
+        self.packed_layers().map(|(fc, kind)| {
+            kind.and_then(|kind| kind.packed_len(fc.in_features, fc.out_features))
+                .unwrap_or(0)
+        })
+    }
+
+    /// Bytes of the packed copy of every layer's weights.
+    pub fn packed_len(&self) -> usize {
+        self.packed_lens().fold(0, usize::saturating_add)
+    }
+
+    /// Writes the packed copy of every layer's weights, back to back, into `out` of
+    /// [`Self::packed_len`] bytes.
+    pub fn pack_weights(&self, out: &mut [u8]) -> Result<(), PolicyError> {
+        if out.len() != self.packed_len() {
+            return Err(kernel(KernelError::OutputLength));
+        }
+        let mut rest = out;
+        for ((fc, kind), len) in self.packed_layers().zip(self.packed_lens()) {
+            let (part, tail) = rest
+                .split_at_mut_checked(len)
+                .ok_or(kernel(KernelError::OutputLength))?;
+            if let Some(kind) = kind {
+                pack(fc, kind, part).map_err(kernel)?;
+            }
+            rest = tail;
+        }
+        Ok(())
+    }
+
+    /// Lets every layer run its packed copy from `bytes` (what [`Self::pack_weights`] wrote for
+    /// this network). Each layer's part is checked against its weights first; on any
+    /// difference the network is left as it was and `KernelError::WeightsLength` returned.
+    pub fn use_packed_weights(&mut self, bytes: &'a [u8]) -> Result<(), PolicyError> {
+        if bytes.len() != self.packed_len() {
+            return Err(kernel(KernelError::WeightsLength));
+        }
+        let mut views: heapless::Vec<Option<PackedWeights<'a>>, { MAX_HIDDEN_LAYERS + 1 }> =
+            heapless::Vec::new();
+        let mut rest = bytes;
+        for ((fc, kind), len) in self.packed_layers().zip(self.packed_lens()) {
+            let (part, tail) = rest
+                .split_at_checked(len)
+                .ok_or(kernel(KernelError::WeightsLength))?;
+            let view = kind
+                .map(|kind| PackedWeights::new(fc, kind, part))
+                .transpose()
+                .map_err(kernel)?;
+            views.push(view).map_err(|_| PolicyError::TooManyLayers)?;
+            rest = tail;
+        }
+        let layers = &mut self.layers;
+        let fcs = layers
+            .hidden
+            .iter_mut()
+            .map(|layer| &mut layer.fc)
+            .chain([&mut layers.output.fc]);
+        for (fc, view) in fcs.zip(views) {
+            fc.packed = view;
+        }
+        Ok(())
+    }
+}
