@@ -27,8 +27,7 @@ impl KernelSwitch {
         }
     }
 
-    /// A level every CPU of the target has: on until switched off.
-    #[cfg(target_arch = "aarch64")]
+    /// A level every CPU of the target has (or a choice between levels): on until switched off.
     pub(crate) const fn baseline() -> Self {
         fn always() -> bool {
             true

@@ -348,8 +348,10 @@ pub fn bench_rows(cfg: &BenchConfig) -> anyhow::Result<(Vec<BenchRow>, Option<St
 
 /// On x86-64 CPUs where frmd-core's int8 kernels use AVX2 (and AVX-VNNI or AVX-512 VNNI): the
 /// same policy timed again with the other kernel levels, which give identical outputs (what CPUs
-/// without some of those instructions run): `avx-512` (without AVX-VNNI, which frmd-core prefers,
-/// if both were active), `avx2` (neither) and `portable` (SSE2).
+/// without some of those instructions run): `avx-vnni` (the packed weights with 256-bit
+/// instructions, where AVX-512 VNNI runs them by default), `row-major` (the packed kernels
+/// switched off: the row-major weights with the VNNI level), `avx2` (no VNNI) and `portable`
+/// (SSE2).
 #[cfg(target_arch = "x86_64")]
 fn time_kernel_levels(
     policy: &mut dyn Policy,
@@ -362,23 +364,33 @@ fn time_kernel_levels(
     if !(name.contains("int8") || name.contains("int16")) || !x86::avx2_active() {
         return Ok(rows);
     }
-    let (avx512, vnni) = (x86::avx512_active(), x86::avx_vnni_active());
+    let (avx512, vnni, packed) = (
+        x86::avx512_active(),
+        x86::avx_vnni_active(),
+        x86::packed_active(),
+    );
+    // (label, AVX-512, AVX-VNNI, packed, AVX2)
     let mut levels = Vec::new();
-    if avx512 && vnni {
-        levels.push(("avx-512", true, false, true));
+    if packed && avx512 && vnni {
+        levels.push(("avx-vnni", false, true, true, true));
+    }
+    if packed {
+        levels.push(("row-major", avx512, vnni, false, true));
     }
     if avx512 || vnni {
-        levels.push(("avx2", false, false, true));
+        levels.push(("avx2", false, false, false, true));
     }
-    levels.push(("portable", false, false, false));
-    for (label, wide, dot, avx2) in levels {
+    levels.push(("portable", false, false, false, false));
+    for (label, wide, dot, pack, avx2) in levels {
         x86::set_avx512_enabled(wide);
         x86::set_avx_vnni_enabled(dot);
+        x86::set_packed_enabled(pack);
         x86::set_avx2_enabled(avx2);
         let timed = time_policy(policy, input, cfg.warmup, cfg.calls);
         x86::set_avx2_enabled(true);
         x86::set_avx_vnni_enabled(vnni);
         x86::set_avx512_enabled(avx512);
+        x86::set_packed_enabled(packed);
         let (median, p99) = timed?;
         rows.push((label, median, p99));
     }

@@ -29,7 +29,7 @@ use frmd_core::policy::{
 };
 use frmd_core::quant::QuantParams;
 use frmd_core::rng::Rng;
-use frmd_export::host::{MAX_ACTION_DIM, MAX_HORIZON};
+use frmd_export::host::{packed_weights, MAX_ACTION_DIM, MAX_HORIZON, MAX_WIDTH};
 
 /// Seed of the noise of every stage run (and of the chunk it is checked against).
 const SEED: u64 = 11;
@@ -56,8 +56,31 @@ pub fn with_stages<R>(
     let aligned = AlignedBlob::new(bytes);
     let loaded = LoadedBlob::load(aligned.bytes()).context("loading the blob")?;
     match &loaded {
-        LoadedBlob::Mlp(blob) => f(&mut Work::new(blob, loaded.config(), policy, input)?),
-        LoadedBlob::Mlp16(blob) => f(&mut Work::new(blob, loaded.config(), policy, input)?),
+        LoadedBlob::Mlp(blob) => {
+            // The layers as the policy runs them: with this CPU's packed weights, if any.
+            let packed = packed_weights(&loaded)?;
+            let mut network = blob.network::<MAX_WIDTH>()?;
+            network.use_packed_weights(&packed)?;
+            let (hidden, output) = network.layers();
+            let layers = (hidden, *output);
+            f(&mut Work::new(
+                blob,
+                layers,
+                loaded.config(),
+                policy,
+                input,
+            )?)
+        }
+        LoadedBlob::Mlp16(blob) => {
+            let layers = (blob.hidden_layers(), blob.mlp(&[]).output);
+            f(&mut Work::new(
+                blob,
+                layers,
+                loaded.config(),
+                policy,
+                input,
+            )?)
+        }
         LoadedBlob::Transformer(_) | LoadedBlob::Transformer16(_) => {
             bail!("the stage breakdown covers MLP students only")
         }
@@ -100,8 +123,11 @@ struct Work<'b, 'p, 'i, P: MlpPrecision> {
 }
 
 impl<'b, 'p, 'i, P: MlpPrecision + TryFrom<i16>> Work<'b, 'p, 'i, P> {
+    /// The stages of `blob` run with `hidden` and `output`: the blob's layers, or a network's
+    /// (with the packed weights the policy runs).
     fn new(
         blob: &'b LoadedQuantMlp<'b, P>,
+        (hidden, output): (&[RequantizedLinear<'b, P>], Int8Linear<'b, P::Acc>),
         config: PolicyConfig<'b>,
         policy: &'p mut Int8Policy,
         raw: &'p PolicyInput<'i>,
@@ -113,9 +139,8 @@ impl<'b, 'p, 'i, P: MlpPrecision + TryFrom<i16>> Work<'b, 'p, 'i, P> {
             precision != InputPrecision::TwoPlane,
             "the stage breakdown does not cover two-plane inputs"
         );
-        let mlp = blob.mlp(blob.hidden_layers());
-        let mut layers: Vec<Layer<'b, P>> = blob
-            .hidden_layers()
+        let mlp = blob.mlp(hidden);
+        let mut layers: Vec<Layer<'b, P>> = hidden
             .iter()
             .map(|full| Layer {
                 full: *full,
@@ -125,7 +150,7 @@ impl<'b, 'p, 'i, P: MlpPrecision + TryFrom<i16>> Work<'b, 'p, 'i, P> {
                 },
             })
             .collect();
-        let mut output = mlp.output;
+        let mut output = output;
         // The step's noise-level variant replaces the first layer's bias.
         let variants = blob.noise_variants();
         if !variants.is_empty() {

@@ -113,7 +113,9 @@ static AVX2: KernelSwitch = KernelSwitch::probed(detect_avx2);
 /// Proof that the AVX2 kernels may run: `Avx2::get` hands one out only while [`avx2_active`]
 /// is true. The kernels are methods of this token (`matvec`, `requant`). `vnni` records whether
 /// the AVX-VNNI variant of the matrix-vector kernel may run too ([`avx_vnni_active`]), `avx512`
-/// whether the AVX-512 VNNI one may ([`avx512_active`]). Where both may, the layers run the 256-bit
+/// whether the AVX-512 VNNI one may ([`avx512_active`]), `packed` whether layers with packed
+/// weights run them ([`packed_active`]; with AVX-512 VNNI where the CPU has it, the faster of
+/// the two there: `x86::packed`). Where both VNNI levels may, the row-major layers run the 256-bit
 /// AVX-VNNI level: it timed faster on both machines measured (an Intel Xeon with AMX and an AMD
 /// EPYC Zen 4; MLP-256 int8 chunk 4.0 against 5.0 us on the EPYC, README's benchmark section), so
 /// AVX-512 runs only on CPUs without AVX-VNNI (Ice Lake and Cascade Lake servers, Zen 4 if its
@@ -122,6 +124,7 @@ static AVX2: KernelSwitch = KernelSwitch::probed(detect_avx2);
 pub(crate) struct Avx2 {
     vnni: bool,
     avx512: bool,
+    packed: bool,
 }
 
 impl Avx2 {
@@ -131,6 +134,7 @@ impl Avx2 {
         avx2_active().then(|| Self {
             vnni: avx_vnni_active(),
             avx512: avx512_active(),
+            packed: PACKED.active(),
         })
     }
 
@@ -158,6 +162,7 @@ pub(crate) fn test_tokens() -> Vec<Avx2> {
     let plain = Avx2 {
         vnni: false,
         avx512: false,
+        packed: true,
     };
     let mut tokens = std::vec![plain];
     for (present, token, name) in [
@@ -185,6 +190,23 @@ pub(crate) fn test_tokens() -> Vec<Avx2> {
         }
     }
     tokens
+}
+
+/// The packed-weight kernels' switch (`x86::packed`; only consulted with a VNNI level).
+static PACKED: KernelSwitch = KernelSwitch::baseline();
+
+/// Whether layers with packed weights (`kernels::packed`) run them: a VNNI level is active and
+/// the packed kernels are not switched off.
+pub fn packed_active() -> bool {
+    PACKED.active() && (avx512_active() || avx_vnni_active())
+}
+
+/// Enables or disables the packed-weight kernels, process-wide (layers then run their
+/// row-major weights with the active level; identical results, for A/B measurements); returns
+/// whether they are active afterwards.
+pub fn set_packed_enabled(enabled: bool) -> bool {
+    PACKED.set(enabled);
+    packed_active()
 }
 
 /// AVX-512's switch (only consulted while AVX2 is active).

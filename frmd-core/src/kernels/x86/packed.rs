@@ -358,9 +358,9 @@ macro_rules! by_packed_level {
 }
 
 impl Avx2 {
-    /// Whether this token runs packed weights (it has a VNNI level).
+    /// Whether this token runs packed weights (a VNNI level, the packed kernels enabled).
     pub(crate) fn runs_packed(self) -> bool {
-        self.avx512() || self.vnni()
+        self.packed && (self.avx512() || self.vnni())
     }
 
     /// Every requantized int8 output of `fc` from its packed copy `packed` (which serves `fc`
@@ -374,7 +374,7 @@ impl Avx2 {
         input: LayerInput<'_>,
         out: &mut [i8],
     ) -> bool {
-        by_packed_level!(self, requantize(packed, fc, requant, input, out))
+        self.packed && by_packed_level!(self, requantize(packed, fc, requant, input, out))
     }
 
     /// Every accumulator of `fc` from its packed copy; `false` (nothing written) without a VNNI
@@ -386,7 +386,7 @@ impl Avx2 {
         input: LayerInput<'_>,
         acc: &mut [i32],
     ) -> bool {
-        by_packed_level!(self, accumulate(packed, fc, input, acc))
+        self.packed && by_packed_level!(self, accumulate(packed, fc, input, acc))
     }
 }
 

@@ -169,6 +169,12 @@ impl<'a, P: MlpPrecision, const WIDTH: usize> QuantMlpNetwork<'a, P, WIDTH> {
         self.layers.hidden.len()
     }
 
+    /// The layers as the network runs them (packed weights included; the first layer with
+    /// its own bias, which each step's noise variant replaces): hidden, output.
+    pub fn layers(&self) -> (&[RequantizedLinear<'a, P>], &Int8Linear<'a, P::Acc>) {
+        (&self.layers.hidden, &self.layers.output)
+    }
+
     /// `(in_features, out_features)` of every layer, the output layer last.
     pub fn layer_shapes(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         let output = &self.layers.output.fc;
