@@ -6,6 +6,9 @@ use super::dims::{all_finite, fixed_row_pairs, fixed_rows};
 use super::PolicyError;
 use crate::prodmp::{apply_row_f32, BakedProDmp, BoundaryRow, ProDmpError};
 
+#[cfg(not(target_os = "none"))]
+mod lockstep;
+
 /// ProDMP decoder tables, row-major (`[n][p]` and `[n]`), as in [`BakedProDmp`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProDmpTables<'p> {
@@ -145,7 +148,7 @@ impl<'p> ProDmpTables<'p> {
             return Err(ProDmpError::NonFiniteInput);
         }
         #[cfg(not(target_os = "none"))]
-        if self.decode_lockstep::<P>(params, y0, v0, positions, velocities) {
+        if self.decode_on_host::<P>(params, y0, v0, positions, velocities) {
             return finite_outputs(positions, velocities);
         }
         let fixed = (
@@ -171,69 +174,9 @@ impl<'p> ProDmpTables<'p> {
         finite_outputs(positions, velocities)
     }
 
-    /// Hosts: four DoFs' positions and velocities of one query time summed in lockstep, one
-    /// accumulator lane per output, each in [`apply_row_f32`]'s order (the same bits as
-    /// [`Self::decode_rows`]; separate multiplies and adds, which SSE does lane by lane): the
-    /// accumulators stay in registers and the four sums overlap, where `decode_rows` runs one
-    /// dependent chain after the other (0.9-1.4 us of a 4.4 us x86 MLP-256 int8 chunk). The
-    /// firmware keeps `decode_rows` and its instruction counts. Returns false (nothing written)
-    /// when `p > P`; callers checked the lengths.
-    #[cfg(not(target_os = "none"))]
-    fn decode_lockstep<const P: usize>(
-        &self,
-        params: &[f32],
-        y0: &[f32],
-        v0: &[f32],
-        positions: &mut [f32],
-        velocities: &mut [f32],
-    ) -> bool {
-        const LANES: usize = 4;
-        let (k, p) = (y0.len(), self.params_per_dof());
-        if p > P || p == 0 || k == 0 {
-            return false;
-        }
-        let mut rows = params.chunks_exact(p);
-        let groups = y0.chunks(LANES).zip(v0.chunks(LANES));
-        for (first, (y0, v0)) in (0..).step_by(LANES).zip(groups) {
-            // theta[j] = parameter j of the group's DoFs (0 in unused lanes).
-            let mut theta = [[0.0_f32; LANES]; P];
-            for (lane, row) in rows.by_ref().take(y0.len()).enumerate() {
-                for (slot, value) in theta.iter_mut().zip(row) {
-                    if let Some(slot) = slot.get_mut(lane) {
-                        *slot = *value;
-                    }
-                }
-            }
-            let tables = (self.pos_params.chunks_exact(p))
-                .zip(self.vel_params.chunks_exact(p))
-                .zip(self.boundary_rows());
-            let outputs = positions
-                .chunks_exact_mut(k)
-                .zip(velocities.chunks_exact_mut(k));
-            for (((pos_row, vel_row), b), (pos_t, vel_t)) in tables.zip(outputs) {
-                let (mut pos, mut vel) = ([0.0_f32; LANES], [0.0_f32; LANES]);
-                for (((pos, vel), y0), v0) in pos.iter_mut().zip(&mut vel).zip(y0).zip(v0) {
-                    *pos = apply_row_f32(&[], b.pos_y0, b.pos_v0, &[], *y0, *v0);
-                    *vel = apply_row_f32(&[], b.vel_y0, b.vel_v0, &[], *y0, *v0);
-                }
-                for ((pos_coeff, vel_coeff), theta) in pos_row.iter().zip(vel_row).zip(&theta) {
-                    for ((pos, vel), theta) in pos.iter_mut().zip(&mut vel).zip(theta) {
-                        *pos += pos_coeff * theta;
-                        *vel += vel_coeff * theta;
-                    }
-                }
-                let out = pos_t.iter_mut().zip(vel_t).skip(first).take(y0.len());
-                for ((pos_out, vel_out), (pos, vel)) in out.zip(pos.iter().zip(&vel)) {
-                    (*pos_out, *vel_out) = (*pos, *vel);
-                }
-            }
-        }
-        true
-    }
-
     /// The decode loop over rows of the tables, the parameters and the outputs.
     #[inline(always)]
-    fn decode_rows<'r, 'o>(
+    pub(super) fn decode_rows<'r, 'o>(
         &self,
         pos_rows: impl Iterator<Item = &'r [f32]>,
         vel_rows: impl Iterator<Item = &'r [f32]>,
@@ -261,73 +204,5 @@ fn finite_outputs(positions: &[f32], velocities: &[f32]) -> Result<(), ProDmpErr
         Ok(())
     } else {
         Err(ProDmpError::NonFiniteResult)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    extern crate std;
-    use super::ProDmpTables;
-    use std::vec::Vec;
-
-    /// The host's lockstep decode gives the bits of the firmware's row-by-row decode.
-    #[test]
-    fn lockstep_decode_equals_row_decode() {
-        let mut state = 0x9E37_79B9_u32;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            (state as f32 / u32::MAX as f32 - 0.5) * 7.0
-        };
-        for (n, p, k) in [(12, 21, 2), (12, 21, 7), (1, 1, 1), (30, 9, 16)] {
-            let mut values = |len: usize| (0..len).map(|_| next()).collect::<Vec<f32>>();
-            let (pos_params, vel_params) = (values(n * p), values(n * p));
-            let columns = [values(n), values(n), values(n), values(n)];
-            let tables = ProDmpTables {
-                pos_params: &pos_params,
-                vel_params: &vel_params,
-                pos_y0: &columns[0],
-                pos_v0: &columns[1],
-                vel_y0: &columns[2],
-                vel_v0: &columns[3],
-            };
-            let (params, y0, v0) = (values(k * p), values(k), values(k));
-            let mut lockstep = (std::vec![0.0; n * k], std::vec![0.0; n * k]);
-            assert!(tables.decode_lockstep::<32>(
-                &params,
-                &y0,
-                &v0,
-                &mut lockstep.0,
-                &mut lockstep.1
-            ));
-            let mut rows = (std::vec![0.0; n * k], std::vec![0.0; n * k]);
-            let outputs = rows.0.chunks_exact_mut(k).zip(rows.1.chunks_exact_mut(k));
-            let (pos_rows, vel_rows) = (pos_params.chunks_exact(p), vel_params.chunks_exact(p));
-            tables.decode_rows(
-                pos_rows,
-                vel_rows,
-                params.chunks_exact(p),
-                &y0,
-                &v0,
-                outputs,
-            );
-            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
-            assert_eq!(
-                bits(&lockstep.0),
-                bits(&rows.0),
-                "positions n {n} p {p} k {k}"
-            );
-            assert_eq!(
-                bits(&lockstep.1),
-                bits(&rows.1),
-                "velocities n {n} p {p} k {k}"
-            );
-        }
-        // More parameters per DoF than the capacity: refused, nothing written.
-        let wide = ProDmpTables::split(&[0.0; 40], 1, 18).unwrap();
-        let mut out = [7.0];
-        assert!(!wide.decode_lockstep::<16>(&[0.0; 18], &[0.0], &[0.0], &mut out, &mut [7.0]));
-        assert_eq!(out, [7.0]);
     }
 }

@@ -6,8 +6,6 @@
 
 use super::sealed;
 use crate::kernels::input::LayerInput;
-#[cfg(target_arch = "x86_64")]
-use crate::kernels::lut;
 use crate::kernels::lut::LutTable;
 use crate::kernels::lut16::Lut16Table;
 
@@ -37,7 +35,7 @@ impl sealed::Quantize for i8 {
     ) {
         fc.forward_avx2(avx2, requant, input, output);
         if let Some(table) = table {
-            lut::apply_in_place_by_words(table, output);
+            avx2.apply_table(table, output);
         }
     }
 }

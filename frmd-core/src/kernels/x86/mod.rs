@@ -10,10 +10,12 @@
 //! - `requant`: requantization of eight accumulators at once;
 //! - `packed`: whole layers of weights packed for `vpdpbusd`/`vpdpwssd` (`kernels::packed`),
 //!   sixteen rows per instruction;
+//! - `table`: the int8 activation table, 64 codes per step with AVX-512 VBMI;
 //! - `vnni`: the fronts of the row sums with `vpdpbusd`/`vpdpwssd`, VEX-encoded on 256 bits
 //!   (AVX-VNNI) or EVEX-encoded on 512 bits (AVX-512 F/BW/VNNI, checked with [`avx512_active`]);
 //! - `wide`: the int16-activation layers (int64 accumulation from 512-column int32 chunk sums,
 //!   requantization to int16 and the interpolated table in registers);
+//! - `decode`: the hosts' ProDMP decode, eight DoFs per pass;
 //! - `dequant`: dequantization of int64 accumulators to f32, eight at a time.
 //!
 //! Detection is `no_std`: `CPUID` leaf 1 (AVX and OSXSAVE bits), `XGETBV` (the OS saves the SSE
@@ -32,14 +34,17 @@
 //!   "active" through `detect_avx2`. The `avx2,avxvnni` functions are called only when the
 //!   token's `vnni` flag is set, which [`avx_vnni_active`] sets only after `detect_avx_vnni`;
 //!   the `avx512f,avx512bw,avx512vnni` functions only when its `avx512` flag is set, which
-//!   [`avx512_active`] sets only after `detect_avx512` (CPUID bits and the ZMM state in XCR0).
+//!   [`avx512_active`] sets only after `detect_avx512` (CPUID bits and the ZMM state in XCR0),
+//!   and the `avx512vbmi` one only when its `vbmi` flag is set, which needs that flag and
+//!   `detect_vbmi`.
 //!   (Disabling a path later leaves existing tokens valid: the CPU still has the instructions.)
 //! - unaligned loads and stores (`_mm_loadu_si128`, `_mm256_loadu_si256`, `_mm256_storeu_si256`,
 //!   `_mm_storeu_si128`) through pointers made from references to fixed-size arrays of exactly
-//!   the accessed size (`&[i8; 16]`, `&[i8; 32]`, `&[i8; 64]` (`_mm512_loadu_si512`), `&[i16; 32]`,
-//!   `&[i16; 16]`, `&[i16; 8]`, `&[i32; 8]`, `&[i64; 4]`, `&[f32; 8]`,
-//!   `&mut [i32; 8]`, `&mut [i16; 8]`, `&mut [i64; 4]`, `&mut [f32; 8]`): in bounds,
-//!   initialized, no alignment needed.
+//!   the accessed size (`&[i8; 16]`, `&[i8; 32]`, `&[i8; 64]` (`_mm512_loadu_si512`),
+//!   `&[u8; 32]`, `&[u8; 64]`, `&[i16; 32]`, `&[i16; 16]`, `&[i16; 8]`, `&[i32; 8]`,
+//!   `&[i64; 4]`, `&[f32; 8]`, `&mut [i8; 64]` (`_mm512_storeu_si512`), `&mut [i32; 8]`,
+//!   `&mut [i16; 8]`, `&mut [i64; 4]`, `&mut [f32; 8]`): in bounds, initialized, no alignment
+//!   needed.
 //! - `_mm256_i32gather_epi32` in `wide::interpolate`: eight 4-byte reads from a `&[i16; 513]`
 //!   table at byte offsets `2 i` with every index `i` masked to `0..=511`, so each read
 //!   (`t[i]`, `t[i + 1]`) ends at byte 1026 at most, inside the table.
@@ -47,16 +52,20 @@
 //! No other memory is touched: slices are walked with `as_chunks` iterators.
 #![allow(unsafe_code)]
 
+mod decode;
 mod dequant;
 mod layer;
 mod matvec;
 mod packed;
 mod requant;
+mod table;
 mod vnni;
 mod wide;
 
 /// Output channels (weight rows) per call of the row kernels, and lanes of a requantized block.
 pub(crate) const BLOCK_ROWS: usize = 8;
+
+pub(crate) use decode::DECODE_LANES;
 
 /// Each of the eight rows from column `start` on (empty if `start` is past its end).
 #[inline(always)]
@@ -125,6 +134,7 @@ pub(crate) struct Avx2 {
     vnni: bool,
     avx512: bool,
     packed: bool,
+    vbmi: bool,
 }
 
 impl Avx2 {
@@ -135,6 +145,7 @@ impl Avx2 {
             vnni: avx_vnni_active(),
             avx512: avx512_active(),
             packed: PACKED.active(),
+            vbmi: avx512_active() && VBMI.active(),
         })
     }
 
@@ -148,6 +159,12 @@ impl Avx2 {
     #[inline]
     pub(crate) fn avx512(self) -> bool {
         self.avx512
+    }
+
+    /// Whether AVX-512 VBMI may be used too (`vpermi2b`: `x86::table`).
+    #[inline]
+    pub(crate) fn vbmi(self) -> bool {
+        self.vbmi
     }
 }
 
@@ -163,6 +180,7 @@ pub(crate) fn test_tokens() -> Vec<Avx2> {
         vnni: false,
         avx512: false,
         packed: true,
+        vbmi: false,
     };
     let mut tokens = std::vec![plain];
     for (present, token, name) in [
@@ -178,6 +196,7 @@ pub(crate) fn test_tokens() -> Vec<Avx2> {
             detected.avx512,
             Avx2 {
                 avx512: true,
+                vbmi: detected.vbmi,
                 ..plain
             },
             "AVX-512 VNNI",
@@ -244,6 +263,16 @@ fn detect_avx512() -> bool {
     let xcr0 = unsafe { _xgetbv(0) };
     let leaf = __cpuid_count(7, 0);
     xcr0 & XCR0_ZMM == XCR0_ZMM && leaf.ebx & (F | BW) == F | BW && leaf.ecx & VNNI != 0
+}
+
+/// AVX-512 VBMI's probe (only consulted while AVX-512 is active).
+static VBMI: KernelSwitch = KernelSwitch::probed(detect_vbmi);
+
+/// `CPUID.(7,0):ECX.AVX512_VBMI` (bit 1); the ZMM state is `detect_avx512`'s check, which every
+/// caller requires as well.
+fn detect_vbmi() -> bool {
+    const VBMI: u32 = 1 << 1;
+    __cpuid(0).eax >= 7 && __cpuid_count(7, 0).ecx & VBMI != 0
 }
 
 /// AVX-VNNI's switch (only consulted while AVX2 is active).
