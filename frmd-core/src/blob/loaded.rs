@@ -127,12 +127,12 @@ pub enum BlobNetwork<'a, const WIDTH: usize, S> {
 }
 
 impl<'a, const WIDTH: usize, S> BlobNetwork<'a, WIDTH, S> {
-    /// Bytes of the packed weights of an int8-activation MLP
-    /// ([`Int8MlpNetwork::packed_len`]); 0 for the other networks, which run their row-major
-    /// weights.
+    /// Bytes of the packed weights of an MLP ([`Int8MlpNetwork::packed_len`]); 0 for the
+    /// transformers, which run their row-major weights.
     pub fn packed_len(&self) -> usize {
         match self {
             Self::Mlp(net) => net.packed_len(),
+            Self::Mlp16(net) => net.packed_len(),
             _ => 0,
         }
     }
@@ -142,6 +142,7 @@ impl<'a, const WIDTH: usize, S> BlobNetwork<'a, WIDTH, S> {
     pub fn pack_weights(&self, out: &mut [u8]) -> Result<(), PolicyError> {
         match self {
             Self::Mlp(net) => net.pack_weights(out),
+            Self::Mlp16(net) => net.pack_weights(out),
             _ if out.is_empty() => Ok(()),
             _ => Err(PolicyError::Model(ModelError::Kernel(
                 KernelError::OutputLength,
@@ -154,6 +155,7 @@ impl<'a, const WIDTH: usize, S> BlobNetwork<'a, WIDTH, S> {
     pub fn use_packed_weights(&mut self, bytes: &'a [u8]) -> Result<(), PolicyError> {
         match self {
             Self::Mlp(net) => net.use_packed_weights(bytes),
+            Self::Mlp16(net) => net.use_packed_weights(bytes),
             _ if bytes.is_empty() => Ok(()),
             _ => Err(PolicyError::Model(ModelError::Kernel(
                 KernelError::WeightsLength,

@@ -202,13 +202,7 @@ impl sealed::Accumulate for i32 {
         input: LayerInput<'_>,
         acc: &mut [i32],
     ) -> bool {
-        if let Some(packed) = fc.packed.filter(|p| p.serves(fc, input)) {
-            if avx2.accumulate_packed(&packed, fc, input, acc) {
-                return true;
-            }
-        }
-        avx2.accumulate_blocks(fc, input, true, acc);
-        false
+        avx2.accumulate_layer(fc, input, acc)
     }
 }
 
@@ -300,8 +294,7 @@ impl sealed::Accumulate for i64 {
         input: LayerInput<'_>,
         acc: &mut [i64],
     ) -> bool {
-        avx2.accumulate_blocks_wide(fc, input, acc);
-        false
+        avx2.accumulate_layer_wide(fc, input, acc)
     }
 }
 

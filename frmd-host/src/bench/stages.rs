@@ -55,36 +55,37 @@ pub fn with_stages<R>(
 ) -> anyhow::Result<R> {
     let aligned = AlignedBlob::new(bytes);
     let loaded = LoadedBlob::load(aligned.bytes()).context("loading the blob")?;
+    // The layers as the policy runs them: with this CPU's packed weights, if any.
+    let packed = packed_weights(&loaded)?;
+    let config = loaded.config();
     match &loaded {
-        LoadedBlob::Mlp(blob) => {
-            // The layers as the policy runs them: with this CPU's packed weights, if any.
-            let packed = packed_weights(&loaded)?;
-            let mut network = blob.network::<MAX_WIDTH>()?;
-            network.use_packed_weights(&packed)?;
-            let (hidden, output) = network.layers();
-            let layers = (hidden, *output);
-            f(&mut Work::new(
-                blob,
-                layers,
-                loaded.config(),
-                policy,
-                input,
-            )?)
-        }
-        LoadedBlob::Mlp16(blob) => {
-            let layers = (blob.hidden_layers(), blob.mlp(&[]).output);
-            f(&mut Work::new(
-                blob,
-                layers,
-                loaded.config(),
-                policy,
-                input,
-            )?)
-        }
+        LoadedBlob::Mlp(blob) => with_network(blob, &packed, config, policy, input, f),
+        LoadedBlob::Mlp16(blob) => with_network(blob, &packed, config, policy, input, f),
         LoadedBlob::Transformer(_) | LoadedBlob::Transformer16(_) => {
             bail!("the stage breakdown covers MLP students only")
         }
     }
+}
+
+/// [`with_stages`] for one MLP blob, its layers those of its network with `packed` weights.
+fn with_network<'b, P: MlpPrecision + TryFrom<i16>, R>(
+    blob: &'b LoadedQuantMlp<'b, P>,
+    packed: &'b [u8],
+    config: PolicyConfig<'b>,
+    policy: &mut Int8Policy,
+    input: &PolicyInput<'_>,
+    f: impl FnOnce(&mut dyn Stages) -> anyhow::Result<R>,
+) -> anyhow::Result<R> {
+    let mut network = blob.network::<MAX_WIDTH>()?;
+    network.use_packed_weights(packed)?;
+    let (hidden, output) = network.layers();
+    f(&mut Work::new(
+        blob,
+        (hidden, *output),
+        config,
+        policy,
+        input,
+    )?)
 }
 
 /// The hidden layer `i` in its three forms: the whole layer, without table, accumulators only.

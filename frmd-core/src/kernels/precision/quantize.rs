@@ -53,7 +53,8 @@ impl sealed::Quantize for i16 {
         fc.requantize_activated(requant, table, input, output);
     }
 
-    /// The int64-accumulating AVX2 kernels with requantization and table in registers.
+    /// The int64-accumulating AVX2 kernels with requantization and table in registers (from
+    /// the packed weights where the layer has them and the CPU runs them).
     #[cfg(target_arch = "x86_64")]
     #[inline]
     fn forward_x86(
@@ -64,6 +65,11 @@ impl sealed::Quantize for i16 {
         input: LayerInput<'_>,
         output: &mut [i16],
     ) {
+        if let Some(packed) = fc.packed.filter(|p| p.serves(fc, input)) {
+            if avx2.requantize_packed_wide(&packed, fc, requant, table, input, output) {
+                return;
+            }
+        }
         fc.forward_avx2_wide(avx2, requant, table, input, output);
     }
 

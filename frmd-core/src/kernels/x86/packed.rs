@@ -182,18 +182,29 @@ fn padded<T: Copy + Default>(values: &[T], first: usize) -> [T; PACK_ROWS] {
     block
 }
 
-/// The layer loops of one level: `$bytes` / `$words` are its block sums of int8 / int16 inputs.
+/// The packed blocks of a layer, [`PACK_ROWS`] rows each.
+#[inline(always)]
+fn blocks<'p>(packed: &PackedWeights<'p>) -> core::slice::ChunksExact<'p, u8> {
+    let groups = packed.in_features().div_ceil(packed.kind().columns());
+    let block_len = groups.saturating_mul(GROUP_BYTES).max(1);
+    packed.bytes().chunks_exact(block_len)
+}
+
+/// The layer loops of one level: `$bytes` / `$words` are its dot-product instructions of int8 /
+/// int16 inputs.
 macro_rules! packed_level {
     ($level:ident, $features:literal, $bytes:ident, $words:ident) => {
         mod $level {
             use super::*;
 
-            /// The packed blocks of the layer with their block-sum function for `input`.
-            #[inline(always)]
-            fn blocks<'p>(packed: &PackedWeights<'p>) -> core::slice::ChunksExact<'p, u8> {
-                let groups = packed.in_features().div_ceil(packed.kind().columns());
-                let block_len = groups.saturating_mul(GROUP_BYTES).max(1);
-                packed.bytes().chunks_exact(block_len)
+            /// The block sums of `input`'s type.
+            #[inline]
+            #[target_feature(enable = $features)]
+            pub(super) fn sums(block: &[u8], input: LayerInput<'_>) -> BlockSums {
+                match input {
+                    LayerInput::Int8(x) => bytes_sums(block, x),
+                    LayerInput::Int16(x) => words_sums(block, x),
+                }
             }
 
             /// `out[o] = requantize_to_i8(bias[o] + dot(row o, input), ...)` for every row.
@@ -206,10 +217,7 @@ macro_rules! packed_level {
                 out: &mut [i8],
             ) {
                 let offset = weight_offset(input);
-                let sums = |block: &[u8]| match input {
-                    LayerInput::Int8(x) => bytes_sums(block, x),
-                    LayerInput::Int16(x) => words_sums(block, x),
-                };
+                let sums = |block: &[u8]| sums(block, input);
                 let finish = |sums: BlockSums,
                               bias: &[i32; PACK_ROWS],
                               multipliers: &[i32; PACK_ROWS],
@@ -270,12 +278,8 @@ macro_rules! packed_level {
             ) {
                 let offset = weight_offset(input);
                 for (index, block) in blocks(packed).enumerate() {
-                    let sums = match input {
-                        LayerInput::Int8(x) => bytes_sums(block, x),
-                        LayerInput::Int16(x) => words_sums(block, x),
-                    };
                     let first = index * PACK_ROWS;
-                    let lanes = with_bias(sums, offset, &padded(fc.bias, first));
+                    let lanes = with_bias(sums(block, input), offset, &padded(fc.bias, first));
                     let mut block = [0_i32; PACK_ROWS];
                     let halves = block.as_chunks_mut::<BLOCK_ROWS>().0.iter_mut().zip(lanes);
                     for (half, lanes) in halves {
@@ -377,6 +381,23 @@ impl Avx2 {
         self.packed && by_packed_level!(self, requantize(packed, fc, requant, input, out))
     }
 
+    /// The accumulators of `fc`: `true` if every row was written (from its packed copy), else
+    /// the whole blocks of eight rows only (`x86::layer`).
+    pub(crate) fn accumulate_layer(
+        self,
+        fc: &FullyConnected<'_, i32>,
+        input: LayerInput<'_>,
+        acc: &mut [i32],
+    ) -> bool {
+        if let Some(packed) = fc.packed.filter(|p| p.serves(fc, input)) {
+            if self.accumulate_packed(&packed, fc, input, acc) {
+                return true;
+            }
+        }
+        self.accumulate_blocks(fc, input, true, acc);
+        false
+    }
+
     /// Every accumulator of `fc` from its packed copy; `false` (nothing written) without a VNNI
     /// level.
     pub(crate) fn accumulate_packed(
@@ -389,6 +410,8 @@ impl Avx2 {
         self.packed && by_packed_level!(self, accumulate(packed, fc, input, acc))
     }
 }
+
+mod wide;
 
 #[cfg(test)]
 mod tests;

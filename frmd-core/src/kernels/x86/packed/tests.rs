@@ -164,3 +164,83 @@ fn packed_sums_wrap_like_the_portable_kernel() {
         });
     }
 }
+
+/// int16-activation layers (int64 accumulators) of one column chunk: the packed accumulators
+/// are the exact sums, and the requantized, tabled outputs equal the row-major kernels'.
+#[test]
+fn packed_wide_layers_match_the_exact_sums_and_the_row_major_kernels() {
+    use crate::kernels::lut16::Lut16Table;
+    use crate::quant::{CHUNK16, SHIFT16_MAX, SHIFT16_MIN};
+    let tokens = tokens();
+    let mut rng = SplitMix64::new(0x16A7);
+    let table: Lut16Table = core::array::from_fn(|_| rng.next_u64() as i16);
+    for case in 0..300 {
+        let columns = 1 + (rng.next_u64() % CHUNK16 as u64) as usize;
+        let rows = 1 + (rng.next_u64() % 40) as usize;
+        let weights: Vec<i8> = (0..rows * columns)
+            .map(|_| ((rng.next_u64() % 255) as i32 - 127) as i8)
+            .collect();
+        let x16: Vec<i16> = (0..columns).map(|_| rng.next_u64() as i16).collect();
+        let bias: Vec<i64> = (0..rows).map(|_| (rng.next_u64() as i64) >> 20).collect();
+        let multipliers: Vec<i32> = (0..rows)
+            .map(|_| (1 << 30) + (rng.next_u64() % (1 << 30)) as i32)
+            .collect();
+        let span = (SHIFT16_MAX - SHIFT16_MIN + 1) as u64;
+        let shifts: Vec<i32> = (0..rows)
+            .map(|_| SHIFT16_MIN + (rng.next_u64() % span) as i32)
+            .collect();
+        let requant = FcRequant {
+            multipliers: &multipliers,
+            shifts: &shifts,
+            output_zero_point: 0,
+            activation_min: if case % 2 == 0 { 0 } else { i16::MIN },
+            activation_max: i16::MAX,
+        };
+        let plain = FullyConnected::new(columns, rows, &weights, &bias);
+        plain.validate_exact().unwrap();
+        let input = LayerInput::Int16(&x16);
+        let exact: Vec<i64> = weights
+            .chunks_exact(columns)
+            .zip(&bias)
+            .map(|(row, b)| {
+                let dot: i64 = row
+                    .iter()
+                    .zip(&x16)
+                    .map(|(w, x)| i64::from(*w) * i64::from(*x))
+                    .sum();
+                b + dot
+            })
+            .collect();
+        let table = (case % 3 != 0).then_some(&table);
+        let mut want_codes = std::vec![0_i16; rows];
+        plain
+            .forward_activated(&requant, table, input, &mut want_codes)
+            .unwrap();
+        let kind = PackedKind::of(input);
+        let mut bytes = std::vec![0_u8; kind.packed_len(columns, rows).unwrap()];
+        pack(&plain, kind, &mut bytes).unwrap();
+        let packed = PackedWeights::new(&plain, kind, &bytes).unwrap();
+        let layer = FullyConnected {
+            packed: Some(packed),
+            ..plain
+        };
+        for token in &tokens {
+            let mut acc = std::vec![0_i64; rows];
+            assert!(token.accumulate_packed_wide(&packed, &layer, input, &mut acc));
+            assert_eq!(acc, exact, "{token:?} case {case} {rows}x{columns}");
+            let mut codes = std::vec![0_i16; rows];
+            assert!(
+                token.requantize_packed_wide(&packed, &layer, &requant, table, input, &mut codes)
+            );
+            assert_eq!(codes, want_codes, "{token:?} case {case} {rows}x{columns}");
+        }
+        let mut acc = std::vec![0_i64; rows];
+        layer.accumulate(input, &mut acc).unwrap();
+        assert_eq!(acc, exact, "accumulate, case {case}");
+        let mut codes = std::vec![0_i16; rows];
+        layer
+            .forward_activated(&requant, table, input, &mut codes)
+            .unwrap();
+        assert_eq!(codes, want_codes, "forward, case {case}");
+    }
+}

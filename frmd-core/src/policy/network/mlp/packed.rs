@@ -1,4 +1,4 @@
-//! An int8 MLP network's weights packed for the host kernels ([`crate::kernels::packed`]): the
+//! An MLP network's weights packed for the host kernels ([`crate::kernels::packed`]): the
 //! host sizes a buffer ([`QuantMlpNetwork::packed_len`]), fills it once
 //! ([`QuantMlpNetwork::pack_weights`]) and hands it back
 //! ([`QuantMlpNetwork::use_packed_weights`]), which checks every layer's part against its
@@ -7,8 +7,8 @@
 
 use super::{QuantMlpNetwork, MAX_HIDDEN_LAYERS};
 use crate::kernels::packed::{pack, PackedKind, PackedWeights};
-use crate::kernels::{FullyConnected, KernelError};
-use crate::model::mlp::{InputPrecision, ModelError};
+use crate::kernels::{Accumulator, FullyConnected, KernelError};
+use crate::model::mlp::{InputPrecision, MlpPrecision, ModelError};
 use crate::policy::PolicyError;
 
 /// A kernel error as a policy error.
@@ -16,31 +16,31 @@ fn kernel(error: KernelError) -> PolicyError {
     PolicyError::Model(ModelError::Kernel(error))
 }
 
-impl<'a, const WIDTH: usize> QuantMlpNetwork<'a, i8, WIDTH> {
+impl<'a, P: MlpPrecision, const WIDTH: usize> QuantMlpNetwork<'a, P, WIDTH> {
     /// Every layer (hidden layers, then the output layer) with the packed kind of its input:
     /// the first layer's by the input precision (none for two planes, whose fine plane runs
-    /// separately), int8 codes for the others.
+    /// separately), the activation codes' for the others; none for a layer of int64
+    /// accumulators wider than one column chunk (the kernels sum one chunk per row).
     fn packed_layers(
         &self,
-    ) -> impl Iterator<Item = (&FullyConnected<'a, i32>, Option<PackedKind>)> {
+    ) -> impl Iterator<Item = (&FullyConnected<'a, P::Acc>, Option<PackedKind>)> {
         let first = match self.precision {
             InputPrecision::Int8 => Some(PackedKind::Bytes),
             InputPrecision::Int16 => Some(PackedKind::Words),
             InputPrecision::TwoPlane => None,
+        };
+        let codes = if P::BITS == 8 {
+            PackedKind::Bytes
+        } else {
+            PackedKind::Words
         };
         let hidden = self.layers.hidden.iter().map(|layer| &layer.fc);
         hidden
             .chain([&self.layers.output.fc])
             .enumerate()
             .map(move |(index, fc)| {
-                (
-                    fc,
-                    if index == 0 {
-                        first
-                    } else {
-                        Some(PackedKind::Bytes)
-                    },
-                )
+                let kind = if index == 0 { first } else { Some(codes) };
+                (fc, kind.filter(|_| fc.in_features <= P::Acc::CHUNK))
             })
     }
 
