@@ -102,8 +102,8 @@ macro_rules! block_sums {
             let (group_runs, _) = groups.as_chunks::<UNROLL>();
             let (word_runs, _) = words.as_chunks::<UNROLL>();
             for (run, x) in group_runs.iter().zip(word_runs) {
-                for k in 0..UNROLL {
-                    acc[k] = step!($level, $dot, acc[k], &run[k], $word(&x[k]));
+                for ((acc, group), x) in acc.iter_mut().zip(run).zip(x) {
+                    *acc = step!($level, $dot, *acc, group, $word(x));
                 }
             }
             let done = word_runs.len() * UNROLL;
