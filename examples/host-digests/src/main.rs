@@ -1,9 +1,10 @@
 //! Digests of what a host computes, one `name digest` line each: the Cortex-M firmware's
 //! workloads (`frmd-firmware-support`: ProDMP decode, the firmware-size int8 MLP with its decode,
 //! the fully connected kernel cases with int8 and int16 activations) and chunks of the sample
-//! policy blob (loader, sampler with the integer Gaussian, decode). The same bytes on every host:
-//! on x86-64 every kernel level this CPU runs (portable, AVX2, AVX-VNNI, AVX-512 VNNI) is checked
-//! to agree before printing, on aarch64 every level (portable, NEON, NEON with `SDOT`) likewise;
+//! policy blob (loader, sampler with the integer Gaussian, decode; its weights packed where the
+//! CPU runs packed kernels). The same bytes on every host: on x86-64 every kernel level this CPU
+//! runs (portable, AVX2, AVX-VNNI, AVX-512 VNNI, packed weights or row-major) is checked to agree
+//! before printing, on aarch64 every level (portable, NEON, NEON with `SDOT`) likewise;
 //! `scripts/aarch64.sh` runs this example natively and under
 //! `qemu-aarch64` and compares the lines.
 //!
@@ -14,7 +15,7 @@
 //! Run with `cargo run --release --manifest-path examples/host-digests/Cargo.toml`.
 use frmd_core::blob::LoadedMlp;
 use frmd_core::hash::Fnv1a64;
-use frmd_core::policy::{AlignedBytes, Noise};
+use frmd_core::policy::{AlignedBytes, Noise, Policy};
 use frmd_core::rng::Rng;
 use frmd_firmware_support::synthetic::mlp as synthetic_mlp;
 use frmd_firmware_support::workload::{digest_all, Workload};
@@ -37,7 +38,16 @@ fn baked() -> prodmp_workload::Baked {
 /// 50 chunks of the sample policy from fresh episodes with varying observations.
 fn policy_digest() -> u64 {
     let loaded = LoadedMlp::load(&BLOB.0).expect("sample blob");
-    let mut policy = loaded.policy::<2, 3, 2, 6, 4, 32, 40>().expect("policy");
+    // The weights packed for this CPU's kernels where it runs them (same bits as row-major).
+    let mut packed = Vec::new();
+    if frmd_core::kernels::packed::runs_here() {
+        let network = loaded.network::<40>().expect("network");
+        packed.resize(network.packed_len(), 0);
+        network.pack_weights(&mut packed).expect("pack");
+    }
+    let mut network = loaded.network::<40>().expect("network");
+    network.use_packed_weights(&packed).expect("packed weights");
+    let mut policy = Policy::<_, 2, 3, 2, 6, 4, 32>::new(loaded.config(), network).expect("policy");
     let mut rng = Rng::new(7);
     let mut digest = Fnv1a64::new();
     for chunk in 0..50 {
@@ -72,20 +82,27 @@ fn digests() -> Vec<(&'static str, u64)> {
 fn checked_digests() -> Vec<(&'static str, u64)> {
     use frmd_core::kernels::x86;
     let best = digests();
-    let (avx512, vnni) = (x86::avx512_active(), x86::avx_vnni_active());
-    for (level, wide, dot, avx2) in [
-        ("avx-vnni", false, vnni, true),
-        ("avx2", false, false, true),
-        ("portable", false, false, false),
+    let (avx512, vnni, packed) = (
+        x86::avx512_active(),
+        x86::avx_vnni_active(),
+        x86::packed_active(),
+    );
+    for (level, wide, dot, pack, avx2) in [
+        ("row-major", avx512, vnni, false, true),
+        ("avx-vnni", false, vnni, packed, true),
+        ("avx2", false, false, false, true),
+        ("portable", false, false, false, false),
     ] {
         x86::set_avx512_enabled(wide);
         x86::set_avx_vnni_enabled(dot);
+        x86::set_packed_enabled(pack);
         x86::set_avx2_enabled(avx2);
         assert_eq!(digests(), best, "the {level} kernels differ");
     }
     x86::set_avx2_enabled(true);
     x86::set_avx_vnni_enabled(vnni);
     x86::set_avx512_enabled(avx512);
+    x86::set_packed_enabled(packed);
     best
 }
 

@@ -151,7 +151,7 @@ impl<'a, const WIDTH: usize, S> BlobNetwork<'a, WIDTH, S> {
     }
 
     /// Runs the packed weights `bytes` from [`Self::pack_weights`], checked against the
-    /// network's ([`Int8MlpNetwork::use_packed_weights`]).
+    /// network's ([`Int8MlpNetwork::use_packed_weights`]); empty `bytes` change nothing.
     pub fn use_packed_weights(&mut self, bytes: &'a [u8]) -> Result<(), PolicyError> {
         match self {
             Self::Mlp(net) => net.use_packed_weights(bytes),

@@ -79,7 +79,12 @@ impl<'a, P: MlpPrecision, const WIDTH: usize> QuantMlpNetwork<'a, P, WIDTH> {
     /// Lets every layer run its packed copy from `bytes` (what [`Self::pack_weights`] wrote for
     /// this network). Each layer's part is checked against its weights first; on any
     /// difference the network is left as it was and `KernelError::WeightsLength` returned.
+    /// Empty `bytes` (a host that does not pack: [`crate::kernels::packed::runs_here`] is
+    /// false) leave the network on its row-major weights.
     pub fn use_packed_weights(&mut self, bytes: &'a [u8]) -> Result<(), PolicyError> {
+        if bytes.is_empty() {
+            return Ok(());
+        }
         if bytes.len() != self.packed_len() {
             return Err(kernel(KernelError::WeightsLength));
         }
@@ -107,5 +112,85 @@ impl<'a, P: MlpPrecision, const WIDTH: usize> QuantMlpNetwork<'a, P, WIDTH> {
             fc.packed = view;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use crate::blob::LoadedMlp;
+    use crate::kernels::KernelError;
+    use crate::model::mlp::ModelError;
+    use crate::policy::{AlignedBytes, Network, PolicyError};
+    use std::vec::Vec;
+
+    macro_rules! sample {
+        () => {
+            include_bytes!(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/data/sample_policy.blob"
+            ))
+        };
+    }
+    static BLOB: AlignedBytes<{ sample!().len() }> = AlignedBytes(*sample!());
+
+    /// Every output of every noise variant, bit for bit.
+    fn outputs(network: &mut impl Network) -> Vec<u32> {
+        let input: Vec<f32> = (0..network.input_width())
+            .map(|i| (i as f32 * 0.37).sin())
+            .collect();
+        let mut all = Vec::new();
+        for variant in 0..network.num_noise_variants().max(1) {
+            let mut out = std::vec![0.0_f32; network.output_width()];
+            network.forward(variant, &input, &mut out).unwrap();
+            all.extend(out.iter().map(|v| v.to_bits()));
+        }
+        all
+    }
+
+    #[test]
+    fn packed_weights_give_the_same_outputs_and_are_checked() {
+        let loaded = LoadedMlp::load(&BLOB.0).unwrap();
+        let mut plain = loaded.network::<64>().unwrap();
+        let want = outputs(&mut plain);
+        let len = plain.packed_len();
+        assert!(len > 0);
+        let mut bytes = std::vec![0_u8; len];
+        plain.pack_weights(&mut bytes).unwrap();
+        assert!(plain.pack_weights(&mut std::vec![0; len + 1]).is_err());
+        let mut bad = bytes.clone();
+        bad[len / 2] ^= 0x10;
+
+        // Packed (run with whatever level this CPU has): the same bits.
+        let mut packed = loaded.network::<64>().unwrap();
+        packed.use_packed_weights(&bytes).unwrap();
+        assert!(packed
+            .layers()
+            .0
+            .iter()
+            .all(|layer| layer.fc.packed.is_some()));
+        assert_eq!(outputs(&mut packed), want);
+
+        // No bytes: nothing changes (a host that does not pack).
+        let mut unpacked = loaded.network::<64>().unwrap();
+        unpacked.use_packed_weights(&[]).unwrap();
+        assert!(unpacked
+            .layers()
+            .0
+            .iter()
+            .all(|layer| layer.fc.packed.is_none()));
+
+        // A changed byte or a short buffer is refused and leaves the network as it was.
+        let refused = Err(PolicyError::Model(ModelError::Kernel(
+            KernelError::WeightsLength,
+        )));
+        assert_eq!(unpacked.use_packed_weights(&bad), refused);
+        assert_eq!(unpacked.use_packed_weights(&bytes[..len - 1]), refused);
+        assert!(unpacked
+            .layers()
+            .0
+            .iter()
+            .all(|layer| layer.fc.packed.is_none()));
+        assert_eq!(outputs(&mut unpacked), want);
     }
 }
