@@ -1,36 +1,46 @@
 //! Weights packed for the hosts' dot-product instructions: a second copy of a layer's int8
-//! weights, made once when a host network is built, in the order in which `vpdpbusd` /
-//! `vpdpwssd` (x86 AVX-VNNI and AVX-512 VNNI) consume them with one broadcast input word per
-//! step, so that one instruction adds a group of columns to sixteen rows at once and no
-//! horizontal reduction is left at the end of a row (`kernels::x86::packed`).
+//! weights, made once when a host network is built, in the order in which `vpdpbusd` (x86
+//! AVX-VNNI and AVX-512 VNNI) consumes them with one broadcast input word per step, so that one
+//! instruction adds four columns to sixteen rows at once and no horizontal reduction is left at
+//! the end of a row (`kernels::x86::packed`).
 //!
 //! Layout: rows in blocks of [`PACK_ROWS`] (the last block padded with zero rows), each block the
-//! groups of columns in order (the last group padded with zero columns), each group 64 bytes: row
-//! `r` of the block at bytes `4 r .. 4 r + 4`, holding
-//! - [`PackedKind::Bytes`] (int8 inputs): the four weights of columns `4 g .. 4 g + 4` made
-//!   unsigned, `w ^ 0x80 = w + 128` (the kernel subtracts `128 sum x` once per layer);
-//! - [`PackedKind::Words`] (int16 inputs): the two weights of columns `2 g, 2 g + 1`
-//!   sign-extended to little-endian int16.
+//! groups of four columns in order (the last group padded with zero columns), each group 64
+//! bytes, row `r` of the block at bytes `4 r .. 4 r + 4`, holding
+//! - [`PackedKind::Bytes`] (int8 inputs): the four weights made unsigned, `w ^ 0x80 = w + 128`
+//!   (the kernel subtracts `128 sum x` once per layer);
+//! - [`PackedKind::Words`] (int16 inputs): the four weights as they are, and after the groups
+//!   each row's weight sum (sixteen little-endian int32): the kernel splits every input into its
+//!   high byte `h` and unsigned low byte `l`, `x = 256 h + l`, and sums `w l` and
+//!   `w (h + 128)` with the same bytes, then subtracts `256 * 128 sum w`.
 //!
-//! A [`PackedWeights`] is only made by checking its bytes against the layer's weights
-//! ([`PackedWeights::new`]), and the kernels use it only with that very weight slice, so a
-//! packed copy can never stand for other weights. The results are those of the row-major kernels
-//! bit for bit (wrapping int32 sums: the order of the products does not matter).
+//! Layers wider than [`MAX_PACKED_COLUMNS`] are not packed (the kernels keep a layer's input
+//! words on the stack). A [`PackedWeights`] is only made by checking its bytes against the
+//! layer's weights ([`PackedWeights::new`]), and the kernels use it only with that very weight
+//! slice, so a packed copy can never stand for other weights. The results are those of the
+//! row-major kernels bit for bit (wrapping int32 sums: the order of the products does not
+//! matter).
 
 use super::{Accumulator, FullyConnected, KernelError, LayerInput};
 
 /// Rows per packed block (one 512-bit register, or two 256-bit ones, of int32 sums).
 pub const PACK_ROWS: usize = 16;
 
+/// Columns per group.
+pub const GROUP_COLUMNS: usize = 4;
+
 /// Bytes of one group of columns in a block: four bytes for each of [`PACK_ROWS`] rows.
-pub const GROUP_BYTES: usize = 4 * PACK_ROWS;
+pub const GROUP_BYTES: usize = GROUP_COLUMNS * PACK_ROWS;
+
+/// Widest layer that is packed.
+pub const MAX_PACKED_COLUMNS: usize = 1024;
 
 /// The input type a packed copy is made for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PackedKind {
-    /// int8 inputs: four columns per group, weights made unsigned.
+    /// int8 inputs: weights made unsigned.
     Bytes,
-    /// int16 inputs: two columns per group, weights widened to int16.
+    /// int16 inputs: signed weights and each row's weight sum.
     Words,
 }
 
@@ -43,27 +53,30 @@ impl PackedKind {
         }
     }
 
-    /// Columns per group.
-    pub const fn columns(self) -> usize {
-        match self {
-            Self::Bytes => 4,
-            Self::Words => 2,
+    /// Bytes of one block of rows of a layer `in_features` wide (`None` beyond
+    /// [`MAX_PACKED_COLUMNS`] or for no columns).
+    pub fn block_len(self, in_features: usize) -> Option<usize> {
+        if in_features == 0 || in_features > MAX_PACKED_COLUMNS {
+            return None;
         }
+        let groups = in_features.div_ceil(GROUP_COLUMNS) * GROUP_BYTES;
+        Some(match self {
+            Self::Bytes => groups,
+            Self::Words => groups + 4 * PACK_ROWS,
+        })
     }
 
-    /// The packed length of a `[out_features, in_features]` layer, `None` on overflow.
+    /// The packed length of a `[out_features, in_features]` layer, `None` where it is not
+    /// packed ([`Self::block_len`]) or on overflow.
     pub fn packed_len(self, in_features: usize, out_features: usize) -> Option<usize> {
-        let groups = in_features.div_ceil(self.columns());
         out_features
             .div_ceil(PACK_ROWS)
-            .checked_mul(groups)?
-            .checked_mul(GROUP_BYTES)
+            .checked_mul(self.block_len(in_features)?)
     }
 
     /// The packed bytes of `layer`, in order.
     fn bytes<'a, A>(self, layer: &'a FullyConnected<'_, A>) -> impl Iterator<Item = u8> + 'a {
         let (width, height) = (layer.in_features, layer.out_features);
-        let columns = self.columns();
         let weight = move |row: usize, column: usize| {
             let inside = row < height && column < width;
             let index = row.wrapping_mul(width).wrapping_add(column);
@@ -72,25 +85,29 @@ impl PackedKind {
                 .flatten()
                 .unwrap_or(0)
         };
-        let groups = width.div_ceil(columns);
+        let groups = width.div_ceil(GROUP_COLUMNS);
         (0..height.div_ceil(PACK_ROWS)).flat_map(move |block| {
-            (0..groups).flat_map(move |group| {
-                (0..PACK_ROWS).flat_map(move |r| {
-                    let row = block * PACK_ROWS + r;
-                    let first = group * columns;
-                    let word = match self {
-                        Self::Bytes => {
-                            core::array::from_fn(|k| (weight(row, first + k) as u8) ^ 0x80)
+            let rows = move || (0..PACK_ROWS).map(move |r| block * PACK_ROWS + r);
+            let weights = (0..groups).flat_map(move |group| {
+                rows().flat_map(move |row| {
+                    let first = group * GROUP_COLUMNS;
+                    let word: [u8; GROUP_COLUMNS] = core::array::from_fn(|k| {
+                        let w = weight(row, first + k) as u8;
+                        match self {
+                            Self::Bytes => w ^ 0x80,
+                            Self::Words => w,
                         }
-                        Self::Words => {
-                            let [a, b] = [0, 1].map(|k| i16::from(weight(row, first + k)));
-                            let ([a0, a1], [b0, b1]) = (a.to_le_bytes(), b.to_le_bytes());
-                            [a0, a1, b0, b1]
-                        }
-                    };
+                    });
                     word.into_iter()
                 })
-            })
+            });
+            let sums = rows()
+                .filter(move |_| self == Self::Words)
+                .flat_map(move |row| {
+                    let sum: i32 = (0..width).map(|c| i32::from(weight(row, c))).sum();
+                    sum.to_le_bytes().into_iter()
+                });
+            weights.chain(sums)
         })
     }
 }
@@ -195,31 +212,36 @@ mod tests {
 
     #[test]
     fn packed_bytes_follow_the_layout_and_are_checked() {
-        // 3 x 5: one block, two byte groups (columns 4 and the padding) or three word groups.
+        // 3 x 5: one block of two groups (columns 4 and the padding).
         let weights: [i8; 15] = core::array::from_fn(|i| (i as i8 - 7) * 9);
         let bias = [0_i32; 3];
         let layer = FullyConnected::new(5, 3, &weights, &bias);
         for kind in [PackedKind::Bytes, PackedKind::Words] {
             let len = kind.packed_len(5, 3).unwrap();
-            assert_eq!(len, 5_usize.div_ceil(kind.columns()) * GROUP_BYTES);
+            let sums_len = if kind == PackedKind::Words { 64 } else { 0 };
+            assert_eq!(len, 2 * GROUP_BYTES + sums_len);
             let mut out = [0_u8; 4 * GROUP_BYTES];
             pack(&layer, kind, &mut out[..len]).unwrap();
             for row in 0..PACK_ROWS {
-                for column in 0..5_usize.div_ceil(kind.columns()) * kind.columns() {
-                    let w = if row < 3 && column < 5 {
+                let w = |column: usize| {
+                    if row < 3 && column < 5 {
                         weights[row * 5 + column]
                     } else {
                         0
-                    };
-                    let (group, k) = (column / kind.columns(), column % kind.columns());
-                    let at = group * GROUP_BYTES + 4 * row;
+                    }
+                };
+                for column in 0..8 {
+                    let at = column / 4 * GROUP_BYTES + 4 * row + column % 4;
                     let stored = match kind {
-                        PackedKind::Bytes => (out[at + k] ^ 0x80) as i8,
-                        PackedKind::Words => {
-                            i16::from_le_bytes([out[at + 2 * k], out[at + 2 * k + 1]]) as i8
-                        }
+                        PackedKind::Bytes => (out[at] ^ 0x80) as i8,
+                        PackedKind::Words => out[at] as i8,
                     };
-                    assert_eq!(stored, w, "{kind:?} row {row} column {column}");
+                    assert_eq!(stored, w(column), "{kind:?} row {row} column {column}");
+                }
+                if kind == PackedKind::Words {
+                    let at = 2 * GROUP_BYTES + 4 * row;
+                    let sum = i32::from_le_bytes([out[at], out[at + 1], out[at + 2], out[at + 3]]);
+                    assert_eq!(sum, (0..5).map(|c| i32::from(w(c))).sum::<i32>());
                 }
             }
             let packed = PackedWeights::new(&layer, kind, &out[..len]).unwrap();
@@ -232,7 +254,7 @@ mod tests {
             assert!(!packed.serves(&elsewhere, kind_input(kind, &[0; 5], &[0; 5])));
             // One changed byte, or a wrong length, is refused.
             let mut bad = out;
-            bad[7] ^= 1;
+            bad[len - 1] ^= 1;
             assert_eq!(
                 PackedWeights::new(&layer, kind, &bad[..len]),
                 Err(KernelError::WeightsLength)
@@ -246,6 +268,11 @@ mod tests {
                 Err(KernelError::OutputLength)
             );
         }
+        // Too wide to pack.
+        assert_eq!(
+            PackedKind::Bytes.packed_len(MAX_PACKED_COLUMNS + 1, 1),
+            None
+        );
     }
 
     fn kind_input<'a>(kind: PackedKind, x8: &'a [i8], x16: &'a [i16]) -> LayerInput<'a> {

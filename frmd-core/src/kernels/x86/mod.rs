@@ -42,7 +42,7 @@
 //!   `_mm_storeu_si128`) through pointers made from references to fixed-size arrays of exactly
 //!   the accessed size (`&[i8; 16]`, `&[i8; 32]`, `&[i8; 64]` (`_mm512_loadu_si512`),
 //!   `&[u8; 32]`, `&[u8; 64]`, `&[i16; 32]`, `&[i16; 16]`, `&[i16; 8]`, `&[i32; 8]`,
-//!   `&[i64; 4]`, `&[f32; 8]`, `&mut [i8; 64]` (`_mm512_storeu_si512`), `&mut [i32; 8]`,
+//!   `&[i64; 4]`, `&[f32; 8]`, `&mut [i8; 64]` (`_mm512_storeu_si512`), `&mut [i32; 4]`, `&mut [i32; 8]`,
 //!   `&mut [i16; 8]`, `&mut [i64; 4]`, `&mut [f32; 8]`): in bounds, initialized, no alignment
 //!   needed.
 //! - `_mm256_i32gather_epi32` in `wide::interpolate`: eight 4-byte reads from a `&[i16; 513]`

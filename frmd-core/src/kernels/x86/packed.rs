@@ -1,33 +1,41 @@
 //! Whole layers of packed weights (`kernels::packed`): per block of sixteen rows and group of
-//! columns, one `vpdpbusd` (int8 inputs, four columns) or `vpdpwssd` (int16 inputs, two columns)
-//! of the 64 packed bytes and the group's input word broadcast to every lane, so each lane
-//! accumulates its own row and a block's sums are ready without a horizontal reduction. AVX-512
-//! VNNI takes a group in one 512-bit instruction, AVX-VNNI in two 256-bit ones; four groups are
-//! in flight at once (independent accumulators). The sums then get the bias and, for hidden
-//! layers, `x86::requant`'s requantization, sixteen outputs at a time.
+//! four columns, `vpdpbusd` of the 64 packed bytes and the group's input word broadcast to every
+//! lane, so each lane accumulates its own row and a block's sums are ready without a horizontal
+//! reduction. AVX-512 VNNI takes a group in one 512-bit instruction, AVX-VNNI in two 256-bit
+//! ones; several groups are in flight at once (independent accumulators). The sums then get the
+//! bias and, for hidden layers, `x86::requant`'s requantization, sixteen outputs at a time.
 //!
-//! Bit-exactness: int8 weights are stored as `u = w + 128`, so a lane accumulates
+//! Bit-exactness. int8 inputs meet unsigned weights `u = w + 128`: a lane accumulates
 //! `sum u x = sum w x + 128 sum x` (four-product groups of at most `4 * 255 * 128` in magnitude,
-//! lanes adding modulo 2^32); `128 sum x`, the same for every row, is subtracted once per
-//! block. int16 inputs meet weights widened to int16: pair sums of at most `2^23`, exact. Each
-//! row's result is therefore the wrapping int32 sum of its products, as in the portable kernel;
-//! padded columns meet a zero input and padded rows are never stored.
+//! lanes adding modulo 2^32), and `128 sum x`, the same for every row, is subtracted. int16
+//! inputs are split, `x = 256 h + l` with `h` the signed high byte and `l` the unsigned low
+//! byte, and meet the signed weights twice: `sum w l` and `sum w (h + 128)` (both unsigned
+//! inputs), so `sum w x = sum w l + 256 (sum w (h + 128) - 128 sum w)` with the row's weight sum
+//! stored beside the packed weights; every step adds modulo 2^32. Each row's result is therefore
+//! the wrapping int32 sum of its products, as in the portable kernel; padded columns have zero
+//! weights and padded rows are never stored.
 #![allow(unsafe_code)]
 
 use super::requant::{load_i32, pack_i8, requantize_lanes, RequantBlock};
 use super::{Avx2, BLOCK_ROWS};
-use crate::kernels::packed::{PackedWeights, GROUP_BYTES, PACK_ROWS};
+use crate::kernels::packed::{
+    PackedWeights, GROUP_BYTES, GROUP_COLUMNS, MAX_PACKED_COLUMNS, PACK_ROWS,
+};
 use crate::kernels::{FcRequant, FullyConnected, LayerInput};
 use core::arch::x86_64::{
-    __m256i, __m512i, _mm256_add_epi32, _mm256_dpbusd_avx_epi32, _mm256_dpwssd_avx_epi32,
-    _mm256_loadu_si256, _mm256_set1_epi32, _mm256_setzero_si256, _mm256_storeu_si256,
-    _mm256_sub_epi32, _mm512_add_epi32, _mm512_castsi512_si256, _mm512_dpbusd_epi32,
-    _mm512_dpwssd_epi32, _mm512_extracti64x4_epi64, _mm512_loadu_si512, _mm512_set1_epi32,
-    _mm512_setzero_si512,
+    __m128i, __m256i, __m512i, _mm256_add_epi32, _mm256_castsi256_si128, _mm256_dpbusd_avx_epi32,
+    _mm256_extracti128_si256, _mm256_loadu_si256, _mm256_permute4x64_epi64, _mm256_set1_epi32,
+    _mm256_setr_epi8, _mm256_setzero_si256, _mm256_shuffle_epi8, _mm256_slli_epi32,
+    _mm256_storeu_si256, _mm256_sub_epi32, _mm512_add_epi32, _mm512_castsi512_si256,
+    _mm512_dpbusd_epi32, _mm512_extracti64x4_epi64, _mm512_loadu_si512, _mm512_set1_epi32,
+    _mm512_setzero_si512, _mm_set1_epi8, _mm_storeu_si128, _mm_xor_si128,
 };
 
-/// Groups of columns in flight (independent accumulators).
+/// Groups of columns in flight (independent accumulators) for int8 inputs.
 const UNROLL: usize = 4;
+
+/// Groups in flight for split int16 inputs (two accumulators each).
+const SPLIT_UNROLL: usize = 2;
 
 /// The sums of one block's sixteen rows: rows 0..8 and 8..16.
 type BlockSums = [__m256i; 2];
@@ -36,13 +44,6 @@ type BlockSums = [__m256i; 2];
 #[inline(always)]
 fn word_of_bytes(group: &[i8; 4]) -> i32 {
     i32::from_le_bytes(group.map(|code| code as u8))
-}
-
-/// The broadcast word of two int16 codes.
-#[inline(always)]
-fn word_of_halves(group: &[i16; 2]) -> i32 {
-    let [low, high] = group.map(|code| i32::from(code as u16));
-    low | (high << 16)
 }
 
 /// Loads 32 packed bytes.
@@ -89,13 +90,162 @@ macro_rules! step {
     };
 }
 
+/// One group's products of the split int16 input added to the `(low, high)` accumulators: the
+/// broadcast input words are the unsigned operand, the signed weights the other.
+macro_rules! split_step {
+    (avx, $dot:ident, $acc:expr, $group:expr, $low:expr, $high:expr) => {{
+        let ([l0, l1], [h0, h1]) = $acc;
+        let (w_low, w_high) = halves($group);
+        let (w_low, w_high) = (load_half(w_low), load_half(w_high));
+        let (low, high) = (_mm256_set1_epi32($low), _mm256_set1_epi32($high));
+        (
+            [$dot(l0, low, w_low), $dot(l1, low, w_high)],
+            [$dot(h0, high, w_low), $dot(h1, high, w_high)],
+        )
+    }};
+    (zmm, $dot:ident, $acc:expr, $group:expr, $low:expr, $high:expr) => {{
+        let (low, high) = $acc;
+        let w = load_group($group);
+        (
+            $dot(low, _mm512_set1_epi32($low), w),
+            $dot(high, _mm512_set1_epi32($high), w),
+        )
+    }};
+}
+
+/// Words a split int16 input may take (four columns each).
+const MAX_WORDS: usize = MAX_PACKED_COLUMNS / GROUP_COLUMNS;
+
+/// Stack space for a split int16 input.
+struct SplitWords {
+    low: [i32; MAX_WORDS],
+    high: [i32; MAX_WORDS],
+}
+
+/// A layer's input as the packed kernels read it.
+#[derive(Clone, Copy)]
+pub(super) enum Prepared<'a> {
+    /// int8 codes, read four at a time as broadcast words.
+    Bytes(&'a [i8]),
+    /// int16 codes split per group of four columns: the low bytes, and the high bytes plus 128.
+    Split(&'a [i32], &'a [i32]),
+}
+
+impl SplitWords {
+    /// `x` split into the words of [`Prepared::Split`]; `None` beyond [`MAX_PACKED_COLUMNS`].
+    /// Sixteen columns per step: `vpshufb` gathers each 128-bit half's low and high bytes,
+    /// `vpermq` joins the halves; the last `len % 16` columns one by one.
+    #[target_feature(enable = "avx2")]
+    fn split<'a>(&'a mut self, x: &[i16]) -> Option<Prepared<'a>> {
+        let groups = x.len().div_ceil(GROUP_COLUMNS);
+        let low = self.low.get_mut(..groups)?;
+        let high = self.high.get_mut(..groups)?;
+        let order = _mm256_setr_epi8(
+            0, 2, 4, 6, 8, 10, 12, 14, 1, 3, 5, 7, 9, 11, 13, 15, 0, 2, 4, 6, 8, 10, 12, 14, 1, 3,
+            5, 7, 9, 11, 13, 15,
+        );
+        let (steps, rest) = x.as_chunks::<16>();
+        let (low_steps, low_rest) = low.split_at_mut_checked(4 * steps.len())?;
+        let (high_steps, high_rest) = high.split_at_mut_checked(4 * steps.len())?;
+        let (low_steps, high_steps) = (
+            low_steps.as_chunks_mut::<4>().0,
+            high_steps.as_chunks_mut::<4>().0,
+        );
+        let words = low_steps.iter_mut().zip(high_steps.iter_mut());
+        for ((low, high), codes) in words.zip(steps) {
+            // SAFETY: the pointer comes from a `&[i16; 16]`: 32 initialized, readable bytes;
+            // `loadu` has no alignment requirement.
+            let codes = unsafe { _mm256_loadu_si256(codes.as_ptr().cast::<__m256i>()) };
+            // Per half: low bytes, then high bytes; then [low 0..16, high 0..16].
+            let bytes =
+                _mm256_permute4x64_epi64::<0b11_01_10_00>(_mm256_shuffle_epi8(codes, order));
+            let flipped =
+                _mm_xor_si128(_mm256_extracti128_si256::<1>(bytes), _mm_set1_epi8(i8::MIN));
+            // SAFETY: the pointers come from `&mut [i32; 4]`: 16 writable bytes each; no
+            // alignment needed.
+            unsafe {
+                _mm_storeu_si128(
+                    low.as_mut_ptr().cast::<__m128i>(),
+                    _mm256_castsi256_si128(bytes),
+                );
+                _mm_storeu_si128(high.as_mut_ptr().cast::<__m128i>(), flipped);
+            }
+        }
+        let rest_words = low_rest.iter_mut().zip(high_rest.iter_mut());
+        for ((low, high), codes) in rest_words.zip(rest.chunks(GROUP_COLUMNS)) {
+            // Missing columns: x = 0, so l = 0 and h + 128 = 128.
+            let (mut l, mut h) = ([0_u8; 4], [0x80_u8; 4]);
+            for ((l, h), code) in l.iter_mut().zip(&mut h).zip(codes) {
+                let [low_byte, high_byte] = code.to_le_bytes();
+                (*l, *h) = (low_byte, high_byte ^ 0x80);
+            }
+            (*low, *high) = (i32::from_le_bytes(l), i32::from_le_bytes(h));
+        }
+        Some(Prepared::Split(low, high))
+    }
+}
+
+/// `run(input as the packed kernels read it)`; `false` for an input they do not take. The token
+/// proves AVX2 for the split.
+#[inline(always)]
+fn with_prepared(
+    _avx2: Avx2,
+    input: LayerInput<'_>,
+    run: impl FnOnce(Prepared<'_>) -> bool,
+) -> bool {
+    match input {
+        LayerInput::Int8(x) => run(Prepared::Bytes(x)),
+        LayerInput::Int16(x) => {
+            let mut words = SplitWords {
+                low: [0; MAX_WORDS],
+                high: [0; MAX_WORDS],
+            };
+            // SAFETY: an `Avx2` token exists only after `avx2_active()` detected AVX2.
+            unsafe { words.split(x) }.is_some_and(run)
+        }
+    }
+}
+
+/// Calls `$body` with `$sums` bound to the block sums of `$input`'s kind from the level module
+/// `$level` (the body is expanded once per kind, so that each loop inlines its kernel).
+macro_rules! with_sums {
+    ($level:path, $input:expr, |$sums:ident| $body:expr) => {{
+        use $level as level;
+        match $input {
+            Prepared::Bytes(x) => {
+                let $sums = |block: &[u8]| level::bytes_sums(block, x);
+                $body
+            }
+            Prepared::Split(low, high) => {
+                let $sums = |block: &[u8]| level::split_sums(block, low, high);
+                $body
+            }
+        }
+    }};
+}
+
+/// `low + 256 high - 256 * 128 * row_sums`, lane by lane (modulo 2^32): the split sums'
+/// combination.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn combine_split(low: BlockSums, high: BlockSums, row_sums: &[u8; GROUP_BYTES]) -> BlockSums {
+    let (first, second) = halves(row_sums);
+    let row_sums = [load_half(first), load_half(second)];
+    let mut out = low;
+    for ((lanes, high), sums) in out.iter_mut().zip(high).zip(row_sums) {
+        let scaled = _mm256_sub_epi32(_mm256_slli_epi32::<8>(high), _mm256_slli_epi32::<15>(sums));
+        *lanes = _mm256_add_epi32(*lanes, scaled);
+    }
+    out
+}
+
 /// `fn $name(block, input) -> BlockSums`: the sums of one packed block over `input` (whole
 /// block of `ceil(len / $columns)` groups), for one level (`avx` | `zmm`) and input type.
 macro_rules! block_sums {
     ($name:ident, $features:literal, $level:ident, $dot:ident, $zero:expr, $x:ty, $columns:literal, $word:ident) => {
         #[inline]
         #[target_feature(enable = $features)]
-        fn $name(block: &[u8], input: &[$x]) -> BlockSums {
+        pub(super) fn $name(block: &[u8], input: &[$x]) -> BlockSums {
             let (groups, _) = block.as_chunks::<GROUP_BYTES>();
             let (words, tail) = input.as_chunks::<$columns>();
             let mut acc = [$zero; UNROLL];
@@ -125,6 +275,19 @@ macro_rules! block_sums {
             block_sums!(@finish $level, a, b, c, d)
         }
     };
+    (@finish2 avx, $a:ident, $b:ident) => {
+        [
+            _mm256_add_epi32($a[0], $b[0]),
+            _mm256_add_epi32($a[1], $b[1]),
+        ]
+    };
+    (@finish2 zmm, $a:ident, $b:ident) => {{
+        let sum = _mm512_add_epi32($a, $b);
+        [
+            _mm512_castsi512_si256(sum),
+            _mm512_extracti64x4_epi64::<1>(sum),
+        ]
+    }};
     (@finish avx, $a:ident, $b:ident, $c:ident, $d:ident) => {
         [
             _mm256_add_epi32(
@@ -146,17 +309,17 @@ macro_rules! block_sums {
     }};
 }
 
-/// `128 sum x` as eight lanes: what the unsigned int8 weights add to every row (zero for int16
-/// inputs, whose weights keep their sign).
+/// `128 sum x` as eight lanes: what the unsigned int8 weights add to every row (zero for split
+/// int16 inputs, whose sums are combined exactly).
 #[inline]
 #[target_feature(enable = "avx2")]
-fn weight_offset(input: LayerInput<'_>) -> __m256i {
+fn weight_offset(input: Prepared<'_>) -> __m256i {
     match input {
-        LayerInput::Int8(x) => {
+        Prepared::Bytes(x) => {
             let sum = x.iter().fold(0_i32, |s, v| s.wrapping_add(i32::from(*v)));
             _mm256_set1_epi32(sum.wrapping_mul(128))
         }
-        LayerInput::Int16(_) => _mm256_setzero_si256(),
+        Prepared::Split(..) => _mm256_setzero_si256(),
     }
 }
 
@@ -185,25 +348,48 @@ fn padded<T: Copy + Default>(values: &[T], first: usize) -> [T; PACK_ROWS] {
 /// The packed blocks of a layer, [`PACK_ROWS`] rows each.
 #[inline(always)]
 fn blocks<'p>(packed: &PackedWeights<'p>) -> core::slice::ChunksExact<'p, u8> {
-    let groups = packed.in_features().div_ceil(packed.kind().columns());
-    let block_len = groups.saturating_mul(GROUP_BYTES).max(1);
-    packed.bytes().chunks_exact(block_len)
+    let block_len = packed.kind().block_len(packed.in_features()).unwrap_or(1);
+    packed.bytes().chunks_exact(block_len.max(1))
 }
 
 /// The layer loops of one level: `$bytes` / `$words` are its dot-product instructions of int8 /
 /// int16 inputs.
 macro_rules! packed_level {
-    ($level:ident, $features:literal, $bytes:ident, $words:ident) => {
+    ($level:ident, $features:literal, $dot:ident) => {
         mod $level {
             use super::*;
 
-            /// The block sums of `input`'s type.
+            /// The sums of one block of split int16 inputs (`low`, `high`: one word per group).
             #[inline]
             #[target_feature(enable = $features)]
-            pub(super) fn sums(block: &[u8], input: LayerInput<'_>) -> BlockSums {
-                match input {
-                    LayerInput::Int8(x) => bytes_sums(block, x),
-                    LayerInput::Int16(x) => words_sums(block, x),
+            pub(super) fn split_sums(block: &[u8], low: &[i32], high: &[i32]) -> BlockSums {
+                let (chunks, _) = block.as_chunks::<GROUP_BYTES>();
+                let (groups, row_sums) = chunks.split_at_checked(low.len()).unwrap_or((&[], &[]));
+                let zero = zero!($level);
+                let mut acc = [(zero, zero); SPLIT_UNROLL];
+                let (runs, _) = groups.as_chunks::<SPLIT_UNROLL>();
+                let (low_runs, _) = low.as_chunks::<SPLIT_UNROLL>();
+                let (high_runs, _) = high.as_chunks::<SPLIT_UNROLL>();
+                for ((run, low), high) in runs.iter().zip(low_runs).zip(high_runs) {
+                    for (((acc, group), low), high) in acc.iter_mut().zip(run).zip(low).zip(high) {
+                        *acc = split_step!($level, $dot, *acc, group, *low, *high);
+                    }
+                }
+                let done = runs.len() * SPLIT_UNROLL;
+                let rest = (groups.get(done..).unwrap_or(&[]).iter())
+                    .zip(low.get(done..).unwrap_or(&[]))
+                    .zip(high.get(done..).unwrap_or(&[]));
+                for ((group, low), high) in rest {
+                    acc[0] = split_step!($level, $dot, acc[0], group, *low, *high);
+                }
+                let [(l0, h0), (l1, h1)] = acc;
+                let (low, high) = (
+                    block_sums!(@finish2 $level, l0, l1),
+                    block_sums!(@finish2 $level, h0, h1),
+                );
+                match row_sums.first() {
+                    Some(row_sums) => combine_split(low, high, row_sums),
+                    None => low,
                 }
             }
 
@@ -213,11 +399,10 @@ macro_rules! packed_level {
                 packed: &PackedWeights<'_>,
                 fc: &FullyConnected<'_, i32>,
                 requant: &FcRequant<'_, i8>,
-                input: LayerInput<'_>,
+                input: Prepared<'_>,
                 out: &mut [i8],
             ) {
                 let offset = weight_offset(input);
-                let sums = |block: &[u8]| sums(block, input);
                 let finish = |sums: BlockSums,
                               bias: &[i32; PACK_ROWS],
                               multipliers: &[i32; PACK_ROWS],
@@ -249,23 +434,25 @@ macro_rules! packed_level {
                     .iter()
                     .zip(requant.multipliers.as_chunks::<PACK_ROWS>().0)
                     .zip(requant.shifts.as_chunks::<PACK_ROWS>().0);
-                for ((out, ((bias, multipliers), shifts)), block) in
-                    whole.iter_mut().zip(channels).zip(blocks.by_ref())
-                {
-                    *out = finish(sums(block), bias, multipliers, shifts);
-                }
-                if let (false, Some(block)) = (tail.is_empty(), blocks.next()) {
-                    let first = whole.len() * PACK_ROWS;
-                    let codes = finish(
-                        sums(block),
-                        &padded(fc.bias, first),
-                        &padded(requant.multipliers, first),
-                        &padded(requant.shifts, first),
-                    );
-                    for (slot, code) in tail.iter_mut().zip(codes) {
-                        *slot = code;
+                with_sums!(super::$level, input, |sums| {
+                    for ((out, ((bias, multipliers), shifts)), block) in
+                        whole.iter_mut().zip(channels).zip(blocks.by_ref())
+                    {
+                        *out = finish(sums(block), bias, multipliers, shifts);
                     }
-                }
+                    if let (false, Some(block)) = (tail.is_empty(), blocks.next()) {
+                        let first = whole.len() * PACK_ROWS;
+                        let codes = finish(
+                            sums(block),
+                            &padded(fc.bias, first),
+                            &padded(requant.multipliers, first),
+                            &padded(requant.shifts, first),
+                        );
+                        for (slot, code) in tail.iter_mut().zip(codes) {
+                            *slot = code;
+                        }
+                    }
+                })
             }
 
             /// `acc[o] = bias[o] + dot(row o, input)` (wrapping) for every row.
@@ -273,46 +460,40 @@ macro_rules! packed_level {
             pub(super) fn accumulate(
                 packed: &PackedWeights<'_>,
                 fc: &FullyConnected<'_, i32>,
-                input: LayerInput<'_>,
+                input: Prepared<'_>,
                 acc: &mut [i32],
             ) {
                 let offset = weight_offset(input);
-                for (index, block) in blocks(packed).enumerate() {
-                    let first = index * PACK_ROWS;
-                    let lanes = with_bias(sums(block, input), offset, &padded(fc.bias, first));
-                    let mut block = [0_i32; PACK_ROWS];
-                    let halves = block.as_chunks_mut::<BLOCK_ROWS>().0.iter_mut().zip(lanes);
-                    for (half, lanes) in halves {
-                        // SAFETY: the pointer comes from a `&mut [i32; 8]`: 32 writable bytes;
-                        // no alignment needed.
-                        unsafe { _mm256_storeu_si256(half.as_mut_ptr().cast::<__m256i>(), lanes) };
+                with_sums!(super::$level, input, |sums| {
+                    for (index, block) in blocks(packed).enumerate() {
+                        let first = index * PACK_ROWS;
+                        let lanes = with_bias(sums(block), offset, &padded(fc.bias, first));
+                        let mut block = [0_i32; PACK_ROWS];
+                        let halves = block.as_chunks_mut::<BLOCK_ROWS>().0.iter_mut().zip(lanes);
+                        for (half, lanes) in halves {
+                            // SAFETY: the pointer comes from a `&mut [i32; 8]`: 32 writable
+                            // bytes; no alignment needed.
+                            unsafe {
+                                _mm256_storeu_si256(half.as_mut_ptr().cast::<__m256i>(), lanes)
+                            };
+                        }
+                        let rows = acc.get_mut(first..).unwrap_or(&mut []);
+                        for (slot, sum) in rows.iter_mut().zip(block) {
+                            *slot = sum;
+                        }
                     }
-                    let rows = acc.get_mut(first..).unwrap_or(&mut []);
-                    for (slot, sum) in rows.iter_mut().zip(block) {
-                        *slot = sum;
-                    }
-                }
+                })
             }
 
             block_sums!(
                 bytes_sums,
                 $features,
                 $level,
-                $bytes,
+                $dot,
                 zero!($level),
                 i8,
                 4,
                 word_of_bytes
-            );
-            block_sums!(
-                words_sums,
-                $features,
-                $level,
-                $words,
-                zero!($level),
-                i16,
-                2,
-                word_of_halves
             );
         }
     };
@@ -328,18 +509,8 @@ macro_rules! zero {
     };
 }
 
-packed_level!(
-    avx,
-    "avx2,avxvnni",
-    _mm256_dpbusd_avx_epi32,
-    _mm256_dpwssd_avx_epi32
-);
-packed_level!(
-    zmm,
-    "avx2,avx512f,avx512bw,avx512vnni",
-    _mm512_dpbusd_epi32,
-    _mm512_dpwssd_epi32
-);
+packed_level!(avx, "avx2,avxvnni", _mm256_dpbusd_avx_epi32);
+packed_level!(zmm, "avx2,avx512f,avx512bw,avx512vnni", _mm512_dpbusd_epi32);
 
 /// Calls `$level::$name(args)` for the token's packed level; `false` when it has none.
 macro_rules! by_packed_level {
@@ -378,7 +549,10 @@ impl Avx2 {
         input: LayerInput<'_>,
         out: &mut [i8],
     ) -> bool {
-        self.packed && by_packed_level!(self, requantize(packed, fc, requant, input, out))
+        self.packed
+            && with_prepared(self, input, |input| {
+                by_packed_level!(self, requantize(packed, fc, requant, input, out))
+            })
     }
 
     /// The accumulators of `fc`: `true` if every row was written (from its packed copy), else
@@ -407,7 +581,10 @@ impl Avx2 {
         input: LayerInput<'_>,
         acc: &mut [i32],
     ) -> bool {
-        self.packed && by_packed_level!(self, accumulate(packed, fc, input, acc))
+        self.packed
+            && with_prepared(self, input, |input| {
+                by_packed_level!(self, accumulate(packed, fc, input, acc))
+            })
     }
 }
 

@@ -147,10 +147,11 @@ fn packed_layers_match_the_wide_sums_and_scalar_requantization() {
 
 #[test]
 fn packed_sums_wrap_like_the_portable_kernel() {
-    // 131 074 products of 16384 (int8) or 2^22 (int16) leave int32: the sums wrap.
-    let columns = 131_074;
+    // The widest packed layer: 1,024 products of 2^22 (int16 inputs) leave int32, and a bias at
+    // the int32 limits wraps with int8 inputs.
+    let columns = crate::kernels::packed::MAX_PACKED_COLUMNS;
     let weights = std::vec![-128_i8; 17 * columns];
-    let bias = [7_i32; 17];
+    let bias = [i32::MAX - 3; 17];
     let x8 = std::vec![-128_i8; columns];
     let x16 = std::vec![i16::MIN; columns];
     for input in [LayerInput::Int8(&x8), LayerInput::Int16(&x16)] {

@@ -1,10 +1,11 @@
 //! The int16-activation layers (int64 accumulators, `x86::wide`) of packed weights, for layers
 //! of one column chunk (`in_features <= quant::CHUNK16`): there a row's accumulator is the
-//! bias plus its int32 sum sign-extended, which the packed block sums give directly. The sums
+//! bias plus its int32 sum sign-extended, which the packed block sums give directly (the int16
+//! inputs split into bytes, `x86::packed`). The sums
 //! then take `x86::wide`'s requantization to int16 and interpolated table, eight rows at a time.
 #![allow(unsafe_code)]
 
-use super::{blocks, padded, weight_offset, BlockSums};
+use super::{blocks, padded, weight_offset, with_prepared, BlockSums, Prepared};
 use crate::kernels::lut16::Lut16Table;
 use crate::kernels::packed::{PackedWeights, PACK_ROWS};
 use crate::kernels::x86::wide::{finish_wide, load_i64x4, pack_i16, RequantBlock16};
@@ -48,43 +49,41 @@ macro_rules! wide_level {
                 fc: &FullyConnected<'_, i64>,
                 requant: &FcRequant<'_, i16>,
                 table: Option<&Lut16Table>,
-                input: LayerInput<'_>,
+                input: Prepared<'_>,
                 out: &mut [i16],
             ) {
                 let offset = weight_offset(input);
                 let bounds = (requant.activation_min, requant.activation_max);
-                for (index, block) in blocks(packed).enumerate() {
-                    let first = index * PACK_ROWS;
-                    let acc = widen(
-                        super::super::$level::sums(block, input),
-                        offset,
-                        &padded(fc.bias, first),
-                    );
-                    let (multipliers, shifts) = (
-                        padded(requant.multipliers, first),
-                        padded(requant.shifts, first),
-                    );
-                    let mut codes = [0_i16; PACK_ROWS];
-                    let halves = codes
-                        .as_chunks_mut::<BLOCK_ROWS>()
-                        .0
-                        .iter_mut()
-                        .zip(acc.as_chunks::<2>().0)
-                        .zip(multipliers.as_chunks::<BLOCK_ROWS>().0)
-                        .zip(shifts.as_chunks::<BLOCK_ROWS>().0);
-                    for (((codes, [low, high]), multipliers), shifts) in halves {
-                        let block = RequantBlock16 {
-                            multipliers,
-                            shifts,
-                            bounds,
-                        };
-                        *codes = pack_i16(finish_wide(*low, *high, block, table));
+                with_sums!(super::super::$level, input, |sums| {
+                    for (index, block) in blocks(packed).enumerate() {
+                        let first = index * PACK_ROWS;
+                        let acc = widen(sums(block), offset, &padded(fc.bias, first));
+                        let (multipliers, shifts) = (
+                            padded(requant.multipliers, first),
+                            padded(requant.shifts, first),
+                        );
+                        let mut codes = [0_i16; PACK_ROWS];
+                        let halves = codes
+                            .as_chunks_mut::<BLOCK_ROWS>()
+                            .0
+                            .iter_mut()
+                            .zip(acc.as_chunks::<2>().0)
+                            .zip(multipliers.as_chunks::<BLOCK_ROWS>().0)
+                            .zip(shifts.as_chunks::<BLOCK_ROWS>().0);
+                        for (((codes, [low, high]), multipliers), shifts) in halves {
+                            let block = RequantBlock16 {
+                                multipliers,
+                                shifts,
+                                bounds,
+                            };
+                            *codes = pack_i16(finish_wide(*low, *high, block, table));
+                        }
+                        let rows = out.get_mut(first..).unwrap_or(&mut []);
+                        for (slot, code) in rows.iter_mut().zip(codes) {
+                            *slot = code;
+                        }
                     }
-                    let rows = out.get_mut(first..).unwrap_or(&mut []);
-                    for (slot, code) in rows.iter_mut().zip(codes) {
-                        *slot = code;
-                    }
-                }
+                })
             }
 
             /// `acc[o] = bias[o] + dot(row o, input)` (int64) for every row.
@@ -92,30 +91,28 @@ macro_rules! wide_level {
             pub(super) fn accumulate(
                 packed: &PackedWeights<'_>,
                 fc: &FullyConnected<'_, i64>,
-                input: LayerInput<'_>,
+                input: Prepared<'_>,
                 acc: &mut [i64],
             ) {
                 let offset = weight_offset(input);
-                for (index, block) in blocks(packed).enumerate() {
-                    let first = index * PACK_ROWS;
-                    let lanes = widen(
-                        super::super::$level::sums(block, input),
-                        offset,
-                        &padded(fc.bias, first),
-                    );
-                    let mut sums = [0_i64; PACK_ROWS];
-                    for (quarter, lanes) in sums.as_chunks_mut::<4>().0.iter_mut().zip(lanes) {
-                        // SAFETY: the pointer comes from a `&mut [i64; 4]`: 32 writable
-                        // bytes; no alignment needed.
-                        unsafe {
-                            _mm256_storeu_si256(quarter.as_mut_ptr().cast::<__m256i>(), lanes)
-                        };
+                with_sums!(super::super::$level, input, |sums| {
+                    for (index, block) in blocks(packed).enumerate() {
+                        let first = index * PACK_ROWS;
+                        let lanes = widen(sums(block), offset, &padded(fc.bias, first));
+                        let mut sums = [0_i64; PACK_ROWS];
+                        for (quarter, lanes) in sums.as_chunks_mut::<4>().0.iter_mut().zip(lanes) {
+                            // SAFETY: the pointer comes from a `&mut [i64; 4]`: 32 writable
+                            // bytes; no alignment needed.
+                            unsafe {
+                                _mm256_storeu_si256(quarter.as_mut_ptr().cast::<__m256i>(), lanes)
+                            };
+                        }
+                        let rows = acc.get_mut(first..).unwrap_or(&mut []);
+                        for (slot, sum) in rows.iter_mut().zip(sums) {
+                            *slot = sum;
+                        }
                     }
-                    let rows = acc.get_mut(first..).unwrap_or(&mut []);
-                    for (slot, sum) in rows.iter_mut().zip(sums) {
-                        *slot = sum;
-                    }
-                }
+                })
             }
         }
     };
@@ -137,9 +134,11 @@ impl Avx2 {
         input: LayerInput<'_>,
         out: &mut [i16],
     ) -> bool {
-        fc.in_features <= CHUNK16
-            && self.packed
-            && by_packed_level!(self, requantize(packed, fc, requant, table, input, out))
+        self.packed
+            && fc.in_features <= CHUNK16
+            && with_prepared(self, input, |input| {
+                by_packed_level!(self, requantize(packed, fc, requant, table, input, out))
+            })
     }
 
     /// The int64 accumulators of `fc`: `true` if every row was written (from its packed copy),
@@ -168,8 +167,10 @@ impl Avx2 {
         input: LayerInput<'_>,
         acc: &mut [i64],
     ) -> bool {
-        fc.in_features <= CHUNK16
-            && self.packed
-            && by_packed_level!(self, accumulate(packed, fc, input, acc))
+        self.packed
+            && fc.in_features <= CHUNK16
+            && with_prepared(self, input, |input| {
+                by_packed_level!(self, accumulate(packed, fc, input, acc))
+            })
     }
 }
