@@ -8,8 +8,8 @@
 //!   the bias added and, for hidden layers, requantized (and the int16 table applied) in
 //!   registers;
 //! - `requant`: requantization of eight accumulators at once;
-//! - `packed`: whole layers of weights packed for `vpdpbusd`/`vpdpwssd` (`kernels::packed`),
-//!   sixteen rows per instruction;
+//! - `packed`: whole layers of weights packed for `vpdpbusd` (`kernels::packed`), sixteen rows
+//!   per instruction, int16 inputs split into bytes;
 //! - `table`: the int8 activation table, 64 codes per step with AVX-512 VBMI;
 //! - `vnni`: the fronts of the row sums with `vpdpbusd`/`vpdpwssd`, VEX-encoded on 256 bits
 //!   (AVX-VNNI) or EVEX-encoded on 512 bits (AVX-512 F/BW/VNNI, checked with [`avx512_active`]);
