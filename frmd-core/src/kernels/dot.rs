@@ -122,6 +122,17 @@ pub(crate) mod tests {
     use std::vec::Vec;
 
     /// Row sums in i64 (no wrapping possible at these sizes).
+    /// `sum w x` of one row and an int8 or int16 input, in int64 (exact).
+    pub(crate) fn wide_dot(row: &[i8], input: crate::kernels::LayerInput<'_>) -> i64 {
+        let products = |x: &mut dyn Iterator<Item = i64>| -> i64 {
+            row.iter().zip(x).map(|(w, x)| i64::from(*w) * x).sum()
+        };
+        match input {
+            crate::kernels::LayerInput::Int8(x) => products(&mut x.iter().map(|v| i64::from(*v))),
+            crate::kernels::LayerInput::Int16(x) => products(&mut x.iter().map(|v| i64::from(*v))),
+        }
+    }
+
     pub(crate) fn wide_row_sums(weights: &[i8], input: &[i8]) -> Vec<i64> {
         weights
             .chunks_exact(input.len())

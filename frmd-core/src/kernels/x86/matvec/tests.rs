@@ -1,7 +1,7 @@
 //! The row kernels of every level (through the whole-layer loops of `x86::layer`) against the
 //! portable definitions and a wide-integer model, on random shapes (every column remainder).
 extern crate std;
-use crate::kernels::dot::tests::{random_cases, wide_row_sums};
+use crate::kernels::dot::tests::{random_cases, wide_dot, wide_row_sums};
 use crate::kernels::x86::test_tokens as tokens;
 use crate::kernels::x86::{Avx2, BLOCK_ROWS};
 use crate::kernels::{FcRequant, FullyConnected, LayerInput};
@@ -102,18 +102,7 @@ fn requantized_rows_match(avx2: Avx2) {
             avx2.accumulate_blocks(&layer, input, true, &mut acc);
             let want: [i8; BLOCK_ROWS] = core::array::from_fn(|r| {
                 let row = &weights[r * columns..(r + 1) * columns];
-                let dot: i64 = match input {
-                    LayerInput::Int8(x) => row
-                        .iter()
-                        .zip(x)
-                        .map(|(w, x)| i64::from(*w) * i64::from(*x))
-                        .sum(),
-                    LayerInput::Int16(x) => row
-                        .iter()
-                        .zip(x)
-                        .map(|(w, x)| i64::from(*w) * i64::from(*x))
-                        .sum(),
-                };
+                let dot = wide_dot(row, input);
                 assert_eq!(
                     acc[r],
                     bias[r].wrapping_add(dot as i32),

@@ -2,6 +2,7 @@
 //! shapes (every column remainder of both group sizes, partial row blocks), extreme codes and
 //! int32 wrap-around.
 extern crate std;
+use crate::kernels::dot::tests::wide_dot;
 use crate::kernels::packed::{pack, PackedKind, PackedWeights};
 use crate::kernels::x86::{test_tokens, Avx2};
 use crate::kernels::{FcRequant, FullyConnected, LayerInput};
@@ -23,25 +24,10 @@ fn tokens() -> Vec<Avx2> {
 
 /// `bias[o] + sum w x` (wrapping int32) of every row.
 fn wide_sums(weights: &[i8], bias: &[i32], input: LayerInput<'_>) -> Vec<i32> {
-    let columns = input.len();
-    let dot = |row: &[i8]| -> i64 {
-        match input {
-            LayerInput::Int8(x) => row
-                .iter()
-                .zip(x)
-                .map(|(w, x)| i64::from(*w) * i64::from(*x))
-                .sum(),
-            LayerInput::Int16(x) => row
-                .iter()
-                .zip(x)
-                .map(|(w, x)| i64::from(*w) * i64::from(*x))
-                .sum(),
-        }
-    };
     weights
-        .chunks_exact(columns)
+        .chunks_exact(input.len())
         .zip(bias)
-        .map(|(row, b)| b.wrapping_add(dot(row) as i32))
+        .map(|(row, b)| b.wrapping_add(wide_dot(row, input) as i32))
         .collect()
 }
 
@@ -203,14 +189,7 @@ fn packed_wide_layers_match_the_exact_sums_and_the_row_major_kernels() {
         let exact: Vec<i64> = weights
             .chunks_exact(columns)
             .zip(&bias)
-            .map(|(row, b)| {
-                let dot: i64 = row
-                    .iter()
-                    .zip(&x16)
-                    .map(|(w, x)| i64::from(*w) * i64::from(*x))
-                    .sum();
-                b + dot
-            })
+            .map(|(row, b)| b + wide_dot(row, LayerInput::Int16(&x16)))
             .collect();
         let table = (case % 3 != 0).then_some(&table);
         let mut want_codes = std::vec![0_i16; rows];
