@@ -98,7 +98,7 @@ pub(crate) fn boxed_scratch<P: Precision>() -> Box<HostScratchOf<P>> {
 
 /// The packed copy of `blob`'s network weights for this CPU's kernels
 /// ([`frmd_core::kernels::packed`], handed to [`BlobNetwork::use_packed_weights`]): empty where
-/// they would not run it (no VNNI level here, or a network other than an int8 MLP).
+/// they would not run it (no VNNI level here, or a transformer).
 pub fn packed_weights(blob: &LoadedBlob<'_>) -> anyhow::Result<Vec<u8>> {
     if !frmd_core::kernels::packed::runs_here() {
         return Ok(Vec::new());

@@ -61,9 +61,10 @@ pub struct FullyConnected<'a, A = i32> {
     /// `[out_features]` bias (int32, or int64 for int16 activations) at scale
     /// `input_scale * weight_scale[o]`, input zero point folded.
     pub bias: &'a [A],
-    /// The same weights packed for a host's dot-product kernels ([`super::packed`], int32
-    /// accumulators on x86-64 with AVX-VNNI or AVX-512 VNNI), or `None` ([`Self::new`]'s
-    /// default): the row-major `weights` run. Same results either way.
+    /// The same weights packed for a host's dot-product kernels ([`super::packed`]: x86-64
+    /// with AVX-VNNI or AVX-512 VNNI; int64 accumulators for layers of one 512-column chunk),
+    /// or `None` ([`Self::new`]'s default): the row-major `weights` run. Same results either
+    /// way.
     pub packed: Option<PackedWeights<'a>>,
 }
 

@@ -6,7 +6,9 @@
 //! [`frmd_export::host`] and the blob's descriptor gives the sizes at run time. The blob is owned
 //! next to its loaded view, and the policy next to both ([`self_cell`]), so nothing is leaked and
 //! nothing is rebuilt per chunk: the network is validated once, as on the firmware, and every
-//! chunk starts a fresh episode with [`frmd_core::policy::Policy::reset`]. The f32 twin, a
+//! chunk starts a fresh episode with [`frmd_core::policy::Policy::reset`]. On CPUs whose
+//! kernels run packed weights ([`frmd_core::kernels::packed`]) the MLP's weights are packed once
+//! here and owned beside the blob. The f32 twin, a
 //! comparison tool, builds its f32 network per chunk.
 use crate::tasks::{Policy, PolicyInput};
 use anyhow::{bail, Context};
