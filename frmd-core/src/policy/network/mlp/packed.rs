@@ -20,7 +20,8 @@ impl<'a, P: MlpPrecision, const WIDTH: usize> QuantMlpNetwork<'a, P, WIDTH> {
     /// Every layer (hidden layers, then the output layer) with the packed kind of its input:
     /// the first layer's by the input precision (none for two planes, whose fine plane runs
     /// separately), the activation codes' for the others; none for a layer of int64
-    /// accumulators wider than one column chunk (the kernels sum one chunk per row).
+    /// accumulators wider than one column chunk (the kernels sum one chunk per row) or one the
+    /// layout does not take (wider than `kernels::packed::MAX_PACKED_COLUMNS`).
     fn packed_layers(
         &self,
     ) -> impl Iterator<Item = (&FullyConnected<'a, P::Acc>, Option<PackedKind>)> {
@@ -40,7 +41,11 @@ impl<'a, P: MlpPrecision, const WIDTH: usize> QuantMlpNetwork<'a, P, WIDTH> {
             .enumerate()
             .map(move |(index, fc)| {
                 let kind = if index == 0 { first } else { Some(codes) };
-                (fc, kind.filter(|_| fc.in_features <= P::Acc::CHUNK))
+                let packable = |kind: &PackedKind| {
+                    let len = kind.packed_len(fc.in_features, fc.out_features);
+                    fc.in_features <= P::Acc::CHUNK && len.is_some()
+                };
+                (fc, kind.filter(packable))
             })
     }
 
