@@ -5,7 +5,7 @@
 //! then take `x86::wide`'s requantization to int16 and interpolated table, eight rows at a time.
 #![allow(unsafe_code)]
 
-use super::{blocks, padded, weight_offset, with_prepared, BlockSums, Prepared};
+use super::{blocks, padded, store_block, weight_offset, with_prepared, BlockSums, Prepared};
 use crate::kernels::lut16::Lut16Table;
 use crate::kernels::packed::{PackedWeights, PACK_ROWS};
 use crate::kernels::x86::wide::{finish_wide, load_i64x4, pack_i16, RequantBlock16};
@@ -78,10 +78,7 @@ macro_rules! wide_level {
                             };
                             *codes = pack_i16(finish_wide(*low, *high, block, table));
                         }
-                        let rows = out.get_mut(first..).unwrap_or(&mut []);
-                        for (slot, code) in rows.iter_mut().zip(codes) {
-                            *slot = code;
-                        }
+                        store_block(out, first, codes);
                     }
                 })
             }
@@ -107,10 +104,7 @@ macro_rules! wide_level {
                                 _mm256_storeu_si256(quarter.as_mut_ptr().cast::<__m256i>(), lanes)
                             };
                         }
-                        let rows = acc.get_mut(first..).unwrap_or(&mut []);
-                        for (slot, sum) in rows.iter_mut().zip(sums) {
-                            *slot = sum;
-                        }
+                        store_block(acc, first, sums);
                     }
                 })
             }
